@@ -1,0 +1,41 @@
+# haa_sym: every target installs what it needs into .venv (created on first use).
+PYTHON ?= python3
+VENV   := .venv
+PY     := $(VENV)/bin/python
+STAMP  := $(VENV)/.installed
+
+.PHONY: all venv derive verify test check-generated paper clean
+
+all: verify
+
+$(STAMP): pyproject.toml
+	$(PYTHON) -m venv $(VENV)
+	$(PY) -m pip install --quiet --upgrade pip
+	$(PY) -m pip install --quiet -e '.[test]'
+	touch $(STAMP)
+
+venv: $(STAMP)
+
+## Regenerate generated/ from the symbolic model (byte-reproducible).
+derive: $(STAMP)
+	$(PY) -m codegen.generate --out generated
+
+## Check the paper's equations (table of PASS/FAIL, non-zero exit on any FAIL).
+verify: $(STAMP)
+	$(PY) -m haa_sym.verify
+
+## The main job until the reproduction lands: regenerate, then verify the paper.
+paper: derive verify
+
+## The whole test suite.
+test: $(STAMP)
+	$(PY) -m pytest -q
+
+## Fail if `make derive` would change generated/.
+check-generated: $(STAMP)
+	@tmp=$$(mktemp -d) && $(PY) -m codegen.generate --out $$tmp >/dev/null && \
+	  diff -r $$tmp generated >/dev/null || { echo "generated/ is stale: run \`make derive\`"; exit 1; }; \
+	  echo "generated/ is up to date"
+
+clean:
+	rm -rf $(VENV) build src/*.egg-info

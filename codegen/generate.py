@@ -1,0 +1,110 @@
+"""``make derive``: regenerate ``generated/`` from the symbolic model.
+
+Writes, byte-reproducibly (no dates, sorted JSON):
+  generated/haa_sym_gen.c      every CasADi Function as C (one translation unit)
+  generated/<name>.casadi      the same Functions serialised, for CasADi's VM when no compiler
+  generated/MANIFEST.json      SHA-256 of every generated file and of the sources, tool versions
+Usage: python -m codegen.generate [--out DIR]
+"""
+from __future__ import annotations
+
+import argparse
+import hashlib
+import json
+import os
+import sys
+import tempfile
+from pathlib import Path
+
+import casadi as ca
+import sympy
+
+from codegen.kernels import frequency_function, stability_function
+from codegen.symbolic_to_casadi import plant_function
+
+ROOT = Path(__file__).resolve().parents[1]
+C_NAME = "haa_sym_gen"
+# Polynomial capacities of the stability evaluators: degree N_av + 8 + delay must fit.
+CAPACITIES = (16, 32, 64)
+# Files whose content defines the generated code; their hash is recorded in the manifest and
+# checked by the runtime (a changed source means stale generated code).
+SOURCES = (
+    "src/haa_sym/params.py",
+    "src/haa_sym/symbolic/eom.py",
+    "src/haa_sym/symbolic/torque_tf.py",
+    "codegen/kernels.py",
+    "codegen/symbolic_to_casadi.py",
+    "codegen/generate.py",
+)
+
+
+def functions() -> list[ca.Function]:
+    fns = [plant_function(), frequency_function()]
+    fns += [stability_function(cap) for cap in CAPACITIES]
+    return fns
+
+
+def sha256_bytes(data: bytes) -> str:
+    return hashlib.sha256(data).hexdigest()
+
+
+def source_digest(root: Path = ROOT) -> str:
+    h = hashlib.sha256()
+    for rel in SOURCES:
+        h.update(rel.encode() + b"\0" + (root / rel).read_bytes() + b"\0")
+    return h.hexdigest()
+
+
+def _write(path: Path, data: bytes) -> None:
+    fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=path.name + ".")
+    with os.fdopen(fd, "wb") as fh:
+        fh.write(data)
+    os.chmod(tmp, 0o644)
+    os.replace(tmp, path)
+
+
+def generate(out: Path) -> dict:
+    out.mkdir(parents=True, exist_ok=True)
+    fns = functions()
+    files: dict[str, bytes] = {}
+    with tempfile.TemporaryDirectory() as tmp:
+        cg = ca.CodeGenerator(f"{C_NAME}.c", {"with_header": True})
+        for f in fns:
+            cg.add(f)
+        cg.generate(tmp + os.sep)
+        for name in (f"{C_NAME}.c", f"{C_NAME}.h"):
+            files[name] = Path(tmp, name).read_bytes()
+    for f in fns:
+        files[f"{f.name()}.casadi"] = f.serialize().encode()
+    manifest = {
+        "generator": "python -m codegen.generate (make derive)",
+        "tools": {"casadi": ca.__version__, "sympy": sympy.__version__},
+        "source_sha256": source_digest(),
+        "sources": list(SOURCES),
+        "capacities": list(CAPACITIES),
+        "functions": [f.name() for f in fns],
+        "library": C_NAME,
+        "files": {name: sha256_bytes(data) for name, data in sorted(files.items())},
+    }
+    files["MANIFEST.json"] = (json.dumps(manifest, indent=2, sort_keys=True) + "\n").encode()
+    for name, data in files.items():
+        _write(out / name, data)
+    # nothing stale may stay behind
+    for old in out.iterdir():
+        if old.name not in files:
+            old.unlink()
+    return manifest
+
+
+def main(argv: list[str] | None = None) -> int:
+    ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    ap.add_argument("--out", type=Path, default=ROOT / "generated")
+    args = ap.parse_args(argv)
+    m = generate(args.out)
+    print(f"generated {len(m['files'])} files into {args.out} (casadi {m['tools']['casadi']}, "
+          f"sympy {m['tools']['sympy']})")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,170 @@
+"""CasADi kernels of the discrete closed loop (Sec. 3): pure CasADi, no sympy.
+
+The closed loop has one actuated input (V_m). With the measured torque T, the encoder angle
+theta_L1, the averaging filter F(z) = (1 - z^-N_av)/(N_av Ts), PI_t(z) of Eq. (7), the impedance
+law Eq. (8), velocity compensation VC * F(z) * theta_L1 (Eq. 6) and a computation delay of
+``d`` samples, the characteristic polynomial is
+
+    chi(z) = b0 + P_t b1 + I_t b2 + P_t P_gain b3 + I_t P_gain b4 + (P_t D_gain - VC) b5 + I_t D_gain b6
+
+with basis polynomials b_j fixed per discretised plant (see ``haa_sym.loop``). These kernels take
+the basis and a gain point and return the Schur-Cohn (Jury) decision and the spectral radius,
+and, per frequency, the loop transfer functions in real arithmetic.
+"""
+from __future__ import annotations
+
+import casadi as ca
+import numpy as np
+
+N_BASIS = 7
+N_CONST = 3   # P_t0, I_t0, VC0
+N_POINT = 4   # P_gain, D_gain, beta, alpha
+BISECTION_STEPS = 40
+
+
+def gain_monomials(point, const):
+    """The coefficients g_j of chi = sum_j g_j b_j for one gain point."""
+    P, D, beta, alpha = point[0], point[1], point[2], point[3]
+    P_t = beta * const[0]
+    I_t = beta * const[1]
+    VC = alpha * const[2]
+    return ca.vertcat(1, P_t, I_t, P_t * P, I_t * P, P_t * D - VC, I_t * D)
+
+
+def jury_function(cap: int) -> ca.Function:
+    """Schur-Cohn test of a real polynomial of degree ``cap`` (ascending coefficients).
+
+    Lattice form: with p_m and its reverse p*_m, k_m = p_m(0)/p*_m(0) and
+    p_{m-1} = (p_m - k_m p*_m)/(z (1 - k_m^2)), p*_{m-1} = (p*_m - k_m p_m)/(1 - k_m^2).
+    All roots lie in |z| < 1 iff every |k_m| < 1. Returns max_m |k_m| (stable iff < 1).
+    Roots at z = 0 (leading zero coefficients, used to pad lower degrees) give k_m = 0.
+    """
+    a = ca.SX.sym("a", cap + 1)
+    inv_lead = 1 / a[cap]
+    P = [a[i] * inv_lead for i in range(cap + 1)]
+    S = P[::-1]
+    kmax = ca.SX(0)
+    for m in range(cap, 0, -1):
+        k = P[0]  # S[0] is kept at 1 by the normalisation below
+        kmax = ca.fmax(kmax, ca.fabs(k))
+        # past an unstable step the remaining k's are meaningless; keep the arithmetic finite
+        inv = 1 / ca.if_else(ca.fabs(k) < 1, 1 - k * k, 1)
+        P, S = ([(P[i + 1] - k * S[i + 1]) * inv for i in range(m)],
+                [(S[i] - k * P[i]) * inv for i in range(m)])
+    return ca.Function(f"haa_jury{cap}", [a], [kmax], ["a"], ["kmax"])
+
+
+def stability_function(cap: int, steps: int = BISECTION_STEPS) -> ca.Function:
+    """Decision and spectral radius of chi for one gain point.
+
+    Inputs: ``basis`` (cap+1 x 7, ascending coefficients of b_j), const [P_t0, I_t0, VC0],
+    point [P_gain, D_gain, beta, alpha].
+    Outputs: ``kmax`` of the Schur-Cohn test (stable iff < 1) and ``rho``, the spectral radius
+    by bisection on chi(r z) (stable iff all roots inside |z| < r): linear on [0, 1] when stable,
+    geometric on [1, Cauchy bound] when not, so rho <= 1 iff the test says stable.
+    """
+    jury = jury_function(cap)
+    basis = ca.MX.sym("basis", cap + 1, N_BASIS)
+    const = ca.MX.sym("const", N_CONST)
+    point = ca.MX.sym("point", N_POINT)
+    a = ca.mtimes(basis, gain_monomials(point, const))
+    kmax = jury(a)
+    stable = kmax < 1
+    cauchy = 1 + ca.mmax(ca.fabs(a[:cap])) / ca.fabs(a[cap])
+    lo = ca.if_else(stable, 0, 1)
+    hi = ca.if_else(stable, 1, cauchy)
+    # a_i r^(i - cap): chi(r z)/r^cap, scaled to keep the largest power bounded
+    powers = ca.DM(np.arange(cap + 1, dtype=float) - cap)
+    for _ in range(steps):
+        r = ca.if_else(stable, (lo + hi) / 2, ca.sqrt(lo * hi))
+        inside = jury(a * r ** powers) < 1
+        lo = ca.if_else(inside, lo, r)
+        hi = ca.if_else(inside, r, hi)
+    return ca.Function(f"haa_stab{cap}", [basis, const, point], [kmax, hi],
+                       ["basis", "const", "point"], ["kmax", "rho"])
+
+
+def _c(re, im):
+    return (re, im)
+
+
+def _mul(a, b):
+    return (a[0] * b[0] - a[1] * b[1], a[0] * b[1] + a[1] * b[0])
+
+
+def _add(a, b):
+    return (a[0] + b[0], a[1] + b[1])
+
+
+def _sub(a, b):
+    return (a[0] - b[0], a[1] - b[1])
+
+
+def _scale(k, a):
+    return (k * a[0], k * a[1])
+
+
+def _div(a, b):
+    den = b[0] * b[0] + b[1] * b[1]
+    return ((a[0] * b[0] + a[1] * b[1]) / den, (a[1] * b[0] - a[0] * b[1]) / den)
+
+
+N_PLANT_RESP = 12  # re/im of G_TV, G_Td, G_thV, G_thd, G_pV, G_pd
+N_STRUCT = 4       # Ts, N_av, delay (samples), port_average (0/1)
+FREQ_OUTPUTS = ("L_t", "L_imp", "Z", "H_T")
+
+
+def frequency_function() -> ca.Function:
+    """Loop transfer functions of one gain point at one frequency, in real arithmetic.
+
+    Inputs: ``G`` (12): the discretised plant's responses at z = exp(j w Ts) from V_m and T_dist
+    to the measured torque T, the encoder angle theta_L1 and the port velocity p;
+    ``wTs`` (w Ts, rad); ``const`` [P_t0, I_t0, VC0]; ``point`` [P_gain, D_gain, beta, alpha];
+    ``struct`` [Ts, N_av, delay, port_average].
+
+    Outputs (re, im pairs):
+    L_t   torque loop opened at the PI output (VC loop closed; impedance loop closed with the
+          given P_gain, D_gain - pass 0, 0 for the torque loop alone);
+    L_imp impedance loop opened at the torque reference T_lref (torque and VC loops closed);
+    Z     driving-port impedance T_dist / velocity with every loop closed (Sec. 5);
+    H_T   torque tracking T / T_lref with the impedance loop open.
+    Sign convention: negative feedback, closed loop 1/(1 + L).
+    """
+    G = ca.SX.sym("G", N_PLANT_RESP)
+    wTs = ca.SX.sym("wTs")
+    const = ca.SX.sym("const", N_CONST)
+    point = ca.SX.sym("point", N_POINT)
+    struct = ca.SX.sym("struct", N_STRUCT)
+    G_TV, G_Td, G_thV, G_thd, G_pV, G_pd = (_c(G[2 * i], G[2 * i + 1]) for i in range(6))
+    P, D, beta, alpha = (point[i] for i in range(4))
+    P_t, I_t, VC = beta * const[0], beta * const[1], alpha * const[2]
+    Ts, N_av, delay, port_avg = (struct[i] for i in range(4))
+    # 1 - exp(-j x) = 2 sin^2(x/2) + j sin(x): no cancellation at low frequency
+    def one_minus_expm(x):
+        return _c(2 * ca.sin(x / 2) ** 2, ca.sin(x))
+    F = _scale(1 / (N_av * Ts), one_minus_expm(N_av * wTs))          # averaging filter
+    PI = _add(_c(P_t, 0), _div(_c(I_t * Ts, 0), one_minus_expm(wTs)))  # Eq. (7)
+    zd = _c(ca.cos(delay * wTs), -ca.sin(delay * wTs))                 # z^-delay
+    imp = _add(_c(P, 0), _scale(D, F))                                 # Eq. (8)
+    VCF = _scale(VC, F)
+    dPI = _mul(zd, PI)
+    dVCF = _mul(zd, VCF)
+    vc_loop = _sub(_c(1, 0), _mul(dVCF, G_thV))                        # 1 - z^-d VC F G_thV
+    R0 = _add(vc_loop, _mul(dPI, G_TV))                                # torque + VC loops
+    L_imp = _div(_mul(_mul(imp, dPI), G_thV), R0)
+    L_t = _div(_mul(dPI, _add(_mul(imp, G_thV), G_TV)), vc_loop)
+    H_T = _div(_mul(dPI, G_TV), R0)
+    R = _mul(R0, _add(_c(1, 0), L_imp))                                # every loop closed
+    # V = K_th theta + K_T T, K_th = z^-d(VC F - PI imp), K_T = -z^-d PI
+    K_th = _sub(dVCF, _mul(dPI, imp))
+    K_T = _scale(-1, dPI)
+    Vd = _div(_add(_mul(K_th, G_thd), _mul(K_T, G_Td)), R)             # V / T_dist
+    pV = (ca.if_else(port_avg > 0.5, _mul(F, G_thV)[0], G_pV[0]),
+          ca.if_else(port_avg > 0.5, _mul(F, G_thV)[1], G_pV[1]))
+    pd = (ca.if_else(port_avg > 0.5, _mul(F, G_thd)[0], G_pd[0]),
+          ca.if_else(port_avg > 0.5, _mul(F, G_thd)[1], G_pd[1]))
+    Y = _add(pd, _mul(pV, Vd))                                         # velocity / T_dist
+    Z = _div(_c(1, 0), Y)
+    out = ca.vertcat(*L_t, *L_imp, *Z, *H_T)
+    return ca.Function("haa_freq", [G, wTs, const, point, struct], [out],
+                       ["G", "wTs", "const", "point", "struct"], ["resp"])

@@ -1,0 +1,11 @@
+"""haa_sym: symbolic-to-numeric model compiler for impedance-controlled robot joints.
+
+Reproduces Focchi et al. (2016), "Robot Impedance Control and Passivity Analysis with Inner
+Torque and Velocity Feedback Loops". The numeric runtime (this namespace) never imports sympy.
+"""
+from haa_sym.params import Controller, ParameterError, Params, Plant, load_params
+from haa_sym.loop import ClosedLoop, LoopOptions, StabilityResult
+
+__all__ = ["Controller", "ParameterError", "Params", "Plant", "load_params", "ClosedLoop",
+           "LoopOptions", "StabilityResult"]
+__version__ = "0.1.0"

@@ -1,0 +1,96 @@
+"""Exact transfer polynomials of a sampled plant, from its double-precision matrices.
+
+The sampled plant's eigenvalues cluster near z = 1 at fast sampling, where the roots of a
+polynomial in the monomial basis are sensitive to its coefficients: rounding alone moves them by
+~1e-8 at Ts = 0.5 ms. So the characteristic polynomial and the adjugate are computed *exactly*
+(Faddeev-LeVerrier in integer arithmetic on the dyadic rationals that the doubles are) and each
+coefficient is rounded once, at the end.
+"""
+from __future__ import annotations
+
+from fractions import Fraction
+
+import numpy as np
+
+__all__ = ["charpoly_adjugate", "transfer_polynomials", "polymul", "to_float"]
+
+
+def _dyadic_scale(M: np.ndarray) -> tuple[list[list[int]], int]:
+    """Integers ``K`` and exponent ``E`` with ``M == K / 2**E`` exactly."""
+    E = 0
+    ratios = [[float(x).as_integer_ratio() for x in row] for row in M]
+    for row in ratios:
+        for _, den in row:
+            E = max(E, den.bit_length() - 1)
+    return [[num << (E - (den.bit_length() - 1)) for num, den in row] for row in ratios], E
+
+
+def charpoly_adjugate(Phi: np.ndarray):
+    """Exact ``det(zI - Phi)`` and ``adj(zI - Phi)``.
+
+    Returns ``(c, Ms)``: ``c`` descending Fractions (c[0] = 1) and ``Ms`` the list of Fraction
+    matrices with ``adj(zI - Phi) = sum_k Ms[k] z^(n-1-k)``.
+    """
+    if not np.all(np.isfinite(Phi)):
+        raise ValueError("Phi has non-finite entries")
+    K, E = _dyadic_scale(Phi)
+    n = len(K)
+    Mk = [[int(i == j) for j in range(n)] for i in range(n)]
+    cs = [1]           # integer char poly of K, descending
+    Ms_int = [Mk]
+    for k in range(1, n + 1):
+        AM = [[sum(K[i][l] * Mk[l][j] for l in range(n)) for j in range(n)] for i in range(n)]
+        tr = sum(AM[i][i] for i in range(n))
+        if tr % k:
+            raise ArithmeticError("Faddeev-LeVerrier: inexact division")  # cannot happen
+        c = -tr // k
+        cs.append(c)
+        Mk = [[AM[i][j] + (c if i == j else 0) for j in range(n)] for i in range(n)]
+        if k < n:
+            Ms_int.append(Mk)
+    if any(any(v for v in row) for row in Mk):
+        raise ArithmeticError("Cayley-Hamilton check failed")  # cannot happen in exact arithmetic
+    # det(zI - K/2^E) = sum_j cs[j] 2^(-E j) z^(n-j); adj coefficient of z^(n-1-k) is Ms[k] 2^(-E k)
+    c = [Fraction(cj, 1 << (E * j)) for j, cj in enumerate(cs)]
+    Ms = [[[Fraction(v, 1 << (E * k)) for v in row] for row in Mi] for k, Mi in enumerate(Ms_int)]
+    return c, Ms
+
+
+def transfer_polynomials(Phi: np.ndarray, Gamma: np.ndarray, C: np.ndarray):
+    """Exact ``d(z) = det(zI - Phi)`` and numerators ``N[o][i](z) = C_o adj(zI - Phi) Gamma_i``.
+
+    All polynomials descending, as lists of Fractions; numerators have degree n - 1.
+    """
+    d, Ms = charpoly_adjugate(Phi)
+    Cf = [[Fraction(float(v)) for v in row] for row in C]
+    Gf = [[Fraction(float(v)) for v in row] for row in Gamma]
+    n = len(d) - 1
+    nums = []
+    for co in Cf:
+        row = []
+        for i in range(len(Gf[0])):
+            coeffs = []
+            for Mk in Ms:
+                coeffs.append(sum(co[a] * sum(Mk[a][b] * Gf[b][i] for b in range(n)) for a in range(n)))
+            row.append(coeffs)
+        nums.append(row)
+    return d, nums
+
+
+def polymul(*polys):
+    """Product of descending coefficient lists (exact if the inputs are)."""
+    out = [Fraction(1)]
+    for p in polys:
+        res = [Fraction(0)] * (len(out) + len(p) - 1)
+        for i, a in enumerate(out):
+            if a:
+                for j, b in enumerate(p):
+                    res[i + j] += a * b
+        out = res
+    return out
+
+
+def to_float(p) -> np.ndarray:
+    """Correctly rounded doubles of exact coefficients."""
+    return np.array([float(x) for x in p])
+

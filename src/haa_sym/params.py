@@ -1,0 +1,277 @@
+"""Actuator and controller parameters as validated data (Table 1 and Sec. 3 of the paper).
+
+A parameter file (TOML, see ``model/hyq_haa.toml``) has a ``[plant]`` table, a ``[controller]``
+table and optional ``[configurations.<name>]`` tables overriding plant keys (the leg
+configurations of Table 1). Loading validates everything and raises :class:`ParameterError`
+naming the file, the key, the value and what is allowed; nothing is silently defaulted.
+
+Example
+-------
+>>> from haa_sym.params import load_params
+>>> p = load_params("model/hyq_haa.toml")                       # doctest: +SKIP
+>>> p.configuration("retracted").plant.J_L2                     # doctest: +SKIP
+0.129
+"""
+from __future__ import annotations
+
+import math
+import tomllib
+from dataclasses import dataclass, field, fields, replace
+from pathlib import Path
+from typing import Mapping
+
+__all__ = [
+    "ParameterError",
+    "Plant",
+    "Controller",
+    "Params",
+    "PLANT_KEYS",
+    "CONTROLLER_KEYS",
+    "load_params",
+    "default_params_path",
+]
+
+
+class ParameterError(ValueError):
+    """A parameter is missing, unknown or outside what the physics allows."""
+
+
+# Domain of every key: ">0" strictly positive, ">=0" non-negative, "int>=1" integer >= 1.
+# Why each is what it is: inertias, stiffnesses of the transmission, L, R, k_t, N and Ts appear
+# as divisors or set the state dimension (L = 0 would make the current an algebraic variable);
+# dampings, frictions and the gravity spring K_L2 may vanish (K_L2 = 0 is the gravity-compensated
+# leg of Sec. 3.1); alpha = 0 switches velocity compensation off (Fig. 9a).
+_PLANT_DOMAIN: dict[str, str] = {
+    "J_m": ">0", "K_hd": ">0", "D_hd": ">=0", "B_m": ">=0", "J_L1": ">0", "B_L1": ">=0",
+    "J_L2": ">0", "B_L2": ">=0", "K_L2": ">=0", "K_p": ">0", "D_p": ">=0", "L": ">0",
+    "R": ">0", "k_t": ">0", "k_w": ">=0", "N": ">0",
+}
+_CONTROLLER_DOMAIN: dict[str, str] = {
+    "Ts": ">0", "N_av": "int>=1", "alpha": ">=0", "beta": ">0", "P_t0": ">=0", "I_t0": ">=0",
+}
+_DOMAIN_TEXT = {
+    ">0": "a finite number > 0",
+    ">=0": "a finite number >= 0",
+    "int>=1": "an integer >= 1",
+}
+_ENTRY_FIELDS = {"value", "unit", "source", "description"}
+_SOURCES = {"D", "I", "C", "-"}
+
+PLANT_KEYS: tuple[str, ...] = tuple(_PLANT_DOMAIN)
+CONTROLLER_KEYS: tuple[str, ...] = tuple(_CONTROLLER_DOMAIN)
+
+
+@dataclass(frozen=True)
+class Plant:
+    """Physical parameters of Eq. (1)-(2), SI units (Table 1)."""
+
+    J_m: float
+    K_hd: float
+    D_hd: float
+    B_m: float
+    J_L1: float
+    B_L1: float
+    J_L2: float
+    B_L2: float
+    K_L2: float
+    K_p: float
+    D_p: float
+    L: float
+    R: float
+    k_t: float
+    k_w: float
+    N: float
+
+    def as_tuple(self) -> tuple[float, ...]:
+        """Values in the order of :data:`PLANT_KEYS` (the order the generated code expects)."""
+        return tuple(getattr(self, k) for k in PLANT_KEYS)
+
+    def replace(self, **changes: float) -> "Plant":
+        """A copy with some keys changed, validated like a file."""
+        return _validated(Plant, {**self.__dict__, **changes}, _PLANT_DOMAIN, "<replace>")
+
+
+@dataclass(frozen=True)
+class Controller:
+    """Controller defaults of Sec. 3: sampling, filter, velocity compensation and PI gains.
+
+    ``P_t = beta * P_t0`` and ``I_t = beta * I_t0`` (Eq. 7); the simplified velocity compensation
+    gain is ``alpha * N / k_t * (R B_m + k_t k_w)`` (Eq. 6).
+    """
+
+    Ts: float
+    N_av: int
+    alpha: float
+    beta: float
+    P_t0: float
+    I_t0: float
+
+    @property
+    def P_t(self) -> float:
+        return self.beta * self.P_t0
+
+    @property
+    def I_t(self) -> float:
+        return self.beta * self.I_t0
+
+    def replace(self, **changes: float) -> "Controller":
+        """A copy with some keys changed, validated like a file."""
+        return _validated(Controller, {**self.__dict__, **changes}, _CONTROLLER_DOMAIN, "<replace>")
+
+
+@dataclass(frozen=True)
+class Params:
+    """A validated parameter file: nominal plant, controller and named leg configurations."""
+
+    plant: Plant
+    controller: Controller
+    configurations: Mapping[str, Mapping[str, float]] = field(default_factory=dict)
+    source: str = "<memory>"
+
+    def configuration(self, name: str) -> "Params":
+        """The parameters with the plant overrides of configuration ``name`` applied."""
+        if name not in self.configurations:
+            raise ParameterError(
+                f"{self.source}: unknown configuration {name!r}; "
+                f"allowed: {sorted(self.configurations) or 'none defined'}"
+            )
+        return replace(self, plant=self.plant.replace(**self.configurations[name]))
+
+    def with_values(self, **changes: float) -> "Params":
+        """A copy with any plant or controller keys changed (what ``--set KEY=VALUE`` does)."""
+        plant_changes = {k: v for k, v in changes.items() if k in _PLANT_DOMAIN}
+        ctrl_changes = {k: v for k, v in changes.items() if k in _CONTROLLER_DOMAIN}
+        unknown = sorted(set(changes) - set(plant_changes) - set(ctrl_changes))
+        if unknown:
+            raise ParameterError(
+                f"unknown parameter key(s) {unknown}; allowed: {list(PLANT_KEYS + CONTROLLER_KEYS)}"
+            )
+        return replace(
+            self,
+            plant=self.plant.replace(**plant_changes) if plant_changes else self.plant,
+            controller=self.controller.replace(**ctrl_changes) if ctrl_changes else self.controller,
+        )
+
+    def to_dict(self) -> dict:
+        """Plain values, for saving next to results."""
+        return {
+            "plant": dict(self.plant.__dict__),
+            "controller": dict(self.controller.__dict__),
+            "configurations": {k: dict(v) for k, v in self.configurations.items()},
+            "source": self.source,
+        }
+
+
+def default_params_path() -> Path:
+    """``model/hyq_haa.toml`` of the source tree (the bundled HyQ parameters)."""
+    return Path(__file__).resolve().parents[2] / "model" / "hyq_haa.toml"
+
+
+def _check_value(where: str, key: str, value: object, domain: str) -> float | int:
+    allowed = _DOMAIN_TEXT[domain]
+    if isinstance(value, bool) or not isinstance(value, (int, float)):
+        raise ParameterError(f"{where}: {key} = {value!r} is not a number; allowed: {allowed}")
+    if not math.isfinite(value):
+        raise ParameterError(f"{where}: {key} = {value!r} is not finite; allowed: {allowed}")
+    if domain == "int>=1":
+        if float(value) != int(value):
+            raise ParameterError(f"{where}: {key} = {value!r} is not an integer; allowed: {allowed}")
+        if value < 1:
+            raise ParameterError(f"{where}: {key} = {value!r} is out of range; allowed: {allowed}")
+        return int(value)
+    if domain == ">0" and not value > 0:
+        raise ParameterError(f"{where}: {key} = {value!r} is out of range; allowed: {allowed}")
+    if domain == ">=0" and not value >= 0:
+        raise ParameterError(f"{where}: {key} = {value!r} is out of range; allowed: {allowed}")
+    return float(value)
+
+
+def _validated(cls, values: Mapping[str, object], domain: Mapping[str, str], where: str):
+    unknown = sorted(set(values) - set(domain))
+    if unknown:
+        raise ParameterError(f"{where}: unknown key(s) {unknown}; allowed: {list(domain)}")
+    missing = [k for k in domain if k not in values]
+    if missing:
+        raise ParameterError(f"{where}: missing key(s) {missing}; every key of {list(domain)} is required")
+    return cls(**{k: _check_value(where, k, values[k], domain[k]) for k in domain})
+
+
+def _entry_values(table: Mapping[str, object], where: str) -> dict[str, object]:
+    """Unwrap ``{value, unit, source, description}`` entries (a bare number is also accepted)."""
+    out: dict[str, object] = {}
+    for key, entry in table.items():
+        if isinstance(entry, Mapping):
+            extra = sorted(set(entry) - _ENTRY_FIELDS)
+            if extra:
+                raise ParameterError(
+                    f"{where}.{key}: unknown field(s) {extra}; allowed: {sorted(_ENTRY_FIELDS)}"
+                )
+            if "value" not in entry:
+                raise ParameterError(f"{where}.{key}: missing field 'value'")
+            src = entry.get("source", "-")
+            if src not in _SOURCES:
+                raise ParameterError(
+                    f"{where}.{key}: source = {src!r}; allowed: {sorted(_SOURCES)} (Table 1 letters)"
+                )
+            out[key] = entry["value"]
+        else:
+            out[key] = entry
+    return out
+
+
+def parse_params(data: Mapping[str, object], source: str = "<memory>") -> Params:
+    """Validate the content of a parameter file already read into a mapping."""
+    top = sorted(set(data) - {"plant", "controller", "configurations"})
+    if top:
+        raise ParameterError(
+            f"{source}: unknown table(s) {top}; allowed: ['plant', 'controller', 'configurations']"
+        )
+    for name in ("plant", "controller"):
+        if not isinstance(data.get(name), Mapping):
+            raise ParameterError(f"{source}: missing table [{name}]")
+    plant = _validated(Plant, _entry_values(data["plant"], f"{source} [plant]"), _PLANT_DOMAIN,
+                       f"{source} [plant]")
+    controller = _validated(Controller, _entry_values(data["controller"], f"{source} [controller]"),
+                            _CONTROLLER_DOMAIN, f"{source} [controller]")
+    configs: dict[str, dict[str, float]] = {}
+    raw_configs = data.get("configurations", {})
+    if not isinstance(raw_configs, Mapping):
+        raise ParameterError(f"{source}: [configurations] must be a table of tables")
+    for name, overrides in raw_configs.items():
+        where = f"{source} [configurations.{name}]"
+        if not isinstance(overrides, Mapping):
+            raise ParameterError(f"{where}: must be a table of plant keys")
+        values = _entry_values(overrides, where)
+        unknown = sorted(set(values) - set(_PLANT_DOMAIN))
+        if unknown:
+            raise ParameterError(f"{where}: unknown key(s) {unknown}; allowed: {list(PLANT_KEYS)}")
+        configs[name] = {k: _check_value(where, k, v, _PLANT_DOMAIN[k]) for k, v in values.items()}
+    return Params(plant=plant, controller=controller, configurations=configs, source=source)
+
+
+def load_params(path: str | Path | None = None) -> Params:
+    """Read and validate a parameter file.
+
+    Parameters
+    ----------
+    path : str or Path, optional
+        TOML file; default the bundled ``model/hyq_haa.toml``.
+
+    Returns
+    -------
+    Params
+
+    Raises
+    ------
+    ParameterError
+        Naming the file, the key, the offending value and what is allowed.
+    """
+    p = Path(path) if path is not None else default_params_path()
+    try:
+        with open(p, "rb") as fh:
+            data = tomllib.load(fh)
+    except FileNotFoundError:
+        raise ParameterError(f"{p}: no such parameter file") from None
+    except tomllib.TOMLDecodeError as exc:
+        raise ParameterError(f"{p}: not valid TOML ({exc})") from None
+    return parse_params(data, source=str(p))

@@ -1,0 +1,100 @@
+"""Independent reference: the closed loop as an explicit discrete state space (numpy only).
+
+This is the textbook construction, sample by sample, used by the tests and the benchmarks to
+check the generated evaluators (which work on the characteristic polynomial and on loop
+algebra instead). It shares only the ZOH-discretised plant with them.
+
+Closed-loop state ``[x (7), theta[k-1..k-N_av], integrator[k-1], V[k-1] (if delay)]``,
+inputs ``[T_dist, r]`` where ``r`` is injected at the cut point, outputs
+``[T_meas, theta_L1, port velocity, y]`` where ``y`` is what returns to the cut point with
+negative sign (so the loop transfer r -> y is the ``L`` of 1/(1+L)).
+"""
+from __future__ import annotations
+
+import numpy as np
+
+from haa_sym.loop import ClosedLoop
+from haa_sym.plant import OUTPUTS
+
+__all__ = ["closed_loop_matrices", "spectral_radius", "frequency_response"]
+
+
+def closed_loop_matrices(loop: ClosedLoop, P_gain: float, D_gain: float, beta: float | None = None,
+                         alpha: float | None = None, cut: str | None = None):
+    """``(A, B, C, D)`` of the sampled closed loop; ``cut`` in {None, "T_ref", "PI"}."""
+    ctrl, opt, pl = loop.params.controller, loop.options, loop.plant
+    beta = ctrl.beta if beta is None else beta
+    alpha = ctrl.alpha if alpha is None else alpha
+    P_t, I_t, VC = beta * ctrl.P_t0, beta * ctrl.I_t0, alpha * pl.VC0
+    N, Ts, d = ctrl.N_av, ctrl.Ts, opt.delay
+    nx = pl.Phi.shape[0]
+    n = nx + N + 1 + d
+    i_h, i_int, i_u = nx, nx + N, nx + N + 1
+    nin = 2  # T_dist, r
+    # every signal at sample k is a row over [state (n), inputs (2)]
+    def zero():
+        return np.zeros(n + nin)
+    def row_from_C(name):
+        r = zero()
+        r[:nx] = pl.C[OUTPUTS.index(name)]
+        return r
+    th = row_from_C("theta_L1")
+    T = row_from_C(loop.torque_output)
+    r_in = zero(); r_in[n + 1] = 1
+    th_N = zero(); th_N[i_h + N - 1] = 1
+    v = (th - th_N) / (N * Ts)
+    imp = P_gain * th + D_gain * v                       # Eq. (8) with theta_ref = 0: T_ref = -imp
+    T_ref = r_in if cut == "T_ref" else -imp
+    e = T_ref - T
+    i_prev = zero(); i_prev[i_int] = 1
+    i_k = i_prev + Ts * e                                 # backward Euler, Eq. (7)
+    u_pi = P_t * e + I_t * i_k
+    V_k = (r_in if cut == "PI" else u_pi) + VC * v        # Eq. (6) compensation
+    if d:
+        V_applied = zero(); V_applied[i_u] = 1
+    else:
+        V_applied = V_k
+    rows = np.zeros((n, n + nin))
+    rows[:nx, :nx] = pl.Phi
+    rows[:nx] += np.outer(pl.Gamma[:, 0], V_applied)
+    rows[:nx, n] += pl.Gamma[:, 2]                        # T_dist
+    rows[i_h] = th
+    for j in range(1, N):
+        rows[i_h + j, i_h + j - 1] = 1
+    rows[i_int] = i_k
+    if d:
+        rows[i_u] = V_k
+    if opt.port == "encoder_average":
+        port = v
+    else:
+        port = row_from_C(opt.port)
+    y = {None: zero(), "T_ref": imp, "PI": -u_pi}[cut]
+    out = np.vstack([T, th, port, y])
+    return rows[:, :n], rows[:, n:], out[:, :n], out[:, n:]
+
+
+def spectral_radius(loop: ClosedLoop, P_gain, D_gain, beta=None, alpha=None) -> float:
+    """max |eig| of the closed-loop state matrix (numpy.linalg.eigvals)."""
+    A = closed_loop_matrices(loop, P_gain, D_gain, beta, alpha)[0]
+    return float(np.abs(np.linalg.eigvals(A)).max())
+
+
+def _tf(A, B, C, D, omega, Ts, out, inp):
+    z = np.exp(1j * np.asarray(omega) * Ts)
+    M = z[:, None, None] * np.eye(A.shape[0]) - A
+    X = np.linalg.solve(M, np.broadcast_to(B[:, inp:inp + 1], (len(z), A.shape[0], 1)))[..., 0]
+    return X @ C[out] + D[out, inp]
+
+
+def frequency_response(loop: ClosedLoop, omega, P_gain, D_gain, beta=None, alpha=None) -> dict:
+    """``L_t``, ``L_imp``, ``Z``, ``H_T`` of :meth:`ClosedLoop.frequency_response`, by state space."""
+    Ts = loop.params.controller.Ts
+    res = {}
+    A, B, C, D = closed_loop_matrices(loop, P_gain, D_gain, beta, alpha, cut="PI")
+    res["L_t"] = _tf(A, B, C, D, omega, Ts, 3, 1)
+    A, B, C, D = closed_loop_matrices(loop, P_gain, D_gain, beta, alpha, cut="T_ref")
+    res["L_imp"] = _tf(A, B, C, D, omega, Ts, 3, 1)
+    res["H_T"] = _tf(A, B, C, D, omega, Ts, 0, 1)
+    A, B, C, D = closed_loop_matrices(loop, P_gain, D_gain, beta, alpha)
+    res["Z"] = 1 / _tf(A, B, C, D, omega, Ts, 2, 0)
+    return res

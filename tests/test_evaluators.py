@@ -1,0 +1,124 @@
+"""The generated evaluators against an independent state-space construction (haa_sym.reference).
+
+Issue 2's acceptance: >= 1,000 random points across beta in [0.5, 6], alpha in [0, 1.2],
+N_av in {1, 4, 10, 20, 50}, Ts in {0.5, 1, 2, 4, 6, 8} ms and both leg configurations; the
+stability decision must agree with numpy.linalg.eigvals wherever the spectral radius is not
+within 1e-6 of 1; frequency responses to 1e-8 relative (1e-12 absolute near zero).
+"""
+import itertools
+
+import numpy as np
+import pytest
+
+from haa_sym import ClosedLoop, LoopOptions
+from haa_sym import reference as ref
+from haa_sym.loop import PORTS
+
+N_AVS = (1, 4, 10, 20, 50)
+TSS = (0.5e-3, 1e-3, 2e-3, 4e-3, 6e-3, 8e-3)
+CONFIGS = ("extended", "retracted")
+POINTS_PER_CASE = 17  # 60 cases x 17 = 1020 points
+
+
+def cases():
+    rng = np.random.default_rng(2016)
+    for N_av, Ts, cfg in itertools.product(N_AVS, TSS, CONFIGS):
+        opts = LoopOptions(delay=int(rng.integers(2)), torque_damping=bool(rng.integers(2)),
+                           port=PORTS[int(rng.integers(3))])
+        pts = np.stack([10 ** rng.uniform(0, np.log10(20000), POINTS_PER_CASE),
+                        rng.uniform(0, 50, POINTS_PER_CASE),
+                        rng.uniform(0.5, 6, POINTS_PER_CASE),
+                        rng.uniform(0, 1.2, POINTS_PER_CASE)])
+        yield N_av, Ts, cfg, opts, pts
+
+
+@pytest.fixture(scope="module")
+def results(params):
+    out = []
+    for N_av, Ts, cfg, opts, pts in cases():
+        loop = ClosedLoop(params.configuration(cfg).with_values(N_av=N_av, Ts=Ts), opts)
+        raw = loop.stability(*pts, refine_band=0)
+        refined = loop.stability(*pts)
+        rho = np.array([ref.spectral_radius(loop, *pts[:, i]) for i in range(pts.shape[1])])
+        out.append((loop, pts, raw, refined, rho))
+    return out
+
+
+def test_thousand_points(results):
+    assert sum(r[1].shape[1] for r in results) >= 1000
+
+
+def test_decision_agrees_with_eigvals(results):
+    bad = []
+    for loop, pts, raw, refined, rho in results:
+        away = np.abs(rho - 1) > 1e-6
+        for i in np.flatnonzero(away & (raw.stable != (rho < 1))):
+            bad.append((loop.params.controller, loop.options, pts[:, i], rho[i], raw.spectral_radius[i]))
+        assert np.array_equal(refined.stable[np.abs(rho - 1) > 1e-12], (rho < 1)[np.abs(rho - 1) > 1e-12])
+    assert not bad, bad[:3]
+
+
+def test_spectral_radius_accuracy(results):
+    # documented accuracy of the bisected radius (monomial basis near z = 1): 2e-6 worst case
+    err = max(np.abs(raw.spectral_radius - rho).max() for _, _, raw, _, rho in results)
+    assert err < 2e-6, err
+    err_ref = max(np.abs(refd.spectral_radius - rho).max() for _, _, _, refd, rho in results)
+    assert err_ref < 2e-6, err_ref
+
+
+def test_radius_consistent_with_decision(results):
+    for _, _, raw, _, _ in results:
+        assert np.array_equal(raw.stable, raw.spectral_radius < 1) or \
+            np.all((raw.spectral_radius <= 1) == raw.stable)
+
+
+def test_both_branches_exercised(results):
+    stable = np.concatenate([rho < 1 for *_, rho in results])
+    assert 0.05 < stable.mean() < 0.95, stable.mean()
+
+
+def test_frequency_responses_match_state_space(results):
+    worst = 0.0
+    for loop, pts, *_ in results[::3]:
+        Ts = loop.params.controller.Ts
+        w = np.logspace(-1, np.log10(np.pi / Ts * 0.999), 25)
+        fr = loop.frequency_response(w, *pts[:, :4])
+        for i in range(4):
+            fref = ref.frequency_response(loop, w, *pts[:, i])
+            for key, val in fref.items():
+                got = fr[key][i]
+                err = np.abs(got - val)
+                ok = (err <= 1e-8 * np.abs(val)) | (err <= 1e-12)
+                assert ok.all(), (key, loop.options, pts[:, i], (err / np.abs(val)).max())
+                worst = max(worst, float((err / np.maximum(np.abs(val), 1e-300)).max()))
+    assert worst < 1e-8
+
+
+def test_characteristic_polynomial_is_det(params):
+    loop = ClosedLoop(params.with_values(N_av=3), LoopOptions(delay=1))
+    chi = loop.characteristic_polynomial(300.0, 7.0, 2.0, 0.5)
+    A = ref.closed_loop_matrices(loop, 300.0, 7.0, 2.0, 0.5)[0]
+    assert len(chi) == A.shape[0] + 1
+    np.testing.assert_allclose(chi / chi[0], np.poly(A), rtol=1e-7, atol=1e-9)
+
+
+def test_broadcasting_and_shapes(params):
+    loop = ClosedLoop(params)
+    P, D = np.meshgrid([1.0, 200.0, 20000.0], [1.0, 10.0])
+    res = loop.stability(P, D)
+    assert res.stable.shape == (2, 3) and res.spectral_radius.shape == (2, 3)
+    fr = loop.frequency_response([1.0, 10.0], P, D)
+    assert fr["Z"].shape == (2, 3, 2)
+
+
+def test_bad_gain_input(params):
+    from haa_sym import ParameterError
+    loop = ClosedLoop(params)
+    with pytest.raises(ParameterError, match="P_gain contains nan"):
+        loop.stability([1.0, float("nan")], 1.0)
+    with pytest.raises(ParameterError, match="port = 'foot'"):
+        LoopOptions(port="foot")
+    with pytest.raises(ParameterError, match="delay = 2"):
+        LoopOptions(delay=2)
+    with pytest.raises(ParameterError, match="N_av = 200 gives a closed loop of order 208"):
+        ClosedLoop(params.with_values(N_av=200))
