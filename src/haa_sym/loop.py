@@ -35,7 +35,7 @@ import numpy as np
 from haa_sym.compiled import evaluators
 from haa_sym.exact import polymul, to_float, transfer_polynomials
 from haa_sym.params import ParameterError, Params
-from haa_sym.plant import DiscretePlant, continuous_plant, discretize
+from haa_sym.plant import OUTPUTS, DiscretePlant, continuous_plant, discretize
 
 __all__ = ["LoopOptions", "ClosedLoop", "StabilityResult", "PORTS", "FREQ_OUTPUTS"]
 
@@ -119,7 +119,6 @@ class ClosedLoop:
 
     def _basis(self) -> np.ndarray:
         """Ascending coefficients (capacity+1) x 7 of b0..b6, padded with roots at z = 0."""
-        from haa_sym.plant import OUTPUTS
         p, ctrl, opt = self.plant, self.params.controller, self.options
         d, nums = transfer_polynomials(p.Phi, p.Gamma[:, :1], p.C)
         n_T = nums[OUTPUTS.index(self.torque_output)][0]

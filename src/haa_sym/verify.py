@@ -157,7 +157,10 @@ def row_torque_margins(params: Params) -> list[Row]:
             f"J_L2 = {p.plant.J_L2}, K_L2 = {K}: PM > 30 deg, GM > 12 dB", ok,
             f"closed loop stable: {stable}; PM = {m.pm_deg:.2f} deg at "
             f"{', '.join(f'{x:.2f}' for x in m.gain_crossovers)} rad/s; GM = {m.gm_db:.2f} dB at "
-            f"{', '.join(f'{x:.1f}' for x in m.phase_crossovers)} rad/s"))
+            f"{', '.join(f'{x:.1f}' for x in m.phase_crossovers)} rad/s",
+            f"P_t = {p.controller.P_t0:g} beta, I_t = {p.controller.I_t0:g} beta (Eq. 7; Table 2's "
+            "caption rounds P_t to 0.38); loop opened at the PI output, P_gain = D_gain = 0, "
+            "N_av-sample averaged velocity in the compensation, no computation delay"))
     return rows
 
 
