@@ -84,7 +84,7 @@ def row_vc_exact(G: sp.Expr) -> Row:
     ok = resid == 0 and not loads
     return Row("Eq. (5): q2 - VC_gain s == 0, and G_tVC then has no load parameter", ok,
                f"q2 - VC_gain s = {resid}; load symbols left in G_tVC: {loads or 'none'}; "
-               f"G_tVC = {sp.factor(Gx)}")
+               f"G_tVC = {Gx}")
 
 
 def row_vc_simplified() -> Row:
