@@ -9,7 +9,9 @@ law Eq. (8), velocity compensation VC * F(z) * theta_L1 (Eq. 6) and a computatio
 
 with basis polynomials b_j fixed per discretised plant (see ``haa_sym.loop``). These kernels take
 the basis and a gain point and return the Schur-Cohn (Jury) decision and the spectral radius,
-and, per frequency, the loop transfer functions in real arithmetic.
+and, per frequency, the gain-affine coefficients of the loop transfer functions in real
+arithmetic (a gain sweep then costs one small matrix product per frequency grid, see
+``haa_sym.regions``).
 """
 from __future__ import annotations
 
@@ -19,7 +21,8 @@ import numpy as np
 N_BASIS = 7
 N_CONST = 3   # P_t0, I_t0, VC0
 N_POINT = 4   # P_gain, D_gain, beta, alpha
-BISECTION_STEPS = 40
+# 2^-30 ~ 1e-9: below the ~1e-8 radius accuracy of the monomial basis at Ts = 1 ms
+BISECTION_STEPS = 30
 
 
 def gain_monomials(point, const):
@@ -60,7 +63,7 @@ def stability_function(cap: int, steps: int = BISECTION_STEPS) -> ca.Function:
     Inputs: ``basis`` (cap+1 x 7, ascending coefficients of b_j), const [P_t0, I_t0, VC0],
     point [P_gain, D_gain, beta, alpha].
     Outputs: ``kmax`` of the Schur-Cohn test (stable iff < 1) and ``rho``, the spectral radius
-    by bisection on chi(r z) (stable iff all roots inside |z| < r): linear on [0, 1] when stable,
+    by ``steps`` halvings on chi(r z) (stable iff all roots inside |z| < r): linear on [0, 1] when stable,
     geometric on [1, Cauchy bound] when not, so rho <= 1 iff the test says stable.
     """
     jury = jury_function(cap)
@@ -111,60 +114,79 @@ def _div(a, b):
 
 N_PLANT_RESP = 12  # re/im of G_TV, G_Td, G_thV, G_thd, G_pV, G_pd
 N_STRUCT = 4       # Ts, N_av, delay (samples), port_average (0/1)
-FREQ_OUTPUTS = ("L_t", "L_imp", "Z", "H_T")
+N_TORQUE_GAINS = 2  # beta, alpha
+# Every loop transfer below is affine in x = (1, P_gain, D_gain) or a ratio of two such forms,
+# because the impedance law Eq. (8) enters linearly through the torque reference.
+COEF_OUTPUTS = ("L_t", "L_imp", "Z_num", "Z_den")
 
 
-def frequency_function() -> ca.Function:
-    """Loop transfer functions of one gain point at one frequency, in real arithmetic.
+def decision_function(cap: int) -> ca.Function:
+    """Schur-Cohn decision only (no radius) for one gain point: ``kmax`` < 1 iff stable."""
+    jury = jury_function(cap)
+    basis = ca.MX.sym("basis", cap + 1, N_BASIS)
+    const = ca.MX.sym("const", N_CONST)
+    point = ca.MX.sym("point", N_POINT)
+    kmax = jury(ca.mtimes(basis, gain_monomials(point, const)))
+    return ca.Function(f"haa_decide{cap}", [basis, const, point], [kmax],
+                       ["basis", "const", "point"], ["kmax"])
+
+
+def loop_coefficient_function() -> ca.Function:
+    """Gain-affine coefficients of the loop transfer functions at one frequency.
 
     Inputs: ``G`` (12): the discretised plant's responses at z = exp(j w Ts) from V_m and T_dist
     to the measured torque T, the encoder angle theta_L1 and the port velocity p;
-    ``wTs`` (w Ts, rad); ``const`` [P_t0, I_t0, VC0]; ``point`` [P_gain, D_gain, beta, alpha];
+    ``wTs`` (w Ts, rad); ``const`` [P_t0, I_t0, VC0]; ``gains`` [beta, alpha];
     ``struct`` [Ts, N_av, delay, port_average].
 
-    Outputs (re, im pairs):
-    L_t   torque loop opened at the PI output (VC loop closed; impedance loop closed with the
-          given P_gain, D_gain - pass 0, 0 for the torque loop alone);
-    L_imp impedance loop opened at the torque reference T_lref (torque and VC loops closed);
-    Z     driving-port impedance T_dist / velocity with every loop closed (Sec. 5);
-    H_T   torque tracking T / T_lref with the impedance loop open.
+    Output ``coef`` (26 reals): for each of L_t, L_imp, Z_num, Z_den the complex coefficients
+    (c_1, c_P, c_D), each as (re, im), so that, with x = (1, P_gain, D_gain),
+
+    L_t   = c . x  torque loop opened at the PI output (VC loop and impedance loop closed;
+                   P_gain = D_gain = 0 is the torque loop alone);
+    L_imp = c . x  impedance loop opened at the torque reference T_lref (torque and VC loops closed);
+    Z     = (Z_num . x) / (Z_den . x), the driving-port impedance T_dist / velocity (Sec. 5);
+
+    then H_T = T / T_lref with the impedance loop open (re, im).
     Sign convention: negative feedback, closed loop 1/(1 + L).
     """
     G = ca.SX.sym("G", N_PLANT_RESP)
     wTs = ca.SX.sym("wTs")
     const = ca.SX.sym("const", N_CONST)
-    point = ca.SX.sym("point", N_POINT)
+    gains = ca.SX.sym("gains", N_TORQUE_GAINS)
     struct = ca.SX.sym("struct", N_STRUCT)
     G_TV, G_Td, G_thV, G_thd, G_pV, G_pd = (_c(G[2 * i], G[2 * i + 1]) for i in range(6))
-    P, D, beta, alpha = (point[i] for i in range(4))
+    beta, alpha = gains[0], gains[1]
     P_t, I_t, VC = beta * const[0], beta * const[1], alpha * const[2]
     Ts, N_av, delay, port_avg = (struct[i] for i in range(4))
     # 1 - exp(-j x) = 2 sin^2(x/2) + j sin(x): no cancellation at low frequency
     def one_minus_expm(x):
         return _c(2 * ca.sin(x / 2) ** 2, ca.sin(x))
+    zero = _c(0, 0)
     F = _scale(1 / (N_av * Ts), one_minus_expm(N_av * wTs))          # averaging filter
     PI = _add(_c(P_t, 0), _div(_c(I_t * Ts, 0), one_minus_expm(wTs)))  # Eq. (7)
     zd = _c(ca.cos(delay * wTs), -ca.sin(delay * wTs))                 # z^-delay
-    imp = _add(_c(P, 0), _scale(D, F))                                 # Eq. (8)
-    VCF = _scale(VC, F)
     dPI = _mul(zd, PI)
-    dVCF = _mul(zd, VCF)
+    dVCF = _mul(zd, _scale(VC, F))                                     # Eq. (6) on the filtered v
     vc_loop = _sub(_c(1, 0), _mul(dVCF, G_thV))                        # 1 - z^-d VC F G_thV
-    R0 = _add(vc_loop, _mul(dPI, G_TV))                                # torque + VC loops
-    L_imp = _div(_mul(_mul(imp, dPI), G_thV), R0)
-    L_t = _div(_mul(dPI, _add(_mul(imp, G_thV), G_TV)), vc_loop)
+    R0 = _add(vc_loop, _mul(dPI, G_TV))                                # torque + VC loops closed
+    # the impedance law imp = P_gain + D_gain F (Eq. 8) multiplies everything below
+    A = _div(_mul(dPI, G_thV), R0)
+    L_imp = (zero, A, _mul(F, A))
+    L_t = (_div(_mul(dPI, G_TV), vc_loop), _div(_mul(dPI, G_thV), vc_loop),
+           _div(_mul(_mul(dPI, F), G_thV), vc_loop))
+    # every loop closed: R = R0 + imp dPI G_thV; V/T_dist = N/R with
+    # N = (z^-d VC F - dPI imp) G_thd - dPI G_Td; port velocity/T_dist = pd + pV N/R
+    r = (R0, _mul(dPI, G_thV), _mul(_mul(F, dPI), G_thV))
+    n = (_sub(_mul(dVCF, G_thd), _mul(dPI, G_Td)), _scale(-1, _mul(dPI, G_thd)),
+         _scale(-1, _mul(_mul(F, dPI), G_thd)))
+    pick = lambda avg, other: (ca.if_else(port_avg > 0.5, avg[0], other[0]),
+                               ca.if_else(port_avg > 0.5, avg[1], other[1]))
+    pV = pick(_mul(F, G_thV), G_pV)
+    pd = pick(_mul(F, G_thd), G_pd)
+    Z_num = r
+    Z_den = tuple(_add(_mul(pd, r[i]), _mul(pV, n[i])) for i in range(3))
     H_T = _div(_mul(dPI, G_TV), R0)
-    R = _mul(R0, _add(_c(1, 0), L_imp))                                # every loop closed
-    # V = K_th theta + K_T T, K_th = z^-d(VC F - PI imp), K_T = -z^-d PI
-    K_th = _sub(dVCF, _mul(dPI, imp))
-    K_T = _scale(-1, dPI)
-    Vd = _div(_add(_mul(K_th, G_thd), _mul(K_T, G_Td)), R)             # V / T_dist
-    pV = (ca.if_else(port_avg > 0.5, _mul(F, G_thV)[0], G_pV[0]),
-          ca.if_else(port_avg > 0.5, _mul(F, G_thV)[1], G_pV[1]))
-    pd = (ca.if_else(port_avg > 0.5, _mul(F, G_thd)[0], G_pd[0]),
-          ca.if_else(port_avg > 0.5, _mul(F, G_thd)[1], G_pd[1]))
-    Y = _add(pd, _mul(pV, Vd))                                         # velocity / T_dist
-    Z = _div(_c(1, 0), Y)
-    out = ca.vertcat(*L_t, *L_imp, *Z, *H_T)
-    return ca.Function("haa_freq", [G, wTs, const, point, struct], [out],
-                       ["G", "wTs", "const", "point", "struct"], ["resp"])
+    out = [v for form in (L_t, L_imp, Z_num, Z_den) for c in form for v in c] + list(H_T)
+    return ca.Function("haa_loopcoef", [G, wTs, const, gains, struct], [ca.vertcat(*out)],
+                       ["G", "wTs", "const", "gains", "struct"], ["coef"])

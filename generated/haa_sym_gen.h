@@ -35,24 +35,24 @@ int haa_plant_work_bytes(casadi_int *sz_arg, casadi_int* sz_res, casadi_int *sz_
 #define haa_plant_SZ_RES 4
 #define haa_plant_SZ_IW 0
 #define haa_plant_SZ_W 0
-int haa_freq(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem);
-int haa_freq_checkout(void);
-void haa_freq_release(int mem);
-void haa_freq_incref(void);
-void haa_freq_decref(void);
-casadi_int haa_freq_n_in(void);
-casadi_int haa_freq_n_out(void);
-casadi_real haa_freq_default_in(casadi_int i);
-const char* haa_freq_name_in(casadi_int i);
-const char* haa_freq_name_out(casadi_int i);
-const casadi_int* haa_freq_sparsity_in(casadi_int i);
-const casadi_int* haa_freq_sparsity_out(casadi_int i);
-int haa_freq_work(casadi_int *sz_arg, casadi_int* sz_res, casadi_int *sz_iw, casadi_int *sz_w);
-int haa_freq_work_bytes(casadi_int *sz_arg, casadi_int* sz_res, casadi_int *sz_iw, casadi_int *sz_w);
-#define haa_freq_SZ_ARG 5
-#define haa_freq_SZ_RES 1
-#define haa_freq_SZ_IW 0
-#define haa_freq_SZ_W 0
+int haa_loopcoef(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem);
+int haa_loopcoef_checkout(void);
+void haa_loopcoef_release(int mem);
+void haa_loopcoef_incref(void);
+void haa_loopcoef_decref(void);
+casadi_int haa_loopcoef_n_in(void);
+casadi_int haa_loopcoef_n_out(void);
+casadi_real haa_loopcoef_default_in(casadi_int i);
+const char* haa_loopcoef_name_in(casadi_int i);
+const char* haa_loopcoef_name_out(casadi_int i);
+const casadi_int* haa_loopcoef_sparsity_in(casadi_int i);
+const casadi_int* haa_loopcoef_sparsity_out(casadi_int i);
+int haa_loopcoef_work(casadi_int *sz_arg, casadi_int* sz_res, casadi_int *sz_iw, casadi_int *sz_w);
+int haa_loopcoef_work_bytes(casadi_int *sz_arg, casadi_int* sz_res, casadi_int *sz_iw, casadi_int *sz_w);
+#define haa_loopcoef_SZ_ARG 5
+#define haa_loopcoef_SZ_RES 1
+#define haa_loopcoef_SZ_IW 0
+#define haa_loopcoef_SZ_W 0
 int haa_stab16(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem);
 int haa_stab16_checkout(void);
 void haa_stab16_release(int mem);
@@ -107,6 +107,60 @@ int haa_stab64_work_bytes(casadi_int *sz_arg, casadi_int* sz_res, casadi_int *sz
 #define haa_stab64_SZ_RES 3
 #define haa_stab64_SZ_IW 0
 #define haa_stab64_SZ_W 462
+int haa_decide16(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem);
+int haa_decide16_checkout(void);
+void haa_decide16_release(int mem);
+void haa_decide16_incref(void);
+void haa_decide16_decref(void);
+casadi_int haa_decide16_n_in(void);
+casadi_int haa_decide16_n_out(void);
+casadi_real haa_decide16_default_in(casadi_int i);
+const char* haa_decide16_name_in(casadi_int i);
+const char* haa_decide16_name_out(casadi_int i);
+const casadi_int* haa_decide16_sparsity_in(casadi_int i);
+const casadi_int* haa_decide16_sparsity_out(casadi_int i);
+int haa_decide16_work(casadi_int *sz_arg, casadi_int* sz_res, casadi_int *sz_iw, casadi_int *sz_w);
+int haa_decide16_work_bytes(casadi_int *sz_arg, casadi_int* sz_res, casadi_int *sz_iw, casadi_int *sz_w);
+#define haa_decide16_SZ_ARG 10
+#define haa_decide16_SZ_RES 2
+#define haa_decide16_SZ_IW 0
+#define haa_decide16_SZ_W 93
+int haa_decide32(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem);
+int haa_decide32_checkout(void);
+void haa_decide32_release(int mem);
+void haa_decide32_incref(void);
+void haa_decide32_decref(void);
+casadi_int haa_decide32_n_in(void);
+casadi_int haa_decide32_n_out(void);
+casadi_real haa_decide32_default_in(casadi_int i);
+const char* haa_decide32_name_in(casadi_int i);
+const char* haa_decide32_name_out(casadi_int i);
+const casadi_int* haa_decide32_sparsity_in(casadi_int i);
+const casadi_int* haa_decide32_sparsity_out(casadi_int i);
+int haa_decide32_work(casadi_int *sz_arg, casadi_int* sz_res, casadi_int *sz_iw, casadi_int *sz_w);
+int haa_decide32_work_bytes(casadi_int *sz_arg, casadi_int* sz_res, casadi_int *sz_iw, casadi_int *sz_w);
+#define haa_decide32_SZ_ARG 10
+#define haa_decide32_SZ_RES 2
+#define haa_decide32_SZ_IW 0
+#define haa_decide32_SZ_W 173
+int haa_decide64(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem);
+int haa_decide64_checkout(void);
+void haa_decide64_release(int mem);
+void haa_decide64_incref(void);
+void haa_decide64_decref(void);
+casadi_int haa_decide64_n_in(void);
+casadi_int haa_decide64_n_out(void);
+casadi_real haa_decide64_default_in(casadi_int i);
+const char* haa_decide64_name_in(casadi_int i);
+const char* haa_decide64_name_out(casadi_int i);
+const casadi_int* haa_decide64_sparsity_in(casadi_int i);
+const casadi_int* haa_decide64_sparsity_out(casadi_int i);
+int haa_decide64_work(casadi_int *sz_arg, casadi_int* sz_res, casadi_int *sz_iw, casadi_int *sz_w);
+int haa_decide64_work_bytes(casadi_int *sz_arg, casadi_int* sz_res, casadi_int *sz_iw, casadi_int *sz_w);
+#define haa_decide64_SZ_ARG 10
+#define haa_decide64_SZ_RES 2
+#define haa_decide64_SZ_IW 0
+#define haa_decide64_SZ_W 333
 void haa_sym_gen_casadi_version(int* major, int* minor, int* patch);
 int haa_sym_gen_casadi_int_size(void);
 int haa_sym_gen_casadi_real_size(void);

@@ -37,9 +37,9 @@ from haa_sym.exact import polymul, to_float, transfer_polynomials
 from haa_sym.params import ParameterError, Params
 from haa_sym.plant import OUTPUTS, DiscretePlant, continuous_plant, discretize
 
-__all__ = ["LoopOptions", "ClosedLoop", "StabilityResult", "PORTS", "FREQ_OUTPUTS"]
+__all__ = ["LoopOptions", "LoopCoefficients", "ClosedLoop", "StabilityResult", "PORTS", "FREQ_OUTPUTS"]
 
-PORTS = ("dtheta_L1", "dtheta_L2", "encoder_average")
+PORTS = ("dtheta_L2", "dtheta_L1", "encoder_average")
 # Half-width of the band around spectral radius 1 where points are re-decided by eigenvalues:
 # ten times the worst radius error of the monomial-basis Schur-Cohn bisection measured over the
 # paper's configurations (9e-7 at Ts = 0.5 ms, delay 1; tests/test_evaluators.py).
@@ -47,21 +47,120 @@ REFINE_BAND = 1e-5
 FREQ_OUTPUTS = ("L_t", "L_imp", "Z", "H_T")
 
 
+COLGATE = ("subtract", "add", "none")
+PM_LOOPS = ("impedance", "torque")
+PM_RULES = ("min_abs", "worst")
+
+
 @dataclass(frozen=True)
 class LoopOptions:
-    """Modelling choices the paper leaves open; defaults are stated in ``docs/model.md``."""
+    """Modelling choices the paper leaves open; each is discussed in ``docs/model.md``.
+
+    The defaults are the combination that reproduces the most cells of Table 2
+    (``haa-sym reproduce`` re-scores all combinations and writes the count to the report).
+
+    Parameters
+    ----------
+    delay : {0, 1}
+        Computation delay between sampling and the applied voltage, samples. Default 0.
+    torque_damping : bool
+        Whether the measured torque includes the D_hd term of Eq. (2). Default True.
+    port : {"dtheta_L2", "dtheta_L1", "encoder_average"}
+        Velocity of the passivity port Z = T_dist / velocity (Sec. 5): the inertia J_L2 that
+        T_dist acts on (default), the sampled link velocity of the paper's wording, or the
+        averaged encoder velocity the controller sees.
+    colgate : {"subtract", "add", "none"}
+        Colgate's sampled-data correction of the phase of Z: subtract w Ts/2 (the paper's
+        wording, default), add it, or none.
+    pm_loop : {"impedance", "torque"}
+        Loop on which the phase margin of the region maps is measured: the impedance loop opened
+        at the torque reference T_lref (default) or the torque loop opened at the PI output with
+        the impedance loop closed.
+    pm_rule : {"min_abs", "worst"}
+        When |L| crosses 1 more than once: the crossover with the smallest |PM| (default; what
+        Matlab's ``margin`` reports) or the smallest signed PM.
+    n_omega : int
+        Points of the log frequency grid from ``omega_min`` to Nyquist pi/Ts on which Z(z) and
+        the loop gains are sampled. Default 2000.
+    omega_min : float
+        Lowest frequency of that grid, rad/s. Default 0.01.
+    passivity_tol_deg : float
+        A point is passive when the corrected phase of Z stays within 90 deg + this tolerance.
+        A spring (Z ~ K/(j w)) sits at -90 deg as w -> 0, so a zero tolerance would decide
+        such points by rounding. Default 1e-3.
+    """
 
     delay: int = 0
     torque_damping: bool = True
-    port: str = "dtheta_L1"
+    port: str = "dtheta_L2"
+    colgate: str = "subtract"
+    pm_loop: str = "impedance"
+    pm_rule: str = "min_abs"
+    n_omega: int = 2000
+    omega_min: float = 0.01
+    passivity_tol_deg: float = 1e-3
 
     def __post_init__(self):
         if self.delay not in (0, 1) or isinstance(self.delay, bool):
             raise ParameterError(f"delay = {self.delay!r}; allowed: 0 or 1 (samples)")
         if not isinstance(self.torque_damping, bool):
             raise ParameterError(f"torque_damping = {self.torque_damping!r}; allowed: True or False")
-        if self.port not in PORTS:
-            raise ParameterError(f"port = {self.port!r}; allowed: {list(PORTS)}")
+        for name, allowed in (("port", PORTS), ("colgate", COLGATE), ("pm_loop", PM_LOOPS),
+                              ("pm_rule", PM_RULES)):
+            if getattr(self, name) not in allowed:
+                raise ParameterError(f"{name} = {getattr(self, name)!r}; allowed: {list(allowed)}")
+        if isinstance(self.n_omega, bool) or not isinstance(self.n_omega, int) or self.n_omega < 10:
+            raise ParameterError(f"n_omega = {self.n_omega!r}; allowed: an integer >= 10")
+        for name in ("omega_min", "passivity_tol_deg"):
+            v = getattr(self, name)
+            if isinstance(v, bool) or not isinstance(v, (int, float)) or not np.isfinite(v) or v < 0 \
+                    or (name == "omega_min" and v == 0):
+                raise ParameterError(f"{name} = {v!r}; allowed: a finite number "
+                                     f"{'> 0 (rad/s)' if name == 'omega_min' else '>= 0 (deg)'}")
+
+    def to_dict(self) -> dict:
+        return {f: getattr(self, f) for f in self.__dataclass_fields__}
+
+    @classmethod
+    def field_names(cls) -> tuple[str, ...]:
+        return tuple(cls.__dataclass_fields__)
+
+    def omega(self, Ts: float) -> np.ndarray:
+        """The frequency grid (rad/s) of this option set for sampling time ``Ts``."""
+        w_max = np.pi / Ts * (1 - 1e-9)
+        if self.omega_min >= w_max:
+            raise ParameterError(f"omega_min = {self.omega_min!r} is not below Nyquist pi/Ts = {w_max:.6g} rad/s")
+        return np.logspace(np.log10(self.omega_min), np.log10(w_max), self.n_omega)
+
+
+@dataclass(frozen=True)
+class LoopCoefficients:
+    """Gain-affine loop transfer functions on a frequency grid (fixed beta, alpha).
+
+    With x = (1, P_gain, D_gain): ``L_t @ x``, ``L_imp @ x`` and ``(Z_num @ x) / (Z_den @ x)``
+    give the torque loop, the impedance loop and the port impedance at every ``omega``.
+    Arrays are complex, shape (n_omega, 3); ``H_T`` (n_omega,) is the torque tracking T/T_lref.
+    """
+
+    omega: np.ndarray
+    Ts: float
+    L_t: np.ndarray
+    L_imp: np.ndarray
+    Z_num: np.ndarray
+    Z_den: np.ndarray
+    H_T: np.ndarray
+
+    def evaluate(self, name: str, P_gain, D_gain) -> np.ndarray:
+        """``L_t``, ``L_imp``, ``Z`` or ``H_T`` at gain points: shape point_shape + (n_omega,)."""
+        P = np.asarray(P_gain, dtype=float)
+        D = np.asarray(D_gain, dtype=float)
+        P, D = np.broadcast_arrays(P, D)
+        x = np.stack([np.ones_like(P), P, D], axis=-1)
+        if name == "H_T":
+            return np.broadcast_to(self.H_T, P.shape + self.H_T.shape).copy()
+        if name == "Z":
+            return (x @ self.Z_num.T) / (x @ self.Z_den.T)
+        return x @ getattr(self, name).T
 
 
 @dataclass(frozen=True)
@@ -167,7 +266,7 @@ class ClosedLoop:
         return asc[self.capacity - self.degree:][::-1]
 
     # --- evaluators -------------------------------------------------------------------------
-    def stability(self, P_gain, D_gain, beta=None, alpha=None, *,
+    def stability(self, P_gain, D_gain, beta=None, alpha=None, *, radius: bool = True,
                   refine_band: float = REFINE_BAND) -> StabilityResult:
         """Stability decision and spectral radius of the closed loop at gain points.
 
@@ -181,6 +280,9 @@ class ClosedLoop:
             Torque-gain scale (Eq. 7) and velocity-compensation gain (Eq. 6); default from params.
             All four broadcast together.
 
+        radius : bool
+            Bisect the spectral radius (30 Schur-Cohn tests per point); False runs one test per
+            point and returns NaN radii except where refined by eigenvalues.
         refine_band : float
             Points whose bisected radius lies within this distance of 1 are re-decided from the
             eigenvalues of the closed-loop state matrix (``haa_sym.reference``); 0 disables.
@@ -189,22 +291,54 @@ class ClosedLoop:
         -------
         StabilityResult
             Arrays of the broadcast shape. Every point is decided by the generated Schur-Cohn
-            test and its radius bisected (40 halvings). Near z = 1 the monomial coefficients
+            test and its radius bisected (30 halvings). Near z = 1 the monomial coefficients
             limit that radius to ~1e-6 at Ts = 0.5 ms (~1e-8 at 1 ms, see docs/model.md), hence
             the refinement band.
         """
         pts, shape = self._points(P_gain, D_gain, beta, alpha)
-        f = evaluators(self.backend)[f"haa_stab{self.capacity}"]
-        kmax, rho = f(self.basis, self.const, pts)
-        rho = np.array(rho).ravel()
-        stable = np.array(kmax).ravel() < 1
-        refined = np.abs(rho - 1) < refine_band
+        ev = evaluators(self.backend)
+        if radius:
+            kmax, rho = ev[f"haa_stab{self.capacity}"](self.basis, self.const, pts)
+            rho = np.array(rho).ravel()
+            kmax = np.array(kmax).ravel()
+            refined = np.abs(rho - 1) < refine_band
+        else:
+            kmax = np.array(ev[f"haa_decide{self.capacity}"](self.basis, self.const, pts)).ravel()
+            rho = np.full(kmax.shape, np.nan)
+            # without a radius, kmax near 1 flags the points the double recursion may misjudge
+            refined = np.abs(kmax - 1) < refine_band
+        stable = kmax < 1
         if refined.any():
             from haa_sym.reference import spectral_radius
             for i in np.flatnonzero(refined):
                 rho[i] = spectral_radius(self, *pts[:, i])
                 stable[i] = rho[i] < 1
         return StabilityResult(stable.reshape(shape), rho.reshape(shape), refined.reshape(shape))
+
+    def loop_coefficients(self, omega=None, beta=None, alpha=None) -> LoopCoefficients:
+        """Gain-affine loop transfer functions on ``omega`` (rad/s; default: the options' grid).
+
+        ``beta`` and ``alpha`` are scalars (default from params). One generated evaluation per
+        frequency; the P_gain/D_gain dependence is then a 3-vector product (see
+        :class:`LoopCoefficients`).
+        """
+        ctrl = self.params.controller
+        omega = self.options.omega(ctrl.Ts) if omega is None else _finite_array("omega", omega).ravel()
+        beta = float(_finite_array("beta", ctrl.beta if beta is None else beta))
+        alpha = float(_finite_array("alpha", ctrl.alpha if alpha is None else alpha))
+        port = "dtheta_L1" if self.options.port == "encoder_average" else self.options.port
+        G = self.plant.frequency_response(omega, outputs=(self.torque_output, "theta_L1", port),
+                                          inputs=("V_m", "T_dist"))
+        Gr = np.empty((12, omega.size))
+        Gr[0::2] = G.reshape(6, -1).real
+        Gr[1::2] = G.reshape(6, -1).imag
+        struct = np.array([ctrl.Ts, ctrl.N_av, self.options.delay,
+                           1.0 if self.options.port == "encoder_average" else 0.0])
+        f = evaluators(self.backend)["haa_loopcoef"]
+        out = np.array(f(Gr, (omega * ctrl.Ts)[None, :], self.const, np.array([beta, alpha]), struct))
+        c = out[0::2] + 1j * out[1::2]                      # 13 x n_w
+        forms = {k: c[3 * i:3 * i + 3].T.copy() for i, k in enumerate(("L_t", "L_imp", "Z_num", "Z_den"))}
+        return LoopCoefficients(omega=omega, Ts=ctrl.Ts, H_T=c[12].copy(), **forms)
 
     def frequency_response(self, omega, P_gain=0.0, D_gain=0.0, beta=None, alpha=None) -> dict:
         """Loop transfer functions at ``omega`` (rad/s) for gain points.
@@ -213,21 +347,15 @@ class ClosedLoop:
         ``L_t`` (torque loop opened at the PI output), ``L_imp`` (impedance loop opened at the
         torque reference), ``Z`` (port impedance T_dist/velocity, every loop closed) and ``H_T``
         (torque tracking T/T_ref, impedance loop open). Negative-feedback convention 1/(1+L).
+        ``beta`` and ``alpha`` may vary per point (one coefficient evaluation per distinct pair).
         """
         omega = _finite_array("omega", omega).ravel()
         pts, shape = self._points(P_gain, D_gain, beta, alpha)
-        port = "dtheta_L1" if self.options.port == "encoder_average" else self.options.port
-        G = self.plant.frequency_response(omega, outputs=(self.torque_output, "theta_L1", port),
-                                          inputs=("V_m", "T_dist"))
-        Gr = np.empty((12, omega.size))
-        Gr[0::2] = G.reshape(6, -1).real
-        Gr[1::2] = G.reshape(6, -1).imag
-        ctrl = self.params.controller
-        struct = np.array([ctrl.Ts, ctrl.N_av, self.options.delay,
-                           1.0 if self.options.port == "encoder_average" else 0.0])
-        n_pt, n_w = pts.shape[1], omega.size
-        f = evaluators(self.backend)["haa_freq"]
-        out = np.array(f(np.tile(Gr, n_pt), np.tile(omega * ctrl.Ts, n_pt)[None, :], self.const,
-                         np.repeat(pts, n_w, axis=1), struct))
-        resp = out[0::2] + 1j * out[1::2]
-        return {k: resp[i].reshape(shape + (n_w,)) for i, k in enumerate(FREQ_OUTPUTS)}
+        out = {k: np.empty((pts.shape[1], omega.size), complex) for k in FREQ_OUTPUTS}
+        pairs, inv = np.unique(pts[2:].T, axis=0, return_inverse=True)
+        for j, (b, a) in enumerate(pairs):
+            sel = np.flatnonzero(inv.ravel() == j)
+            co = self.loop_coefficients(omega, b, a)
+            for k in FREQ_OUTPUTS:
+                out[k][sel] = co.evaluate(k, pts[0, sel], pts[1, sel])
+        return {k: v.reshape(shape + (omega.size,)) for k, v in out.items()}
