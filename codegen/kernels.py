@@ -121,14 +121,25 @@ COEF_OUTPUTS = ("L_t", "L_imp", "Z_num", "Z_den")
 
 
 def decision_function(cap: int) -> ca.Function:
-    """Schur-Cohn decision only (no radius) for one gain point: ``kmax`` < 1 iff stable."""
+    """Schur-Cohn decision without the radius, for one gain point.
+
+    Inputs as :func:`stability_function` plus ``band``. Outputs ``kmax`` (stable iff < 1) and
+    the same test on chi((1 - band) z) and chi((1 + band) z): ``k_in`` < 1 iff every root lies in
+    |z| < 1 - band, ``k_out`` < 1 iff every root lies in |z| < 1 + band. A point with
+    k_in >= 1 > k_out has its spectral radius within ``band`` of 1 (three tests instead of 30).
+    """
     jury = jury_function(cap)
     basis = ca.MX.sym("basis", cap + 1, N_BASIS)
     const = ca.MX.sym("const", N_CONST)
     point = ca.MX.sym("point", N_POINT)
-    kmax = jury(ca.mtimes(basis, gain_monomials(point, const)))
-    return ca.Function(f"haa_decide{cap}", [basis, const, point], [kmax],
-                       ["basis", "const", "point"], ["kmax"])
+    band = ca.MX.sym("band")
+    a = ca.mtimes(basis, gain_monomials(point, const))
+    powers = ca.DM(np.arange(cap + 1, dtype=float) - cap)
+    kmax = jury(a)
+    k_in = jury(a * (1 - band) ** powers)
+    k_out = jury(a * (1 + band) ** powers)
+    return ca.Function(f"haa_decide{cap}", [basis, const, point, band], [kmax, k_in, k_out],
+                       ["basis", "const", "point", "band"], ["kmax", "k_in", "k_out"])
 
 
 def loop_coefficient_function() -> ca.Function:

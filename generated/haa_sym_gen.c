@@ -23452,11 +23452,12 @@ static int casadi_f9(const casadi_real** arg, casadi_real** res, casadi_int* iw,
   return 0;
 }
 
-/* haa_decide16:(basis[17x7],const[3],point[4])->(kmax) */
+/* haa_decide16:(basis[17x7],const[3],point[4],band)->(kmax,k_in,k_out) */
 static int casadi_f8(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
-  casadi_real **res1=res+1, *rr, *w00=w+62, w02, *w03=w+79, w04, *w05=w+83, w06, w07, w08, w09, w10;
-  casadi_real w11, w12, *w13=w+86;
-  const casadi_real **arg1=arg+3, *cs, *wr01;
+  casadi_int i;
+  casadi_real **res1=res+3, *rr, *w00=w+62, w02, *w03=w+79, w04, *w05=w+83, w06, w07, w08, w09, w10;
+  casadi_real w11, w12, *w13=w+86, *w14=w+93;
+  const casadi_real **arg1=arg+4, *cr, *cs, *wr01, *wr14;
   /* #0: @0 = zeros(17x1) */
   casadi_clear(w00, 17);
   /* #1: @1 = input[0][0] */
@@ -23514,6 +23515,40 @@ static int casadi_f8(const casadi_real** arg, casadi_real** res, casadi_int* iw,
   if (casadi_f9(arg1, res1, iw, w, 0)) return 1;
   /* #23: output[0][0] = @2 */
   if (res[0]) res[0][0] = w02;
+  /* #24: @2 = 1 */
+  w02 = 1.;
+  /* #25: @6 = input[3][0] */
+  w06 = arg[3] ? arg[3][0] : 0;
+  /* #26: @2 = (@2-@6) */
+  w02 -= w06;
+  /* #27: @14 = [-16, -15, -14, -13, -12, -11, -10, -9, -8, -7, -6, -5, -4, -3, -2, -1, 0] */
+  wr14 = casadi_c0;
+  /* #28: @14 = pow(@2,@14) */
+  for (i=0, rr=w14, cs=wr14; i<17; ++i) (*rr++)  = pow(w02,(*cs++));
+  /* #29: @14 = (@0*@14) */
+  for (i=0, rr=w14, cr=w00, cs=w14; i<17; ++i) (*rr++)  = ((*cr++)*(*cs++));
+  /* #30: @2 = haa_jury16(@14) */
+  arg1[0]=w14;
+  res1[0]=(&w02);
+  if (casadi_f9(arg1, res1, iw, w, 0)) return 1;
+  /* #31: output[1][0] = @2 */
+  if (res[1]) res[1][0] = w02;
+  /* #32: @2 = 1 */
+  w02 = 1.;
+  /* #33: @2 = (@2+@6) */
+  w02 += w06;
+  /* #34: @14 = [-16, -15, -14, -13, -12, -11, -10, -9, -8, -7, -6, -5, -4, -3, -2, -1, 0] */
+  wr14 = casadi_c0;
+  /* #35: @14 = pow(@2,@14) */
+  for (i=0, rr=w14, cs=wr14; i<17; ++i) (*rr++)  = pow(w02,(*cs++));
+  /* #36: @0 = (@0*@14) */
+  for (i=0, rr=w00, cs=w14; i<17; ++i) (*rr++) *= (*cs++);
+  /* #37: @2 = haa_jury16(@0) */
+  arg1[0]=w00;
+  res1[0]=(&w02);
+  if (casadi_f9(arg1, res1, iw, w, 0)) return 1;
+  /* #38: output[2][0] = @2 */
+  if (res[2]) res[2][0] = w02;
   return 0;
 }
 
@@ -23534,9 +23569,9 @@ CASADI_SYMBOL_EXPORT void haa_decide16_incref(void) {
 CASADI_SYMBOL_EXPORT void haa_decide16_decref(void) {
 }
 
-CASADI_SYMBOL_EXPORT casadi_int haa_decide16_n_in(void) { return 3;}
+CASADI_SYMBOL_EXPORT casadi_int haa_decide16_n_in(void) { return 4;}
 
-CASADI_SYMBOL_EXPORT casadi_int haa_decide16_n_out(void) { return 1;}
+CASADI_SYMBOL_EXPORT casadi_int haa_decide16_n_out(void) { return 3;}
 
 CASADI_SYMBOL_EXPORT casadi_real haa_decide16_default_in(casadi_int i) {
   switch (i) {
@@ -23549,6 +23584,7 @@ CASADI_SYMBOL_EXPORT const char* haa_decide16_name_in(casadi_int i) {
     case 0: return "basis";
     case 1: return "const";
     case 2: return "point";
+    case 3: return "band";
     default: return 0;
   }
 }
@@ -23556,6 +23592,8 @@ CASADI_SYMBOL_EXPORT const char* haa_decide16_name_in(casadi_int i) {
 CASADI_SYMBOL_EXPORT const char* haa_decide16_name_out(casadi_int i) {
   switch (i) {
     case 0: return "kmax";
+    case 1: return "k_in";
+    case 2: return "k_out";
     default: return 0;
   }
 }
@@ -23565,6 +23603,7 @@ CASADI_SYMBOL_EXPORT const casadi_int* haa_decide16_sparsity_in(casadi_int i) {
     case 0: return casadi_s10;
     case 1: return casadi_s6;
     case 2: return casadi_s8;
+    case 3: return casadi_s4;
     default: return 0;
   }
 }
@@ -23572,23 +23611,25 @@ CASADI_SYMBOL_EXPORT const casadi_int* haa_decide16_sparsity_in(casadi_int i) {
 CASADI_SYMBOL_EXPORT const casadi_int* haa_decide16_sparsity_out(casadi_int i) {
   switch (i) {
     case 0: return casadi_s4;
+    case 1: return casadi_s4;
+    case 2: return casadi_s4;
     default: return 0;
   }
 }
 
 CASADI_SYMBOL_EXPORT int haa_decide16_work(casadi_int *sz_arg, casadi_int* sz_res, casadi_int *sz_iw, casadi_int *sz_w) {
-  if (sz_arg) *sz_arg = 10;
-  if (sz_res) *sz_res = 2;
+  if (sz_arg) *sz_arg = 11;
+  if (sz_res) *sz_res = 4;
   if (sz_iw) *sz_iw = 0;
-  if (sz_w) *sz_w = 93;
+  if (sz_w) *sz_w = 110;
   return 0;
 }
 
 CASADI_SYMBOL_EXPORT int haa_decide16_work_bytes(casadi_int *sz_arg, casadi_int* sz_res, casadi_int *sz_iw, casadi_int *sz_w) {
-  if (sz_arg) *sz_arg = 10*sizeof(const casadi_real*);
-  if (sz_res) *sz_res = 2*sizeof(casadi_real*);
+  if (sz_arg) *sz_arg = 11*sizeof(const casadi_real*);
+  if (sz_res) *sz_res = 4*sizeof(casadi_real*);
   if (sz_iw) *sz_iw = 0*sizeof(casadi_int);
-  if (sz_w) *sz_w = 93*sizeof(casadi_real);
+  if (sz_w) *sz_w = 110*sizeof(casadi_real);
   return 0;
 }
 
@@ -26871,11 +26912,12 @@ static int casadi_f11(const casadi_real** arg, casadi_real** res, casadi_int* iw
   return 0;
 }
 
-/* haa_decide32:(basis[33x7],const[3],point[4])->(kmax) */
+/* haa_decide32:(basis[33x7],const[3],point[4],band)->(kmax,k_in,k_out) */
 static int casadi_f10(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
-  casadi_real **res1=res+1, *rr, *w00=w+126, w02, *w03=w+159, w04, *w05=w+163, w06, w07, w08, w09, w10;
-  casadi_real w11, w12, *w13=w+166;
-  const casadi_real **arg1=arg+3, *cs, *wr01;
+  casadi_int i;
+  casadi_real **res1=res+3, *rr, *w00=w+126, w02, *w03=w+159, w04, *w05=w+163, w06, w07, w08, w09, w10;
+  casadi_real w11, w12, *w13=w+166, *w14=w+173;
+  const casadi_real **arg1=arg+4, *cr, *cs, *wr01, *wr14;
   /* #0: @0 = zeros(33x1) */
   casadi_clear(w00, 33);
   /* #1: @1 = input[0][0] */
@@ -26933,6 +26975,40 @@ static int casadi_f10(const casadi_real** arg, casadi_real** res, casadi_int* iw
   if (casadi_f11(arg1, res1, iw, w, 0)) return 1;
   /* #23: output[0][0] = @2 */
   if (res[0]) res[0][0] = w02;
+  /* #24: @2 = 1 */
+  w02 = 1.;
+  /* #25: @6 = input[3][0] */
+  w06 = arg[3] ? arg[3][0] : 0;
+  /* #26: @2 = (@2-@6) */
+  w02 -= w06;
+  /* #27: @14 = [-32, -31, -30, -29, -28, -27, -26, -25, -24, -23, -22, -21, -20, -19, -18, -17, -16, -15, -14, -13, -12, -11, -10, -9, -8, -7, -6, -5, -4, -3, -2, -1, 0] */
+  wr14 = casadi_c1;
+  /* #28: @14 = pow(@2,@14) */
+  for (i=0, rr=w14, cs=wr14; i<33; ++i) (*rr++)  = pow(w02,(*cs++));
+  /* #29: @14 = (@0*@14) */
+  for (i=0, rr=w14, cr=w00, cs=w14; i<33; ++i) (*rr++)  = ((*cr++)*(*cs++));
+  /* #30: @2 = haa_jury32(@14) */
+  arg1[0]=w14;
+  res1[0]=(&w02);
+  if (casadi_f11(arg1, res1, iw, w, 0)) return 1;
+  /* #31: output[1][0] = @2 */
+  if (res[1]) res[1][0] = w02;
+  /* #32: @2 = 1 */
+  w02 = 1.;
+  /* #33: @2 = (@2+@6) */
+  w02 += w06;
+  /* #34: @14 = [-32, -31, -30, -29, -28, -27, -26, -25, -24, -23, -22, -21, -20, -19, -18, -17, -16, -15, -14, -13, -12, -11, -10, -9, -8, -7, -6, -5, -4, -3, -2, -1, 0] */
+  wr14 = casadi_c1;
+  /* #35: @14 = pow(@2,@14) */
+  for (i=0, rr=w14, cs=wr14; i<33; ++i) (*rr++)  = pow(w02,(*cs++));
+  /* #36: @0 = (@0*@14) */
+  for (i=0, rr=w00, cs=w14; i<33; ++i) (*rr++) *= (*cs++);
+  /* #37: @2 = haa_jury32(@0) */
+  arg1[0]=w00;
+  res1[0]=(&w02);
+  if (casadi_f11(arg1, res1, iw, w, 0)) return 1;
+  /* #38: output[2][0] = @2 */
+  if (res[2]) res[2][0] = w02;
   return 0;
 }
 
@@ -26953,9 +27029,9 @@ CASADI_SYMBOL_EXPORT void haa_decide32_incref(void) {
 CASADI_SYMBOL_EXPORT void haa_decide32_decref(void) {
 }
 
-CASADI_SYMBOL_EXPORT casadi_int haa_decide32_n_in(void) { return 3;}
+CASADI_SYMBOL_EXPORT casadi_int haa_decide32_n_in(void) { return 4;}
 
-CASADI_SYMBOL_EXPORT casadi_int haa_decide32_n_out(void) { return 1;}
+CASADI_SYMBOL_EXPORT casadi_int haa_decide32_n_out(void) { return 3;}
 
 CASADI_SYMBOL_EXPORT casadi_real haa_decide32_default_in(casadi_int i) {
   switch (i) {
@@ -26968,6 +27044,7 @@ CASADI_SYMBOL_EXPORT const char* haa_decide32_name_in(casadi_int i) {
     case 0: return "basis";
     case 1: return "const";
     case 2: return "point";
+    case 3: return "band";
     default: return 0;
   }
 }
@@ -26975,6 +27052,8 @@ CASADI_SYMBOL_EXPORT const char* haa_decide32_name_in(casadi_int i) {
 CASADI_SYMBOL_EXPORT const char* haa_decide32_name_out(casadi_int i) {
   switch (i) {
     case 0: return "kmax";
+    case 1: return "k_in";
+    case 2: return "k_out";
     default: return 0;
   }
 }
@@ -26984,6 +27063,7 @@ CASADI_SYMBOL_EXPORT const casadi_int* haa_decide32_sparsity_in(casadi_int i) {
     case 0: return casadi_s11;
     case 1: return casadi_s6;
     case 2: return casadi_s8;
+    case 3: return casadi_s4;
     default: return 0;
   }
 }
@@ -26991,23 +27071,25 @@ CASADI_SYMBOL_EXPORT const casadi_int* haa_decide32_sparsity_in(casadi_int i) {
 CASADI_SYMBOL_EXPORT const casadi_int* haa_decide32_sparsity_out(casadi_int i) {
   switch (i) {
     case 0: return casadi_s4;
+    case 1: return casadi_s4;
+    case 2: return casadi_s4;
     default: return 0;
   }
 }
 
 CASADI_SYMBOL_EXPORT int haa_decide32_work(casadi_int *sz_arg, casadi_int* sz_res, casadi_int *sz_iw, casadi_int *sz_w) {
-  if (sz_arg) *sz_arg = 10;
-  if (sz_res) *sz_res = 2;
+  if (sz_arg) *sz_arg = 11;
+  if (sz_res) *sz_res = 4;
   if (sz_iw) *sz_iw = 0;
-  if (sz_w) *sz_w = 173;
+  if (sz_w) *sz_w = 206;
   return 0;
 }
 
 CASADI_SYMBOL_EXPORT int haa_decide32_work_bytes(casadi_int *sz_arg, casadi_int* sz_res, casadi_int *sz_iw, casadi_int *sz_w) {
-  if (sz_arg) *sz_arg = 10*sizeof(const casadi_real*);
-  if (sz_res) *sz_res = 2*sizeof(casadi_real*);
+  if (sz_arg) *sz_arg = 11*sizeof(const casadi_real*);
+  if (sz_res) *sz_res = 4*sizeof(casadi_real*);
   if (sz_iw) *sz_iw = 0*sizeof(casadi_int);
-  if (sz_w) *sz_w = 173*sizeof(casadi_real);
+  if (sz_w) *sz_w = 206*sizeof(casadi_real);
   return 0;
 }
 
@@ -39709,11 +39791,12 @@ static int casadi_f13(const casadi_real** arg, casadi_real** res, casadi_int* iw
   return 0;
 }
 
-/* haa_decide64:(basis[65x7],const[3],point[4])->(kmax) */
+/* haa_decide64:(basis[65x7],const[3],point[4],band)->(kmax,k_in,k_out) */
 static int casadi_f12(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
-  casadi_real **res1=res+1, *rr, *w00=w+254, w02, *w03=w+319, w04, *w05=w+323, w06, w07, w08, w09, w10;
-  casadi_real w11, w12, *w13=w+326;
-  const casadi_real **arg1=arg+3, *cs, *wr01;
+  casadi_int i;
+  casadi_real **res1=res+3, *rr, *w00=w+254, w02, *w03=w+319, w04, *w05=w+323, w06, w07, w08, w09, w10;
+  casadi_real w11, w12, *w13=w+326, *w14=w+333;
+  const casadi_real **arg1=arg+4, *cr, *cs, *wr01, *wr14;
   /* #0: @0 = zeros(65x1) */
   casadi_clear(w00, 65);
   /* #1: @1 = input[0][0] */
@@ -39771,6 +39854,40 @@ static int casadi_f12(const casadi_real** arg, casadi_real** res, casadi_int* iw
   if (casadi_f13(arg1, res1, iw, w, 0)) return 1;
   /* #23: output[0][0] = @2 */
   if (res[0]) res[0][0] = w02;
+  /* #24: @2 = 1 */
+  w02 = 1.;
+  /* #25: @6 = input[3][0] */
+  w06 = arg[3] ? arg[3][0] : 0;
+  /* #26: @2 = (@2-@6) */
+  w02 -= w06;
+  /* #27: @14 = [-64, -63, -62, -61, -60, -59, -58, -57, -56, -55, -54, -53, -52, -51, -50, -49, -48, -47, -46, -45, -44, -43, -42, -41, -40, -39, -38, -37, -36, -35, -34, -33, -32, -31, -30, -29, -28, -27, -26, -25, -24, -23, -22, -21, -20, -19, -18, -17, -16, -15, -14, -13, -12, -11, -10, -9, -8, -7, -6, -5, -4, -3, -2, -1, 0] */
+  wr14 = casadi_c2;
+  /* #28: @14 = pow(@2,@14) */
+  for (i=0, rr=w14, cs=wr14; i<65; ++i) (*rr++)  = pow(w02,(*cs++));
+  /* #29: @14 = (@0*@14) */
+  for (i=0, rr=w14, cr=w00, cs=w14; i<65; ++i) (*rr++)  = ((*cr++)*(*cs++));
+  /* #30: @2 = haa_jury64(@14) */
+  arg1[0]=w14;
+  res1[0]=(&w02);
+  if (casadi_f13(arg1, res1, iw, w, 0)) return 1;
+  /* #31: output[1][0] = @2 */
+  if (res[1]) res[1][0] = w02;
+  /* #32: @2 = 1 */
+  w02 = 1.;
+  /* #33: @2 = (@2+@6) */
+  w02 += w06;
+  /* #34: @14 = [-64, -63, -62, -61, -60, -59, -58, -57, -56, -55, -54, -53, -52, -51, -50, -49, -48, -47, -46, -45, -44, -43, -42, -41, -40, -39, -38, -37, -36, -35, -34, -33, -32, -31, -30, -29, -28, -27, -26, -25, -24, -23, -22, -21, -20, -19, -18, -17, -16, -15, -14, -13, -12, -11, -10, -9, -8, -7, -6, -5, -4, -3, -2, -1, 0] */
+  wr14 = casadi_c2;
+  /* #35: @14 = pow(@2,@14) */
+  for (i=0, rr=w14, cs=wr14; i<65; ++i) (*rr++)  = pow(w02,(*cs++));
+  /* #36: @0 = (@0*@14) */
+  for (i=0, rr=w00, cs=w14; i<65; ++i) (*rr++) *= (*cs++);
+  /* #37: @2 = haa_jury64(@0) */
+  arg1[0]=w00;
+  res1[0]=(&w02);
+  if (casadi_f13(arg1, res1, iw, w, 0)) return 1;
+  /* #38: output[2][0] = @2 */
+  if (res[2]) res[2][0] = w02;
   return 0;
 }
 
@@ -39791,9 +39908,9 @@ CASADI_SYMBOL_EXPORT void haa_decide64_incref(void) {
 CASADI_SYMBOL_EXPORT void haa_decide64_decref(void) {
 }
 
-CASADI_SYMBOL_EXPORT casadi_int haa_decide64_n_in(void) { return 3;}
+CASADI_SYMBOL_EXPORT casadi_int haa_decide64_n_in(void) { return 4;}
 
-CASADI_SYMBOL_EXPORT casadi_int haa_decide64_n_out(void) { return 1;}
+CASADI_SYMBOL_EXPORT casadi_int haa_decide64_n_out(void) { return 3;}
 
 CASADI_SYMBOL_EXPORT casadi_real haa_decide64_default_in(casadi_int i) {
   switch (i) {
@@ -39806,6 +39923,7 @@ CASADI_SYMBOL_EXPORT const char* haa_decide64_name_in(casadi_int i) {
     case 0: return "basis";
     case 1: return "const";
     case 2: return "point";
+    case 3: return "band";
     default: return 0;
   }
 }
@@ -39813,6 +39931,8 @@ CASADI_SYMBOL_EXPORT const char* haa_decide64_name_in(casadi_int i) {
 CASADI_SYMBOL_EXPORT const char* haa_decide64_name_out(casadi_int i) {
   switch (i) {
     case 0: return "kmax";
+    case 1: return "k_in";
+    case 2: return "k_out";
     default: return 0;
   }
 }
@@ -39822,6 +39942,7 @@ CASADI_SYMBOL_EXPORT const casadi_int* haa_decide64_sparsity_in(casadi_int i) {
     case 0: return casadi_s12;
     case 1: return casadi_s6;
     case 2: return casadi_s8;
+    case 3: return casadi_s4;
     default: return 0;
   }
 }
@@ -39829,23 +39950,25 @@ CASADI_SYMBOL_EXPORT const casadi_int* haa_decide64_sparsity_in(casadi_int i) {
 CASADI_SYMBOL_EXPORT const casadi_int* haa_decide64_sparsity_out(casadi_int i) {
   switch (i) {
     case 0: return casadi_s4;
+    case 1: return casadi_s4;
+    case 2: return casadi_s4;
     default: return 0;
   }
 }
 
 CASADI_SYMBOL_EXPORT int haa_decide64_work(casadi_int *sz_arg, casadi_int* sz_res, casadi_int *sz_iw, casadi_int *sz_w) {
-  if (sz_arg) *sz_arg = 10;
-  if (sz_res) *sz_res = 2;
+  if (sz_arg) *sz_arg = 11;
+  if (sz_res) *sz_res = 4;
   if (sz_iw) *sz_iw = 0;
-  if (sz_w) *sz_w = 333;
+  if (sz_w) *sz_w = 398;
   return 0;
 }
 
 CASADI_SYMBOL_EXPORT int haa_decide64_work_bytes(casadi_int *sz_arg, casadi_int* sz_res, casadi_int *sz_iw, casadi_int *sz_w) {
-  if (sz_arg) *sz_arg = 10*sizeof(const casadi_real*);
-  if (sz_res) *sz_res = 2*sizeof(casadi_real*);
+  if (sz_arg) *sz_arg = 11*sizeof(const casadi_real*);
+  if (sz_res) *sz_res = 4*sizeof(casadi_real*);
   if (sz_iw) *sz_iw = 0*sizeof(casadi_int);
-  if (sz_w) *sz_w = 333*sizeof(casadi_real);
+  if (sz_w) *sz_w = 398*sizeof(casadi_real);
   return 0;
 }
 

@@ -1,0 +1,49 @@
+"""Stability in contact with a stiff environment (Sec. 5).
+
+The environment is a spring of stiffness K_L2 on the leg inertia (Fig. 13 of the paper, a linear
+spring at a distance from the HAA axis); the scan replaces K_L2 by each environment stiffness and
+decides closed-loop stability, by default with the impedance loop open (the torque loop alone).
+"""
+from __future__ import annotations
+
+import numpy as np
+
+from haa_sym.loop import ClosedLoop, LoopOptions
+from haa_sym.params import Params
+
+__all__ = ["contact_stability", "intervals"]
+
+
+def contact_stability(params: Params, K_env, *, P_gain: float = 0.0, D_gain: float = 0.0,
+                      options: LoopOptions | None = None, beta: float | None = None,
+                      alpha: float | None = None, progress: bool | None = None):
+    """Stability decision and spectral radius for each environment stiffness ``K_env`` (Nm/rad).
+
+    Returns ``(stable, spectral_radius)`` arrays of ``K_env``'s length. One closed loop (exact
+    characteristic-polynomial basis) per stiffness.
+    """
+    from tqdm.auto import tqdm
+    K_env = np.asarray(K_env, float).ravel()
+    stable = np.empty(K_env.size, bool)
+    rho = np.empty(K_env.size)
+    for i, K in enumerate(tqdm(K_env, desc="contact stiffness", leave=False,
+                               disable=None if progress is None else not progress)):
+        loop = ClosedLoop(params.with_values(K_L2=float(K)), options)
+        st = loop.stability(P_gain, D_gain, beta, alpha)
+        stable[i], rho[i] = bool(st.stable), float(st.spectral_radius)
+    return stable, rho
+
+
+def intervals(x, flag) -> list[tuple[float, float]]:
+    """Maximal runs [x_first, x_last] of consecutive samples where ``flag`` is true."""
+    x, flag = np.asarray(x), np.asarray(flag, bool)
+    out, start = [], None
+    for i, f in enumerate(flag):
+        if f and start is None:
+            start = i
+        if not f and start is not None:
+            out.append((float(x[start]), float(x[i - 1])))
+            start = None
+    if start is not None:
+        out.append((float(x[start]), float(x[-1])))
+    return out

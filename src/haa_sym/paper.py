@@ -1,0 +1,29 @@
+"""What the paper reports, as data (``model/paper.toml``): Figs. 8-11 panels, Table 2, claims."""
+from __future__ import annotations
+
+import tomllib
+from pathlib import Path
+
+from haa_sym.params import ParameterError, Params
+
+__all__ = ["paper_spec", "panel_params", "default_paper_path"]
+
+
+def default_paper_path() -> Path:
+    return Path(__file__).resolve().parents[2] / "model" / "paper.toml"
+
+
+def paper_spec(path: str | Path | None = None) -> dict:
+    """The parsed ``model/paper.toml``."""
+    path = Path(path or default_paper_path())
+    try:
+        return tomllib.loads(path.read_text())
+    except (OSError, tomllib.TOMLDecodeError) as exc:
+        raise ParameterError(f"{path}: cannot read the paper's reference data ({exc})") from None
+
+
+def panel_params(params: Params, entry: dict) -> Params:
+    """``params`` with an entry's ``configuration`` and ``set`` overrides applied."""
+    if entry.get("configuration"):
+        params = params.configuration(entry["configuration"])
+    return params.with_values(**entry.get("set", {}))
