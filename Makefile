@@ -4,7 +4,7 @@ VENV   := .venv
 PY     := $(VENV)/bin/python
 STAMP  := $(VENV)/.installed
 
-.PHONY: all venv derive verify test check-generated paper clean
+.PHONY: all venv derive verify test check-generated paper bench clean
 
 all: verify
 
@@ -24,8 +24,13 @@ derive: $(STAMP)
 verify: $(STAMP)
 	$(PY) -m haa_sym.verify
 
-## The main job until the reproduction lands: regenerate, then verify the paper.
-paper: derive verify
+## The main job: every figure and table of the paper and results/REPORT.md (~1 min).
+paper: derive
+	$(PY) -m haa_sym.cli reproduce --out results
+
+## Speed ratios against numpy eigvals and python-control (prints a table, writes benchmarks/results.json).
+bench: $(STAMP)
+	$(PY) benchmarks/bench_regions.py
 
 ## The whole test suite.
 test: $(STAMP)

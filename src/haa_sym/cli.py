@@ -1,15 +1,30 @@
 """``haa-sym``: command line of haa_sym.
 
-  haa-sym verify [--params FILE]     check the paper's equations (same as python -m haa_sym.verify)
-  haa-sym stability --P-gain 200 --D-gain 10 [--params FILE] [--set KEY=VALUE ...]
-                                     decide one gain point and print its spectral radius
+  haa-sym reproduce --out results/            every figure and table of the paper + REPORT.md
+  haa-sym regions --out map.npz [--plot map.png] [--P-gain log:1:20000:200] [--D-gain lin:1:50:100]
+  haa-sym passivity [--P-gain 0,200] [--D-gain 0,10] [--out cells.csv] [--plot phase.png]
+  haa-sym step [--duration 0.3] [--out step.csv] [--plot step.png]
+  haa-sym margins [--P-gain 200] [--D-gain 10]
+  haa-sym stability --P-gain 200 --D-gain 10
+  haa-sym verify                              check the paper's equations
+
+Every analysis command takes ``--params FILE`` (default: the bundled HyQ parameters),
+``--configuration NAME`` (e.g. retracted), ``--set KEY=VALUE`` for any key of the parameter file
+(``--set beta=2 --set N_av=10 --set J_L2=0.129 --set Ts=0.006``) and ``--option KEY=VALUE`` for
+the modelling options of ``haa_sym.LoopOptions`` (``--option port=dtheta_L1 --option delay=1``).
+Bad input exits with status 2 and a message naming the field; nothing partial is written.
 """
 from __future__ import annotations
 
 import argparse
 import sys
+from pathlib import Path
+
+import numpy as np
 
 from haa_sym.params import ParameterError, load_params
+
+OUTPUT_SUFFIXES = {"regions": (".npz",), "passivity": (".csv", ".json"), "step": (".csv",)}
 
 
 def _parse_set(items: list[str]) -> dict[str, float]:
@@ -25,26 +40,211 @@ def _parse_set(items: list[str]) -> dict[str, float]:
     return out
 
 
+def _parse_options(items: list[str]):
+    from haa_sym.loop import LoopOptions
+    fields = LoopOptions.__dataclass_fields__
+    out = {}
+    for item in items:
+        key, sep, value = item.partition("=")
+        key, value = key.strip(), value.strip()
+        if not sep:
+            raise ParameterError(f"--option {item!r}: expected KEY=VALUE")
+        if key not in fields:
+            raise ParameterError(f"--option {item!r}: unknown option {key!r}; allowed: {list(fields)}")
+        default = fields[key].default
+        try:
+            if isinstance(default, bool):
+                if value.lower() not in ("true", "false", "1", "0"):
+                    raise ValueError
+                out[key] = value.lower() in ("true", "1")
+            elif isinstance(default, int):
+                out[key] = int(value)
+            elif isinstance(default, float):
+                out[key] = float(value)
+            else:
+                out[key] = value
+        except ValueError:
+            raise ParameterError(f"--option {item!r}: {value!r} is not a valid {type(default).__name__}") from None
+    return LoopOptions(**out)
+
+
+def _common(p: argparse.ArgumentParser) -> None:
+    p.add_argument("--params", help="parameter file (TOML); default: bundled HyQ HAA")
+    p.add_argument("--configuration", help="leg configuration of the parameter file, e.g. retracted")
+    p.add_argument("--set", action="append", default=[], metavar="KEY=VALUE",
+                   help="override any parameter key (repeatable)")
+    p.add_argument("--option", action="append", default=[], metavar="KEY=VALUE",
+                   help="modelling option of haa_sym.LoopOptions (repeatable)")
+
+
+def _params(args):
+    params = load_params(args.params)
+    if args.configuration:
+        params = params.configuration(args.configuration)
+    return params.with_values(**_parse_set(args.set))
+
+
+def _check_out(path: str | None, cmd: str, flag: str = "--out") -> Path | None:
+    if path is None:
+        return None
+    p = Path(path)
+    allowed = OUTPUT_SUFFIXES[cmd] if flag == "--out" else (".png", ".pdf", ".svg")
+    if p.suffix.lower() not in allowed:
+        raise ParameterError(f"{flag} {path!r}: unsupported file type; allowed: {list(allowed)}")
+    return p
+
+
+def _cmd_regions(args) -> int:
+    from haa_sym.regions import grid, region_map
+    params = _params(args)
+    options = _parse_options(args.option)
+    P, D = grid(args.P_gain, "--P-gain"), grid(args.D_gain, "--D-gain")
+    out = _check_out(args.out, "regions")
+    plot = _check_out(args.plot, "regions", "--plot")
+    m = region_map(params, P, D, options=options, radius=not args.no_radius)
+    if out:
+        m.save(out)
+    if plot:
+        from haa_sym.plots import plot_region, save_figure
+        save_figure(plot_region(m, title=args.title), plot)
+    print(f"{m.stable.size} points: {m.stable.sum()} stable, {m.low_pm.sum()} stable with PM < 30 deg, "
+          f"{m.passive.sum()} passive" + (f"; wrote {out}" if out else ""))
+    return 0
+
+
+def _cmd_passivity(args) -> int:
+    import json
+    from haa_sym.passivity import bands_beyond, corrected_phase, passivity
+    from haa_sym.regions import grid
+    params = _params(args)
+    options = _parse_options(args.option)
+    P, D = grid(args.P_gain, "--P-gain"), grid(args.D_gain, "--D-gain")
+    if P.size != D.size:
+        raise ParameterError(f"--P-gain has {P.size} values and --D-gain {D.size}; they pair up, "
+                             "so give the same number")
+    out = _check_out(args.out, "passivity")
+    plot = _check_out(args.plot, "passivity", "--plot")
+    r = passivity(params, P, D, options=options)
+    rows = []
+    for i in range(P.size):
+        rows.append({"P_gain": float(P[i]), "D_gain": float(D[i]), "status": str(r.status[i]),
+                     "phase_excess_deg": float(r.phase_excess_deg[i]), "omega_worst_rad_s": float(r.omega_worst[i])})
+        print(f"P_gain {P[i]:g}  D_gain {D[i]:g}: {r.status[i]:8s}  worst corrected phase excess "
+              f"{r.phase_excess_deg[i]:+.3f} deg at {r.omega_worst[i]:.4g} rad/s")
+    curves = []
+    if plot:
+        for i in range(P.size):
+            w, ph = corrected_phase(params, P[i], D[i], options=options)
+            curves.append((w, ph, f"P_gain = {P[i]:g}, D_gain = {D[i]:g}"))
+            print(f"  |phase| > 90 deg for P_gain {P[i]:g}, D_gain {D[i]:g}: "
+                  + (", ".join(f"{a:.1f}-{b:.1f} rad/s" for a, b in bands_beyond(w, ph)) or "never"))
+    if out:
+        from haa_sym.reproduce import _csv, _write_text
+        from haa_sym.regions import run_meta
+        text = (json.dumps({"cells": rows, "meta": run_meta(params, options)}, indent=1) + "\n"
+                if out.suffix == ".json" else _csv(rows))
+        _write_text(out, text)
+    if plot:
+        from haa_sym.plots import plot_corrected_phase, save_figure
+        save_figure(plot_corrected_phase(curves, "corrected phase of Z(z)"), plot)
+    return 0
+
+
+def _cmd_step(args) -> int:
+    from haa_sym.torque import step_response, torque_bandwidth
+    params = _params(args)
+    options = _parse_options(args.option)
+    out = _check_out(args.out, "step")
+    plot = _check_out(args.plot, "step", "--plot")
+    s = step_response(params, duration=args.duration, options=options)
+    print(f"10-90% rise time {s.rise_time * 1e3:.1f} ms, overshoot {s.overshoot * 100:.1f} %, "
+          f"T at {s.t[-1]:g} s = {s.T[-1]:.4f}, -3 dB bandwidth "
+          f"{torque_bandwidth(params, options=options):.2f} rad/s")
+    if out:
+        from haa_sym.reproduce import _csv, _write_text
+        _write_text(out, _csv([{"t_s": f"{t:.6g}", "T_Nm": f"{v:.9g}"} for t, v in zip(s.t, s.T)]))
+    if plot:
+        from haa_sym.plots import plot_steps, save_figure
+        save_figure(plot_steps([("unit torque step", [(s, "T_l", "-")])]), plot)
+    return 0
+
+
+def _cmd_margins(args) -> int:
+    from haa_sym.loop import ClosedLoop
+    from haa_sym.margins import stability_margins
+    params = _params(args)
+    options = _parse_options(args.option)
+    loop = ClosedLoop(params, options)
+    coef = loop.loop_coefficients()
+    st = loop.stability(args.P_gain, args.D_gain)
+    print(f"closed loop: {'stable' if st.stable else 'UNSTABLE'}, spectral radius {float(st.spectral_radius):.9f}")
+    for name, label in (("L_t", "torque loop (opened at the PI output)"),
+                        ("L_imp", "impedance loop (opened at T_lref)")):
+        m = stability_margins(coef.evaluate(name, args.P_gain, args.D_gain), coef.omega)
+        pms = ", ".join(f"{pm:.2f} deg @ {w:.4g} rad/s" for pm, w in zip(m.phase_margins_deg, m.gain_crossovers))
+        gms = ", ".join(f"{g:.2f} dB @ {w:.4g} rad/s" for g, w in zip(m.gain_margins_db, m.phase_crossovers))
+        print(f"{label}: PM {pms or 'none (|L| does not cross 1)'}; GM {gms or 'none'}")
+    return 0
+
+
+def _cmd_reproduce(args) -> int:
+    from haa_sym.reproduce import reproduce
+    params = _params(args)
+    options = _parse_options(args.option)
+    reproduce(args.out, params, options, quick=args.quick)
+    return 0
+
+
 def main(argv: list[str] | None = None) -> int:
-    ap = argparse.ArgumentParser(prog="haa-sym", description=__doc__.splitlines()[0])
+    ap = argparse.ArgumentParser(prog="haa-sym", description=__doc__.splitlines()[0],
+                                 formatter_class=argparse.RawDescriptionHelpFormatter, epilog=__doc__)
     sub = ap.add_subparsers(dest="cmd", required=True)
     v = sub.add_parser("verify", help="check the paper's equations")
     v.add_argument("--params")
     s = sub.add_parser("stability", help="stability of one gain point")
-    s.add_argument("--params")
-    s.add_argument("--set", action="append", default=[], metavar="KEY=VALUE")
+    _common(s)
     s.add_argument("--P-gain", type=float, required=True)
     s.add_argument("--D-gain", type=float, required=True)
+    r = sub.add_parser("regions", help="stability / PM / passivity map on a gain grid (Figs. 8-11)")
+    _common(r)
+    r.add_argument("--P-gain", default="log:1:20000:200", help="grid spec (default log:1:20000:200)")
+    r.add_argument("--D-gain", default="lin:1:50:100", help="grid spec (default lin:1:50:100)")
+    r.add_argument("--out", help="output .npz")
+    r.add_argument("--plot", help="output figure (.png/.pdf/.svg)")
+    r.add_argument("--title")
+    r.add_argument("--no-radius", action="store_true", help="skip the spectral radius (faster)")
+    p = sub.add_parser("passivity", help="passivity of Z(z) at gain pairs (Table 2, Fig. 12)")
+    _common(p)
+    p.add_argument("--P-gain", default="0,200,20000", help="values paired with --D-gain")
+    p.add_argument("--D-gain", default="0,10,50")
+    p.add_argument("--out", help="output .csv or .json")
+    p.add_argument("--plot", help="corrected phase of Z, figure file")
+    st = sub.add_parser("step", help="unit torque step, impedance loop open (Fig. 7)")
+    _common(st)
+    st.add_argument("--duration", type=float, default=0.3, help="seconds")
+    st.add_argument("--out", help="output .csv")
+    st.add_argument("--plot", help="figure file")
+    mg = sub.add_parser("margins", help="phase and gain margins of the torque and impedance loops")
+    _common(mg)
+    mg.add_argument("--P-gain", type=float, default=0.0)
+    mg.add_argument("--D-gain", type=float, default=0.0)
+    rp = sub.add_parser("reproduce", help="every figure and table of the paper, and REPORT.md")
+    _common(rp)
+    rp.add_argument("--out", default="results")
+    rp.add_argument("--quick", action="store_true", help="coarse grids (for tests)")
     args = ap.parse_args(argv)
     try:
         if args.cmd == "verify":
             from haa_sym.verify import main as verify_main
             return verify_main(["--params", args.params] if args.params else [])
-        from haa_sym.loop import ClosedLoop
-        params = load_params(args.params).with_values(**_parse_set(args.set))
-        res = ClosedLoop(params).stability(args.P_gain, args.D_gain)
-        print(f"stable: {bool(res.stable)}  spectral radius: {float(res.spectral_radius):.12f}")
-        return 0
+        if args.cmd == "stability":
+            from haa_sym.loop import ClosedLoop
+            params = _params(args)
+            res = ClosedLoop(params, _parse_options(args.option)).stability(args.P_gain, args.D_gain)
+            print(f"stable: {bool(res.stable)}  spectral radius: {float(res.spectral_radius):.12f}")
+            return 0
+        return {"regions": _cmd_regions, "passivity": _cmd_passivity, "step": _cmd_step,
+                "margins": _cmd_margins, "reproduce": _cmd_reproduce}[args.cmd](args)
     except ParameterError as exc:
         print(f"haa-sym: error: {exc}", file=sys.stderr)
         return 2

@@ -1,0 +1,134 @@
+"""Figures (matplotlib, no computation): region maps as in Figs. 8-11, Z phase as in Fig. 12,
+torque steps as in Fig. 7. Every function takes computed data and returns the Figure."""
+from __future__ import annotations
+
+from pathlib import Path
+
+import matplotlib
+
+matplotlib.use("Agg")
+import matplotlib.pyplot as plt  # noqa: E402
+import numpy as np  # noqa: E402
+from matplotlib.colors import ListedColormap  # noqa: E402
+from matplotlib.patches import Patch  # noqa: E402
+
+__all__ = ["plot_region", "plot_region_panels", "plot_corrected_phase", "plot_steps",
+           "plot_contact", "save_figure"]
+
+# Figs. 8-11: white stable, light grey stable with PM < 30 deg, dark unstable.
+REGION_COLORS = ListedColormap(["#ffffff", "#c8c8c8", "#3a3a3a"])
+
+
+def _edges(x: np.ndarray, log: bool) -> np.ndarray:
+    if x.size == 1:
+        return np.array([x[0] * 0.9, x[0] * 1.1]) if log else np.array([x[0] - 0.5, x[0] + 0.5])
+    v = np.log(x) if log else x
+    mid = (v[1:] + v[:-1]) / 2
+    e = np.concatenate([[2 * v[0] - mid[0]], mid, [2 * v[-1] - mid[-1]]])
+    return np.exp(e) if log else e
+
+
+def plot_region(m, ax=None, title: str | None = None, passivity: bool = True):
+    """Draw one :class:`haa_sym.regions.RegionMap` on ``ax`` (log P_gain, linear D_gain)."""
+    fig = None
+    if ax is None:
+        fig, ax = plt.subplots(figsize=(4.2, 3.4))
+    cls = np.where(~m.stable, 2, np.where(m.low_pm, 1, 0))
+    logP = bool(np.all(m.P_gain > 0))
+    ax.pcolormesh(_edges(m.P_gain, logP), _edges(m.D_gain, False), cls.T, cmap=REGION_COLORS,
+                  vmin=-0.5, vmax=2.5, shading="flat", rasterized=True)
+    if passivity and m.passive.any() and (~m.passive).any() and m.P_gain.size > 1 and m.D_gain.size > 1:
+        ax.contour(m.P_gain, m.D_gain, m.passive.T.astype(float), levels=[0.5], colors="tab:blue",
+                   linewidths=1.0, linestyles="--")
+    if logP:
+        ax.set_xscale("log")
+    ax.set_xlabel("P_gain (Nm/rad)")
+    ax.set_ylabel("D_gain (Nms/rad)")
+    if title:
+        ax.set_title(title, fontsize=10)
+    return fig or ax.figure
+
+
+def plot_region_panels(maps, titles, suptitle: str = ""):
+    """A row of region maps (one paper figure) with the legend of Figs. 8-11."""
+    fig, axes = plt.subplots(1, len(maps), figsize=(3.6 * len(maps), 3.4), squeeze=False,
+                             constrained_layout=True)
+    for ax, m, t in zip(axes[0], maps, titles):
+        plot_region(m, ax, t)
+    handles = [Patch(facecolor="#ffffff", edgecolor="k", label="stable, PM >= 30 deg"),
+               Patch(facecolor="#c8c8c8", edgecolor="k", label="stable, PM < 30 deg"),
+               Patch(facecolor="#3a3a3a", edgecolor="k", label="unstable"),
+               plt.Line2D([], [], color="tab:blue", ls="--", label="passivity boundary")]
+    fig.legend(handles=handles, loc="outside lower center", ncol=4, fontsize=8)
+    if suptitle:
+        fig.suptitle(suptitle, fontsize=11)
+    return fig
+
+
+def plot_corrected_phase(curves, title: str = ""):
+    """Corrected phase of Z(z) (Fig. 12): ``curves`` = [(omega, phase_deg, label), ...]."""
+    fig, ax = plt.subplots(figsize=(6.4, 3.6), constrained_layout=True)
+    for (w, ph, label), color in zip(curves, ("tab:red", "tab:blue", "tab:green", "tab:orange")):
+        ax.semilogx(w, ph, color=color, label=label)
+    for y in (90, -90):
+        ax.axhline(y, color="k", lw=0.8)
+    ax.set_xlabel("omega (rad/s)")
+    ax.set_ylabel("corrected phase of Z (deg)")
+    ax.set_ylim(-180, 180)
+    ax.set_yticks(range(-180, 181, 45))
+    ax.grid(True, which="both", alpha=0.3)
+    ax.legend(fontsize=8)
+    if title:
+        ax.set_title(title, fontsize=10)
+    return fig
+
+
+def plot_steps(panels, title: str = ""):
+    """Torque steps (Fig. 7): ``panels`` = [(panel_title, [(StepResponse, label, linestyle)])]."""
+    fig, axes = plt.subplots(len(panels), 1, figsize=(6.4, 2.8 * len(panels)), sharex=True,
+                             constrained_layout=True, squeeze=False)
+    for ax, (ptitle, lines) in zip(axes[:, 0], panels):
+        for s, label, ls in lines:
+            ax.plot(s.t, s.T, ls, color="k", label=label)
+        ax.axhline(1.0, color="0.6", lw=0.8)
+        ax.set_ylabel("T_l (Nm)")
+        ax.set_title(ptitle, fontsize=10)
+        ax.legend(fontsize=8)
+        ax.grid(True, alpha=0.3)
+    axes[-1, 0].set_xlabel("t (s)")
+    if title:
+        fig.suptitle(title, fontsize=11)
+    return fig
+
+
+def plot_contact(K, rho, paper_range=None):
+    """Spectral radius of the torque loop alone against the environment stiffness."""
+    fig, ax = plt.subplots(figsize=(6.4, 3.2), constrained_layout=True)
+    ax.semilogx(K, rho, color="k")
+    ax.axhline(1.0, color="tab:red", lw=0.8, label="|z| = 1")
+    if paper_range:
+        ax.axvspan(*paper_range, color="tab:orange", alpha=0.2, label="paper: unstable")
+    ax.set_xlabel("environment stiffness K_L2 (Nm/rad)")
+    ax.set_ylabel("spectral radius")
+    ax.legend(fontsize=8)
+    ax.grid(True, which="both", alpha=0.3)
+    return fig
+
+
+def save_figure(fig, path: str | Path) -> Path:
+    """Save a figure atomically (temporary file + os.replace) and close it."""
+    import os
+    import tempfile
+    path = Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=path.name + ".", suffix=path.suffix)
+    os.close(fd)
+    try:
+        fig.savefig(tmp, dpi=120, metadata={"Software": None} if path.suffix == ".png" else None)
+        os.replace(tmp, path)
+    except BaseException:
+        Path(tmp).unlink(missing_ok=True)
+        raise
+    finally:
+        plt.close(fig)
+    return path

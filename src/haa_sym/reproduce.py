@@ -1,0 +1,276 @@
+"""``haa-sym reproduce --out results/`` (``make paper``): every figure and table of Sec. 3-5.
+
+Writes into the output directory, as data and as PNG:
+  regions/fig{08..11}{a..d}.npz, fig08.png .. fig11.png   stability/PM/passivity maps (Figs. 8-11)
+  table2.md, table2.csv                                 Table 2 with the worst phase excess per cell
+  options_table2.csv                                    cells of Table 2 reproduced per option set
+  fig12.png, fig12.csv                                  corrected phase of Z (Fig. 12)
+  fig07.png, fig07.csv                                  unit torque steps (Fig. 7)
+  contact.png, contact.csv                              stability against environment stiffness
+  verify.txt                                            python -m haa_sym.verify (p1 roots, margins)
+  claims.json                                           every computed claim, machine-readable
+  REPORT.md                                             all of it, "the paper says / we compute"
+Everything is computed from ``model/hyq_haa.toml`` and ``model/paper.toml``; nothing is typed in.
+"""
+from __future__ import annotations
+
+import csv
+import io
+import json
+import os
+import subprocess
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+import numpy as np
+
+from haa_sym.contact import contact_stability, intervals
+from haa_sym.loop import ClosedLoop, LoopOptions
+from haa_sym.paper import panel_params, paper_spec
+from haa_sym.params import Params, load_params
+from haa_sym.passivity import bands_beyond, corrected_phase
+from haa_sym.regions import grid, region_map, run_meta
+from haa_sym.table2 import OPTION_GRID, score_options, table2
+from haa_sym.torque import step_response, torque_bandwidth
+
+__all__ = ["reproduce", "region_trends"]
+
+
+def _write_text(path: Path, text: str) -> None:
+    path.parent.mkdir(parents=True, exist_ok=True)
+    fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=path.name + ".")
+    with os.fdopen(fd, "w") as fh:
+        fh.write(text)
+    os.replace(tmp, path)
+
+
+def _csv(rows: list[dict]) -> str:
+    buf = io.StringIO()
+    w = csv.DictWriter(buf, fieldnames=list(rows[0]), lineterminator="\n")
+    w.writeheader()
+    w.writerows(rows)
+    return buf.getvalue()
+
+
+def _log(msg: str) -> None:
+    print(msg, file=sys.stderr, flush=True)
+
+
+# --- Sec. 4 trends ------------------------------------------------------------------------------
+def _quadrants(m, P_split: float, D_split: float):
+    """Unstable / PM<30 cell counts in the four quadrants of the (P, D) plane split at
+    ``P_split`` and ``D_split``. The paper's "low stiffness and damping" is the low/low quadrant,
+    "large stiffness and/or large damping" the other three.
+    """
+    lowP = (m.P_gain <= P_split)[:, None]
+    lowD = (m.D_gain <= D_split)[None, :]
+    un = ~m.stable
+    return {
+        "unstable_lowP_lowD": int((un & lowP & lowD).sum()),
+        "unstable_highP_lowD": int((un & ~lowP & lowD).sum()),
+        "unstable_high_any": int((un & ~(lowP & lowD)).sum()),
+        "unstable_total": int(un.sum()),
+        "low_pm_total": int(m.low_pm.sum()),
+        "passive_total": int(m.passive.sum()),
+        "cells": int(m.stable.size),
+    }
+
+
+def quadrant_splits(spec: dict, P_grid, D_grid) -> dict:
+    """Named ways to split "low" from "large" stiffness: the paper's locomotion range
+    (Sec. 3.4, P_gain <= 2000 Nm/rad) and the geometric middle of the swept P range; damping is
+    split at the middle of the swept D range."""
+    D_mid = 0.5 * (D_grid.min() + D_grid.max())
+    return {
+        "locomotion": (float(spec["regions"]["locomotion_P_gain_max"]), D_mid),
+        "log_middle": (float(np.sqrt(P_grid.min() * P_grid.max())), D_mid),
+    }
+
+
+def _trend(seq, key, direction):
+    vals = [q[key] for q in seq]
+    steps = list(zip(vals[:-1], vals[1:]))
+    if direction == "up":
+        ok = [b >= a for a, b in steps]
+    else:
+        ok = [b <= a for a, b in steps]
+    return vals, sum(ok), len(ok)
+
+
+def region_trends(stats: dict) -> list[dict]:
+    """The qualitative claims of Sec. 4, each checked on the computed maps with the counts.
+
+    ``stats`` maps a panel id ("8a", ...) to :func:`_quadrants` of its map (one split).
+    """
+    s = stats
+    claims = []
+
+    def add(text, ids, key, direction):
+        vals, n_ok, n = _trend([s[i] for i in ids], key, direction)
+        claims.append({"claim": text, "panels": ids, "measure": key, "values": vals,
+                       "holds": n_ok == n, "steps_holding": f"{n_ok}/{n}"})
+
+    beta = ["8a", "8b", "8c", "8d"]
+    add("Fig. 8: as beta grows, the unstable region at low stiffness and damping shrinks",
+        beta, "unstable_lowP_lowD", "down")
+    add("Fig. 8: as beta grows, the unstable region at large stiffness and/or damping grows",
+        beta, "unstable_high_any", "up")
+    add("Fig. 9 (a)-(c): increasing alpha enlarges the unstable region",
+        ["9a", "9b", "9c"], "unstable_total", "up")
+    nav = ["10a", "8a", "10b", "10c", "10d"]   # N_av = 1, 4, 10, 20, 50
+    add("Fig. 10: averaging more samples enlarges the unstable region at low stiffness",
+        nav, "unstable_lowP_lowD", "up")
+    add("Fig. 10: averaging more samples shrinks the unstable region at high stiffness, low damping",
+        nav, "unstable_highP_lowD", "down")
+    ts = ["11a", "11b", "11c"]
+    add("Fig. 11 (a)-(c): the unstable region grows with the sampling time",
+        ts, "unstable_total", "up")
+    add("Fig. 11 (a)-(c): the PM < 30 deg region grows with the sampling time",
+        ts, "low_pm_total", "up")
+    leg = ["8a", "11d"]   # extended -> retracted
+    add("Fig. 11 (d): the retracted leg has a larger unstable region at low damping and stiffness",
+        leg, "unstable_lowP_lowD", "up")
+    add("Fig. 11 (d): the retracted leg has a smaller unstable region at low damping, large stiffness",
+        leg, "unstable_highP_lowD", "down")
+    add("Fig. 11 (d): the retracted leg has a larger PM < 30 deg region",
+        leg, "low_pm_total", "up")
+    return claims
+
+
+# --- the job -----------------------------------------------------------------------------------
+def reproduce(out: str | Path = "results", params: Params | None = None,
+              options: LoopOptions | None = None, quick: bool = False,
+              spec: dict | None = None) -> dict:
+    """Compute and write everything listed in the module docstring; returns the claims dict.
+
+    ``quick`` uses coarse grids (for tests); the report says so.
+    """
+    t_start = time.time()
+    out = Path(out)
+    params = params or load_params()
+    options = options or LoopOptions()
+    spec = spec or paper_spec()
+    reg = spec["regions"]
+    claims_spec = spec["claims"]
+    P_grid = grid("log:1:20000:40" if quick else reg["P_gain"], "P_gain")
+    D_grid = grid("lin:1:50:20" if quick else reg["D_gain"], "D_gain")
+    result: dict = {"meta": run_meta(params, options, quick=quick)}
+
+    # Figs. 8-11
+    _log("regions: 16 maps (Figs. 8-11)")
+    splits = quadrant_splits(spec, P_grid, D_grid)
+    stats, panels_by_fig = {k: {} for k in splits}, {}
+    for entry in reg["panel"]:
+        pid = f"{entry['figure']}{entry['panel']}"
+        p = panel_params(params, entry)
+        m = region_map(p, P_grid, D_grid, options=options)
+        m.meta.update(figure=entry["figure"], panel=entry["panel"], title=entry["title"])
+        m.save(out / "regions" / f"fig{entry['figure']:02d}{entry['panel']}.npz")
+        for split, (Ps, Ds) in splits.items():
+            stats[split][pid] = _quadrants(m, Ps, Ds)
+        panels_by_fig.setdefault(entry["figure"], []).append((m, f"({entry['panel']}) {entry['title']}"))
+    from haa_sym.plots import (plot_contact, plot_corrected_phase, plot_region_panels, plot_steps,
+                               save_figure)
+    captions = {8: "beta (alpha = 0.94, N_av = 4, Ts = 1 ms)", 9: "alpha (beta = 1, N_av = 4, Ts = 1 ms)",
+                10: "N_av (beta = 1, alpha = 0.94, Ts = 1 ms)",
+                11: "Ts (beta = 1, N_av = 4, alpha = 0.94) and retracted leg"}
+    for fig_no, items in panels_by_fig.items():
+        save_figure(plot_region_panels([m for m, _ in items], [t for _, t in items],
+                                       f"Fig. {fig_no}: stability regions varying {captions.get(fig_no, '')}"),
+                    out / f"fig{fig_no:02d}.png")
+    result["region_splits"] = splits
+    result["region_stats"] = stats
+    result["region_trends"] = {k: region_trends(v) for k, v in stats.items()}
+
+    # Table 2 and the option scores
+    _log("Table 2 and option scores")
+    cells = table2(params, options, spec)
+    rows = [{"row": c.row, "column": c.column, "P_gain": c.P_gain, "D_gain": c.D_gain,
+             "paper": c.paper, "computed": c.status, "agrees": c.agrees,
+             "phase_excess_deg": round(c.phase_excess_deg, 4) if np.isfinite(c.phase_excess_deg) else "",
+             "omega_worst_rad_s": round(c.omega_worst, 3) if np.isfinite(c.omega_worst) else ""}
+            for c in cells]
+    _write_text(out / "table2.csv", _csv(rows))
+    scores = score_options(params, spec, options)
+    _write_text(out / "options_table2.csv", _csv([{**combo, "cells_reproduced": n, "cells": total}
+                                                    for combo, n, total in scores]))
+    result["table2"] = rows
+    result["option_scores"] = [{"options": combo, "agree": n, "cells": total} for combo, n, total in scores]
+
+    # Fig. 12 and the Z band
+    _log("Fig. 12, contact stiffness, beta threshold, Fig. 7")
+    loop = ClosedLoop(params, options)
+    w_fine = np.logspace(np.log10(options.omega_min), np.log10(np.pi / params.controller.Ts * (1 - 1e-9)),
+                         4 * options.n_omega)
+    w, ph_t = corrected_phase(params, 0.0, 0.0, omega=w_fine, loop=loop)
+    P12, D12 = claims_spec["fig12_gains"]
+    _, ph_i = corrected_phase(params, P12, D12, omega=w_fine, loop=loop)
+    save_figure(plot_corrected_phase(
+        [(w, ph_t, f"torque loop alone (beta = {params.controller.beta:g}, alpha = {params.controller.alpha:g})"),
+         (w, ph_i, f"impedance loop closed (P_gain = {P12:g}, D_gain = {D12:g})")],
+        "Fig. 12: corrected phase of Z(z)"), out / "fig12.png")
+    _write_text(out / "fig12.csv", _csv([{"omega_rad_s": f"{a:.6g}", "phase_torque_loop_deg": f"{b:.6f}",
+                                          "phase_impedance_loop_deg": f"{c:.6f}"}
+                                         for a, b, c in zip(w, ph_t, ph_i)]))
+    result["z_band_torque_loop"] = bands_beyond(w, ph_t)
+    result["z_band_impedance_loop"] = bands_beyond(w, ph_i)
+
+    # contact stiffness
+    K = grid(claims_spec["contact_K_L2_grid"] if not quick else "log:1:100000:80", "K_L2")
+    st, rho = contact_stability(params, K, options=options)
+    result["contact_unstable_K_L2"] = intervals(K, ~st)
+    _write_text(out / "contact.csv", _csv([{"K_L2": f"{k:.6g}", "stable": bool(s), "spectral_radius": f"{r:.9f}"}
+                                           for k, s, r in zip(K, st, rho)]))
+    save_figure(plot_contact(K, rho, claims_spec["contact_unstable_K_L2"]), out / "contact.png")
+
+    # beta threshold for the stiff impedance
+    bt = claims_spec["beta_threshold"]
+    betas = grid(bt["grid"], "beta")
+    sb = loop.stability(bt["P_gain"], bt["D_gain"], betas)
+    result["beta_unstable_intervals"] = intervals(betas, ~sb.stable)
+    result["beta_check"] = {
+        "stable_at": bt["stable_at"], "computed_stable_at": bool(loop.stability(bt["P_gain"], bt["D_gain"], bt["stable_at"]).stable),
+        "unstable_from": bt["unstable_from"],
+        "computed_unstable_for_all_beta_from": bool((~sb.stable[betas >= bt["unstable_from"]]).all()),
+        "first_unstable_beta_above_stable_at": float(betas[(betas > bt["stable_at"]) & ~sb.stable][0])
+        if ((betas > bt["stable_at"]) & ~sb.stable).any() else None,
+    }
+
+    # Fig. 7 torque steps
+    panels, steps = [], []
+    for K_L2 in claims_spec["fig7_K_L2"]:
+        p7 = params.with_values(K_L2=K_L2)
+        lines = []
+        for a, ls in zip(claims_spec["fig7_alpha"], ("-", "--")):
+            s = step_response(p7, duration=claims_spec["fig7_duration_s"], options=options, alpha=a)
+            lines.append((s, f"alpha = {a:g}", ls))
+            steps.append({"K_L2": K_L2, "alpha": a, "rise_time_s": s.rise_time,
+                          "T_at_end": float(s.T[-1]), "overshoot": s.overshoot,
+                          "settling_time_5pct_s": s.settling_time,
+                          "bandwidth_rad_s": torque_bandwidth(p7, options=options, alpha=a)})
+        panels.append((f"K_L2 = {K_L2:g} Nm/rad", lines))
+    save_figure(plot_steps(panels, "Fig. 7: unit torque steps (extended leg)"), out / "fig07.png")
+    t7 = panels[0][1][0][0].t
+    _write_text(out / "fig07.csv", _csv([
+        {"t_s": f"{t:.4f}", **{f"T_K{K:g}_alpha{a:g}": f"{s.T[i]:.6f}"
+                               for (title, lines), K in zip(panels, claims_spec["fig7_K_L2"])
+                               for (s, _, _), a in zip(lines, claims_spec["fig7_alpha"])}}
+        for i, t in enumerate(t7)]))
+    result["fig7"] = steps
+
+    # verify (symbolic rows: p1 roots, margins at the leg-inertia bounds) in its own process:
+    # the numeric runtime never imports sympy
+    proc = subprocess.run([sys.executable, "-m", "haa_sym.verify"] +
+                          (["--params", params.source] if Path(params.source).is_file() else []),
+                          capture_output=True, text=True)
+    _write_text(out / "verify.txt", proc.stdout + proc.stderr)
+    result["verify_exit_status"] = proc.returncode
+
+    result["elapsed_s"] = round(time.time() - t_start, 1)
+    _write_text(out / "claims.json", json.dumps(result, indent=1, default=float) + "\n")
+    from haa_sym.report import write_report
+    write_report(out, result, spec, options, proc.stdout)
+    _log(f"wrote {out}/REPORT.md in {result['elapsed_s']} s")
+    return result
