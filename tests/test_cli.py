@@ -15,3 +15,65 @@ def test_bad_set_key_and_value(capsys):
     assert "Ts = -1.0 is out of range" in capsys.readouterr().err
     assert main(["stability", "--P-gain", "200", "--D-gain", "10", "--set", "Ts"]) == 2
     assert "expected KEY=VALUE" in capsys.readouterr().err
+
+
+# --- haa-sym regions and friends (issue 3) -------------------------------------------------------
+import json  # noqa: E402
+
+import numpy as np  # noqa: E402
+import pytest  # noqa: E402
+
+
+def test_regions_writes_npz_and_plot(tmp_path, capsys):
+    out, png = tmp_path / "map.npz", tmp_path / "map.png"
+    rc = main(["regions", "--set", "beta=2", "--set", "N_av=10", "--P-gain", "log:1:20000:12",
+               "--D-gain", "lin:1:50:5", "--option", "pm_rule=worst", "--out", str(out),
+               "--plot", str(png)])
+    assert rc == 0, capsys.readouterr().err
+    with np.load(out) as f:
+        assert f["stable"].shape == (12, 5) and f["P_gain"].shape == (12,)
+        assert f["phase_margin_deg"].shape == (12, 5) and f["passive"].dtype == bool
+        meta = json.loads(str(f["meta"]))
+    assert meta["params"]["controller"]["beta"] == 2.0 and meta["params"]["controller"]["N_av"] == 10
+    assert meta["options"]["pm_rule"] == "worst"
+    assert png.stat().st_size > 1000
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["map.npz", "map.png"]
+
+
+@pytest.mark.parametrize("args,msg", [
+    (["--P-gain", "log:0:20000:10"], "--P-gain = 'log:0:20000:10'"),
+    (["--D-gain", "lin:1:50:x"], "--D-gain = 'lin:1:50:x'"),
+    (["--set", "J_L3=0.1"], "unknown parameter key(s) ['J_L3']"),
+    (["--set", "J_L2=-0.1"], "J_L2"),
+    (["--set", "N_av=0"], "N_av"),
+    (["--set", "Ts=nan"], "Ts"),
+    (["--option", "port=foot"], "port = 'foot'"),
+    (["--option", "bogus=1"], "unknown option 'bogus'"),
+    (["--configuration", "folded"], "unknown configuration 'folded'"),
+])
+def test_regions_rejects_bad_input_and_writes_nothing(tmp_path, capsys, args, msg):
+    out = tmp_path / "map.npz"
+    rc = main(["regions", "--P-gain", "log:1:20000:5", "--D-gain", "lin:1:50:3", *args,
+               "--out", str(out), "--plot", str(tmp_path / "map.png")])
+    err = capsys.readouterr().err
+    assert rc == 2
+    assert msg in err and err.startswith("haa-sym: error:")
+    assert list(tmp_path.iterdir()) == []
+
+
+def test_regions_rejects_bad_output_suffix(tmp_path, capsys):
+    assert main(["regions", "--P-gain", "1,2", "--D-gain", "1", "--out", str(tmp_path / "m.csv")]) == 2
+    assert "allowed: ['.npz']" in capsys.readouterr().err
+
+
+def test_passivity_step_margins(tmp_path, capsys):
+    assert main(["passivity", "--out", str(tmp_path / "p.csv")]) == 0
+    out = capsys.readouterr().out
+    assert "P_gain 0  D_gain 0: No" in out and "P_gain 200  D_gain 10: Yes" in out
+    assert (tmp_path / "p.csv").read_text().startswith("P_gain,D_gain,status")
+    assert main(["passivity", "--P-gain", "1,2", "--D-gain", "1"]) == 2
+    assert "same number" in capsys.readouterr().err
+    assert main(["step", "--set", "K_L2=0", "--out", str(tmp_path / "s.csv")]) == 0
+    assert "rise time" in capsys.readouterr().out
+    assert main(["margins", "--P-gain", "200", "--D-gain", "10"]) == 0
+    assert "impedance loop (opened at T_lref): PM" in capsys.readouterr().out

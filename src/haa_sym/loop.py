@@ -41,8 +41,9 @@ __all__ = ["LoopOptions", "LoopCoefficients", "ClosedLoop", "StabilityResult", "
 
 PORTS = ("dtheta_L2", "dtheta_L1", "encoder_average")
 # Half-width of the band around spectral radius 1 where points are re-decided by eigenvalues:
-# ten times the worst radius error of the monomial-basis Schur-Cohn bisection measured over the
-# paper's configurations (9e-7 at Ts = 0.5 ms, delay 1; tests/test_evaluators.py).
+# at least three times the worst radius error of the monomial-basis Schur-Cohn bisection measured over the
+# paper's configurations (9e-7 at Ts = 0.5 ms over 1,020 random points, tests/test_evaluators.py;
+# 3e-6 at one map point of tests/test_regions.py, rho = 0.9959, still far from the band).
 REFINE_BAND = 1e-5
 FREQ_OUTPUTS = ("L_t", "L_imp", "Z", "H_T")
 
@@ -294,7 +295,7 @@ class ClosedLoop:
         StabilityResult
             Arrays of the broadcast shape. Every point is decided by the generated Schur-Cohn
             test and its radius bisected (30 halvings). Near z = 1 the monomial coefficients
-            limit that radius to ~1e-6 at Ts = 0.5 ms (~1e-8 at 1 ms, see docs/model.md), hence
+            limit that radius to ~3e-6 at Ts = 0.5 ms (~1e-8 at 1 ms, see docs/model.md), hence
             the refinement band.
         """
         pts, shape = self._points(P_gain, D_gain, beta, alpha)

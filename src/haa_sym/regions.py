@@ -60,9 +60,9 @@ def grid(spec: str, name: str = "grid") -> np.ndarray:
             if len(parts) != 3:
                 raise bad("expected 3 fields after the kind")
             a, b = float(parts[0]), float(parts[1])
-            n = int(parts[2])
-            if str(n) != parts[2].strip() or n < 1:
+            if not parts[2].strip().isdigit() or int(parts[2]) < 1:
                 raise bad(f"N = {parts[2]!r} is not an integer >= 1")
+            n = int(parts[2])
             if not (np.isfinite(a) and np.isfinite(b)) or a > b or a < 0:
                 raise bad("START and STOP must be finite with 0 <= START <= STOP")
             if kind == "log":

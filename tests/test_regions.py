@@ -1,0 +1,124 @@
+"""Region maps (issue 3): every grid point against an independent eigenvalue computation, the
+phase margin and passivity reductions against the state-space closed loop, and the npz output."""
+import json
+
+import numpy as np
+import pytest
+
+from haa_sym import ClosedLoop, LoopOptions, ParameterError
+from haa_sym import reference as ref
+from haa_sym.margins import stability_margins
+from haa_sym.regions import RegionMap, grid, region_map
+from haa_sym.sweep import colgate_factor
+
+P_GRID = "log:1:20000:24"
+D_GRID = "lin:1:50:12"
+CASES = [
+    ("nominal", {}, None),
+    ("N_av=50", {"N_av": 50}, None),
+    ("Ts=8ms beta=4", {"Ts": 0.008, "beta": 4.0}, None),
+    ("Ts=0.5ms delay=1", {"Ts": 0.0005}, LoopOptions(delay=1, port="dtheta_L1")),
+    ("retracted alpha=1.2", {"alpha": 1.2}, "retracted"),
+]
+
+
+def _params(params, changes, cfg):
+    p = params.configuration(cfg) if isinstance(cfg, str) else params
+    return p.with_values(**changes)
+
+
+@pytest.mark.parametrize("name,changes,extra", CASES, ids=[c[0] for c in CASES])
+@pytest.mark.parametrize("radius", [True, False], ids=["radius", "decision"])
+def test_map_agrees_with_eigvals(params, name, changes, extra, radius):
+    p = _params(params, changes, extra)
+    opts = extra if isinstance(extra, LoopOptions) else LoopOptions()
+    m = region_map(p, grid(P_GRID), grid(D_GRID), options=opts, radius=radius, progress=False)
+    loop = ClosedLoop(p, opts)
+    rho = np.array([[ref.spectral_radius(loop, P, D) for D in m.D_gain] for P in m.P_gain])
+    decided = np.abs(rho - 1) > 1e-6
+    assert decided.sum() > 0.95 * rho.size
+    np.testing.assert_array_equal(m.stable[decided], (rho < 1)[decided])
+    if radius:
+        # measured worst case: 3.0e-6 at Ts = 0.5 ms, delay 1 (rho = 0.99591; np.roots of the
+        # rounded chi is already 7e-7 off); 1e-8 at Ts = 1 ms. See docs/model.md.
+        np.testing.assert_allclose(m.spectral_radius, rho, atol=5e-6 if p.controller.Ts < 1e-3 else 1e-6)
+    # the maps are not trivial: both decisions occur somewhere in these cases
+    assert m.stable.any()
+
+
+def test_phase_margin_and_passivity_match_state_space(params):
+    """PM (impedance loop at T_lref, and torque loop at the PI output) and the passivity excess
+    of the sweep against python-free state-space responses on the same frequency grid."""
+    rng = np.random.default_rng(7)
+    for pm_loop, key in (("impedance", "L_imp"), ("torque", "L_t")):
+        opts = LoopOptions(pm_loop=pm_loop)
+        m = region_map(params, grid("log:10:20000:9"), grid("lin:1:50:5"), options=opts, progress=False)
+        loop = ClosedLoop(params, opts)
+        w = opts.omega(params.controller.Ts)
+        checked = 0
+        for i, j in zip(rng.integers(0, 9, 12), rng.integers(0, 5, 12)):
+            if not m.stable[i, j]:
+                continue
+            P, D = m.P_gain[i], m.D_gain[j]
+            r = ref.frequency_response(loop, w, P, D)
+            mg = stability_margins(r[key], w)
+            if mg.phase_margins_deg.size == 0:
+                assert np.isnan(m.phase_margin_deg[i, j])
+            else:
+                pm = mg.phase_margins_deg[np.argmin(np.abs(mg.phase_margins_deg))]
+                assert m.phase_margin_deg[i, j] == pytest.approx(pm, abs=0.05)
+            ph = np.degrees(np.angle(r["Z"] * colgate_factor(w, params.controller.Ts, "subtract")))
+            assert m.phase_excess_deg[i, j] == pytest.approx(np.abs(ph).max() - 90, abs=1e-6)
+            checked += 1
+        assert checked >= 4
+
+
+def test_phase_margin_rule(params):
+    """'worst' takes the smallest signed PM, 'min_abs' the smallest |PM|: worst <= min_abs."""
+    a = region_map(params, grid("log:100:20000:12"), grid("lin:1:50:6"), progress=False,
+                   options=LoopOptions(pm_rule="min_abs"))
+    b = region_map(params, grid("log:100:20000:12"), grid("lin:1:50:6"), progress=False,
+                   options=LoopOptions(pm_rule="worst"))
+    both = ~np.isnan(a.phase_margin_deg)
+    assert both.any()
+    assert np.all(b.phase_margin_deg[both] <= a.phase_margin_deg[both] + 1e-12)
+    assert np.all(np.abs(a.phase_margin_deg[both]) <= np.abs(b.phase_margin_deg[both]) + 1e-12)
+
+
+def test_npz_roundtrip(params, tmp_path):
+    m = region_map(params, [1, 200, 20000], [1, 10, 50], progress=False)
+    path = m.save(tmp_path / "map.npz")
+    with np.load(path) as f:
+        assert {"P_gain", "D_gain", "stable", "spectral_radius", "phase_margin_deg", "passive",
+                "meta"} <= set(f.files)
+        assert f["stable"].dtype == bool and f["passive"].dtype == bool
+        assert f["stable"].shape == (3, 3)
+        meta = json.loads(str(f["meta"]))
+    assert meta["options"] == LoopOptions().to_dict()
+    assert meta["params"]["controller"]["N_av"] == 4
+    back = RegionMap.load(path)
+    np.testing.assert_array_equal(back.stable, m.stable)
+    assert list(tmp_path.iterdir()) == [path]          # no temporary file left behind
+
+
+@pytest.mark.parametrize("spec,msg", [
+    ("log:0:10:5", "log grid needs START > 0"),
+    ("lin:1:50", "expected 3 fields"),
+    ("lin:1:50:2.5", "is not an integer"),
+    ("lin:50:1:5", "START <= STOP"),
+    ("1,nan,3", "finite"),
+    ("1,-2", "finite and >= 0"),
+    ("abc", "not a number"),
+])
+def test_bad_grid(spec, msg):
+    with pytest.raises(ParameterError, match=msg) as exc:
+        grid(spec, "--P-gain")
+    assert "--P-gain" in str(exc.value) and "allowed:" in str(exc.value)
+
+
+def test_bad_options():
+    for kw, msg in (({"port": "theta"}, "port = 'theta'"), ({"colgate": "minus"}, "colgate"),
+                    ({"n_omega": 3}, "n_omega = 3"), ({"omega_min": float("nan")}, "omega_min"),
+                    ({"pm_rule": "first"}, "pm_rule")):
+        with pytest.raises(ParameterError, match=msg):
+            LoopOptions(**kw)
