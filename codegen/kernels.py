@@ -123,23 +123,30 @@ COEF_OUTPUTS = ("L_t", "L_imp", "Z_num", "Z_den")
 def decision_function(cap: int) -> ca.Function:
     """Schur-Cohn decision without the radius, for one gain point.
 
-    Inputs as :func:`stability_function` plus ``band``. Outputs ``kmax`` (stable iff < 1) and
-    the same test on chi((1 - band) z) and chi((1 + band) z): ``k_in`` < 1 iff every root lies in
-    |z| < 1 - band, ``k_out`` < 1 iff every root lies in |z| < 1 + band. A point with
-    k_in >= 1 > k_out has its spectral radius within ``band`` of 1 (three tests instead of 30).
+    Inputs as :func:`stability_function` plus ``s_in`` and ``s_out``, the scalings
+    r^(i - cap) of the ascending coefficients for r = 1 - band and r = 1 + band (passed in
+    rather than computed: 2 x (cap+1) pow calls per point cost as much as a test).
+    Outputs ``kmax``, ``k_in`` and ``k_out``: stable iff kmax < 1; k_in < 1 iff every root lies
+    in |z| < 1 - band; k_out < 1 iff every root lies in |z| < 1 + band. A point with
+    k_in >= 1 > k_out has its spectral radius within ``band`` of 1 and must be re-decided by
+    eigenvalues.
+
+    The test at 1 - band runs first: when it passes (most stable points) the point is stable and
+    not near the boundary, the other two tests are skipped (short-circuit branch) and all three
+    outputs are k_in. Otherwise all three run.
     """
     jury = jury_function(cap)
     basis = ca.MX.sym("basis", cap + 1, N_BASIS)
     const = ca.MX.sym("const", N_CONST)
     point = ca.MX.sym("point", N_POINT)
-    band = ca.MX.sym("band")
+    s_in = ca.MX.sym("s_in", cap + 1)
+    s_out = ca.MX.sym("s_out", cap + 1)
     a = ca.mtimes(basis, gain_monomials(point, const))
-    powers = ca.DM(np.arange(cap + 1, dtype=float) - cap)
-    kmax = jury(a)
-    k_in = jury(a * (1 - band) ** powers)
-    k_out = jury(a * (1 + band) ** powers)
-    return ca.Function(f"haa_decide{cap}", [basis, const, point, band], [kmax, k_in, k_out],
-                       ["basis", "const", "point", "band"], ["kmax", "k_in", "k_out"])
+    k_in = jury(a * s_in)
+    rest = ca.if_else(k_in < 1, ca.vertcat(k_in, k_in), ca.vertcat(jury(a), jury(a * s_out)), True)
+    return ca.Function(f"haa_decide{cap}", [basis, const, point, s_in, s_out],
+                       [rest[0], k_in, rest[1]],
+                       ["basis", "const", "point", "s_in", "s_out"], ["kmax", "k_in", "k_out"])
 
 
 def loop_coefficient_function() -> ca.Function:

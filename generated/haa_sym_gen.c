@@ -40,7 +40,16 @@ extern "C" {
 #define casadi_f11 CASADI_PREFIX(f11)
 #define casadi_f12 CASADI_PREFIX(f12)
 #define casadi_f13 CASADI_PREFIX(f13)
+#define casadi_f14 CASADI_PREFIX(f14)
+#define casadi_f15 CASADI_PREFIX(f15)
+#define casadi_f16 CASADI_PREFIX(f16)
+#define casadi_f17 CASADI_PREFIX(f17)
+#define casadi_f18 CASADI_PREFIX(f18)
+#define casadi_f19 CASADI_PREFIX(f19)
 #define casadi_f2 CASADI_PREFIX(f2)
+#define casadi_f20 CASADI_PREFIX(f20)
+#define casadi_f21 CASADI_PREFIX(f21)
+#define casadi_f22 CASADI_PREFIX(f22)
 #define casadi_f3 CASADI_PREFIX(f3)
 #define casadi_f4 CASADI_PREFIX(f4)
 #define casadi_f5 CASADI_PREFIX(f5)
@@ -57,6 +66,9 @@ extern "C" {
 #define casadi_s10 CASADI_PREFIX(s10)
 #define casadi_s11 CASADI_PREFIX(s11)
 #define casadi_s12 CASADI_PREFIX(s12)
+#define casadi_s13 CASADI_PREFIX(s13)
+#define casadi_s14 CASADI_PREFIX(s14)
+#define casadi_s15 CASADI_PREFIX(s15)
 #define casadi_s2 CASADI_PREFIX(s2)
 #define casadi_s3 CASADI_PREFIX(s3)
 #define casadi_s4 CASADI_PREFIX(s4)
@@ -160,6 +172,8 @@ casadi_real casadi_mmax(const casadi_real* x, casadi_int n, casadi_int is_dense)
   return casadi_vfmax(x, n, r);
 }
 
+#define casadi_to_int(x) ((casadi_int) x)
+
 /* Configuration this file was compiled with */
 CASADI_SYMBOL_EXPORT void haa_sym_gen_casadi_version(int* major, int* minor, int* patch) {
   *major = 3;
@@ -182,6 +196,9 @@ static const casadi_int casadi_s9[3] = {26, 1, 1};
 static const casadi_int casadi_s10[3] = {17, 7, 1};
 static const casadi_int casadi_s11[3] = {33, 7, 1};
 static const casadi_int casadi_s12[3] = {65, 7, 1};
+static const casadi_int casadi_s13[3] = {17, 1, 1};
+static const casadi_int casadi_s14[3] = {33, 1, 1};
+static const casadi_int casadi_s15[3] = {65, 1, 1};
 
 static const casadi_real casadi_c0[17] = 
   {-16., -15., -14., -13., -12., -11., -10., -9.,
@@ -23452,12 +23469,170 @@ static int casadi_f9(const casadi_real** arg, casadi_real** res, casadi_int* iw,
   return 0;
 }
 
-/* haa_decide16:(basis[17x7],const[3],point[4],band)->(kmax,k_in,k_out) */
+/* f_false:(i0[17x7],i1[4],i2[3],i3[17],i4[17])->(o0[2]) */
+static int casadi_f11(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
+  casadi_int i;
+  casadi_real **res1=res+1, *rr, *w00=w+62, w02, *w03=w+79, w04, *w05=w+83, w06, w07, w08, w09, w10;
+  casadi_real w11, w12, *w13=w+86;
+  const casadi_real **arg1=arg+5, *cs, *wr01, *wr14;
+  /* #0: @0 = zeros(17x1) */
+  casadi_clear(w00, 17);
+  /* #1: @1 = input[0][0] */
+  wr01 = arg[0] ? arg[0] : casadi_zeros;
+  /* #2: @2 = 1 */
+  w02 = 1.;
+  /* #3: @3 = input[1][0] */
+  casadi_copy(arg[1], 4, w03);
+  /* #4: @4 = @3[2] */
+  for (rr=(&w04), cs=w03+2; cs!=w03+3; cs+=1) *rr++ = *cs;
+  /* #5: @5 = input[2][0] */
+  casadi_copy(arg[2], 3, w05);
+  /* #6: @6 = @5[0] */
+  for (rr=(&w06), cs=w05+0; cs!=w05+1; cs+=1) *rr++ = *cs;
+  /* #7: @6 = (@4*@6) */
+  w06  = (w04*w06);
+  /* #8: @7 = @5[1] */
+  for (rr=(&w07), cs=w05+1; cs!=w05+2; cs+=1) *rr++ = *cs;
+  /* #9: @4 = (@4*@7) */
+  w04 *= w07;
+  /* #10: @7 = @3[0] */
+  for (rr=(&w07), cs=w03+0; cs!=w03+1; cs+=1) *rr++ = *cs;
+  /* #11: @8 = (@6*@7) */
+  w08  = (w06*w07);
+  /* #12: @7 = (@4*@7) */
+  w07  = (w04*w07);
+  /* #13: @9 = @3[1] */
+  for (rr=(&w09), cs=w03+1; cs!=w03+2; cs+=1) *rr++ = *cs;
+  /* #14: @10 = (@6*@9) */
+  w10  = (w06*w09);
+  /* #15: @11 = @3[3] */
+  for (rr=(&w11), cs=w03+3; cs!=w03+4; cs+=1) *rr++ = *cs;
+  /* #16: @12 = @5[2] */
+  for (rr=(&w12), cs=w05+2; cs!=w05+3; cs+=1) *rr++ = *cs;
+  /* #17: @11 = (@11*@12) */
+  w11 *= w12;
+  /* #18: @10 = (@10-@11) */
+  w10 -= w11;
+  /* #19: @9 = (@4*@9) */
+  w09  = (w04*w09);
+  /* #20: @13 = vertcat(@2, @6, @4, @8, @7, @10, @9) */
+  rr=w13;
+  *rr++ = w02;
+  *rr++ = w06;
+  *rr++ = w04;
+  *rr++ = w08;
+  *rr++ = w07;
+  *rr++ = w10;
+  *rr++ = w09;
+  /* #21: @0 = mac(@1,@13,@0) */
+  casadi_mtimes_dense(wr01, 17, 7, w13, 1, w00, 0);
+  /* #22: @2 = haa_jury16(@0) */
+  arg1[0]=w00;
+  res1[0]=(&w02);
+  if (casadi_f9(arg1, res1, iw, w, 0)) return 1;
+  /* #23: output[0][0] = @2 */
+  if (res[0]) res[0][0] = w02;
+  /* #24: @14 = input[4][0] */
+  wr14 = arg[4] ? arg[4] : casadi_zeros;
+  /* #25: @0 = (@0*@14) */
+  for (i=0, rr=w00, cs=wr14; i<17; ++i) (*rr++) *= (*cs++);
+  /* #26: @2 = haa_jury16(@0) */
+  arg1[0]=w00;
+  res1[0]=(&w02);
+  if (casadi_f9(arg1, res1, iw, w, 0)) return 1;
+  /* #27: output[0][1] = @2 */
+  if (res[0]) res[0][1] = w02;
+  return 0;
+}
+
+/* f_true:(i0[17x7],i1[4],i2[3],i3[17],i4[17])->(o0[2]) */
+static int casadi_f12(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
+  casadi_int i;
+  casadi_real **res1=res+1, *rr, *w00=w+62, w02, *w03=w+79, w04, *w05=w+83, w06, w07, w08, w09, w10;
+  casadi_real w11, w12, *w13=w+86;
+  const casadi_real **arg1=arg+5, *cs, *wr01, *wr14;
+  /* #0: @0 = zeros(17x1) */
+  casadi_clear(w00, 17);
+  /* #1: @1 = input[0][0] */
+  wr01 = arg[0] ? arg[0] : casadi_zeros;
+  /* #2: @2 = 1 */
+  w02 = 1.;
+  /* #3: @3 = input[1][0] */
+  casadi_copy(arg[1], 4, w03);
+  /* #4: @4 = @3[2] */
+  for (rr=(&w04), cs=w03+2; cs!=w03+3; cs+=1) *rr++ = *cs;
+  /* #5: @5 = input[2][0] */
+  casadi_copy(arg[2], 3, w05);
+  /* #6: @6 = @5[0] */
+  for (rr=(&w06), cs=w05+0; cs!=w05+1; cs+=1) *rr++ = *cs;
+  /* #7: @6 = (@4*@6) */
+  w06  = (w04*w06);
+  /* #8: @7 = @5[1] */
+  for (rr=(&w07), cs=w05+1; cs!=w05+2; cs+=1) *rr++ = *cs;
+  /* #9: @4 = (@4*@7) */
+  w04 *= w07;
+  /* #10: @7 = @3[0] */
+  for (rr=(&w07), cs=w03+0; cs!=w03+1; cs+=1) *rr++ = *cs;
+  /* #11: @8 = (@6*@7) */
+  w08  = (w06*w07);
+  /* #12: @7 = (@4*@7) */
+  w07  = (w04*w07);
+  /* #13: @9 = @3[1] */
+  for (rr=(&w09), cs=w03+1; cs!=w03+2; cs+=1) *rr++ = *cs;
+  /* #14: @10 = (@6*@9) */
+  w10  = (w06*w09);
+  /* #15: @11 = @3[3] */
+  for (rr=(&w11), cs=w03+3; cs!=w03+4; cs+=1) *rr++ = *cs;
+  /* #16: @12 = @5[2] */
+  for (rr=(&w12), cs=w05+2; cs!=w05+3; cs+=1) *rr++ = *cs;
+  /* #17: @11 = (@11*@12) */
+  w11 *= w12;
+  /* #18: @10 = (@10-@11) */
+  w10 -= w11;
+  /* #19: @9 = (@4*@9) */
+  w09  = (w04*w09);
+  /* #20: @13 = vertcat(@2, @6, @4, @8, @7, @10, @9) */
+  rr=w13;
+  *rr++ = w02;
+  *rr++ = w06;
+  *rr++ = w04;
+  *rr++ = w08;
+  *rr++ = w07;
+  *rr++ = w10;
+  *rr++ = w09;
+  /* #21: @0 = mac(@1,@13,@0) */
+  casadi_mtimes_dense(wr01, 17, 7, w13, 1, w00, 0);
+  /* #22: @14 = input[3][0] */
+  wr14 = arg[3] ? arg[3] : casadi_zeros;
+  /* #23: @0 = (@0*@14) */
+  for (i=0, rr=w00, cs=wr14; i<17; ++i) (*rr++) *= (*cs++);
+  /* #24: @2 = haa_jury16(@0) */
+  arg1[0]=w00;
+  res1[0]=(&w02);
+  if (casadi_f9(arg1, res1, iw, w, 0)) return 1;
+  /* #25: output[0][0] = @2 */
+  if (res[0]) res[0][0] = w02;
+  /* #26: output[0][1] = @2 */
+  if (res[0]) res[0][1] = w02;
+  return 0;
+}
+
+/* switch:(i0,i1[17x7],i2[4],i3[3],i4[17],i5[17])->(o0[2]) */
+static int casadi_f10(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
+  if (arg[0] ? casadi_to_int(*arg[0]) : 0) {
+    if (casadi_f12(arg+1, res, iw, w, 0)) return 1;
+  } else {
+    if (casadi_f11(arg+1, res, iw, w, 0)) return 1;
+  }
+  return 0;
+}
+
+/* haa_decide16:(basis[17x7],const[3],point[4],s_in[17],s_out[17])->(kmax,k_in,k_out) */
 static int casadi_f8(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
   casadi_int i;
-  casadi_real **res1=res+3, *rr, *w00=w+62, w02, *w03=w+79, w04, *w05=w+83, w06, w07, w08, w09, w10;
-  casadi_real w11, w12, *w13=w+86, *w14=w+93;
-  const casadi_real **arg1=arg+4, *cr, *cs, *wr01, *wr14;
+  casadi_real **res1=res+3, *rr, *w00=w+238, w02, *w03=w+255, w04, *w05=w+259, w06, w07, w08, w09, w10;
+  casadi_real w11, w12, *w13=w+262, *w15=w+269;
+  const casadi_real **arg1=arg+5, *cs, *wr00, *wr01, *wr14;
   /* #0: @0 = zeros(17x1) */
   casadi_clear(w00, 17);
   /* #1: @1 = input[0][0] */
@@ -23509,45 +23684,38 @@ static int casadi_f8(const casadi_real** arg, casadi_real** res, casadi_int* iw,
   *rr++ = w09;
   /* #21: @0 = mac(@1,@13,@0) */
   casadi_mtimes_dense(wr01, 17, 7, w13, 1, w00, 0);
-  /* #22: @2 = haa_jury16(@0) */
+  /* #22: @14 = input[3][0] */
+  wr14 = arg[3] ? arg[3] : casadi_zeros;
+  /* #23: @0 = (@0*@14) */
+  for (i=0, rr=w00, cs=wr14; i<17; ++i) (*rr++) *= (*cs++);
+  /* #24: @2 = haa_jury16(@0) */
   arg1[0]=w00;
   res1[0]=(&w02);
   if (casadi_f9(arg1, res1, iw, w, 0)) return 1;
-  /* #23: output[0][0] = @2 */
-  if (res[0]) res[0][0] = w02;
-  /* #24: @2 = 1 */
-  w02 = 1.;
-  /* #25: @6 = input[3][0] */
-  w06 = arg[3] ? arg[3][0] : 0;
-  /* #26: @2 = (@2-@6) */
-  w02 -= w06;
-  /* #27: @14 = [-16, -15, -14, -13, -12, -11, -10, -9, -8, -7, -6, -5, -4, -3, -2, -1, 0] */
-  wr14 = casadi_c0;
-  /* #28: @14 = pow(@2,@14) */
-  for (i=0, rr=w14, cs=wr14; i<17; ++i) (*rr++)  = pow(w02,(*cs++));
-  /* #29: @14 = (@0*@14) */
-  for (i=0, rr=w14, cr=w00, cs=w14; i<17; ++i) (*rr++)  = ((*cr++)*(*cs++));
-  /* #30: @2 = haa_jury16(@14) */
-  arg1[0]=w14;
-  res1[0]=(&w02);
-  if (casadi_f9(arg1, res1, iw, w, 0)) return 1;
+  /* #25: @6 = 1 */
+  w06 = 1.;
+  /* #26: @6 = (@2<@6) */
+  w06  = (w02<w06);
+  /* #27: @0 = input[4][0] */
+  wr00 = arg[4] ? arg[4] : casadi_zeros;
+  /* #28: @15 = switch(@6, @1, @3, @5, @14, @0) */
+  arg1[0]=(&w06);
+  arg1[1]=wr01;
+  arg1[2]=w03;
+  arg1[3]=w05;
+  arg1[4]=wr14;
+  arg1[5]=wr00;
+  res1[0]=w15;
+  if (casadi_f10(arg1, res1, iw, w, 0)) return 1;
+  /* #29: @6 = @15[0] */
+  for (rr=(&w06), cs=w15+0; cs!=w15+1; cs+=1) *rr++ = *cs;
+  /* #30: output[0][0] = @6 */
+  if (res[0]) res[0][0] = w06;
   /* #31: output[1][0] = @2 */
   if (res[1]) res[1][0] = w02;
-  /* #32: @2 = 1 */
-  w02 = 1.;
-  /* #33: @2 = (@2+@6) */
-  w02 += w06;
-  /* #34: @14 = [-16, -15, -14, -13, -12, -11, -10, -9, -8, -7, -6, -5, -4, -3, -2, -1, 0] */
-  wr14 = casadi_c0;
-  /* #35: @14 = pow(@2,@14) */
-  for (i=0, rr=w14, cs=wr14; i<17; ++i) (*rr++)  = pow(w02,(*cs++));
-  /* #36: @0 = (@0*@14) */
-  for (i=0, rr=w00, cs=w14; i<17; ++i) (*rr++) *= (*cs++);
-  /* #37: @2 = haa_jury16(@0) */
-  arg1[0]=w00;
-  res1[0]=(&w02);
-  if (casadi_f9(arg1, res1, iw, w, 0)) return 1;
-  /* #38: output[2][0] = @2 */
+  /* #32: @2 = @15[1] */
+  for (rr=(&w02), cs=w15+1; cs!=w15+2; cs+=1) *rr++ = *cs;
+  /* #33: output[2][0] = @2 */
   if (res[2]) res[2][0] = w02;
   return 0;
 }
@@ -23569,7 +23737,7 @@ CASADI_SYMBOL_EXPORT void haa_decide16_incref(void) {
 CASADI_SYMBOL_EXPORT void haa_decide16_decref(void) {
 }
 
-CASADI_SYMBOL_EXPORT casadi_int haa_decide16_n_in(void) { return 4;}
+CASADI_SYMBOL_EXPORT casadi_int haa_decide16_n_in(void) { return 5;}
 
 CASADI_SYMBOL_EXPORT casadi_int haa_decide16_n_out(void) { return 3;}
 
@@ -23584,7 +23752,8 @@ CASADI_SYMBOL_EXPORT const char* haa_decide16_name_in(casadi_int i) {
     case 0: return "basis";
     case 1: return "const";
     case 2: return "point";
-    case 3: return "band";
+    case 3: return "s_in";
+    case 4: return "s_out";
     default: return 0;
   }
 }
@@ -23603,7 +23772,8 @@ CASADI_SYMBOL_EXPORT const casadi_int* haa_decide16_sparsity_in(casadi_int i) {
     case 0: return casadi_s10;
     case 1: return casadi_s6;
     case 2: return casadi_s8;
-    case 3: return casadi_s4;
+    case 3: return casadi_s13;
+    case 4: return casadi_s13;
     default: return 0;
   }
 }
@@ -23618,23 +23788,23 @@ CASADI_SYMBOL_EXPORT const casadi_int* haa_decide16_sparsity_out(casadi_int i) {
 }
 
 CASADI_SYMBOL_EXPORT int haa_decide16_work(casadi_int *sz_arg, casadi_int* sz_res, casadi_int *sz_iw, casadi_int *sz_w) {
-  if (sz_arg) *sz_arg = 11;
-  if (sz_res) *sz_res = 4;
+  if (sz_arg) *sz_arg = 23;
+  if (sz_res) *sz_res = 6;
   if (sz_iw) *sz_iw = 0;
-  if (sz_w) *sz_w = 110;
+  if (sz_w) *sz_w = 271;
   return 0;
 }
 
 CASADI_SYMBOL_EXPORT int haa_decide16_work_bytes(casadi_int *sz_arg, casadi_int* sz_res, casadi_int *sz_iw, casadi_int *sz_w) {
-  if (sz_arg) *sz_arg = 11*sizeof(const casadi_real*);
-  if (sz_res) *sz_res = 4*sizeof(casadi_real*);
+  if (sz_arg) *sz_arg = 23*sizeof(const casadi_real*);
+  if (sz_res) *sz_res = 6*sizeof(casadi_real*);
   if (sz_iw) *sz_iw = 0*sizeof(casadi_int);
-  if (sz_w) *sz_w = 110*sizeof(casadi_real);
+  if (sz_w) *sz_w = 271*sizeof(casadi_real);
   return 0;
 }
 
 /* haa_jury32:(a[33])->(kmax) */
-static int casadi_f11(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
+static int casadi_f14(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
   casadi_real a000, a001, a002, a003, a004, a005, a006, a007, a008, a009, a010, a011;
   casadi_real a012, a013, a014, a015, a016, a017, a018, a019, a020, a021, a022, a023;
   casadi_real a024, a025, a026, a027, a028, a029, a030, a031, a032, a033, a034, a035;
@@ -26912,12 +27082,170 @@ static int casadi_f11(const casadi_real** arg, casadi_real** res, casadi_int* iw
   return 0;
 }
 
-/* haa_decide32:(basis[33x7],const[3],point[4],band)->(kmax,k_in,k_out) */
-static int casadi_f10(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
+/* f_false:(i0[33x7],i1[4],i2[3],i3[33],i4[33])->(o0[2]) */
+static int casadi_f16(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
   casadi_int i;
-  casadi_real **res1=res+3, *rr, *w00=w+126, w02, *w03=w+159, w04, *w05=w+163, w06, w07, w08, w09, w10;
-  casadi_real w11, w12, *w13=w+166, *w14=w+173;
-  const casadi_real **arg1=arg+4, *cr, *cs, *wr01, *wr14;
+  casadi_real **res1=res+1, *rr, *w00=w+126, w02, *w03=w+159, w04, *w05=w+163, w06, w07, w08, w09, w10;
+  casadi_real w11, w12, *w13=w+166;
+  const casadi_real **arg1=arg+5, *cs, *wr01, *wr14;
+  /* #0: @0 = zeros(33x1) */
+  casadi_clear(w00, 33);
+  /* #1: @1 = input[0][0] */
+  wr01 = arg[0] ? arg[0] : casadi_zeros;
+  /* #2: @2 = 1 */
+  w02 = 1.;
+  /* #3: @3 = input[1][0] */
+  casadi_copy(arg[1], 4, w03);
+  /* #4: @4 = @3[2] */
+  for (rr=(&w04), cs=w03+2; cs!=w03+3; cs+=1) *rr++ = *cs;
+  /* #5: @5 = input[2][0] */
+  casadi_copy(arg[2], 3, w05);
+  /* #6: @6 = @5[0] */
+  for (rr=(&w06), cs=w05+0; cs!=w05+1; cs+=1) *rr++ = *cs;
+  /* #7: @6 = (@4*@6) */
+  w06  = (w04*w06);
+  /* #8: @7 = @5[1] */
+  for (rr=(&w07), cs=w05+1; cs!=w05+2; cs+=1) *rr++ = *cs;
+  /* #9: @4 = (@4*@7) */
+  w04 *= w07;
+  /* #10: @7 = @3[0] */
+  for (rr=(&w07), cs=w03+0; cs!=w03+1; cs+=1) *rr++ = *cs;
+  /* #11: @8 = (@6*@7) */
+  w08  = (w06*w07);
+  /* #12: @7 = (@4*@7) */
+  w07  = (w04*w07);
+  /* #13: @9 = @3[1] */
+  for (rr=(&w09), cs=w03+1; cs!=w03+2; cs+=1) *rr++ = *cs;
+  /* #14: @10 = (@6*@9) */
+  w10  = (w06*w09);
+  /* #15: @11 = @3[3] */
+  for (rr=(&w11), cs=w03+3; cs!=w03+4; cs+=1) *rr++ = *cs;
+  /* #16: @12 = @5[2] */
+  for (rr=(&w12), cs=w05+2; cs!=w05+3; cs+=1) *rr++ = *cs;
+  /* #17: @11 = (@11*@12) */
+  w11 *= w12;
+  /* #18: @10 = (@10-@11) */
+  w10 -= w11;
+  /* #19: @9 = (@4*@9) */
+  w09  = (w04*w09);
+  /* #20: @13 = vertcat(@2, @6, @4, @8, @7, @10, @9) */
+  rr=w13;
+  *rr++ = w02;
+  *rr++ = w06;
+  *rr++ = w04;
+  *rr++ = w08;
+  *rr++ = w07;
+  *rr++ = w10;
+  *rr++ = w09;
+  /* #21: @0 = mac(@1,@13,@0) */
+  casadi_mtimes_dense(wr01, 33, 7, w13, 1, w00, 0);
+  /* #22: @2 = haa_jury32(@0) */
+  arg1[0]=w00;
+  res1[0]=(&w02);
+  if (casadi_f14(arg1, res1, iw, w, 0)) return 1;
+  /* #23: output[0][0] = @2 */
+  if (res[0]) res[0][0] = w02;
+  /* #24: @14 = input[4][0] */
+  wr14 = arg[4] ? arg[4] : casadi_zeros;
+  /* #25: @0 = (@0*@14) */
+  for (i=0, rr=w00, cs=wr14; i<33; ++i) (*rr++) *= (*cs++);
+  /* #26: @2 = haa_jury32(@0) */
+  arg1[0]=w00;
+  res1[0]=(&w02);
+  if (casadi_f14(arg1, res1, iw, w, 0)) return 1;
+  /* #27: output[0][1] = @2 */
+  if (res[0]) res[0][1] = w02;
+  return 0;
+}
+
+/* f_true:(i0[33x7],i1[4],i2[3],i3[33],i4[33])->(o0[2]) */
+static int casadi_f17(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
+  casadi_int i;
+  casadi_real **res1=res+1, *rr, *w00=w+126, w02, *w03=w+159, w04, *w05=w+163, w06, w07, w08, w09, w10;
+  casadi_real w11, w12, *w13=w+166;
+  const casadi_real **arg1=arg+5, *cs, *wr01, *wr14;
+  /* #0: @0 = zeros(33x1) */
+  casadi_clear(w00, 33);
+  /* #1: @1 = input[0][0] */
+  wr01 = arg[0] ? arg[0] : casadi_zeros;
+  /* #2: @2 = 1 */
+  w02 = 1.;
+  /* #3: @3 = input[1][0] */
+  casadi_copy(arg[1], 4, w03);
+  /* #4: @4 = @3[2] */
+  for (rr=(&w04), cs=w03+2; cs!=w03+3; cs+=1) *rr++ = *cs;
+  /* #5: @5 = input[2][0] */
+  casadi_copy(arg[2], 3, w05);
+  /* #6: @6 = @5[0] */
+  for (rr=(&w06), cs=w05+0; cs!=w05+1; cs+=1) *rr++ = *cs;
+  /* #7: @6 = (@4*@6) */
+  w06  = (w04*w06);
+  /* #8: @7 = @5[1] */
+  for (rr=(&w07), cs=w05+1; cs!=w05+2; cs+=1) *rr++ = *cs;
+  /* #9: @4 = (@4*@7) */
+  w04 *= w07;
+  /* #10: @7 = @3[0] */
+  for (rr=(&w07), cs=w03+0; cs!=w03+1; cs+=1) *rr++ = *cs;
+  /* #11: @8 = (@6*@7) */
+  w08  = (w06*w07);
+  /* #12: @7 = (@4*@7) */
+  w07  = (w04*w07);
+  /* #13: @9 = @3[1] */
+  for (rr=(&w09), cs=w03+1; cs!=w03+2; cs+=1) *rr++ = *cs;
+  /* #14: @10 = (@6*@9) */
+  w10  = (w06*w09);
+  /* #15: @11 = @3[3] */
+  for (rr=(&w11), cs=w03+3; cs!=w03+4; cs+=1) *rr++ = *cs;
+  /* #16: @12 = @5[2] */
+  for (rr=(&w12), cs=w05+2; cs!=w05+3; cs+=1) *rr++ = *cs;
+  /* #17: @11 = (@11*@12) */
+  w11 *= w12;
+  /* #18: @10 = (@10-@11) */
+  w10 -= w11;
+  /* #19: @9 = (@4*@9) */
+  w09  = (w04*w09);
+  /* #20: @13 = vertcat(@2, @6, @4, @8, @7, @10, @9) */
+  rr=w13;
+  *rr++ = w02;
+  *rr++ = w06;
+  *rr++ = w04;
+  *rr++ = w08;
+  *rr++ = w07;
+  *rr++ = w10;
+  *rr++ = w09;
+  /* #21: @0 = mac(@1,@13,@0) */
+  casadi_mtimes_dense(wr01, 33, 7, w13, 1, w00, 0);
+  /* #22: @14 = input[3][0] */
+  wr14 = arg[3] ? arg[3] : casadi_zeros;
+  /* #23: @0 = (@0*@14) */
+  for (i=0, rr=w00, cs=wr14; i<33; ++i) (*rr++) *= (*cs++);
+  /* #24: @2 = haa_jury32(@0) */
+  arg1[0]=w00;
+  res1[0]=(&w02);
+  if (casadi_f14(arg1, res1, iw, w, 0)) return 1;
+  /* #25: output[0][0] = @2 */
+  if (res[0]) res[0][0] = w02;
+  /* #26: output[0][1] = @2 */
+  if (res[0]) res[0][1] = w02;
+  return 0;
+}
+
+/* switch:(i0,i1[33x7],i2[4],i3[3],i4[33],i5[33])->(o0[2]) */
+static int casadi_f15(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
+  if (arg[0] ? casadi_to_int(*arg[0]) : 0) {
+    if (casadi_f17(arg+1, res, iw, w, 0)) return 1;
+  } else {
+    if (casadi_f16(arg+1, res, iw, w, 0)) return 1;
+  }
+  return 0;
+}
+
+/* haa_decide32:(basis[33x7],const[3],point[4],s_in[33],s_out[33])->(kmax,k_in,k_out) */
+static int casadi_f13(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
+  casadi_int i;
+  casadi_real **res1=res+3, *rr, *w00=w+446, w02, *w03=w+479, w04, *w05=w+483, w06, w07, w08, w09, w10;
+  casadi_real w11, w12, *w13=w+486, *w15=w+493;
+  const casadi_real **arg1=arg+5, *cs, *wr00, *wr01, *wr14;
   /* #0: @0 = zeros(33x1) */
   casadi_clear(w00, 33);
   /* #1: @1 = input[0][0] */
@@ -26969,51 +27297,44 @@ static int casadi_f10(const casadi_real** arg, casadi_real** res, casadi_int* iw
   *rr++ = w09;
   /* #21: @0 = mac(@1,@13,@0) */
   casadi_mtimes_dense(wr01, 33, 7, w13, 1, w00, 0);
-  /* #22: @2 = haa_jury32(@0) */
+  /* #22: @14 = input[3][0] */
+  wr14 = arg[3] ? arg[3] : casadi_zeros;
+  /* #23: @0 = (@0*@14) */
+  for (i=0, rr=w00, cs=wr14; i<33; ++i) (*rr++) *= (*cs++);
+  /* #24: @2 = haa_jury32(@0) */
   arg1[0]=w00;
   res1[0]=(&w02);
-  if (casadi_f11(arg1, res1, iw, w, 0)) return 1;
-  /* #23: output[0][0] = @2 */
-  if (res[0]) res[0][0] = w02;
-  /* #24: @2 = 1 */
-  w02 = 1.;
-  /* #25: @6 = input[3][0] */
-  w06 = arg[3] ? arg[3][0] : 0;
-  /* #26: @2 = (@2-@6) */
-  w02 -= w06;
-  /* #27: @14 = [-32, -31, -30, -29, -28, -27, -26, -25, -24, -23, -22, -21, -20, -19, -18, -17, -16, -15, -14, -13, -12, -11, -10, -9, -8, -7, -6, -5, -4, -3, -2, -1, 0] */
-  wr14 = casadi_c1;
-  /* #28: @14 = pow(@2,@14) */
-  for (i=0, rr=w14, cs=wr14; i<33; ++i) (*rr++)  = pow(w02,(*cs++));
-  /* #29: @14 = (@0*@14) */
-  for (i=0, rr=w14, cr=w00, cs=w14; i<33; ++i) (*rr++)  = ((*cr++)*(*cs++));
-  /* #30: @2 = haa_jury32(@14) */
-  arg1[0]=w14;
-  res1[0]=(&w02);
-  if (casadi_f11(arg1, res1, iw, w, 0)) return 1;
+  if (casadi_f14(arg1, res1, iw, w, 0)) return 1;
+  /* #25: @6 = 1 */
+  w06 = 1.;
+  /* #26: @6 = (@2<@6) */
+  w06  = (w02<w06);
+  /* #27: @0 = input[4][0] */
+  wr00 = arg[4] ? arg[4] : casadi_zeros;
+  /* #28: @15 = switch(@6, @1, @3, @5, @14, @0) */
+  arg1[0]=(&w06);
+  arg1[1]=wr01;
+  arg1[2]=w03;
+  arg1[3]=w05;
+  arg1[4]=wr14;
+  arg1[5]=wr00;
+  res1[0]=w15;
+  if (casadi_f15(arg1, res1, iw, w, 0)) return 1;
+  /* #29: @6 = @15[0] */
+  for (rr=(&w06), cs=w15+0; cs!=w15+1; cs+=1) *rr++ = *cs;
+  /* #30: output[0][0] = @6 */
+  if (res[0]) res[0][0] = w06;
   /* #31: output[1][0] = @2 */
   if (res[1]) res[1][0] = w02;
-  /* #32: @2 = 1 */
-  w02 = 1.;
-  /* #33: @2 = (@2+@6) */
-  w02 += w06;
-  /* #34: @14 = [-32, -31, -30, -29, -28, -27, -26, -25, -24, -23, -22, -21, -20, -19, -18, -17, -16, -15, -14, -13, -12, -11, -10, -9, -8, -7, -6, -5, -4, -3, -2, -1, 0] */
-  wr14 = casadi_c1;
-  /* #35: @14 = pow(@2,@14) */
-  for (i=0, rr=w14, cs=wr14; i<33; ++i) (*rr++)  = pow(w02,(*cs++));
-  /* #36: @0 = (@0*@14) */
-  for (i=0, rr=w00, cs=w14; i<33; ++i) (*rr++) *= (*cs++);
-  /* #37: @2 = haa_jury32(@0) */
-  arg1[0]=w00;
-  res1[0]=(&w02);
-  if (casadi_f11(arg1, res1, iw, w, 0)) return 1;
-  /* #38: output[2][0] = @2 */
+  /* #32: @2 = @15[1] */
+  for (rr=(&w02), cs=w15+1; cs!=w15+2; cs+=1) *rr++ = *cs;
+  /* #33: output[2][0] = @2 */
   if (res[2]) res[2][0] = w02;
   return 0;
 }
 
 CASADI_SYMBOL_EXPORT int haa_decide32(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem){
-  return casadi_f10(arg, res, iw, w, mem);
+  return casadi_f13(arg, res, iw, w, mem);
 }
 
 CASADI_SYMBOL_EXPORT int haa_decide32_checkout(void) {
@@ -27029,7 +27350,7 @@ CASADI_SYMBOL_EXPORT void haa_decide32_incref(void) {
 CASADI_SYMBOL_EXPORT void haa_decide32_decref(void) {
 }
 
-CASADI_SYMBOL_EXPORT casadi_int haa_decide32_n_in(void) { return 4;}
+CASADI_SYMBOL_EXPORT casadi_int haa_decide32_n_in(void) { return 5;}
 
 CASADI_SYMBOL_EXPORT casadi_int haa_decide32_n_out(void) { return 3;}
 
@@ -27044,7 +27365,8 @@ CASADI_SYMBOL_EXPORT const char* haa_decide32_name_in(casadi_int i) {
     case 0: return "basis";
     case 1: return "const";
     case 2: return "point";
-    case 3: return "band";
+    case 3: return "s_in";
+    case 4: return "s_out";
     default: return 0;
   }
 }
@@ -27063,7 +27385,8 @@ CASADI_SYMBOL_EXPORT const casadi_int* haa_decide32_sparsity_in(casadi_int i) {
     case 0: return casadi_s11;
     case 1: return casadi_s6;
     case 2: return casadi_s8;
-    case 3: return casadi_s4;
+    case 3: return casadi_s14;
+    case 4: return casadi_s14;
     default: return 0;
   }
 }
@@ -27078,23 +27401,23 @@ CASADI_SYMBOL_EXPORT const casadi_int* haa_decide32_sparsity_out(casadi_int i) {
 }
 
 CASADI_SYMBOL_EXPORT int haa_decide32_work(casadi_int *sz_arg, casadi_int* sz_res, casadi_int *sz_iw, casadi_int *sz_w) {
-  if (sz_arg) *sz_arg = 11;
-  if (sz_res) *sz_res = 4;
+  if (sz_arg) *sz_arg = 23;
+  if (sz_res) *sz_res = 6;
   if (sz_iw) *sz_iw = 0;
-  if (sz_w) *sz_w = 206;
+  if (sz_w) *sz_w = 495;
   return 0;
 }
 
 CASADI_SYMBOL_EXPORT int haa_decide32_work_bytes(casadi_int *sz_arg, casadi_int* sz_res, casadi_int *sz_iw, casadi_int *sz_w) {
-  if (sz_arg) *sz_arg = 11*sizeof(const casadi_real*);
-  if (sz_res) *sz_res = 4*sizeof(casadi_real*);
+  if (sz_arg) *sz_arg = 23*sizeof(const casadi_real*);
+  if (sz_res) *sz_res = 6*sizeof(casadi_real*);
   if (sz_iw) *sz_iw = 0*sizeof(casadi_int);
-  if (sz_w) *sz_w = 206*sizeof(casadi_real);
+  if (sz_w) *sz_w = 495*sizeof(casadi_real);
   return 0;
 }
 
 /* haa_jury64:(a[65])->(kmax) */
-static int casadi_f13(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
+static int casadi_f19(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
   casadi_real a000, a001, a002, a003, a004, a005, a006, a007, a008, a009, a010, a011;
   casadi_real a012, a013, a014, a015, a016, a017, a018, a019, a020, a021, a022, a023;
   casadi_real a024, a025, a026, a027, a028, a029, a030, a031, a032, a033, a034, a035;
@@ -39791,12 +40114,170 @@ static int casadi_f13(const casadi_real** arg, casadi_real** res, casadi_int* iw
   return 0;
 }
 
-/* haa_decide64:(basis[65x7],const[3],point[4],band)->(kmax,k_in,k_out) */
-static int casadi_f12(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
+/* f_false:(i0[65x7],i1[4],i2[3],i3[65],i4[65])->(o0[2]) */
+static int casadi_f21(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
   casadi_int i;
-  casadi_real **res1=res+3, *rr, *w00=w+254, w02, *w03=w+319, w04, *w05=w+323, w06, w07, w08, w09, w10;
-  casadi_real w11, w12, *w13=w+326, *w14=w+333;
-  const casadi_real **arg1=arg+4, *cr, *cs, *wr01, *wr14;
+  casadi_real **res1=res+1, *rr, *w00=w+254, w02, *w03=w+319, w04, *w05=w+323, w06, w07, w08, w09, w10;
+  casadi_real w11, w12, *w13=w+326;
+  const casadi_real **arg1=arg+5, *cs, *wr01, *wr14;
+  /* #0: @0 = zeros(65x1) */
+  casadi_clear(w00, 65);
+  /* #1: @1 = input[0][0] */
+  wr01 = arg[0] ? arg[0] : casadi_zeros;
+  /* #2: @2 = 1 */
+  w02 = 1.;
+  /* #3: @3 = input[1][0] */
+  casadi_copy(arg[1], 4, w03);
+  /* #4: @4 = @3[2] */
+  for (rr=(&w04), cs=w03+2; cs!=w03+3; cs+=1) *rr++ = *cs;
+  /* #5: @5 = input[2][0] */
+  casadi_copy(arg[2], 3, w05);
+  /* #6: @6 = @5[0] */
+  for (rr=(&w06), cs=w05+0; cs!=w05+1; cs+=1) *rr++ = *cs;
+  /* #7: @6 = (@4*@6) */
+  w06  = (w04*w06);
+  /* #8: @7 = @5[1] */
+  for (rr=(&w07), cs=w05+1; cs!=w05+2; cs+=1) *rr++ = *cs;
+  /* #9: @4 = (@4*@7) */
+  w04 *= w07;
+  /* #10: @7 = @3[0] */
+  for (rr=(&w07), cs=w03+0; cs!=w03+1; cs+=1) *rr++ = *cs;
+  /* #11: @8 = (@6*@7) */
+  w08  = (w06*w07);
+  /* #12: @7 = (@4*@7) */
+  w07  = (w04*w07);
+  /* #13: @9 = @3[1] */
+  for (rr=(&w09), cs=w03+1; cs!=w03+2; cs+=1) *rr++ = *cs;
+  /* #14: @10 = (@6*@9) */
+  w10  = (w06*w09);
+  /* #15: @11 = @3[3] */
+  for (rr=(&w11), cs=w03+3; cs!=w03+4; cs+=1) *rr++ = *cs;
+  /* #16: @12 = @5[2] */
+  for (rr=(&w12), cs=w05+2; cs!=w05+3; cs+=1) *rr++ = *cs;
+  /* #17: @11 = (@11*@12) */
+  w11 *= w12;
+  /* #18: @10 = (@10-@11) */
+  w10 -= w11;
+  /* #19: @9 = (@4*@9) */
+  w09  = (w04*w09);
+  /* #20: @13 = vertcat(@2, @6, @4, @8, @7, @10, @9) */
+  rr=w13;
+  *rr++ = w02;
+  *rr++ = w06;
+  *rr++ = w04;
+  *rr++ = w08;
+  *rr++ = w07;
+  *rr++ = w10;
+  *rr++ = w09;
+  /* #21: @0 = mac(@1,@13,@0) */
+  casadi_mtimes_dense(wr01, 65, 7, w13, 1, w00, 0);
+  /* #22: @2 = haa_jury64(@0) */
+  arg1[0]=w00;
+  res1[0]=(&w02);
+  if (casadi_f19(arg1, res1, iw, w, 0)) return 1;
+  /* #23: output[0][0] = @2 */
+  if (res[0]) res[0][0] = w02;
+  /* #24: @14 = input[4][0] */
+  wr14 = arg[4] ? arg[4] : casadi_zeros;
+  /* #25: @0 = (@0*@14) */
+  for (i=0, rr=w00, cs=wr14; i<65; ++i) (*rr++) *= (*cs++);
+  /* #26: @2 = haa_jury64(@0) */
+  arg1[0]=w00;
+  res1[0]=(&w02);
+  if (casadi_f19(arg1, res1, iw, w, 0)) return 1;
+  /* #27: output[0][1] = @2 */
+  if (res[0]) res[0][1] = w02;
+  return 0;
+}
+
+/* f_true:(i0[65x7],i1[4],i2[3],i3[65],i4[65])->(o0[2]) */
+static int casadi_f22(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
+  casadi_int i;
+  casadi_real **res1=res+1, *rr, *w00=w+254, w02, *w03=w+319, w04, *w05=w+323, w06, w07, w08, w09, w10;
+  casadi_real w11, w12, *w13=w+326;
+  const casadi_real **arg1=arg+5, *cs, *wr01, *wr14;
+  /* #0: @0 = zeros(65x1) */
+  casadi_clear(w00, 65);
+  /* #1: @1 = input[0][0] */
+  wr01 = arg[0] ? arg[0] : casadi_zeros;
+  /* #2: @2 = 1 */
+  w02 = 1.;
+  /* #3: @3 = input[1][0] */
+  casadi_copy(arg[1], 4, w03);
+  /* #4: @4 = @3[2] */
+  for (rr=(&w04), cs=w03+2; cs!=w03+3; cs+=1) *rr++ = *cs;
+  /* #5: @5 = input[2][0] */
+  casadi_copy(arg[2], 3, w05);
+  /* #6: @6 = @5[0] */
+  for (rr=(&w06), cs=w05+0; cs!=w05+1; cs+=1) *rr++ = *cs;
+  /* #7: @6 = (@4*@6) */
+  w06  = (w04*w06);
+  /* #8: @7 = @5[1] */
+  for (rr=(&w07), cs=w05+1; cs!=w05+2; cs+=1) *rr++ = *cs;
+  /* #9: @4 = (@4*@7) */
+  w04 *= w07;
+  /* #10: @7 = @3[0] */
+  for (rr=(&w07), cs=w03+0; cs!=w03+1; cs+=1) *rr++ = *cs;
+  /* #11: @8 = (@6*@7) */
+  w08  = (w06*w07);
+  /* #12: @7 = (@4*@7) */
+  w07  = (w04*w07);
+  /* #13: @9 = @3[1] */
+  for (rr=(&w09), cs=w03+1; cs!=w03+2; cs+=1) *rr++ = *cs;
+  /* #14: @10 = (@6*@9) */
+  w10  = (w06*w09);
+  /* #15: @11 = @3[3] */
+  for (rr=(&w11), cs=w03+3; cs!=w03+4; cs+=1) *rr++ = *cs;
+  /* #16: @12 = @5[2] */
+  for (rr=(&w12), cs=w05+2; cs!=w05+3; cs+=1) *rr++ = *cs;
+  /* #17: @11 = (@11*@12) */
+  w11 *= w12;
+  /* #18: @10 = (@10-@11) */
+  w10 -= w11;
+  /* #19: @9 = (@4*@9) */
+  w09  = (w04*w09);
+  /* #20: @13 = vertcat(@2, @6, @4, @8, @7, @10, @9) */
+  rr=w13;
+  *rr++ = w02;
+  *rr++ = w06;
+  *rr++ = w04;
+  *rr++ = w08;
+  *rr++ = w07;
+  *rr++ = w10;
+  *rr++ = w09;
+  /* #21: @0 = mac(@1,@13,@0) */
+  casadi_mtimes_dense(wr01, 65, 7, w13, 1, w00, 0);
+  /* #22: @14 = input[3][0] */
+  wr14 = arg[3] ? arg[3] : casadi_zeros;
+  /* #23: @0 = (@0*@14) */
+  for (i=0, rr=w00, cs=wr14; i<65; ++i) (*rr++) *= (*cs++);
+  /* #24: @2 = haa_jury64(@0) */
+  arg1[0]=w00;
+  res1[0]=(&w02);
+  if (casadi_f19(arg1, res1, iw, w, 0)) return 1;
+  /* #25: output[0][0] = @2 */
+  if (res[0]) res[0][0] = w02;
+  /* #26: output[0][1] = @2 */
+  if (res[0]) res[0][1] = w02;
+  return 0;
+}
+
+/* switch:(i0,i1[65x7],i2[4],i3[3],i4[65],i5[65])->(o0[2]) */
+static int casadi_f20(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
+  if (arg[0] ? casadi_to_int(*arg[0]) : 0) {
+    if (casadi_f22(arg+1, res, iw, w, 0)) return 1;
+  } else {
+    if (casadi_f21(arg+1, res, iw, w, 0)) return 1;
+  }
+  return 0;
+}
+
+/* haa_decide64:(basis[65x7],const[3],point[4],s_in[65],s_out[65])->(kmax,k_in,k_out) */
+static int casadi_f18(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
+  casadi_int i;
+  casadi_real **res1=res+3, *rr, *w00=w+862, w02, *w03=w+927, w04, *w05=w+931, w06, w07, w08, w09, w10;
+  casadi_real w11, w12, *w13=w+934, *w15=w+941;
+  const casadi_real **arg1=arg+5, *cs, *wr00, *wr01, *wr14;
   /* #0: @0 = zeros(65x1) */
   casadi_clear(w00, 65);
   /* #1: @1 = input[0][0] */
@@ -39848,51 +40329,44 @@ static int casadi_f12(const casadi_real** arg, casadi_real** res, casadi_int* iw
   *rr++ = w09;
   /* #21: @0 = mac(@1,@13,@0) */
   casadi_mtimes_dense(wr01, 65, 7, w13, 1, w00, 0);
-  /* #22: @2 = haa_jury64(@0) */
+  /* #22: @14 = input[3][0] */
+  wr14 = arg[3] ? arg[3] : casadi_zeros;
+  /* #23: @0 = (@0*@14) */
+  for (i=0, rr=w00, cs=wr14; i<65; ++i) (*rr++) *= (*cs++);
+  /* #24: @2 = haa_jury64(@0) */
   arg1[0]=w00;
   res1[0]=(&w02);
-  if (casadi_f13(arg1, res1, iw, w, 0)) return 1;
-  /* #23: output[0][0] = @2 */
-  if (res[0]) res[0][0] = w02;
-  /* #24: @2 = 1 */
-  w02 = 1.;
-  /* #25: @6 = input[3][0] */
-  w06 = arg[3] ? arg[3][0] : 0;
-  /* #26: @2 = (@2-@6) */
-  w02 -= w06;
-  /* #27: @14 = [-64, -63, -62, -61, -60, -59, -58, -57, -56, -55, -54, -53, -52, -51, -50, -49, -48, -47, -46, -45, -44, -43, -42, -41, -40, -39, -38, -37, -36, -35, -34, -33, -32, -31, -30, -29, -28, -27, -26, -25, -24, -23, -22, -21, -20, -19, -18, -17, -16, -15, -14, -13, -12, -11, -10, -9, -8, -7, -6, -5, -4, -3, -2, -1, 0] */
-  wr14 = casadi_c2;
-  /* #28: @14 = pow(@2,@14) */
-  for (i=0, rr=w14, cs=wr14; i<65; ++i) (*rr++)  = pow(w02,(*cs++));
-  /* #29: @14 = (@0*@14) */
-  for (i=0, rr=w14, cr=w00, cs=w14; i<65; ++i) (*rr++)  = ((*cr++)*(*cs++));
-  /* #30: @2 = haa_jury64(@14) */
-  arg1[0]=w14;
-  res1[0]=(&w02);
-  if (casadi_f13(arg1, res1, iw, w, 0)) return 1;
+  if (casadi_f19(arg1, res1, iw, w, 0)) return 1;
+  /* #25: @6 = 1 */
+  w06 = 1.;
+  /* #26: @6 = (@2<@6) */
+  w06  = (w02<w06);
+  /* #27: @0 = input[4][0] */
+  wr00 = arg[4] ? arg[4] : casadi_zeros;
+  /* #28: @15 = switch(@6, @1, @3, @5, @14, @0) */
+  arg1[0]=(&w06);
+  arg1[1]=wr01;
+  arg1[2]=w03;
+  arg1[3]=w05;
+  arg1[4]=wr14;
+  arg1[5]=wr00;
+  res1[0]=w15;
+  if (casadi_f20(arg1, res1, iw, w, 0)) return 1;
+  /* #29: @6 = @15[0] */
+  for (rr=(&w06), cs=w15+0; cs!=w15+1; cs+=1) *rr++ = *cs;
+  /* #30: output[0][0] = @6 */
+  if (res[0]) res[0][0] = w06;
   /* #31: output[1][0] = @2 */
   if (res[1]) res[1][0] = w02;
-  /* #32: @2 = 1 */
-  w02 = 1.;
-  /* #33: @2 = (@2+@6) */
-  w02 += w06;
-  /* #34: @14 = [-64, -63, -62, -61, -60, -59, -58, -57, -56, -55, -54, -53, -52, -51, -50, -49, -48, -47, -46, -45, -44, -43, -42, -41, -40, -39, -38, -37, -36, -35, -34, -33, -32, -31, -30, -29, -28, -27, -26, -25, -24, -23, -22, -21, -20, -19, -18, -17, -16, -15, -14, -13, -12, -11, -10, -9, -8, -7, -6, -5, -4, -3, -2, -1, 0] */
-  wr14 = casadi_c2;
-  /* #35: @14 = pow(@2,@14) */
-  for (i=0, rr=w14, cs=wr14; i<65; ++i) (*rr++)  = pow(w02,(*cs++));
-  /* #36: @0 = (@0*@14) */
-  for (i=0, rr=w00, cs=w14; i<65; ++i) (*rr++) *= (*cs++);
-  /* #37: @2 = haa_jury64(@0) */
-  arg1[0]=w00;
-  res1[0]=(&w02);
-  if (casadi_f13(arg1, res1, iw, w, 0)) return 1;
-  /* #38: output[2][0] = @2 */
+  /* #32: @2 = @15[1] */
+  for (rr=(&w02), cs=w15+1; cs!=w15+2; cs+=1) *rr++ = *cs;
+  /* #33: output[2][0] = @2 */
   if (res[2]) res[2][0] = w02;
   return 0;
 }
 
 CASADI_SYMBOL_EXPORT int haa_decide64(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem){
-  return casadi_f12(arg, res, iw, w, mem);
+  return casadi_f18(arg, res, iw, w, mem);
 }
 
 CASADI_SYMBOL_EXPORT int haa_decide64_checkout(void) {
@@ -39908,7 +40382,7 @@ CASADI_SYMBOL_EXPORT void haa_decide64_incref(void) {
 CASADI_SYMBOL_EXPORT void haa_decide64_decref(void) {
 }
 
-CASADI_SYMBOL_EXPORT casadi_int haa_decide64_n_in(void) { return 4;}
+CASADI_SYMBOL_EXPORT casadi_int haa_decide64_n_in(void) { return 5;}
 
 CASADI_SYMBOL_EXPORT casadi_int haa_decide64_n_out(void) { return 3;}
 
@@ -39923,7 +40397,8 @@ CASADI_SYMBOL_EXPORT const char* haa_decide64_name_in(casadi_int i) {
     case 0: return "basis";
     case 1: return "const";
     case 2: return "point";
-    case 3: return "band";
+    case 3: return "s_in";
+    case 4: return "s_out";
     default: return 0;
   }
 }
@@ -39942,7 +40417,8 @@ CASADI_SYMBOL_EXPORT const casadi_int* haa_decide64_sparsity_in(casadi_int i) {
     case 0: return casadi_s12;
     case 1: return casadi_s6;
     case 2: return casadi_s8;
-    case 3: return casadi_s4;
+    case 3: return casadi_s15;
+    case 4: return casadi_s15;
     default: return 0;
   }
 }
@@ -39957,18 +40433,18 @@ CASADI_SYMBOL_EXPORT const casadi_int* haa_decide64_sparsity_out(casadi_int i) {
 }
 
 CASADI_SYMBOL_EXPORT int haa_decide64_work(casadi_int *sz_arg, casadi_int* sz_res, casadi_int *sz_iw, casadi_int *sz_w) {
-  if (sz_arg) *sz_arg = 11;
-  if (sz_res) *sz_res = 4;
+  if (sz_arg) *sz_arg = 23;
+  if (sz_res) *sz_res = 6;
   if (sz_iw) *sz_iw = 0;
-  if (sz_w) *sz_w = 398;
+  if (sz_w) *sz_w = 943;
   return 0;
 }
 
 CASADI_SYMBOL_EXPORT int haa_decide64_work_bytes(casadi_int *sz_arg, casadi_int* sz_res, casadi_int *sz_iw, casadi_int *sz_w) {
-  if (sz_arg) *sz_arg = 11*sizeof(const casadi_real*);
-  if (sz_res) *sz_res = 4*sizeof(casadi_real*);
+  if (sz_arg) *sz_arg = 23*sizeof(const casadi_real*);
+  if (sz_res) *sz_res = 6*sizeof(casadi_real*);
   if (sz_iw) *sz_iw = 0*sizeof(casadi_int);
-  if (sz_w) *sz_w = 398*sizeof(casadi_real);
+  if (sz_w) *sz_w = 943*sizeof(casadi_real);
   return 0;
 }
 

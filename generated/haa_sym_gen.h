@@ -121,10 +121,10 @@ const casadi_int* haa_decide16_sparsity_in(casadi_int i);
 const casadi_int* haa_decide16_sparsity_out(casadi_int i);
 int haa_decide16_work(casadi_int *sz_arg, casadi_int* sz_res, casadi_int *sz_iw, casadi_int *sz_w);
 int haa_decide16_work_bytes(casadi_int *sz_arg, casadi_int* sz_res, casadi_int *sz_iw, casadi_int *sz_w);
-#define haa_decide16_SZ_ARG 11
-#define haa_decide16_SZ_RES 4
+#define haa_decide16_SZ_ARG 23
+#define haa_decide16_SZ_RES 6
 #define haa_decide16_SZ_IW 0
-#define haa_decide16_SZ_W 110
+#define haa_decide16_SZ_W 271
 int haa_decide32(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem);
 int haa_decide32_checkout(void);
 void haa_decide32_release(int mem);
@@ -139,10 +139,10 @@ const casadi_int* haa_decide32_sparsity_in(casadi_int i);
 const casadi_int* haa_decide32_sparsity_out(casadi_int i);
 int haa_decide32_work(casadi_int *sz_arg, casadi_int* sz_res, casadi_int *sz_iw, casadi_int *sz_w);
 int haa_decide32_work_bytes(casadi_int *sz_arg, casadi_int* sz_res, casadi_int *sz_iw, casadi_int *sz_w);
-#define haa_decide32_SZ_ARG 11
-#define haa_decide32_SZ_RES 4
+#define haa_decide32_SZ_ARG 23
+#define haa_decide32_SZ_RES 6
 #define haa_decide32_SZ_IW 0
-#define haa_decide32_SZ_W 206
+#define haa_decide32_SZ_W 495
 int haa_decide64(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem);
 int haa_decide64_checkout(void);
 void haa_decide64_release(int mem);
@@ -157,10 +157,10 @@ const casadi_int* haa_decide64_sparsity_in(casadi_int i);
 const casadi_int* haa_decide64_sparsity_out(casadi_int i);
 int haa_decide64_work(casadi_int *sz_arg, casadi_int* sz_res, casadi_int *sz_iw, casadi_int *sz_w);
 int haa_decide64_work_bytes(casadi_int *sz_arg, casadi_int* sz_res, casadi_int *sz_iw, casadi_int *sz_w);
-#define haa_decide64_SZ_ARG 11
-#define haa_decide64_SZ_RES 4
+#define haa_decide64_SZ_ARG 23
+#define haa_decide64_SZ_RES 6
 #define haa_decide64_SZ_IW 0
-#define haa_decide64_SZ_W 398
+#define haa_decide64_SZ_W 943
 void haa_sym_gen_casadi_version(int* major, int* minor, int* patch);
 int haa_sym_gen_casadi_int_size(void);
 int haa_sym_gen_casadi_real_size(void);

@@ -306,8 +306,9 @@ class ClosedLoop:
             kmax = np.array(kmax).ravel()
             refined = np.abs(rho - 1) < refine_band
         else:
+            powers = np.arange(self.capacity + 1) - self.capacity
             kmax, k_in, k_out = (np.array(v).ravel() for v in ev[f"haa_decide{self.capacity}"](
-                self.basis, self.const, pts, refine_band))
+                self.basis, self.const, pts, (1 - refine_band) ** powers, (1 + refine_band) ** powers))
             rho = np.full(kmax.shape, np.nan)
             # radius within refine_band of 1: not every root inside 1 - band, all inside 1 + band
             refined = (k_in >= 1) & (k_out < 1)
