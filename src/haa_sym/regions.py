@@ -231,3 +231,31 @@ def run_meta(params: Params, options: LoopOptions, **extra) -> dict:
     src = evaluators(extra.get("backend", "auto")).code.manifest["source_sha256"]
     return {"params": params.to_dict(), "options": options.to_dict(), "haa_sym": __version__,
             "generated_source_sha256": src, **extra}
+
+
+def eigenvalue_crosscheck(m: RegionMap, loop: ClosedLoop, band: float = 1e-6, chunk: int = 2000) -> dict:
+    """Check every point of a map against numpy eigenvalues of the explicit closed loop.
+
+    The closed-loop matrix is affine in the gains, A = A0 + P_gain A1 + D_gain A2 (built by
+    ``haa_sym.reference``, independent of the generated code), so the whole grid is one stacked
+    ``numpy.linalg.eigvals``. Returns the number of points, of points decided (|rho - 1| > band),
+    of disagreements among those, and the largest radius difference where the map has radii.
+    """
+    from haa_sym.reference import closed_loop_matrices
+    beta, alpha = m.meta.get("beta"), m.meta.get("alpha")
+    A0 = closed_loop_matrices(loop, 0.0, 0.0, beta, alpha)[0]
+    A1 = closed_loop_matrices(loop, 1.0, 0.0, beta, alpha)[0] - A0
+    A2 = closed_loop_matrices(loop, 0.0, 1.0, beta, alpha)[0] - A0
+    PP, DD = np.meshgrid(m.P_gain, m.D_gain, indexing="ij")
+    P, D = PP.ravel(), DD.ravel()
+    rho = np.empty(P.size)
+    for s in range(0, P.size, chunk):
+        A = A0 + P[s:s + chunk, None, None] * A1 + D[s:s + chunk, None, None] * A2
+        rho[s:s + chunk] = np.abs(np.linalg.eigvals(A)).max(axis=1)
+    decided = np.abs(rho - 1) > band
+    stable = m.stable.ravel()
+    with np.errstate(invalid="ignore"):
+        diff = np.abs(m.spectral_radius.ravel() - rho)
+    return {"points": int(P.size), "decided": int(decided.sum()),
+            "disagree": int((stable[decided] != (rho < 1)[decided]).sum()),
+            "max_radius_diff": float(np.nanmax(diff)) if np.isfinite(diff).any() else None}
