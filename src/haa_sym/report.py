@@ -19,6 +19,30 @@ def _table(header, rows) -> str:
     return "\n".join(lines)
 
 
+def table2_markdown(cells: list[dict], spec: dict) -> str:
+    """Table 2 as Markdown: "paper / computed (worst excess @ frequency)" per cell."""
+    cols = spec["table2"]["columns"]
+    rows = []
+    by_row: dict = {}
+    for cell in cells:
+        by_row.setdefault(cell["row"], {})[cell["column"]] = cell
+    for label, row in by_row.items():
+        line = [label]
+        for col in cols:
+            x = row[col]
+            ex = f" ({x['phase_excess_deg']:+.2f} deg @ {x['omega_worst_rad_s']:.3g} rad/s)" \
+                if x["phase_excess_deg"] != "" else ""
+            mark = "" if x["agrees"] else " **differs**"
+            line.append(f"{x['paper']} / {x['computed']}{ex}{mark}")
+        rows.append(line)
+    return _table(["row (paper / computed)"] + cols, rows)
+
+
+def option_sensitivity_markdown(rows: list[dict]) -> str:
+    return _table(["option changed from the defaults", "stable", "stable, PM < 30 deg", "passive"],
+                  [[r["change"], r["stable"], r["low_pm"], r["passive"]] for r in rows])
+
+
 def write_report(out: Path, r: dict, spec: dict, options: LoopOptions, verify_text: str) -> Path:
     from haa_sym.reproduce import _write_text
     c = spec["claims"]
@@ -48,25 +72,14 @@ def write_report(out: Path, r: dict, spec: dict, options: LoopOptions, verify_te
     keys = list(scores[0]["options"])
     add(_table(keys + ["cells reproduced"],
                [[s["options"][k] for k in keys] + [f"{s['agree']}/{s['cells']}"] for s in scores]))
+    add("\nHow each option moves the nominal map (Fig. 8a grid; cells out of "
+        f"{r['option_sensitivity'][0]['cells']}):\n")
+    add(option_sensitivity_markdown(r["option_sensitivity"]))
     add("\n## Table 2: passivity\n")
     add("Status per cell: Yes (passive), No (stable, not passive), Unstable. The excess is the "
         "worst corrected phase of Z beyond +-90 deg (<= 0: within). Passive cells touch -90 deg at "
         "Nyquist (Z is real at z = -1 and the correction is -90 deg there), so their excess is 0.\n")
-    cols = spec["table2"]["columns"]
-    rows = []
-    by_row: dict = {}
-    for cell in r["table2"]:
-        by_row.setdefault(cell["row"], {})[cell["column"]] = cell
-    for label, cells in by_row.items():
-        line = [label]
-        for col in cols:
-            x = cells[col]
-            ex = f" ({x['phase_excess_deg']:+.2f} deg @ {x['omega_worst_rad_s']:.3g} rad/s)" \
-                if x["phase_excess_deg"] != "" else ""
-            mark = "" if x["agrees"] else " **differs**"
-            line.append(f"{x['paper']} / {x['computed']}{ex}{mark}")
-        rows.append(line)
-    add(_table(["row (paper / computed)"] + cols, rows))
+    add(table2_markdown(r["table2"], spec))
     diffs = [x for x in r["table2"] if not x["agrees"]]
     if diffs:
         add("\nCells that differ, with the most likely cause:\n")

@@ -188,6 +188,22 @@ def reproduce(out: str | Path = "results", params: Params | None = None,
     result["region_stats"] = stats
     result["region_trends"] = {k: region_trends(v) for k, v in stats.items()}
 
+    # how every option moves the nominal map
+    _log("option sensitivity of the nominal map")
+    sens = []
+    variants = [("none (defaults)", {})] + [
+        (f"{k} = {v}", {k: v}) for k, vals in (("delay", (1,)), ("torque_damping", (False,)),
+                                               ("port", ("dtheta_L1", "encoder_average")),
+                                               ("colgate", ("add", "none")), ("pm_loop", ("torque",)),
+                                               ("pm_rule", ("worst",)))
+        for v in vals if getattr(options, k) != v]
+    for label, change in variants:
+        opt = LoopOptions(**{**options.to_dict(), **change})
+        m = region_map(params, P_grid, D_grid, options=opt, radius=False)
+        sens.append({"change": label, "stable": int(m.stable.sum()), "low_pm": int(m.low_pm.sum()),
+                     "passive": int(m.passive.sum()), "cells": int(m.stable.size)})
+    result["option_sensitivity"] = sens
+
     # Table 2 and the option scores
     _log("Table 2 and option scores")
     cells = table2(params, options, spec)
@@ -197,6 +213,8 @@ def reproduce(out: str | Path = "results", params: Params | None = None,
              "omega_worst_rad_s": round(c.omega_worst, 3) if np.isfinite(c.omega_worst) else ""}
             for c in cells]
     _write_text(out / "table2.csv", _csv(rows))
+    from haa_sym.report import table2_markdown
+    _write_text(out / "table2.md", "# Table 2: passivity (paper / computed)\n\n" + table2_markdown(rows, spec) + "\n")
     scores = score_options(params, spec, options)
     _write_text(out / "options_table2.csv", _csv([{**combo, "cells_reproduced": n, "cells": total}
                                                     for combo, n, total in scores]))
