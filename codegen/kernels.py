@@ -15,6 +15,8 @@ arithmetic (a gain sweep then costs one small matrix product per frequency grid,
 """
 from __future__ import annotations
 
+import functools
+
 import casadi as ca
 import numpy as np
 
@@ -34,6 +36,7 @@ def gain_monomials(point, const):
     return ca.vertcat(1, P_t, I_t, P_t * P, I_t * P, P_t * D - VC, I_t * D)
 
 
+@functools.lru_cache(maxsize=None)
 def jury_function(cap: int) -> ca.Function:
     """Schur-Cohn test of a real polynomial of degree ``cap`` (ascending coefficients).
 
@@ -41,6 +44,7 @@ def jury_function(cap: int) -> ca.Function:
     p_{m-1} = (p_m - k_m p*_m)/(z (1 - k_m^2)), p*_{m-1} = (p*_m - k_m p_m)/(1 - k_m^2).
     All roots lie in |z| < 1 iff every |k_m| < 1. Returns max_m |k_m| (stable iff < 1).
     Roots at z = 0 (leading zero coefficients, used to pad lower degrees) give k_m = 0.
+    Cached: the decision and radius functions of one capacity share one copy in the C.
     """
     a = ca.SX.sym("a", cap + 1)
     inv_lead = 1 / a[cap]
