@@ -1,11 +1,17 @@
 """CasADi kernels of the discrete closed loop (Sec. 3): pure CasADi, no sympy.
 
 The closed loop has one actuated input (V_m). With the measured torque T, the encoder angle
-theta_L1, the averaging filter F(z) = (1 - z^-N_av)/(N_av Ts), PI_t(z) of Eq. (7), the impedance
-law Eq. (8), velocity compensation VC * F(z) * theta_L1 (Eq. 6) and a computation delay of
-``d`` samples, the characteristic polynomial is
+theta_L1, the averaging filters F_N(z) = (1 - z^-N)/(N Ts) of the D term (N = N_D) and of the
+velocity compensation (N = N_VC), PI_t(z) of Eq. (7), the impedance law Eq. (8), velocity
+compensation VC * F_NVC(z) * theta_L1 (Eq. 6) and a computation delay of ``d`` samples, the
+characteristic polynomial is
 
-    chi(z) = b0 + P_t b1 + I_t b2 + P_t P_gain b3 + I_t P_gain b4 + (P_t D_gain - VC) b5 + I_t D_gain b6
+    chi(z) = b0 + P_t b1 + I_t b2 + P_t P_gain b3 + I_t P_gain b4 + (P_t D_gain - VC) b5
+             + I_t D_gain b6 - VC b7
+
+where b7 is the exact difference of the compensation's and the D term's polynomials (zero when
+both use the same average): P_t D_gain and VC nearly cancel in parts of the gain plane, so the
+two must not be rounded separately.
 
 with basis polynomials b_j fixed per discretised plant (see ``haa_sym.loop``). These kernels take
 the basis and a gain point and return the Schur-Cohn (Jury) decision and the spectral radius,
@@ -20,7 +26,7 @@ import functools
 import casadi as ca
 import numpy as np
 
-N_BASIS = 7
+N_BASIS = 8
 N_CONST = 3   # P_t0, I_t0, VC0
 N_POINT = 4   # P_gain, D_gain, beta, alpha
 # 2^-30 ~ 1e-9: below the ~1e-8 radius accuracy of the monomial basis at Ts = 1 ms
@@ -33,7 +39,7 @@ def gain_monomials(point, const):
     P_t = beta * const[0]
     I_t = beta * const[1]
     VC = alpha * const[2]
-    return ca.vertcat(1, P_t, I_t, P_t * P, I_t * P, P_t * D - VC, I_t * D)
+    return ca.vertcat(1, P_t, I_t, P_t * P, I_t * P, P_t * D - VC, I_t * D, -VC)
 
 
 @functools.lru_cache(maxsize=None)
@@ -64,7 +70,7 @@ def jury_function(cap: int) -> ca.Function:
 def stability_function(cap: int, steps: int = BISECTION_STEPS) -> ca.Function:
     """Decision and spectral radius of chi for one gain point.
 
-    Inputs: ``basis`` (cap+1 x 7, ascending coefficients of b_j), const [P_t0, I_t0, VC0],
+    Inputs: ``basis`` (cap+1 x 8, ascending coefficients of b_j), const [P_t0, I_t0, VC0],
     point [P_gain, D_gain, beta, alpha].
     Outputs: ``kmax`` of the Schur-Cohn test (stable iff < 1) and ``rho``, the spectral radius
     by ``steps`` halvings on chi(r z) (stable iff all roots inside |z| < r): linear on [0, 1] when stable,
@@ -117,7 +123,7 @@ def _div(a, b):
 
 
 N_PLANT_RESP = 12  # re/im of G_TV, G_Td, G_thV, G_thd, G_pV, G_pd
-N_STRUCT = 4       # Ts, N_av, delay (samples), port_average (0/1)
+N_STRUCT = 6       # Ts, N_av, delay (samples), port_average (0/1), N_VC, N_D
 N_TORQUE_GAINS = 2  # beta, alpha
 # Every loop transfer below is affine in x = (1, P_gain, D_gain) or a ratio of two such forms,
 # because the impedance law Eq. (8) enters linearly through the torque reference.
@@ -159,7 +165,8 @@ def loop_coefficient_function() -> ca.Function:
     Inputs: ``G`` (12): the discretised plant's responses at z = exp(j w Ts) from V_m and T_dist
     to the measured torque T, the encoder angle theta_L1 and the port velocity p;
     ``wTs`` (w Ts, rad); ``const`` [P_t0, I_t0, VC0]; ``gains`` [beta, alpha];
-    ``struct`` [Ts, N_av, delay, port_average].
+    ``struct`` [Ts, N_av, delay, port_average, N_VC, N_D]: the averaging lengths of the port
+    velocity (when averaged), the velocity compensation and the D term.
 
     Output ``coef`` (26 reals): for each of L_t, L_imp, Z_num, Z_den the complex coefficients
     (c_1, c_P, c_D), each as (re, im), so that, with x = (1, P_gain, D_gain),
@@ -180,16 +187,20 @@ def loop_coefficient_function() -> ca.Function:
     G_TV, G_Td, G_thV, G_thd, G_pV, G_pd = (_c(G[2 * i], G[2 * i + 1]) for i in range(6))
     beta, alpha = gains[0], gains[1]
     P_t, I_t, VC = beta * const[0], beta * const[1], alpha * const[2]
-    Ts, N_av, delay, port_avg = (struct[i] for i in range(4))
+    Ts, N_av, delay, port_avg, N_vc, N_d = (struct[i] for i in range(6))
     # 1 - exp(-j x) = 2 sin^2(x/2) + j sin(x): no cancellation at low frequency
     def one_minus_expm(x):
         return _c(2 * ca.sin(x / 2) ** 2, ca.sin(x))
     zero = _c(0, 0)
-    F = _scale(1 / (N_av * Ts), one_minus_expm(N_av * wTs))          # averaging filter
+    def average(N):                                                    # (1 - z^-N)/(N Ts)
+        return _scale(1 / (N * Ts), one_minus_expm(N * wTs))
+    F = average(N_d)                                                   # D term of Eq. (8)
+    F_vc = average(N_vc)                                               # Eq. (6)
+    F_port = average(N_av)                                             # averaged port velocity
     PI = _add(_c(P_t, 0), _div(_c(I_t * Ts, 0), one_minus_expm(wTs)))  # Eq. (7)
     zd = _c(ca.cos(delay * wTs), -ca.sin(delay * wTs))                 # z^-delay
     dPI = _mul(zd, PI)
-    dVCF = _mul(zd, _scale(VC, F))                                     # Eq. (6) on the filtered v
+    dVCF = _mul(zd, _scale(VC, F_vc))                                  # Eq. (6) on the filtered v
     vc_loop = _sub(_c(1, 0), _mul(dVCF, G_thV))                        # 1 - z^-d VC F G_thV
     R0 = _add(vc_loop, _mul(dPI, G_TV))                                # torque + VC loops closed
     # the impedance law imp = P_gain + D_gain F (Eq. 8) multiplies everything below
@@ -204,8 +215,8 @@ def loop_coefficient_function() -> ca.Function:
          _scale(-1, _mul(_mul(F, dPI), G_thd)))
     pick = lambda avg, other: (ca.if_else(port_avg > 0.5, avg[0], other[0]),
                                ca.if_else(port_avg > 0.5, avg[1], other[1]))
-    pV = pick(_mul(F, G_thV), G_pV)
-    pd = pick(_mul(F, G_thd), G_pd)
+    pV = pick(_mul(F_port, G_thV), G_pV)
+    pd = pick(_mul(F_port, G_thd), G_pd)
     Z_num = r
     Z_den = tuple(_add(_mul(pd, r[i]), _mul(pV, n[i])) for i in range(3))
     H_T = _div(_mul(dPI, G_TV), R0)

@@ -67,10 +67,10 @@ const casadi_int* haa_stab16_sparsity_in(casadi_int i);
 const casadi_int* haa_stab16_sparsity_out(casadi_int i);
 int haa_stab16_work(casadi_int *sz_arg, casadi_int* sz_res, casadi_int *sz_iw, casadi_int *sz_w);
 int haa_stab16_work_bytes(casadi_int *sz_arg, casadi_int* sz_res, casadi_int *sz_iw, casadi_int *sz_w);
-#define haa_stab16_SZ_ARG 10
+#define haa_stab16_SZ_ARG 11
 #define haa_stab16_SZ_RES 3
 #define haa_stab16_SZ_IW 0
-#define haa_stab16_SZ_W 126
+#define haa_stab16_SZ_W 127
 int haa_stab32(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem);
 int haa_stab32_checkout(void);
 void haa_stab32_release(int mem);
@@ -85,10 +85,10 @@ const casadi_int* haa_stab32_sparsity_in(casadi_int i);
 const casadi_int* haa_stab32_sparsity_out(casadi_int i);
 int haa_stab32_work(casadi_int *sz_arg, casadi_int* sz_res, casadi_int *sz_iw, casadi_int *sz_w);
 int haa_stab32_work_bytes(casadi_int *sz_arg, casadi_int* sz_res, casadi_int *sz_iw, casadi_int *sz_w);
-#define haa_stab32_SZ_ARG 10
+#define haa_stab32_SZ_ARG 11
 #define haa_stab32_SZ_RES 3
 #define haa_stab32_SZ_IW 0
-#define haa_stab32_SZ_W 238
+#define haa_stab32_SZ_W 239
 int haa_stab64(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem);
 int haa_stab64_checkout(void);
 void haa_stab64_release(int mem);
@@ -103,10 +103,10 @@ const casadi_int* haa_stab64_sparsity_in(casadi_int i);
 const casadi_int* haa_stab64_sparsity_out(casadi_int i);
 int haa_stab64_work(casadi_int *sz_arg, casadi_int* sz_res, casadi_int *sz_iw, casadi_int *sz_w);
 int haa_stab64_work_bytes(casadi_int *sz_arg, casadi_int* sz_res, casadi_int *sz_iw, casadi_int *sz_w);
-#define haa_stab64_SZ_ARG 10
+#define haa_stab64_SZ_ARG 11
 #define haa_stab64_SZ_RES 3
 #define haa_stab64_SZ_IW 0
-#define haa_stab64_SZ_W 462
+#define haa_stab64_SZ_W 463
 int haa_decide16(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem);
 int haa_decide16_checkout(void);
 void haa_decide16_release(int mem);
@@ -121,10 +121,10 @@ const casadi_int* haa_decide16_sparsity_in(casadi_int i);
 const casadi_int* haa_decide16_sparsity_out(casadi_int i);
 int haa_decide16_work(casadi_int *sz_arg, casadi_int* sz_res, casadi_int *sz_iw, casadi_int *sz_w);
 int haa_decide16_work_bytes(casadi_int *sz_arg, casadi_int* sz_res, casadi_int *sz_iw, casadi_int *sz_w);
-#define haa_decide16_SZ_ARG 23
+#define haa_decide16_SZ_ARG 24
 #define haa_decide16_SZ_RES 6
 #define haa_decide16_SZ_IW 0
-#define haa_decide16_SZ_W 271
+#define haa_decide16_SZ_W 290
 int haa_decide32(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem);
 int haa_decide32_checkout(void);
 void haa_decide32_release(int mem);
@@ -139,10 +139,10 @@ const casadi_int* haa_decide32_sparsity_in(casadi_int i);
 const casadi_int* haa_decide32_sparsity_out(casadi_int i);
 int haa_decide32_work(casadi_int *sz_arg, casadi_int* sz_res, casadi_int *sz_iw, casadi_int *sz_w);
 int haa_decide32_work_bytes(casadi_int *sz_arg, casadi_int* sz_res, casadi_int *sz_iw, casadi_int *sz_w);
-#define haa_decide32_SZ_ARG 23
+#define haa_decide32_SZ_ARG 24
 #define haa_decide32_SZ_RES 6
 #define haa_decide32_SZ_IW 0
-#define haa_decide32_SZ_W 495
+#define haa_decide32_SZ_W 530
 int haa_decide64(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem);
 int haa_decide64_checkout(void);
 void haa_decide64_release(int mem);
@@ -157,10 +157,10 @@ const casadi_int* haa_decide64_sparsity_in(casadi_int i);
 const casadi_int* haa_decide64_sparsity_out(casadi_int i);
 int haa_decide64_work(casadi_int *sz_arg, casadi_int* sz_res, casadi_int *sz_iw, casadi_int *sz_w);
 int haa_decide64_work_bytes(casadi_int *sz_arg, casadi_int* sz_res, casadi_int *sz_iw, casadi_int *sz_w);
-#define haa_decide64_SZ_ARG 23
+#define haa_decide64_SZ_ARG 24
 #define haa_decide64_SZ_RES 6
 #define haa_decide64_SZ_IW 0
-#define haa_decide64_SZ_W 943
+#define haa_decide64_SZ_W 1010
 void haa_sym_gen_casadi_version(int* major, int* minor, int* patch);
 int haa_sym_gen_casadi_int_size(void);
 int haa_sym_gen_casadi_real_size(void);

@@ -12,7 +12,7 @@ import pytest
 
 from haa_sym import ClosedLoop, LoopOptions
 from haa_sym import reference as ref
-from haa_sym.loop import PORTS
+from haa_sym.loop import FILTERS, PORTS
 
 N_AVS = (1, 4, 10, 20, 50)
 TSS = (0.5e-3, 1e-3, 2e-3, 4e-3, 6e-3, 8e-3)
@@ -24,7 +24,7 @@ def cases():
     rng = np.random.default_rng(2016)
     for N_av, Ts, cfg in itertools.product(N_AVS, TSS, CONFIGS):
         opts = LoopOptions(delay=int(rng.integers(2)), torque_damping=bool(rng.integers(2)),
-                           port=PORTS[int(rng.integers(3))])
+                           port=PORTS[int(rng.integers(3))], filter=FILTERS[int(rng.integers(3))])
         pts = np.stack([10 ** rng.uniform(0, np.log10(20000), POINTS_PER_CASE),
                         rng.uniform(0, 50, POINTS_PER_CASE),
                         rng.uniform(0.5, 6, POINTS_PER_CASE),

@@ -44,7 +44,7 @@ def test_defaults_are_best_option_combination(params, cells):
     best = scores[0][1]
     assert sum(c.agrees for c in cells) == best
     defaults = LoopOptions()
-    top = [combo for combo, n, _ in scores if n == best]
+    top = [combo for combo, n, _, _ in scores if n == best]
     assert {k: getattr(defaults, k) for k in top[0]} in top
 
 

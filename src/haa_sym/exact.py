@@ -90,6 +90,14 @@ def polymul(*polys):
     return out
 
 
+def polysub(a, b):
+    """a - b for descending coefficient lists (exact if the inputs are)."""
+    n = max(len(a), len(b))
+    a = [Fraction(0)] * (n - len(a)) + list(a)
+    b = [Fraction(0)] * (n - len(b)) + list(b)
+    return [x - y for x, y in zip(a, b)]
+
+
 def to_float(p) -> np.ndarray:
     """Correctly rounded doubles of exact coefficients."""
     return np.array([float(x) for x in p])

@@ -33,7 +33,7 @@ from fractions import Fraction
 import numpy as np
 
 from haa_sym.compiled import evaluators
-from haa_sym.exact import polymul, to_float, transfer_polynomials
+from haa_sym.exact import polymul, polysub, to_float, transfer_polynomials
 from haa_sym.params import ParameterError, Params
 from haa_sym.plant import OUTPUTS, DiscretePlant, continuous_plant, discretize
 
@@ -49,6 +49,7 @@ FREQ_OUTPUTS = ("L_t", "L_imp", "Z", "H_T")
 
 
 COLGATE = ("subtract", "add", "none")
+FILTERS = ("both", "impedance", "compensation")
 PM_LOOPS = ("impedance", "torque")
 PM_RULES = ("min_abs", "worst")
 
@@ -66,6 +67,11 @@ class LoopOptions:
         Computation delay between sampling and the applied voltage, samples. Default 0.
     torque_damping : bool
         Whether the measured torque includes the D_hd term of Eq. (2). Default True.
+    filter : {"both", "impedance", "compensation"}
+        Where the N_av-sample averaging filter sits: on the velocity feeding both the D term of
+        Eq. (8) and the velocity compensation of Eq. (6) (default, the paper's Sec. 3.4 and
+        Fig. 6), on the D term only, or on the compensation only; the other path then uses the
+        one-sample first difference (theta[k] - theta[k-1])/Ts.
     port : {"dtheta_L2", "dtheta_L1", "encoder_average"}
         Velocity of the passivity port Z = T_dist / velocity (Sec. 5): the inertia J_L2 that
         T_dist acts on (default), the sampled link velocity of the paper's wording, or the
@@ -94,6 +100,7 @@ class LoopOptions:
 
     delay: int = 0
     torque_damping: bool = True
+    filter: str = "both"
     port: str = "dtheta_L2"
     colgate: str = "subtract"
     pm_loop: str = "impedance"
@@ -107,7 +114,7 @@ class LoopOptions:
             raise ParameterError(f"delay = {self.delay!r}; allowed: 0 or 1 (samples)")
         if not isinstance(self.torque_damping, bool):
             raise ParameterError(f"torque_damping = {self.torque_damping!r}; allowed: True or False")
-        for name, allowed in (("port", PORTS), ("colgate", COLGATE), ("pm_loop", PM_LOOPS),
+        for name, allowed in (("port", PORTS), ("filter", FILTERS), ("colgate", COLGATE), ("pm_loop", PM_LOOPS),
                               ("pm_rule", PM_RULES)):
             if getattr(self, name) not in allowed:
                 raise ParameterError(f"{name} = {getattr(self, name)!r}; allowed: {list(allowed)}")
@@ -218,28 +225,45 @@ class ClosedLoop:
     def torque_output(self) -> str:
         return "T_l" if self.options.torque_damping else "T_l_spring"
 
+    @property
+    def filter_lengths(self) -> tuple[int, int]:
+        """(N_VC, N_D): samples averaged by the compensation and by the D term (option ``filter``)."""
+        N = self.params.controller.N_av
+        f = self.options.filter
+        return (N if f in ("both", "compensation") else 1, N if f in ("both", "impedance") else 1)
+
     def _basis(self) -> np.ndarray:
-        """Ascending coefficients (capacity+1) x 7 of b0..b6, padded with roots at z = 0."""
+        """Ascending coefficients (capacity+1) x 8 of b0..b7, padded with roots at z = 0."""
         p, ctrl, opt = self.plant, self.params.controller, self.options
         d, nums = transfer_polynomials(p.Phi, p.Gamma[:, :1], p.C)
         n_T = nums[OUTPUTS.index(self.torque_output)][0]
         n_th = nums[OUTPUTS.index("theta_L1")][0]
-        N = ctrl.N_av
+        N = ctrl.N_av                      # the longest average: z^N clears every denominator
+        N_vc, N_d = self.filter_lengths
         Ts = Fraction(ctrl.Ts)
-        zN = [Fraction(1)] + [Fraction(0)] * N                     # z^N
+
+        def zpow(k):
+            return [Fraction(1)] + [Fraction(0)] * k
+
+        def zk_minus_1(k):
+            return [Fraction(1)] + [Fraction(0)] * (k - 1) + [Fraction(-1)]
         zm1 = [Fraction(1), Fraction(-1)]                          # z - 1
-        zNm1 = [Fraction(1)] + [Fraction(0)] * (N - 1) + [Fraction(-1)]  # z^N - 1
-        z1 = [Fraction(1), Fraction(0)]
-        zd = [Fraction(1)] + [Fraction(0)] * opt.delay
-        # chi(z) / (N Ts): return difference at V_m times (z-1) z^(N+d) d(z), Eq. (6)-(8)
+        z1 = zpow(1)
+        # chi(z): return difference at V_m times (z-1) z^(N+d) d(z), Eq. (6)-(8), where
+        # F_k(z) z^N = z^(N-k) (z^k - 1)/(k Ts). P_t D_gain and VC multiply b_d and b_vc; they
+        # nearly cancel in parts of the plane, so chi uses (P_t D_gain - VC) b_d - VC (b_vc - b_d)
+        # with the difference exact (zero for filter = "both").
+        b_d = polymul([1 / (N_d * Ts)], zm1, zpow(N - N_d), zk_minus_1(N_d), n_th)
+        b_vc = polymul([1 / (N_vc * Ts)], zm1, zpow(N - N_vc), zk_minus_1(N_vc), n_th)
         basis = [
-            polymul(zm1, zN, zd, d),                               # 1
-            polymul(zm1, zN, n_T),                                 # P_t
-            polymul([Ts], z1, zN, n_T),                            # I_t
-            polymul(zm1, zN, n_th),                                # P_t P_gain
-            polymul([Ts], z1, zN, n_th),                           # I_t P_gain
-            polymul([1 / (N * Ts)], zm1, zNm1, n_th),              # P_t D_gain - VC
-            polymul([Fraction(1, N)], z1, zNm1, n_th),             # I_t D_gain
+            polymul(zm1, zpow(N), zpow(opt.delay), d),                                # 1
+            polymul(zm1, zpow(N), n_T),                                               # P_t
+            polymul([Ts], z1, zpow(N), n_T),                                          # I_t
+            polymul(zm1, zpow(N), n_th),                                              # P_t P_gain
+            polymul([Ts], z1, zpow(N), n_th),                                         # I_t P_gain
+            b_d,                                                                      # P_t D_gain - VC
+            polymul([Fraction(1, N_d)], z1, zpow(N - N_d), zk_minus_1(N_d), n_th),    # I_t D_gain
+            polysub(b_vc, b_d),                                                       # -VC (rest)
         ]
         out = np.zeros((self.capacity + 1, len(basis)))
         for j, b in enumerate(basis):
@@ -263,7 +287,7 @@ class ClosedLoop:
             raise ValueError("characteristic_polynomial takes one gain point")
         P, D, b, a = pts[:, 0]
         P_t, I_t, VC = b * self.const[0], b * self.const[1], a * self.const[2]
-        g = np.array([1, P_t, I_t, P_t * P, I_t * P, P_t * D - VC, I_t * D])
+        g = np.array([1, P_t, I_t, P_t * P, I_t * P, P_t * D - VC, I_t * D, -VC])
         asc = self.basis @ g
         return asc[self.capacity - self.degree:][::-1]
 
@@ -338,7 +362,7 @@ class ClosedLoop:
         Gr[0::2] = G.reshape(6, -1).real
         Gr[1::2] = G.reshape(6, -1).imag
         struct = np.array([ctrl.Ts, ctrl.N_av, self.options.delay,
-                           1.0 if self.options.port == "encoder_average" else 0.0])
+                           1.0 if self.options.port == "encoder_average" else 0.0, *self.filter_lengths])
         f = evaluators(self.backend)["haa_loopcoef"]
         out = np.array(f(Gr, (omega * ctrl.Ts)[None, :], self.const, np.array([beta, alpha]), struct))
         c = out[0::2] + 1j * out[1::2]                      # 13 x n_w

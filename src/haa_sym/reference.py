@@ -41,15 +41,19 @@ def closed_loop_matrices(loop: ClosedLoop, P_gain: float, D_gain: float, beta: f
     th = row_from_C("theta_L1")
     T = row_from_C(loop.torque_output)
     r_in = zero(); r_in[n + 1] = 1
-    th_N = zero(); th_N[i_h + N - 1] = 1
-    v = (th - th_N) / (N * Ts)
-    imp = P_gain * th + D_gain * v                       # Eq. (8) with theta_ref = 0: T_ref = -imp
+    def average(k):                                       # (theta[k] - theta[k-k]) / (k Ts)
+        th_k = zero(); th_k[i_h + k - 1] = 1
+        return (th - th_k) / (k * Ts)
+    N_vc, N_d = loop.filter_lengths
+    v = average(N)                                        # the encoder average (port option)
+    v_vc, v_d = average(N_vc), average(N_d)
+    imp = P_gain * th + D_gain * v_d                     # Eq. (8) with theta_ref = 0: T_ref = -imp
     T_ref = r_in if cut == "T_ref" else -imp
     e = T_ref - T
     i_prev = zero(); i_prev[i_int] = 1
     i_k = i_prev + Ts * e                                 # backward Euler, Eq. (7)
     u_pi = P_t * e + I_t * i_k
-    V_k = (r_in if cut == "PI" else u_pi) + VC * v        # Eq. (6) compensation
+    V_k = (r_in if cut == "PI" else u_pi) + VC * v_vc     # Eq. (6) compensation
     if d:
         V_applied = zero(); V_applied[i_u] = 1
     else:

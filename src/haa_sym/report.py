@@ -86,6 +86,14 @@ def write_report(out: Path, r: dict, spec: dict, options: LoopOptions, verify_te
         for x in diffs:
             add(f"- {x['row']}, {x['column']}: paper {x['paper']}, computed {x['computed']} "
                 f"(excess {x['phase_excess_deg']} deg at {x['omega_worst_rad_s']} rad/s). " + _cause(x, meta))
+            rescue = r["differing_cells_rescued_by"].get(f"{x['row']} | {x['column']}")
+            if rescue:
+                diff = {k: v for k, v in rescue["options"].items() if getattr(options, k) != v}
+                add(f"  The best-scoring option set that reproduces this cell changes "
+                    + ", ".join(f"`{k}={v}`" for k, v in diff.items())
+                    + f" and reproduces {rescue['agree']}/{rescue['cells']} cells in all; the defaults stay.")
+            else:
+                add("  No scored option set reproduces this cell.")
     add("\n## Quantitative claims: the paper says / we compute\n")
     bc = r["beta_check"]
     fig7 = {(s["K_L2"], s["alpha"]): s for s in r["fig7"]}
@@ -176,8 +184,8 @@ def _cause(x: dict, meta: dict) -> str:
         lag = math.degrees(w * N * Ts / 2)
         return (f"The N_av-sample average F(z) = (1 - z^-N_av)/(N_av Ts) lags a true derivative by "
                 f"w N_av Ts/2 = {lag:.0f} deg at {w:.3g} rad/s, so the D term of Eq. (8) cannot add "
-                "the damping phase where the torque loop's Z exceeds 90 deg. The paper does not say "
-                "where its averaging filter sits or how it was discretised, and an averaging filter "
-                "placed or discretised differently would change this lag; we did not tune any "
-                "option toward this cell.")
+                "the damping phase where the torque loop's Z exceeds 90 deg. The paper describes the "
+                "averaged velocity in the D term (Sec. 3.4) but not exactly where the filter sits or "
+                "how it is discretised; the placement is the `filter` option, scored with the others "
+                "(no option was tuned toward this cell).")
     return "No specific cause identified; see docs/model.md for the modelling options."

@@ -11,7 +11,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from haa_sym.loop import COLGATE, PORTS, ClosedLoop, LoopOptions
+from haa_sym.loop import COLGATE, FILTERS, PORTS, ClosedLoop, LoopOptions
 from haa_sym.paper import panel_params, paper_spec
 from haa_sym.params import Params
 from haa_sym.passivity import passivity
@@ -19,7 +19,8 @@ from haa_sym.passivity import passivity
 __all__ = ["Cell", "table2", "score_options", "OPTION_GRID"]
 
 # The options that change a Table 2 cell (pm_loop / pm_rule only affect the region maps).
-OPTION_GRID = {"delay": (0, 1), "torque_damping": (True, False), "port": PORTS, "colgate": COLGATE}
+OPTION_GRID = {"delay": (0, 1), "torque_damping": (True, False), "filter": FILTERS, "port": PORTS,
+               "colgate": COLGATE}
 
 
 @dataclass(frozen=True)
@@ -58,8 +59,8 @@ def table2(params: Params, options: LoopOptions | None = None, spec: dict | None
 def score_options(params: Params, spec: dict | None = None, base: LoopOptions | None = None):
     """Cells of Table 2 reproduced by every combination of :data:`OPTION_GRID`.
 
-    Returns a list of ``(options_dict, n_agree, n_cells)`` sorted best first (ties keep the
-    grid order, which lists the defaults first).
+    Returns a list of ``(options_dict, n_agree, n_cells, cells)`` sorted best first (ties keep
+    the grid order, which lists the defaults first); ``cells`` are that combination's cells.
     """
     spec = spec or paper_spec()
     base = base or LoopOptions()
@@ -69,5 +70,5 @@ def score_options(params: Params, spec: dict | None = None, base: LoopOptions | 
         combo = dict(zip(keys, values))
         opt = LoopOptions(**{**base.to_dict(), **combo})
         cells = table2(params, opt, spec)
-        out.append((combo, sum(c.agrees for c in cells), len(cells)))
+        out.append((combo, sum(c.agrees for c in cells), len(cells), cells))
     return sorted(out, key=lambda r: -r[1])
