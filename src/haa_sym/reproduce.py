@@ -33,7 +33,7 @@ from haa_sym.paper import panel_params, paper_spec
 from haa_sym.params import Params, load_params
 from haa_sym.passivity import bands_beyond, corrected_phase
 from haa_sym.regions import eigenvalue_crosscheck, grid, region_map, run_meta
-from haa_sym.table2 import OPTION_GRID, score_options, table2
+from haa_sym.table2 import score_options, table2
 from haa_sym.torque import step_response, torque_bandwidth
 
 __all__ = ["reproduce", "region_trends"]
