@@ -32,7 +32,7 @@ def plot_region(m, ax=None, title: str | None = None, passivity: bool = True):
     """Draw one :class:`haa_sym.regions.RegionMap` on ``ax`` (log P_gain, linear D_gain)."""
     fig = None
     if ax is None:
-        fig, ax = plt.subplots(figsize=(4.2, 3.4))
+        fig, ax = plt.subplots(figsize=(4.6, 4.4), layout="constrained")
     cls = np.where(~m.stable, 2, np.where(m.low_pm, 1, 0))
     logP = bool(np.all(m.P_gain > 0))
     ax.pcolormesh(_edges(m.P_gain, logP), _edges(m.D_gain, False), cls.T, cmap=REGION_COLORS,
@@ -40,13 +40,29 @@ def plot_region(m, ax=None, title: str | None = None, passivity: bool = True):
     if passivity and m.passive.any() and (~m.passive).any() and m.P_gain.size > 1 and m.D_gain.size > 1:
         ax.contour(m.P_gain, m.D_gain, m.passive.T.astype(float), levels=[0.5], colors="tab:blue",
                    linewidths=1.0, linestyles="--")
+        not_passive = (m.stable & ~m.passive).T.astype(float)
+        if not_passive.any():
+            cs = ax.contourf(m.P_gain, m.D_gain, not_passive, levels=[0.5, 1.5], colors="none",
+                             hatches=["////"])
+            cs.set_edgecolor("tab:blue")
+            cs.set_linewidth(0)
     if logP:
         ax.set_xscale("log")
     ax.set_xlabel("P_gain (Nm/rad)")
     ax.set_ylabel("D_gain (Nms/rad)")
     if title:
         ax.set_title(title, fontsize=10)
+    if fig is not None:
+        fig.legend(handles=_region_legend(), loc="outside lower center", ncol=2, fontsize=7)
     return fig or ax.figure
+
+
+def _region_legend():
+    return [Patch(facecolor="#ffffff", edgecolor="k", label="stable, PM >= 30 deg"),
+            Patch(facecolor="#c8c8c8", edgecolor="k", label="stable, PM < 30 deg"),
+            Patch(facecolor="#3a3a3a", edgecolor="k", label="unstable"),
+            plt.Line2D([], [], color="tab:blue", ls="--", label="passivity boundary"),
+            Patch(facecolor="none", edgecolor="tab:blue", hatch="////", label="stable, not passive")]
 
 
 def plot_region_panels(maps, titles, suptitle: str = ""):
@@ -55,11 +71,7 @@ def plot_region_panels(maps, titles, suptitle: str = ""):
                              constrained_layout=True)
     for ax, m, t in zip(axes[0], maps, titles):
         plot_region(m, ax, t)
-    handles = [Patch(facecolor="#ffffff", edgecolor="k", label="stable, PM >= 30 deg"),
-               Patch(facecolor="#c8c8c8", edgecolor="k", label="stable, PM < 30 deg"),
-               Patch(facecolor="#3a3a3a", edgecolor="k", label="unstable"),
-               plt.Line2D([], [], color="tab:blue", ls="--", label="passivity boundary")]
-    fig.legend(handles=handles, loc="outside lower center", ncol=4, fontsize=8)
+    fig.legend(handles=_region_legend(), loc="outside lower center", ncol=5 if len(maps) >= 3 else 3, fontsize=8)
     if suptitle:
         fig.suptitle(suptitle, fontsize=11)
     return fig

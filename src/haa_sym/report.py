@@ -161,7 +161,7 @@ def write_report(out: Path, r: dict, spec: dict, options: LoopOptions, verify_te
                    ("contact.png", "Torque loop alone in contact with a spring K_L2")):
         add(f"### {cap}\n\n![{cap}]({f})\n")
     add("White: stable with PM >= 30 deg (or |L| never crossing 1); light grey: stable with PM < 30 deg; "
-        "dark: unstable; dashed blue: boundary of the passive region. Data: `regions/*.npz`.\n")
+        "dark: unstable; dashed blue: boundary of the passive region, hatched: stable but not passive. Data: `regions/*.npz`.\n")
     add("## Symbolic checks, p1 roots and torque-loop margins at the leg-inertia bounds\n")
     add("`python -m haa_sym.verify` (exit status "
         f"{r['verify_exit_status']}):\n\n```\n{verify_text.rstrip()}\n```\n")
