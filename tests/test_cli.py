@@ -77,3 +77,12 @@ def test_passivity_step_margins(tmp_path, capsys):
     assert "rise time" in capsys.readouterr().out
     assert main(["margins", "--P-gain", "200", "--D-gain", "10"]) == 0
     assert "impedance loop (opened at T_lref): PM" in capsys.readouterr().out
+
+
+def test_regions_rejects_unwritable_output(tmp_path, capsys):
+    blocker = tmp_path / "a_file"
+    blocker.write_text("not a directory")
+    out = blocker / "m.npz"
+    assert main(["regions", "--P-gain", "1", "--D-gain", "1", "--out", str(out)]) == 2
+    assert "is not a writable directory" in capsys.readouterr().err
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["a_file"]

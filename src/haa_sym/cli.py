@@ -17,6 +17,8 @@ Bad input exits with status 2 and a message naming the field; nothing partial is
 from __future__ import annotations
 
 import argparse
+import contextlib
+import os
 import sys
 from pathlib import Path
 
@@ -83,13 +85,31 @@ def _params(args):
 
 
 def _check_out(path: str | None, cmd: str, flag: str = "--out") -> Path | None:
+    """Validate an output path before any computation: suffix, and a writable directory."""
     if path is None:
         return None
     p = Path(path)
     allowed = OUTPUT_SUFFIXES[cmd] if flag == "--out" else (".png", ".pdf", ".svg")
     if p.suffix.lower() not in allowed:
         raise ParameterError(f"{flag} {path!r}: unsupported file type; allowed: {list(allowed)}")
+    parent = p.parent
+    while not parent.exists() and parent != parent.parent:
+        parent = parent.parent
+    if not (parent.is_dir() and os.access(parent, os.W_OK)):
+        raise ParameterError(f"{flag} {path!r}: {parent} is not a writable directory")
     return p
+
+
+@contextlib.contextmanager
+def _all_or_nothing(paths):
+    """Remove the outputs already written if a later one fails: no partial results."""
+    try:
+        yield
+    except BaseException:
+        for p in paths:
+            if p is not None:
+                Path(p).unlink(missing_ok=True)
+        raise
 
 
 def _cmd_regions(args) -> int:
@@ -100,11 +120,12 @@ def _cmd_regions(args) -> int:
     out = _check_out(args.out, "regions")
     plot = _check_out(args.plot, "regions", "--plot")
     m = region_map(params, P, D, options=options, radius=not args.no_radius)
-    if out:
-        m.save(out)
-    if plot:
-        from haa_sym.plots import plot_region, save_figure
-        save_figure(plot_region(m, title=args.title), plot)
+    with _all_or_nothing([out, plot]):
+        if out:
+            m.save(out)
+        if plot:
+            from haa_sym.plots import plot_region, save_figure
+            save_figure(plot_region(m, title=args.title), plot)
     print(f"{m.stable.size} points: {m.stable.sum()} stable, {m.low_pm.sum()} stable with PM < 30 deg, "
           f"{m.passive.sum()} passive" + (f"; wrote {out}" if out else ""))
     return 0
@@ -245,6 +266,9 @@ def main(argv: list[str] | None = None) -> int:
                 "margins": _cmd_margins, "reproduce": _cmd_reproduce}[args.cmd](args)
     except ParameterError as exc:
         print(f"haa-sym: error: {exc}", file=sys.stderr)
+        return 2
+    except OSError as exc:
+        print(f"haa-sym: error: {exc.strerror or exc}: {exc.filename or ''}", file=sys.stderr)
         return 2
 
 
