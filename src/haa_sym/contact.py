@@ -21,6 +21,13 @@ def contact_stability(params: Params, K_env, *, P_gain: float = 0.0, D_gain: flo
 
     Returns ``(stable, spectral_radius)`` arrays of ``K_env``'s length. One closed loop (exact
     characteristic-polynomial basis) per stiffness.
+
+    Example
+    -------
+    >>> K = np.logspace(0, 5, 400)
+    >>> stable, rho = contact_stability(load_params(), K)                   # doctest: +SKIP
+    >>> intervals(K, ~stable)                                               # doctest: +SKIP
+    [(73.6..., 3418.4...)]
     """
     from tqdm.auto import tqdm
     K_env = np.asarray(K_env, float).ravel()
@@ -35,7 +42,11 @@ def contact_stability(params: Params, K_env, *, P_gain: float = 0.0, D_gain: flo
 
 
 def intervals(x, flag) -> list[tuple[float, float]]:
-    """Maximal runs [x_first, x_last] of consecutive samples where ``flag`` is true."""
+    """Maximal runs [x_first, x_last] of consecutive samples where ``flag`` is true.
+
+    >>> intervals([1, 2, 3, 4, 5], [False, True, True, False, True])
+    [(2.0, 3.0), (5.0, 5.0)]
+    """
     x, flag = np.asarray(x), np.asarray(flag, bool)
     out, start = [], None
     for i, f in enumerate(flag):

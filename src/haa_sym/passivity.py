@@ -91,6 +91,12 @@ def corrected_phase(params: Params, P_gain: float = 0.0, D_gain: float = 0.0, *,
     """Phase of Z(z) with Colgate's correction, degrees in (-180, 180], on ``omega`` (rad/s).
 
     Returns ``(omega, phase_deg)``; ``omega`` defaults to the options' grid (Fig. 12).
+
+    Example
+    -------
+    >>> w, ph = corrected_phase(load_params(), 0.0, 0.0)      # torque loop alone  # doctest: +SKIP
+    >>> bands_beyond(w, ph)                                                         # doctest: +SKIP
+    [(11.57..., 59.17...)]
     """
     loop = loop or ClosedLoop(params, options)
     coef = loop.loop_coefficients(omega, beta, alpha)
@@ -100,7 +106,11 @@ def corrected_phase(params: Params, P_gain: float = 0.0, D_gain: float = 0.0, *,
 
 
 def bands_beyond(omega, phase_deg, limit: float = 90.0) -> list[tuple[float, float]]:
-    """Frequency intervals (rad/s) where |phase| > ``limit``, edges interpolated in log(omega)."""
+    """Frequency intervals (rad/s) where |phase| > ``limit``, edges interpolated in log(omega).
+
+    >>> [(round(a, 4), round(b, 4)) for a, b in bands_beyond([1.0, 2, 4, 8], [80.0, 100, 100, 80])]
+    [(1.4142, 5.6569)]
+    """
     omega = np.asarray(omega, float)
     s = np.abs(np.asarray(phase_deg, float)) - limit
     out, start = [], None

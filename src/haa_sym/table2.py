@@ -40,7 +40,14 @@ class Cell:
 
 
 def table2(params: Params, options: LoopOptions | None = None, spec: dict | None = None) -> list[Cell]:
-    """All cells of Table 2 (rows x columns of ``model/paper.toml``), computed with ``options``."""
+    """All cells of Table 2 (rows x columns of ``model/paper.toml``), computed with ``options``.
+
+    Example
+    -------
+    >>> cells = table2(load_params())                                       # doctest: +SKIP
+    >>> sum(c.agrees for c in cells), len(cells)                            # doctest: +SKIP
+    (44, 45)
+    """
     spec = spec or paper_spec()
     t = spec["table2"]
     options = options or LoopOptions()

@@ -92,6 +92,11 @@ def torque_bandwidth(params: Params, *, options: LoopOptions | None = None,
 
     The paper defines the torque bandwidth with the leg free to move in the air (Sec. 3.3);
     pass K_L2 = 0 in ``params`` for that. NaN if |H_T| never drops 3 dB below Nyquist.
+
+    Example
+    -------
+    >>> torque_bandwidth(load_params().with_values(K_L2=0.0))             # doctest: +SKIP
+    30.36...
     """
     loop = loop or ClosedLoop(params, options)
     coef = loop.loop_coefficients(None, beta, alpha)

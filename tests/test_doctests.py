@@ -1,0 +1,14 @@
+"""The runnable examples in the docstrings (the ones not marked +SKIP) run and are right."""
+import doctest
+import importlib
+
+import pytest
+
+MODULES = ["haa_sym.regions", "haa_sym.passivity", "haa_sym.contact", "haa_sym.margins",
+           "haa_sym.sweep", "haa_sym.torque", "haa_sym.table2"]
+
+
+@pytest.mark.parametrize("name", MODULES)
+def test_docstring_examples(name):
+    result = doctest.testmod(importlib.import_module(name), optionflags=doctest.ELLIPSIS)
+    assert result.failed == 0
