@@ -144,6 +144,22 @@ def write_report(out: Path, r: dict, spec: dict, options: LoopOptions, verify_te
     add(_table(["claim", "panels", "measure (cells)"] + [f"`{k}`" for k in names], trows))
     add("\n" + "; ".join(f"`{k}`: {sum(t['holds'] for t in r['region_trends'][k])} of "
                          f"{len(r['region_trends'][k])} trends hold" for k in names) + ".")
+    alt = r.get("trend_alternatives", {})
+    if alt:
+        add("\nThe trends that fail with the defaults, recounted (`locomotion` split) with one option "
+            "changed at a time (the options that change stability or the phase margin):\n")
+        add(_table(["option changed", "trends holding", "failing trends that then hold",
+                    "trends that then fail instead"],
+                   [[k, v["holding"], "; ".join(v["rescued"]) or "none", "; ".join(v["lost"]) or "none"]
+                    for k, v in alt.items()]))
+        add("\nNo single option makes every trend hold, so the failing trends are not explained by "
+            "one modelling choice left open by the paper; the most likely causes are that the "
+            "paper's maps are read qualitatively (a \"region\" there may mean one lobe of the map, "
+            "which a quadrant count mixes with its neighbours) and model differences the paper does "
+            "not document. The figures above let the reader compare the lobes directly."
+            if all(len(v["rescued"]) < sum(not t["holds"] for t in r["region_trends"]["locomotion"])
+                   or v["lost"] for v in alt.values()) else
+            "\nAt least one option change makes every trend hold without losing another; see the table.")
     cc = r["region_crosscheck"]
     n_pts = sum(v["points"] for v in cc.values())
     n_dec = sum(v["decided"] for v in cc.values())

@@ -205,6 +205,28 @@ def reproduce(out: str | Path = "results", params: Params | None = None,
                      "passive": int(m.passive.sum()), "cells": int(m.stable.size)})
     result["option_sensitivity"] = sens
 
+    # do the trends that fail with the defaults hold under another stability / PM option?
+    _log("Sec. 4 trends under the options that change stability or the phase margin")
+    failing = [i for i, t in enumerate(result["region_trends"]["locomotion"]) if not t["holds"]]
+    trend_alt = {}
+    if failing:
+        P_split, D_split = splits["locomotion"]
+        for label, change in variants[1:]:
+            if next(iter(change)) in ("port", "colgate"):
+                continue                                   # passivity only: no effect on trends
+            opt = LoopOptions(**{**options.to_dict(), **change})
+            st = {}
+            for entry in reg["panel"]:
+                p = panel_params(params, entry)
+                st[f"{entry['figure']}{entry['panel']}"] = _quadrants(
+                    region_map(p, P_grid, D_grid, options=opt, radius=False), P_split, D_split)
+            tr = region_trends(st)
+            trend_alt[label] = {"holding": sum(t["holds"] for t in tr),
+                                "rescued": [tr[i]["claim"] for i in failing if tr[i]["holds"]],
+                                "lost": [t["claim"] for i, t in enumerate(tr)
+                                         if not t["holds"] and i not in failing]}
+    result["trend_alternatives"] = trend_alt
+
     # Table 2 and the option scores
     _log("Table 2 and option scores")
     cells = table2(params, options, spec)
