@@ -1,7 +1,7 @@
 """``make derive``: regenerate ``generated/`` from the symbolic model.
 
 Writes, byte-reproducibly (no dates, sorted JSON):
-  generated/haa_sym_gen.c      every CasADi Function as C (one translation unit)
+  generated/haa_sym_gen.c      every CasADi Function as C, then codegen/driver.c (one translation unit)
   generated/<name>.casadi      the same Functions serialised, for CasADi's VM when no compiler
   generated/MANIFEST.json      SHA-256 of every generated file and of the sources, tool versions
 Usage: python -m codegen.generate [--out DIR]
@@ -24,6 +24,7 @@ from codegen.symbolic_to_casadi import plant_function
 
 ROOT = Path(__file__).resolve().parents[1]
 C_NAME = "haa_sym_gen"
+DRIVER = ROOT / "codegen" / "driver.c"
 # Polynomial capacities of the stability evaluators: degree N_av + 8 + delay must fit.
 CAPACITIES = (16, 32, 64)
 # Files whose content defines the generated code; their hash is recorded in the manifest and
@@ -35,6 +36,7 @@ SOURCES = (
     "codegen/kernels.py",
     "codegen/symbolic_to_casadi.py",
     "codegen/generate.py",
+    "codegen/driver.c",
 )
 
 
@@ -75,6 +77,8 @@ def generate(out: Path) -> dict:
         cg.generate(tmp + os.sep)
         for name in (f"{C_NAME}.c", f"{C_NAME}.h"):
             files[name] = Path(tmp, name).read_bytes()
+    # one translation unit: the column driver uses the generated typedefs and export macro
+    files[f"{C_NAME}.c"] += b"\n" + DRIVER.read_bytes()
     for f in fns:
         files[f"{f.name()}.casadi"] = f.serialize().encode()
     manifest = {

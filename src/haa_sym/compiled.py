@@ -9,6 +9,7 @@ warning, never silently).
 """
 from __future__ import annotations
 
+import ctypes
 import functools
 import hashlib
 import json
@@ -20,6 +21,7 @@ import warnings
 from pathlib import Path
 
 import casadi as ca
+import numpy as np
 
 __all__ = ["StaleGeneratedCode", "GeneratedCode", "Compiler", "Evaluators", "evaluators"]
 
@@ -151,6 +153,56 @@ class Evaluators:
                 self._fns[name] = ca.Function.deserialize(
                     (self.code.dir / f"{name}.casadi").read_text())
         return self._fns[name]
+
+    def call_columns(self, name: str, args: list, col: int) -> list[np.ndarray]:
+        """Evaluate ``name`` on every column of ``args[col]``, the other inputs shared.
+
+        Compiled: one call of the generated column driver (``codegen/driver.c``) for all
+        columns. VM: CasADi's own column mapping. Returns each output as (n_columns, size).
+        """
+        f = self[name]
+        cols = np.asfortranarray(np.atleast_2d(np.asarray(args[col], dtype=float)))
+        n = cols.shape[1]
+        if cols.shape[0] != f.size1_in(col):
+            raise ValueError(f"{name}: input {col} has {cols.shape[0]} rows, expected {f.size1_in(col)}")
+        shared = []
+        for i, a in enumerate(args):
+            if i == col:
+                shared.append(cols)
+                continue
+            a = np.asfortranarray(np.asarray(a, dtype=float))
+            if a.size != f.numel_in(i):
+                raise ValueError(f"{name}: input {i} has {a.size} values, expected {f.numel_in(i)}")
+            shared.append(a)
+        sizes = [f.numel_out(j) for j in range(f.n_out())]
+        if self.backend != "compiled" or n == 0:
+            res = f(*shared)
+            res = res if isinstance(res, (list, tuple)) else [res]
+            return [np.array(r).reshape(sizes[j], n, order="F").T for j, r in enumerate(res)]
+        lib = self._cdll()
+        outs = [np.empty((n, sz)) for sz in sizes]
+        dbl = ctypes.POINTER(ctypes.c_double)
+        arg_ptrs = (dbl * len(shared))(*[a.ctypes.data_as(dbl) for a in shared])
+        out_ptrs = (dbl * len(outs))(*[o.ctypes.data_as(dbl) for o in outs])
+        strides = (ctypes.c_longlong * len(outs))(*sizes)
+        flag = lib.haa_columns(ctypes.cast(getattr(lib, name), ctypes.c_void_p),
+                               ctypes.cast(getattr(lib, f"{name}_work"), ctypes.c_void_p),
+                               len(shared), arg_ptrs, col, cols.shape[0], n, len(outs), out_ptrs,
+                               strides)
+        if flag:
+            raise RuntimeError(f"generated {name} failed on a column (code {flag})")
+        return outs
+
+    def _cdll(self):
+        if getattr(self, "_lib", None) is None:
+            lib = ctypes.CDLL(str(self.library))
+            lib.haa_columns.restype = ctypes.c_int
+            lib.haa_columns.argtypes = [ctypes.c_void_p, ctypes.c_void_p, ctypes.c_longlong,
+                                        ctypes.c_void_p, ctypes.c_longlong, ctypes.c_longlong,
+                                        ctypes.c_longlong, ctypes.c_longlong, ctypes.c_void_p,
+                                        ctypes.c_void_p]
+            self._lib = lib
+        return self._lib
 
     @property
     def capacities(self) -> list[int]:

@@ -325,14 +325,14 @@ class ClosedLoop:
         pts, shape = self._points(P_gain, D_gain, beta, alpha)
         ev = evaluators(self.backend)
         if radius:
-            kmax, rho = ev[f"haa_stab{self.capacity}"](self.basis, self.const, pts)
-            rho = np.array(rho).ravel()
-            kmax = np.array(kmax).ravel()
+            kmax, rho = (v.ravel() for v in ev.call_columns(
+                f"haa_stab{self.capacity}", [self.basis, self.const, pts], 2))
             refined = np.abs(rho - 1) < refine_band
         else:
             powers = np.arange(self.capacity + 1) - self.capacity
-            kmax, k_in, k_out = (np.array(v).ravel() for v in ev[f"haa_decide{self.capacity}"](
-                self.basis, self.const, pts, (1 - refine_band) ** powers, (1 + refine_band) ** powers))
+            kmax, k_in, k_out = (v.ravel() for v in ev.call_columns(
+                f"haa_decide{self.capacity}",
+                [self.basis, self.const, pts, (1 - refine_band) ** powers, (1 + refine_band) ** powers], 2))
             rho = np.full(kmax.shape, np.nan)
             # radius within refine_band of 1: not every root inside 1 - band, all inside 1 + band
             refined = (k_in >= 1) & (k_out < 1)
