@@ -178,7 +178,22 @@ def write_report(out: Path, r: dict, spec: dict, options: LoopOptions, verify_te
         add(f"### {cap}\n\n![{cap}]({f})\n")
     add("White: stable with PM >= 30 deg (or |L| never crossing 1); light grey: stable with PM < 30 deg; "
         "dark: unstable; dashed blue: boundary of the passive region, hatched: stable but not passive. Data: `regions/*.npz`.\n")
-    add("## Symbolic checks, p1 roots and torque-loop margins at the leg-inertia bounds\n")
+    add("## p1 roots and torque-loop margins at the leg-inertia bounds (Sec. 3.1-3.2)\n")
+    add("Computed numerically from the plant (zeros of V_m -> T_l without the K_hd + D_hd s factor of "
+        "Eq. 2; the torque loop opened at the PI output, impedance loop open). The paper requires "
+        "PM > 30 deg and GM > 12 dB at these bounds; the symbolic check of the same numbers is "
+        "`verify` below.\n")
+
+    def _root(z):
+        re, im = z
+        return f"{re:.4g}" if abs(im) < 1e-12 * max(1.0, abs(re)) else f"{re:.4g}{im:+.4g}j"
+    add(_table(["leg", "J_L2", "K_L2", "roots of p1 (1/s)", "PM (deg) @ rad/s", "GM (dB) @ rad/s"],
+               [[c["configuration"], c["J_L2"], c["K_L2"],
+                 ", ".join(_root(z if isinstance(z, (list, tuple)) else (z.real, z.imag)) for z in c["p1_roots"]),
+                 "-" if c["pm_deg"] is None else f"{c['pm_deg']:.2f} @ " + ", ".join(f"{w:.4g}" for w in c["gain_crossover_rad_s"]),
+                 "-" if c["gm_db"] is None else f"{c['gm_db']:.2f} @ " + ", ".join(f"{w:.4g}" for w in c["phase_crossover_rad_s"])]
+                for c in r["torque_loop_corners"]]))
+    add("\n## Symbolic checks\n")
     add("`python -m haa_sym.verify` (exit status "
         f"{r['verify_exit_status']}):\n\n```\n{verify_text.rstrip()}\n```\n")
     path = out / "REPORT.md"

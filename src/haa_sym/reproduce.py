@@ -34,7 +34,7 @@ from haa_sym.params import Params, load_params
 from haa_sym.passivity import bands_beyond, corrected_phase
 from haa_sym.regions import eigenvalue_crosscheck, grid, region_map, run_meta
 from haa_sym.table2 import score_options, table2
-from haa_sym.torque import step_response, torque_bandwidth
+from haa_sym.torque import p1_roots, step_response, torque_bandwidth, torque_loop_margins
 
 __all__ = ["reproduce", "region_trends"]
 
@@ -53,6 +53,12 @@ def _csv(rows: list[dict]) -> str:
     w.writeheader()
     w.writerows(rows)
     return buf.getvalue()
+
+
+def _json_default(x):
+    if isinstance(x, complex):
+        return [x.real, x.imag]
+    return float(x)
 
 
 def _log(msg: str) -> None:
@@ -314,6 +320,21 @@ def reproduce(out: str | Path = "results", params: Params | None = None,
         for i, t in enumerate(t7)]))
     result["fig7"] = steps
 
+    # p1 roots and torque-loop margins at the leg-inertia / stiffness bounds, numerically
+    corners = []
+    for cfg in sorted(params.configurations):
+        for K in sorted({0.0, *(p.get("K_L2") for p in params.configurations.values() if "K_L2" in p),
+                         params.plant.K_L2}):
+            pc = params.configuration(cfg).with_values(K_L2=K)
+            mg = torque_loop_margins(pc, options=options)
+            corners.append({"configuration": cfg, "J_L2": pc.plant.J_L2, "K_L2": K,
+                            "p1_roots": [complex(z) for z in p1_roots(pc)],
+                            "pm_deg": mg.pm_deg if np.isfinite(mg.pm_deg) else None,
+                            "gain_crossover_rad_s": [float(x) for x in mg.gain_crossovers],
+                            "gm_db": mg.gm_db if np.isfinite(mg.gm_db) else None,
+                            "phase_crossover_rad_s": [float(x) for x in mg.phase_crossovers]})
+    result["torque_loop_corners"] = corners
+
     # verify (symbolic rows: p1 roots, margins at the leg-inertia bounds) in its own process:
     # the numeric runtime never imports sympy
     proc = subprocess.run([sys.executable, "-m", "haa_sym.verify"] +
@@ -323,7 +344,7 @@ def reproduce(out: str | Path = "results", params: Params | None = None,
     result["verify_exit_status"] = proc.returncode
 
     result["elapsed_s"] = round(time.time() - t_start, 1)
-    _write_text(out / "claims.json", json.dumps(result, indent=1, default=float) + "\n")
+    _write_text(out / "claims.json", json.dumps(result, indent=1, default=_json_default) + "\n")
     from haa_sym.report import write_report
     write_report(out, result, spec, options, proc.stdout)
     _log(f"wrote {out}/REPORT.md in {result['elapsed_s']} s")

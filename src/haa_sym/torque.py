@@ -111,3 +111,41 @@ def torque_bandwidth(params: Params, *, options: LoopOptions | None = None,
     target = -0.5 * np.log(2)
     t = (target - m0) / (m1 - m0)
     return float(np.exp(lw[k - 1] + t * (lw[k] - lw[k - 1])))
+
+
+def p1_roots(params: Params) -> np.ndarray:
+    """Roots (1/s) of p1 of Eq. (3)-(4), computed numerically from the plant (no sympy).
+
+    The zeros of V_m -> T_l (Eq. 2) are those of (K_hd + D_hd s) p1(s) (the velocity
+    compensation does not move them); the root at -K_hd/D_hd is removed. An independent check of
+    the symbolic rows of ``python -m haa_sym.verify``.
+
+    Example
+    -------
+    >>> np.round(p1_roots(load_params().with_values(K_L2=0.0)).real, 3)    # doctest: +SKIP
+    array([-7.53619948e+04, -2.55227e+02, -1.722e+00,  0.0])
+    """
+    from haa_sym.exact import to_float, transfer_polynomials
+    from haa_sym.plant import OUTPUTS, continuous_plant
+    cp = continuous_plant(params.plant)
+    _, nums = transfer_polynomials(cp.A, cp.B[:, :1], cp.C)
+    num = np.trim_zeros(to_float(nums[OUTPUTS.index("T_l")][0]), "f")
+    roots = np.roots(num)
+    spring_zero = -params.plant.K_hd / params.plant.D_hd
+    roots = np.delete(roots, np.argmin(np.abs(roots - spring_zero)))
+    roots = np.where(np.abs(roots) < 1e-9 * np.abs(roots).max(), 0.0, roots)
+    return np.sort_complex(roots)
+
+
+def torque_loop_margins(params: Params, *, options: LoopOptions | None = None,
+                        beta: float | None = None, alpha: float | None = None):
+    """Margins of the torque loop alone, opened at the PI output (Sec. 3.2 design targets:
+    PM > 30 deg, GM > 12 dB at the leg-inertia and stiffness bounds). Returns
+    :class:`haa_sym.margins.Margins`."""
+    from haa_sym.margins import stability_margins
+    loop = ClosedLoop(params, options)
+    ctrl = params.controller
+    w = np.logspace(np.log10(loop.options.omega_min), np.log10(np.pi / ctrl.Ts * (1 - 1e-9)),
+                    4 * loop.options.n_omega)
+    coef = loop.loop_coefficients(w, beta, alpha)
+    return stability_margins(coef.evaluate("L_t", 0.0, 0.0), w)
