@@ -23,6 +23,7 @@ import subprocess
 import sys
 import tempfile
 import time
+from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
@@ -147,108 +148,112 @@ def region_trends(stats: dict) -> list[dict]:
 
 
 # --- the job -----------------------------------------------------------------------------------
-def reproduce(out: str | Path = "results", params: Params | None = None,
-              options: LoopOptions | None = None, quick: bool = False,
-              spec: dict | None = None) -> dict:
-    """Compute and write everything listed in the module docstring; returns the claims dict.
+@dataclass(frozen=True)
+class _Job:
+    """What every section of the reproduction needs."""
 
-    ``quick`` uses coarse grids (for tests); the report says so.
-    """
-    t_start = time.time()
-    out = Path(out)
-    params = params or load_params()
-    options = options or LoopOptions()
-    spec = spec or paper_spec()
-    reg = spec["regions"]
-    claims_spec = spec["claims"]
-    P_grid = grid("log:1:20000:40" if quick else reg["P_gain"], "P_gain")
-    D_grid = grid("lin:1:50:20" if quick else reg["D_gain"], "D_gain")
-    result: dict = {"meta": run_meta(params, options, quick=quick)}
+    out: Path
+    params: Params
+    options: LoopOptions
+    spec: dict
+    quick: bool
+    P_grid: np.ndarray
+    D_grid: np.ndarray
 
-    # Figs. 8-11
+    @property
+    def claims(self) -> dict:
+        return self.spec["claims"]
+
+    def with_options(self, **change) -> LoopOptions:
+        return LoopOptions(**{**self.options.to_dict(), **change})
+
+
+# options varied one at a time around the defaults (the sensitivity table and the trend recount)
+OPTION_VARIANTS = (("delay", (0, 1)), ("torque_damping", (True, False)),
+                   ("filter", ("both", "impedance", "compensation")),
+                   ("port", ("dtheta_L2", "dtheta_L1", "encoder_average")),
+                   ("colgate", ("subtract", "add", "none")), ("pm_loop", ("impedance", "torque")),
+                   ("pm_rule", ("min_abs", "worst")))
+REGION_CAPTIONS = {8: "beta (alpha = 0.94, N_av = 4, Ts = 1 ms)", 9: "alpha (beta = 1, N_av = 4, Ts = 1 ms)",
+                   10: "N_av (beta = 1, alpha = 0.94, Ts = 1 ms)",
+                   11: "Ts (beta = 1, N_av = 4, alpha = 0.94) and retracted leg"}
+
+
+def _variants(options: LoopOptions) -> list[tuple[str, dict]]:
+    return [(f"{k} = {v}", {k: v}) for k, vals in OPTION_VARIANTS for v in vals if getattr(options, k) != v]
+
+
+def _regions(job: _Job) -> dict:
+    """Figs. 8-11: every panel's map (npz), its eigenvalue cross-check, the figures, the trends."""
+    from haa_sym.plots import plot_region_panels, save_figure
     _log("regions: 16 maps (Figs. 8-11)")
-    splits = quadrant_splits(spec, P_grid, D_grid)
+    splits = quadrant_splits(job.spec, job.P_grid, job.D_grid)
     stats, panels_by_fig, crosscheck = {k: {} for k in splits}, {}, {}
-    for entry in reg["panel"]:
+    for entry in job.spec["regions"]["panel"]:
         pid = f"{entry['figure']}{entry['panel']}"
-        p = panel_params(params, entry)
-        loop = ClosedLoop(p, options)
-        m = region_map(p, P_grid, D_grid, options=options, loop=loop)
+        p = panel_params(job.params, entry)
+        loop = ClosedLoop(p, job.options)
+        m = region_map(p, job.P_grid, job.D_grid, options=job.options, loop=loop)
         crosscheck[pid] = eigenvalue_crosscheck(m, loop)
         m.meta.update(figure=entry["figure"], panel=entry["panel"], title=entry["title"])
-        m.save(out / "regions" / f"fig{entry['figure']:02d}{entry['panel']}.npz")
+        m.save(job.out / "regions" / f"fig{entry['figure']:02d}{entry['panel']}.npz")
         for split, (Ps, Ds) in splits.items():
             stats[split][pid] = _quadrants(m, Ps, Ds)
         panels_by_fig.setdefault(entry["figure"], []).append((m, f"({entry['panel']}) {entry['title']}"))
-    from haa_sym.plots import (plot_contact, plot_corrected_phase, plot_region_panels, plot_steps,
-                               save_figure)
-    captions = {8: "beta (alpha = 0.94, N_av = 4, Ts = 1 ms)", 9: "alpha (beta = 1, N_av = 4, Ts = 1 ms)",
-                10: "N_av (beta = 1, alpha = 0.94, Ts = 1 ms)",
-                11: "Ts (beta = 1, N_av = 4, alpha = 0.94) and retracted leg"}
     for fig_no, items in panels_by_fig.items():
         save_figure(plot_region_panels([m for m, _ in items], [t for _, t in items],
-                                       f"Fig. {fig_no}: stability regions varying {captions.get(fig_no, '')}"),
-                    out / f"fig{fig_no:02d}.png")
-    result["region_crosscheck"] = crosscheck
-    result["region_splits"] = splits
-    result["region_stats"] = stats
-    result["region_trends"] = {k: region_trends(v) for k, v in stats.items()}
+                                       f"Fig. {fig_no}: stability regions varying {REGION_CAPTIONS.get(fig_no, '')}"),
+                    job.out / f"fig{fig_no:02d}.png")
+    return {"region_crosscheck": crosscheck, "region_splits": splits, "region_stats": stats,
+            "region_trends": {k: region_trends(v) for k, v in stats.items()}}
 
-    # how every option moves the nominal map
+
+def _option_sensitivity(job: _Job) -> dict:
+    """How each option, changed alone, moves the nominal map."""
     _log("option sensitivity of the nominal map")
     sens = []
-    variants = [("none (defaults)", {})] + [
-        (f"{k} = {v}", {k: v}) for k, vals in (("delay", (1,)), ("torque_damping", (False,)),
-                                               ("filter", ("impedance", "compensation")),
-                                               ("port", ("dtheta_L1", "encoder_average")),
-                                               ("colgate", ("add", "none")), ("pm_loop", ("torque",)),
-                                               ("pm_rule", ("worst",)))
-        for v in vals if getattr(options, k) != v]
-    for label, change in variants:
-        opt = LoopOptions(**{**options.to_dict(), **change})
-        m = region_map(params, P_grid, D_grid, options=opt, radius=False)
+    for label, change in [("none (defaults)", {})] + _variants(job.options):
+        m = region_map(job.params, job.P_grid, job.D_grid, options=job.with_options(**change), radius=False)
         sens.append({"change": label, "stable": int(m.stable.sum()), "low_pm": int(m.low_pm.sum()),
                      "passive": int(m.passive.sum()), "cells": int(m.stable.size)})
-    result["option_sensitivity"] = sens
+    return {"option_sensitivity": sens}
 
-    # do the trends that fail with the defaults hold under another stability / PM option?
+
+def _trend_alternatives(job: _Job, trends: list[dict], split: tuple[float, float]) -> dict:
+    """Do the trends that fail with the defaults hold under another stability / PM option?"""
     _log("Sec. 4 trends under the options that change stability or the phase margin")
-    failing = [i for i, t in enumerate(result["region_trends"]["locomotion"]) if not t["holds"]]
-    trend_alt = {}
-    if failing:
-        P_split, D_split = splits["locomotion"]
-        for label, change in variants[1:]:
-            if next(iter(change)) in ("port", "colgate"):
-                continue                                   # passivity only: no effect on trends
-            opt = LoopOptions(**{**options.to_dict(), **change})
-            st = {}
-            for entry in reg["panel"]:
-                p = panel_params(params, entry)
-                st[f"{entry['figure']}{entry['panel']}"] = _quadrants(
-                    region_map(p, P_grid, D_grid, options=opt, radius=False), P_split, D_split)
-            tr = region_trends(st)
-            trend_alt[label] = {"holding": sum(t["holds"] for t in tr),
-                                "rescued": [tr[i]["claim"] for i in failing if tr[i]["holds"]],
-                                "lost": [t["claim"] for i, t in enumerate(tr)
-                                         if not t["holds"] and i not in failing]}
-    result["trend_alternatives"] = trend_alt
+    failing = [i for i, t in enumerate(trends) if not t["holds"]]
+    alt = {}
+    for label, change in (_variants(job.options) if failing else []):
+        if next(iter(change)) in ("port", "colgate"):
+            continue                                       # passivity only: no effect on trends
+        opt = job.with_options(**change)
+        st = {f"{e['figure']}{e['panel']}": _quadrants(
+            region_map(panel_params(job.params, e), job.P_grid, job.D_grid, options=opt, radius=False), *split)
+            for e in job.spec["regions"]["panel"]}
+        tr = region_trends(st)
+        alt[label] = {"holding": sum(t["holds"] for t in tr),
+                      "rescued": [tr[i]["claim"] for i in failing if tr[i]["holds"]],
+                      "lost": [t["claim"] for i, t in enumerate(tr) if not t["holds"] and i not in failing]}
+    return {"trend_alternatives": alt}
 
-    # Table 2 and the option scores
+
+def _table2(job: _Job) -> dict:
+    """Table 2 (csv, md), the scores of every option combination, and what rescues each miss."""
+    from haa_sym.report import table2_markdown
     _log("Table 2 and option scores")
-    cells = table2(params, options, spec)
+    cells = table2(job.params, job.options, job.spec)
     rows = [{"row": c.row, "column": c.column, "P_gain": c.P_gain, "D_gain": c.D_gain,
              "paper": c.paper, "computed": c.status, "agrees": c.agrees,
              "phase_excess_deg": round(c.phase_excess_deg, 4) if np.isfinite(c.phase_excess_deg) else "",
              "omega_worst_rad_s": round(c.omega_worst, 3) if np.isfinite(c.omega_worst) else ""}
             for c in cells]
-    _write_text(out / "table2.csv", _csv(rows))
-    from haa_sym.report import table2_markdown
-    _write_text(out / "table2.md", "# Table 2: passivity (paper / computed)\n\n" + table2_markdown(rows, spec) + "\n")
-    scores = score_options(params, spec, options)
-    _write_text(out / "options_table2.csv", _csv([{**combo, "cells_reproduced": n, "cells": total}
-                                                    for combo, n, total, _ in scores]))
-    result["table2"] = rows
-    result["option_scores"] = [{"options": combo, "agree": n, "cells": total} for combo, n, total, _ in scores]
+    _write_text(job.out / "table2.csv", _csv(rows))
+    _write_text(job.out / "table2.md",
+                "# Table 2: passivity (paper / computed)\n\n" + table2_markdown(rows, job.spec) + "\n")
+    scores = score_options(job.params, job.spec, job.options)
+    _write_text(job.out / "options_table2.csv", _csv([{**combo, "cells_reproduced": n, "cells": total}
+                                                        for combo, n, total, _ in scores]))
     # for every cell the defaults miss: the best option set that gets it, and its total
     rescue = {}
     for c in cells:
@@ -257,95 +262,143 @@ def reproduce(out: str | Path = "results", params: Params | None = None,
                 if any(x.row == c.row and x.column == c.column and x.agrees for x in cc):
                     rescue[f"{c.row} | {c.column}"] = {"options": combo, "agree": n, "cells": total}
                     break
-    result["differing_cells_rescued_by"] = rescue
+    return {"table2": rows,
+            "option_scores": [{"options": combo, "agree": n, "cells": total} for combo, n, total, _ in scores],
+            "differing_cells_rescued_by": rescue}
 
-    # Fig. 12 and the Z band
-    _log("Fig. 12, contact stiffness, beta threshold, Fig. 7")
-    loop = ClosedLoop(params, options)
+
+def _fig12(job: _Job, loop: ClosedLoop) -> dict:
+    """Fig. 12: corrected phase of Z, torque loop alone and impedance loop closed; the bands."""
+    from haa_sym.plots import plot_corrected_phase, save_figure
+    params, options = job.params, job.options
     w_fine = np.logspace(np.log10(options.omega_min), np.log10(np.pi / params.controller.Ts * (1 - 1e-9)),
                          4 * options.n_omega)
     w, ph_t = corrected_phase(params, 0.0, 0.0, omega=w_fine, loop=loop)
-    P12, D12 = claims_spec["fig12_gains"]
+    P12, D12 = job.claims["fig12_gains"]
     _, ph_i = corrected_phase(params, P12, D12, omega=w_fine, loop=loop)
     save_figure(plot_corrected_phase(
         [(w, ph_t, f"torque loop alone (beta = {params.controller.beta:g}, alpha = {params.controller.alpha:g})"),
          (w, ph_i, f"impedance loop closed (P_gain = {P12:g}, D_gain = {D12:g})")],
-        "Fig. 12: corrected phase of Z(z)"), out / "fig12.png")
-    _write_text(out / "fig12.csv", _csv([{"omega_rad_s": f"{a:.6g}", "phase_torque_loop_deg": f"{b:.6f}",
-                                          "phase_impedance_loop_deg": f"{c:.6f}"}
-                                         for a, b, c in zip(w, ph_t, ph_i)]))
-    result["z_band_torque_loop"] = bands_beyond(w, ph_t)
-    result["z_band_impedance_loop"] = bands_beyond(w, ph_i)
+        "Fig. 12: corrected phase of Z(z)"), job.out / "fig12.png")
+    _write_text(job.out / "fig12.csv", _csv([{"omega_rad_s": f"{a:.6g}", "phase_torque_loop_deg": f"{b:.6f}",
+                                              "phase_impedance_loop_deg": f"{c:.6f}"}
+                                             for a, b, c in zip(w, ph_t, ph_i)]))
+    return {"z_band_torque_loop": bands_beyond(w, ph_t), "z_band_impedance_loop": bands_beyond(w, ph_i)}
 
-    # contact stiffness
-    K = grid(claims_spec["contact_K_L2_grid"] if not quick else "log:1:100000:80", "K_L2")
-    st, rho = contact_stability(params, K, options=options)
-    result["contact_unstable_K_L2"] = intervals(K, ~st)
-    _write_text(out / "contact.csv", _csv([{"K_L2": f"{k:.6g}", "stable": bool(s), "spectral_radius": f"{r:.9f}"}
-                                           for k, s, r in zip(K, st, rho)]))
-    save_figure(plot_contact(K, rho, claims_spec["contact_unstable_K_L2"]), out / "contact.png")
 
-    # beta threshold for the stiff impedance
-    bt = claims_spec["beta_threshold"]
+def _contact(job: _Job) -> dict:
+    """Stability of the torque loop alone against the environment stiffness (Sec. 5)."""
+    from haa_sym.plots import plot_contact, save_figure
+    K = grid(job.claims["contact_K_L2_grid"] if not job.quick else "log:1:100000:80", "K_L2")
+    st, rho = contact_stability(job.params, K, options=job.options)
+    _write_text(job.out / "contact.csv", _csv([{"K_L2": f"{k:.6g}", "stable": bool(s), "spectral_radius": f"{r:.9f}"}
+                                               for k, s, r in zip(K, st, rho)]))
+    save_figure(plot_contact(K, rho, job.claims["contact_unstable_K_L2"]), job.out / "contact.png")
+    return {"contact_unstable_K_L2": intervals(K, ~st)}
+
+
+def _beta_threshold(job: _Job, loop: ClosedLoop) -> dict:
+    """The torque gain beyond which the stiff impedance (P 20000, D 50) is unstable."""
+    bt = job.claims["beta_threshold"]
     betas = grid(bt["grid"], "beta")
     sb = loop.stability(bt["P_gain"], bt["D_gain"], betas)
-    result["beta_unstable_intervals"] = intervals(betas, ~sb.stable)
-    result["beta_check"] = {
-        "stable_at": bt["stable_at"], "computed_stable_at": bool(loop.stability(bt["P_gain"], bt["D_gain"], bt["stable_at"]).stable),
-        "unstable_from": bt["unstable_from"],
-        "computed_unstable_for_all_beta_from": bool((~sb.stable[betas >= bt["unstable_from"]]).all()),
-        "first_unstable_beta_above_stable_at": float(betas[(betas > bt["stable_at"]) & ~sb.stable][0])
-        if ((betas > bt["stable_at"]) & ~sb.stable).any() else None,
-    }
+    above = (betas > bt["stable_at"]) & ~sb.stable
+    return {"beta_unstable_intervals": intervals(betas, ~sb.stable),
+            "beta_check": {
+                "stable_at": bt["stable_at"],
+                "computed_stable_at": bool(loop.stability(bt["P_gain"], bt["D_gain"], bt["stable_at"]).stable),
+                "unstable_from": bt["unstable_from"],
+                "computed_unstable_for_all_beta_from": bool((~sb.stable[betas >= bt["unstable_from"]]).all()),
+                "first_unstable_beta_above_stable_at": float(betas[above][0]) if above.any() else None}}
 
-    # Fig. 7 torque steps
+
+def _fig7(job: _Job) -> dict:
+    """Fig. 7: unit torque steps, K_L2 = 0 and 11.2, with and without velocity compensation."""
+    from haa_sym.plots import plot_steps, save_figure
+    c = job.claims
     panels, steps = [], []
-    for K_L2 in claims_spec["fig7_K_L2"]:
-        p7 = params.with_values(K_L2=K_L2)
+    for K_L2 in c["fig7_K_L2"]:
+        p7 = job.params.with_values(K_L2=K_L2)
         lines = []
-        for a, ls in zip(claims_spec["fig7_alpha"], ("-", "--")):
-            s = step_response(p7, duration=claims_spec["fig7_duration_s"], options=options, alpha=a)
+        for a, ls in zip(c["fig7_alpha"], ("-", "--")):
+            s = step_response(p7, duration=c["fig7_duration_s"], options=job.options, alpha=a)
             lines.append((s, f"alpha = {a:g}", ls))
             steps.append({"K_L2": K_L2, "alpha": a, "rise_time_s": s.rise_time,
                           "T_at_end": float(s.T[-1]), "overshoot": s.overshoot,
                           "settling_time_5pct_s": s.settling_time,
-                          "bandwidth_rad_s": torque_bandwidth(p7, options=options, alpha=a)})
+                          "bandwidth_rad_s": torque_bandwidth(p7, options=job.options, alpha=a)})
         panels.append((f"K_L2 = {K_L2:g} Nm/rad", lines))
-    save_figure(plot_steps(panels, "Fig. 7: unit torque steps (extended leg)"), out / "fig07.png")
+    save_figure(plot_steps(panels, "Fig. 7: unit torque steps (extended leg)"), job.out / "fig07.png")
     t7 = panels[0][1][0][0].t
-    _write_text(out / "fig07.csv", _csv([
+    _write_text(job.out / "fig07.csv", _csv([
         {"t_s": f"{t:.4f}", **{f"T_K{K:g}_alpha{a:g}": f"{s.T[i]:.6f}"
-                               for (title, lines), K in zip(panels, claims_spec["fig7_K_L2"])
-                               for (s, _, _), a in zip(lines, claims_spec["fig7_alpha"])}}
+                               for (_, lines), K in zip(panels, c["fig7_K_L2"])
+                               for (s, _, _), a in zip(lines, c["fig7_alpha"])}}
         for i, t in enumerate(t7)]))
-    result["fig7"] = steps
+    return {"fig7": steps}
 
-    # p1 roots and torque-loop margins at the leg-inertia / stiffness bounds, numerically
+
+def _torque_loop_corners(job: _Job) -> dict:
+    """p1 roots and torque-loop margins at the leg-inertia / stiffness bounds, numerically."""
+    params = job.params
     corners = []
     for cfg in sorted(params.configurations):
         for K in sorted({0.0, *(p.get("K_L2") for p in params.configurations.values() if "K_L2" in p),
                          params.plant.K_L2}):
             pc = params.configuration(cfg).with_values(K_L2=K)
-            mg = torque_loop_margins(pc, options=options)
+            mg = torque_loop_margins(pc, options=job.options)
             corners.append({"configuration": cfg, "J_L2": pc.plant.J_L2, "K_L2": K,
                             "p1_roots": [complex(z) for z in p1_roots(pc)],
                             "pm_deg": mg.pm_deg if np.isfinite(mg.pm_deg) else None,
                             "gain_crossover_rad_s": [float(x) for x in mg.gain_crossovers],
                             "gm_db": mg.gm_db if np.isfinite(mg.gm_db) else None,
                             "phase_crossover_rad_s": [float(x) for x in mg.phase_crossovers]})
-    result["torque_loop_corners"] = corners
+    return {"torque_loop_corners": corners}
 
-    # verify (symbolic rows: p1 roots, margins at the leg-inertia bounds) in its own process:
-    # the numeric runtime never imports sympy
+
+def _verify(job: _Job) -> tuple[dict, str]:
+    """``python -m haa_sym.verify`` in its own process: the numeric runtime never imports sympy."""
+    src = job.params.source
     proc = subprocess.run([sys.executable, "-m", "haa_sym.verify"] +
-                          (["--params", params.source] if Path(params.source).is_file() else []),
+                          (["--params", src] if Path(src).is_file() else []),
                           capture_output=True, text=True)
-    _write_text(out / "verify.txt", proc.stdout + proc.stderr)
-    result["verify_exit_status"] = proc.returncode
+    _write_text(job.out / "verify.txt", proc.stdout + proc.stderr)
+    return {"verify_exit_status": proc.returncode}, proc.stdout
 
+
+def reproduce(out: str | Path = "results", params: Params | None = None,
+              options: LoopOptions | None = None, quick: bool = False,
+              spec: dict | None = None) -> dict:
+    """Compute and write everything listed in the module docstring; returns the claims dict.
+
+    ``quick`` uses coarse grids (for tests); the report says so.
+    """
+    t_start = time.time()
+    params = params or load_params()
+    options = options or LoopOptions()
+    spec = spec or paper_spec()
+    reg = spec["regions"]
+    job = _Job(out=Path(out), params=params, options=options, spec=spec, quick=quick,
+               P_grid=grid("log:1:20000:40" if quick else reg["P_gain"], "P_gain"),
+               D_grid=grid("lin:1:50:20" if quick else reg["D_gain"], "D_gain"))
+    result: dict = {"meta": run_meta(params, options, quick=quick)}
+    result.update(_regions(job))
+    result.update(_option_sensitivity(job))
+    result.update(_trend_alternatives(job, result["region_trends"]["locomotion"],
+                                      result["region_splits"]["locomotion"]))
+    result.update(_table2(job))
+    _log("Fig. 12, contact stiffness, beta threshold, Fig. 7, torque-loop bounds, verify")
+    loop = ClosedLoop(params, options)
+    result.update(_fig12(job, loop))
+    result.update(_contact(job))
+    result.update(_beta_threshold(job, loop))
+    result.update(_fig7(job))
+    result.update(_torque_loop_corners(job))
+    verify_status, verify_text = _verify(job)
+    result.update(verify_status)
     result["elapsed_s"] = round(time.time() - t_start, 1)
-    _write_text(out / "claims.json", json.dumps(result, indent=1, default=_json_default) + "\n")
+    _write_text(job.out / "claims.json", json.dumps(result, indent=1, default=_json_default) + "\n")
     from haa_sym.report import write_report
-    write_report(out, result, spec, options, proc.stdout)
-    _log(f"wrote {out}/REPORT.md in {result['elapsed_s']} s")
+    write_report(job.out, result, spec, options, verify_text)
+    _log(f"wrote {job.out}/REPORT.md in {result['elapsed_s']} s")
     return result
