@@ -19,8 +19,10 @@ class Margins:
 
     ``gain_crossovers`` (rad/s) where |L| = 1, with ``phase_margins_deg`` = 180 + arg L there,
     wrapped to (-180, 180]; ``phase_crossovers`` (rad/s) where arg L = -180 (mod 360), with
-    ``gain_margins_db`` = -20 log10 |L| there. ``pm_deg``: the smallest phase margin (NaN if
-    |L| never crosses 1); ``gm_db``: the smallest gain margin (inf if no phase crossover).
+    ``gain_margins_db`` = -20 log10 |L| there. ``pm_deg``: the smallest signed phase margin (NaN
+    if |L| never crosses 1), the conservative value for a "PM > x at every crossover" design check
+    (``verify``, the torque-loop bounds of the report); the region maps choose the crossover by
+    ``LoopOptions.pm_rule`` instead. ``gm_db``: the smallest gain margin (inf if no phase crossover).
     """
 
     gain_crossovers: np.ndarray

@@ -187,7 +187,8 @@ def write_report(out: Path, r: dict, spec: dict, options: LoopOptions, verify_te
     def _root(z):
         re, im = z
         return f"{re:.4g}" if abs(im) < 1e-12 * max(1.0, abs(re)) else f"{re:.4g}{im:+.4g}j"
-    add(_table(["leg", "J_L2", "K_L2", "roots of p1 (1/s)", "PM (deg) @ rad/s", "GM (dB) @ rad/s"],
+    add(_table(["leg", "J_L2", "K_L2", "roots of p1 (1/s)", "smallest PM (deg) @ crossovers (rad/s)",
+                "smallest GM (dB) @ rad/s"],
                [[c["configuration"], c["J_L2"], c["K_L2"],
                  ", ".join(_root(z if isinstance(z, (list, tuple)) else (z.real, z.imag)) for z in c["p1_roots"]),
                  "-" if c["pm_deg"] is None else f"{c['pm_deg']:.2f} @ " + ", ".join(f"{w:.4g}" for w in c["gain_crossover_rad_s"]),
