@@ -19,7 +19,7 @@ from pathlib import Path
 import casadi as ca
 import sympy
 
-from codegen.kernels import decision_function, loop_coefficient_function, stability_function
+from codegen.kernels import decision_function, loop_coefficient_function
 from codegen.symbolic_to_casadi import plant_function
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -42,7 +42,6 @@ SOURCES = (
 
 def functions() -> list[ca.Function]:
     fns = [plant_function(), loop_coefficient_function()]
-    fns += [stability_function(cap) for cap in CAPACITIES]
     fns += [decision_function(cap) for cap in CAPACITIES]
     return fns
 

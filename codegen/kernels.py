@@ -13,9 +13,11 @@ where b7 is the exact difference of the compensation's and the D term's polynomi
 both use the same average): P_t D_gain and VC nearly cancel in parts of the gain plane, so the
 two must not be rounded separately.
 
-with basis polynomials b_j fixed per discretised plant (see ``haa_sym.loop``). These kernels take
-the basis and a gain point and return the Schur-Cohn (Jury) decision and the spectral radius,
-and, per frequency, the gain-affine coefficients of the loop transfer functions in real
+with basis polynomials b_j fixed per discretised plant (see ``haa_sym.loop``). The stability
+kernel works on their bilinear transforms (z = (1 + s)/(1 - s), computed exactly), where the
+poles that crowd at z = 1 under fast sampling stay resolved: it returns the Routh-Hurwitz
+decision and whether the rounding of the coefficients could change it. Per frequency the
+kernels return the gain-affine coefficients of the loop transfer functions in real
 arithmetic (a gain sweep then costs one small matrix product per frequency grid, see
 ``haa_sym.regions``).
 """
@@ -24,13 +26,19 @@ from __future__ import annotations
 import functools
 
 import casadi as ca
-import numpy as np
 
 N_BASIS = 8
 N_CONST = 3   # P_t0, I_t0, VC0
 N_POINT = 4   # P_gain, D_gain, beta, alpha
-# 2^-30 ~ 1e-9: below the ~1e-8 radius accuracy of the monomial basis at Ts = 1 ms
-BISECTION_STEPS = 30
+# Bound on the rounding error of each coefficient of q = basis @ g, in units of the unit
+# roundoff times (|basis| @ |g|): the basis rounded once (1), the products (1), the gain
+# monomials themselves (3, g_5 = P_t D_gain - VC is a difference), the 8-term sum (8), the
+# normalisation (1); doubled for safety.
+COEF_ERROR_ULPS = 32.0
+UNIT_ROUNDOFF = 2.0 ** -53
+# Kharitonov's four vertex polynomials of the interval family q +- e, ascending coefficients:
+# +1 takes the upper end of the interval, -1 the lower; the pattern repeats every 4 powers.
+KHARITONOV_PATTERNS = ((-1, -1, +1, +1), (+1, +1, -1, -1), (-1, +1, +1, -1), (+1, -1, -1, +1))
 
 
 def gain_monomials(point, const):
@@ -42,59 +50,82 @@ def gain_monomials(point, const):
     return ca.vertcat(1, P_t, I_t, P_t * P, I_t * P, P_t * D - VC, I_t * D, -VC)
 
 
-@functools.lru_cache(maxsize=None)
-def jury_function(cap: int) -> ca.Function:
-    """Schur-Cohn test of a real polynomial of degree ``cap`` (ascending coefficients).
+def gain_monomial_bounds(point, const):
+    """Upper bounds of |g_j| that also cover the rounding of g_5 = P_t D_gain - VC."""
+    P, D, beta, alpha = point[0], point[1], point[2], point[3]
+    P_t = ca.fabs(beta * const[0])
+    I_t = ca.fabs(beta * const[1])
+    VC = ca.fabs(alpha * const[2])
+    P, D = ca.fabs(P), ca.fabs(D)
+    return ca.vertcat(1, P_t, I_t, P_t * P, I_t * P, P_t * D + VC, I_t * D, VC)
 
-    Lattice form: with p_m and its reverse p*_m, k_m = p_m(0)/p*_m(0) and
-    p_{m-1} = (p_m - k_m p*_m)/(z (1 - k_m^2)), p*_{m-1} = (p*_m - k_m p_m)/(1 - k_m^2).
-    All roots lie in |z| < 1 iff every |k_m| < 1. Returns max_m |k_m| (stable iff < 1).
-    Roots at z = 0 (leading zero coefficients, used to pad lower degrees) give k_m = 0.
-    Cached: the decision and radius functions of one capacity share one copy in the C.
+
+@functools.lru_cache(maxsize=None)
+def routh_function(cap: int) -> ca.Function:
+    """Routh-Hurwitz test of a real polynomial of degree ``cap`` (ascending coefficients).
+
+    The Routh array of q(s) = sum_k a_k s^k: the first two rows hold the coefficients of even
+    and odd distance from the leading one; each next row is r2_j = r0_(j+1) - (r0_0/r1_0)
+    r1_(j+1). With a positive leading coefficient, the number of sign changes down the first
+    column is the number of roots in Re s > 0 (Routh 1877). Outputs ``changes`` and ``regular``
+    (0 when a first-column entry is zero or not finite: the singular case, left to the caller).
+    Cached: the decision function of one capacity calls one shared copy in the C.
     """
     a = ca.SX.sym("a", cap + 1)
-    inv_lead = 1 / a[cap]
-    P = [a[i] * inv_lead for i in range(cap + 1)]
-    S = P[::-1]
-    kmax = ca.SX(0)
-    for m in range(cap, 0, -1):
-        k = P[0]  # S[0] is kept at 1 by the normalisation below
-        kmax = ca.fmax(kmax, ca.fabs(k))
-        # past an unstable step the remaining k's are meaningless; keep the arithmetic finite
-        inv = 1 / ca.if_else(ca.fabs(k) < 1, 1 - k * k, 1)
-        P, S = ([(P[i + 1] - k * S[i + 1]) * inv for i in range(m)],
-                [(S[i] - k * P[i]) * inv for i in range(m)])
-    return ca.Function(f"haa_jury{cap}", [a], [kmax], ["a"], ["kmax"])
+    desc = [a[cap - i] for i in range(cap + 1)]
+    r0, r1 = desc[0::2], desc[1::2]
+    first = [r0[0], r1[0]]
+    for _ in range(cap - 1):
+        m = r0[0] / r1[0]
+        new = [r0[j + 1] - m * (r1[j + 1] if j + 1 < len(r1) else 0) for j in range(len(r0) - 1)]
+        r0, r1 = r1, new
+        first.append(r1[0])
+    changes = ca.SX(0)
+    regular = ca.SX(1)
+    for i, f in enumerate(first):
+        # |f| < inf is false for NaN as well as for +-inf
+        regular = regular * (ca.fabs(f) > 0) * (ca.fabs(f) < ca.inf)
+        if i:
+            changes = changes + ca.fabs((first[i - 1] < 0) - (f < 0))
+    return ca.Function(f"haa_routh{cap}", [a], [changes, regular], ["a"], ["changes", "regular"])
 
 
-def stability_function(cap: int, steps: int = BISECTION_STEPS) -> ca.Function:
-    """Decision and spectral radius of chi for one gain point.
+def decision_function(cap: int) -> ca.Function:
+    """Stability decision of one gain point, certified against the rounding of chi.
 
-    Inputs: ``basis`` (cap+1 x 8, ascending coefficients of b_j), const [P_t0, I_t0, VC0],
-    point [P_gain, D_gain, beta, alpha].
-    Outputs: ``kmax`` of the Schur-Cohn test (stable iff < 1) and ``rho``, the spectral radius
-    by ``steps`` halvings on chi(r z) (stable iff all roots inside |z| < r): linear on [0, 1] when stable,
-    geometric on [1, Cauchy bound] when not, so rho <= 1 iff the test says stable.
+    Inputs: ``basis`` (cap+1 x 8): ascending coefficients of the bilinear transforms
+    q_j(s) = (1 - s)^cap b_j((1 + s)/(1 - s)) of the basis polynomials (computed exactly, rounded
+    once; ``haa_sym.loop``), const [P_t0, I_t0, VC0], point [P_gain, D_gain, beta, alpha].
+
+    chi is Schur stable iff q = basis @ g is Hurwitz stable. Outputs:
+    ``n_unstable``  sign changes of q's Routh array = closed-loop poles outside |z| = 1;
+    ``certified``   1 when every polynomial within the rounding bound e of q (|dq_k| <= e_k,
+                    COEF_ERROR_ULPS) has the same decision: the Routh tests of Kharitonov's four
+                    vertex polynomials agree with q's (for a stable q this is Kharitonov's
+                    theorem: the whole interval family is Hurwitz), no Routh array is singular
+                    and the leading coefficient's interval excludes 0. Otherwise 0: the caller
+                    re-decides the point from eigenvalues.
     """
-    jury = jury_function(cap)
+    routh = routh_function(cap)
     basis = ca.MX.sym("basis", cap + 1, N_BASIS)
     const = ca.MX.sym("const", N_CONST)
     point = ca.MX.sym("point", N_POINT)
-    a = ca.mtimes(basis, gain_monomials(point, const))
-    kmax = jury(a)
-    stable = kmax < 1
-    cauchy = 1 + ca.mmax(ca.fabs(a[:cap])) / ca.fabs(a[cap])
-    lo = ca.if_else(stable, 0, 1)
-    hi = ca.if_else(stable, 1, cauchy)
-    # a_i r^(i - cap): chi(r z)/r^cap, scaled to keep the largest power bounded
-    powers = ca.DM(np.arange(cap + 1, dtype=float) - cap)
-    for _ in range(steps):
-        r = ca.if_else(stable, (lo + hi) / 2, ca.sqrt(lo * hi))
-        inside = jury(a * r ** powers) < 1
-        lo = ca.if_else(inside, lo, r)
-        hi = ca.if_else(inside, r, hi)
-    return ca.Function(f"haa_stab{cap}", [basis, const, point], [kmax, hi],
-                       ["basis", "const", "point"], ["kmax", "rho"])
+    q = ca.mtimes(basis, gain_monomials(point, const))
+    e = COEF_ERROR_ULPS * UNIT_ROUNDOFF * ca.mtimes(ca.fabs(basis), gain_monomial_bounds(point, const))
+    # positive leading coefficient, largest coefficient 1: Routh's rule needs the sign and the
+    # array stays in range
+    scale = ca.sign(q[cap]) / ca.mmax(ca.fabs(q))
+    q = q * scale
+    e = e * ca.fabs(scale)
+    changes, regular = routh(q)
+    stable = changes < 0.5
+    certified = regular * (q[cap] > e[cap])
+    for pattern in KHARITONOV_PATTERNS:
+        signs = ca.DM([pattern[k % 4] for k in range(cap + 1)])
+        ch, reg = routh(q + signs * e)
+        certified = certified * reg * ((ch < 0.5) == stable)
+    return ca.Function(f"haa_decide{cap}", [basis, const, point], [changes, certified],
+                       ["basis", "const", "point"], ["n_unstable", "certified"])
 
 
 def _c(re, im):
@@ -128,35 +159,6 @@ N_TORQUE_GAINS = 2  # beta, alpha
 # Every loop transfer below is affine in x = (1, P_gain, D_gain) or a ratio of two such forms,
 # because the impedance law Eq. (8) enters linearly through the torque reference.
 COEF_OUTPUTS = ("L_t", "L_imp", "Z_num", "Z_den")
-
-
-def decision_function(cap: int) -> ca.Function:
-    """Schur-Cohn decision without the radius, for one gain point.
-
-    Inputs as :func:`stability_function` plus ``s_in`` and ``s_out``, the scalings
-    r^(i - cap) of the ascending coefficients for r = 1 - band and r = 1 + band (passed in
-    rather than computed: 2 x (cap+1) pow calls per point cost as much as a test).
-    Outputs ``kmax``, ``k_in`` and ``k_out``: stable iff kmax < 1; k_in < 1 iff every root lies
-    in |z| < 1 - band; k_out < 1 iff every root lies in |z| < 1 + band. A point with
-    k_in >= 1 > k_out has its spectral radius within ``band`` of 1 and must be re-decided by
-    eigenvalues.
-
-    The test at 1 - band runs first: when it passes (most stable points) the point is stable and
-    not near the boundary, the other two tests are skipped (short-circuit branch) and all three
-    outputs are k_in. Otherwise all three run.
-    """
-    jury = jury_function(cap)
-    basis = ca.MX.sym("basis", cap + 1, N_BASIS)
-    const = ca.MX.sym("const", N_CONST)
-    point = ca.MX.sym("point", N_POINT)
-    s_in = ca.MX.sym("s_in", cap + 1)
-    s_out = ca.MX.sym("s_out", cap + 1)
-    a = ca.mtimes(basis, gain_monomials(point, const))
-    k_in = jury(a * s_in)
-    rest = ca.if_else(k_in < 1, ca.vertcat(k_in, k_in), ca.vertcat(jury(a), jury(a * s_out)), True)
-    return ca.Function(f"haa_decide{cap}", [basis, const, point, s_in, s_out],
-                       [rest[0], k_in, rest[1]],
-                       ["basis", "const", "point", "s_in", "s_out"], ["kmax", "k_in", "k_out"])
 
 
 def loop_coefficient_function() -> ca.Function:

@@ -53,60 +53,6 @@ int haa_loopcoef_work_bytes(casadi_int *sz_arg, casadi_int* sz_res, casadi_int *
 #define haa_loopcoef_SZ_RES 1
 #define haa_loopcoef_SZ_IW 0
 #define haa_loopcoef_SZ_W 0
-int haa_stab16(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem);
-int haa_stab16_checkout(void);
-void haa_stab16_release(int mem);
-void haa_stab16_incref(void);
-void haa_stab16_decref(void);
-casadi_int haa_stab16_n_in(void);
-casadi_int haa_stab16_n_out(void);
-casadi_real haa_stab16_default_in(casadi_int i);
-const char* haa_stab16_name_in(casadi_int i);
-const char* haa_stab16_name_out(casadi_int i);
-const casadi_int* haa_stab16_sparsity_in(casadi_int i);
-const casadi_int* haa_stab16_sparsity_out(casadi_int i);
-int haa_stab16_work(casadi_int *sz_arg, casadi_int* sz_res, casadi_int *sz_iw, casadi_int *sz_w);
-int haa_stab16_work_bytes(casadi_int *sz_arg, casadi_int* sz_res, casadi_int *sz_iw, casadi_int *sz_w);
-#define haa_stab16_SZ_ARG 11
-#define haa_stab16_SZ_RES 3
-#define haa_stab16_SZ_IW 0
-#define haa_stab16_SZ_W 127
-int haa_stab32(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem);
-int haa_stab32_checkout(void);
-void haa_stab32_release(int mem);
-void haa_stab32_incref(void);
-void haa_stab32_decref(void);
-casadi_int haa_stab32_n_in(void);
-casadi_int haa_stab32_n_out(void);
-casadi_real haa_stab32_default_in(casadi_int i);
-const char* haa_stab32_name_in(casadi_int i);
-const char* haa_stab32_name_out(casadi_int i);
-const casadi_int* haa_stab32_sparsity_in(casadi_int i);
-const casadi_int* haa_stab32_sparsity_out(casadi_int i);
-int haa_stab32_work(casadi_int *sz_arg, casadi_int* sz_res, casadi_int *sz_iw, casadi_int *sz_w);
-int haa_stab32_work_bytes(casadi_int *sz_arg, casadi_int* sz_res, casadi_int *sz_iw, casadi_int *sz_w);
-#define haa_stab32_SZ_ARG 11
-#define haa_stab32_SZ_RES 3
-#define haa_stab32_SZ_IW 0
-#define haa_stab32_SZ_W 239
-int haa_stab64(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem);
-int haa_stab64_checkout(void);
-void haa_stab64_release(int mem);
-void haa_stab64_incref(void);
-void haa_stab64_decref(void);
-casadi_int haa_stab64_n_in(void);
-casadi_int haa_stab64_n_out(void);
-casadi_real haa_stab64_default_in(casadi_int i);
-const char* haa_stab64_name_in(casadi_int i);
-const char* haa_stab64_name_out(casadi_int i);
-const casadi_int* haa_stab64_sparsity_in(casadi_int i);
-const casadi_int* haa_stab64_sparsity_out(casadi_int i);
-int haa_stab64_work(casadi_int *sz_arg, casadi_int* sz_res, casadi_int *sz_iw, casadi_int *sz_w);
-int haa_stab64_work_bytes(casadi_int *sz_arg, casadi_int* sz_res, casadi_int *sz_iw, casadi_int *sz_w);
-#define haa_stab64_SZ_ARG 11
-#define haa_stab64_SZ_RES 3
-#define haa_stab64_SZ_IW 0
-#define haa_stab64_SZ_W 463
 int haa_decide16(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem);
 int haa_decide16_checkout(void);
 void haa_decide16_release(int mem);
@@ -121,10 +67,10 @@ const casadi_int* haa_decide16_sparsity_in(casadi_int i);
 const casadi_int* haa_decide16_sparsity_out(casadi_int i);
 int haa_decide16_work(casadi_int *sz_arg, casadi_int* sz_res, casadi_int *sz_iw, casadi_int *sz_w);
 int haa_decide16_work_bytes(casadi_int *sz_arg, casadi_int* sz_res, casadi_int *sz_iw, casadi_int *sz_w);
-#define haa_decide16_SZ_ARG 24
-#define haa_decide16_SZ_RES 6
+#define haa_decide16_SZ_ARG 11
+#define haa_decide16_SZ_RES 4
 #define haa_decide16_SZ_IW 0
-#define haa_decide16_SZ_W 290
+#define haa_decide16_SZ_W 229
 int haa_decide32(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem);
 int haa_decide32_checkout(void);
 void haa_decide32_release(int mem);
@@ -139,10 +85,10 @@ const casadi_int* haa_decide32_sparsity_in(casadi_int i);
 const casadi_int* haa_decide32_sparsity_out(casadi_int i);
 int haa_decide32_work(casadi_int *sz_arg, casadi_int* sz_res, casadi_int *sz_iw, casadi_int *sz_w);
 int haa_decide32_work_bytes(casadi_int *sz_arg, casadi_int* sz_res, casadi_int *sz_iw, casadi_int *sz_w);
-#define haa_decide32_SZ_ARG 24
-#define haa_decide32_SZ_RES 6
+#define haa_decide32_SZ_ARG 11
+#define haa_decide32_SZ_RES 4
 #define haa_decide32_SZ_IW 0
-#define haa_decide32_SZ_W 530
+#define haa_decide32_SZ_W 429
 int haa_decide64(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem);
 int haa_decide64_checkout(void);
 void haa_decide64_release(int mem);
@@ -157,10 +103,10 @@ const casadi_int* haa_decide64_sparsity_in(casadi_int i);
 const casadi_int* haa_decide64_sparsity_out(casadi_int i);
 int haa_decide64_work(casadi_int *sz_arg, casadi_int* sz_res, casadi_int *sz_iw, casadi_int *sz_w);
 int haa_decide64_work_bytes(casadi_int *sz_arg, casadi_int* sz_res, casadi_int *sz_iw, casadi_int *sz_w);
-#define haa_decide64_SZ_ARG 24
-#define haa_decide64_SZ_RES 6
+#define haa_decide64_SZ_ARG 11
+#define haa_decide64_SZ_RES 4
 #define haa_decide64_SZ_IW 0
-#define haa_decide64_SZ_W 1010
+#define haa_decide64_SZ_W 829
 void haa_sym_gen_casadi_version(int* major, int* minor, int* patch);
 int haa_sym_gen_casadi_int_size(void);
 int haa_sym_gen_casadi_real_size(void);

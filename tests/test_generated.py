@@ -79,11 +79,10 @@ def test_compiled_and_vm_agree(params):
         a = ClosedLoop(p, backend="compiled")
         b = ClosedLoop(p, backend="vm")
         np.testing.assert_array_equal(a.basis, b.basis)
-        ra, rb = a.stability(*pts, refine_band=0), b.stability(*pts, refine_band=0)
+        ra, rb = a.stability(*pts, certify=False), b.stability(*pts, certify=False)
         np.testing.assert_array_equal(ra.stable, rb.stable)
-        np.testing.assert_allclose(ra.spectral_radius, rb.spectral_radius, rtol=0, atol=1e-13)
-        da, db = a.stability(*pts, radius=False), b.stability(*pts, radius=False)
-        np.testing.assert_array_equal(da.stable, db.stable)
+        np.testing.assert_array_equal(ra.n_unstable, rb.n_unstable)
+        np.testing.assert_array_equal(ra.refined, rb.refined)
         w = np.logspace(0, 3, 7)
         fa, fb = a.frequency_response(w, *pts), b.frequency_response(w, *pts)
         for k in fa:
@@ -115,13 +114,10 @@ def test_column_driver_matches_casadi_call(params):
     loop = ClosedLoop(params.with_values(N_av=10), backend="compiled")
     pts = np.stack([10 ** rng.uniform(0, 4.3, 300), rng.uniform(0, 50, 300),
                     rng.uniform(0.5, 6, 300), rng.uniform(0, 1.2, 300)])
-    powers = np.arange(loop.capacity + 1) - loop.capacity
-    for name, args in ((f"haa_stab{loop.capacity}", [loop.basis, loop.const, pts]),
-                       (f"haa_decide{loop.capacity}",
-                        [loop.basis, loop.const, pts, 0.99 ** powers, 1.01 ** powers])):
+    for name, args in ((f"haa_decide{loop.capacity}", [loop.basis, loop.const, pts]),):
         fast = ev.call_columns(name, args, 2)
         ref = ev[name](*args)
         for a, b in zip(fast, ref):
             np.testing.assert_array_equal(a.ravel(), np.array(b).ravel())
     with pytest.raises(ValueError, match="rows"):
-        ev.call_columns(f"haa_stab{loop.capacity}", [loop.basis, loop.const, pts[:3]], 2)
+        ev.call_columns(f"haa_decide{loop.capacity}", [loop.basis, loop.const, pts[:3]], 2)

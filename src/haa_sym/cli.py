@@ -119,7 +119,7 @@ def _cmd_regions(args) -> int:
     P, D = grid(args.P_gain, "--P-gain"), grid(args.D_gain, "--D-gain")
     out = _check_out(args.out, "regions")
     plot = _check_out(args.plot, "regions", "--plot")
-    m = region_map(params, P, D, options=options, radius=not args.no_radius)
+    m = region_map(params, P, D, options=options, radius=args.radius)
     with _all_or_nothing([out, plot]):
         if out:
             m.save(out)
@@ -195,7 +195,7 @@ def _cmd_margins(args) -> int:
     options = _parse_options(args.option)
     loop = ClosedLoop(params, options)
     coef = loop.loop_coefficients()
-    st = loop.stability(args.P_gain, args.D_gain)
+    st = loop.stability(args.P_gain, args.D_gain, radius=True)
     print(f"closed loop: {'stable' if st.stable else 'UNSTABLE'}, spectral radius {float(st.spectral_radius):.9f}")
     for name, label in (("L_t", "torque loop (opened at the PI output)"),
                         ("L_imp", "impedance loop (opened at T_lref)")):
@@ -231,7 +231,8 @@ def main(argv: list[str] | None = None) -> int:
     r.add_argument("--out", help="output .npz")
     r.add_argument("--plot", help="output figure (.png/.pdf/.svg)")
     r.add_argument("--title")
-    r.add_argument("--no-radius", action="store_true", help="skip the spectral radius (faster)")
+    r.add_argument("--radius", action="store_true",
+                   help="also compute the spectral radius from eigenvalues (slower)")
     p = sub.add_parser("passivity", help="passivity of Z(z) at gain pairs (Table 2, Fig. 12)")
     _common(p)
     p.add_argument("--P-gain", default="0,200,20000", help="values paired with --D-gain")
@@ -259,7 +260,8 @@ def main(argv: list[str] | None = None) -> int:
         if args.cmd == "stability":
             from haa_sym.loop import ClosedLoop
             params = _params(args)
-            res = ClosedLoop(params, _parse_options(args.option)).stability(args.P_gain, args.D_gain)
+            res = ClosedLoop(params, _parse_options(args.option)).stability(args.P_gain, args.D_gain,
+                                                                             radius=True)
             print(f"stable: {bool(res.stable)}  spectral radius: {float(res.spectral_radius):.12f}")
             return 0
         return {"regions": _cmd_regions, "passivity": _cmd_passivity, "step": _cmd_step,

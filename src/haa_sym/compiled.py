@@ -113,7 +113,7 @@ class Compiler:
 
 
 class Evaluators:
-    """The generated CasADi Functions, by name: ``ev["haa_stab16"]``.
+    """The generated CasADi Functions, by name: ``ev["haa_decide16"]``.
 
     Parameters
     ----------

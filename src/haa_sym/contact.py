@@ -36,7 +36,7 @@ def contact_stability(params: Params, K_env, *, P_gain: float = 0.0, D_gain: flo
     for i, K in enumerate(tqdm(K_env, desc="contact stiffness", leave=False,
                                disable=None if progress is None else not progress)):
         loop = ClosedLoop(params.with_values(K_L2=float(K)), options)
-        st = loop.stability(P_gain, D_gain, beta, alpha)
+        st = loop.stability(P_gain, D_gain, beta, alpha, radius=True)
         stable[i], rho[i] = bool(st.stable), float(st.spectral_radius)
     return stable, rho
 

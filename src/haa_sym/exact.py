@@ -8,11 +8,13 @@ coefficient is rounded once, at the end.
 """
 from __future__ import annotations
 
+import functools
+import math
 from fractions import Fraction
 
 import numpy as np
 
-__all__ = ["charpoly_adjugate", "transfer_polynomials", "polymul", "to_float"]
+__all__ = ["charpoly_adjugate", "transfer_polynomials", "polymul", "polysub", "to_float", "bilinear"]
 
 
 def _dyadic_scale(M: np.ndarray) -> tuple[list[list[int]], int]:
@@ -102,3 +104,45 @@ def to_float(p) -> np.ndarray:
     """Correctly rounded doubles of exact coefficients."""
     return np.array([float(x) for x in p])
 
+
+
+@functools.lru_cache(maxsize=None)
+def _bilinear_matrix(n: int) -> tuple[tuple[int, ...], ...]:
+    """Row k: ascending integer coefficients of (1 + s)^k (1 - s)^(n - k)."""
+    rows = []
+    for k in range(n + 1):
+        plus = [math.comb(k, i) for i in range(k + 1)]
+        minus = [math.comb(n - k, i) * (-1) ** i for i in range(n - k + 1)]
+        row = [0] * (n + 1)
+        for i, x in enumerate(plus):
+            for j, y in enumerate(minus):
+                row[i + j] += x * y
+        rows.append(tuple(row))
+    return tuple(rows)
+
+
+def bilinear(p) -> list[Fraction]:
+    """Exact bilinear (Cayley) transform of a polynomial in z: ascending coefficients of
+    ``q(s) = (1 - s)^n p((1 + s)/(1 - s))``, n = len(p) - 1, for ``p`` descending.
+
+    z = (1 + s)/(1 - s) maps |z| < 1 onto Re s < 0, so p is Schur stable iff q is Hurwitz
+    stable (a root at z = -1 lowers the degree of q). Roots crowding at z = 1 under fast
+    sampling, z = 1 + Ts delta with small Ts delta, land at s = Ts delta/(2 + Ts delta) near
+    s = 0, where the low-order coefficients of q resolve them to full relative precision: the
+    monomial coefficients of p cannot (docs/model.md, "Fast sampling"). Computed in integers
+    over the common denominator, so the only rounding is the caller's, once per coefficient.
+    """
+    p = [Fraction(x) for x in p]
+    n = len(p) - 1
+    den = 1
+    for x in p:
+        den = den * x.denominator // math.gcd(den, x.denominator)
+    a = [int(x * den) for x in reversed(p)]                  # ascending integers
+    T = _bilinear_matrix(n)
+    q = [0] * (n + 1)
+    for k, ak in enumerate(a):
+        if ak:
+            for j, t in enumerate(T[k]):
+                if t:
+                    q[j] += ak * t
+    return [Fraction(v, den) for v in q]

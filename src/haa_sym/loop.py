@@ -16,7 +16,10 @@ Options the paper leaves open (:class:`LoopOptions`):
 
 Because every feedback path enters through the single input V_m, the characteristic polynomial
 is affine in the gain monomials (see ``codegen/kernels.py``); :class:`ClosedLoop` builds its
-basis polynomials once per plant, exactly, and the generated code evaluates gain points.
+basis polynomials exactly, once per distinct plant and loop structure (a process-wide cache),
+maps them by the bilinear transform z = (1 + s)/(1 - s) and rounds once; the generated code
+decides gain points by a Routh-Hurwitz test certified against that rounding, and the few
+points it cannot certify are decided from eigenvalues (docs/model.md, "Fast sampling").
 
 Example
 -------
@@ -33,19 +36,31 @@ from fractions import Fraction
 import numpy as np
 
 from haa_sym.compiled import evaluators
-from haa_sym.exact import polymul, polysub, to_float, transfer_polynomials
+from haa_sym.exact import bilinear, polymul, polysub, to_float, transfer_polynomials
 from haa_sym.params import ParameterError, Params
 from haa_sym.plant import OUTPUTS, DiscretePlant, continuous_plant, discretize
 
 __all__ = ["LoopOptions", "LoopCoefficients", "ClosedLoop", "StabilityResult", "PORTS", "FREQ_OUTPUTS"]
 
 PORTS = ("dtheta_L2", "dtheta_L1", "encoder_average")
-# Half-width of the band around spectral radius 1 where points are re-decided by eigenvalues:
-# at least three times the worst radius error of the monomial-basis Schur-Cohn bisection measured over the
-# paper's configurations (9e-7 at Ts = 0.5 ms over 1,020 random points, tests/test_evaluators.py;
-# 3e-6 at one map point of tests/test_regions.py, rho = 0.9959, still far from the band).
-REFINE_BAND = 1e-5
 FREQ_OUTPUTS = ("L_t", "L_imp", "Z", "H_T")
+# Exact bases by structure (see ClosedLoop._basis): a map, Table 2 and the option scoring
+# build thousands of ClosedLoops over a handful of plants; the exact arithmetic is the costly
+# part. Bounded so that a long sweep over Ts or the leg cannot grow it without limit.
+_BASIS_CACHE: dict[tuple, tuple[np.ndarray, np.ndarray]] = {}
+_BASIS_CACHE_SIZE = 256
+_PLANT_POLY_CACHE: dict[tuple, tuple] = {}
+
+
+def _transfer_polynomials(plant: DiscretePlant):
+    """Exact d(z) and the V_m numerators of ``plant`` (cached: Faddeev-LeVerrier in integers)."""
+    key = (plant.Phi.tobytes(), plant.Gamma[:, :1].tobytes(), plant.C.tobytes())
+    hit = _PLANT_POLY_CACHE.get(key)
+    if hit is None:
+        if len(_PLANT_POLY_CACHE) >= _BASIS_CACHE_SIZE:
+            _PLANT_POLY_CACHE.pop(next(iter(_PLANT_POLY_CACHE)))
+        hit = _PLANT_POLY_CACHE[key] = transfer_polynomials(plant.Phi, plant.Gamma[:, :1], plant.C)
+    return hit
 
 
 COLGATE = ("subtract", "add", "none")
@@ -174,13 +189,19 @@ class LoopCoefficients:
 
 @dataclass(frozen=True)
 class StabilityResult:
-    """``stable``: all closed-loop poles in |z| < 1; ``spectral_radius``: max |z| of the poles;
-    ``refined``: the points decided by eigenvalues because the bisected radius was within the
-    refinement band of 1."""
+    """Stability of the closed loop at gain points (arrays of the points' shape).
+
+    ``stable``: every closed-loop pole in |z| < 1. ``n_unstable``: the number of poles with
+    |z| > 1. ``spectral_radius``: max |z| of the poles, from the eigenvalues of the explicit
+    closed loop (:mod:`haa_sym.reference`); NaN where not asked for. ``refined``: the points
+    whose generated decision could not be certified against rounding (a pole within rounding
+    distance of |z| = 1) and were decided from the eigenvalues instead.
+    """
 
     stable: np.ndarray
     spectral_radius: np.ndarray
     refined: np.ndarray = field(repr=False)
+    n_unstable: np.ndarray = field(repr=False, default=None)
 
 
 def _finite_array(name: str, value) -> np.ndarray:
@@ -218,7 +239,7 @@ class ClosedLoop:
                 "CAPACITIES in codegen/generate.py and run `make derive`")
         self.capacity = caps[0]
         self.const = np.array([ctrl.P_t0, ctrl.I_t0, self.plant.VC0])
-        self.basis = self._basis()
+        self.basis, self._z_basis = self._basis()
 
     # --- the characteristic polynomial -------------------------------------------------------
     @property
@@ -232,10 +253,16 @@ class ClosedLoop:
         f = self.options.filter
         return (N if f in ("both", "compensation") else 1, N if f in ("both", "impedance") else 1)
 
-    def _basis(self) -> np.ndarray:
-        """Ascending coefficients (capacity+1) x 8 of b0..b7, padded with roots at z = 0."""
+    def _structure_key(self) -> tuple:
+        """Everything the basis depends on: the sampled plant and the loop's structure."""
+        p, ctrl = self.plant, self.params.controller
+        return (p.Phi.tobytes(), p.Gamma[:, :1].tobytes(), p.C.tobytes(), ctrl.Ts, ctrl.N_av,
+                self.filter_lengths, self.options.delay, self.torque_output, self.capacity)
+
+    def _exact_basis(self) -> list[list[Fraction]]:
+        """Exact descending coefficients of b0..b7 in z, each of degree ``self.degree``."""
         p, ctrl, opt = self.plant, self.params.controller, self.options
-        d, nums = transfer_polynomials(p.Phi, p.Gamma[:, :1], p.C)
+        d, nums = _transfer_polynomials(p)
         n_T = nums[OUTPUTS.index(self.torque_output)][0]
         n_th = nums[OUTPUTS.index("theta_L1")][0]
         N = ctrl.N_av                      # the longest average: z^N clears every denominator
@@ -265,12 +292,26 @@ class ClosedLoop:
             polymul([Fraction(1, N_d)], z1, zpow(N - N_d), zk_minus_1(N_d), n_th),    # I_t D_gain
             polysub(b_vc, b_d),                                                       # -VC (rest)
         ]
-        out = np.zeros((self.capacity + 1, len(basis)))
-        for j, b in enumerate(basis):
-            asc = to_float(b)[::-1]
-            # z^(cap - degree) * b: roots at the origin change neither stability nor the radius
-            out[self.capacity - self.degree:][:len(asc), j] = asc
-        return out
+        return [[Fraction(0)] * (self.degree + 1 - len(b)) + list(b) for b in basis]
+
+    def _basis(self) -> tuple[np.ndarray, np.ndarray]:
+        """(bilinear, z) bases: (capacity+1) x 8 ascending coefficients of the bilinear
+        transforms of z^(capacity - degree) b_j (the extra roots at z = 0, s = -1, change no
+        decision), and degree+1 x 8 descending coefficients of b_j in z. Cached per structure.
+        """
+        key = self._structure_key()
+        hit = _BASIS_CACHE.get(key)
+        if hit is None:
+            exact = self._exact_basis()
+            pad = [Fraction(0)] * (self.capacity - self.degree)
+            s_basis = np.array([to_float(bilinear(b + pad)) for b in exact]).T
+            z_basis = np.array([to_float(b) for b in exact]).T
+            for arr in (s_basis, z_basis):
+                arr.setflags(write=False)
+            if len(_BASIS_CACHE) >= _BASIS_CACHE_SIZE:
+                _BASIS_CACHE.pop(next(iter(_BASIS_CACHE)))
+            hit = _BASIS_CACHE[key] = (s_basis, z_basis)
+        return hit
 
     def _points(self, P_gain, D_gain, beta, alpha) -> np.ndarray:
         ctrl = self.params.controller
@@ -288,13 +329,12 @@ class ClosedLoop:
         P, D, b, a = pts[:, 0]
         P_t, I_t, VC = b * self.const[0], b * self.const[1], a * self.const[2]
         g = np.array([1, P_t, I_t, P_t * P, I_t * P, P_t * D - VC, I_t * D, -VC])
-        asc = self.basis @ g
-        return asc[self.capacity - self.degree:][::-1]
+        return self._z_basis @ g
 
     # --- evaluators -------------------------------------------------------------------------
-    def stability(self, P_gain, D_gain, beta=None, alpha=None, *, radius: bool = True,
-                  refine_band: float = REFINE_BAND) -> StabilityResult:
-        """Stability decision and spectral radius of the closed loop at gain points.
+    def stability(self, P_gain, D_gain, beta=None, alpha=None, *, radius: bool = False,
+                  certify: bool = True) -> StabilityResult:
+        """Stability decision (and optionally the spectral radius) of the closed loop at gain points.
 
         Parameters
         ----------
@@ -305,44 +345,45 @@ class ClosedLoop:
         beta, alpha : array_like, optional
             Torque-gain scale (Eq. 7) and velocity-compensation gain (Eq. 6); default from params.
             All four broadcast together.
-
         radius : bool
-            Bisect the spectral radius (30 Schur-Cohn tests per point); False runs three tests
-            per point (at radius 1 and 1 +- refine_band) and returns NaN radii except where
-            refined by eigenvalues.
-        refine_band : float
-            Points whose bisected radius lies within this distance of 1 are re-decided from the
-            eigenvalues of the closed-loop state matrix (``haa_sym.reference``); 0 disables.
+            Also return the spectral radius of every point, from the eigenvalues of the explicit
+            closed loop (costs about as much as a stacked ``numpy.linalg.eigvals``); default
+            False: NaN except at refined points.
+        certify : bool
+            Re-decide from eigenvalues the points whose generated decision is not certified
+            against the rounding of the characteristic polynomial (default). False returns the
+            raw generated decision everywhere (for tests and benchmarks).
 
         Returns
         -------
         StabilityResult
-            Arrays of the broadcast shape. Every point is decided by the generated Schur-Cohn
-            test and its radius bisected (30 halvings). Near z = 1 the monomial coefficients
-            limit that radius to ~3e-6 at Ts = 0.5 ms (~1e-8 at 1 ms, see docs/model.md), hence
-            the refinement band.
+            Every point is decided by the generated Routh-Hurwitz test of the bilinear
+            transform of chi; its certificate (Kharitonov's vertex polynomials of the
+            coefficients' rounding bound) says whether rounding could change the decision.
+
+        Examples
+        --------
+        >>> from haa_sym import load_params, ClosedLoop
+        >>> loop = ClosedLoop(load_params().with_values(Ts=1e-4))                 # doctest: +SKIP
+        >>> bool(loop.stability(200.0, 10.0).stable)                              # doctest: +SKIP
+        True
         """
         pts, shape = self._points(P_gain, D_gain, beta, alpha)
         ev = evaluators(self.backend)
-        if radius:
-            kmax, rho = (v.ravel() for v in ev.call_columns(
-                f"haa_stab{self.capacity}", [self.basis, self.const, pts], 2))
-            refined = np.abs(rho - 1) < refine_band
-        else:
-            powers = np.arange(self.capacity + 1) - self.capacity
-            kmax, k_in, k_out = (v.ravel() for v in ev.call_columns(
-                f"haa_decide{self.capacity}",
-                [self.basis, self.const, pts, (1 - refine_band) ** powers, (1 + refine_band) ** powers], 2))
-            rho = np.full(kmax.shape, np.nan)
-            # radius within refine_band of 1: not every root inside 1 - band, all inside 1 + band
-            refined = (k_in >= 1) & (k_out < 1)
-        stable = kmax < 1
-        if refined.any():
-            from haa_sym.reference import spectral_radius
-            for i in np.flatnonzero(refined):
-                rho[i] = spectral_radius(self, *pts[:, i])
-                stable[i] = rho[i] < 1
-        return StabilityResult(stable.reshape(shape), rho.reshape(shape), refined.reshape(shape))
+        n_unstable, certified = (v.ravel() for v in ev.call_columns(
+            f"haa_decide{self.capacity}", [self.basis, self.const, pts], 2))
+        n_unstable = n_unstable.astype(int)
+        refined = (certified < 0.5) if certify else np.zeros(n_unstable.shape, bool)
+        rho = np.full(n_unstable.shape, np.nan)
+        need = np.ones_like(refined) if radius else refined
+        if need.any():
+            from haa_sym.reference import closed_loop_eigenvalues
+            eig = np.abs(closed_loop_eigenvalues(self, pts[:, need]))
+            rho[need] = eig.max(axis=1)
+            n_unstable[refined] = (eig[refined[need]] >= 1).sum(axis=1)
+        stable = n_unstable == 0
+        return StabilityResult(stable.reshape(shape), rho.reshape(shape), refined.reshape(shape),
+                               n_unstable.reshape(shape))
 
     def loop_coefficients(self, omega=None, beta=None, alpha=None) -> LoopCoefficients:
         """Gain-affine loop transfer functions on ``omega`` (rad/s; default: the options' grid).

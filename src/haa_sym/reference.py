@@ -16,12 +16,20 @@ import numpy as np
 from haa_sym.loop import ClosedLoop
 from haa_sym.plant import OUTPUTS
 
-__all__ = ["closed_loop_matrices", "spectral_radius", "frequency_response"]
+__all__ = ["closed_loop_matrices", "closed_loop_eigenvalues", "spectral_radius", "frequency_response"]
 
 
 def closed_loop_matrices(loop: ClosedLoop, P_gain: float, D_gain: float, beta: float | None = None,
                          alpha: float | None = None, cut: str | None = None):
     """``(A, B, C, D)`` of the sampled closed loop; ``cut`` in {None, "T_ref", "PI"}."""
+    A, B, C, D = _closed_loop_batch(loop, np.atleast_1d(np.asarray(P_gain, float)),
+                                    np.atleast_1d(np.asarray(D_gain, float)), beta, alpha, cut)
+    return A[0], B[0], C[0], D[0]
+
+
+def _closed_loop_batch(loop: ClosedLoop, P_gain: np.ndarray, D_gain: np.ndarray, beta=None, alpha=None,
+                       cut: str | None = None):
+    """The construction of :func:`closed_loop_matrices` for k gain points at once (shape (k,))."""
     ctrl, opt, pl = loop.params.controller, loop.options, loop.plant
     beta = ctrl.beta if beta is None else beta
     alpha = ctrl.alpha if alpha is None else alpha
@@ -31,6 +39,8 @@ def closed_loop_matrices(loop: ClosedLoop, P_gain: float, D_gain: float, beta: f
     n = nx + N + 1 + d
     i_h, i_int, i_u = nx, nx + N, nx + N + 1
     nin = 2  # T_dist, r
+    k = P_gain.shape[0]
+    Pg, Dg = P_gain[:, None], D_gain[:, None]
     # every signal at sample k is a row over [state (n), inputs (2)]
     def zero():
         return np.zeros(n + nin)
@@ -47,34 +57,51 @@ def closed_loop_matrices(loop: ClosedLoop, P_gain: float, D_gain: float, beta: f
     N_vc, N_d = loop.filter_lengths
     v = average(N)                                        # the encoder average (port option)
     v_vc, v_d = average(N_vc), average(N_d)
-    imp = P_gain * th + D_gain * v_d                     # Eq. (8) with theta_ref = 0: T_ref = -imp
-    T_ref = r_in if cut == "T_ref" else -imp
+    imp = Pg * th + Dg * v_d                              # Eq. (8) with theta_ref = 0: T_ref = -imp
+    T_ref = np.broadcast_to(r_in, imp.shape) if cut == "T_ref" else -imp
     e = T_ref - T
     i_prev = zero(); i_prev[i_int] = 1
     i_k = i_prev + Ts * e                                 # backward Euler, Eq. (7)
     u_pi = P_t * e + I_t * i_k
-    V_k = (r_in if cut == "PI" else u_pi) + VC * v_vc     # Eq. (6) compensation
+    V_k = (np.broadcast_to(r_in, imp.shape) if cut == "PI" else u_pi) + VC * v_vc   # Eq. (6)
     if d:
-        V_applied = zero(); V_applied[i_u] = 1
+        V_applied = np.broadcast_to(i_u == np.arange(n + nin), imp.shape).astype(float)
     else:
         V_applied = V_k
-    rows = np.zeros((n, n + nin))
-    rows[:nx, :nx] = pl.Phi
-    rows[:nx] += np.outer(pl.Gamma[:, 0], V_applied)
-    rows[:nx, n] += pl.Gamma[:, 2]                        # T_dist
-    rows[i_h] = th
+    rows = np.zeros((k, n, n + nin))
+    rows[:, :nx, :nx] = pl.Phi
+    rows[:, :nx] += pl.Gamma[None, :, 0, None] * V_applied[:, None, :]
+    rows[:, :nx, n] += pl.Gamma[:, 2]                     # T_dist
+    rows[:, i_h] = th
     for j in range(1, N):
-        rows[i_h + j, i_h + j - 1] = 1
-    rows[i_int] = i_k
+        rows[:, i_h + j, i_h + j - 1] = 1
+    rows[:, i_int] = i_k
     if d:
-        rows[i_u] = V_k
-    if opt.port == "encoder_average":
-        port = v
-    else:
-        port = row_from_C(opt.port)
-    y = {None: zero(), "T_ref": imp, "PI": -u_pi}[cut]
-    out = np.vstack([T, th, port, y])
-    return rows[:, :n], rows[:, n:], out[:, :n], out[:, n:]
+        rows[:, i_u] = V_k
+    port = v if opt.port == "encoder_average" else row_from_C(opt.port)
+    y = {None: np.zeros_like(imp), "T_ref": imp, "PI": -u_pi}[cut]
+    out = np.concatenate([np.broadcast_to(r, imp.shape)[:, None] for r in (T, th, port)] + [y[:, None]], axis=1)
+    return rows[:, :, :n], rows[:, :, n:], out[:, :, :n], out[:, :, n:]
+
+
+def closed_loop_eigenvalues(loop: ClosedLoop, points, chunk_bytes: int = 64 << 20) -> np.ndarray:
+    """Eigenvalues of the closed-loop state matrix at gain points, shape (k, order).
+
+    ``points`` is (4, k): rows P_gain, D_gain, beta, alpha. One ``numpy.linalg.eigvals`` call
+    per chunk of stacked matrices (``chunk_bytes`` of them at a time) and distinct (beta, alpha).
+    """
+    pts = np.asarray(points, dtype=float).reshape(4, -1)
+    order = loop.degree
+    out = np.empty((pts.shape[1], order), complex)
+    pairs, inv = np.unique(pts[2:].T, axis=0, return_inverse=True)
+    step = max(1, chunk_bytes // (8 * order * order))
+    for j, (b, a) in enumerate(pairs):
+        sel = np.flatnonzero(inv.ravel() == j)
+        for c in range(0, sel.size, step):
+            idx = sel[c:c + step]
+            A = _closed_loop_batch(loop, pts[0, idx], pts[1, idx], b, a)[0]
+            out[idx] = np.linalg.eigvals(A)
+    return out
 
 
 def spectral_radius(loop: ClosedLoop, P_gain, D_gain, beta=None, alpha=None) -> float:

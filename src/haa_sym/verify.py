@@ -169,7 +169,7 @@ def row_alpha_range(params: Params) -> Row:
     worst = []
     ok = True
     for cfg, K, p in corners(params):
-        res = ClosedLoop(p).stability(0.0, 0.0, alpha=alphas)
+        res = ClosedLoop(p).stability(0.0, 0.0, alpha=alphas, radius=True)
         ok &= bool(res.stable.all())
         worst.append(f"{cfg}/K_L2={K}: max rho = {res.spectral_radius.max():.6f}")
     return Row("Sec. 3.2: torque loop stable for every alpha in [0, 1] (101 values, 4 corners)", ok,
