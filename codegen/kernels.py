@@ -164,9 +164,9 @@ COEF_OUTPUTS = ("L_t", "L_imp", "Z_num", "Z_den")
 def loop_coefficient_function() -> ca.Function:
     """Gain-affine coefficients of the loop transfer functions at one frequency.
 
-    Inputs: ``G`` (12): the discretised plant's responses at z = exp(j w Ts) from V_m and T_dist
-    to the measured torque T, the encoder angle theta_L1 and the port velocity p;
-    ``wTs`` (w Ts, rad); ``const`` [P_t0, I_t0, VC0]; ``gains`` [beta, alpha];
+    Inputs: ``Gw`` (13): the discretised plant's responses at z = exp(j w Ts) from V_m and
+    T_dist to the measured torque T, the encoder angle theta_L1 and the port velocity p (re, im
+    each), then w Ts (rad): one column per frequency for the column driver; ``const`` [P_t0, I_t0, VC0]; ``gains`` [beta, alpha];
     ``struct`` [Ts, N_av, delay, port_average, N_VC, N_D]: the averaging lengths of the port
     velocity (when averaged), the velocity compensation and the D term.
 
@@ -181,8 +181,8 @@ def loop_coefficient_function() -> ca.Function:
     then H_T = T / T_lref with the impedance loop open (re, im).
     Sign convention: negative feedback, closed loop 1/(1 + L).
     """
-    G = ca.SX.sym("G", N_PLANT_RESP)
-    wTs = ca.SX.sym("wTs")
+    Gw = ca.SX.sym("Gw", N_PLANT_RESP + 1)
+    G, wTs = Gw[:N_PLANT_RESP], Gw[N_PLANT_RESP]
     const = ca.SX.sym("const", N_CONST)
     gains = ca.SX.sym("gains", N_TORQUE_GAINS)
     struct = ca.SX.sym("struct", N_STRUCT)
@@ -223,5 +223,5 @@ def loop_coefficient_function() -> ca.Function:
     Z_den = tuple(_add(_mul(pd, r[i]), _mul(pV, n[i])) for i in range(3))
     H_T = _div(_mul(dPI, G_TV), R0)
     out = [v for form in (L_t, L_imp, Z_num, Z_den) for c in form for v in c] + list(H_T)
-    return ca.Function("haa_loopcoef", [G, wTs, const, gains, struct], [ca.vertcat(*out)],
-                       ["G", "wTs", "const", "gains", "struct"], ["coef"])
+    return ca.Function("haa_loopcoef", [Gw, const, gains, struct], [ca.vertcat(*out)],
+                       ["Gw", "const", "gains", "struct"], ["coef"])

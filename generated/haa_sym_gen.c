@@ -181,7 +181,7 @@ static const casadi_int casadi_s1[3] = {7, 7, 1};
 static const casadi_int casadi_s2[3] = {7, 3, 1};
 static const casadi_int casadi_s3[3] = {5, 7, 1};
 static const casadi_int casadi_s4[3] = {1, 1, 1};
-static const casadi_int casadi_s5[3] = {12, 1, 1};
+static const casadi_int casadi_s5[3] = {13, 1, 1};
 static const casadi_int casadi_s6[3] = {3, 1, 1};
 static const casadi_int casadi_s7[3] = {2, 1, 1};
 static const casadi_int casadi_s8[3] = {6, 1, 1};
@@ -537,21 +537,21 @@ CASADI_SYMBOL_EXPORT int haa_plant_work_bytes(casadi_int *sz_arg, casadi_int* sz
   return 0;
 }
 
-/* haa_loopcoef:(G[12],wTs,const[3],gains[2],struct[6])->(coef[26]) */
+/* haa_loopcoef:(Gw[13],const[3],gains[2],struct[6])->(coef[26]) */
 static int casadi_f1(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
   casadi_real a00, a01, a02, a03, a04, a05, a06, a07, a08, a09, a10, a11;
   casadi_real a12, a13, a14, a15, a16, a17, a18, a19, a20, a21, a22, a23;
   casadi_real a24, a25, a26, a27, a28, a29, a30;
-  a00=arg[4]? arg[4][2] : 0;
-  a01=arg[1]? arg[1][0] : 0;
+  a00=arg[3]? arg[3][2] : 0;
+  a01=arg[0]? arg[0][12] : 0;
   a02=(a00*a01);
   a02=cos(a02);
-  a03=arg[3]? arg[3][0] : 0;
-  a04=arg[2]? arg[2][0] : 0;
+  a03=arg[2]? arg[2][0] : 0;
+  a04=arg[1]? arg[1][0] : 0;
   a04=(a03*a04);
-  a05=arg[2]? arg[2][1] : 0;
+  a05=arg[1]? arg[1][1] : 0;
   a03=(a03*a05);
-  a05=arg[4]? arg[4][0] : 0;
+  a05=arg[3]? arg[3][0] : 0;
   a03=(a03*a05);
   a06=2.;
   a07=(a01/a06);
@@ -581,10 +581,10 @@ static int casadi_f1(const casadi_real** arg, casadi_real** res, casadi_int* iw,
   a10=(a03*a04);
   a09=(a09+a10);
   a10=1.;
-  a11=arg[3]? arg[3][1] : 0;
-  a12=arg[2]? arg[2][2] : 0;
+  a11=arg[2]? arg[2][1] : 0;
+  a12=arg[1]? arg[1][2] : 0;
   a11=(a11*a12);
-  a12=arg[4]? arg[4][4] : 0;
+  a12=arg[3]? arg[3][4] : 0;
   a13=(a12*a01);
   a14=(a13/a06);
   a14=sin(a14);
@@ -646,7 +646,7 @@ static int casadi_f1(const casadi_real** arg, casadi_real** res, casadi_int* iw,
   a09=(a09+a14);
   a09=(a09/a12);
   if (res[0]!=0) res[0][3]=a09;
-  a09=arg[4]? arg[4][5] : 0;
+  a09=arg[3]? arg[3][5] : 0;
   a12=(a09*a01);
   a14=(a12/a06);
   a14=sin(a14);
@@ -744,9 +744,9 @@ static int casadi_f1(const casadi_real** arg, casadi_real** res, casadi_int* iw,
   a11=(a11+a19);
   if (res[0]!=0) res[0][17]=a11;
   a19=5.0000000000000000e-01;
-  a20=arg[4]? arg[4][3] : 0;
+  a20=arg[3]? arg[3][3] : 0;
   a21=(a19<a20);
-  a22=arg[4]? arg[4][1] : 0;
+  a22=arg[3]? arg[3][1] : 0;
   a01=(a22*a01);
   a06=(a01/a06);
   a06=sin(a06);
@@ -914,7 +914,7 @@ CASADI_SYMBOL_EXPORT void haa_loopcoef_incref(void) {
 CASADI_SYMBOL_EXPORT void haa_loopcoef_decref(void) {
 }
 
-CASADI_SYMBOL_EXPORT casadi_int haa_loopcoef_n_in(void) { return 5;}
+CASADI_SYMBOL_EXPORT casadi_int haa_loopcoef_n_in(void) { return 4;}
 
 CASADI_SYMBOL_EXPORT casadi_int haa_loopcoef_n_out(void) { return 1;}
 
@@ -926,11 +926,10 @@ CASADI_SYMBOL_EXPORT casadi_real haa_loopcoef_default_in(casadi_int i) {
 
 CASADI_SYMBOL_EXPORT const char* haa_loopcoef_name_in(casadi_int i) {
   switch (i) {
-    case 0: return "G";
-    case 1: return "wTs";
-    case 2: return "const";
-    case 3: return "gains";
-    case 4: return "struct";
+    case 0: return "Gw";
+    case 1: return "const";
+    case 2: return "gains";
+    case 3: return "struct";
     default: return 0;
   }
 }
@@ -945,10 +944,9 @@ CASADI_SYMBOL_EXPORT const char* haa_loopcoef_name_out(casadi_int i) {
 CASADI_SYMBOL_EXPORT const casadi_int* haa_loopcoef_sparsity_in(casadi_int i) {
   switch (i) {
     case 0: return casadi_s5;
-    case 1: return casadi_s4;
-    case 2: return casadi_s6;
-    case 3: return casadi_s7;
-    case 4: return casadi_s8;
+    case 1: return casadi_s6;
+    case 2: return casadi_s7;
+    case 3: return casadi_s8;
     default: return 0;
   }
 }
@@ -961,7 +959,7 @@ CASADI_SYMBOL_EXPORT const casadi_int* haa_loopcoef_sparsity_out(casadi_int i) {
 }
 
 CASADI_SYMBOL_EXPORT int haa_loopcoef_work(casadi_int *sz_arg, casadi_int* sz_res, casadi_int *sz_iw, casadi_int *sz_w) {
-  if (sz_arg) *sz_arg = 5;
+  if (sz_arg) *sz_arg = 4;
   if (sz_res) *sz_res = 1;
   if (sz_iw) *sz_iw = 0;
   if (sz_w) *sz_w = 0;
@@ -969,7 +967,7 @@ CASADI_SYMBOL_EXPORT int haa_loopcoef_work(casadi_int *sz_arg, casadi_int* sz_re
 }
 
 CASADI_SYMBOL_EXPORT int haa_loopcoef_work_bytes(casadi_int *sz_arg, casadi_int* sz_res, casadi_int *sz_iw, casadi_int *sz_w) {
-  if (sz_arg) *sz_arg = 5*sizeof(const casadi_real*);
+  if (sz_arg) *sz_arg = 4*sizeof(const casadi_real*);
   if (sz_res) *sz_res = 1*sizeof(casadi_real*);
   if (sz_iw) *sz_iw = 0*sizeof(casadi_int);
   if (sz_w) *sz_w = 0*sizeof(casadi_real);

@@ -35,6 +35,7 @@ from fractions import Fraction
 
 import numpy as np
 
+from haa_sym.cache import BoundedCache, array_key
 from haa_sym.compiled import evaluators
 from haa_sym.exact import bilinear, polymul, polysub, to_float, transfer_polynomials
 from haa_sym.params import ParameterError, Params
@@ -44,23 +45,18 @@ __all__ = ["LoopOptions", "LoopCoefficients", "ClosedLoop", "StabilityResult", "
 
 PORTS = ("dtheta_L2", "dtheta_L1", "encoder_average")
 FREQ_OUTPUTS = ("L_t", "L_imp", "Z", "H_T")
-# Exact bases by structure (see ClosedLoop._basis): a map, Table 2 and the option scoring
-# build thousands of ClosedLoops over a handful of plants; the exact arithmetic is the costly
-# part. Bounded so that a long sweep over Ts or the leg cannot grow it without limit.
-_BASIS_CACHE: dict[tuple, tuple[np.ndarray, np.ndarray]] = {}
-_BASIS_CACHE_SIZE = 256
-_PLANT_POLY_CACHE: dict[tuple, tuple] = {}
+# Exact arithmetic (bases) and the plant's frequency responses are the costly parts of a
+# ClosedLoop; maps, Table 2 and the option scoring build thousands over a handful of plants.
+_PLANTS = BoundedCache()
+_PLANT_POLYS = BoundedCache()
+_BASES = BoundedCache()
+_COEFFICIENTS = BoundedCache(64)
 
 
 def _transfer_polynomials(plant: DiscretePlant):
-    """Exact d(z) and the V_m numerators of ``plant`` (cached: Faddeev-LeVerrier in integers)."""
-    key = (plant.Phi.tobytes(), plant.Gamma[:, :1].tobytes(), plant.C.tobytes())
-    hit = _PLANT_POLY_CACHE.get(key)
-    if hit is None:
-        if len(_PLANT_POLY_CACHE) >= _BASIS_CACHE_SIZE:
-            _PLANT_POLY_CACHE.pop(next(iter(_PLANT_POLY_CACHE)))
-        hit = _PLANT_POLY_CACHE[key] = transfer_polynomials(plant.Phi, plant.Gamma[:, :1], plant.C)
-    return hit
+    """Exact d(z) and the V_m numerators of ``plant`` (Faddeev-LeVerrier in integers), memoised."""
+    return _PLANT_POLYS.get(array_key(plant.Phi, plant.Gamma[:, :1], plant.C),
+                            lambda: transfer_polynomials(plant.Phi, plant.Gamma[:, :1], plant.C))
 
 
 COLGATE = ("subtract", "add", "none")
@@ -222,14 +218,19 @@ class ClosedLoop:
     options : LoopOptions, optional
     backend : {"auto", "compiled", "vm"}
         How the generated functions run (see :mod:`haa_sym.compiled`).
+    basis : bool
+        Build the exact characteristic-polynomial basis (needed by :meth:`stability`; default).
     """
 
-    def __init__(self, params: Params, options: LoopOptions | None = None, backend: str = "auto"):
+    def __init__(self, params: Params, options: LoopOptions | None = None, backend: str = "auto",
+                 basis: bool = True):
         self.params = params
         self.options = options or LoopOptions()
         self.backend = backend
         ctrl = params.controller
-        self.plant: DiscretePlant = discretize(continuous_plant(params.plant, backend), ctrl.Ts)
+        self.plant: DiscretePlant = _PLANTS.get(
+            (params.plant.as_tuple(), ctrl.Ts, backend),
+            lambda: discretize(continuous_plant(params.plant, backend), ctrl.Ts))
         self.degree = ctrl.N_av + 8 + self.options.delay
         caps = [c for c in evaluators(backend).capacities if c >= self.degree]
         if not caps:
@@ -239,7 +240,8 @@ class ClosedLoop:
                 "CAPACITIES in codegen/generate.py and run `make derive`")
         self.capacity = caps[0]
         self.const = np.array([ctrl.P_t0, ctrl.I_t0, self.plant.VC0])
-        self.basis, self._z_basis = self._basis()
+        # basis=False: a loop used only for frequency responses or the explicit state space
+        self.basis, self._z_basis = self._basis() if basis else (None, None)
 
     # --- the characteristic polynomial -------------------------------------------------------
     @property
@@ -256,8 +258,8 @@ class ClosedLoop:
     def _structure_key(self) -> tuple:
         """Everything the basis depends on: the sampled plant and the loop's structure."""
         p, ctrl = self.plant, self.params.controller
-        return (p.Phi.tobytes(), p.Gamma[:, :1].tobytes(), p.C.tobytes(), ctrl.Ts, ctrl.N_av,
-                self.filter_lengths, self.options.delay, self.torque_output, self.capacity)
+        return (array_key(p.Phi, p.Gamma[:, :1], p.C), ctrl.Ts, ctrl.N_av, self.filter_lengths,
+                self.options.delay, self.torque_output, self.capacity)
 
     def _exact_basis(self) -> list[list[Fraction]]:
         """Exact descending coefficients of b0..b7 in z, each of degree ``self.degree``."""
@@ -299,19 +301,15 @@ class ClosedLoop:
         transforms of z^(capacity - degree) b_j (the extra roots at z = 0, s = -1, change no
         decision), and degree+1 x 8 descending coefficients of b_j in z. Cached per structure.
         """
-        key = self._structure_key()
-        hit = _BASIS_CACHE.get(key)
-        if hit is None:
+        def build():
             exact = self._exact_basis()
             pad = [Fraction(0)] * (self.capacity - self.degree)
             s_basis = np.array([to_float(bilinear(b + pad)) for b in exact]).T
             z_basis = np.array([to_float(b) for b in exact]).T
             for arr in (s_basis, z_basis):
                 arr.setflags(write=False)
-            if len(_BASIS_CACHE) >= _BASIS_CACHE_SIZE:
-                _BASIS_CACHE.pop(next(iter(_BASIS_CACHE)))
-            hit = _BASIS_CACHE[key] = (s_basis, z_basis)
-        return hit
+            return s_basis, z_basis
+        return _BASES.get(self._structure_key(), build)
 
     def _points(self, P_gain, D_gain, beta, alpha) -> np.ndarray:
         ctrl = self.params.controller
@@ -368,6 +366,8 @@ class ClosedLoop:
         >>> bool(loop.stability(200.0, 10.0).stable)                              # doctest: +SKIP
         True
         """
+        if self.basis is None:
+            raise ValueError("this ClosedLoop was built with basis=False: no stability evaluator")
         pts, shape = self._points(P_gain, D_gain, beta, alpha)
         ev = evaluators(self.backend)
         n_unstable, certified = (v.ravel() for v in ev.call_columns(
@@ -396,19 +396,30 @@ class ClosedLoop:
         omega = self.options.omega(ctrl.Ts) if omega is None else _finite_array("omega", omega).ravel()
         beta = float(_finite_array("beta", ctrl.beta if beta is None else beta))
         alpha = float(_finite_array("alpha", ctrl.alpha if alpha is None else alpha))
+        struct = (ctrl.Ts, ctrl.N_av, self.options.delay,
+                  1.0 if self.options.port == "encoder_average" else 0.0, *self.filter_lengths)
+        key = (array_key(self.plant.Phi, self.plant.Gamma, self.plant.C, omega, self.const), struct,
+               self.torque_output, self.options.port, beta, alpha, self.backend)
+        return _COEFFICIENTS.get(key, lambda: self._loop_coefficients(omega, beta, alpha, struct))
+
+    def _loop_coefficients(self, omega, beta, alpha, struct) -> LoopCoefficients:
+        ctrl = self.params.controller
         port = "dtheta_L1" if self.options.port == "encoder_average" else self.options.port
         G = self.plant.frequency_response(omega, outputs=(self.torque_output, "theta_L1", port),
                                           inputs=("V_m", "T_dist"))
-        Gr = np.empty((12, omega.size))
-        Gr[0::2] = G.reshape(6, -1).real
-        Gr[1::2] = G.reshape(6, -1).imag
-        struct = np.array([ctrl.Ts, ctrl.N_av, self.options.delay,
-                           1.0 if self.options.port == "encoder_average" else 0.0, *self.filter_lengths])
-        f = evaluators(self.backend)["haa_loopcoef"]
-        out = np.array(f(Gr, (omega * ctrl.Ts)[None, :], self.const, np.array([beta, alpha]), struct))
-        c = out[0::2] + 1j * out[1::2]                      # 13 x n_w
+        # one column per frequency: re/im of the 6 plant responses, then w Ts
+        cols = np.empty((13, omega.size))
+        cols[0:12:2] = G.reshape(6, -1).real
+        cols[1:12:2] = G.reshape(6, -1).imag
+        cols[12] = omega * ctrl.Ts
+        (out,) = evaluators(self.backend).call_columns(
+            "haa_loopcoef", [cols, self.const, np.array([beta, alpha]), np.array(struct)], 0)
+        c = (out[:, 0::2] + 1j * out[:, 1::2]).T            # 13 x n_w
         forms = {k: c[3 * i:3 * i + 3].T.copy() for i, k in enumerate(("L_t", "L_imp", "Z_num", "Z_den"))}
-        return LoopCoefficients(omega=omega, Ts=ctrl.Ts, H_T=c[12].copy(), **forms)
+        res = LoopCoefficients(omega=omega.copy(), Ts=ctrl.Ts, H_T=c[12].copy(), **forms)
+        for arr in (res.omega, res.H_T, *forms.values()):
+            arr.setflags(write=False)
+        return res
 
     def frequency_response(self, omega, P_gain=0.0, D_gain=0.0, beta=None, alpha=None) -> dict:
         """Loop transfer functions at ``omega`` (rad/s) for gain points.

@@ -72,4 +72,7 @@ def discretize(cont: ContinuousPlant, Ts: float) -> DiscretePlant:
     aug[:n, :n] = cont.A
     aug[:n, n:] = cont.B
     E = scipy.linalg.expm(aug * Ts)
-    return DiscretePlant(E[:n, :n], E[:n, n:], cont.C.copy(), float(Ts), cont.VC0)
+    Phi, Gamma, C = E[:n, :n].copy(), E[:n, n:].copy(), cont.C.copy()
+    for arr in (Phi, Gamma, C):          # shared by every ClosedLoop of this plant (memoised)
+        arr.setflags(write=False)
+    return DiscretePlant(Phi, Gamma, C, float(Ts), cont.VC0)

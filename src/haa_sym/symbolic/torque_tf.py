@@ -7,6 +7,7 @@ T_l / V of Eq. (2). ``paper_g_tvc`` is Eq. (3) built from the printed p1, q1, q2
 from __future__ import annotations
 
 import sympy as sp
+from sympy.polys.matrices import DomainMatrix
 
 from haa_sym.symbolic.eom import laplace_equations, load_torque, plant_symbols, s
 
@@ -14,17 +15,53 @@ VC = sp.Symbol("VC_gain")  # the velocity-compensation transfer function, kept g
 alpha = sp.Symbol("alpha", positive=True)
 
 
-def derive_g_tvc(p: dict | None = None, vc=VC) -> sp.Expr:
-    """T_l/V with V_m = V + vc*s*theta_L1, derived from Eq. (1)-(2); a cancelled rational in s."""
+def derive_g_tvc_fraction(p: dict | None = None, vc=VC):
+    """T_l/V with V_m = V + vc*s*theta_L1, derived from Eq. (1)-(2), as ``(num, den, ring)``.
+
+    The Laplace equations are linear in the unknowns; Cramer's rule with fraction-free
+    determinants (Bareiss, sympy's DomainMatrix) over the polynomial ring in the parameters,
+    s, V and VC_gain gives theta_m and theta_L1 exactly, in a fraction of a second (sympy's
+    ``solve`` + ``cancel`` on expressions took minutes). ``num``/``den`` are ring elements;
+    ``ring.to_sympy`` turns them into expressions.
+    """
     p, unknowns, eqs = laplace_equations(p)
     V = sp.Symbol("V")
     subs = {sp.Symbol("V_m"): V + vc * s * unknowns[2], sp.Symbol("T_fr"): 0, sp.Symbol("T_dist"): 0}
-    eqs = [sp.together(e.subs(subs)) for e in eqs]
-    eqs = [sp.numer(e) for e in eqs]  # clear the (nonzero) denominators
-    sol = sp.solve(eqs, unknowns, dict=True)[0]
-    I_m, th_m, th_1, th_2 = (sol[u] for u in unknowns)
-    T_l = (p["K_hd"] + s * p["D_hd"]) * (th_m / p["N"] - th_1)
-    return sp.cancel(sp.together(T_l / V))
+    eqs = [sp.numer(sp.together(e.subs(subs))) for e in eqs]   # clear the (nonzero) denominators
+    M, rhs = sp.linear_eq_to_matrix(eqs, unknowns)
+    gens = sorted(M.free_symbols | rhs.free_symbols | {V}, key=str)
+    ring = sp.QQ[tuple(gens)]
+    A = DomainMatrix([[ring.from_sympy(M[i, j]) for j in range(M.cols)] for i in range(M.rows)],
+                     M.shape, ring)
+    det = A.det()
+
+    def cramer(k):                                                  # det(A with column k = rhs)
+        rows = [[ring.from_sympy(rhs[i, 0]) if j == k else A[i, j].element for j in range(M.cols)]
+                for i in range(M.rows)]
+        return DomainMatrix(rows, M.shape, ring).det()
+    th_m, th_1 = cramer(1), cramer(2)                                # times det
+    K, D, N = (ring.from_sympy(p[k]) for k in ("K_hd", "D_hd", "N"))
+    # Eq. (2): T_l = (K_hd + s D_hd)(theta_m/N - theta_L1)
+    num = (K + ring.from_sympy(s) * D) * (th_m - N * th_1)
+    den = N * det * ring.from_sympy(V)
+    return num, den, ring
+
+
+def derive_g_tvc(p: dict | None = None, vc=VC) -> sp.Expr:
+    """:func:`derive_g_tvc_fraction` as an (uncancelled) sympy expression num/den."""
+    num, den, ring = derive_g_tvc_fraction(p, vc)
+    return ring.to_sympy(num) / ring.to_sympy(den)
+
+
+def same_rational(num, den, expr: sp.Expr, ring) -> bool:
+    """Whether num/den (elements of ``ring``) equals the rational expression ``expr``: the
+    cross-multiplied polynomial identity, decided exactly in the ring (no ``cancel``)."""
+    e_num, e_den = sp.fraction(sp.together(expr))
+    field = ring.get_field()
+    e_num, e_den = field.from_sympy(e_num), field.from_sympy(e_den)
+    # e_num = a/b, e_den = c/d with a, b, c, d in the field's polynomial ring (= ring's)
+    a, b, c, d = e_num.numer, e_num.denom, e_den.numer, e_den.denom
+    return num * b * c == den * a * d
 
 
 def paper_polynomials(p: dict | None = None) -> dict[str, sp.Expr]:
@@ -67,5 +104,5 @@ def pi_torque(P_t, I_t, Ts, z):
             (P_t + I_t * Ts) * (z - P_t / (P_t + I_t * Ts)) / (z - 1))
 
 
-__all__ = ["VC", "alpha", "derive_g_tvc", "paper_polynomials", "paper_g_tvc", "vc_gain_exact",
+__all__ = ["VC", "alpha", "derive_g_tvc", "derive_g_tvc_fraction", "same_rational", "paper_polynomials", "paper_g_tvc", "vc_gain_exact",
            "vc_gain_simplified", "pi_torque", "load_torque", "plant_symbols"]
