@@ -19,6 +19,8 @@ CASES = [
     ("Ts=8ms beta=4", {"Ts": 0.008, "beta": 4.0}, None),
     ("Ts=0.5ms delay=1", {"Ts": 0.0005}, LoopOptions(delay=1, port="dtheta_L1")),
     ("retracted alpha=1.2", {"alpha": 1.2}, "retracted"),
+    ("Ts=20us N_av=10", {"Ts": 20e-6, "N_av": 10}, None),
+    ("Ts=100us delay=1", {"Ts": 100e-6}, LoopOptions(delay=1)),
 ]
 
 
@@ -47,9 +49,12 @@ def test_map_agrees_with_eigvals(params, name, changes, extra, radius):
     assert m.stable.any()
 
 
-def test_phase_margin_and_passivity_match_state_space(params):
+@pytest.mark.parametrize("Ts", [1e-3, 50e-6, 10e-6], ids=["1ms", "50us", "10us"])
+def test_phase_margin_and_passivity_match_state_space(params, Ts):
     """PM (impedance loop at T_lref, and torque loop at the PI output) and the passivity excess
-    of the sweep against python-free state-space responses on the same frequency grid."""
+    of the sweep against python-free state-space responses on the same frequency grid, at the
+    paper's Ts and at fast sampling."""
+    params = params.with_values(Ts=Ts)
     rng = np.random.default_rng(7)
     for pm_loop, key in (("impedance", "L_imp"), ("torque", "L_t")):
         opts = LoopOptions(pm_loop=pm_loop)
