@@ -229,7 +229,8 @@ def _trend_alternatives(job: _Job, trends: list[dict], split: tuple[float, float
             continue                                       # passivity only: no effect on trends
         opt = job.with_options(**change)
         st = {f"{e['figure']}{e['panel']}": _quadrants(
-            region_map(panel_params(job.params, e), job.P_grid, job.D_grid, options=opt, radius=False), *split)
+            region_map(panel_params(job.params, e), job.P_grid, job.D_grid, options=opt, radius=False,
+                       passivity=False), *split)
             for e in job.spec["regions"]["panel"]}
         tr = region_trends(st)
         alt[label] = {"holding": sum(t["holds"] for t in tr),
