@@ -206,11 +206,14 @@ def _snapshot(*dirs):
     return {p: p.read_bytes() for d in dirs for p in sorted(d.rglob("*")) if p.is_file()}
 
 
-@pytest.mark.parametrize("tamper", [_tamper_edit_byte, _tamper_truncate_manifest])
-@pytest.mark.parametrize("command", [["-m", "haa_sym.cli", "regions", "--P-gain", "log:1:20000:5",
-                                      "--D-gain", "lin:1:50:3", "--out", "map.npz"],
-                                     ["-m", "haa_sym.verify"]])
-def test_damaged_generated_code_exits_2_with_one_message(tmp_path, tamper, command):
+_REGIONS = ["-m", "haa_sym.cli", "regions", "--P-gain", "log:1:20000:5", "--D-gain", "lin:1:50:3",
+            "--out", "map.npz"]
+
+
+@pytest.mark.parametrize("command,tamper", [(_REGIONS, _tamper_edit_byte),
+                                            (_REGIONS, _tamper_truncate_manifest),
+                                            (["-m", "haa_sym.verify"], _tamper_truncate_manifest)])
+def test_damaged_generated_code_exits_2_with_one_message(tmp_path, command, tamper):
     # a fresh process: the evaluators are cached per process
     gen = shutil.copytree(GEN, tmp_path / "generated")
     msg = tamper(gen)
