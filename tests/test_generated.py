@@ -1,6 +1,8 @@
 """Generated code: reproducible bytes, refused when stale, compiled and VM paths agree."""
 import filecmp
+import json
 import os
+import re
 import shutil
 import subprocess
 import sys
@@ -61,6 +63,20 @@ def test_missing_manifest_is_refused(tmp_path):
         GeneratedCode(tmp_path)
 
 
+_PLANT = """import sys, casadi as ca, numpy as np
+f = ca.external("haa_plant", sys.argv[1])
+args = [ca.reshape(ca.DM(np.linspace(0.5, 2.0, f.numel_in(i))), *f.size_in(i)) for i in range(f.n_in())]
+print(repr([np.array(r).ravel(order="F").tolist() for r in f.call(args)]))
+"""
+
+
+def _plant_values(lib):
+    # a fresh process: truncating a library this process has mapped would crash it (SIGBUS)
+    return subprocess.run([sys.executable, "-c", _PLANT, str(lib)], capture_output=True,
+                          text=True, check=True).stdout
+
+
+@pytest.mark.slow
 def test_compile_cache_by_content_hash(tmp_path):
     comp = Compiler(cache_dir=tmp_path / "cache")
     code = GeneratedCode()
@@ -69,6 +85,12 @@ def test_compile_cache_by_content_hash(tmp_path):
     mtime = lib.stat().st_mtime_ns
     assert comp.build(code.c_file) == lib and lib.stat().st_mtime_ns == mtime
     assert not list(GEN.glob("*.so"))
+    # issue 7: a truncated cached library crashed every later run; now it is rebuilt
+    before = _plant_values(lib)
+    with open(lib, "r+b") as f:
+        f.truncate(lib.stat().st_size // 2)
+    assert Evaluators("compiled", compiler=comp).library == lib and comp.verified(lib)
+    assert _plant_values(lib) == before and "nan" not in before
 
 
 def test_compiled_and_vm_agree(params):
@@ -121,3 +143,84 @@ def test_column_driver_matches_casadi_call(params):
             np.testing.assert_array_equal(a.ravel(), np.array(b).ravel())
     with pytest.raises(ValueError, match="rows"):
         ev.call_columns(f"haa_decide{loop.capacity}", [loop.basis, loop.const, pts[:3]], 2)
+
+
+# --- damaged generated code: one message, exit 2 (issue 7) --------------------------------------
+def test_missing_listed_source_is_refused_in_a_source_tree(tmp_path):
+    root = _copy_tree(tmp_path)
+    (root / "codegen" / "driver.c").unlink()
+    with pytest.raises(StaleGeneratedCode, match=r"driver.c, a source of generated/.* is missing: "
+                                                 r"run `make derive`"):
+        GeneratedCode(root / "generated", root=root)
+
+
+def test_installed_package_needs_no_sources(tmp_path):
+    # root=None is the installed layout: no symbolic sources, the digests alone are checked
+    gen = shutil.copytree(GEN, tmp_path / "generated")
+    assert GeneratedCode(gen, root=None).function_names
+    (gen / "haa_plant.casadi").write_bytes(b"")
+    with pytest.raises(StaleGeneratedCode, match="unset HAA_SYM_GENERATED"):
+        GeneratedCode(gen, root=None)
+
+
+def _edit_manifest(gen, edit):
+    man = gen / "MANIFEST.json"
+    m = json.loads(man.read_text())
+    edit(m)
+    man.write_text(json.dumps(m))
+
+
+@pytest.mark.parametrize("edit,msg", [
+    (lambda m: m.pop("files"), "missing or malformed: files"),
+    (lambda m: m.update(functions="haa_plant"), "missing or malformed: functions"),
+    (lambda m: m["files"].pop("haa_decide16.casadi"), "files['haa_decide16.casadi']"),
+    (lambda m: m.update(capacities=[16, "32"]), "missing or malformed: capacities"),
+    (lambda m: m["tools"].pop("casadi"), "missing or malformed: tools.casadi"),
+])
+def test_invalid_manifest_is_refused(tmp_path, edit, msg):
+    gen = shutil.copytree(GEN, tmp_path / "generated")
+    _edit_manifest(gen, edit)
+    with pytest.raises(StaleGeneratedCode, match=re.escape(msg) + ".*run `make derive`"):
+        GeneratedCode(gen)
+
+
+def _tamper_edit_byte(gen):
+    c = gen / "haa_sym_gen.c"
+    data = bytearray(c.read_bytes())
+    data[len(data) // 2] ^= 1
+    c.write_bytes(bytes(data))
+    return "haa_sym_gen.c does not match"
+
+
+def _tamper_truncate_manifest(gen):
+    man = gen / "MANIFEST.json"
+    man.write_bytes(man.read_bytes()[:100])
+    return "MANIFEST.json is unreadable"
+
+
+def _snapshot(*dirs):
+    return {p: p.read_bytes() for d in dirs for p in sorted(d.rglob("*")) if p.is_file()}
+
+
+_REGIONS = ["-m", "haa_sym.cli", "regions", "--P-gain", "log:1:20000:5", "--D-gain", "lin:1:50:3",
+            "--out", "map.npz"]
+
+
+@pytest.mark.parametrize("command,tamper", [(_REGIONS, _tamper_edit_byte),
+                                            (_REGIONS, _tamper_truncate_manifest),
+                                            (["-m", "haa_sym.verify"], _tamper_truncate_manifest)])
+def test_damaged_generated_code_exits_2_with_one_message(tmp_path, command, tamper):
+    # a fresh process: the evaluators are cached per process
+    gen = shutil.copytree(GEN, tmp_path / "generated")
+    msg = tamper(gen)
+    work = tmp_path / "work"
+    work.mkdir()
+    before = _snapshot(gen, work)
+    env = dict(os.environ, HAA_SYM_GENERATED=str(gen), HAA_SYM_CACHE=str(tmp_path / "cache"))
+    proc = subprocess.run([sys.executable, *command], cwd=work, env=env, capture_output=True,
+                          text=True, timeout=120)
+    assert proc.returncode == 2, proc.stderr
+    assert proc.stderr.startswith("haa-sym: error: ") and msg in proc.stderr
+    assert "run `make derive`" in proc.stderr and "Traceback" not in proc.stderr
+    assert proc.stdout == ""
+    assert _snapshot(gen, work) == before  # nothing written, nothing changed

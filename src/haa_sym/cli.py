@@ -272,6 +272,13 @@ def main(argv: list[str] | None = None) -> int:
     except OSError as exc:
         print(f"haa-sym: error: {exc.strerror or exc}: {exc.filename or ''}", file=sys.stderr)
         return 2
+    except RuntimeError as exc:
+        # generated/ stale or damaged, or the C compiler failing: a fault the user fixes, not a bug
+        from haa_sym.compiled import CompilerError, StaleGeneratedCode
+        if not isinstance(exc, (StaleGeneratedCode, CompilerError)):
+            raise
+        print(f"haa-sym: error: {exc}", file=sys.stderr)
+        return 2
 
 
 if __name__ == "__main__":

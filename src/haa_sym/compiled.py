@@ -1,11 +1,14 @@
 """Load the generated evaluators: compiled C (cached by content hash) or CasADi's VM.
 
-Steps, one small class each (PyDy-style): :class:`GeneratedCode` locates ``generated/`` and
-refuses stale code; :class:`Compiler` builds the shared library into a cache keyed by the
-SHA-256 of the C source, the compiler and its flags (written with ``os.replace``, never in the
-source tree, no ``os.chdir``); :class:`Evaluators` loads the functions with ``casadi.external``,
-or with ``casadi.Function.load`` on the serialised copies when no C compiler is found (one
-warning, never silently).
+Steps, one small class each (PyDy-style): :class:`GeneratedCode` locates ``generated/`` (the
+source tree's, or the copy an installed package carries; see :mod:`haa_sym.resources`) and
+refuses stale, damaged or unreadable code; :class:`Compiler` builds the shared library into a
+cache keyed by the SHA-256 of the C source, the compiler command and its flags (written with
+``os.replace``, never in the source tree, no ``os.chdir``), records the library's own SHA-256
+beside it and checks it before every use, so a truncated or altered library is rebuilt instead
+of crashing the process or changing results; :class:`Evaluators` loads the functions with
+``casadi.external``, or with ``casadi.Function.load`` on the serialised copies when no C
+compiler is found (one warning, never silently).
 """
 from __future__ import annotations
 
@@ -14,6 +17,7 @@ import functools
 import hashlib
 import json
 import os
+import shlex
 import shutil
 import subprocess
 import tempfile
@@ -23,52 +27,112 @@ from pathlib import Path
 import casadi as ca
 import numpy as np
 
-__all__ = ["StaleGeneratedCode", "GeneratedCode", "Compiler", "Evaluators", "evaluators"]
+from haa_sym.resources import data_dir, remedy, source_root
 
-_ROOT = Path(__file__).resolve().parents[2]
+__all__ = ["StaleGeneratedCode", "CompilerError", "NoCompiler", "GeneratedCode", "Compiler",
+           "Evaluators", "evaluators"]
+
 CFLAGS = ("-O2", "-fPIC", "-shared", "-ffp-contract=off")
+# Manifest keys and their JSON types, as codegen/generate.py writes them.
+_MANIFEST_KEYS = {"capacities": list, "files": dict, "functions": list, "library": str,
+                  "source_sha256": str, "sources": list, "tools": dict}
+_DEFAULT = object()
 
 
 class StaleGeneratedCode(RuntimeError):
-    """generated/ does not match its manifest or the symbolic sources."""
+    """generated/ is missing, damaged, or does not match its manifest or the symbolic sources."""
 
 
-class NoCompiler(RuntimeError):
+class CompilerError(RuntimeError):
+    """The C compiler could not build the generated code."""
+
+
+class NoCompiler(CompilerError):
     """No C compiler could be found."""
 
 
-class GeneratedCode:
-    """The checked content of ``generated/`` (default: next to ``src/``; env HAA_SYM_GENERATED)."""
+def _sha256(path: str | Path) -> str:
+    h = hashlib.sha256()
+    with open(path, "rb") as f:
+        for block in iter(lambda: f.read(1 << 20), b""):
+            h.update(block)
+    return h.hexdigest()
 
-    def __init__(self, directory: str | Path | None = None, root: Path = _ROOT):
-        self.dir = Path(directory or os.environ.get("HAA_SYM_GENERATED") or root / "generated")
-        self.root = root
-        man = self.dir / "MANIFEST.json"
-        if not man.is_file():
-            raise StaleGeneratedCode(f"{man} is missing: run `make derive`")
-        self.manifest = json.loads(man.read_text())
+
+class GeneratedCode:
+    """The checked content of ``generated/``.
+
+    Parameters
+    ----------
+    directory : str or Path, optional
+        Default: env ``HAA_SYM_GENERATED``, else ``generated/`` of the source tree or the
+        installed package.
+    root : Path or None, optional
+        Root of the source tree whose symbolic sources the code must match; default the tree
+        this package was loaded from, None for an installed package (whose sources are absent).
+    """
+
+    def __init__(self, directory: str | Path | None = None, root: Path | None = _DEFAULT):
+        self.dir = Path(directory or os.environ.get("HAA_SYM_GENERATED") or data_dir("generated"))
+        self.root = source_root() if root is _DEFAULT else root
+        self.manifest = self._read_manifest(self.dir / "MANIFEST.json")
         self.check()
+
+    def _fix(self) -> str:
+        if self.root is not None:
+            return "run `make derive`"
+        if self.dir.resolve() != data_dir("generated").resolve():
+            return "regenerate it in a source tree (`make derive`) or unset HAA_SYM_GENERATED"
+        return remedy()
+
+    def _read_manifest(self, man: Path) -> dict:
+        if not man.is_file():
+            raise StaleGeneratedCode(f"{man} is missing: {self._fix()}")
+        try:
+            m = json.loads(man.read_text(encoding="utf-8"))
+        except (OSError, UnicodeDecodeError, json.JSONDecodeError) as exc:
+            raise StaleGeneratedCode(f"{man} is unreadable ({exc}): {self._fix()}") from None
+        bad = [k for k, t in _MANIFEST_KEYS.items()
+               if not isinstance(m, dict) or not isinstance(m.get(k), t)]
+        if not bad:
+            # Every file the runtime reads must be covered by a digest.
+            needed = [f"{m['library']}.c"] + [f"{fn}.casadi" for fn in m["functions"]]
+            bad += [f"files[{n!r}]" for n in needed if not isinstance(m["files"].get(n), str)]
+            bad += [] if all(isinstance(r, str) for r in m["sources"]) else ["sources"]
+            bad += [] if isinstance(m["tools"].get("casadi"), str) else ["tools.casadi"]
+            bad += [] if all(type(c) is int and c > 0 for c in m["capacities"]) else ["capacities"]
+        if bad:
+            raise StaleGeneratedCode(
+                f"{man} is invalid (missing or malformed: {', '.join(bad)}): {self._fix()}")
+        return m
 
     def check(self) -> None:
         for name, digest in self.manifest["files"].items():
             path = self.dir / name
-            if not path.is_file() or hashlib.sha256(path.read_bytes()).hexdigest() != digest:
+            if not path.is_file() or _sha256(path) != digest:
                 raise StaleGeneratedCode(
-                    f"{path} does not match generated/MANIFEST.json: run `make derive`")
-        # In a source tree, the symbolic sources must be the ones the code was generated from.
-        sources = [self.root / rel for rel in self.manifest["sources"]]
-        if all(p.is_file() for p in sources):
+                    f"{path} does not match {self.dir / 'MANIFEST.json'}: {self._fix()}")
+        # In a source tree, the symbolic sources must be the ones the code was generated from;
+        # an installed package legitimately carries none of them.
+        if self.root is not None:
             h = hashlib.sha256()
-            for rel, p in zip(self.manifest["sources"], sources):
+            for rel in self.manifest["sources"]:
+                p = self.root / rel
+                if not p.is_file():
+                    raise StaleGeneratedCode(
+                        f"{p}, a source of generated/ (MANIFEST.json), is missing: run `make derive`")
                 h.update(rel.encode() + b"\0" + p.read_bytes() + b"\0")
             if h.hexdigest() != self.manifest["source_sha256"]:
                 raise StaleGeneratedCode(
                     "the symbolic model or code generator changed since generated/ was written: "
                     "run `make derive`")
         if self.manifest["tools"]["casadi"] != ca.__version__:
+            fix = ("install the pinned version (`make venv`) or run `make derive`"
+                   if self.root is not None else
+                   f"install casadi=={self.manifest['tools']['casadi']}, the version haa_sym pins")
             raise StaleGeneratedCode(
                 f"generated/ was written by casadi {self.manifest['tools']['casadi']}, this is "
-                f"casadi {ca.__version__}: install the pinned version (`make venv`) or run `make derive`")
+                f"casadi {ca.__version__}: {fix}")
 
     @property
     def c_file(self) -> Path:
@@ -80,35 +144,86 @@ class GeneratedCode:
 
 
 class Compiler:
-    """Compile one C file into a shared library cached by content hash."""
+    """Compile one C file into a shared library cached by content hash.
+
+    Parameters
+    ----------
+    cc : str, optional
+        Compiler command, split like a shell word list ("gcc -O0", "ccache gcc"); default env
+        ``CC``, else the first of cc, gcc, clang on PATH.
+    cache_dir : str or Path, optional
+        Default env ``HAA_SYM_CACHE``, else ``$XDG_CACHE_HOME/haa_sym`` (``~/.cache/haa_sym``).
+    """
 
     def __init__(self, cc: str | None = None, cache_dir: str | Path | None = None):
-        self.cc = cc or os.environ.get("CC") or shutil.which("cc") or shutil.which("gcc") \
+        cc = cc or os.environ.get("CC") or shutil.which("cc") or shutil.which("gcc") \
             or shutil.which("clang")
-        if not self.cc or not shutil.which(self.cc):
-            raise NoCompiler("no C compiler found (set CC or install gcc)")
+        try:
+            self.argv = shlex.split(cc) if cc else []
+        except ValueError as exc:
+            raise CompilerError(f"CC = {cc!r} cannot be split into a command ({exc})") from None
+        if not self.argv or not shutil.which(self.argv[0]):
+            raise NoCompiler(f"no C compiler found (CC = {cc!r}; set CC or install gcc)"
+                             if cc else "no C compiler found (set CC or install gcc)")
+        self.cc = cc
         self.cache = Path(cache_dir or os.environ.get("HAA_SYM_CACHE")
                           or Path(os.environ.get("XDG_CACHE_HOME", Path.home() / ".cache")) / "haa_sym")
 
     def _version(self) -> str:
-        out = subprocess.run([self.cc, "--version"], capture_output=True, text=True)
+        try:
+            out = subprocess.run([*self.argv, "--version"], capture_output=True, text=True)
+        except OSError:
+            return self.cc
         return out.stdout.splitlines()[0] if out.stdout else self.cc
 
+    @staticmethod
+    def digest_path(library: Path) -> Path:
+        """Where the SHA-256 of ``library`` is recorded (written after the library)."""
+        return library.with_name(library.name + ".sha256")
+
+    def verified(self, library: Path) -> bool:
+        """True if ``library`` exists and matches its recorded SHA-256."""
+        try:
+            recorded = self.digest_path(library).read_text().strip()
+            return _sha256(library) == recorded
+        except OSError:
+            return False
+
     def build(self, c_file: Path) -> Path:
+        """The verified shared library built from ``c_file``; (re)built if absent or damaged."""
         src = c_file.read_bytes()
-        key = hashlib.sha256(src + "\0".join((self._version(),) + CFLAGS).encode()).hexdigest()[:24]
+        key = hashlib.sha256(src + "\0".join((self._version(), *self.argv) + CFLAGS).encode()
+                             ).hexdigest()[:24]
         target = self.cache / key / (c_file.stem + ".so")
-        if target.is_file():
+        if self.verified(target):
             return target
         target.parent.mkdir(parents=True, exist_ok=True)
+        # Both files are written under temporary names and renamed: a concurrent process sees
+        # the old or the new file, never a partial one; a library whose digest is not (yet)
+        # the recorded one is rebuilt, never loaded.
         fd, tmp = tempfile.mkstemp(dir=target.parent, suffix=".so")
         os.close(fd)
-        proc = subprocess.run([self.cc, *CFLAGS, str(c_file), "-o", tmp, "-lm"],
-                              capture_output=True, text=True)
-        if proc.returncode != 0:
-            os.unlink(tmp)
-            raise RuntimeError(f"compiling {c_file} with {self.cc} failed:\n{proc.stderr}")
-        os.replace(tmp, target)
+        try:
+            try:
+                proc = subprocess.run([*self.argv, *CFLAGS, str(c_file), "-o", tmp, "-lm"],
+                                      capture_output=True, text=True)
+            except OSError as exc:
+                raise CompilerError(f"cannot run the C compiler CC = {self.cc!r}: {exc}") from None
+            if proc.returncode != 0:
+                tail = "\n".join((proc.stderr or proc.stdout).strip().splitlines()[-15:])
+                raise CompilerError(
+                    f"compiling {c_file} with CC = {self.cc!r} failed (exit status "
+                    f"{proc.returncode}); set CC to a working C compiler. Compiler output:\n"
+                    f"{tail or '(none)'}")
+            digest = _sha256(tmp)
+            os.replace(tmp, target)
+        finally:
+            if os.path.exists(tmp):
+                os.unlink(tmp)
+        fd, tmp = tempfile.mkstemp(dir=target.parent, suffix=".sha256")
+        with os.fdopen(fd, "w") as f:
+            f.write(digest + "\n")
+        os.replace(tmp, self.digest_path(target))
         return target
 
 

@@ -5,12 +5,14 @@ import tomllib
 from pathlib import Path
 
 from haa_sym.params import ParameterError, Params
+from haa_sym.resources import data_dir
 
 __all__ = ["paper_spec", "panel_params", "default_paper_path"]
 
 
 def default_paper_path() -> Path:
-    return Path(__file__).resolve().parents[2] / "model" / "paper.toml"
+    """``model/paper.toml`` (source tree or installed package)."""
+    return data_dir("model") / "paper.toml"
 
 
 def paper_spec(path: str | Path | None = None) -> dict:

@@ -20,6 +20,8 @@ from dataclasses import dataclass, field, fields, replace
 from pathlib import Path
 from typing import Mapping
 
+from haa_sym.resources import data_dir
+
 __all__ = [
     "ParameterError",
     "Plant",
@@ -163,8 +165,8 @@ class Params:
 
 
 def default_params_path() -> Path:
-    """``model/hyq_haa.toml`` of the source tree (the bundled HyQ parameters)."""
-    return Path(__file__).resolve().parents[2] / "model" / "hyq_haa.toml"
+    """``model/hyq_haa.toml``, the bundled HyQ parameters (source tree or installed package)."""
+    return data_dir("model") / "hyq_haa.toml"
 
 
 def _check_value(where: str, key: str, value: object, domain: str) -> float | int:

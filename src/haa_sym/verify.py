@@ -16,9 +16,10 @@ from dataclasses import dataclass
 import numpy as np
 import sympy as sp
 
+from haa_sym.compiled import CompilerError, StaleGeneratedCode, evaluators
 from haa_sym.loop import ClosedLoop
 from haa_sym.margins import default_omega, stability_margins
-from haa_sym.params import PLANT_KEYS, Params, load_params
+from haa_sym.params import PLANT_KEYS, ParameterError, Params, load_params
 from haa_sym.symbolic import eom, torque_tf as tt
 
 LOAD_KEYS = ("J_L1", "B_L1", "J_L2", "B_L2", "K_L2", "K_p", "D_p")
@@ -194,8 +195,13 @@ def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(prog="python -m haa_sym.verify", description=__doc__.splitlines()[0])
     ap.add_argument("--params", default=None, help="parameter file (default model/hyq_haa.toml)")
     args = ap.parse_args(argv)
-    params = load_params(args.params)
-    rows = run(params)
+    try:
+        params = load_params(args.params)
+        evaluators()  # refuse stale or damaged generated code before the slow symbolic rows
+        rows = run(params)
+    except (ParameterError, StaleGeneratedCode, CompilerError) as exc:
+        print(f"haa-sym: error: {exc}", file=sys.stderr)
+        return 2
     width = max(len(r.claim) for r in rows)
     for i, r in enumerate(rows, 1):
         print(f"{i:2d} {'PASS' if r.ok else 'FAIL'}  {r.claim}")

@@ -1,0 +1,104 @@
+"""The compiled-library cache checks itself; compiler faults are one message, exit 2 (issue 7).
+
+Every test uses its own cache directory (never the user's). A library is never loaded into this
+process before it is damaged: truncating a mapped library would crash the test process itself.
+"""
+import os
+import shutil
+import subprocess
+import sys
+
+import pytest
+
+from haa_sym.compiled import Compiler, CompilerError, NoCompiler
+
+pytestmark = pytest.mark.skipif(not (shutil.which("cc") or shutil.which("gcc")),
+                                reason="needs a C compiler")
+GCC = shutil.which("gcc") or shutil.which("cc")
+
+TINY = "double haa_twice(double x) { return 2.0 * x + 0.25; }\n"
+
+
+@pytest.fixture
+def tiny(tmp_path):
+    c = tmp_path / "tiny.c"
+    c.write_text(TINY)
+    return c
+
+
+def _call(lib):
+    """haa_twice(1.5) from ``lib``, in a fresh process."""
+    code = ("import ctypes, sys\nf = ctypes.CDLL(sys.argv[1]).haa_twice\n"
+            "f.restype = ctypes.c_double\nf.argtypes = [ctypes.c_double]\nprint(repr(f(1.5)))")
+    return subprocess.run([sys.executable, "-c", code, str(lib)], capture_output=True, text=True,
+                          check=True).stdout
+
+
+def _truncate(lib):
+    with open(lib, "r+b") as f:
+        f.truncate(lib.stat().st_size // 2)
+
+
+def _flip_byte(lib):
+    data = bytearray(lib.read_bytes())
+    data[len(data) // 2] ^= 0x40
+    lib.write_bytes(bytes(data))
+
+
+@pytest.mark.parametrize("damage", [_truncate, _flip_byte, lambda lib: lib.unlink(),
+                                    lambda lib: Compiler.digest_path(lib).unlink()])
+def test_damaged_library_is_rebuilt(tmp_path, tiny, damage):
+    comp = Compiler(cc=GCC, cache_dir=tmp_path / "cache")
+    lib = comp.build(tiny)
+    good, result = lib.read_bytes(), _call(lib)
+    assert comp.verified(lib) and result == "3.25\n"
+    damage(lib)
+    assert not comp.verified(lib)
+    assert comp.build(tiny) == lib
+    assert comp.verified(lib) and lib.read_bytes() == good and _call(lib) == result
+    # only the library and its digest: no temporary files left behind
+    assert sorted(p.name for p in lib.parent.iterdir()) == ["tiny.so", "tiny.so.sha256"]
+
+
+def test_verified_library_is_not_rebuilt(tmp_path, tiny):
+    comp = Compiler(cc=GCC, cache_dir=tmp_path / "cache")
+    lib = comp.build(tiny)
+    mtime = lib.stat().st_mtime_ns
+    assert comp.build(tiny) == lib and lib.stat().st_mtime_ns == mtime
+
+
+def test_cc_with_flags_is_honoured(tmp_path, tiny):
+    plain = Compiler(cc=GCC, cache_dir=tmp_path / "cache").build(tiny)
+    flagged = Compiler(cc=f"{GCC} -O0", cache_dir=tmp_path / "cache").build(tiny)
+    assert flagged != plain  # the command is part of the cache key
+    assert _call(flagged) == _call(plain) == "3.25\n"
+
+
+def test_failing_compiler_is_named_with_its_output(tmp_path, tiny):
+    cache = tmp_path / "cache"
+    with pytest.raises(CompilerError, match=r"CC = '/bin/false' failed \(exit status 1\)"):
+        Compiler(cc="/bin/false", cache_dir=cache).build(tiny)
+    tiny.write_text("double broken(double x) { return x +; }\n")
+    with pytest.raises(CompilerError, match=r"(?s)CC = .* failed.*tiny.c.*error"):
+        Compiler(cc=GCC, cache_dir=cache).build(tiny)
+    assert not [p for p in cache.rglob("*") if p.is_file()]  # no partial library left
+
+
+def test_missing_compiler_command_is_no_compiler(tmp_path):
+    with pytest.raises(NoCompiler, match="no C compiler found .CC = '/nonexistent/cc -O0'"):
+        Compiler(cc="/nonexistent/cc -O0", cache_dir=tmp_path)
+    with pytest.raises(CompilerError, match="cannot be split"):
+        Compiler(cc="gcc '-O0", cache_dir=tmp_path)
+
+
+@pytest.mark.parametrize("command", [["-m", "haa_sym.cli", "stability", "--P-gain", "200",
+                                      "--D-gain", "10"], ["-m", "haa_sym.verify"]])
+def test_failing_compiler_exits_2(tmp_path, command):
+    env = dict(os.environ, CC="/bin/false", HAA_SYM_CACHE=str(tmp_path / "cache"))
+    proc = subprocess.run([sys.executable, *command], cwd=tmp_path, env=env, capture_output=True,
+                          text=True, timeout=120)
+    assert proc.returncode == 2, proc.stderr
+    assert proc.stderr.startswith("haa-sym: error: compiling ")
+    assert "CC = '/bin/false' failed" in proc.stderr and "Traceback" not in proc.stderr
+    assert proc.stdout == ""
+
