@@ -3,8 +3,8 @@
 For the nominal configuration (N_av = 4) and for N_av = 50, on P_gain log 1..20000 x D_gain lin 1..50:
 
 (1) haa_sym's generated evaluators:
-    - stability map: decision only (Schur-Cohn at 1 - band, then 1 and 1 + band if needed);
-    - stability + spectral radius (30 halvings);
+    - stability map: the certified Routh-Hurwitz decision on the bilinear basis;
+    - stability + spectral radius (the radius from stacked eigenvalues, ``radius=True``);
     - full map: stability, phase margin of the impedance loop and passivity (``region_map``,
       radius off) and with the radius;
 (2) numpy ``linalg.eigvals`` on the stacked closed-loop matrices A(P, D) = A0 + P A1 + D A2
@@ -13,14 +13,24 @@ For the nominal configuration (N_av = 4) and for N_av = 50, on P_gain log 1..200
     ``feedback``, ``poles``, ``stability_margins``) on a random sample of points, extrapolated
     to 40,000 points.
 
-Prints the timings and the ratios and writes ``benchmarks/results.json``. Every timing is the
-best of ``REPEATS`` runs. The decisions of (1), (2) and (3) are compared on the points each saw.
+Then, whole processes as a user runs them (fresh interpreter, compiled-code cache warm):
+(4) ``haa-sym regions`` on a 300 x 300 grid (stability, PM, passivity, npz written) against a
+    plain script that builds the stacked closed-loop matrices and calls ``numpy.linalg.eigvals``
+    (stability only), nominal and N_av = 50;
+(5) ``haa-sym reproduce --out DIR``, what ``make paper`` runs after ``make derive``.
+
+Prints the timings and the ratios and writes ``benchmarks/results.json``. Every in-process timing
+is the best of ``REPEATS`` runs, every whole-process timing one run. The decisions of (1), (2)
+and (3) are compared on the points each saw.
 """
 from __future__ import annotations
 
 import json
+import os
 import platform
+import subprocess
 import sys
+import tempfile
 import time
 import warnings
 from pathlib import Path
@@ -121,6 +131,57 @@ def run(n_P=200, n_D=200, configs=(("nominal (N_av = 4)", {}), ("N_av = 50", {"N
     return rows
 
 
+EIGVALS_SCRIPT = """
+import sys, numpy as np
+from haa_sym import ClosedLoop, load_params
+from haa_sym.reference import closed_loop_matrices
+n, N_av = int(sys.argv[1]), int(sys.argv[2])
+loop = ClosedLoop(load_params().with_values(N_av=N_av), basis=False)
+A0 = closed_loop_matrices(loop, 0, 0)[0]
+A1 = closed_loop_matrices(loop, 1, 0)[0] - A0
+A2 = closed_loop_matrices(loop, 0, 1)[0] - A0
+P, D = np.meshgrid(np.logspace(0, np.log10(20000), n), np.linspace(1, 50, n), indexing="ij")
+P, D = P.ravel(), D.ravel()
+stable = np.empty(P.size, bool)
+for s in range(0, P.size, 2000):
+    A = A0 + P[s:s + 2000, None, None] * A1 + D[s:s + 2000, None, None] * A2
+    stable[s:s + 2000] = np.abs(np.linalg.eigvals(A)).max(axis=1) < 1
+np.save(sys.argv[3], stable)
+"""
+
+
+def _timed(cmd: list[str], cwd: str) -> float:
+    t = time.perf_counter()
+    subprocess.run(cmd, cwd=cwd, check=True, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+    return time.perf_counter() - t
+
+
+def whole_process(n: int = 300) -> list[dict]:
+    """(4): the CLI map against the stacked-eigvals script, each in a fresh process."""
+    rows = []
+    with tempfile.TemporaryDirectory() as tmp:
+        for N_av in (4, 50):
+            t_cli = _timed([sys.executable, "-m", "haa_sym.cli", "regions", "--set", f"N_av={N_av}",
+                            "--P-gain", f"log:1:20000:{n}", "--D-gain", f"lin:1:50:{n}",
+                            "--out", os.path.join(tmp, "m.npz")], tmp)
+            t_eig = _timed([sys.executable, "-c", EIGVALS_SCRIPT, str(n), str(N_av),
+                            os.path.join(tmp, "s.npy")], tmp)
+            with np.load(os.path.join(tmp, "m.npz")) as f:
+                cli_stable = f["stable"].ravel()
+            agree = float((np.load(os.path.join(tmp, "s.npy")) == cli_stable).mean())
+            rows.append({"N_av": N_av, "grid": f"{n} x {n}", "cli_regions_full_map_s": t_cli,
+                         "eigvals_script_stability_only_s": t_eig, "ratio": t_eig / t_cli,
+                         "decisions_agreeing_fraction": agree})
+    return rows
+
+
+def paper_run() -> float:
+    """(5): ``haa-sym reproduce`` into a temporary directory, one whole-process run."""
+    with tempfile.TemporaryDirectory() as tmp:
+        return _timed([sys.executable, "-m", "haa_sym.cli", "reproduce", "--out",
+                       os.path.join(tmp, "results")], tmp)
+
+
 def main() -> int:
     rows = run()
     print(f"200 x 200 region map on {platform.processor() or platform.machine()}, "
@@ -139,8 +200,17 @@ def main() -> int:
         print(f"  ratio full map vs python-control   {r['ratio_full_map_vs_python_control']:8.0f} x")
         print(f"  decisions agree with eigvals: {r['decisions_agree_with_eigvals']}; "
               f"python-control sample: {r['python_control_sample_agreeing']}")
+    procs = whole_process()
+    print("\nwhole processes (fresh interpreter), 300 x 300:")
+    for r in procs:
+        print(f"  N_av = {r['N_av']:2d}: haa-sym regions (full map) {r['cli_regions_full_map_s']:6.2f} s, "
+              f"stacked-eigvals script (stability only) {r['eigvals_script_stability_only_s']:6.2f} s: "
+              f"{r['ratio']:.1f} x; decisions agreeing {100 * r['decisions_agreeing_fraction']:.3f} %")
+    t_paper = paper_run()
+    print(f"\nhaa-sym reproduce (make paper after make derive): {t_paper:.1f} s")
     out = HERE / "results.json"
-    out.write_text(json.dumps({"machine": platform.platform(), "rows": rows}, indent=1) + "\n")
+    out.write_text(json.dumps({"machine": platform.platform(), "rows": rows, "whole_process": procs,
+                               "reproduce_s": t_paper}, indent=1) + "\n")
     print(f"\nwrote {out}")
     return 0
 
