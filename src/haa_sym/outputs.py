@@ -136,12 +136,15 @@ class Transaction:
                 raise OutputError(f"{_label(target, field)}: cannot write ({exc.strerror})") from None
         else:
             raise OutputError(f"{_label(target, field)}: cannot create a temporary file next to it")
-        self._staged.append((tmp, target, False))
         try:
             with os.fdopen(fd, mode) as fh:
                 yield fh
-        except OSError as exc:
-            raise OutputError(f"{_label(target, field)}: cannot write ({exc.strerror or exc})") from None
+        except BaseException as exc:
+            _remove(tmp)                         # a failed write is never committed
+            if isinstance(exc, OSError):
+                raise OutputError(f"{_label(target, field)}: cannot write ({exc.strerror or exc})") from None
+            raise
+        self._staged.append((tmp, target, False))
 
     def write_text(self, path: str | Path, text: str, field: str | None = None) -> Path:
         with self.open(path, "w", field) as fh:
@@ -211,7 +214,7 @@ class Transaction:
                     elif not existed:
                         _remove(old_target)
             self.rollback()
-            if isinstance(exc, OSError) and not isinstance(exc, OutputError) and target is not None:
+            if isinstance(exc, OSError) and target is not None:
                 raise OutputError(f"{_label(target, None)}: cannot write ({exc.strerror or exc})") from None
             raise
         self._staged = []

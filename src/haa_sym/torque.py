@@ -77,7 +77,7 @@ def step_response(params: Params, *, duration: float = 0.3, options: LoopOptions
     _, _, beta, alpha = gain_points(0.0, 0.0, beta, alpha)
     Ts = params.controller.Ts
     n = int(round(duration / Ts)) + 1
-    check_memory(16 * n, f"duration = {duration!r} s: a step response of {n} samples")
+    check_memory(16 * n, f"duration = {duration!r} s: a step response of {float(n):.4g} samples")
     loop = loop or ClosedLoop(params, options)
     A, B, C, D = closed_loop_matrices(loop, 0.0, 0.0, beta, alpha, cut="T_ref")
     x = np.zeros(A.shape[0])
