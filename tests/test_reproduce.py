@@ -2,10 +2,19 @@
 import json
 
 from haa_sym.cli import main
+from haa_sym.reproduce import foreign_entries
 
 
 def test_reproduce_quick(tmp_path, capsys):
-    assert main(["reproduce", "--quick", "--out", str(tmp_path)]) == 0
+    out = tmp_path / "results"
+    (out / "regions").mkdir(parents=True)                    # an earlier run's results, replaced whole
+    (out / "regions" / "fig99z.npz").write_bytes(b"stale map")
+    (out / "REPORT.md").write_text("# old report\n")
+    assert main(["reproduce", "--quick", "--out", str(out)]) == 0
+    assert [p.name for p in tmp_path.iterdir()] == ["results"]          # no temporary left
+    assert foreign_entries(out) == []    # the rule that lets a later run replace it knows every output
+    assert not (out / "regions" / "fig99z.npz").exists()
+    tmp_path = out
     names = {p.name for p in tmp_path.iterdir()}
     assert {"REPORT.md", "claims.json", "table2.csv", "options_table2.csv", "fig07.png", "fig08.png",
             "fig09.png", "fig10.png", "fig11.png", "fig12.png", "fig12.csv", "fig07.csv",

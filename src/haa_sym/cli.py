@@ -17,12 +17,10 @@ Bad input exits with status 2 and a message naming the field; nothing partial is
 from __future__ import annotations
 
 import argparse
-import contextlib
-import os
 import sys
 from pathlib import Path
 
-from haa_sym.params import ParameterError, load_params
+from haa_sym.params import ParameterError, gain_array, load_params
 
 OUTPUT_SUFFIXES = {"regions": (".npz",), "passivity": (".csv", ".json"), "step": (".csv",)}
 
@@ -33,10 +31,13 @@ def _parse_set(items: list[str]) -> dict[str, float]:
         key, sep, value = item.partition("=")
         if not sep:
             raise ParameterError(f"--set {item!r}: expected KEY=VALUE")
+        key, value = key.strip(), value.strip()
         try:
-            out[key.strip()] = float(value)
+            # an integer stays one, so that messages show the value as typed (N_av = 0, not 0.0)
+            out[key] = int(value) if value.lstrip("+-").isdigit() else float(value)
         except ValueError:
-            raise ParameterError(f"--set {item!r}: {value!r} is not a number") from None
+            raise ParameterError(f"--set {key}={value}: {value!r} is not a number; allowed: a finite "
+                                 "number") from None
     return out
 
 
@@ -81,35 +82,28 @@ def _params(args):
     params = load_params(args.params)
     if args.configuration:
         params = params.configuration(args.configuration)
-    return params.with_values(**_parse_set(args.set))
+    for key, value in _parse_set(args.set).items():
+        try:
+            params = params.with_values(**{key: value})
+        except ParameterError as exc:
+            raise ParameterError(f"--set {key}={value}: {exc}") from None
+    return params
 
 
 def _check_out(path: str | None, cmd: str, flag: str = "--out") -> Path | None:
-    """Validate an output path before any computation: suffix, and a writable directory."""
+    """Validate an output path before any computation: suffix, existing writable directory."""
     if path is None:
         return None
+    from haa_sym.outputs import check_file
     p = Path(path)
     allowed = OUTPUT_SUFFIXES[cmd] if flag == "--out" else (".png", ".pdf", ".svg")
     if p.suffix.lower() not in allowed:
         raise ParameterError(f"{flag} {path!r}: unsupported file type; allowed: {list(allowed)}")
-    parent = p.parent
-    while not parent.exists() and parent != parent.parent:
-        parent = parent.parent
-    if not (parent.is_dir() and os.access(parent, os.W_OK)):
-        raise ParameterError(f"{flag} {path!r}: {parent} is not a writable directory")
-    return p
+    return check_file(p, flag)
 
 
-@contextlib.contextmanager
-def _all_or_nothing(paths):
-    """Remove the outputs already written if a later one fails: no partial results."""
-    try:
-        yield
-    except BaseException:
-        for p in paths:
-            if p is not None:
-                Path(p).unlink(missing_ok=True)
-        raise
+def _gain(args, name: str, flag: str) -> float:
+    return float(gain_array(name, getattr(args, name), flag))
 
 
 def _cmd_regions(args) -> int:
@@ -120,12 +114,13 @@ def _cmd_regions(args) -> int:
     out = _check_out(args.out, "regions")
     plot = _check_out(args.plot, "regions", "--plot")
     m = region_map(params, P, D, options=options, radius=args.radius)
-    with _all_or_nothing([out, plot]):
+    from haa_sym.outputs import Transaction
+    with Transaction() as tx:
         if out:
-            m.save(out)
+            m.save(out, tx, "--out")
         if plot:
             from haa_sym.plots import plot_region, save_figure
-            save_figure(plot_region(m, title=args.title), plot)
+            save_figure(plot_region(m, title=args.title), plot, tx, "--plot")
     print(f"{m.stable.size} points: {m.stable.sum()} stable, {m.low_pm.sum()} stable with PM < 30 deg, "
           f"{m.passive.sum()} passive" + (f"; wrote {out}" if out else ""))
     return 0
@@ -157,15 +152,17 @@ def _cmd_passivity(args) -> int:
             curves.append((w, ph, f"P_gain = {P[i]:g}, D_gain = {D[i]:g}"))
             print(f"  |phase| > 90 deg for P_gain {P[i]:g}, D_gain {D[i]:g}: "
                   + (", ".join(f"{a:.1f}-{b:.1f} rad/s" for a, b in bands_beyond(w, ph)) or "never"))
-    if out:
-        from haa_sym.reproduce import _csv, _write_text
-        from haa_sym.regions import run_meta
-        text = (json.dumps({"cells": rows, "meta": run_meta(params, options)}, indent=1) + "\n"
-                if out.suffix == ".json" else _csv(rows))
-        _write_text(out, text)
-    if plot:
-        from haa_sym.plots import plot_corrected_phase, save_figure
-        save_figure(plot_corrected_phase(curves, "corrected phase of Z(z)"), plot)
+    from haa_sym.outputs import Transaction
+    with Transaction() as tx:
+        if out:
+            from haa_sym.reproduce import _csv
+            from haa_sym.regions import run_meta
+            text = (json.dumps({"cells": rows, "meta": run_meta(params, options)}, indent=1) + "\n"
+                    if out.suffix == ".json" else _csv(rows))
+            tx.write_text(out, text, "--out")
+        if plot:
+            from haa_sym.plots import plot_corrected_phase, save_figure
+            save_figure(plot_corrected_phase(curves, "corrected phase of Z(z)"), plot, tx, "--plot")
     return 0
 
 
@@ -179,20 +176,25 @@ def _cmd_step(args) -> int:
     print(f"10-90% rise time {s.rise_time * 1e3:.1f} ms, overshoot {s.overshoot * 100:.1f} %, "
           f"T at {s.t[-1]:g} s = {s.T[-1]:.4f}, -3 dB bandwidth "
           f"{torque_bandwidth(params, options=options):.2f} rad/s")
-    if out:
-        from haa_sym.reproduce import _csv, _write_text
-        _write_text(out, _csv([{"t_s": f"{t:.6g}", "T_Nm": f"{v:.9g}"} for t, v in zip(s.t, s.T)]))
-    if plot:
-        from haa_sym.plots import plot_steps, save_figure
-        save_figure(plot_steps([("unit torque step", [(s, "T_l", "-")])]), plot)
+    from haa_sym.outputs import Transaction
+    with Transaction() as tx:
+        if out:
+            from haa_sym.reproduce import _csv
+            tx.write_text(out, _csv([{"t_s": f"{t:.6g}", "T_Nm": f"{v:.9g}"} for t, v in zip(s.t, s.T)]), "--out")
+        if plot:
+            from haa_sym.plots import plot_steps, save_figure
+            save_figure(plot_steps([("unit torque step", [(s, "T_l", "-")])]), plot, tx, "--plot")
     return 0
 
 
 def _cmd_margins(args) -> int:
+    from haa_sym.budget import check_memory, sweep_bytes
     from haa_sym.loop import ClosedLoop
     from haa_sym.margins import stability_margins
     params = _params(args)
     options = _parse_options(args.option)
+    args.P_gain, args.D_gain = _gain(args, "P_gain", "--P-gain"), _gain(args, "D_gain", "--D-gain")
+    check_memory(sweep_bytes(1, options.n_omega), f"the loop gains on n_omega = {options.n_omega} frequencies")
     loop = ClosedLoop(params, options)
     coef = loop.loop_coefficients()
     st = loop.stability(args.P_gain, args.D_gain, radius=True)
@@ -210,7 +212,7 @@ def _cmd_reproduce(args) -> int:
     from haa_sym.reproduce import reproduce
     params = _params(args)
     options = _parse_options(args.option)
-    reproduce(args.out, params, options, quick=args.quick)
+    reproduce(args.out, params, options, quick=args.quick, field="--out")
     return 0
 
 
@@ -260,6 +262,7 @@ def main(argv: list[str] | None = None) -> int:
         if args.cmd == "stability":
             from haa_sym.loop import ClosedLoop
             params = _params(args)
+            args.P_gain, args.D_gain = _gain(args, "P_gain", "--P-gain"), _gain(args, "D_gain", "--D-gain")
             res = ClosedLoop(params, _parse_options(args.option)).stability(args.P_gain, args.D_gain,
                                                                              radius=True)
             print(f"stable: {bool(res.stable)}  spectral radius: {float(res.spectral_radius):.12f}")

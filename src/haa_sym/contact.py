@@ -9,7 +9,7 @@ from __future__ import annotations
 import numpy as np
 
 from haa_sym.loop import ClosedLoop, LoopOptions
-from haa_sym.params import Params
+from haa_sym.params import Params, gain_array, gain_points
 
 __all__ = ["contact_stability", "intervals"]
 
@@ -33,7 +33,8 @@ def contact_stability(params: Params, K_env, *, P_gain: float = 0.0, D_gain: flo
     from tqdm.auto import tqdm
 
     from haa_sym.reference import spectral_radius
-    K_env = np.asarray(K_env, float).ravel()
+    P_gain, D_gain, beta, alpha = gain_points(P_gain, D_gain, beta, alpha)
+    K_env = gain_array("K_env", K_env).ravel()
     stable = np.empty(K_env.size, bool)
     rho = np.empty(K_env.size)
     for i, K in enumerate(tqdm(K_env, desc="contact stiffness", leave=False,

@@ -38,7 +38,7 @@ import numpy as np
 from haa_sym.cache import BoundedCache, array_key
 from haa_sym.compiled import evaluators
 from haa_sym.exact import bilinear, polymul, polysub, to_float, transfer_polynomials
-from haa_sym.params import ParameterError, Params
+from haa_sym.params import ParameterError, Params, gain_array
 from haa_sym.plant import OUTPUTS, DiscretePlant, continuous_plant, discretize
 
 __all__ = ["LoopOptions", "LoopCoefficients", "ClosedLoop", "StabilityResult", "PORTS", "FREQ_OUTPUTS"]
@@ -201,11 +201,9 @@ class StabilityResult:
 
 
 def _finite_array(name: str, value) -> np.ndarray:
-    arr = np.asarray(value, dtype=float)
-    if not np.all(np.isfinite(arr)):
-        bad = arr[~np.isfinite(arr)].ravel()[0]
-        raise ParameterError(f"{name} contains {float(bad)!r}; allowed: finite numbers")
-    return arr
+    # gains (P_gain, D_gain, beta, alpha) follow the one rule of haa_sym.params.gain_array;
+    # other arrays (omega) must be finite
+    return gain_array(name, value)
 
 
 class ClosedLoop:

@@ -10,6 +10,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from haa_sym.params import ParameterError, gain_array
+
 __all__ = ["Margins", "stability_margins", "default_omega"]
 
 
@@ -63,7 +65,13 @@ def stability_margins(L: np.ndarray, omega: np.ndarray) -> Margins:
     84.3
     """
     L = np.asarray(L)
-    lw = np.log(np.asarray(omega, dtype=float))
+    omega = gain_array("omega", omega)
+    if omega.ndim != 1 or L.shape != omega.shape or omega.size < 2:
+        raise ParameterError(f"L has shape {L.shape} and omega {omega.shape}; allowed: two 1-D arrays "
+                             "of the same length >= 2")
+    if omega[0] <= 0 or np.any(np.diff(omega) <= 0):
+        raise ParameterError("omega is not positive and increasing; allowed: increasing frequencies > 0 (rad/s)")
+    lw = np.log(omega)
     mag = np.log10(np.abs(L))
     ph = np.degrees(np.unwrap(np.angle(L)))
     i, t = _crossings(lw, mag, 0.0)

@@ -5,6 +5,11 @@ table and optional ``[configurations.<name>]`` tables overriding plant keys (the
 configurations of Table 1). Loading validates everything and raises :class:`ParameterError`
 naming the file, the key, the value and what is allowed; nothing is silently defaulted.
 
+Validation lives here and only here: :class:`Plant`, :class:`Controller` and :class:`Params`
+check themselves on construction (so ``dataclasses.replace`` cannot make an invalid object
+either), and :func:`gain_array` is the one rule for the gain points every analysis takes
+(P_gain, D_gain, beta, alpha).
+
 Example
 -------
 >>> from haa_sym.params import load_params
@@ -16,9 +21,11 @@ from __future__ import annotations
 
 import math
 import tomllib
-from dataclasses import dataclass, field, fields, replace
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Mapping
+
+import numpy as np
 
 from haa_sym.resources import data_dir
 
@@ -29,6 +36,9 @@ __all__ = [
     "Params",
     "PLANT_KEYS",
     "CONTROLLER_KEYS",
+    "GAIN_KEYS",
+    "gain_array",
+    "gain_points",
     "load_params",
     "default_params_path",
 ]
@@ -56,6 +66,13 @@ _DOMAIN_TEXT = {
     ">=0": "a finite number >= 0",
     "int>=1": "an integer >= 1",
 }
+# Gain points of every analysis: the impedance gains of Eq. (8) and the torque-loop gains, whose
+# rule is the controller file's (beta = 0 switches the torque PI off; negative gains are positive
+# feedback, which the analysis, the paper and the generated sign conventions do not cover).
+_GAIN_DOMAIN: dict[str, str] = {"P_gain": ">=0", "D_gain": ">=0",
+                                "beta": _CONTROLLER_DOMAIN["beta"], "alpha": _CONTROLLER_DOMAIN["alpha"]}
+_GAIN_UNITS = {"P_gain": " (Nm/rad)", "D_gain": " (Nms/rad)", "beta": "", "alpha": ""}
+GAIN_KEYS: tuple[str, ...] = tuple(_GAIN_DOMAIN)
 _ENTRY_FIELDS = {"value", "unit", "source", "description"}
 _SOURCES = {"D", "I", "C", "-"}
 
@@ -84,13 +101,16 @@ class Plant:
     k_w: float
     N: float
 
+    def __post_init__(self):
+        _check_fields(self, _PLANT_DOMAIN)
+
     def as_tuple(self) -> tuple[float, ...]:
         """Values in the order of :data:`PLANT_KEYS` (the order the generated code expects)."""
         return tuple(getattr(self, k) for k in PLANT_KEYS)
 
     def replace(self, **changes: float) -> "Plant":
         """A copy with some keys changed, validated like a file."""
-        return _validated(Plant, {**self.__dict__, **changes}, _PLANT_DOMAIN, "<replace>")
+        return _validated(Plant, {**self.__dict__, **changes}, _PLANT_DOMAIN)
 
 
 @dataclass(frozen=True)
@@ -108,6 +128,9 @@ class Controller:
     P_t0: float
     I_t0: float
 
+    def __post_init__(self):
+        _check_fields(self, _CONTROLLER_DOMAIN)
+
     @property
     def P_t(self) -> float:
         return self.beta * self.P_t0
@@ -118,7 +141,7 @@ class Controller:
 
     def replace(self, **changes: float) -> "Controller":
         """A copy with some keys changed, validated like a file."""
-        return _validated(Controller, {**self.__dict__, **changes}, _CONTROLLER_DOMAIN, "<replace>")
+        return _validated(Controller, {**self.__dict__, **changes}, _CONTROLLER_DOMAIN)
 
 
 @dataclass(frozen=True)
@@ -129,6 +152,24 @@ class Params:
     controller: Controller
     configurations: Mapping[str, Mapping[str, float]] = field(default_factory=dict)
     source: str = "<memory>"
+
+    def __post_init__(self):
+        if not isinstance(self.plant, Plant):
+            raise ParameterError(f"{self.source}: plant = {self.plant!r}; allowed: a haa_sym.Plant")
+        if not isinstance(self.controller, Controller):
+            raise ParameterError(f"{self.source}: controller = {self.controller!r}; allowed: a haa_sym.Controller")
+        if not isinstance(self.configurations, Mapping):
+            raise ParameterError(f"{self.source}: [configurations] must be a table of tables")
+        configs = {}
+        for name, overrides in self.configurations.items():
+            where = f"{self.source} [configurations.{name}]"
+            if not isinstance(overrides, Mapping):
+                raise ParameterError(f"{where}: must be a table of plant keys")
+            unknown = sorted(set(overrides) - set(_PLANT_DOMAIN))
+            if unknown:
+                raise ParameterError(f"{where}: unknown key(s) {unknown}; allowed: {list(PLANT_KEYS)}")
+            configs[name] = {k: _check_value(k, v, _PLANT_DOMAIN[k], where) for k, v in overrides.items()}
+        object.__setattr__(self, "configurations", configs)
 
     def configuration(self, name: str) -> "Params":
         """The parameters with the plant overrides of configuration ``name`` applied."""
@@ -169,33 +210,101 @@ def default_params_path() -> Path:
     return data_dir("model") / "hyq_haa.toml"
 
 
-def _check_value(where: str, key: str, value: object, domain: str) -> float | int:
+def _check_value(key: str, value: object, domain: str, where: str | None = None) -> float | int:
+    """``value`` of ``key`` checked against ``domain``; the message names where, key, value, allowed."""
     allowed = _DOMAIN_TEXT[domain]
+    prefix = f"{where}: " if where else ""
     if isinstance(value, bool) or not isinstance(value, (int, float)):
-        raise ParameterError(f"{where}: {key} = {value!r} is not a number; allowed: {allowed}")
-    if not math.isfinite(value):
-        raise ParameterError(f"{where}: {key} = {value!r} is not finite; allowed: {allowed}")
+        raise ParameterError(f"{prefix}{key} = {value!r} is not a number; allowed: {allowed}")
+    try:
+        finite = math.isfinite(value)
+    except OverflowError:                      # an integer beyond the float range (TOML allows it)
+        finite = False
+    if not finite:
+        raise ParameterError(f"{prefix}{key} = {value!r} is not finite; allowed: {allowed}")
     if domain == "int>=1":
         if float(value) != int(value):
-            raise ParameterError(f"{where}: {key} = {value!r} is not an integer; allowed: {allowed}")
+            raise ParameterError(f"{prefix}{key} = {value!r} is not an integer; allowed: {allowed}")
         if value < 1:
-            raise ParameterError(f"{where}: {key} = {value!r} is out of range; allowed: {allowed}")
+            raise ParameterError(f"{prefix}{key} = {value!r} is out of range; allowed: {allowed}")
         return int(value)
-    if domain == ">0" and not value > 0:
-        raise ParameterError(f"{where}: {key} = {value!r} is out of range; allowed: {allowed}")
-    if domain == ">=0" and not value >= 0:
-        raise ParameterError(f"{where}: {key} = {value!r} is out of range; allowed: {allowed}")
+    if (domain == ">0" and not value > 0) or (domain == ">=0" and not value >= 0):
+        raise ParameterError(f"{prefix}{key} = {value!r} is out of range; allowed: {allowed}")
     return float(value)
 
 
-def _validated(cls, values: Mapping[str, object], domain: Mapping[str, str], where: str):
+def _check_fields(obj, domain: Mapping[str, str]) -> None:
+    """Validate and normalise (float, or int for N_av) every field of a frozen dataclass."""
+    for key, dom in domain.items():
+        object.__setattr__(obj, key, _check_value(key, getattr(obj, key), dom))
+
+
+def _validated(cls, values: Mapping[str, object], domain: Mapping[str, str], where: str | None = None):
+    prefix = f"{where}: " if where else ""
     unknown = sorted(set(values) - set(domain))
     if unknown:
-        raise ParameterError(f"{where}: unknown key(s) {unknown}; allowed: {list(domain)}")
+        raise ParameterError(f"{prefix}unknown key(s) {unknown}; allowed: {list(domain)}")
     missing = [k for k in domain if k not in values]
     if missing:
-        raise ParameterError(f"{where}: missing key(s) {missing}; every key of {list(domain)} is required")
-    return cls(**{k: _check_value(where, k, values[k], domain[k]) for k in domain})
+        raise ParameterError(f"{prefix}missing key(s) {missing}; every key of {list(domain)} is required")
+    try:
+        return cls(**values)
+    except ParameterError as exc:
+        raise ParameterError(f"{prefix}{exc}") from None
+
+
+def gain_array(name: str, value, label: str | None = None) -> np.ndarray:
+    """``value`` as a float array, checked against the rule of gain ``name``.
+
+    The one rule for the gain points of every analysis (CLI and API): ``P_gain`` >= 0 (Nm/rad)
+    and ``D_gain`` >= 0 (Nms/rad) of Eq. (8), ``beta`` > 0 and ``alpha`` >= 0 of Eq. (6)-(7),
+    all finite. Any other ``name`` (e.g. ``omega``) is only required to be finite.
+
+    Parameters
+    ----------
+    name : str
+        One of :data:`GAIN_KEYS`, or another array name.
+    value : array_like
+    label : str, optional
+        How the message names the value (e.g. ``--P-gain``); default ``name``.
+
+    Raises
+    ------
+    ParameterError
+        Naming the label, the first offending value and what is allowed.
+    """
+    label = label or name
+    domain = _GAIN_DOMAIN.get(name)
+    allowed = (_DOMAIN_TEXT[domain] + _GAIN_UNITS[name]) if domain else "finite numbers"
+    try:
+        arr = np.asarray(value, dtype=float)
+    except (TypeError, ValueError):
+        raise ParameterError(f"{label} = {value!r} is not a number; allowed: {allowed}") from None
+    with np.errstate(invalid="ignore"):
+        bad = ~np.isfinite(arr)
+        if domain == ">0":
+            bad |= ~(arr > 0)
+        elif domain == ">=0":
+            bad |= ~(arr >= 0)
+    if bad.any():
+        first = float(arr[bad].ravel()[0])
+        what = "is not finite" if not math.isfinite(first) else "is out of range"
+        where = f"{label} = {first!r}" if arr.ndim == 0 else f"{label} contains {first!r}, which"
+        raise ParameterError(f"{where} {what}; allowed: {allowed}")
+    return arr
+
+
+def gain_points(P_gain=0.0, D_gain=0.0, beta=None, alpha=None):
+    """Gain points checked by :func:`gain_array`: ``(P_gain, D_gain, beta, alpha)`` as arrays,
+    P_gain and D_gain broadcast together; a beta or alpha of None stays None (the controller's)."""
+    P, D = gain_array("P_gain", P_gain), gain_array("D_gain", D_gain)
+    try:
+        P, D = np.broadcast_arrays(P, D)
+    except ValueError:
+        raise ParameterError(f"P_gain has shape {P.shape} and D_gain {D.shape}; allowed: shapes that "
+                             "broadcast together (one value each per gain point)") from None
+    return (P, D, None if beta is None else gain_array("beta", beta),
+            None if alpha is None else gain_array("alpha", alpha))
 
 
 def _entry_values(table: Mapping[str, object], where: str) -> dict[str, object]:
@@ -235,19 +344,14 @@ def parse_params(data: Mapping[str, object], source: str = "<memory>") -> Params
                        f"{source} [plant]")
     controller = _validated(Controller, _entry_values(data["controller"], f"{source} [controller]"),
                             _CONTROLLER_DOMAIN, f"{source} [controller]")
-    configs: dict[str, dict[str, float]] = {}
     raw_configs = data.get("configurations", {})
     if not isinstance(raw_configs, Mapping):
         raise ParameterError(f"{source}: [configurations] must be a table of tables")
+    configs = {}
     for name, overrides in raw_configs.items():
-        where = f"{source} [configurations.{name}]"
         if not isinstance(overrides, Mapping):
-            raise ParameterError(f"{where}: must be a table of plant keys")
-        values = _entry_values(overrides, where)
-        unknown = sorted(set(values) - set(_PLANT_DOMAIN))
-        if unknown:
-            raise ParameterError(f"{where}: unknown key(s) {unknown}; allowed: {list(PLANT_KEYS)}")
-        configs[name] = {k: _check_value(where, k, v, _PLANT_DOMAIN[k]) for k, v in values.items()}
+            raise ParameterError(f"{source} [configurations.{name}]: must be a table of plant keys")
+        configs[name] = _entry_values(overrides, f"{source} [configurations.{name}]")
     return Params(plant=plant, controller=controller, configurations=configs, source=source)
 
 
@@ -275,5 +379,10 @@ def load_params(path: str | Path | None = None) -> Params:
     except FileNotFoundError:
         raise ParameterError(f"{p}: no such parameter file") from None
     except tomllib.TOMLDecodeError as exc:
-        raise ParameterError(f"{p}: not valid TOML ({exc})") from None
+        raise ParameterError(f"{p}: not valid TOML ({exc}); allowed: a TOML parameter file") from None
+    except UnicodeDecodeError as exc:
+        raise ParameterError(f"{p}: not a text file (byte 0x{exc.object[exc.start]:02x} at offset "
+                             f"{exc.start} is not UTF-8); allowed: a TOML parameter file") from None
+    except OSError as exc:
+        raise ParameterError(f"{p}: cannot read the parameter file ({exc.strerror or exc})") from None
     return parse_params(data, source=str(p))

@@ -20,8 +20,9 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from haa_sym.budget import check_memory, sweep_bytes
 from haa_sym.loop import ClosedLoop, LoopOptions
-from haa_sym.params import Params
+from haa_sym.params import Params, gain_points
 from haa_sym.sweep import colgate_factor, gain_rows, phase_excess
 
 __all__ = ["PassivityResult", "passivity", "corrected_phase", "bands_beyond", "status"]
@@ -67,9 +68,11 @@ def passivity(params: Params, P_gain=0.0, D_gain=0.0, *, options: LoopOptions | 
     -------
     PassivityResult
     """
+    P, D, beta, alpha = gain_points(P_gain, D_gain, beta, alpha)
     loop = loop or ClosedLoop(params, options, backend)
     options = loop.options
-    P, D = np.broadcast_arrays(np.asarray(P_gain, float), np.asarray(D_gain, float))
+    check_memory(sweep_bytes(P.size, options.n_omega),
+                 f"passivity of {P.size} gain points on n_omega = {options.n_omega} frequencies")
     st = loop.stability(P, D, beta, alpha, radius=False)
     coef = loop.loop_coefficients(None, beta, alpha)
     X = gain_rows(P, D)
@@ -98,7 +101,11 @@ def corrected_phase(params: Params, P_gain: float = 0.0, D_gain: float = 0.0, *,
     >>> bands_beyond(w, ph)                                                         # doctest: +SKIP
     [(11.57..., 59.17...)]
     """
+    P_gain, D_gain, beta, alpha = gain_points(P_gain, D_gain, beta, alpha)
     loop = loop or ClosedLoop(params, options)
+    n_omega = loop.options.n_omega if omega is None else np.size(omega)
+    check_memory(sweep_bytes(P_gain.size, n_omega),
+                 f"the phase of Z at {P_gain.size} gain points on {n_omega} frequencies")
     coef = loop.loop_coefficients(omega, beta, alpha)
     Z = coef.evaluate("Z", P_gain, D_gain)
     c = colgate_factor(coef.omega, params.controller.Ts, loop.options.colgate)

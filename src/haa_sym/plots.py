@@ -127,20 +127,18 @@ def plot_contact(K, rho, paper_range=None):
     return fig
 
 
-def save_figure(fig, path: str | Path) -> Path:
-    """Save a figure atomically (temporary file + os.replace) and close it."""
-    import os
-    import tempfile
+def save_figure(fig, path: str | Path, tx=None, field: str | None = None) -> Path:
+    """Save a figure (format from the suffix) and close it.
+
+    Written through the :class:`haa_sym.outputs.Transaction` ``tx`` (committed with the other
+    outputs of its command), or on its own, atomically, when ``tx`` is None.
+    """
+    from haa_sym.outputs import transaction
     path = Path(path)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=path.name + ".", suffix=path.suffix)
-    os.close(fd)
     try:
-        fig.savefig(tmp, dpi=120, metadata={"Software": None} if path.suffix == ".png" else None)
-        os.replace(tmp, path)
-    except BaseException:
-        Path(tmp).unlink(missing_ok=True)
-        raise
+        with transaction(tx) as t, t.open(path, "wb", field) as fh:
+            fig.savefig(fh, format=path.suffix.lstrip(".").lower(), dpi=120,
+                        metadata={"Software": None} if path.suffix.lower() == ".png" else None)
     finally:
         plt.close(fig)
     return path

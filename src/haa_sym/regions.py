@@ -24,15 +24,14 @@ Example
 from __future__ import annotations
 
 import json
-import os
-import tempfile
 from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
 
+from haa_sym.budget import check_memory, sweep_bytes
 from haa_sym.loop import ClosedLoop, LoopOptions
-from haa_sym.params import ParameterError, Params
+from haa_sym.params import ParameterError, Params, gain_array
 from haa_sym.sweep import gain_rows, phase_excess, phase_margins
 
 __all__ = ["RegionMap", "region_map", "grid", "PM_THRESHOLD_DEG", "save_npz"]
@@ -49,33 +48,38 @@ def grid(spec: str, name: str = "grid") -> np.ndarray:
     array([ 1. , 25.5, 50. ])
     """
     def bad(why):
-        return ParameterError(f"{name} = {spec!r}: {why}; allowed: 'log:START:STOP:N' (0 < START "
-                              "<= STOP), 'lin:START:STOP:N' or a comma-separated list of numbers, "
-                              "all finite and >= 0, N an integer >= 1")
+        return ParameterError(f"{name} = {spec!r}: {why}; allowed: 'log:START:STOP:N' (0 < START <= "
+                              "STOP), 'lin:START:STOP:N' (0 <= START <= STOP) or a comma-separated list "
+                              "of numbers >= 0, all finite, N an integer >= 1")
+
+    def number(text, what=""):
+        try:
+            v = float(text)
+        except ValueError:
+            raise bad(f"{what}{text.strip()!r} is not a number") from None
+        if not np.isfinite(v):
+            raise bad(f"{what}{text.strip()} is not finite")
+        if v < 0:
+            raise bad(f"{what}{text.strip()} is negative")
+        return v
+
     s = str(spec).strip()
     kind, _, rest = s.partition(":")
-    try:
-        if kind in ("log", "lin"):
-            parts = rest.split(":")
-            if len(parts) != 3:
-                raise bad("expected 3 fields after the kind")
-            a, b = float(parts[0]), float(parts[1])
-            if not parts[2].strip().isdigit() or int(parts[2]) < 1:
-                raise bad(f"N = {parts[2]!r} is not an integer >= 1")
-            n = int(parts[2])
-            if not (np.isfinite(a) and np.isfinite(b)) or a > b or a < 0:
-                raise bad("START and STOP must be finite with 0 <= START <= STOP")
-            if kind == "log":
-                if a <= 0:
-                    raise bad("a log grid needs START > 0")
-                return np.logspace(np.log10(a), np.log10(b), n)
-            return np.linspace(a, b, n)
-        values = np.array([float(v) for v in s.split(",")])
-    except ValueError as exc:
-        raise bad(f"not a number ({exc})") from None
-    if values.size == 0 or not np.all(np.isfinite(values)) or np.any(values < 0):
-        raise bad("values must be finite and >= 0")
-    return values
+    if kind in ("log", "lin"):
+        parts = rest.split(":")
+        if len(parts) != 3:
+            raise bad(f"expected 3 fields after '{kind}:' (START:STOP:N), got {len(parts)}")
+        a, b = number(parts[0], "START = "), number(parts[1], "STOP = ")
+        if not parts[2].strip().isdigit() or int(parts[2]) < 1:
+            raise bad(f"N = {parts[2].strip()!r} is not an integer >= 1")
+        n = int(parts[2])
+        if a > b:
+            raise bad(f"START = {a:g} is above STOP = {b:g} (reversed range)")
+        if kind == "log" and a == 0:
+            raise bad("START = 0: a log grid needs START > 0")
+        check_memory(16 * n, f"{name} = {spec!r}: a grid of {n} points")
+        return np.logspace(np.log10(a), np.log10(b), n) if kind == "log" else np.linspace(a, b, n)
+    return np.array([number(v) for v in s.split(",")])
 
 
 @dataclass
@@ -103,9 +107,9 @@ class RegionMap:
                                               "phase_margin_deg", "passive", "phase_excess_deg",
                                               "refined")}
 
-    def save(self, path: str | Path) -> Path:
-        """Write an ``.npz`` (arrays + ``meta`` as a JSON string), atomically."""
-        return save_npz(path, self.arrays(), self.meta)
+    def save(self, path: str | Path, tx=None, field: str | None = None) -> Path:
+        """Write an ``.npz`` (arrays + ``meta`` as a JSON string), atomically (see :func:`save_npz`)."""
+        return save_npz(path, self.arrays(), self.meta, tx, field)
 
     @classmethod
     def load(cls, path: str | Path) -> "RegionMap":
@@ -115,19 +119,16 @@ class RegionMap:
         return cls(meta=meta, **data)
 
 
-def save_npz(path: str | Path, arrays: dict, meta: dict) -> Path:
-    """``np.savez`` into a temporary file next to ``path``, then ``os.replace``: never partial."""
-    path = Path(path)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=path.name + ".", suffix=".npz")
-    try:
-        with os.fdopen(fd, "wb") as fh:
-            np.savez(fh, meta=np.array(json.dumps(meta, sort_keys=True)), **arrays)
-        os.replace(tmp, path)
-    except BaseException:
-        Path(tmp).unlink(missing_ok=True)
-        raise
-    return path
+def save_npz(path: str | Path, arrays: dict, meta: dict, tx=None, field: str | None = None) -> Path:
+    """``np.savez`` of ``arrays`` and ``meta`` (a JSON string) to ``path``: never partial.
+
+    Written through the :class:`haa_sym.outputs.Transaction` ``tx`` (committed with the other
+    outputs of its command), or on its own, atomically, when ``tx`` is None.
+    """
+    from haa_sym.outputs import transaction
+    with transaction(tx) as t, t.open(path, "wb", field) as fh:
+        np.savez(fh, meta=np.array(json.dumps(meta, sort_keys=True)), **arrays)
+    return Path(path)
 
 
 def _progress(total: int, desc: str, enabled):
@@ -179,17 +180,18 @@ def region_map(params: Params, P_gain, D_gain, *, options: LoopOptions | None = 
     array([[ True,  True], [ True,  True]])
     """
     options = options or LoopOptions()
-    P = np.asarray(P_gain, dtype=float).ravel()
-    D = np.asarray(D_gain, dtype=float).ravel()
+    P = gain_array("P_gain", P_gain).ravel()
+    D = gain_array("D_gain", D_gain).ravel()
     for name, arr in (("P_gain", P), ("D_gain", D)):
-        if arr.size == 0 or not np.all(np.isfinite(arr)) or np.any(arr < 0):
-            raise ParameterError(f"{name} = {arr!r}; allowed: a non-empty array of finite values >= 0")
+        if arr.size == 0:
+            raise ParameterError(f"{name} is empty; allowed: at least one value")
     ctrl = params.controller
-    beta = ctrl.beta if beta is None else float(beta)
-    alpha = ctrl.alpha if alpha is None else float(alpha)
-    for name, v in (("beta", beta), ("alpha", alpha)):
-        if not np.isfinite(v) or v < 0:
-            raise ParameterError(f"{name} = {v!r}; allowed: a finite number >= 0")
+    beta = float(gain_array("beta", ctrl.beta if beta is None else beta))
+    alpha = float(gain_array("alpha", ctrl.alpha if alpha is None else alpha))
+    n_omega = (loop.options if loop is not None else options).n_omega
+    check_memory(sweep_bytes(P.size * D.size, n_omega, CHUNK),
+                 f"a region map of {P.size} x {D.size} (P_gain x D_gain) points on n_omega = "
+                 f"{n_omega} frequencies")
     if loop is None:
         loop = ClosedLoop(params, options, backend)
     coef = loop.loop_coefficients(None, beta, alpha)

@@ -44,7 +44,7 @@ def option_sensitivity_markdown(rows: list[dict]) -> str:
 
 
 def write_report(out: Path, r: dict, spec: dict, options: LoopOptions, verify_text: str) -> Path:
-    from haa_sym.reproduce import _write_text
+    from haa_sym.outputs import write_text
     c = spec["claims"]
     meta = r["meta"]
     ctrl = meta["params"]["controller"]
@@ -198,7 +198,7 @@ def write_report(out: Path, r: dict, spec: dict, options: LoopOptions, verify_te
     add("`python -m haa_sym.verify` (exit status "
         f"{r['verify_exit_status']}):\n\n```\n{verify_text.rstrip()}\n```\n")
     path = out / "REPORT.md"
-    _write_text(path, "\n".join(L) + "\n")
+    write_text(path, "\n".join(L) + "\n")
     return path
 
 

@@ -12,16 +12,20 @@ Writes into the output directory, as data and as PNG:
   claims.json                                           every computed claim, machine-readable
   REPORT.md                                             all of it, "the paper says / we compute"
 Everything is computed from ``model/hyq_haa.toml`` and ``model/paper.toml``; nothing is typed in.
+
+The directory is built as a temporary sibling and swapped in when complete
+(:class:`haa_sym.outputs.Transaction`): an interrupted or failed run leaves the previous
+results as they were. An existing directory is replaced only if it holds nothing but such
+outputs, so no other file is ever deleted.
 """
 from __future__ import annotations
 
 import csv
 import io
 import json
-import os
+import re
 import subprocess
 import sys
-import tempfile
 import time
 from dataclasses import dataclass
 from pathlib import Path
@@ -29,23 +33,49 @@ from pathlib import Path
 import numpy as np
 
 from haa_sym.contact import contact_stability, intervals
+from haa_sym.budget import check_memory, sweep_bytes
 from haa_sym.loop import ClosedLoop, LoopOptions
+from haa_sym.outputs import Transaction, check_directory, write_text
 from haa_sym.paper import panel_params, paper_spec
 from haa_sym.params import Params, load_params
 from haa_sym.passivity import bands_beyond, corrected_phase
-from haa_sym.regions import eigenvalue_crosscheck, grid, region_map, run_meta
+from haa_sym.regions import CHUNK, eigenvalue_crosscheck, grid, region_map, run_meta
 from haa_sym.table2 import score_options, table2
 from haa_sym.torque import p1_roots, step_response, torque_bandwidth, torque_loop_margins
 
 __all__ = ["reproduce", "region_trends"]
 
 
+# The names reproduce writes (regions/ holds only the maps): an existing output directory with
+# anything else in it is not replaced.
+_OUTPUT_NAMES = re.compile(r"fig\d\d\.(png|csv)|table2\.(md|csv)|options_table2\.csv|contact\.(png|csv)"
+                           r"|verify\.txt|claims\.json|REPORT\.md|regions")
+_REGION_NAMES = re.compile(r"fig\d\d[a-z]\.npz")
+
+
+def foreign_entries(directory: Path) -> list[str]:
+    """Entries of ``directory`` that are not outputs of :func:`reproduce` (relative paths)."""
+    out = []
+    for p in sorted(Path(directory).iterdir()):
+        if not _OUTPUT_NAMES.fullmatch(p.name) or p.is_dir() != (p.name == "regions"):
+            out.append(p.name)
+        elif p.name == "regions":
+            out += [f"regions/{q.name}" for q in sorted(p.iterdir())
+                    if not (_REGION_NAMES.fullmatch(q.name) and q.is_file())]
+    return out
+
+
+def _replaceable(directory: Path) -> str | None:
+    foreign = foreign_entries(directory)
+    if foreign:
+        shown = ", ".join(foreign[:5]) + (f" and {len(foreign) - 5} more" if len(foreign) > 5 else "")
+        return (f"holds files reproduce does not write ({shown}), which replacing it would delete; "
+                "allowed: a new directory, an empty one or the results of an earlier reproduce")
+    return None
+
+
 def _write_text(path: Path, text: str) -> None:
-    path.parent.mkdir(parents=True, exist_ok=True)
-    fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=path.name + ".")
-    with os.fdopen(fd, "w") as fh:
-        fh.write(text)
-    os.replace(tmp, path)
+    write_text(path, text)
 
 
 def _csv(rows: list[dict]) -> str:
@@ -369,37 +399,48 @@ def _verify(job: _Job) -> tuple[dict, str]:
 
 def reproduce(out: str | Path = "results", params: Params | None = None,
               options: LoopOptions | None = None, quick: bool = False,
-              spec: dict | None = None) -> dict:
+              spec: dict | None = None, field: str | None = None) -> dict:
     """Compute and write everything listed in the module docstring; returns the claims dict.
 
-    ``quick`` uses coarse grids (for tests); the report says so.
+    ``out`` is replaced as a whole when everything is computed (see the module docstring); its
+    parent directory must exist. ``quick`` uses coarse grids (for tests); the report says so.
+    ``field`` names ``out`` in error messages (e.g. ``--out``).
     """
     t_start = time.time()
     params = params or load_params()
     options = options or LoopOptions()
     spec = spec or paper_spec()
     reg = spec["regions"]
-    job = _Job(out=Path(out), params=params, options=options, spec=spec, quick=quick,
-               P_grid=grid("log:1:20000:40" if quick else reg["P_gain"], "P_gain"),
-               D_grid=grid("lin:1:50:20" if quick else reg["D_gain"], "D_gain"))
-    result: dict = {"meta": run_meta(params, options, quick=quick)}
-    result.update(_regions(job))
-    result.update(_option_sensitivity(job))
-    result.update(_trend_alternatives(job, result["region_trends"]["locomotion"],
-                                      result["region_splits"]["locomotion"]))
-    result.update(_table2(job))
-    _log("Fig. 12, contact stiffness, beta threshold, Fig. 7, torque-loop bounds, verify")
-    loop = ClosedLoop(params, options)
-    result.update(_fig12(job, loop))
-    result.update(_contact(job))
-    result.update(_beta_threshold(job, loop))
-    result.update(_fig7(job))
-    result.update(_torque_loop_corners(job))
-    verify_status, verify_text = _verify(job)
-    result.update(verify_status)
-    result["elapsed_s"] = round(time.time() - t_start, 1)
-    _write_text(job.out / "claims.json", json.dumps(result, indent=1, default=_json_default) + "\n")
-    from haa_sym.report import write_report
-    write_report(job.out, result, spec, options, verify_text)
-    _log(f"wrote {job.out}/REPORT.md in {result['elapsed_s']} s")
+    out = check_directory(out, field, _replaceable)
+    P_grid = grid("log:1:20000:40" if quick else reg["P_gain"], "P_gain")
+    D_grid = grid("lin:1:50:20" if quick else reg["D_gain"], "D_gain")
+    # the largest pieces, before minutes of work: a region map and the fine Fig. 12 sweep
+    check_memory(max(sweep_bytes(P_grid.size * D_grid.size, options.n_omega, CHUNK),
+                     sweep_bytes(1, 4 * options.n_omega)),
+                 f"reproduce (region maps of {P_grid.size} x {D_grid.size} points, n_omega = {options.n_omega})")
+    with Transaction() as tx:
+        stage = tx.directory(out, field, _replaceable)
+        (stage / "regions").mkdir()
+        job = _Job(out=stage, params=params, options=options, spec=spec, quick=quick,
+                   P_grid=P_grid, D_grid=D_grid)
+        result: dict = {"meta": run_meta(params, options, quick=quick)}
+        result.update(_regions(job))
+        result.update(_option_sensitivity(job))
+        result.update(_trend_alternatives(job, result["region_trends"]["locomotion"],
+                                          result["region_splits"]["locomotion"]))
+        result.update(_table2(job))
+        _log("Fig. 12, contact stiffness, beta threshold, Fig. 7, torque-loop bounds, verify")
+        loop = ClosedLoop(params, options)
+        result.update(_fig12(job, loop))
+        result.update(_contact(job))
+        result.update(_beta_threshold(job, loop))
+        result.update(_fig7(job))
+        result.update(_torque_loop_corners(job))
+        verify_status, verify_text = _verify(job)
+        result.update(verify_status)
+        result["elapsed_s"] = round(time.time() - t_start, 1)
+        _write_text(job.out / "claims.json", json.dumps(result, indent=1, default=_json_default) + "\n")
+        from haa_sym.report import write_report
+        write_report(job.out, result, spec, options, verify_text)
+    _log(f"wrote {out}/REPORT.md in {result['elapsed_s']} s")
     return result

@@ -16,8 +16,9 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from haa_sym.budget import check_memory, sweep_bytes
 from haa_sym.loop import ClosedLoop, LoopOptions
-from haa_sym.params import ParameterError, Params
+from haa_sym.params import ParameterError, Params, gain_points
 
 __all__ = ["StepResponse", "step_response", "torque_bandwidth"]
 
@@ -73,10 +74,12 @@ def step_response(params: Params, *, duration: float = 0.3, options: LoopOptions
     from haa_sym.reference import closed_loop_matrices
     if not np.isfinite(duration) or duration <= 0:
         raise ParameterError(f"duration = {duration!r}; allowed: a finite time > 0 (s)")
-    loop = loop or ClosedLoop(params, options)
-    A, B, C, D = closed_loop_matrices(loop, 0.0, 0.0, beta, alpha, cut="T_ref")
+    _, _, beta, alpha = gain_points(0.0, 0.0, beta, alpha)
     Ts = params.controller.Ts
     n = int(round(duration / Ts)) + 1
+    check_memory(16 * n, f"duration = {duration!r} s: a step response of {float(n):.4g} samples")
+    loop = loop or ClosedLoop(params, options)
+    A, B, C, D = closed_loop_matrices(loop, 0.0, 0.0, beta, alpha, cut="T_ref")
     x = np.zeros(A.shape[0])
     T = np.empty(n)
     for k in range(n):
@@ -98,7 +101,9 @@ def torque_bandwidth(params: Params, *, options: LoopOptions | None = None,
     >>> torque_bandwidth(load_params().with_values(K_L2=0.0))             # doctest: +SKIP
     30.36...
     """
+    _, _, beta, alpha = gain_points(0.0, 0.0, beta, alpha)
     loop = loop or ClosedLoop(params, options)
+    check_memory(sweep_bytes(1, loop.options.n_omega), f"the torque loop on n_omega = {loop.options.n_omega} frequencies")
     coef = loop.loop_coefficients(None, beta, alpha)
     mag = np.abs(coef.H_T)
     ref = mag[0]
@@ -143,7 +148,10 @@ def torque_loop_margins(params: Params, *, options: LoopOptions | None = None,
     PM > 30 deg, GM > 12 dB at the leg-inertia and stiffness bounds). Returns
     :class:`haa_sym.margins.Margins`."""
     from haa_sym.margins import stability_margins
+    _, _, beta, alpha = gain_points(0.0, 0.0, beta, alpha)
     loop = ClosedLoop(params, options)
+    check_memory(sweep_bytes(1, 4 * loop.options.n_omega),
+                 f"the torque loop on 4 x n_omega = {4 * loop.options.n_omega} frequencies")
     ctrl = params.controller
     w = np.logspace(np.log10(loop.options.omega_min), np.log10(np.pi / ctrl.Ts * (1 - 1e-9)),
                     4 * loop.options.n_omega)
