@@ -2,10 +2,15 @@
 import json
 
 from haa_sym.cli import main
+from haa_sym.progress import set_progress
 
 
 def test_reproduce_quick(tmp_path, capsys):
-    assert main(["reproduce", "--quick", "--out", str(tmp_path)]) == 0
+    try:
+        assert main(["--quiet", "reproduce", "--quick", "--out", str(tmp_path)]) == 0
+    finally:
+        set_progress(None)
+    assert capsys.readouterr().err == ""                  # --quiet: no progress messages
     names = {p.name for p in tmp_path.iterdir()}
     assert {"REPORT.md", "claims.json", "table2.csv", "options_table2.csv", "fig07.png", "fig08.png",
             "fig09.png", "fig10.png", "fig11.png", "fig12.png", "fig12.csv", "fig07.csv",

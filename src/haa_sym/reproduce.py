@@ -33,6 +33,7 @@ from haa_sym.loop import ClosedLoop, LoopOptions
 from haa_sym.paper import panel_params, paper_spec
 from haa_sym.params import Params, load_params
 from haa_sym.passivity import bands_beyond, corrected_phase
+from haa_sym.progress import message, progress as progress_bar
 from haa_sym.regions import eigenvalue_crosscheck, grid, region_map, run_meta
 from haa_sym.table2 import score_options, table2
 from haa_sym.torque import p1_roots, step_response, torque_bandwidth, torque_loop_margins
@@ -63,7 +64,17 @@ def _json_default(x):
 
 
 def _log(msg: str) -> None:
-    print(msg, file=sys.stderr, flush=True)
+    message(msg)
+
+
+def _finite_or_none(x: float):
+    """None (JSON null, an empty CSV cell) for a metric that is undefined (NaN)."""
+    return float(x) if np.isfinite(x) else None
+
+
+# claims / CSV name of each step_info key (python-control / MATLAB convention, see torque.py)
+STEP_INFO_COLUMNS = (("rise_time_10_90_s", "RiseTime"), ("settling_time_2pct_s", "SettlingTime"),
+                     ("overshoot_pct", "Overshoot"), ("peak_Nm", "Peak"), ("peak_time_s", "PeakTime"))
 
 
 # --- Sec. 4 trends ------------------------------------------------------------------------------
@@ -382,20 +393,25 @@ def reproduce(out: str | Path = "results", params: Params | None = None,
                P_grid=grid("log:1:20000:40" if quick else reg["P_gain"], "P_gain"),
                D_grid=grid("lin:1:50:20" if quick else reg["D_gain"], "D_gain"))
     result: dict = {"meta": run_meta(params, options, quick=quick)}
-    result.update(_regions(job))
-    result.update(_option_sensitivity(job))
-    result.update(_trend_alternatives(job, result["region_trends"]["locomotion"],
-                                      result["region_splits"]["locomotion"]))
-    result.update(_table2(job))
-    _log("Fig. 12, contact stiffness, beta threshold, Fig. 7, torque-loop bounds, verify")
-    loop = ClosedLoop(params, options)
-    result.update(_fig12(job, loop))
-    result.update(_contact(job))
-    result.update(_beta_threshold(job, loop))
-    result.update(_fig7(job))
-    result.update(_torque_loop_corners(job))
-    verify_status, verify_text = _verify(job)
-    result.update(verify_status)
+    # one bar over the sections (stderr; shown on a terminal after 2 s, see haa_sym.progress)
+    with progress_bar(10, "reproduce", "section") as bar:
+        def run(section, *args):
+            result.update(section(job, *args))
+            bar.update(1)
+        run(_regions)
+        run(_option_sensitivity)
+        run(_trend_alternatives, result["region_trends"]["locomotion"], result["region_splits"]["locomotion"])
+        run(_table2)
+        _log("Fig. 12, contact stiffness, beta threshold, Fig. 7, torque-loop bounds, verify")
+        loop = ClosedLoop(params, options)
+        run(_fig12, loop)
+        run(_contact)
+        run(_beta_threshold, loop)
+        run(_fig7)
+        run(_torque_loop_corners)
+        verify_status, verify_text = _verify(job)
+        result.update(verify_status)
+        bar.update(1)
     result["elapsed_s"] = round(time.time() - t_start, 1)
     _write_text(job.out / "claims.json", json.dumps(result, indent=1, default=_json_default) + "\n")
     from haa_sym.report import write_report
