@@ -16,6 +16,7 @@ from haa_sym.cli import main
 from haa_sym.compiled import evaluators
 from haa_sym.regions import region_map
 from haa_sym.sweep import blas_limits
+from haa_sym.torque import STEP_CONVENTION, step_info, step_response
 
 from conftest import ROOT
 
@@ -89,6 +90,50 @@ def test_progress_bar_appears_on_a_terminal(monkeypatch, capsys, reset_progress)
     tty.truncate()
     assert main(["-q", *REGIONS]) == 0
     assert tty.getvalue() == "" and capsys.readouterr().out == out
+
+
+# --- step metrics: the python-control step_info convention ----------------------------------------
+@pytest.mark.parametrize("K_L2, alpha", [(0.0, 0.94), (11.2, 0.94), (11.2, 0.0)])
+def test_step_metrics_match_python_control_step_info(params, K_L2, alpha):
+    control = pytest.importorskip("control")
+    # 3 s: long enough for these steps to settle, so every step_info number is defined
+    s = step_response(params.with_values(K_L2=K_L2), duration=3.0, alpha=alpha)
+    ref = control.step_info(s.T, s.t, yfinal=s.final_value)
+    ours = s.info
+    assert np.isfinite(ours["SettlingTime"])
+    for key, value in ref.items():
+        assert ours[key] == pytest.approx(value, rel=1e-12, abs=1e-15), key
+
+
+def test_step_info_with_the_last_sample_as_final_value_is_python_controls_default(params):
+    control = pytest.importorskip("control")
+    s = step_response(params.with_values(K_L2=0.0), duration=0.3)
+    ref = control.step_info(s.T, s.t)
+    ours = step_info(s.t, s.T)
+    for key, value in ref.items():
+        assert ours[key] == pytest.approx(value, rel=1e-12, abs=1e-15), key
+
+
+def test_unsettled_step_reports_nan_not_a_number(params):
+    """Fig. 7's 0.3 s window: the free leg with alpha = 0.94 rises but has not settled within 2 %
+    of its final value; with alpha = 0 it does not even reach 90 %."""
+    p = params.with_values(K_L2=0.0)
+    on = step_response(p, duration=0.3, alpha=0.94)
+    off = step_response(p, duration=0.3, alpha=0.0)
+    # the final value is where the step goes: the long response ends within 2 % of it
+    assert abs(step_response(p, duration=3.0).T[-1] / on.final_value - 1) < 0.02
+    assert np.isfinite(on.rise_time) and abs(on.T[-1] / on.final_value - 1) > 0.02
+    assert np.isnan(on.settling_time) and np.isnan(on.overshoot_pct)
+    assert off.T.max() < 0.9 * off.final_value and np.isnan(off.rise_time)
+
+
+def test_step_cli_states_the_convention_and_never_a_negative_overshoot(capsys, params):
+    assert main(["step", "--set", "K_L2=0"]) == 0
+    out = capsys.readouterr().out
+    s = step_response(params.with_values(K_L2=0.0), duration=0.3)
+    assert f"rise time (10-90 %) {s.rise_time * 1e3:.1f} ms" in out
+    assert "settling time (2 %) not settled within 0.3 s" in out
+    assert STEP_CONVENTION in out and "overshoot -" not in out
 
 
 # --- meta records the backend that ran ------------------------------------------------------------

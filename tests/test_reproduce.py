@@ -1,8 +1,12 @@
 """`haa-sym reproduce --quick`: every output of `make paper` is written (coarse grids)."""
 import json
+import math
+
+import numpy as np
 
 from haa_sym.cli import main
 from haa_sym.progress import set_progress
+from haa_sym.torque import STEP_CONVENTION
 
 
 def test_reproduce_quick(tmp_path, capsys):
@@ -14,7 +18,7 @@ def test_reproduce_quick(tmp_path, capsys):
     names = {p.name for p in tmp_path.iterdir()}
     assert {"REPORT.md", "claims.json", "table2.csv", "options_table2.csv", "fig07.png", "fig08.png",
             "fig09.png", "fig10.png", "fig11.png", "fig12.png", "fig12.csv", "fig07.csv",
-            "contact.png", "contact.csv", "verify.txt"} <= names
+            "fig07_step_info.csv", "contact.png", "contact.csv", "verify.txt"} <= names
     assert len(list((tmp_path / "regions").glob("fig*.npz"))) == 16
     claims = json.loads((tmp_path / "claims.json").read_text())
     assert claims["verify_exit_status"] == 0
@@ -30,3 +34,12 @@ def test_reproduce_quick(tmp_path, capsys):
     # the report's Table 2 count is the computed one
     n = sum(c["agrees"] for c in claims["table2"])
     assert f"The defaults reproduce **{n}/45**" in report
+    # Fig. 7: step_info metrics, undefined (not settled in the window) as null, never NaN
+    assert STEP_CONVENTION in report
+    step = np.genfromtxt(tmp_path / "fig07_step_info.csv", delimiter=",", names=True)
+    for s in claims["fig7"]:
+        row = step[(step["K_L2"] == s["K_L2"]) & (step["alpha"] == s["alpha"])]
+        assert row.size == 1
+        for key in ("rise_time_10_90_s", "settling_time_2pct_s", "overshoot_pct"):
+            assert s[key] is None or math.isfinite(s[key])
+            assert (s[key] is None and np.isnan(row[key][0])) or row[key][0] == s[key]

@@ -173,15 +173,14 @@ def _cmd_passivity(args) -> int:
 
 
 def _cmd_step(args) -> int:
-    from haa_sym.torque import step_response, torque_bandwidth
+    from haa_sym.torque import STEP_CONVENTION, describe_step, step_response, torque_bandwidth
     params = _params(args)
     options = _parse_options(args.option)
     out = _check_out(args.out, "step")
     plot = _check_out(args.plot, "step", "--plot")
     s = step_response(params, duration=args.duration, options=options)
-    print(f"10-90% rise time {s.rise_time * 1e3:.1f} ms, overshoot {s.overshoot * 100:.1f} %, "
-          f"T at {s.t[-1]:g} s = {s.T[-1]:.4f}, -3 dB bandwidth "
-          f"{torque_bandwidth(params, options=options):.2f} rad/s")
+    print(f"{describe_step(s)}, -3 dB bandwidth {torque_bandwidth(params, options=options):.2f} rad/s")
+    print(f"({STEP_CONVENTION})")
     if out:
         from haa_sym.reproduce import _csv, _write_text
         _write_text(out, _csv([{"t_s": f"{t:.6g}", "T_Nm": f"{v:.9g}"} for t, v in zip(s.t, s.T)]))

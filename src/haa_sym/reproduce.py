@@ -6,7 +6,8 @@ Writes into the output directory, as data and as PNG:
   table2.md, table2.csv                                 Table 2 with the worst phase excess per cell
   options_table2.csv                                    cells of Table 2 reproduced per option set
   fig12.png, fig12.csv                                  corrected phase of Z (Fig. 12)
-  fig07.png, fig07.csv                                  unit torque steps (Fig. 7)
+  fig07.png, fig07.csv, fig07_step_info.csv            unit torque steps (Fig. 7) and their
+                                                        step_info metrics
   contact.png, contact.csv                              stability against environment stiffness
   verify.txt                                            python -m haa_sym.verify (p1 roots, margins)
   claims.json                                           every computed claim, machine-readable
@@ -334,18 +335,22 @@ def _fig7(job: _Job) -> dict:
         for a, ls in zip(c["fig7_alpha"], ("-", "--")):
             s = step_response(p7, duration=c["fig7_duration_s"], options=job.options, alpha=a)
             lines.append((s, f"alpha = {a:g}", ls))
-            steps.append({"K_L2": K_L2, "alpha": a, "rise_time_s": s.rise_time,
-                          "T_at_end": float(s.T[-1]), "overshoot": s.overshoot,
-                          "settling_time_5pct_s": s.settling_time,
+            info = s.info
+            steps.append({"K_L2": K_L2, "alpha": a, "final_value": s.final_value,
+                          **{key: _finite_or_none(info[k]) for key, k in STEP_INFO_COLUMNS},
+                          "T_at_end": float(s.T[-1]),
                           "bandwidth_rad_s": torque_bandwidth(p7, options=job.options, alpha=a)})
         panels.append((f"K_L2 = {K_L2:g} Nm/rad", lines))
     save_figure(plot_steps(panels, "Fig. 7: unit torque steps (extended leg)"), job.out / "fig07.png")
-    t7 = panels[0][1][0][0].t
+    # long format: one row per sample and curve, so the header names no parameter values
     _write_text(job.out / "fig07.csv", _csv([
-        {"t_s": f"{t:.4f}", **{f"T_K{K:g}_alpha{a:g}": f"{s.T[i]:.6f}"
-                               for (_, lines), K in zip(panels, c["fig7_K_L2"])
-                               for (s, _, _), a in zip(lines, c["fig7_alpha"])}}
-        for i, t in enumerate(t7)]))
+        {"K_L2": f"{K:g}", "alpha": f"{a:g}", "t_s": f"{t:.4f}", "T_Nm": f"{T:.6f}"}
+        for (_, lines), K in zip(panels, c["fig7_K_L2"])
+        for (s, _, _), a in zip(lines, c["fig7_alpha"])
+        for t, T in zip(s.t, s.T)]))
+    # empty cell: not reached / not settled within the window (NaN in numpy.genfromtxt)
+    _write_text(job.out / "fig07_step_info.csv", _csv([
+        {k: "" if v is None else v for k, v in row.items()} for row in steps]))
     return {"fig7": steps}
 
 
