@@ -1,6 +1,8 @@
 """`haa-sym reproduce --quick`: every output of `make paper` is written (coarse grids)."""
+import csv
 import json
 import math
+import re
 
 import numpy as np
 
@@ -19,6 +21,16 @@ def test_reproduce_quick(tmp_path, capsys):
     assert {"REPORT.md", "claims.json", "table2.csv", "options_table2.csv", "fig07.png", "fig08.png",
             "fig09.png", "fig10.png", "fig11.png", "fig12.png", "fig12.csv", "fig07.csv",
             "fig07_step_info.csv", "contact.png", "contact.csv", "verify.txt"} <= names
+    # every CSV: plain identifiers as headers, read back by numpy.genfromtxt unchanged
+    csvs = sorted(tmp_path.rglob("*.csv"))
+    assert len(csvs) >= 6
+    for path in csvs:
+        with open(path, newline="") as fh:
+            rows = list(csv.reader(fh))
+        assert all(re.fullmatch(r"[A-Za-z_][A-Za-z0-9_]*", h) for h in rows[0]), (path.name, rows[0])
+        data = np.genfromtxt(path, delimiter=",", names=True, dtype=None, encoding="utf-8")
+        assert list(data.dtype.names) == rows[0], path.name
+        assert data.size == len(rows) - 1, path.name
     assert len(list((tmp_path / "regions").glob("fig*.npz"))) == 16
     claims = json.loads((tmp_path / "claims.json").read_text())
     assert claims["verify_exit_status"] == 0

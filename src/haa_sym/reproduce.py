@@ -20,6 +20,7 @@ import csv
 import io
 import json
 import os
+import re
 import subprocess
 import sys
 import tempfile
@@ -50,7 +51,20 @@ def _write_text(path: Path, text: str) -> None:
     os.replace(tmp, path)
 
 
+_CSV_NAME = re.compile(r"[A-Za-z_][A-Za-z0-9_]*")
+
+
 def _csv(rows: list[dict]) -> str:
+    """CSV text that ``numpy.genfromtxt(..., delimiter=",", names=True)`` reads back unchanged:
+    headers are plain identifiers (genfromtxt rewrites others, e.g. drops dots) and no value
+    holds a comma, quote or newline (genfromtxt does not parse CSV quoting)."""
+    for name in rows[0]:
+        if not _CSV_NAME.fullmatch(name):
+            raise ValueError(f"CSV header {name!r} is not a plain identifier")
+    for row in rows:
+        for v in row.values():
+            if any(ch in str(v) for ch in ',"\n'):
+                raise ValueError(f"CSV value {v!r} holds a comma, quote or newline")
     buf = io.StringIO()
     w = csv.DictWriter(buf, fieldnames=list(rows[0]), lineterminator="\n")
     w.writeheader()
@@ -260,7 +274,9 @@ def _table2(job: _Job) -> dict:
              "phase_excess_deg": round(c.phase_excess_deg, 4) if np.isfinite(c.phase_excess_deg) else "",
              "omega_worst_rad_s": round(c.omega_worst, 3) if np.isfinite(c.omega_worst) else ""}
             for c in cells]
-    _write_text(job.out / "table2.csv", _csv(rows))
+    # labels hold commas ("P_gain = 200, D_gain = 10"), which genfromtxt would split on
+    _write_text(job.out / "table2.csv", _csv([{**r, "row": r["row"].replace(", ", "; "),
+                                                "column": r["column"].replace(", ", "; ")} for r in rows]))
     _write_text(job.out / "table2.md",
                 "# Table 2: passivity (paper / computed)\n\n" + table2_markdown(rows, job.spec) + "\n")
     scores = score_options(job.params, job.spec, job.options)
