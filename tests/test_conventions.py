@@ -11,7 +11,7 @@ import numpy as np
 import pytest
 
 import haa_sym
-from haa_sym import progress
+from haa_sym import LoopOptions, RegionMap, progress
 from haa_sym.cli import main
 from haa_sym.compiled import evaluators
 from haa_sym.regions import region_map
@@ -134,6 +134,22 @@ def test_step_cli_states_the_convention_and_never_a_negative_overshoot(capsys, p
     assert f"rise time (10-90 %) {s.rise_time * 1e3:.1f} ms" in out
     assert "settling time (2 %) not settled within 0.3 s" in out
     assert STEP_CONVENTION in out and "overshoot -" not in out
+
+
+# --- the README's Python example runs and is consistent -----------------------------------------
+def test_readme_python_example(tmp_path, monkeypatch):
+    blocks = re.findall(r"```python\n(.*?)```", (ROOT / "README.md").read_text(), re.S)
+    assert len(blocks) == 1
+    monkeypatch.chdir(tmp_path)
+    ns: dict = {}
+    exec(compile(blocks[0], "README.md", "exec"), ns)
+    m, res = ns["m"], ns["res"]
+    np.testing.assert_array_equal(m.stable, res.stable)
+    # the map is computed with the loop's options, and those are the documented defaults
+    assert m.meta["options"] == ns["loop"].options.to_dict() == LoopOptions().to_dict()
+    saved = RegionMap.load(tmp_path / "map.npz")
+    assert saved.meta["params"]["plant"]["J_L2"] == ns["params"].plant.J_L2
+    assert (tmp_path / "map.png").stat().st_size > 1000
 
 
 # --- meta records the backend that ran ------------------------------------------------------------
