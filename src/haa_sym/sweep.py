@@ -19,7 +19,8 @@ __all__ = ["gain_rows", "monomial_rows", "product_form", "phase_margins", "phase
 # BLAS threads during a gain-grid sweep. Its products, (512 x 6) @ (6 x 1000) per chunk, are too
 # small for OpenBLAS threads to pay; the extra threads spin waiting for work and, on a machine
 # whose cores are busy with other processes, take turns with them (measured on this 2-core
-# machine under load: a 200 x 200 region map 5.7 s with OpenBLAS's 2 threads, 2.4 s with 1).
+# machine under load, two runs: a 200 x 200 region map 5.1-5.7 s with OpenBLAS's 2 threads,
+# 2.4-3.0 s with 1).
 BLAS_THREADS = 1
 
 
