@@ -56,8 +56,8 @@ def test_overflowing_plant_names_the_key(tmp_path, capsys, setting, key):
 @pytest.mark.parametrize("argv,size", [
     (["regions", "--P-gain", "log:1:100:1000000", "--D-gain", "lin:1:50:1000000"], "TiB"),
     (["regions", "--P-gain", "1", "--D-gain", "1", "--option", "n_omega=100000000000"], "TiB"),
-    (["passivity", "--P-gain", "log:1:100:100000", "--D-gain", "lin:1:50:100000",
-      "--option", "n_omega=100000"], "GiB"),
+    (["passivity", "--P-gain", "log:1:100:1000", "--D-gain", "lin:1:50:1000",
+      "--option", "n_omega=10000000"], "GiB"),
     (["margins", "--option", "n_omega=100000000000"], "TiB"),
     (["step", "--duration", "1e12"], "PiB"),
     (["regions", "--P-gain", "log:1:2:10000000000000"], "TiB"),

@@ -1,8 +1,15 @@
 """`haa-sym reproduce --quick`: every output of `make paper` is written (coarse grids)."""
+import csv
 import json
+import math
+import re
+
+import numpy as np
 
 from haa_sym.cli import main
+from haa_sym.progress import set_progress
 from haa_sym.reproduce import foreign_entries
+from haa_sym.torque import STEP_CONVENTION
 
 
 def test_reproduce_quick(tmp_path, capsys):
@@ -10,7 +17,11 @@ def test_reproduce_quick(tmp_path, capsys):
     (out / "regions").mkdir(parents=True)                    # an earlier run's results, replaced whole
     (out / "regions" / "fig99z.npz").write_bytes(b"stale map")
     (out / "REPORT.md").write_text("# old report\n")
-    assert main(["reproduce", "--quick", "--out", str(out)]) == 0
+    try:
+        assert main(["--quiet", "reproduce", "--quick", "--out", str(out)]) == 0
+    finally:
+        set_progress(None)
+    assert capsys.readouterr().err == ""                  # --quiet: no progress messages
     assert [p.name for p in tmp_path.iterdir()] == ["results"]          # no temporary left
     assert foreign_entries(out) == []    # the rule that lets a later run replace it knows every output
     assert not (out / "regions" / "fig99z.npz").exists()
@@ -18,7 +29,17 @@ def test_reproduce_quick(tmp_path, capsys):
     names = {p.name for p in tmp_path.iterdir()}
     assert {"REPORT.md", "claims.json", "table2.csv", "options_table2.csv", "fig07.png", "fig08.png",
             "fig09.png", "fig10.png", "fig11.png", "fig12.png", "fig12.csv", "fig07.csv",
-            "contact.png", "contact.csv", "verify.txt"} <= names
+            "fig07_step_info.csv", "contact.png", "contact.csv", "verify.txt"} <= names
+    # every CSV: plain identifiers as headers, read back by numpy.genfromtxt unchanged
+    csvs = sorted(tmp_path.rglob("*.csv"))
+    assert len(csvs) >= 6
+    for path in csvs:
+        with open(path, newline="") as fh:
+            rows = list(csv.reader(fh))
+        assert all(re.fullmatch(r"[A-Za-z_][A-Za-z0-9_]*", h) for h in rows[0]), (path.name, rows[0])
+        data = np.genfromtxt(path, delimiter=",", names=True, dtype=None, encoding="utf-8")
+        assert list(data.dtype.names) == rows[0], path.name
+        assert data.size == len(rows) - 1, path.name
     assert len(list((tmp_path / "regions").glob("fig*.npz"))) == 16
     claims = json.loads((tmp_path / "claims.json").read_text())
     assert claims["verify_exit_status"] == 0
@@ -34,3 +55,12 @@ def test_reproduce_quick(tmp_path, capsys):
     # the report's Table 2 count is the computed one
     n = sum(c["agrees"] for c in claims["table2"])
     assert f"The defaults reproduce **{n}/45**" in report
+    # Fig. 7: step_info metrics, undefined (not settled in the window) as null, never NaN
+    assert STEP_CONVENTION in report
+    step = np.genfromtxt(tmp_path / "fig07_step_info.csv", delimiter=",", names=True)
+    for s in claims["fig7"]:
+        row = step[(step["K_L2"] == s["K_L2"]) & (step["alpha"] == s["alpha"])]
+        assert row.size == 1
+        for key in ("rise_time_10_90_s", "settling_time_2pct_s", "overshoot_pct"):
+            assert s[key] is None or math.isfinite(s[key])
+            assert (s[key] is None and np.isnan(row[key][0])) or row[key][0] == s[key]

@@ -11,4 +11,22 @@ from haa_sym.passivity import PassivityResult, passivity
 __all__ = ["Controller", "ParameterError", "Params", "Plant", "load_params", "ClosedLoop",
            "LoopOptions", "StabilityResult", "RegionMap", "grid", "region_map", "PassivityResult",
            "passivity"]
-__version__ = "0.1.0"
+
+
+def _version() -> str:
+    """The version of the installed distribution (``importlib.metadata``); read from
+    ``pyproject.toml`` when run from a source tree that was never installed (``PYTHONPATH=src``)."""
+    from importlib.metadata import PackageNotFoundError, version
+    try:
+        return version("haa_sym")
+    except PackageNotFoundError:
+        import tomllib
+        from pathlib import Path
+        try:
+            with open(Path(__file__).resolve().parents[2] / "pyproject.toml", "rb") as fh:
+                return tomllib.load(fh)["project"]["version"]
+        except (OSError, KeyError, tomllib.TOMLDecodeError):
+            return "0+unknown"
+
+
+__version__ = _version()

@@ -13,6 +13,8 @@ Every analysis command takes ``--params FILE`` (default: the bundled HyQ paramet
 (``--set beta=2 --set N_av=10 --set J_L2=0.129 --set Ts=0.006``) and ``--option KEY=VALUE`` for
 the modelling options of ``haa_sym.LoopOptions`` (``--option port=dtheta_L1 --option delay=1``).
 Bad input exits with status 2 and a message naming the field; nothing partial is written.
+Results go to stdout; progress bars (on a terminal, for work longer than 2 s) to stderr;
+``--quiet`` silences them, ``--progress`` forces them. ``haa-sym --version`` prints the version.
 """
 from __future__ import annotations
 
@@ -21,6 +23,7 @@ import sys
 from pathlib import Path
 
 from haa_sym.params import ParameterError, gain_array, load_params
+from haa_sym.progress import set_progress
 
 OUTPUT_SUFFIXES = {"regions": (".npz",), "passivity": (".csv", ".json"), "step": (".csv",)}
 
@@ -167,15 +170,14 @@ def _cmd_passivity(args) -> int:
 
 
 def _cmd_step(args) -> int:
-    from haa_sym.torque import step_response, torque_bandwidth
+    from haa_sym.torque import STEP_CONVENTION, describe_step, step_response, torque_bandwidth
     params = _params(args)
     options = _parse_options(args.option)
     out = _check_out(args.out, "step")
     plot = _check_out(args.plot, "step", "--plot")
     s = step_response(params, duration=args.duration, options=options)
-    print(f"10-90% rise time {s.rise_time * 1e3:.1f} ms, overshoot {s.overshoot * 100:.1f} %, "
-          f"T at {s.t[-1]:g} s = {s.T[-1]:.4f}, -3 dB bandwidth "
-          f"{torque_bandwidth(params, options=options):.2f} rad/s")
+    print(f"{describe_step(s)}, -3 dB bandwidth {torque_bandwidth(params, options=options):.2f} rad/s")
+    print(f"({STEP_CONVENTION})")
     from haa_sym.outputs import Transaction
     with Transaction() as tx:
         if out:
@@ -216,9 +218,21 @@ def _cmd_reproduce(args) -> int:
     return 0
 
 
+def _progress_flags(p: argparse.ArgumentParser, default) -> None:
+    g = p.add_mutually_exclusive_group()
+    g.add_argument("-q", "--quiet", action="store_true", default=default,
+                   help="no progress bars or progress messages on stderr")
+    g.add_argument("--progress", action="store_true", default=default,
+                   help="progress bars on stderr from the start, also when it is not a terminal "
+                        "(default: on a terminal, for work longer than 2 s)")
+
+
 def main(argv: list[str] | None = None) -> int:
+    from haa_sym import __version__
     ap = argparse.ArgumentParser(prog="haa-sym", description=__doc__.splitlines()[0],
                                  formatter_class=argparse.RawDescriptionHelpFormatter, epilog=__doc__)
+    ap.add_argument("--version", action="version", version=f"%(prog)s {__version__}")
+    _progress_flags(ap, False)
     sub = ap.add_subparsers(dest="cmd", required=True)
     v = sub.add_parser("verify", help="check the paper's equations")
     v.add_argument("--params")
@@ -254,7 +268,11 @@ def main(argv: list[str] | None = None) -> int:
     _common(rp)
     rp.add_argument("--out", default="results")
     rp.add_argument("--quick", action="store_true", help="coarse grids (for tests)")
+    for command in sub.choices.values():
+        # also after the command (haa-sym reproduce --quiet); SUPPRESS keeps the global value
+        _progress_flags(command, argparse.SUPPRESS)
     args = ap.parse_args(argv)
+    set_progress(False if args.quiet else True if args.progress else None)
     try:
         if args.cmd == "verify":
             from haa_sym.verify import main as verify_main

@@ -23,7 +23,8 @@ import numpy as np
 from haa_sym.budget import check_memory, sweep_bytes
 from haa_sym.loop import ClosedLoop, LoopOptions
 from haa_sym.params import Params, gain_points
-from haa_sym.sweep import colgate_factor, gain_rows, phase_excess
+from haa_sym.progress import progress as progress_bar
+from haa_sym.sweep import BLAS_THREADS, blas_limits, colgate_factor, gain_rows, phase_excess
 
 __all__ = ["PassivityResult", "passivity", "corrected_phase", "bands_beyond", "status"]
 
@@ -51,7 +52,8 @@ class PassivityResult:
 
 def passivity(params: Params, P_gain=0.0, D_gain=0.0, *, options: LoopOptions | None = None,
               beta: float | None = None, alpha: float | None = None,
-              loop: ClosedLoop | None = None, backend: str = "auto") -> PassivityResult:
+              loop: ClosedLoop | None = None, backend: str = "auto",
+              progress: bool | None = None, blas_threads: int | None = BLAS_THREADS) -> PassivityResult:
     """Passivity of Z(z) at gain points (P_gain, D_gain broadcast together).
 
     Parameters
@@ -63,27 +65,40 @@ def passivity(params: Params, P_gain=0.0, D_gain=0.0, *, options: LoopOptions | 
         Port, Colgate correction, frequency grid and tolerance (``passivity_tol_deg``).
     beta, alpha : float, optional
         Torque-gain scale and velocity compensation; default from ``params``.
+    progress : bool or None
+        Progress bar on stderr; None follows :func:`haa_sym.progress.set_progress`.
+    blas_threads : int or None
+        BLAS threads during the sweep; see :data:`haa_sym.sweep.BLAS_THREADS`.
 
     Returns
     -------
     PassivityResult
     """
+    from haa_sym.regions import CHUNK
     P, D, beta, alpha = gain_points(P_gain, D_gain, beta, alpha)
     loop = loop or ClosedLoop(params, options, backend)
     options = loop.options
-    check_memory(sweep_bytes(P.size, options.n_omega),
+    # chunked: one chunk's sweep at a time, plus the coefficients and the per-point results
+    check_memory(sweep_bytes(P.size, options.n_omega, CHUNK),
                  f"passivity of {P.size} gain points on n_omega = {options.n_omega} frequencies")
-    st = loop.stability(P, D, beta, alpha, radius=False)
+    shape = P.shape
+    P, D = P.ravel(), D.ravel()
     coef = loop.loop_coefficients(None, beta, alpha)
-    X = gain_rows(P, D)
-    ex, ww = phase_excess(X, coef.Z_num, coef.Z_den, coef.omega, params.controller.Ts,
-                          options.colgate)
-    stable = st.stable.ravel()
+    n = P.size
+    stable = np.empty(n, bool)
+    ex = np.empty(n)
+    ww = np.empty(n)
+    with blas_limits(blas_threads), progress_bar(n, "passivity", "pt", progress) as bar:
+        for s in range(0, n, CHUNK):
+            sl = slice(s, min(s + CHUNK, n))
+            stable[sl] = loop.stability(P[sl], D[sl], beta, alpha, radius=False).stable.ravel()
+            ex[sl], ww[sl] = phase_excess(gain_rows(P[sl], D[sl]), coef.Z_num, coef.Z_den,
+                                          coef.omega, params.controller.Ts, options.colgate)
+            bar.update(sl.stop - sl.start)
     ex = np.where(stable, ex, np.nan)
     ww = np.where(stable, ww, np.nan)
     with np.errstate(invalid="ignore"):
         passive = stable & (ex <= options.passivity_tol_deg)
-    shape = P.shape
     return PassivityResult(stable.reshape(shape), passive.reshape(shape), ex.reshape(shape),
                            ww.reshape(shape))
 

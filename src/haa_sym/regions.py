@@ -32,7 +32,8 @@ import numpy as np
 from haa_sym.budget import check_memory, sweep_bytes
 from haa_sym.loop import ClosedLoop, LoopOptions
 from haa_sym.params import ParameterError, Params, gain_array
-from haa_sym.sweep import gain_rows, phase_excess, phase_margins
+from haa_sym.progress import progress as progress_bar
+from haa_sym.sweep import BLAS_THREADS, blas_limits, gain_rows, phase_excess, phase_margins
 
 __all__ = ["RegionMap", "region_map", "grid", "PM_THRESHOLD_DEG", "save_npz"]
 
@@ -131,17 +132,11 @@ def save_npz(path: str | Path, arrays: dict, meta: dict, tx=None, field: str | N
     return Path(path)
 
 
-def _progress(total: int, desc: str, enabled):
-    from tqdm.auto import tqdm
-    # enabled=None: tqdm shows the bar only on a terminal
-    return tqdm(total=total, desc=desc, unit="pt", disable=(None if enabled is None else not enabled),
-                leave=False)
-
-
 def region_map(params: Params, P_gain, D_gain, *, options: LoopOptions | None = None,
                beta: float | None = None, alpha: float | None = None, radius: bool = False,
                progress: bool | None = None, backend: str = "auto",
-               loop: ClosedLoop | None = None, passivity: bool = True) -> RegionMap:
+               loop: ClosedLoop | None = None, passivity: bool = True,
+               blas_threads: int | None = BLAS_THREADS) -> RegionMap:
     """Stability, phase margin and passivity on the grid ``P_gain`` x ``D_gain``.
 
     Parameters
@@ -160,13 +155,19 @@ def region_map(params: Params, P_gain, D_gain, *, options: LoopOptions | None = 
         Also compute the spectral radius, from the eigenvalues of the explicit closed loop
         (default False: it costs a stacked ``numpy.linalg.eigvals``, 10-100x the decision).
     progress : bool or None
-        Progress bar; None shows it on a terminal only.
+        Progress bar on stderr; None follows :func:`haa_sym.progress.set_progress` (by default
+        a bar on a terminal when the map takes more than 2 s).
+    backend : {"auto", "compiled", "vm"}
+        Evaluators of the generated code (``meta["backend"]`` records the one that ran).
     loop : ClosedLoop, optional
         Reuse an already built closed loop of the same params and options.
     passivity : bool
         Compute the passivity excess (default); False leaves ``passive`` False and
         ``phase_excess_deg`` NaN, for callers that need stability and phase margin only (it
         halves a map's cost).
+    blas_threads : int or None
+        BLAS threads during the sweep (threadpoolctl); None leaves BLAS alone. Default
+        :data:`haa_sym.sweep.BLAS_THREADS` (1, and why).
 
     Returns
     -------
@@ -219,7 +220,7 @@ def region_map(params: Params, P_gain, D_gain, *, options: LoopOptions | None = 
 
     # chunks small enough for the (chunk x n_omega) products to stay in cache (measured: 512
     # points beat 2048 by ~30%; two threads did not help, BLAS already uses both cores)
-    with _progress(n, "region map", progress) as bar:
+    with blas_limits(blas_threads), progress_bar(n, "region map", "pt", progress) as bar:
         for s in range(0, n, CHUNK):
             bar.update(work(slice(s, min(s + CHUNK, n))))
     shape = PP.shape
@@ -229,16 +230,18 @@ def region_map(params: Params, P_gain, D_gain, *, options: LoopOptions | None = 
                      spectral_radius=out["rho"].reshape(shape),
                      phase_margin_deg=out["pm"].reshape(shape), passive=passive.reshape(shape),
                      phase_excess_deg=out["excess"].reshape(shape), refined=refined.reshape(shape),
-                     meta=run_meta(params, options, beta=beta, alpha=alpha, backend=backend))
+                     meta=run_meta(params, options, beta=beta, alpha=alpha, backend=loop.backend))
 
 
-def run_meta(params: Params, options: LoopOptions, **extra) -> dict:
-    """What produced a result: parameters, options, versions and the generated-code hash."""
+def run_meta(params: Params, options: LoopOptions, *, backend: str = "auto", **extra) -> dict:
+    """What produced a result: parameters, options, versions, the generated-code hash and the
+    backend that evaluated it ("compiled" or "vm", ``backend`` = "auto" resolved)."""
     from haa_sym import __version__
     from haa_sym.compiled import evaluators
-    src = evaluators(extra.get("backend", "auto")).code.manifest["source_sha256"]
+    ev = evaluators(backend)
     return {"params": params.to_dict(), "options": options.to_dict(), "haa_sym": __version__,
-            "generated_source_sha256": src, **extra}
+            "generated_source_sha256": ev.code.manifest["source_sha256"], **extra,
+            "backend": ev.backend}
 
 
 def eigenvalue_crosscheck(m: RegionMap, loop: ClosedLoop, band: float = 1e-6) -> dict:

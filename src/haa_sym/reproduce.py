@@ -6,7 +6,8 @@ Writes into the output directory, as data and as PNG:
   table2.md, table2.csv                                 Table 2 with the worst phase excess per cell
   options_table2.csv                                    cells of Table 2 reproduced per option set
   fig12.png, fig12.csv                                  corrected phase of Z (Fig. 12)
-  fig07.png, fig07.csv                                  unit torque steps (Fig. 7)
+  fig07.png, fig07.csv, fig07_step_info.csv            unit torque steps (Fig. 7) and their
+                                                        step_info metrics
   contact.png, contact.csv                              stability against environment stiffness
   verify.txt                                            python -m haa_sym.verify (p1 roots, margins)
   claims.json                                           every computed claim, machine-readable
@@ -39,6 +40,7 @@ from haa_sym.outputs import Transaction, check_directory, write_text
 from haa_sym.paper import panel_params, paper_spec
 from haa_sym.params import Params, load_params
 from haa_sym.passivity import bands_beyond, corrected_phase
+from haa_sym.progress import message, progress as progress_bar
 from haa_sym.regions import CHUNK, eigenvalue_crosscheck, grid, region_map, run_meta
 from haa_sym.table2 import score_options, table2
 from haa_sym.torque import p1_roots, step_response, torque_bandwidth, torque_loop_margins
@@ -48,7 +50,7 @@ __all__ = ["reproduce", "region_trends"]
 
 # The names reproduce writes (regions/ holds only the maps): an existing output directory with
 # anything else in it is not replaced.
-_OUTPUT_NAMES = re.compile(r"fig\d\d\.(png|csv)|table2\.(md|csv)|options_table2\.csv|contact\.(png|csv)"
+_OUTPUT_NAMES = re.compile(r"fig\d\d(_step_info)?\.(png|csv)|table2\.(md|csv)|options_table2\.csv|contact\.(png|csv)"
                            r"|verify\.txt|claims\.json|REPORT\.md|regions")
 _REGION_NAMES = re.compile(r"fig\d\d[a-z]\.npz")
 
@@ -78,7 +80,20 @@ def _write_text(path: Path, text: str) -> None:
     write_text(path, text)
 
 
+_CSV_NAME = re.compile(r"[A-Za-z_][A-Za-z0-9_]*")
+
+
 def _csv(rows: list[dict]) -> str:
+    """CSV text that ``numpy.genfromtxt(..., delimiter=",", names=True)`` reads back unchanged:
+    headers are plain identifiers (genfromtxt rewrites others, e.g. drops dots) and no value
+    holds a comma, quote or newline (genfromtxt does not parse CSV quoting)."""
+    for name in rows[0]:
+        if not _CSV_NAME.fullmatch(name):
+            raise ValueError(f"CSV header {name!r} is not a plain identifier")
+    for row in rows:
+        for v in row.values():
+            if any(ch in str(v) for ch in ',"\n'):
+                raise ValueError(f"CSV value {v!r} holds a comma, quote or newline")
     buf = io.StringIO()
     w = csv.DictWriter(buf, fieldnames=list(rows[0]), lineterminator="\n")
     w.writeheader()
@@ -93,7 +108,17 @@ def _json_default(x):
 
 
 def _log(msg: str) -> None:
-    print(msg, file=sys.stderr, flush=True)
+    message(msg)
+
+
+def _finite_or_none(x: float):
+    """None (JSON null, an empty CSV cell) for a metric that is undefined (NaN)."""
+    return float(x) if np.isfinite(x) else None
+
+
+# claims / CSV name of each step_info key (python-control / MATLAB convention, see torque.py)
+STEP_INFO_COLUMNS = (("rise_time_10_90_s", "RiseTime"), ("settling_time_2pct_s", "SettlingTime"),
+                     ("overshoot_pct", "Overshoot"), ("peak_Nm", "Peak"), ("peak_time_s", "PeakTime"))
 
 
 # --- Sec. 4 trends ------------------------------------------------------------------------------
@@ -279,7 +304,9 @@ def _table2(job: _Job) -> dict:
              "phase_excess_deg": round(c.phase_excess_deg, 4) if np.isfinite(c.phase_excess_deg) else "",
              "omega_worst_rad_s": round(c.omega_worst, 3) if np.isfinite(c.omega_worst) else ""}
             for c in cells]
-    _write_text(job.out / "table2.csv", _csv(rows))
+    # labels hold commas ("P_gain = 200, D_gain = 10"), which genfromtxt would split on
+    _write_text(job.out / "table2.csv", _csv([{**r, "row": r["row"].replace(", ", "; "),
+                                                "column": r["column"].replace(", ", "; ")} for r in rows]))
     _write_text(job.out / "table2.md",
                 "# Table 2: passivity (paper / computed)\n\n" + table2_markdown(rows, job.spec) + "\n")
     scores = score_options(job.params, job.spec, job.options)
@@ -354,18 +381,22 @@ def _fig7(job: _Job) -> dict:
         for a, ls in zip(c["fig7_alpha"], ("-", "--")):
             s = step_response(p7, duration=c["fig7_duration_s"], options=job.options, alpha=a)
             lines.append((s, f"alpha = {a:g}", ls))
-            steps.append({"K_L2": K_L2, "alpha": a, "rise_time_s": s.rise_time,
-                          "T_at_end": float(s.T[-1]), "overshoot": s.overshoot,
-                          "settling_time_5pct_s": s.settling_time,
+            info = s.info
+            steps.append({"K_L2": K_L2, "alpha": a, "final_value": s.final_value,
+                          **{key: _finite_or_none(info[k]) for key, k in STEP_INFO_COLUMNS},
+                          "T_at_end": float(s.T[-1]),
                           "bandwidth_rad_s": torque_bandwidth(p7, options=job.options, alpha=a)})
         panels.append((f"K_L2 = {K_L2:g} Nm/rad", lines))
     save_figure(plot_steps(panels, "Fig. 7: unit torque steps (extended leg)"), job.out / "fig07.png")
-    t7 = panels[0][1][0][0].t
+    # long format: one row per sample and curve, so the header names no parameter values
     _write_text(job.out / "fig07.csv", _csv([
-        {"t_s": f"{t:.4f}", **{f"T_K{K:g}_alpha{a:g}": f"{s.T[i]:.6f}"
-                               for (_, lines), K in zip(panels, c["fig7_K_L2"])
-                               for (s, _, _), a in zip(lines, c["fig7_alpha"])}}
-        for i, t in enumerate(t7)]))
+        {"K_L2": f"{K:g}", "alpha": f"{a:g}", "t_s": f"{t:.4f}", "T_Nm": f"{T:.6f}"}
+        for (_, lines), K in zip(panels, c["fig7_K_L2"])
+        for (s, _, _), a in zip(lines, c["fig7_alpha"])
+        for t, T in zip(s.t, s.T)]))
+    # empty cell: not reached / not settled within the window (NaN in numpy.genfromtxt)
+    _write_text(job.out / "fig07_step_info.csv", _csv([
+        {k: "" if v is None else v for k, v in row.items()} for row in steps]))
     return {"fig7": steps}
 
 
@@ -424,20 +455,26 @@ def reproduce(out: str | Path = "results", params: Params | None = None,
         job = _Job(out=stage, params=params, options=options, spec=spec, quick=quick,
                    P_grid=P_grid, D_grid=D_grid)
         result: dict = {"meta": run_meta(params, options, quick=quick)}
-        result.update(_regions(job))
-        result.update(_option_sensitivity(job))
-        result.update(_trend_alternatives(job, result["region_trends"]["locomotion"],
-                                          result["region_splits"]["locomotion"]))
-        result.update(_table2(job))
-        _log("Fig. 12, contact stiffness, beta threshold, Fig. 7, torque-loop bounds, verify")
-        loop = ClosedLoop(params, options)
-        result.update(_fig12(job, loop))
-        result.update(_contact(job))
-        result.update(_beta_threshold(job, loop))
-        result.update(_fig7(job))
-        result.update(_torque_loop_corners(job))
-        verify_status, verify_text = _verify(job)
-        result.update(verify_status)
+        # one bar over the sections (stderr; shown on a terminal after 2 s, see haa_sym.progress)
+        with progress_bar(10, "reproduce", "section") as bar:
+            def run(section, *args):
+                result.update(section(job, *args))
+                bar.update(1)
+            run(_regions)
+            run(_option_sensitivity)
+            run(_trend_alternatives, result["region_trends"]["locomotion"],
+                result["region_splits"]["locomotion"])
+            run(_table2)
+            _log("Fig. 12, contact stiffness, beta threshold, Fig. 7, torque-loop bounds, verify")
+            loop = ClosedLoop(params, options)
+            run(_fig12, loop)
+            run(_contact)
+            run(_beta_threshold, loop)
+            run(_fig7)
+            run(_torque_loop_corners)
+            verify_status, verify_text = _verify(job)
+            result.update(verify_status)
+            bar.update(1)
         result["elapsed_s"] = round(time.time() - t_start, 1)
         _write_text(job.out / "claims.json", json.dumps(result, indent=1, default=_json_default) + "\n")
         from haa_sym.report import write_report

@@ -8,10 +8,29 @@ chunk by chunk, to one number per point: the phase margin and the passivity phas
 """
 from __future__ import annotations
 
+import contextlib
+
 import numpy as np
 
 __all__ = ["gain_rows", "monomial_rows", "product_form", "phase_margins", "phase_excess",
-           "colgate_factor"]
+           "colgate_factor", "blas_limits", "BLAS_THREADS"]
+
+
+# BLAS threads during a gain-grid sweep. Its products, (512 x 6) @ (6 x 1000) per chunk, are too
+# small for OpenBLAS threads to pay; the extra threads spin waiting for work and, on a machine
+# whose cores are busy with other processes, take turns with them (measured on this 2-core
+# machine under load, two runs: a 200 x 200 region map 5.1-5.7 s with OpenBLAS's 2 threads,
+# 2.4-3.0 s with 1).
+BLAS_THREADS = 1
+
+
+def blas_limits(threads: int | None):
+    """Context manager limiting BLAS to ``threads`` threads (threadpoolctl); None: no change.
+    Used around the sweeps (``region_map``, ``passivity``) with :data:`BLAS_THREADS`."""
+    if threads is None:
+        return contextlib.nullcontext()
+    from threadpoolctl import threadpool_limits
+    return threadpool_limits(limits=int(threads), user_api="blas")
 
 
 def gain_rows(P_gain, D_gain) -> np.ndarray:

@@ -8,7 +8,7 @@ Example
 >>> from haa_sym import load_params
 >>> from haa_sym.torque import step_response
 >>> s = step_response(load_params(), duration=0.3)              # doctest: +SKIP
->>> s.rise_time                                                 # doctest: +SKIP
+>>> s.rise_time, s.settling_time, s.overshoot_pct                # doctest: +SKIP
 """
 from __future__ import annotations
 
@@ -20,37 +20,127 @@ from haa_sym.budget import check_memory, sweep_bytes
 from haa_sym.loop import ClosedLoop, LoopOptions
 from haa_sym.params import ParameterError, Params, gain_points
 
-__all__ = ["StepResponse", "step_response", "torque_bandwidth"]
+__all__ = ["StepResponse", "step_response", "step_info", "dc_gain", "describe_step",
+           "torque_bandwidth", "STEP_CONVENTION"]
+
+
+# python-control ``step_info`` / MATLAB ``stepinfo`` defaults
+SETTLING_THRESHOLD = 0.02
+RISE_LIMITS = (0.1, 0.9)
+STEP_CONVENTION = ("rise 10-90 % of the final value, settling within 2 % of it, overshoot in % of "
+                   "it (python-control step_info / MATLAB stepinfo); final value = DC gain T/T_lref")
+
+
+def step_info(t, y, final_value: float | None = None, *,
+              settling_threshold: float = SETTLING_THRESHOLD,
+              rise_limits: tuple[float, float] = RISE_LIMITS) -> dict:
+    """Step-response characteristics of sampled data, python-control ``step_info`` convention.
+
+    Parameters
+    ----------
+    t : (n,) array
+        Sample times, s.
+    y : (n,) array
+        Response to a step applied at ``t[0]``.
+    final_value : float, optional
+        Steady-state value the metrics are relative to; default ``y[-1]`` (``step_info``'s
+        default for data, which calls any response "settled" at its last sample).
+    settling_threshold : float
+        Settled: |y / final_value - 1| < this from some sample to the end of the data.
+    rise_limits : (float, float)
+        Rise time from the first sample at ``rise_limits[0]`` to the first at ``rise_limits[1]``
+        of the final value.
+
+    Returns
+    -------
+    dict
+        The keys of ``control.step_info``: ``RiseTime``, ``SettlingTime``, ``PeakTime`` (s),
+        ``Overshoot``, ``Undershoot`` (% of the final value), ``SettlingMin``, ``SettlingMax``,
+        ``Peak``, ``SteadyStateValue`` (units of ``y``). The numbers equal ``step_info``'s
+        whenever the data settle, with two differences where they do not: ``RiseTime`` is NaN
+        when ``y`` never reaches the upper rise limit (``step_info`` raises IndexError), and
+        ``Overshoot`` is NaN when ``y`` has not settled by ``t[-1]`` (a later peak may be higher;
+        ``step_info`` reports the peak seen so far). ``SettlingTime`` is NaN when not settled.
+
+    Example
+    -------
+    >>> t = np.arange(6.0)
+    >>> info = step_info(t, np.array([0, 0.5, 1.2, 0.99, 1.0, 1.0]), 1.0)
+    >>> info["RiseTime"], info["SettlingTime"], round(info["Overshoot"], 6)
+    (1.0, 3.0, 20.0)
+    >>> step_info(t, t / 10, 1.0)["RiseTime"]       # never reaches 90 % of the final value
+    nan
+    """
+    t = np.asarray(t, float)
+    y = np.asarray(y, float)
+    yf = float(y[-1] if final_value is None else final_value)
+    nan = float("nan")
+    info = {"RiseTime": nan, "SettlingTime": nan, "SettlingMin": nan, "SettlingMax": nan,
+            "Overshoot": nan, "Undershoot": nan, "Peak": nan, "PeakTime": nan, "SteadyStateValue": yf}
+    if not np.isfinite(yf) or yf == 0:
+        return info
+    sgn = np.sign(yf)
+    lo = np.flatnonzero(sgn * (y - rise_limits[0] * yf) >= 0)
+    hi = np.flatnonzero(sgn * (y - rise_limits[1] * yf) >= 0)
+    outside = np.flatnonzero(np.abs(y / yf - 1) >= settling_threshold)
+    settled = 0 if outside.size == 0 else outside[-1] + 1
+    if hi.size:
+        info.update(RiseTime=t[hi[0]] - t[lo[0]], SettlingMin=min(y[hi[0]:].min(), yf),
+                    SettlingMax=max(y[hi[0]:].max(), yf))
+    if settled < t.size:
+        info["SettlingTime"] = t[settled]
+        info["Overshoot"] = max(0.0, 100.0 * (np.abs((sgn * y).max()) - abs(yf)) / abs(yf))
+    y_us = y[(sgn * y).argmin()]
+    info["Undershoot"] = -100.0 * y_us / yf if sgn * y_us < 0 else 0.0
+    k = np.abs(y).argmax()
+    info.update(Peak=np.abs(y[k]), PeakTime=t[k])
+    return {key: float(v) for key, v in info.items()}
 
 
 @dataclass(frozen=True)
 class StepResponse:
-    """Samples ``t`` (s) and measured torque ``T`` (Nm) after a unit step of T_lref at t = 0."""
+    """Samples ``t`` (s) and measured torque ``T`` (Nm) after a unit step of T_lref at t = 0;
+    ``final_value`` is the steady state the loop tends to (its DC gain; 1 with the PI's integral
+    action). The metrics follow :func:`step_info` relative to ``final_value``: NaN when the
+    response does not reach 90 % of it / does not settle within 2 % of it inside the window."""
 
     t: np.ndarray
     T: np.ndarray
+    final_value: float = 1.0
 
-    def _cross(self, level: float) -> float:
-        k = np.flatnonzero(self.T >= level)
-        return float(self.t[k[0]]) if k.size else float("nan")
+    @property
+    def info(self) -> dict:
+        """:func:`step_info` of the samples relative to ``final_value``."""
+        return step_info(self.t, self.T, self.final_value)
 
     @property
     def rise_time(self) -> float:
-        """10 % to 90 % of the unit reference, s (NaN if not reached in the window)."""
-        return self._cross(0.9) - self._cross(0.1)
-
-    @property
-    def overshoot(self) -> float:
-        """max T - 1, as a fraction of the unit step."""
-        return float(self.T.max() - 1.0)
+        """10 % to 90 % of the final value, s (NaN if 90 % is not reached in the window)."""
+        return float(self.info["RiseTime"])
 
     @property
     def settling_time(self) -> float:
-        """Last time |T - 1| > 5 %, s (NaN if it never settles in the window)."""
-        k = np.flatnonzero(np.abs(self.T - 1.0) > 0.05)
-        if k.size == 0:
-            return 0.0
-        return float("nan") if k[-1] == self.T.size - 1 else float(self.t[k[-1] + 1])
+        """Entry into +-2 % of the final value for good, s (NaN if not settled in the window)."""
+        return float(self.info["SettlingTime"])
+
+    @property
+    def overshoot_pct(self) -> float:
+        """Peak above the final value, % of it (0 if none; NaN if not settled in the window)."""
+        return float(self.info["Overshoot"])
+
+
+def describe_step(s: StepResponse) -> str:
+    """One line of step metrics for people, saying "not reached" / "not settled" where
+    :func:`step_info` gives NaN, and the window they refer to."""
+    info, end = s.info, f"{s.t[-1]:g} s"
+
+    def ms(x, never):
+        return f"{x * 1e3:.1f} ms" if np.isfinite(x) else never
+    return (f"final value (DC gain) {s.final_value:.4f}; rise time (10-90 %) "
+            f"{ms(info['RiseTime'], 'not reached within ' + end)}, settling time (2 %) "
+            f"{ms(info['SettlingTime'], 'not settled within ' + end)}, overshoot "
+            + (f"{info['Overshoot']:.1f} %" if np.isfinite(info["Overshoot"]) else "undefined (not settled)")
+            + f"; T at {end} = {s.T[-1]:.4f}")
 
 
 def step_response(params: Params, *, duration: float = 0.3, options: LoopOptions | None = None,
@@ -85,7 +175,21 @@ def step_response(params: Params, *, duration: float = 0.3, options: LoopOptions
     for k in range(n):
         T[k] = C[0] @ x + D[0, 1]
         x = A @ x + B[:, 1]
-    return StepResponse(np.arange(n) * Ts, T)
+    return StepResponse(np.arange(n) * Ts, T, dc_gain(params, loop=loop, beta=beta, alpha=alpha))
+
+
+def dc_gain(params: Params, *, options: LoopOptions | None = None, beta: float | None = None,
+            alpha: float | None = None, loop: ClosedLoop | None = None) -> float:
+    """Steady-state gain T_l / T_lref of the torque loop (impedance loop open), Nm/Nm.
+
+    Evaluated on the generated frequency response at 1e-6 rad/s rather than as
+    C (I - A)^-1 B + D: with the leg free (K_L2 = 0) the closed loop keeps a pole at z = 1 that
+    the torque output does not see, and the matrix form is then singular (python-control's
+    ``dcgain`` returns 1.22 for a loop whose step tends to 1).
+    """
+    loop = loop or ClosedLoop(params, options)
+    coef = loop.loop_coefficients(np.array([1e-6]), beta, alpha)
+    return float(coef.H_T[0].real)
 
 
 def torque_bandwidth(params: Params, *, options: LoopOptions | None = None,
