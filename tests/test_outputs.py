@@ -127,8 +127,8 @@ def test_interrupted_reproduce_keeps_the_old_results(tmp_path, capsys, monkeypat
         (job.out / "regions" / "fig08a.npz").write_bytes(b"new map")
         raise KeyboardInterrupt
     monkeypatch.setattr(rp, "_regions", interrupted)
-    with pytest.raises(KeyboardInterrupt):
-        main(["reproduce", "--quick", "--out", str(tmp_path / "results")])
+    assert main(["reproduce", "--quick", "--out", str(tmp_path / "results")]) == 130
+    assert capsys.readouterr().err.endswith("haa-sym: interrupted; no output written\n")
     assert snapshot(tmp_path) == before
 
 
@@ -168,3 +168,19 @@ def test_a_failed_write_is_never_committed(tmp_path):
         tx.write_text(tmp_path / "b.csv", "new b")
     assert sorted(os.listdir(tmp_path)) == ["a.csv", "b.csv"]
     assert (tmp_path / "a.csv").read_text() == "old a"
+
+
+def test_interrupt_is_one_line_and_writes_nothing(tmp_path, capsys, monkeypatch):
+    """Ctrl-C during a command: exit 130, one line, no traceback, existing output untouched."""
+    import haa_sym.regions as regions
+    out = tmp_path / "old.npz"
+    out.write_bytes(b"the user's file")
+
+    def interrupted(*args, **kwargs):
+        raise KeyboardInterrupt
+    monkeypatch.setattr(regions, "region_map", interrupted)
+    from haa_sym.cli import main
+    assert main(["regions", "--P-gain", "1,2", "--D-gain", "1,2", "--out", str(out)]) == 130
+    err = capsys.readouterr().err
+    assert err == "haa-sym: interrupted; no output written\n"
+    assert out.read_bytes() == b"the user's file" and [p.name for p in tmp_path.iterdir()] == ["old.npz"]

@@ -300,6 +300,11 @@ def main(argv: list[str] | None = None) -> int:
             raise
         print(f"haa-sym: error: {exc}", file=sys.stderr)
         return 2
+    except KeyboardInterrupt:
+        # outputs are staged (haa_sym.outputs): an interrupted command leaves existing files as
+        # they were; 128 + SIGINT, the shell's convention
+        print("haa-sym: interrupted; no output written", file=sys.stderr)
+        return 130
 
 
 if __name__ == "__main__":

@@ -265,4 +265,5 @@ def eigenvalue_crosscheck(m: RegionMap, loop: ClosedLoop, band: float = 1e-6) ->
         diff = np.abs(m.spectral_radius.ravel() - rho)
     return {"points": int(P.size), "decided": int(decided.sum()),
             "disagree": int((stable[decided] != (rho < 1)[decided]).sum()),
+            "refined": int(m.refined.sum()),
             "max_radius_diff": float(np.nanmax(diff)) if np.isfinite(diff).any() else None}
