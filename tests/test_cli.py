@@ -47,7 +47,7 @@ def test_regions_writes_npz_and_plot(tmp_path, capsys):
     (["--set", "J_L2=-0.1"], "J_L2"),
     (["--set", "N_av=0"], "N_av"),
     (["--set", "Ts=nan"], "Ts"),
-    (["--option", "port=foot"], "port = 'foot'"),
+    (["--option", "port=foot"], "--option port = 'foot'"),
     (["--option", "bogus=1"], "unknown option 'bogus'"),
     (["--configuration", "folded"], "unknown configuration 'folded'"),
 ])

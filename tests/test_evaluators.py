@@ -116,5 +116,5 @@ def test_bad_gain_input(params):
         LoopOptions(port="foot")
     with pytest.raises(ParameterError, match="delay = 2"):
         LoopOptions(delay=2)
-    with pytest.raises(ParameterError, match="N_av = 200 gives a closed loop of order 208"):
+    with pytest.raises(ParameterError, match="N_av = 200 gives a closed loop of order 208.*allowed: N_av <= 56"):
         ClosedLoop(params.with_values(N_av=200))

@@ -44,10 +44,10 @@ def test_reproduce_quick(tmp_path, capsys):
     claims = json.loads((tmp_path / "claims.json").read_text())
     assert claims["verify_exit_status"] == 0
     assert len(claims["table2"]) == 45
-    # every map point checked against numpy eigvals inside reproduce
+    # map points next to a boundary, and a lattice, checked against numpy eigvals inside reproduce
     cc = claims["region_crosscheck"]
     assert len(cc) == 16 and all(v["disagree"] == 0 for v in cc.values())
-    assert all(v["decided"] > 0.99 * v["points"] for v in cc.values())
+    assert all(v["decided"] > 0.99 * v["checked"] and v["checked"] > v["points"] / 9 for v in cc.values())
     report = (tmp_path / "REPORT.md").read_text()
     for heading in ("## Table 2: passivity", "## Quantitative claims", "## Qualitative trends",
                     "![Fig. 8: varying beta](fig08.png)", "Quick mode"):

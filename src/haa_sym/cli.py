@@ -2,9 +2,9 @@
 
   haa-sym reproduce --out results/            every figure and table of the paper + REPORT.md
   haa-sym regions --out map.npz [--plot map.png] [--P-gain log:1:20000:200] [--D-gain lin:1:50:100]
-  haa-sym passivity [--P-gain 0,200] [--D-gain 0,10] [--out cells.csv] [--plot phase.png]
+  haa-sym passivity [--P-gain 0,200,20000] [--D-gain 0,10,50] [--out cells.csv] [--plot phase.png]
   haa-sym step [--duration 0.3] [--out step.csv] [--plot step.png]
-  haa-sym margins [--P-gain 200] [--D-gain 10]
+  haa-sym margins [--P-gain 0] [--D-gain 0]
   haa-sym stability --P-gain 200 --D-gain 10
   haa-sym verify                              check the paper's equations
 
@@ -69,7 +69,10 @@ def _parse_options(items: list[str]):
                 out[key] = value
         except ValueError:
             raise ParameterError(f"--option {item!r}: {value!r} is not a valid {type(default).__name__}") from None
-    return LoopOptions(**out)
+    try:
+        return LoopOptions(**out)
+    except ParameterError as exc:
+        raise ParameterError(f"--option {exc}") from None
 
 
 def _common(p: argparse.ArgumentParser) -> None:
@@ -200,7 +203,7 @@ def _cmd_margins(args) -> int:
     loop = ClosedLoop(params, options)
     coef = loop.loop_coefficients()
     st = loop.stability(args.P_gain, args.D_gain, radius=True)
-    print(f"closed loop: {'stable' if st.stable else 'UNSTABLE'}, spectral radius {float(st.spectral_radius):.9f}")
+    print(f"closed loop: {'stable' if st.stable else 'UNSTABLE'}, spectral radius {float(st.spectral_radius):.9g}")
     for name, label in (("L_t", "torque loop (opened at the PI output)"),
                         ("L_imp", "impedance loop (opened at T_lref)")):
         m = stability_margins(coef.evaluate(name, args.P_gain, args.D_gain), coef.omega)
@@ -283,7 +286,7 @@ def main(argv: list[str] | None = None) -> int:
             args.P_gain, args.D_gain = _gain(args, "P_gain", "--P-gain"), _gain(args, "D_gain", "--D-gain")
             res = ClosedLoop(params, _parse_options(args.option)).stability(args.P_gain, args.D_gain,
                                                                              radius=True)
-            print(f"stable: {bool(res.stable)}  spectral radius: {float(res.spectral_radius):.12f}")
+            print(f"stable: {bool(res.stable)}  spectral radius: {float(res.spectral_radius):.12g}")
             return 0
         return {"regions": _cmd_regions, "passivity": _cmd_passivity, "step": _cmd_step,
                 "margins": _cmd_margins, "reproduce": _cmd_reproduce}[args.cmd](args)

@@ -232,10 +232,12 @@ class ClosedLoop:
         self.degree = ctrl.N_av + 8 + self.options.delay
         caps = [c for c in evaluators(backend).capacities if c >= self.degree]
         if not caps:
+            cap = max(evaluators(backend).capacities)
             raise ParameterError(
                 f"N_av = {ctrl.N_av} gives a closed loop of order {self.degree}, above the largest "
-                f"generated capacity {max(evaluators(backend).capacities)}; add a capacity to "
-                "CAPACITIES in codegen/generate.py and run `make derive`")
+                f"generated capacity {cap}; allowed: N_av <= {cap - 8 - self.options.delay} (with "
+                f"delay = {self.options.delay}; a larger capacity needs CAPACITIES in "
+                "codegen/generate.py of a source tree and `make derive`)")
         self.capacity = caps[0]
         self.const = np.array([ctrl.P_t0, ctrl.I_t0, self.plant.VC0])
         # basis=False: a loop used only for frequency responses or the explicit state space

@@ -72,7 +72,8 @@ def stability_margins(L: np.ndarray, omega: np.ndarray) -> Margins:
     if omega[0] <= 0 or np.any(np.diff(omega) <= 0):
         raise ParameterError("omega is not positive and increasing; allowed: increasing frequencies > 0 (rad/s)")
     lw = np.log(omega)
-    mag = np.log10(np.abs(L))
+    with np.errstate(divide="ignore"):          # |L| = 0 (a zero gain) is -inf dB: no crossover
+        mag = np.log10(np.abs(L))
     ph = np.degrees(np.unwrap(np.angle(L)))
     i, t = _crossings(lw, mag, 0.0)
     wc = np.exp(lw[i] + t * (lw[i + 1] - lw[i]))

@@ -249,7 +249,7 @@ def _regions(job: _Job) -> dict:
         p = panel_params(job.params, entry)
         loop = ClosedLoop(p, job.options)
         m = region_map(p, job.P_grid, job.D_grid, options=job.options, loop=loop)
-        crosscheck[pid] = eigenvalue_crosscheck(m, loop)
+        crosscheck[pid] = eigenvalue_crosscheck(m, loop, points="boundary")
         m.meta.update(figure=entry["figure"], panel=entry["panel"], title=entry["title"])
         m.save(job.out / "regions" / f"fig{entry['figure']:02d}{entry['panel']}.npz")
         for split, (Ps, Ds) in splits.items():
