@@ -128,3 +128,14 @@ def test_bad_options():
                     ({"pm_rule": "first"}, "pm_rule")):
         with pytest.raises(ParameterError, match=msg):
             LoopOptions(**kw)
+
+
+def test_threaded_sweep_gives_the_same_map(params, monkeypatch):
+    import haa_sym.regions as regions
+    P, D = grid("log:1:20000:40"), grid("lin:1:50:40")       # 1,600 points: four chunks
+    maps = []
+    for threads in (1, 2):
+        monkeypatch.setattr(regions, "SWEEP_THREADS", threads)
+        maps.append(region_map(params, P, D, progress=False))
+    for key, a in maps[0].arrays().items():
+        np.testing.assert_array_equal(a, maps[1].arrays()[key], err_msg=key)
