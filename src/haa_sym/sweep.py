@@ -9,6 +9,7 @@ chunk by chunk, to one number per point: the phase margin and the passivity phas
 from __future__ import annotations
 
 import contextlib
+import functools
 import os
 
 import numpy as np
@@ -34,8 +35,15 @@ def blas_limits(threads: int | None):
     Used around the sweeps (``region_map``, ``passivity``) with :data:`BLAS_THREADS`."""
     if threads is None:
         return contextlib.nullcontext()
-    from threadpoolctl import threadpool_limits
-    return threadpool_limits(limits=int(threads), user_api="blas")
+    return _controller().limit(limits=int(threads), user_api="blas")
+
+
+@functools.lru_cache(maxsize=None)
+def _controller():
+    # one scan of the loaded libraries per process: threadpool_limits() rescans at every call
+    # (1.7 ms; Table 2 and the option scores make thousands of sweeps)
+    from threadpoolctl import ThreadpoolController
+    return ThreadpoolController()
 
 
 def gain_rows(P_gain, D_gain) -> np.ndarray:
