@@ -86,3 +86,17 @@ def test_regions_rejects_unwritable_output(tmp_path, capsys):
     assert main(["regions", "--P-gain", "1", "--D-gain", "1", "--out", str(out)]) == 2
     assert "a_file' is not a directory; allowed: a path in an existing directory" in capsys.readouterr().err
     assert sorted(p.name for p in tmp_path.iterdir()) == ["a_file"]
+
+
+@pytest.mark.parametrize("argv,msg", [
+    (["step", "--duration", "abc"], "argument --duration: invalid float value: 'abc'"),
+    (["margins", "--P-gain", "1,2"], "argument --P-gain: invalid float value: '1,2'"),
+    (["regions", "--option", "n_omega=abc"], "'abc' is not a valid int; allowed: an integer"),
+])
+def test_argument_errors_are_one_line(capsys, argv, msg):
+    try:
+        rc = main(argv)
+    except SystemExit as exc:            # argparse's own errors leave through SystemExit
+        rc = exc.code
+    err = capsys.readouterr().err
+    assert rc == 2 and err.count("\n") == 1 and err.startswith("haa-sym: error: ") and msg in err, err

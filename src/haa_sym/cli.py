@@ -68,11 +68,21 @@ def _parse_options(items: list[str]):
             else:
                 out[key] = value
         except ValueError:
-            raise ParameterError(f"--option {item!r}: {value!r} is not a valid {type(default).__name__}") from None
+            kind = {bool: "true or false", int: "an integer", float: "a number"}.get(type(default), "text")
+            raise ParameterError(f"--option {item!r}: {value!r} is not a valid {type(default).__name__}; "
+                                 f"allowed: {kind}") from None
     try:
         return LoopOptions(**out)
     except ParameterError as exc:
         raise ParameterError(f"--option {exc}") from None
+
+
+class _Parser(argparse.ArgumentParser):
+    """argparse with the project's error form: one line, exit status 2 (argparse's own usage
+    block is what ``--help`` is for)."""
+
+    def error(self, message: str):
+        self.exit(2, f"haa-sym: error: {message}; see `{self.prog} --help`\n")
 
 
 def _common(p: argparse.ArgumentParser) -> None:
@@ -232,7 +242,7 @@ def _progress_flags(p: argparse.ArgumentParser, default) -> None:
 
 def main(argv: list[str] | None = None) -> int:
     from haa_sym import __version__
-    ap = argparse.ArgumentParser(prog="haa-sym", description=__doc__.splitlines()[0],
+    ap = _Parser(prog="haa-sym", description=__doc__.splitlines()[0],
                                  formatter_class=argparse.RawDescriptionHelpFormatter, epilog=__doc__)
     ap.add_argument("--version", action="version", version=f"%(prog)s {__version__}")
     _progress_flags(ap, False)
