@@ -102,3 +102,15 @@ def test_failing_compiler_exits_2(tmp_path, command):
     assert "CC = '/bin/false' failed" in proc.stderr and "Traceback" not in proc.stderr
     assert proc.stdout == ""
 
+
+
+def test_unwritable_cache_names_the_variable(tmp_path):
+    (tmp_path / "file").write_text("not a directory")
+    env = dict(os.environ, HAA_SYM_CACHE=str(tmp_path / "file" / "cache"))
+    proc = subprocess.run([sys.executable, "-m", "haa_sym.cli", "stability", "--P-gain", "200",
+                           "--D-gain", "10"], cwd=tmp_path, env=env, capture_output=True, text=True,
+                          timeout=120)
+    assert proc.returncode == 2 and proc.stdout == ""
+    assert proc.stderr == (f"haa-sym: error: the compiled-code cache {tmp_path / 'file' / 'cache'} "
+                           "(HAA_SYM_CACHE, default ~/.cache/haa_sym) cannot be created: Not a "
+                           "directory; allowed: a writable directory\n")

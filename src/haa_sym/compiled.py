@@ -197,7 +197,13 @@ class Compiler:
         target = self.cache / key / (c_file.stem + ".so")
         if self.verified(target):
             return target
-        target.parent.mkdir(parents=True, exist_ok=True)
+        try:
+            target.parent.mkdir(parents=True, exist_ok=True)
+        except OSError as exc:
+            raise CompilerError(
+                f"the compiled-code cache {self.cache} (HAA_SYM_CACHE, default "
+                f"~/.cache/haa_sym) cannot be created: {exc.strerror or exc}; allowed: a writable "
+                "directory") from None
         # Both files are written under temporary names and renamed: a concurrent process sees
         # the old or the new file, never a partial one; a library whose digest is not (yet)
         # the recorded one is rebuilt, never loaded.
