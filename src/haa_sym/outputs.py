@@ -91,6 +91,20 @@ def _sibling(target: Path, tag: str) -> Path:
     return target.parent / f".{target.name}.{secrets.token_hex(4)}.{tag}"
 
 
+def _create_sibling(target: Path, field: str | None, make, verb: str, what: str):
+    """``(tmp, make(tmp))`` for a fresh temporary sibling of ``target``; a name taken by a
+    concurrent writer is retried, any other failure is one error naming the user's path."""
+    for _ in range(100):
+        tmp = _sibling(target, "tmp")
+        try:
+            return tmp, make(tmp)
+        except FileExistsError:
+            continue
+        except OSError as exc:
+            raise OutputError(f"{_label(target, field)}: cannot {verb} ({exc.strerror})") from None
+    raise OutputError(f"{_label(target, field)}: cannot create {what} next to it")
+
+
 def _remove(path: Path) -> None:
     if path.is_dir() and not path.is_symlink():
         shutil.rmtree(path, ignore_errors=True)
@@ -124,18 +138,10 @@ class Transaction:
     def open(self, path: str | Path, mode: str = "wb", field: str | None = None) -> Iterator:
         """A file object writing the staged content of ``path`` (``mode`` "w" or "wb")."""
         target = check_file(path, field)
-        for _ in range(100):
-            tmp = _sibling(target, "tmp")
-            try:
-                # 0o666 & ~umask, as open() gives a new file (mkstemp would force 0600)
-                fd = os.open(tmp, os.O_WRONLY | os.O_CREAT | os.O_EXCL | getattr(os, "O_CLOEXEC", 0), 0o666)
-                break
-            except FileExistsError:
-                continue
-            except OSError as exc:
-                raise OutputError(f"{_label(target, field)}: cannot write ({exc.strerror})") from None
-        else:
-            raise OutputError(f"{_label(target, field)}: cannot create a temporary file next to it")
+        # 0o666 & ~umask, as open() gives a new file (mkstemp would force 0600)
+        flags = os.O_WRONLY | os.O_CREAT | os.O_EXCL | getattr(os, "O_CLOEXEC", 0)
+        tmp, fd = _create_sibling(target, field, lambda t: os.open(t, flags, 0o666), "write",
+                                  "a temporary file")
         try:
             with os.fdopen(fd, mode) as fh:
                 yield fh
@@ -159,17 +165,9 @@ class Transaction:
         :func:`check_directory`) is replaced by the staged one.
         """
         target = check_directory(path, field, replaceable)
-        for _ in range(100):
-            tmp = _sibling(target, "tmp")
-            try:
-                os.mkdir(tmp, 0o777)             # 0o777 & ~umask, like mkdir (mkdtemp forces 0700)
-                break
-            except FileExistsError:
-                continue
-            except OSError as exc:
-                raise OutputError(f"{_label(target, field)}: cannot create ({exc.strerror})") from None
-        else:
-            raise OutputError(f"{_label(target, field)}: cannot create a temporary directory next to it")
+        # 0o777 & ~umask, like mkdir (mkdtemp forces 0700)
+        tmp, _ = _create_sibling(target, field, lambda t: os.mkdir(t, 0o777), "create",
+                                 "a temporary directory")
         self._staged.append((tmp, target, True))
         self._dir_checks[target] = (field, replaceable)
         return tmp
