@@ -229,13 +229,14 @@ class ClosedLoop:
         self.plant: DiscretePlant = _PLANTS.get(
             (params.plant.as_tuple(), ctrl.Ts, backend),
             lambda: discretize(continuous_plant(params.plant, backend), ctrl.Ts))
-        self.degree = ctrl.N_av + 8 + self.options.delay
+        # chi = (z - 1) z^delay z^N_av d(z) + ...: integrator, delay, filter, plant states
+        self.degree = self.plant.Phi.shape[0] + 1 + ctrl.N_av + self.options.delay
         caps = [c for c in evaluators(backend).capacities if c >= self.degree]
         if not caps:
             cap = max(evaluators(backend).capacities)
             raise ParameterError(
                 f"N_av = {ctrl.N_av} gives a closed loop of order {self.degree}, above the largest "
-                f"generated capacity {cap}; allowed: N_av <= {cap - 8 - self.options.delay} (with "
+                f"generated capacity {cap}; allowed: N_av <= {cap - self.degree + ctrl.N_av} (with "
                 f"delay = {self.options.delay}; a larger capacity needs CAPACITIES in "
                 "codegen/generate.py of a source tree and `make derive`)")
         self.capacity = caps[0]
@@ -246,7 +247,7 @@ class ClosedLoop:
     # --- the characteristic polynomial -------------------------------------------------------
     @property
     def torque_output(self) -> str:
-        return "T_l" if self.options.torque_damping else "T_l_spring"
+        return "T_sensor" if self.options.torque_damping else "T_sensor_spring"
 
     @property
     def filter_lengths(self) -> tuple[int, int]:
@@ -266,7 +267,7 @@ class ClosedLoop:
         p, ctrl, opt = self.plant, self.params.controller, self.options
         d, nums = _transfer_polynomials(p)
         n_T = nums[OUTPUTS.index(self.torque_output)][0]
-        n_th = nums[OUTPUTS.index("theta_L1")][0]
+        n_th = nums[OUTPUTS.index("theta_encoder")][0]
         N = ctrl.N_av                      # the longest average: z^N clears every denominator
         N_vc, N_d = self.filter_lengths
         Ts = Fraction(ctrl.Ts)
@@ -405,7 +406,7 @@ class ClosedLoop:
     def _loop_coefficients(self, omega, beta, alpha, struct) -> LoopCoefficients:
         ctrl = self.params.controller
         port = "dtheta_L1" if self.options.port == "encoder_average" else self.options.port
-        G = self.plant.frequency_response(omega, outputs=(self.torque_output, "theta_L1", port),
+        G = self.plant.frequency_response(omega, outputs=(self.torque_output, "theta_encoder", port),
                                           inputs=("V_m", "T_dist"))
         # one column per frequency: re/im of the 6 plant responses, then w Ts
         cols = np.empty((13, omega.size))

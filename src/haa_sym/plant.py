@@ -2,8 +2,9 @@
 and its zero-order-hold discretisation at Ts.
 
 State ``[I_m, theta_m, dtheta_m, theta_L1, dtheta_L1, theta_L2, dtheta_L2]``, inputs
-``[V_m, T_fr, T_dist]``, outputs ``[T_l, T_l_spring, theta_L1, dtheta_L1, dtheta_L2]`` where
-``T_l`` is Eq. (2) and ``T_l_spring`` its K_hd term alone.
+``[V_m, T_fr, T_dist]``, outputs ``[T_sensor, T_sensor_spring, theta_encoder, dtheta_L1, dtheta_L2]``
+where ``T_sensor`` is the torque sensor of Eq. (2) (T_l), ``T_sensor_spring`` its K_hd term alone
+and ``theta_encoder`` the encoder angle (theta_L1).
 """
 from __future__ import annotations
 
@@ -17,7 +18,7 @@ from haa_sym.params import PLANT_KEYS, ParameterError, Plant
 
 STATES = ("I_m", "theta_m", "dtheta_m", "theta_L1", "dtheta_L1", "theta_L2", "dtheta_L2")
 INPUTS = ("V_m", "T_fr", "T_dist")
-OUTPUTS = ("T_l", "T_l_spring", "theta_L1", "dtheta_L1", "dtheta_L2")
+OUTPUTS = ("T_sensor", "T_sensor_spring", "theta_encoder", "dtheta_L1", "dtheta_L2")
 
 __all__ = ["STATES", "INPUTS", "OUTPUTS", "ContinuousPlant", "DiscretePlant", "continuous_plant",
            "discretize"]

@@ -48,7 +48,7 @@ def _closed_loop_batch(loop: ClosedLoop, P_gain: np.ndarray, D_gain: np.ndarray,
         r = zero()
         r[:nx] = pl.C[OUTPUTS.index(name)]
         return r
-    th = row_from_C("theta_L1")
+    th = row_from_C("theta_encoder")
     T = row_from_C(loop.torque_output)
     r_in = zero(); r_in[n + 1] = 1
     def average(k):                                       # (theta[k] - theta[k-k]) / (k Ts)

@@ -238,7 +238,7 @@ def p1_roots(params: Params) -> np.ndarray:
     from haa_sym.plant import OUTPUTS, continuous_plant
     cp = continuous_plant(params.plant)
     _, nums = transfer_polynomials(cp.A, cp.B[:, :1], cp.C)
-    num = np.trim_zeros(to_float(nums[OUTPUTS.index("T_l")][0]), "f")
+    num = np.trim_zeros(to_float(nums[OUTPUTS.index("T_sensor")][0]), "f")
     roots = np.roots(num)
     spring_zero = -params.plant.K_hd / params.plant.D_hd
     roots = np.delete(roots, np.argmin(np.abs(roots - spring_zero)))

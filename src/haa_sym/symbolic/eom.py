@@ -22,7 +22,7 @@ STATE_NAMES = ("I_m", "theta_m", "dtheta_m", "theta_L1", "dtheta_L1", "theta_L2"
 INPUT_NAMES = ("V_m", "T_fr", "T_dist")
 # Measured and port outputs: the torque sensor (Eq. 2) with and without its D_hd term, the
 # encoder angle, and the two candidate port velocities of Sec. 5.
-OUTPUT_NAMES = ("T_l", "T_l_spring", "theta_L1", "dtheta_L1", "dtheta_L2")
+OUTPUT_NAMES = ("T_sensor", "T_sensor_spring", "theta_encoder", "dtheta_L1", "dtheta_L2")
 
 s = sp.Symbol("s")
 
