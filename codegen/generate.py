@@ -3,7 +3,10 @@
 Writes, byte-reproducibly (no dates, sorted JSON):
   generated/haa_sym_gen.c      every CasADi Function as C, then codegen/driver.c (one translation unit)
   generated/<name>.casadi      the same Functions serialised, for CasADi's VM when no compiler
-  generated/MANIFEST.json      SHA-256 of every generated file and of the sources, tool versions
+  generated/MANIFEST.json      SHA-256 of every generated file and of the sources, tool versions,
+                               and the built-in actuators' topologies (fingerprint -> function, files)
+The plant function of every built-in actuator (model/*.toml except paper.toml) is generated,
+one per distinct topology, named haa_plant_<first 12 hex of the topology's fingerprint>.
 Usage: python -m codegen.generate [--out DIR]
 """
 from __future__ import annotations
@@ -20,7 +23,8 @@ import casadi as ca
 import sympy
 
 from codegen.kernels import decision_function, loop_coefficient_function
-from codegen.symbolic_to_casadi import plant_function
+from haa_sym.params import builtin_actuators, load_params
+from haa_sym.symbolic.symbolic_to_casadi import plant_function
 
 ROOT = Path(__file__).resolve().parents[1]
 C_NAME = "haa_sym_gen"
@@ -28,20 +32,35 @@ DRIVER = ROOT / "codegen" / "driver.c"
 # Polynomial capacities of the stability evaluators: degree N_av + 8 + delay must fit.
 CAPACITIES = (16, 32, 64)
 # Files whose content defines the generated code; their hash is recorded in the manifest and
-# checked by the runtime (a changed source means stale generated code).
+# checked by the runtime (a changed source means stale generated code). The actuator files
+# define it through their topology only (not their values): the manifest's "topologies" lists
+# each built-in file under its topology's fingerprint, and the runtime checks that list against
+# model/ (haa_sym.compiled.GeneratedCode), so editing a value never stales generated/.
 SOURCES = (
-    "src/haa_sym/params.py",
-    "src/haa_sym/symbolic/eom.py",
-    "src/haa_sym/symbolic/torque_tf.py",
+    "src/haa_sym/actuator.py",
+    "src/haa_sym/symbolic/chain.py",
+    "src/haa_sym/symbolic/symbolic_to_casadi.py",
     "codegen/kernels.py",
-    "codegen/symbolic_to_casadi.py",
     "codegen/generate.py",
     "codegen/driver.c",
 )
 
 
-def functions() -> list[ca.Function]:
-    fns = [plant_function(), loop_coefficient_function()]
+def builtin_topologies() -> dict[str, dict]:
+    """{fingerprint: {"function", "actuators", "topology"}} of the built-in actuator files."""
+    out: dict[str, dict] = {}
+    for path in builtin_actuators():
+        top = load_params(path).plant.topology
+        entry = out.setdefault(top.fingerprint, {"function": top.function_name, "actuators": [],
+                                                 "topology": top})
+        entry["actuators"].append(path.name)
+    return out
+
+
+def functions(topologies: dict[str, dict] | None = None) -> list[ca.Function]:
+    topologies = builtin_topologies() if topologies is None else topologies
+    fns = [plant_function(t["topology"]) for _, t in sorted(topologies.items())]
+    fns += [loop_coefficient_function()]
     fns += [decision_function(cap) for cap in CAPACITIES]
     return fns
 
@@ -67,7 +86,8 @@ def _write(path: Path, data: bytes) -> None:
 
 def generate(out: Path) -> dict:
     out.mkdir(parents=True, exist_ok=True)
-    fns = functions()
+    topologies = builtin_topologies()
+    fns = functions(topologies)
     files: dict[str, bytes] = {}
     with tempfile.TemporaryDirectory() as tmp:
         cg = ca.CodeGenerator(f"{C_NAME}.c", {"with_header": True})
@@ -89,6 +109,8 @@ def generate(out: Path) -> dict:
         "functions": [f.name() for f in fns],
         "library": C_NAME,
         "files": {name: sha256_bytes(data) for name, data in sorted(files.items())},
+        "topologies": {fp: {"function": t["function"], "actuators": sorted(t["actuators"])}
+                       for fp, t in sorted(topologies.items())},
     }
     files["MANIFEST.json"] = (json.dumps(manifest, indent=2, sort_keys=True) + "\n").encode()
     for name, data in files.items():

@@ -275,19 +275,19 @@ static const casadi_real casadi_c11[65] =
 static const casadi_real casadi_zeros[520] = 
   {0.};
 
-/* haa_plant:(p[16])->(A[7x7],B[7x3],C[5x7],VC0) */
+/* haa_plant_5cfa27f41820:(p[16])->(A[7x7],B[7x3],C[5x7],VC0) */
 static int casadi_f0(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
   casadi_real a00, a01, a02, a03, a04, a05, a06, a07, a08, a09, a10, a11;
   casadi_real a12, a13, a14, a15;
-  a00=arg[0]? arg[0][12] : 0;
-  a01=arg[0]? arg[0][11] : 0;
+  a00=arg[0]? arg[0][1] : 0;
+  a01=arg[0]? arg[0][0] : 0;
   a02=(a00/a01);
   a02=(-a02);
   if (res[0]!=0) res[0][0]=a02;
   a02=0.;
   if (res[0]!=0) res[0][1]=a02;
-  a03=arg[0]? arg[0][13] : 0;
-  a04=arg[0]? arg[0][0] : 0;
+  a03=arg[0]? arg[0][2] : 0;
+  a04=arg[0]? arg[0][4] : 0;
   a05=(a03/a04);
   if (res[0]!=0) res[0][2]=a05;
   if (res[0]!=0) res[0][3]=a02;
@@ -296,29 +296,29 @@ static int casadi_f0(const casadi_real** arg, casadi_real** res, casadi_int* iw,
   if (res[0]!=0) res[0][6]=a02;
   if (res[0]!=0) res[0][7]=a02;
   if (res[0]!=0) res[0][8]=a02;
-  a05=arg[0]? arg[0][1] : 0;
+  a05=arg[0]? arg[0][12] : 0;
   a06=(a05/a04);
-  a07=arg[0]? arg[0][15] : 0;
+  a07=arg[0]? arg[0][6] : 0;
   a08=casadi_sq(a07);
   a06=(a06/a08);
   a06=(-a06);
   if (res[0]!=0) res[0][9]=a06;
   if (res[0]!=0) res[0][10]=a02;
-  a06=arg[0]? arg[0][4] : 0;
+  a06=arg[0]? arg[0][7] : 0;
   a08=(a05/a06);
   a08=(a08/a07);
   if (res[0]!=0) res[0][11]=a08;
   if (res[0]!=0) res[0][12]=a02;
   if (res[0]!=0) res[0][13]=a02;
-  a08=arg[0]? arg[0][14] : 0;
+  a08=arg[0]? arg[0][3] : 0;
   a09=(a08/a01);
   a09=(-a09);
   if (res[0]!=0) res[0][14]=a09;
   a09=1.;
   if (res[0]!=0) res[0][15]=a09;
-  a10=arg[0]? arg[0][3] : 0;
+  a10=arg[0]? arg[0][5] : 0;
   a11=(a10/a04);
-  a12=arg[0]? arg[0][2] : 0;
+  a12=arg[0]? arg[0][13] : 0;
   a13=(a12/a04);
   a14=casadi_sq(a07);
   a13=(a13/a14);
@@ -337,13 +337,13 @@ static int casadi_f0(const casadi_real** arg, casadi_real** res, casadi_int* iw,
   a11=(a11/a07);
   if (res[0]!=0) res[0][23]=a11;
   if (res[0]!=0) res[0][24]=a02;
-  a11=arg[0]? arg[0][9] : 0;
+  a11=arg[0]? arg[0][14] : 0;
   a13=(a05+a11);
   a13=(a13/a06);
   a13=(-a13);
   if (res[0]!=0) res[0][25]=a13;
   if (res[0]!=0) res[0][26]=a02;
-  a13=arg[0]? arg[0][6] : 0;
+  a13=arg[0]? arg[0][9] : 0;
   a14=(a11/a13);
   if (res[0]!=0) res[0][27]=a14;
   if (res[0]!=0) res[0][28]=a02;
@@ -352,9 +352,9 @@ static int casadi_f0(const casadi_real** arg, casadi_real** res, casadi_int* iw,
   a14=(a14/a07);
   if (res[0]!=0) res[0][30]=a14;
   if (res[0]!=0) res[0][31]=a09;
-  a14=arg[0]? arg[0][5] : 0;
+  a14=arg[0]? arg[0][8] : 0;
   a14=(a14+a12);
-  a15=arg[0]? arg[0][10] : 0;
+  a15=arg[0]? arg[0][15] : 0;
   a14=(a14+a15);
   a14=(a14/a06);
   a14=(-a14);
@@ -369,7 +369,7 @@ static int casadi_f0(const casadi_real** arg, casadi_real** res, casadi_int* iw,
   a14=(a11/a06);
   if (res[0]!=0) res[0][39]=a14;
   if (res[0]!=0) res[0][40]=a02;
-  a14=arg[0]? arg[0][8] : 0;
+  a14=arg[0]? arg[0][11] : 0;
   a14=(a14+a11);
   a14=(a14/a13);
   a14=(-a14);
@@ -381,7 +381,7 @@ static int casadi_f0(const casadi_real** arg, casadi_real** res, casadi_int* iw,
   a06=(a15/a06);
   if (res[0]!=0) res[0][46]=a06;
   if (res[0]!=0) res[0][47]=a09;
-  a06=arg[0]? arg[0][7] : 0;
+  a06=arg[0]? arg[0][10] : 0;
   a06=(a06+a15);
   a06=(a06/a13);
   a06=(-a06);
@@ -460,41 +460,41 @@ static int casadi_f0(const casadi_real** arg, casadi_real** res, casadi_int* iw,
   return 0;
 }
 
-CASADI_SYMBOL_EXPORT int haa_plant(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem){
+CASADI_SYMBOL_EXPORT int haa_plant_5cfa27f41820(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem){
   return casadi_f0(arg, res, iw, w, mem);
 }
 
-CASADI_SYMBOL_EXPORT int haa_plant_checkout(void) {
+CASADI_SYMBOL_EXPORT int haa_plant_5cfa27f41820_checkout(void) {
   return 0;
 }
 
-CASADI_SYMBOL_EXPORT void haa_plant_release(int mem) {
+CASADI_SYMBOL_EXPORT void haa_plant_5cfa27f41820_release(int mem) {
 }
 
-CASADI_SYMBOL_EXPORT void haa_plant_incref(void) {
+CASADI_SYMBOL_EXPORT void haa_plant_5cfa27f41820_incref(void) {
 }
 
-CASADI_SYMBOL_EXPORT void haa_plant_decref(void) {
+CASADI_SYMBOL_EXPORT void haa_plant_5cfa27f41820_decref(void) {
 }
 
-CASADI_SYMBOL_EXPORT casadi_int haa_plant_n_in(void) { return 1;}
+CASADI_SYMBOL_EXPORT casadi_int haa_plant_5cfa27f41820_n_in(void) { return 1;}
 
-CASADI_SYMBOL_EXPORT casadi_int haa_plant_n_out(void) { return 4;}
+CASADI_SYMBOL_EXPORT casadi_int haa_plant_5cfa27f41820_n_out(void) { return 4;}
 
-CASADI_SYMBOL_EXPORT casadi_real haa_plant_default_in(casadi_int i) {
+CASADI_SYMBOL_EXPORT casadi_real haa_plant_5cfa27f41820_default_in(casadi_int i) {
   switch (i) {
     default: return 0;
   }
 }
 
-CASADI_SYMBOL_EXPORT const char* haa_plant_name_in(casadi_int i) {
+CASADI_SYMBOL_EXPORT const char* haa_plant_5cfa27f41820_name_in(casadi_int i) {
   switch (i) {
     case 0: return "p";
     default: return 0;
   }
 }
 
-CASADI_SYMBOL_EXPORT const char* haa_plant_name_out(casadi_int i) {
+CASADI_SYMBOL_EXPORT const char* haa_plant_5cfa27f41820_name_out(casadi_int i) {
   switch (i) {
     case 0: return "A";
     case 1: return "B";
@@ -504,14 +504,14 @@ CASADI_SYMBOL_EXPORT const char* haa_plant_name_out(casadi_int i) {
   }
 }
 
-CASADI_SYMBOL_EXPORT const casadi_int* haa_plant_sparsity_in(casadi_int i) {
+CASADI_SYMBOL_EXPORT const casadi_int* haa_plant_5cfa27f41820_sparsity_in(casadi_int i) {
   switch (i) {
     case 0: return casadi_s0;
     default: return 0;
   }
 }
 
-CASADI_SYMBOL_EXPORT const casadi_int* haa_plant_sparsity_out(casadi_int i) {
+CASADI_SYMBOL_EXPORT const casadi_int* haa_plant_5cfa27f41820_sparsity_out(casadi_int i) {
   switch (i) {
     case 0: return casadi_s1;
     case 1: return casadi_s2;
@@ -521,7 +521,7 @@ CASADI_SYMBOL_EXPORT const casadi_int* haa_plant_sparsity_out(casadi_int i) {
   }
 }
 
-CASADI_SYMBOL_EXPORT int haa_plant_work(casadi_int *sz_arg, casadi_int* sz_res, casadi_int *sz_iw, casadi_int *sz_w) {
+CASADI_SYMBOL_EXPORT int haa_plant_5cfa27f41820_work(casadi_int *sz_arg, casadi_int* sz_res, casadi_int *sz_iw, casadi_int *sz_w) {
   if (sz_arg) *sz_arg = 1;
   if (sz_res) *sz_res = 4;
   if (sz_iw) *sz_iw = 0;
@@ -529,7 +529,7 @@ CASADI_SYMBOL_EXPORT int haa_plant_work(casadi_int *sz_arg, casadi_int* sz_res, 
   return 0;
 }
 
-CASADI_SYMBOL_EXPORT int haa_plant_work_bytes(casadi_int *sz_arg, casadi_int* sz_res, casadi_int *sz_iw, casadi_int *sz_w) {
+CASADI_SYMBOL_EXPORT int haa_plant_5cfa27f41820_work_bytes(casadi_int *sz_arg, casadi_int* sz_res, casadi_int *sz_iw, casadi_int *sz_w) {
   if (sz_arg) *sz_arg = 1*sizeof(const casadi_real*);
   if (sz_res) *sz_res = 4*sizeof(casadi_real*);
   if (sz_iw) *sz_iw = 0*sizeof(casadi_int);

@@ -17,24 +17,24 @@ extern "C" {
 #define casadi_int long long int
 #endif
 
-int haa_plant(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem);
-int haa_plant_checkout(void);
-void haa_plant_release(int mem);
-void haa_plant_incref(void);
-void haa_plant_decref(void);
-casadi_int haa_plant_n_in(void);
-casadi_int haa_plant_n_out(void);
-casadi_real haa_plant_default_in(casadi_int i);
-const char* haa_plant_name_in(casadi_int i);
-const char* haa_plant_name_out(casadi_int i);
-const casadi_int* haa_plant_sparsity_in(casadi_int i);
-const casadi_int* haa_plant_sparsity_out(casadi_int i);
-int haa_plant_work(casadi_int *sz_arg, casadi_int* sz_res, casadi_int *sz_iw, casadi_int *sz_w);
-int haa_plant_work_bytes(casadi_int *sz_arg, casadi_int* sz_res, casadi_int *sz_iw, casadi_int *sz_w);
-#define haa_plant_SZ_ARG 1
-#define haa_plant_SZ_RES 4
-#define haa_plant_SZ_IW 0
-#define haa_plant_SZ_W 0
+int haa_plant_5cfa27f41820(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem);
+int haa_plant_5cfa27f41820_checkout(void);
+void haa_plant_5cfa27f41820_release(int mem);
+void haa_plant_5cfa27f41820_incref(void);
+void haa_plant_5cfa27f41820_decref(void);
+casadi_int haa_plant_5cfa27f41820_n_in(void);
+casadi_int haa_plant_5cfa27f41820_n_out(void);
+casadi_real haa_plant_5cfa27f41820_default_in(casadi_int i);
+const char* haa_plant_5cfa27f41820_name_in(casadi_int i);
+const char* haa_plant_5cfa27f41820_name_out(casadi_int i);
+const casadi_int* haa_plant_5cfa27f41820_sparsity_in(casadi_int i);
+const casadi_int* haa_plant_5cfa27f41820_sparsity_out(casadi_int i);
+int haa_plant_5cfa27f41820_work(casadi_int *sz_arg, casadi_int* sz_res, casadi_int *sz_iw, casadi_int *sz_w);
+int haa_plant_5cfa27f41820_work_bytes(casadi_int *sz_arg, casadi_int* sz_res, casadi_int *sz_iw, casadi_int *sz_w);
+#define haa_plant_5cfa27f41820_SZ_ARG 1
+#define haa_plant_5cfa27f41820_SZ_RES 4
+#define haa_plant_5cfa27f41820_SZ_IW 0
+#define haa_plant_5cfa27f41820_SZ_W 0
 int haa_loopcoef(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem);
 int haa_loopcoef_checkout(void);
 void haa_loopcoef_release(int mem);

@@ -35,9 +35,9 @@ def test_no_dates_in_generated_files():
 
 def _copy_tree(tmp_path):
     root = tmp_path / "tree"
-    for rel in ("generated", "src/haa_sym/symbolic", "codegen"):
+    for rel in ("generated", "src/haa_sym/symbolic", "codegen", "model"):
         shutil.copytree(ROOT / rel, root / rel)
-    shutil.copy(ROOT / "src/haa_sym/params.py", root / "src/haa_sym/params.py")
+    shutil.copy(ROOT / "src/haa_sym/actuator.py", root / "src/haa_sym/actuator.py")
     return root
 
 
@@ -52,8 +52,8 @@ def test_tampered_file_is_refused(tmp_path):
 def test_changed_symbolic_source_is_refused(tmp_path):
     root = _copy_tree(tmp_path)
     GeneratedCode(root / "generated", root=root)  # a faithful copy is accepted
-    eom = root / "src/haa_sym/symbolic/eom.py"
-    eom.write_text(eom.read_text() + "\n# edited\n")
+    chain = root / "src/haa_sym/symbolic/chain.py"
+    chain.write_text(chain.read_text() + "\n# edited\n")
     with pytest.raises(StaleGeneratedCode, match="symbolic model .* changed.*run `make derive`"):
         GeneratedCode(root / "generated", root=root)
 
@@ -64,7 +64,7 @@ def test_missing_manifest_is_refused(tmp_path):
 
 
 _PLANT = """import sys, casadi as ca, numpy as np
-f = ca.external("haa_plant", sys.argv[1])
+f = ca.external(sys.argv[2], sys.argv[1])
 args = [ca.reshape(ca.DM(np.linspace(0.5, 2.0, f.numel_in(i))), *f.size_in(i)) for i in range(f.n_in())]
 print(repr([np.array(r).ravel(order="F").tolist() for r in f.call(args)]))
 """
@@ -72,7 +72,8 @@ print(repr([np.array(r).ravel(order="F").tolist() for r in f.call(args)]))
 
 def _plant_values(lib):
     # a fresh process: truncating a library this process has mapped would crash it (SIGBUS)
-    return subprocess.run([sys.executable, "-c", _PLANT, str(lib)], capture_output=True,
+    from haa_sym.actuator import HYQ
+    return subprocess.run([sys.executable, "-c", _PLANT, str(lib), HYQ.function_name], capture_output=True,
                           text=True, check=True).stdout
 
 
@@ -158,7 +159,8 @@ def test_installed_package_needs_no_sources(tmp_path):
     # root=None is the installed layout: no symbolic sources, the digests alone are checked
     gen = shutil.copytree(GEN, tmp_path / "generated")
     assert GeneratedCode(gen, root=None).function_names
-    (gen / "haa_plant.casadi").write_bytes(b"")
+    from haa_sym.actuator import HYQ
+    (gen / f"{HYQ.function_name}.casadi").write_bytes(b"")
     with pytest.raises(StaleGeneratedCode, match="unset HAA_SYM_GENERATED"):
         GeneratedCode(gen, root=None)
 

@@ -86,7 +86,8 @@ def test_installed_layout_runs_from_any_directory(site, tmp_path, params):
 
 def test_damaged_install_says_reinstall(site, tmp_path):
     copy = shutil.copytree(site, tmp_path / "site")
-    plant = copy / "haa_sym/_generated/haa_plant.casadi"
+    from haa_sym.actuator import HYQ
+    plant = copy / f"haa_sym/_generated/{HYQ.function_name}.casadi"
     plant.write_bytes(plant.read_bytes()[:-1])
     (tmp_path / "work").mkdir()
     proc = _run(copy, tmp_path / "work", "-m", "haa_sym.cli", "stability", "--P-gain", "200",

@@ -51,7 +51,7 @@ def test_numeric_p1_roots_match_the_paper_polynomial(params):
     for cfg in sorted(params.configurations):
         for K in (0.0, params.configuration(cfg).plant.K_L2):
             pc = params.configuration(cfg).with_values(K_L2=K)
-            sub = {syms[k]: sp.nsimplify(v, rational=True) for k, v in pc.plant.__dict__.items()}
+            sub = {syms[k]: sp.nsimplify(v, rational=True) for k, v in pc.plant.as_dict().items()}
             exact = np.sort_complex(np.array(
                 [complex(z) for z in sp.Poly(tt.paper_polynomials(syms)["p1"].subs(sub), eom.s).nroots(n=30)]))
             num = p1_roots(pc)

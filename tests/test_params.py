@@ -1,13 +1,16 @@
-"""Every bad-input case of a parameter file gives one clear error naming file, key, value, allowed."""
+"""Every bad-input case of a parameter file gives one clear error naming file, key, value, allowed.
+
+These use the legacy flat-[plant] HyQ file (tests/data/hyq_haa_legacy.toml, read as the HyQ
+topology); the actuator format's own cases are in test_actuators.py."""
 import math
 
 import pytest
 
-from haa_sym.params import ParameterError, load_params, PLANT_KEYS, CONTROLLER_KEYS
+from haa_sym.params import ParameterError, load_params, CONTROLLER_KEYS
 
 from conftest import ROOT
 
-GOOD = (ROOT / "model" / "hyq_haa.toml").read_text()
+GOOD = (ROOT / "tests" / "data" / "hyq_haa_legacy.toml").read_text()
 
 
 def write(tmp_path, text):
@@ -23,7 +26,7 @@ def test_bundled_file_matches_table1(params):
     c = params.controller
     assert (c.Ts, c.N_av, c.alpha, c.beta) == (1e-3, 4, 0.94, 1.0)
     assert math.isclose(c.P_t, 0.382) and math.isclose(c.I_t, 18.0)
-    assert set(PLANT_KEYS) == set(params.plant.__dict__)
+    assert params.plant.topology.parameter_keys == tuple(params.plant.as_dict())
 
 
 @pytest.mark.parametrize("old,new,pieces", [

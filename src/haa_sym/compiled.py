@@ -30,12 +30,12 @@ import numpy as np
 from haa_sym.resources import data_dir, remedy, source_root
 
 __all__ = ["StaleGeneratedCode", "CompilerError", "NoCompiler", "GeneratedCode", "Compiler",
-           "Evaluators", "evaluators"]
+           "Evaluators", "evaluators", "default_cache_dir"]
 
 CFLAGS = ("-O2", "-fPIC", "-shared", "-ffp-contract=off")
 # Manifest keys and their JSON types, as codegen/generate.py writes them.
 _MANIFEST_KEYS = {"capacities": list, "files": dict, "functions": list, "library": str,
-                  "source_sha256": str, "sources": list, "tools": dict}
+                  "source_sha256": str, "sources": list, "tools": dict, "topologies": dict}
 _DEFAULT = object()
 
 
@@ -49,6 +49,12 @@ class CompilerError(RuntimeError):
 
 class NoCompiler(CompilerError):
     """No C compiler could be found."""
+
+
+def default_cache_dir() -> Path:
+    """env ``HAA_SYM_CACHE``, else ``$XDG_CACHE_HOME/haa_sym`` (``~/.cache/haa_sym``)."""
+    return Path(os.environ.get("HAA_SYM_CACHE")
+                or Path(os.environ.get("XDG_CACHE_HOME", Path.home() / ".cache")) / "haa_sym")
 
 
 def _sha256(path: str | Path) -> str:
@@ -101,6 +107,9 @@ class GeneratedCode:
             bad += [] if all(isinstance(r, str) for r in m["sources"]) else ["sources"]
             bad += [] if isinstance(m["tools"].get("casadi"), str) else ["tools.casadi"]
             bad += [] if all(type(c) is int and c > 0 for c in m["capacities"]) else ["capacities"]
+            bad += [f"topologies[{fp!r}]" for fp, t in m["topologies"].items()
+                    if not (isinstance(t, dict) and t.get("function") in m["functions"]
+                            and isinstance(t.get("actuators"), list))]
         if bad:
             raise StaleGeneratedCode(
                 f"{man} is invalid (missing or malformed: {', '.join(bad)}): {self._fix()}")
@@ -126,6 +135,7 @@ class GeneratedCode:
                 raise StaleGeneratedCode(
                     "the symbolic model or code generator changed since generated/ was written: "
                     "run `make derive`")
+            self._check_actuators()
         if self.manifest["tools"]["casadi"] != ca.__version__:
             fix = ("install the pinned version (`make venv`) or run `make derive`"
                    if self.root is not None else
@@ -133,6 +143,23 @@ class GeneratedCode:
             raise StaleGeneratedCode(
                 f"generated/ was written by casadi {self.manifest['tools']['casadi']}, this is "
                 f"casadi {ca.__version__}: {fix}")
+
+    def _check_actuators(self) -> None:
+        """The built-in actuator files' topologies must be the ones generated (their values may
+        change freely: they are inputs of the generated functions)."""
+        from haa_sym.params import ParameterError, builtin_actuators, load_params
+        have = {(name, fp) for fp, t in self.manifest["topologies"].items() for name in t["actuators"]}
+        want = set()
+        for path in builtin_actuators(self.root / "model"):
+            try:
+                want.add((path.name, load_params(path).plant.topology.fingerprint))
+            except ParameterError:
+                continue          # a broken file is reported when it is used, with its own message
+        if want - have or {n for n, _ in have} - {n for n, _ in want}:
+            changed = sorted({n for n, _ in want ^ have})
+            raise StaleGeneratedCode(
+                f"the topology of the built-in actuator file(s) {changed} changed since generated/ "
+                "was written: run `make derive`")
 
     @property
     def c_file(self) -> Path:
@@ -166,8 +193,7 @@ class Compiler:
             raise NoCompiler(f"no C compiler found (CC = {cc!r}; set CC or install gcc)"
                              if cc else "no C compiler found (set CC or install gcc)")
         self.cc = cc
-        self.cache = Path(cache_dir or os.environ.get("HAA_SYM_CACHE")
-                          or Path(os.environ.get("XDG_CACHE_HOME", Path.home() / ".cache")) / "haa_sym")
+        self.cache = Path(cache_dir or default_cache_dir())
 
     def _version(self) -> str:
         try:

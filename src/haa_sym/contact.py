@@ -3,13 +3,15 @@
 The environment is a spring of stiffness K_L2 on the leg inertia (Fig. 13 of the paper, a linear
 spring at a distance from the HAA axis); the scan replaces K_L2 by each environment stiffness and
 decides closed-loop stability, by default with the impedance loop open (the torque loop alone).
+For any actuator file the spring replaces the ground stiffness K_<port> of the port body
+([sensors] port), which the file must therefore give.
 """
 from __future__ import annotations
 
 import numpy as np
 
 from haa_sym.loop import ClosedLoop, LoopOptions
-from haa_sym.params import Params, gain_array, gain_points
+from haa_sym.params import ParameterError, Params, gain_array, gain_points
 
 __all__ = ["contact_stability", "intervals"]
 
@@ -35,11 +37,18 @@ def contact_stability(params: Params, K_env, *, P_gain: float = 0.0, D_gain: flo
     from haa_sym.reference import spectral_radius
     P_gain, D_gain, beta, alpha = gain_points(P_gain, D_gain, beta, alpha)
     K_env = gain_array("K_env", K_env).ravel()
+    top = params.plant.topology
+    key = f"K_{top.port}"
+    if key not in top.parameter_keys:
+        raise ParameterError(
+            f"{params.source} [bodies.{top.port}]: the port body {top.port!r} has no stiffness to "
+            f"ground K ({key}), which the contact scan replaces by the environment's; allowed: an "
+            f"actuator whose port body has K (e.g. K = {{ value = 0.0 }} for none)")
     stable = np.empty(K_env.size, bool)
     rho = np.empty(K_env.size)
     for i, K in enumerate(tqdm(K_env, desc="contact stiffness", leave=False,
                                disable=None if progress is None else not progress)):
-        loop = ClosedLoop(params.with_values(K_L2=float(K)), options, basis=False)
+        loop = ClosedLoop(params.with_values(**{key: float(K)}), options, basis=False)
         rho[i] = spectral_radius(loop, P_gain, D_gain, beta, alpha)
         stable[i] = rho[i] < 1
     return stable, rho

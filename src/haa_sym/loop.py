@@ -30,6 +30,7 @@ Example
 """
 from __future__ import annotations
 
+import re
 from dataclasses import dataclass, field
 from fractions import Fraction
 
@@ -39,7 +40,7 @@ from haa_sym.cache import BoundedCache, array_key
 from haa_sym.compiled import evaluators
 from haa_sym.exact import bilinear, polymul, polysub, to_float, transfer_polynomials
 from haa_sym.params import ParameterError, Params, gain_array
-from haa_sym.plant import OUTPUTS, DiscretePlant, continuous_plant, discretize
+from haa_sym.plant import DiscretePlant, continuous_plant, discretize
 
 __all__ = ["LoopOptions", "LoopCoefficients", "ClosedLoop", "StabilityResult", "PORTS", "FREQ_OUTPUTS"]
 
@@ -125,7 +126,11 @@ class LoopOptions:
             raise ParameterError(f"delay = {self.delay!r}; allowed: 0 or 1 (samples)")
         if not isinstance(self.torque_damping, bool):
             raise ParameterError(f"torque_damping = {self.torque_damping!r}; allowed: True or False")
-        for name, allowed in (("port", PORTS), ("filter", FILTERS), ("colgate", COLGATE), ("pm_loop", PM_LOOPS),
+        if not (self.port == "encoder_average" or (isinstance(self.port, str)
+                                                    and re.fullmatch(r"dtheta_[A-Za-z][A-Za-z0-9]*", self.port))):
+            raise ParameterError(f"port = {self.port!r}; allowed: 'dtheta_<body>' (a body of the "
+                                 f"actuator file, e.g. {list(PORTS)[:2]}) or 'encoder_average'")
+        for name, allowed in (("filter", FILTERS), ("colgate", COLGATE), ("pm_loop", PM_LOOPS),
                               ("pm_rule", PM_RULES)):
             if getattr(self, name) not in allowed:
                 raise ParameterError(f"{name} = {getattr(self, name)!r}; allowed: {list(allowed)}")
@@ -227,7 +232,7 @@ class ClosedLoop:
         self.backend = backend
         ctrl = params.controller
         self.plant: DiscretePlant = _PLANTS.get(
-            (params.plant.as_tuple(), ctrl.Ts, backend),
+            (params.plant, ctrl.Ts, backend),
             lambda: discretize(continuous_plant(params.plant, backend), ctrl.Ts))
         # chi = (z - 1) z^delay z^N_av d(z) + ...: integrator, delay, filter, plant states
         self.degree = self.plant.Phi.shape[0] + 1 + ctrl.N_av + self.options.delay
@@ -241,13 +246,21 @@ class ClosedLoop:
                 "codegen/generate.py of a source tree and `make derive`)")
         self.capacity = caps[0]
         self.const = np.array([ctrl.P_t0, ctrl.I_t0, self.plant.VC0])
+        ports = [o for o in self.plant.outputs if o.startswith("dtheta_")] + ["encoder_average"]
+        if self.options.port not in ports:
+            raise ParameterError(
+                f"port = {self.options.port!r} is not a velocity of the actuator {params.source}; "
+                f"allowed: {ports} (its [sensors] port body is "
+                f"{params.plant.topology.port!r}: port = 'dtheta_{params.plant.topology.port}')")
         # basis=False: a loop used only for frequency responses or the explicit state space
         self.basis, self._z_basis = self._basis() if basis else (None, None)
 
     # --- the characteristic polynomial -------------------------------------------------------
     @property
     def torque_output(self) -> str:
-        return "T_sensor" if self.options.torque_damping else "T_sensor_spring"
+        # the actuator file says what the sensor measures; the option can drop the damping term
+        damped = self.options.torque_damping and self.params.plant.topology.torque_damping
+        return "T_sensor" if damped else "T_sensor_spring"
 
     @property
     def filter_lengths(self) -> tuple[int, int]:
@@ -266,8 +279,8 @@ class ClosedLoop:
         """Exact descending coefficients of b0..b7 in z, each of degree ``self.degree``."""
         p, ctrl, opt = self.plant, self.params.controller, self.options
         d, nums = _transfer_polynomials(p)
-        n_T = nums[OUTPUTS.index(self.torque_output)][0]
-        n_th = nums[OUTPUTS.index("theta_encoder")][0]
+        n_T = nums[p.outputs.index(self.torque_output)][0]
+        n_th = nums[p.outputs.index("theta_encoder")][0]
         N = ctrl.N_av                      # the longest average: z^N clears every denominator
         N_vc, N_d = self.filter_lengths
         Ts = Fraction(ctrl.Ts)
@@ -405,7 +418,9 @@ class ClosedLoop:
 
     def _loop_coefficients(self, omega, beta, alpha, struct) -> LoopCoefficients:
         ctrl = self.params.controller
-        port = "dtheta_L1" if self.options.port == "encoder_average" else self.options.port
+        # with port = "encoder_average" the kernel uses the averaged encoder, not this row
+        port = f"dtheta_{self.params.plant.topology.encoder}" if self.options.port == "encoder_average" \
+            else self.options.port
         G = self.plant.frequency_response(omega, outputs=(self.torque_output, "theta_encoder", port),
                                           inputs=("V_m", "T_dist"))
         # one column per frequency: re/im of the 6 plant responses, then w Ts

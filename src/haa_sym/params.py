@@ -1,9 +1,12 @@
 """Actuator and controller parameters as validated data (Table 1 and Sec. 3 of the paper).
 
-A parameter file (TOML, see ``model/hyq_haa.toml``) has a ``[plant]`` table, a ``[controller]``
-table and optional ``[configurations.<name>]`` tables overriding plant keys (the leg
-configurations of Table 1). Loading validates everything and raises :class:`ParameterError`
-naming the file, the key, the value and what is allowed; nothing is silently defaulted.
+A parameter file (TOML, see ``model/hyq_haa.toml`` and docs/model.md, "Actuator files")
+describes an actuator ([motor], [bodies.*], [couplings.*], [sensors]; the structure is a
+:class:`haa_sym.actuator.Topology`, the values a :class:`Plant`), a ``[controller]`` table and
+optional ``[configurations.<name>]`` tables overriding plant keys (the leg configurations of
+Table 1). The legacy flat ``[plant]`` table is read as the HyQ topology. Loading validates
+everything and raises :class:`ParameterError` naming the file, the section, the key, the value
+and what is allowed; nothing is silently defaulted.
 
 Validation lives here and only here: :class:`Plant`, :class:`Controller` and :class:`Params`
 check themselves on construction (so ``dataclasses.replace`` cannot make an invalid object
@@ -27,6 +30,7 @@ from typing import Mapping
 
 import numpy as np
 
+from haa_sym.actuator import ACTUATOR_SECTIONS, HYQ, Topology, entry_values, parse_actuator
 from haa_sym.resources import data_dir
 
 __all__ = [
@@ -34,13 +38,13 @@ __all__ = [
     "Plant",
     "Controller",
     "Params",
-    "PLANT_KEYS",
     "CONTROLLER_KEYS",
     "GAIN_KEYS",
     "gain_array",
     "gain_points",
     "load_params",
     "default_params_path",
+    "builtin_actuators",
 ]
 
 
@@ -49,15 +53,9 @@ class ParameterError(ValueError):
 
 
 # Domain of every key: ">0" strictly positive, ">=0" non-negative, "int>=1" integer >= 1.
-# Why each is what it is: inertias, stiffnesses of the transmission, L, R, k_t, N and Ts appear
-# as divisors or set the state dimension (L = 0 would make the current an algebraic variable);
-# dampings, frictions and the gravity spring K_L2 may vanish (K_L2 = 0 is the gravity-compensated
-# leg of Sec. 3.1); alpha = 0 switches velocity compensation off (Fig. 9a).
-_PLANT_DOMAIN: dict[str, str] = {
-    "J_m": ">0", "K_hd": ">0", "D_hd": ">=0", "B_m": ">=0", "J_L1": ">0", "B_L1": ">=0",
-    "J_L2": ">0", "B_L2": ">=0", "K_L2": ">=0", "K_p": ">0", "D_p": ">=0", "L": ">0",
-    "R": ">0", "k_t": ">0", "k_w": ">=0", "N": ">0",
-}
+# The plant's domains are per topology (haa_sym.actuator: inertias, couplings, L, R, k_t, N > 0;
+# frictions, dampings, k_w and stiffness to ground >= 0). Ts sets the sampling, N_av the state
+# dimension; alpha = 0 switches velocity compensation off (Fig. 9a).
 _CONTROLLER_DOMAIN: dict[str, str] = {
     "Ts": ">0", "N_av": "int>=1", "alpha": ">=0", "beta": ">0", "P_t0": ">=0", "I_t0": ">=0",
 }
@@ -73,44 +71,83 @@ _GAIN_DOMAIN: dict[str, str] = {"P_gain": ">=0", "D_gain": ">=0",
                                 "beta": _CONTROLLER_DOMAIN["beta"], "alpha": _CONTROLLER_DOMAIN["alpha"]}
 _GAIN_UNITS = {"P_gain": " (Nm/rad)", "D_gain": " (Nms/rad)", "beta": "", "alpha": ""}
 GAIN_KEYS: tuple[str, ...] = tuple(_GAIN_DOMAIN)
-_ENTRY_FIELDS = {"value", "unit", "source", "description"}
-_SOURCES = {"D", "I", "C", "-"}
 
-PLANT_KEYS: tuple[str, ...] = tuple(_PLANT_DOMAIN)
 CONTROLLER_KEYS: tuple[str, ...] = tuple(_CONTROLLER_DOMAIN)
 
 
-@dataclass(frozen=True)
 class Plant:
-    """Physical parameters of Eq. (1)-(2), SI units (Table 1)."""
+    """Physical parameters of one actuator topology, SI units, validated (Table 1 for HyQ).
 
-    J_m: float
-    K_hd: float
-    D_hd: float
-    B_m: float
-    J_L1: float
-    B_L1: float
-    J_L2: float
-    B_L2: float
-    K_L2: float
-    K_p: float
-    D_p: float
-    L: float
-    R: float
-    k_t: float
-    k_w: float
-    N: float
+    Values are read by their flat names (``plant.J_L2``, ``plant.K_hd``; see
+    :class:`haa_sym.actuator.Topology`), the object is immutable, and :meth:`replace` validates
+    like a file.
 
-    def __post_init__(self):
-        _check_fields(self, _PLANT_DOMAIN)
+    Parameters
+    ----------
+    topology : Topology, optional
+        Default: the HyQ HAA joint of the paper (:data:`haa_sym.actuator.HYQ`).
+    **values : float
+        Every key of ``topology.parameter_keys``.
+    """
+
+    __slots__ = ("topology", "_values")
+
+    def __init__(self, topology: Topology | None = None, /, **values: float):
+        topology = HYQ if topology is None else topology
+        if not isinstance(topology, Topology):
+            raise ParameterError(f"topology = {topology!r}; allowed: a haa_sym.actuator.Topology")
+        domain = topology.domain
+        unknown = sorted(set(values) - set(domain))
+        if unknown:
+            raise ParameterError(f"unknown key(s) {unknown}; allowed: {list(domain)}")
+        missing = [k for k in domain if k not in values]
+        if missing:
+            raise ParameterError(f"missing key(s) {missing}; every key of {list(domain)} is required")
+        checked = {k: _check_value(k, values[k], domain[k]) for k in domain}
+        object.__setattr__(self, "topology", topology)
+        object.__setattr__(self, "_values", checked)
+
+    def __getattr__(self, name: str) -> float:
+        try:
+            return object.__getattribute__(self, "_values")[name]
+        except KeyError:
+            raise AttributeError(f"Plant has no parameter {name!r}") from None
+
+    def __setattr__(self, name, value):
+        raise AttributeError("Plant is immutable; use plant.replace(key=value)")
+
+    def __eq__(self, other) -> bool:
+        return (isinstance(other, Plant) and self.topology == other.topology
+                and self.as_tuple() == other.as_tuple())
+
+    def __hash__(self) -> int:
+        return hash((self.topology, self.as_tuple()))
+
+    def __repr__(self) -> str:
+        return "Plant(" + ", ".join(f"{k}={v!r}" for k, v in self._values.items()) + ")"
+
+    def __reduce__(self):
+        return (_plant_from, (self.topology, self._values))
+
+    @property
+    def keys(self) -> tuple[str, ...]:
+        return self.topology.parameter_keys
+
+    def as_dict(self) -> dict[str, float]:
+        """Values by flat name, in ``topology.parameter_keys`` order."""
+        return dict(self._values)
 
     def as_tuple(self) -> tuple[float, ...]:
-        """Values in the order of :data:`PLANT_KEYS` (the order the generated code expects)."""
-        return tuple(getattr(self, k) for k in PLANT_KEYS)
+        """Values in ``topology.parameter_keys`` order (the order the generated code expects)."""
+        return tuple(self._values.values())
 
     def replace(self, **changes: float) -> "Plant":
         """A copy with some keys changed, validated like a file."""
-        return _validated(Plant, {**self.__dict__, **changes}, _PLANT_DOMAIN)
+        return Plant(self.topology, **{**self._values, **changes})
+
+
+def _plant_from(topology, values):
+    return Plant(topology, **values)
 
 
 @dataclass(frozen=True)
@@ -146,12 +183,14 @@ class Controller:
 
 @dataclass(frozen=True)
 class Params:
-    """A validated parameter file: nominal plant, controller and named leg configurations."""
+    """A validated parameter file: nominal plant (of its topology), controller and named leg
+    configurations; ``about`` is the file's [about] table (name, description, references)."""
 
     plant: Plant
     controller: Controller
     configurations: Mapping[str, Mapping[str, float]] = field(default_factory=dict)
     source: str = "<memory>"
+    about: Mapping[str, object] = field(default_factory=dict, compare=False)
 
     def __post_init__(self):
         if not isinstance(self.plant, Plant):
@@ -165,10 +204,11 @@ class Params:
             where = f"{self.source} [configurations.{name}]"
             if not isinstance(overrides, Mapping):
                 raise ParameterError(f"{where}: must be a table of plant keys")
-            unknown = sorted(set(overrides) - set(_PLANT_DOMAIN))
+            domain = self.plant.topology.domain
+            unknown = sorted(set(overrides) - set(domain))
             if unknown:
-                raise ParameterError(f"{where}: unknown key(s) {unknown}; allowed: {list(PLANT_KEYS)}")
-            configs[name] = {k: _check_value(k, v, _PLANT_DOMAIN[k], where) for k, v in overrides.items()}
+                raise ParameterError(f"{where}: unknown key(s) {unknown}; allowed: {list(domain)}")
+            configs[name] = {k: _check_value(k, v, domain[k], where) for k, v in overrides.items()}
         object.__setattr__(self, "configurations", configs)
 
     def configuration(self, name: str) -> "Params":
@@ -182,12 +222,13 @@ class Params:
 
     def with_values(self, **changes: float) -> "Params":
         """A copy with any plant or controller keys changed (what ``--set KEY=VALUE`` does)."""
-        plant_changes = {k: v for k, v in changes.items() if k in _PLANT_DOMAIN}
+        keys = self.plant.topology.parameter_keys
+        plant_changes = {k: v for k, v in changes.items() if k in keys}
         ctrl_changes = {k: v for k, v in changes.items() if k in _CONTROLLER_DOMAIN}
         unknown = sorted(set(changes) - set(plant_changes) - set(ctrl_changes))
         if unknown:
             raise ParameterError(
-                f"unknown parameter key(s) {unknown}; allowed: {list(PLANT_KEYS + CONTROLLER_KEYS)}"
+                f"unknown parameter key(s) {unknown}; allowed: {list(keys + CONTROLLER_KEYS)}"
             )
         return replace(
             self,
@@ -196,13 +237,22 @@ class Params:
         )
 
     def to_dict(self) -> dict:
-        """Plain values, for saving next to results."""
+        """Plain values, for saving next to results (with the topology: self-describing)."""
+        top = self.plant.topology
         return {
-            "plant": dict(self.plant.__dict__),
+            "plant": self.plant.as_dict(),
+            "topology": {**top.structure(), "fingerprint": top.fingerprint},
             "controller": dict(self.controller.__dict__),
             "configurations": {k: dict(v) for k, v in self.configurations.items()},
             "source": self.source,
         }
+
+
+def builtin_actuators(directory: str | Path | None = None) -> list[Path]:
+    """The bundled actuator files: every ``model/*.toml`` except ``paper.toml`` (the paper's
+    reported results), sorted by name; their plant functions are generated (``make derive``)."""
+    d = Path(directory) if directory is not None else data_dir("model")
+    return sorted(p for p in d.glob("*.toml") if p.name != "paper.toml")
 
 
 def default_params_path() -> Path:
@@ -307,52 +357,45 @@ def gain_points(P_gain=0.0, D_gain=0.0, beta=None, alpha=None):
             None if alpha is None else gain_array("alpha", alpha))
 
 
-def _entry_values(table: Mapping[str, object], where: str) -> dict[str, object]:
-    """Unwrap ``{value, unit, source, description}`` entries (a bare number is also accepted)."""
-    out: dict[str, object] = {}
-    for key, entry in table.items():
-        if isinstance(entry, Mapping):
-            extra = sorted(set(entry) - _ENTRY_FIELDS)
-            if extra:
-                raise ParameterError(
-                    f"{where}.{key}: unknown field(s) {extra}; allowed: {sorted(_ENTRY_FIELDS)}"
-                )
-            if "value" not in entry:
-                raise ParameterError(f"{where}.{key}: missing field 'value'")
-            src = entry.get("source", "-")
-            if src not in _SOURCES:
-                raise ParameterError(
-                    f"{where}.{key}: source = {src!r}; allowed: {sorted(_SOURCES)} (Table 1 letters)"
-                )
-            out[key] = entry["value"]
-        else:
-            out[key] = entry
-    return out
+_FILE_SECTIONS = ACTUATOR_SECTIONS + ("controller", "configurations")
+_LEGACY_SECTIONS = ("about", "plant", "controller", "configurations")
 
 
 def parse_params(data: Mapping[str, object], source: str = "<memory>") -> Params:
-    """Validate the content of a parameter file already read into a mapping."""
-    top = sorted(set(data) - {"plant", "controller", "configurations"})
+    """Validate the content of a parameter file already read into a mapping.
+
+    The actuator sections ([about], [motor], [bodies.*], [couplings.*], [sensors]; or the legacy
+    flat [plant]) are read by :func:`haa_sym.actuator.parse_actuator`; [controller] and
+    [configurations.*] here.
+    """
+    legacy = "plant" in data
+    allowed = _LEGACY_SECTIONS if legacy else _FILE_SECTIONS
+    top = sorted(set(data) - set(allowed))
     if top:
-        raise ParameterError(
-            f"{source}: unknown table(s) {top}; allowed: ['plant', 'controller', 'configurations']"
-        )
-    for name in ("plant", "controller"):
-        if not isinstance(data.get(name), Mapping):
-            raise ParameterError(f"{source}: missing table [{name}]")
-    plant = _validated(Plant, _entry_values(data["plant"], f"{source} [plant]"), _PLANT_DOMAIN,
-                       f"{source} [plant]")
-    controller = _validated(Controller, _entry_values(data["controller"], f"{source} [controller]"),
+        hint = " (a file with [plant] is the legacy HyQ format: no [motor], [bodies], [couplings], " \
+               "[sensors])" if legacy else ""
+        raise ParameterError(f"{source}: unknown table(s) {top}; allowed: {list(allowed)}{hint}")
+    topology, raw, about = parse_actuator(data, source)
+    values = {}
+    for key, dom in topology.domain.items():
+        section, local = ("plant", key) if legacy else topology.section_of(key)
+        values[key] = _check_value(local, raw[key], dom, f"{source} [{section}]")
+    plant = Plant(topology, **values)
+    if not isinstance(data.get("controller"), Mapping):
+        raise ParameterError(f"{source}: missing table [controller]")
+    refs = about["references"]
+    controller = _validated(Controller, entry_values(data["controller"], f"{source} [controller]", refs),
                             _CONTROLLER_DOMAIN, f"{source} [controller]")
     raw_configs = data.get("configurations", {})
     if not isinstance(raw_configs, Mapping):
         raise ParameterError(f"{source}: [configurations] must be a table of tables")
     configs = {}
     for name, overrides in raw_configs.items():
+        where = f"{source} [configurations.{name}]"
         if not isinstance(overrides, Mapping):
-            raise ParameterError(f"{source} [configurations.{name}]: must be a table of plant keys")
-        configs[name] = _entry_values(overrides, f"{source} [configurations.{name}]")
-    return Params(plant=plant, controller=controller, configurations=configs, source=source)
+            raise ParameterError(f"{where}: must be a table of plant keys")
+        configs[name] = entry_values(overrides, where, refs)
+    return Params(plant=plant, controller=controller, configurations=configs, source=source, about=about)
 
 
 def load_params(path: str | Path | None = None) -> Params:

@@ -1,27 +1,30 @@
-"""The actuator plant of Eq. (1)-(2): continuous state space (generated from the sympy model)
-and its zero-order-hold discretisation at Ts.
+"""The actuator plant (Eq. 1-2 for HyQ, any chain of haa_sym.actuator): continuous state space
+(generated from the sympy model of its topology) and its zero-order-hold discretisation at Ts.
 
-State ``[I_m, theta_m, dtheta_m, theta_L1, dtheta_L1, theta_L2, dtheta_L2]``, inputs
-``[V_m, T_fr, T_dist]``, outputs ``[T_sensor, T_sensor_spring, theta_encoder, dtheta_L1, dtheta_L2]``
-where ``T_sensor`` is the torque sensor of Eq. (2) (T_l), ``T_sensor_spring`` its K_hd term alone
-and ``theta_encoder`` the encoder angle (theta_L1).
+Signals are named per plant (``plant.states``, ``plant.inputs``, ``plant.outputs``, from the
+topology): states ``[I_m, theta_m, dtheta_m, theta_X, dtheta_X ...]``, inputs
+``[V_m, T_fr, T_dist]``, outputs ``[T_sensor, T_sensor_spring, theta_encoder, dtheta_X ...]``
+where ``T_sensor`` is the torque sensor's coupling torque (Eq. 2, T_l for HyQ),
+``T_sensor_spring`` its spring term alone and ``theta_encoder`` the encoder angle (theta_L1).
 """
 from __future__ import annotations
 
-from dataclasses import dataclass, field, replace
+from dataclasses import dataclass, field
 
 import numpy as np
 import scipy.linalg
 
-from haa_sym.compiled import evaluators
-from haa_sym.params import PLANT_KEYS, ParameterError, Plant
+from haa_sym.params import ParameterError, Plant
+from haa_sym.plant_code import plant_function
 
-STATES = ("I_m", "theta_m", "dtheta_m", "theta_L1", "dtheta_L1", "theta_L2", "dtheta_L2")
-INPUTS = ("V_m", "T_fr", "T_dist")
-OUTPUTS = ("T_sensor", "T_sensor_spring", "theta_encoder", "dtheta_L1", "dtheta_L2")
+__all__ = ["ContinuousPlant", "DiscretePlant", "continuous_plant", "discretize"]
 
-__all__ = ["STATES", "INPUTS", "OUTPUTS", "ContinuousPlant", "DiscretePlant", "continuous_plant",
-           "discretize"]
+
+def _index(names: tuple[str, ...], wanted, kind: str) -> list[int]:
+    missing = [w for w in wanted if w not in names]
+    if missing:
+        raise ParameterError(f"{kind} {missing} not in this plant; allowed: {list(names)}")
+    return [names.index(w) for w in wanted]
 
 
 @dataclass(frozen=True)
@@ -36,6 +39,9 @@ class ContinuousPlant:
     C: np.ndarray
     VC0: float
     plant: Plant | None = field(default=None, repr=False, compare=False)
+    states: tuple[str, ...] = ()
+    inputs: tuple[str, ...] = ()
+    outputs: tuple[str, ...] = ()
 
 
 @dataclass(frozen=True)
@@ -47,15 +53,19 @@ class DiscretePlant:
     C: np.ndarray
     Ts: float
     VC0: float
+    states: tuple[str, ...] = ()
+    inputs: tuple[str, ...] = ()
+    outputs: tuple[str, ...] = ()
 
-    def frequency_response(self, omega: np.ndarray, outputs=OUTPUTS, inputs=INPUTS) -> np.ndarray:
-        """``C (e^{j w Ts} I - Phi)^-1 Gamma`` for rows ``outputs``, columns ``inputs``.
+    def frequency_response(self, omega: np.ndarray, outputs=None, inputs=None) -> np.ndarray:
+        """``C (e^{j w Ts} I - Phi)^-1 Gamma`` for rows ``outputs``, columns ``inputs`` (names;
+        default all of :attr:`outputs` and :attr:`inputs`).
 
         Returns a complex array of shape ``(len(outputs), len(inputs), len(omega))``; omega in rad/s.
         """
         omega = np.asarray(omega, dtype=float)
-        rows = [OUTPUTS.index(o) for o in outputs]
-        cols = [INPUTS.index(i) for i in inputs]
+        rows = _index(self.outputs, self.outputs if outputs is None else outputs, "output(s)")
+        cols = _index(self.inputs, self.inputs if inputs is None else inputs, "input(s)")
         z = np.exp(1j * omega * self.Ts)
         M = z[:, None, None] * np.eye(self.Phi.shape[0]) - self.Phi
         X = np.linalg.solve(M, np.broadcast_to(self.Gamma[:, cols], (len(z),) + self.Gamma[:, cols].shape))
@@ -63,7 +73,8 @@ class DiscretePlant:
 
 
 def continuous_plant(plant: Plant, backend: str = "auto") -> ContinuousPlant:
-    """Evaluate the generated ``haa_plant`` function (Eq. 1-2, Eq. 6) for ``plant``.
+    """Evaluate the plant function of ``plant.topology`` (Eq. 1-2, Eq. 6) for ``plant``: the
+    generated one of a built-in actuator, else compiled on first use (:mod:`haa_sym.plant_code`).
 
     Raises :class:`ParameterError` naming the key when the matrices overflow (e.g. K_hd = 1e300).
     """
@@ -83,13 +94,16 @@ def discretize(cont: ContinuousPlant, Ts: float) -> DiscretePlant:
     C = cont.C.copy()
     for arr in (Phi, Gamma, C):          # shared by every ClosedLoop of this plant (memoised)
         arr.setflags(write=False)
-    return DiscretePlant(Phi, Gamma, C, float(Ts), cont.VC0)
+    return DiscretePlant(Phi, Gamma, C, float(Ts), cont.VC0, cont.states, cont.inputs, cont.outputs)
 
 
 def _evaluate(plant: Plant, backend: str = "auto") -> ContinuousPlant:
+    top = plant.topology
+    f = plant_function(top, backend)
     with np.errstate(over="ignore", invalid="ignore", divide="ignore"):
-        A, B, C, VC0 = evaluators(backend)["haa_plant"](np.array(plant.as_tuple(), dtype=float))
-    return ContinuousPlant(np.array(A), np.array(B), np.array(C), float(VC0), plant)
+        A, B, C, VC0 = f(np.array(plant.as_tuple(), dtype=float))
+    return ContinuousPlant(np.array(A), np.array(B), np.array(C), float(VC0), plant,
+                           top.state_names, top.input_names, top.output_names)
 
 
 def _zoh(A: np.ndarray, B: np.ndarray, Ts: float):
@@ -118,7 +132,7 @@ def _overflow(plant: Plant | None, Ts: float | None, backend: str = "auto") -> P
     """
     what = "the plant matrices of Eq. (1)-(2)" + ("" if Ts is None else f" sampled at Ts = {Ts!r} s")
     keys = [] if plant is None else \
-        [k for k in PLANT_KEYS if _sampled_finite(replace(plant, **{k: 1.0}), Ts, backend)]
+        [k for k in plant.keys if _sampled_finite(plant.replace(**{k: 1.0}), Ts, backend)]
     if not keys and plant is not None and Ts is not None and _sampled_finite(plant, 1e-3, backend):
         return ParameterError(f"Ts = {Ts!r}: {what} overflow to non-finite values; allowed: a sampling "
                               "time for which they stay finite (the bundled file has Ts = 0.001)")
@@ -127,7 +141,8 @@ def _overflow(plant: Plant | None, Ts: float | None, backend: str = "auto") -> P
     try:
         from haa_sym.params import load_params
         ref = load_params().plant
-        hint = " (the bundled HyQ file has " + ", ".join(f"{k} = {getattr(ref, k):g}" for k in keys) + ")"
+        hint = " (the bundled HyQ file has " + ", ".join(f"{k} = {getattr(ref, k):g}" for k in keys) + ")" \
+            if all(k in ref.keys for k in keys) else ""
     except ParameterError:
         hint = ""
     given = ", ".join(f"{k} = {getattr(plant, k)!r}" for k in keys)

@@ -14,7 +14,6 @@ from __future__ import annotations
 import numpy as np
 
 from haa_sym.loop import ClosedLoop
-from haa_sym.plant import OUTPUTS
 
 __all__ = ["closed_loop_matrices", "closed_loop_eigenvalues", "spectral_radius", "frequency_response"]
 
@@ -46,7 +45,7 @@ def _closed_loop_batch(loop: ClosedLoop, P_gain: np.ndarray, D_gain: np.ndarray,
         return np.zeros(n + nin)
     def row_from_C(name):
         r = zero()
-        r[:nx] = pl.C[OUTPUTS.index(name)]
+        r[:nx] = pl.C[pl.outputs.index(name)]
         return r
     th = row_from_C("theta_encoder")
     T = row_from_C(loop.torque_output)

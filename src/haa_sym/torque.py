@@ -227,7 +227,8 @@ def p1_roots(params: Params) -> np.ndarray:
 
     The zeros of V_m -> T_l (Eq. 2) are those of (K_hd + D_hd s) p1(s) (the velocity
     compensation does not move them); the root at -K_hd/D_hd is removed. An independent check of
-    the symbolic rows of ``python -m haa_sym.verify``.
+    the symbolic rows of ``python -m haa_sym.verify``. For another topology: the zeros of
+    V_m -> T_sensor without the sensor coupling's own zero -K/D (p1 is the paper's, HyQ's, name).
 
     Example
     -------
@@ -235,13 +236,16 @@ def p1_roots(params: Params) -> np.ndarray:
     array([-7.53619948e+04, -2.55227e+02, -1.722e+00,  0.0])
     """
     from haa_sym.exact import to_float, transfer_polynomials
-    from haa_sym.plant import OUTPUTS, continuous_plant
+    from haa_sym.plant import continuous_plant
     cp = continuous_plant(params.plant)
     _, nums = transfer_polynomials(cp.A, cp.B[:, :1], cp.C)
-    num = np.trim_zeros(to_float(nums[OUTPUTS.index("T_sensor")][0]), "f")
+    num = np.trim_zeros(to_float(nums[cp.outputs.index("T_sensor")][0]), "f")
     roots = np.roots(num)
-    spring_zero = -params.plant.K_hd / params.plant.D_hd
-    roots = np.delete(roots, np.argmin(np.abs(roots - spring_zero)))
+    sensor = params.plant.topology.sensor
+    D = getattr(params.plant, f"D_{sensor}")
+    if D > 0:                       # the sensor coupling's own zero (K + D s)
+        spring_zero = -getattr(params.plant, f"K_{sensor}") / D
+        roots = np.delete(roots, np.argmin(np.abs(roots - spring_zero)))
     roots = np.where(np.abs(roots) < 1e-9 * np.abs(roots).max(), 0.0, roots)
     return np.sort_complex(roots)
 

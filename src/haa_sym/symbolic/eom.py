@@ -16,7 +16,7 @@ from dataclasses import dataclass
 
 import sympy as sp
 
-from haa_sym.params import PLANT_KEYS
+from haa_sym.actuator import HYQ
 
 STATE_NAMES = ("I_m", "theta_m", "dtheta_m", "theta_L1", "dtheta_L1", "theta_L2", "dtheta_L2")
 INPUT_NAMES = ("V_m", "T_fr", "T_dist")
@@ -32,7 +32,7 @@ def plant_symbols() -> dict[str, sp.Symbol]:
     nonneg = {"D_hd", "B_m", "B_L1", "B_L2", "K_L2", "D_p", "k_w"}
     return {
         k: sp.Symbol(k, nonnegative=True) if k in nonneg else sp.Symbol(k, positive=True)
-        for k in PLANT_KEYS
+        for k in HYQ.parameter_keys
     }
 
 

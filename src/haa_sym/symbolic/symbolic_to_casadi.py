@@ -1,12 +1,16 @@
-"""Translate the sympy model (haa_sym.symbolic) into CasADi SX expressions."""
+"""Translate the sympy model of an actuator (haa_sym.symbolic.chain) into a CasADi Function.
+
+Used by ``make derive`` (codegen/generate.py, the built-in actuators) and by the runtime when a
+user's actuator file has a topology that was not generated (haa_sym.topology_code): the only
+place the compile step needs sympy.
+"""
 from __future__ import annotations
 
 import casadi as ca
 import sympy as sp
 
-from haa_sym.params import PLANT_KEYS
-from haa_sym.symbolic.eom import state_space
-from haa_sym.symbolic.torque_tf import vc_gain_simplified
+from haa_sym.actuator import Topology
+from haa_sym.symbolic.chain import state_space, vc_gain_simplified
 
 
 def to_sx(expr: sp.Expr, env: dict[sp.Symbol, ca.SX]) -> ca.SX:
@@ -37,19 +41,21 @@ def to_sx(expr: sp.Expr, env: dict[sp.Symbol, ca.SX]) -> ca.SX:
     raise ValueError(f"cannot translate {expr!r} ({type(expr).__name__})")
 
 
-def plant_function() -> ca.Function:
-    """``haa_plant(p) -> (A, B, C, VC0)``: Eq. (1)-(2) state space and Eq. (6) at alpha = 1.
+def plant_function(topology: Topology) -> ca.Function:
+    """``haa_plant_<fingerprint>(p) -> (A, B, C, VC0)``: the chain's state space (Eq. 1-2 for
+    HyQ) and Eq. (6) at alpha = 1.
 
-    ``p`` is the plant vector in the order of ``haa_sym.params.PLANT_KEYS``.
+    ``p`` is the plant vector in the order of ``topology.parameter_keys``.
     """
-    ss = state_space()
-    p = ca.SX.sym("p", len(PLANT_KEYS))
-    env = {ss.symbols[k]: p[i] for i, k in enumerate(PLANT_KEYS)}
+    ss = state_space(topology)
+    keys = topology.parameter_keys
+    p = ca.SX.sym("p", len(keys))
+    env = {ss.symbols[k]: p[i] for i, k in enumerate(keys)}
 
     def mat(M: sp.Matrix) -> ca.SX:
         return ca.vertcat(*[ca.horzcat(*[to_sx(M[i, j], env) for j in range(M.cols)])
                             for i in range(M.rows)])
 
     vc0 = to_sx(vc_gain_simplified(ss.symbols, 1), env)
-    return ca.Function("haa_plant", [p], [mat(ss.A), mat(ss.B), mat(ss.C), vc0],
+    return ca.Function(topology.function_name, [p], [mat(ss.A), mat(ss.B), mat(ss.C), vc0],
                        ["p"], ["A", "B", "C", "VC0"])

@@ -1,0 +1,154 @@
+"""The plant function of an actuator topology: generated (built-in) or compiled on first use.
+
+A built-in actuator's topology (``model/*.toml``) has its function in ``generated/`` (listed
+under its fingerprint in ``MANIFEST.json``); it is loaded with the other generated evaluators
+and needs no sympy. Any other topology (a user's actuator file) is compiled once: sympy derives
+its state space (:mod:`haa_sym.symbolic.chain`), CasADi writes C into the content-hash cache
+(``HAA_SYM_CACHE``, default ``~/.cache/haa_sym``) under a key of the topology's structure, the
+code generator's sources and the CasADi version, and :class:`haa_sym.compiled.Compiler` builds
+and verifies the shared library; without a C compiler the serialised function runs in CasADi's
+virtual machine (one warning). The generated C and ``.casadi`` files are checked against their
+recorded SHA-256 before every use and regenerated when damaged. ``haa-sym compile FILE`` does
+this ahead of time.
+"""
+from __future__ import annotations
+
+import functools
+import hashlib
+import os
+import sys
+import tempfile
+import warnings
+from pathlib import Path
+
+import casadi as ca
+
+from haa_sym.actuator import Topology
+from haa_sym.compiled import Compiler, CompilerError, NoCompiler, _sha256, default_cache_dir, evaluators
+
+__all__ = ["plant_function", "compile_topology", "CompiledTopology"]
+
+# The files that define a compiled topology's code (besides its structure and CasADi's version).
+_CODE_SOURCES = ("actuator.py", "symbolic/chain.py", "symbolic/symbolic_to_casadi.py")
+
+
+class CompiledTopology:
+    """Where a user topology's code lives: ``c_file``, ``casadi_file`` and, when compiled,
+    ``library``; ``backend`` is "compiled" or "vm"."""
+
+    def __init__(self, topology: Topology, c_file: Path, casadi_file: Path, library: Path | None):
+        self.topology, self.c_file, self.casadi_file, self.library = topology, c_file, casadi_file, library
+        self.backend = "compiled" if library is not None else "vm"
+
+    def function(self) -> ca.Function:
+        name = self.topology.function_name
+        if self.library is not None:
+            return ca.external(name, str(self.library))
+        return ca.Function.deserialize(self.casadi_file.read_text())
+
+
+def _code_key(topology: Topology) -> str:
+    pkg = Path(__file__).resolve().parent
+    h = hashlib.sha256(topology.fingerprint.encode() + b"\0" + ca.__version__.encode() + b"\0")
+    for rel in _CODE_SOURCES:
+        h.update(rel.encode() + b"\0" + (pkg / rel).read_bytes() + b"\0")
+    return h.hexdigest()[:24]
+
+
+def _verified(path: Path) -> bool:
+    try:
+        return _sha256(path) == path.with_name(path.name + ".sha256").read_text().strip()
+    except OSError:
+        return False
+
+
+def _write_verified(path: Path, data: bytes) -> None:
+    """Write ``data`` and its SHA-256 beside it, each by rename (never a partial file)."""
+    for target, content in ((path, data),
+                            (path.with_name(path.name + ".sha256"),
+                             (hashlib.sha256(data).hexdigest() + "\n").encode())):
+        fd, tmp = tempfile.mkstemp(dir=target.parent, prefix=target.name + ".")
+        with os.fdopen(fd, "wb") as fh:
+            fh.write(content)
+        os.replace(tmp, target)
+
+
+def _generate(topology: Topology, directory: Path, quiet: bool) -> tuple[Path, Path]:
+    """The topology's C and serialised function in ``directory`` (sympy only when absent)."""
+    name = topology.function_name
+    c_file, cas_file = directory / f"{name}.c", directory / f"{name}.casadi"
+    if _verified(c_file) and _verified(cas_file):
+        return c_file, cas_file
+    if not quiet:
+        print(f"haa_sym: compiling the plant of {topology.source} (topology {topology.fingerprint[:12]}: "
+              f"{topology.describe()}) into {directory}; once per topology", file=sys.stderr)
+    try:
+        directory.mkdir(parents=True, exist_ok=True)
+    except OSError as exc:
+        raise CompilerError(
+            f"the compiled-code cache {directory.parent.parent} (HAA_SYM_CACHE, default "
+            f"~/.cache/haa_sym) cannot be created: {exc.strerror or exc}; allowed: a writable "
+            "directory") from None
+    from haa_sym.symbolic.symbolic_to_casadi import plant_function as derive   # sympy: compile step only
+    f = derive(topology)
+    with tempfile.TemporaryDirectory(dir=directory) as tmp:
+        cg = ca.CodeGenerator(f"{name}.c", {"with_header": False})
+        cg.add(f)
+        cg.generate(tmp + os.sep)
+        c_src = Path(tmp, f"{name}.c").read_bytes()
+    _write_verified(c_file, c_src)
+    _write_verified(cas_file, f.serialize().encode())
+    return c_file, cas_file
+
+
+def compile_topology(topology: Topology, backend: str = "auto", *, cache_dir: str | Path | None = None,
+                     compiler: Compiler | None = None, quiet: bool = False) -> CompiledTopology:
+    """Generate (sympy, once) and compile (C, once) the plant function of ``topology``.
+
+    Parameters
+    ----------
+    topology : Topology
+    backend : {"auto", "compiled", "vm"}
+        "compiled" requires a C compiler; "auto" warns once and uses the VM without one.
+    cache_dir : str or Path, optional
+        Default env ``HAA_SYM_CACHE``, else ``~/.cache/haa_sym``.
+    quiet : bool
+        No progress line on stderr.
+
+    Raises
+    ------
+    CompilerError
+        The cache is not writable, or the C compiler failed (its output in the message).
+    """
+    if backend not in ("auto", "compiled", "vm"):
+        raise ValueError(f"backend = {backend!r}; allowed: 'auto', 'compiled', 'vm'")
+    root = Path(cache_dir) if cache_dir is not None else (compiler.cache if compiler else default_cache_dir())
+    directory = root / "topologies" / _code_key(topology)
+    c_file, cas_file = _generate(topology, directory, quiet)
+    library = None
+    if backend in ("auto", "compiled"):
+        try:
+            comp = compiler or Compiler(cache_dir=root)
+        except NoCompiler as exc:
+            if backend == "compiled":
+                raise
+            warnings.warn(f"haa_sym: {exc}; evaluating the plant of {topology.source} in CasADi's "
+                          "virtual machine (slower, same numbers)", RuntimeWarning, stacklevel=2)
+        else:
+            library = comp.build(c_file)
+    return CompiledTopology(topology, c_file, cas_file, library)
+
+
+@functools.lru_cache(maxsize=None)
+def _user_function(topology: Topology, backend: str) -> ca.Function:
+    return compile_topology(topology, backend).function()
+
+
+def plant_function(topology: Topology, backend: str = "auto") -> ca.Function:
+    """``f(p) -> (A, B, C, VC0)`` of ``topology``, ``p`` in ``topology.parameter_keys`` order:
+    the generated function of a built-in topology, else compiled on first use (cached)."""
+    ev = evaluators(backend)
+    entry = ev.code.manifest["topologies"].get(topology.fingerprint)
+    if entry is not None:
+        return ev[entry["function"]]
+    return _user_function(topology, ev.backend)
