@@ -51,6 +51,8 @@ extern "C" {
 #define casadi_f5 CASADI_PREFIX(f5)
 #define casadi_f6 CASADI_PREFIX(f6)
 #define casadi_f7 CASADI_PREFIX(f7)
+#define casadi_f8 CASADI_PREFIX(f8)
+#define casadi_f9 CASADI_PREFIX(f9)
 #define casadi_fabs CASADI_PREFIX(fabs)
 #define casadi_fmax CASADI_PREFIX(fmax)
 #define casadi_mmax CASADI_PREFIX(mmax)
@@ -61,6 +63,10 @@ extern "C" {
 #define casadi_s11 CASADI_PREFIX(s11)
 #define casadi_s12 CASADI_PREFIX(s12)
 #define casadi_s13 CASADI_PREFIX(s13)
+#define casadi_s14 CASADI_PREFIX(s14)
+#define casadi_s15 CASADI_PREFIX(s15)
+#define casadi_s16 CASADI_PREFIX(s16)
+#define casadi_s17 CASADI_PREFIX(s17)
 #define casadi_s2 CASADI_PREFIX(s2)
 #define casadi_s3 CASADI_PREFIX(s3)
 #define casadi_s4 CASADI_PREFIX(s4)
@@ -176,20 +182,24 @@ CASADI_SYMBOL_EXPORT void haa_sym_gen_casadi_version(int* major, int* minor, int
 CASADI_SYMBOL_EXPORT int haa_sym_gen_casadi_int_size(void) { return (int) sizeof(casadi_int); }
 CASADI_SYMBOL_EXPORT int haa_sym_gen_casadi_real_size(void) { return (int) sizeof(casadi_real); }
 
-static const casadi_int casadi_s0[3] = {16, 1, 1};
-static const casadi_int casadi_s1[3] = {7, 7, 1};
-static const casadi_int casadi_s2[3] = {7, 3, 1};
-static const casadi_int casadi_s3[3] = {5, 7, 1};
+static const casadi_int casadi_s0[3] = {12, 1, 1};
+static const casadi_int casadi_s1[3] = {5, 5, 1};
+static const casadi_int casadi_s2[3] = {5, 3, 1};
+static const casadi_int casadi_s3[3] = {4, 5, 1};
 static const casadi_int casadi_s4[3] = {1, 1, 1};
-static const casadi_int casadi_s5[3] = {13, 1, 1};
-static const casadi_int casadi_s6[3] = {3, 1, 1};
-static const casadi_int casadi_s7[3] = {2, 1, 1};
-static const casadi_int casadi_s8[3] = {6, 1, 1};
-static const casadi_int casadi_s9[3] = {26, 1, 1};
-static const casadi_int casadi_s10[3] = {17, 8, 1};
-static const casadi_int casadi_s11[3] = {4, 1, 1};
-static const casadi_int casadi_s12[3] = {33, 8, 1};
-static const casadi_int casadi_s13[3] = {65, 8, 1};
+static const casadi_int casadi_s5[3] = {16, 1, 1};
+static const casadi_int casadi_s6[3] = {7, 7, 1};
+static const casadi_int casadi_s7[3] = {7, 3, 1};
+static const casadi_int casadi_s8[3] = {5, 7, 1};
+static const casadi_int casadi_s9[3] = {13, 1, 1};
+static const casadi_int casadi_s10[3] = {3, 1, 1};
+static const casadi_int casadi_s11[3] = {2, 1, 1};
+static const casadi_int casadi_s12[3] = {6, 1, 1};
+static const casadi_int casadi_s13[3] = {26, 1, 1};
+static const casadi_int casadi_s14[3] = {17, 8, 1};
+static const casadi_int casadi_s15[3] = {4, 1, 1};
+static const casadi_int casadi_s16[3] = {33, 8, 1};
+static const casadi_int casadi_s17[3] = {65, 8, 1};
 
 static const casadi_real casadi_c0[17] = 
   {-1., -1., 1., 1., -1., -1., 1., 1.,
@@ -275,8 +285,210 @@ static const casadi_real casadi_c11[65] =
 static const casadi_real casadi_zeros[520] = 
   {0.};
 
-/* haa_plant_5cfa27f41820:(p[16])->(A[7x7],B[7x3],C[5x7],VC0) */
+/* haa_plant_1c37b2fe0b35:(p[12])->(A[5x5],B[5x3],C[4x5],VC0) */
 static int casadi_f0(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
+  casadi_real a00, a01, a02, a03, a04, a05, a06, a07, a08, a09, a10, a11;
+  casadi_real a12, a13, a14;
+  a00=arg[0]? arg[0][1] : 0;
+  a01=arg[0]? arg[0][0] : 0;
+  a02=(a00/a01);
+  a02=(-a02);
+  if (res[0]!=0) res[0][0]=a02;
+  a02=0.;
+  if (res[0]!=0) res[0][1]=a02;
+  a03=arg[0]? arg[0][2] : 0;
+  a04=arg[0]? arg[0][4] : 0;
+  a05=(a03/a04);
+  if (res[0]!=0) res[0][2]=a05;
+  if (res[0]!=0) res[0][3]=a02;
+  if (res[0]!=0) res[0][4]=a02;
+  if (res[0]!=0) res[0][5]=a02;
+  if (res[0]!=0) res[0][6]=a02;
+  a05=arg[0]? arg[0][10] : 0;
+  a06=(a05/a04);
+  a07=arg[0]? arg[0][6] : 0;
+  a08=casadi_sq(a07);
+  a06=(a06/a08);
+  a06=(-a06);
+  if (res[0]!=0) res[0][7]=a06;
+  if (res[0]!=0) res[0][8]=a02;
+  a06=arg[0]? arg[0][7] : 0;
+  a08=(a05/a06);
+  a08=(a08/a07);
+  if (res[0]!=0) res[0][9]=a08;
+  a08=arg[0]? arg[0][3] : 0;
+  a09=(a08/a01);
+  a09=(-a09);
+  if (res[0]!=0) res[0][10]=a09;
+  a09=1.;
+  if (res[0]!=0) res[0][11]=a09;
+  a10=arg[0]? arg[0][5] : 0;
+  a11=(a10/a04);
+  a12=arg[0]? arg[0][11] : 0;
+  a13=(a12/a04);
+  a14=casadi_sq(a07);
+  a13=(a13/a14);
+  a11=(a11+a13);
+  a11=(-a11);
+  if (res[0]!=0) res[0][12]=a11;
+  if (res[0]!=0) res[0][13]=a02;
+  a11=(a12/a06);
+  a11=(a11/a07);
+  if (res[0]!=0) res[0][14]=a11;
+  if (res[0]!=0) res[0][15]=a02;
+  if (res[0]!=0) res[0][16]=a02;
+  a11=(a05/a04);
+  a11=(a11/a07);
+  if (res[0]!=0) res[0][17]=a11;
+  if (res[0]!=0) res[0][18]=a02;
+  a11=arg[0]? arg[0][9] : 0;
+  a11=(a11+a05);
+  a11=(a11/a06);
+  a11=(-a11);
+  if (res[0]!=0) res[0][19]=a11;
+  if (res[0]!=0) res[0][20]=a02;
+  if (res[0]!=0) res[0][21]=a02;
+  a11=(a12/a04);
+  a11=(a11/a07);
+  if (res[0]!=0) res[0][22]=a11;
+  if (res[0]!=0) res[0][23]=a09;
+  a11=arg[0]? arg[0][8] : 0;
+  a11=(a11+a12);
+  a11=(a11/a06);
+  a11=(-a11);
+  if (res[0]!=0) res[0][24]=a11;
+  a01=(1./a01);
+  if (res[1]!=0) res[1][0]=a01;
+  if (res[1]!=0) res[1][1]=a02;
+  if (res[1]!=0) res[1][2]=a02;
+  if (res[1]!=0) res[1][3]=a02;
+  if (res[1]!=0) res[1][4]=a02;
+  if (res[1]!=0) res[1][5]=a02;
+  if (res[1]!=0) res[1][6]=a02;
+  a04=(1./a04);
+  if (res[1]!=0) res[1][7]=a04;
+  if (res[1]!=0) res[1][8]=a02;
+  if (res[1]!=0) res[1][9]=a02;
+  if (res[1]!=0) res[1][10]=a02;
+  if (res[1]!=0) res[1][11]=a02;
+  if (res[1]!=0) res[1][12]=a02;
+  if (res[1]!=0) res[1][13]=a02;
+  a06=(1./a06);
+  if (res[1]!=0) res[1][14]=a06;
+  if (res[2]!=0) res[2][0]=a02;
+  if (res[2]!=0) res[2][1]=a02;
+  if (res[2]!=0) res[2][2]=a02;
+  if (res[2]!=0) res[2][3]=a02;
+  a06=(a05/a07);
+  if (res[2]!=0) res[2][4]=a06;
+  a06=(a05/a07);
+  if (res[2]!=0) res[2][5]=a06;
+  if (res[2]!=0) res[2][6]=a02;
+  if (res[2]!=0) res[2][7]=a02;
+  a06=(a12/a07);
+  if (res[2]!=0) res[2][8]=a06;
+  if (res[2]!=0) res[2][9]=a02;
+  if (res[2]!=0) res[2][10]=a02;
+  if (res[2]!=0) res[2][11]=a02;
+  a06=(-a05);
+  if (res[2]!=0) res[2][12]=a06;
+  a05=(-a05);
+  if (res[2]!=0) res[2][13]=a05;
+  if (res[2]!=0) res[2][14]=a09;
+  if (res[2]!=0) res[2][15]=a02;
+  a12=(-a12);
+  if (res[2]!=0) res[2][16]=a12;
+  if (res[2]!=0) res[2][17]=a02;
+  if (res[2]!=0) res[2][18]=a02;
+  if (res[2]!=0) res[2][19]=a09;
+  a07=(a07/a03);
+  a10=(a10*a00);
+  a08=(a08*a03);
+  a10=(a10+a08);
+  a07=(a07*a10);
+  if (res[3]!=0) res[3][0]=a07;
+  return 0;
+}
+
+CASADI_SYMBOL_EXPORT int haa_plant_1c37b2fe0b35(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem){
+  return casadi_f0(arg, res, iw, w, mem);
+}
+
+CASADI_SYMBOL_EXPORT int haa_plant_1c37b2fe0b35_checkout(void) {
+  return 0;
+}
+
+CASADI_SYMBOL_EXPORT void haa_plant_1c37b2fe0b35_release(int mem) {
+}
+
+CASADI_SYMBOL_EXPORT void haa_plant_1c37b2fe0b35_incref(void) {
+}
+
+CASADI_SYMBOL_EXPORT void haa_plant_1c37b2fe0b35_decref(void) {
+}
+
+CASADI_SYMBOL_EXPORT casadi_int haa_plant_1c37b2fe0b35_n_in(void) { return 1;}
+
+CASADI_SYMBOL_EXPORT casadi_int haa_plant_1c37b2fe0b35_n_out(void) { return 4;}
+
+CASADI_SYMBOL_EXPORT casadi_real haa_plant_1c37b2fe0b35_default_in(casadi_int i) {
+  switch (i) {
+    default: return 0;
+  }
+}
+
+CASADI_SYMBOL_EXPORT const char* haa_plant_1c37b2fe0b35_name_in(casadi_int i) {
+  switch (i) {
+    case 0: return "p";
+    default: return 0;
+  }
+}
+
+CASADI_SYMBOL_EXPORT const char* haa_plant_1c37b2fe0b35_name_out(casadi_int i) {
+  switch (i) {
+    case 0: return "A";
+    case 1: return "B";
+    case 2: return "C";
+    case 3: return "VC0";
+    default: return 0;
+  }
+}
+
+CASADI_SYMBOL_EXPORT const casadi_int* haa_plant_1c37b2fe0b35_sparsity_in(casadi_int i) {
+  switch (i) {
+    case 0: return casadi_s0;
+    default: return 0;
+  }
+}
+
+CASADI_SYMBOL_EXPORT const casadi_int* haa_plant_1c37b2fe0b35_sparsity_out(casadi_int i) {
+  switch (i) {
+    case 0: return casadi_s1;
+    case 1: return casadi_s2;
+    case 2: return casadi_s3;
+    case 3: return casadi_s4;
+    default: return 0;
+  }
+}
+
+CASADI_SYMBOL_EXPORT int haa_plant_1c37b2fe0b35_work(casadi_int *sz_arg, casadi_int* sz_res, casadi_int *sz_iw, casadi_int *sz_w) {
+  if (sz_arg) *sz_arg = 1;
+  if (sz_res) *sz_res = 4;
+  if (sz_iw) *sz_iw = 0;
+  if (sz_w) *sz_w = 0;
+  return 0;
+}
+
+CASADI_SYMBOL_EXPORT int haa_plant_1c37b2fe0b35_work_bytes(casadi_int *sz_arg, casadi_int* sz_res, casadi_int *sz_iw, casadi_int *sz_w) {
+  if (sz_arg) *sz_arg = 1*sizeof(const casadi_real*);
+  if (sz_res) *sz_res = 4*sizeof(casadi_real*);
+  if (sz_iw) *sz_iw = 0*sizeof(casadi_int);
+  if (sz_w) *sz_w = 0*sizeof(casadi_real);
+  return 0;
+}
+
+/* haa_plant_5cfa27f41820:(p[16])->(A[7x7],B[7x3],C[5x7],VC0) */
+static int casadi_f1(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
   casadi_real a00, a01, a02, a03, a04, a05, a06, a07, a08, a09, a10, a11;
   casadi_real a12, a13, a14, a15;
   a00=arg[0]? arg[0][1] : 0;
@@ -461,7 +673,7 @@ static int casadi_f0(const casadi_real** arg, casadi_real** res, casadi_int* iw,
 }
 
 CASADI_SYMBOL_EXPORT int haa_plant_5cfa27f41820(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem){
-  return casadi_f0(arg, res, iw, w, mem);
+  return casadi_f1(arg, res, iw, w, mem);
 }
 
 CASADI_SYMBOL_EXPORT int haa_plant_5cfa27f41820_checkout(void) {
@@ -506,16 +718,16 @@ CASADI_SYMBOL_EXPORT const char* haa_plant_5cfa27f41820_name_out(casadi_int i) {
 
 CASADI_SYMBOL_EXPORT const casadi_int* haa_plant_5cfa27f41820_sparsity_in(casadi_int i) {
   switch (i) {
-    case 0: return casadi_s0;
+    case 0: return casadi_s5;
     default: return 0;
   }
 }
 
 CASADI_SYMBOL_EXPORT const casadi_int* haa_plant_5cfa27f41820_sparsity_out(casadi_int i) {
   switch (i) {
-    case 0: return casadi_s1;
-    case 1: return casadi_s2;
-    case 2: return casadi_s3;
+    case 0: return casadi_s6;
+    case 1: return casadi_s7;
+    case 2: return casadi_s8;
     case 3: return casadi_s4;
     default: return 0;
   }
@@ -537,8 +749,267 @@ CASADI_SYMBOL_EXPORT int haa_plant_5cfa27f41820_work_bytes(casadi_int *sz_arg, c
   return 0;
 }
 
+/* haa_plant_b107ac0be577:(p[16])->(A[7x7],B[7x3],C[5x7],VC0) */
+static int casadi_f2(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
+  casadi_real a00, a01, a02, a03, a04, a05, a06, a07, a08, a09, a10, a11;
+  casadi_real a12, a13, a14;
+  a00=arg[0]? arg[0][1] : 0;
+  a01=arg[0]? arg[0][0] : 0;
+  a02=(a00/a01);
+  a02=(-a02);
+  if (res[0]!=0) res[0][0]=a02;
+  a02=0.;
+  if (res[0]!=0) res[0][1]=a02;
+  a03=arg[0]? arg[0][2] : 0;
+  a04=arg[0]? arg[0][4] : 0;
+  a05=(a03/a04);
+  if (res[0]!=0) res[0][2]=a05;
+  if (res[0]!=0) res[0][3]=a02;
+  if (res[0]!=0) res[0][4]=a02;
+  if (res[0]!=0) res[0][5]=a02;
+  if (res[0]!=0) res[0][6]=a02;
+  if (res[0]!=0) res[0][7]=a02;
+  if (res[0]!=0) res[0][8]=a02;
+  a05=arg[0]? arg[0][12] : 0;
+  a06=(a05/a04);
+  a07=arg[0]? arg[0][6] : 0;
+  a08=casadi_sq(a07);
+  a06=(a06/a08);
+  a06=(-a06);
+  if (res[0]!=0) res[0][9]=a06;
+  if (res[0]!=0) res[0][10]=a02;
+  a06=arg[0]? arg[0][7] : 0;
+  a08=(a05/a06);
+  a08=(a08/a07);
+  if (res[0]!=0) res[0][11]=a08;
+  if (res[0]!=0) res[0][12]=a02;
+  if (res[0]!=0) res[0][13]=a02;
+  a08=arg[0]? arg[0][3] : 0;
+  a09=(a08/a01);
+  a09=(-a09);
+  if (res[0]!=0) res[0][14]=a09;
+  a09=1.;
+  if (res[0]!=0) res[0][15]=a09;
+  a10=arg[0]? arg[0][5] : 0;
+  a11=(a10/a04);
+  a12=arg[0]? arg[0][13] : 0;
+  a13=(a12/a04);
+  a14=casadi_sq(a07);
+  a13=(a13/a14);
+  a11=(a11+a13);
+  a11=(-a11);
+  if (res[0]!=0) res[0][16]=a11;
+  if (res[0]!=0) res[0][17]=a02;
+  a11=(a12/a06);
+  a11=(a11/a07);
+  if (res[0]!=0) res[0][18]=a11;
+  if (res[0]!=0) res[0][19]=a02;
+  if (res[0]!=0) res[0][20]=a02;
+  if (res[0]!=0) res[0][21]=a02;
+  if (res[0]!=0) res[0][22]=a02;
+  a11=(a05/a04);
+  a11=(a11/a07);
+  if (res[0]!=0) res[0][23]=a11;
+  if (res[0]!=0) res[0][24]=a02;
+  a11=arg[0]? arg[0][14] : 0;
+  a05=(a11+a05);
+  a05=(a05/a06);
+  a05=(-a05);
+  if (res[0]!=0) res[0][25]=a05;
+  if (res[0]!=0) res[0][26]=a02;
+  a05=arg[0]? arg[0][9] : 0;
+  a13=(a11/a05);
+  if (res[0]!=0) res[0][27]=a13;
+  if (res[0]!=0) res[0][28]=a02;
+  if (res[0]!=0) res[0][29]=a02;
+  a13=(a12/a04);
+  a13=(a13/a07);
+  if (res[0]!=0) res[0][30]=a13;
+  if (res[0]!=0) res[0][31]=a09;
+  a13=arg[0]? arg[0][8] : 0;
+  a14=arg[0]? arg[0][15] : 0;
+  a13=(a13+a14);
+  a13=(a13+a12);
+  a13=(a13/a06);
+  a13=(-a13);
+  if (res[0]!=0) res[0][32]=a13;
+  if (res[0]!=0) res[0][33]=a02;
+  a13=(a14/a05);
+  if (res[0]!=0) res[0][34]=a13;
+  if (res[0]!=0) res[0][35]=a02;
+  if (res[0]!=0) res[0][36]=a02;
+  if (res[0]!=0) res[0][37]=a02;
+  if (res[0]!=0) res[0][38]=a02;
+  a13=(a11/a06);
+  if (res[0]!=0) res[0][39]=a13;
+  if (res[0]!=0) res[0][40]=a02;
+  a13=arg[0]? arg[0][11] : 0;
+  a13=(a13+a11);
+  a13=(a13/a05);
+  a13=(-a13);
+  if (res[0]!=0) res[0][41]=a13;
+  if (res[0]!=0) res[0][42]=a02;
+  if (res[0]!=0) res[0][43]=a02;
+  if (res[0]!=0) res[0][44]=a02;
+  if (res[0]!=0) res[0][45]=a02;
+  a06=(a14/a06);
+  if (res[0]!=0) res[0][46]=a06;
+  if (res[0]!=0) res[0][47]=a09;
+  a06=arg[0]? arg[0][10] : 0;
+  a06=(a06+a14);
+  a06=(a06/a05);
+  a06=(-a06);
+  if (res[0]!=0) res[0][48]=a06;
+  a01=(1./a01);
+  if (res[1]!=0) res[1][0]=a01;
+  if (res[1]!=0) res[1][1]=a02;
+  if (res[1]!=0) res[1][2]=a02;
+  if (res[1]!=0) res[1][3]=a02;
+  if (res[1]!=0) res[1][4]=a02;
+  if (res[1]!=0) res[1][5]=a02;
+  if (res[1]!=0) res[1][6]=a02;
+  if (res[1]!=0) res[1][7]=a02;
+  if (res[1]!=0) res[1][8]=a02;
+  a04=(1./a04);
+  if (res[1]!=0) res[1][9]=a04;
+  if (res[1]!=0) res[1][10]=a02;
+  if (res[1]!=0) res[1][11]=a02;
+  if (res[1]!=0) res[1][12]=a02;
+  if (res[1]!=0) res[1][13]=a02;
+  if (res[1]!=0) res[1][14]=a02;
+  if (res[1]!=0) res[1][15]=a02;
+  if (res[1]!=0) res[1][16]=a02;
+  if (res[1]!=0) res[1][17]=a02;
+  if (res[1]!=0) res[1][18]=a02;
+  if (res[1]!=0) res[1][19]=a02;
+  a05=(1./a05);
+  if (res[1]!=0) res[1][20]=a05;
+  if (res[2]!=0) res[2][0]=a02;
+  if (res[2]!=0) res[2][1]=a02;
+  if (res[2]!=0) res[2][2]=a02;
+  if (res[2]!=0) res[2][3]=a02;
+  if (res[2]!=0) res[2][4]=a02;
+  if (res[2]!=0) res[2][5]=a02;
+  if (res[2]!=0) res[2][6]=a02;
+  if (res[2]!=0) res[2][7]=a02;
+  if (res[2]!=0) res[2][8]=a02;
+  if (res[2]!=0) res[2][9]=a02;
+  if (res[2]!=0) res[2][10]=a02;
+  if (res[2]!=0) res[2][11]=a02;
+  if (res[2]!=0) res[2][12]=a02;
+  if (res[2]!=0) res[2][13]=a02;
+  if (res[2]!=0) res[2][14]=a02;
+  if (res[2]!=0) res[2][15]=a11;
+  if (res[2]!=0) res[2][16]=a11;
+  if (res[2]!=0) res[2][17]=a02;
+  if (res[2]!=0) res[2][18]=a02;
+  if (res[2]!=0) res[2][19]=a02;
+  if (res[2]!=0) res[2][20]=a14;
+  if (res[2]!=0) res[2][21]=a02;
+  if (res[2]!=0) res[2][22]=a02;
+  if (res[2]!=0) res[2][23]=a09;
+  if (res[2]!=0) res[2][24]=a02;
+  a05=(-a11);
+  if (res[2]!=0) res[2][25]=a05;
+  a11=(-a11);
+  if (res[2]!=0) res[2][26]=a11;
+  if (res[2]!=0) res[2][27]=a09;
+  if (res[2]!=0) res[2][28]=a02;
+  if (res[2]!=0) res[2][29]=a02;
+  a14=(-a14);
+  if (res[2]!=0) res[2][30]=a14;
+  if (res[2]!=0) res[2][31]=a02;
+  if (res[2]!=0) res[2][32]=a02;
+  if (res[2]!=0) res[2][33]=a02;
+  if (res[2]!=0) res[2][34]=a09;
+  a07=(a07/a03);
+  a10=(a10*a00);
+  a08=(a08*a03);
+  a10=(a10+a08);
+  a07=(a07*a10);
+  if (res[3]!=0) res[3][0]=a07;
+  return 0;
+}
+
+CASADI_SYMBOL_EXPORT int haa_plant_b107ac0be577(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem){
+  return casadi_f2(arg, res, iw, w, mem);
+}
+
+CASADI_SYMBOL_EXPORT int haa_plant_b107ac0be577_checkout(void) {
+  return 0;
+}
+
+CASADI_SYMBOL_EXPORT void haa_plant_b107ac0be577_release(int mem) {
+}
+
+CASADI_SYMBOL_EXPORT void haa_plant_b107ac0be577_incref(void) {
+}
+
+CASADI_SYMBOL_EXPORT void haa_plant_b107ac0be577_decref(void) {
+}
+
+CASADI_SYMBOL_EXPORT casadi_int haa_plant_b107ac0be577_n_in(void) { return 1;}
+
+CASADI_SYMBOL_EXPORT casadi_int haa_plant_b107ac0be577_n_out(void) { return 4;}
+
+CASADI_SYMBOL_EXPORT casadi_real haa_plant_b107ac0be577_default_in(casadi_int i) {
+  switch (i) {
+    default: return 0;
+  }
+}
+
+CASADI_SYMBOL_EXPORT const char* haa_plant_b107ac0be577_name_in(casadi_int i) {
+  switch (i) {
+    case 0: return "p";
+    default: return 0;
+  }
+}
+
+CASADI_SYMBOL_EXPORT const char* haa_plant_b107ac0be577_name_out(casadi_int i) {
+  switch (i) {
+    case 0: return "A";
+    case 1: return "B";
+    case 2: return "C";
+    case 3: return "VC0";
+    default: return 0;
+  }
+}
+
+CASADI_SYMBOL_EXPORT const casadi_int* haa_plant_b107ac0be577_sparsity_in(casadi_int i) {
+  switch (i) {
+    case 0: return casadi_s5;
+    default: return 0;
+  }
+}
+
+CASADI_SYMBOL_EXPORT const casadi_int* haa_plant_b107ac0be577_sparsity_out(casadi_int i) {
+  switch (i) {
+    case 0: return casadi_s6;
+    case 1: return casadi_s7;
+    case 2: return casadi_s8;
+    case 3: return casadi_s4;
+    default: return 0;
+  }
+}
+
+CASADI_SYMBOL_EXPORT int haa_plant_b107ac0be577_work(casadi_int *sz_arg, casadi_int* sz_res, casadi_int *sz_iw, casadi_int *sz_w) {
+  if (sz_arg) *sz_arg = 1;
+  if (sz_res) *sz_res = 4;
+  if (sz_iw) *sz_iw = 0;
+  if (sz_w) *sz_w = 0;
+  return 0;
+}
+
+CASADI_SYMBOL_EXPORT int haa_plant_b107ac0be577_work_bytes(casadi_int *sz_arg, casadi_int* sz_res, casadi_int *sz_iw, casadi_int *sz_w) {
+  if (sz_arg) *sz_arg = 1*sizeof(const casadi_real*);
+  if (sz_res) *sz_res = 4*sizeof(casadi_real*);
+  if (sz_iw) *sz_iw = 0*sizeof(casadi_int);
+  if (sz_w) *sz_w = 0*sizeof(casadi_real);
+  return 0;
+}
+
 /* haa_loopcoef:(Gw[13],const[3],gains[2],struct[6])->(coef[26]) */
-static int casadi_f1(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
+static int casadi_f3(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
   casadi_real a00, a01, a02, a03, a04, a05, a06, a07, a08, a09, a10, a11;
   casadi_real a12, a13, a14, a15, a16, a17, a18, a19, a20, a21, a22, a23;
   casadi_real a24, a25, a26, a27, a28, a29, a30;
@@ -898,7 +1369,7 @@ static int casadi_f1(const casadi_real** arg, casadi_real** res, casadi_int* iw,
 }
 
 CASADI_SYMBOL_EXPORT int haa_loopcoef(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem){
-  return casadi_f1(arg, res, iw, w, mem);
+  return casadi_f3(arg, res, iw, w, mem);
 }
 
 CASADI_SYMBOL_EXPORT int haa_loopcoef_checkout(void) {
@@ -943,17 +1414,17 @@ CASADI_SYMBOL_EXPORT const char* haa_loopcoef_name_out(casadi_int i) {
 
 CASADI_SYMBOL_EXPORT const casadi_int* haa_loopcoef_sparsity_in(casadi_int i) {
   switch (i) {
-    case 0: return casadi_s5;
-    case 1: return casadi_s6;
-    case 2: return casadi_s7;
-    case 3: return casadi_s8;
+    case 0: return casadi_s9;
+    case 1: return casadi_s10;
+    case 2: return casadi_s11;
+    case 3: return casadi_s12;
     default: return 0;
   }
 }
 
 CASADI_SYMBOL_EXPORT const casadi_int* haa_loopcoef_sparsity_out(casadi_int i) {
   switch (i) {
-    case 0: return casadi_s9;
+    case 0: return casadi_s13;
     default: return 0;
   }
 }
@@ -975,7 +1446,7 @@ CASADI_SYMBOL_EXPORT int haa_loopcoef_work_bytes(casadi_int *sz_arg, casadi_int*
 }
 
 /* haa_routh16:(a[17])->(changes,regular) */
-static int casadi_f3(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
+static int casadi_f5(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
   casadi_real a00, a01, a02, a03, a04, a05, a06, a07, a08, a09, a10, a11;
   casadi_real a12, a13, a14, a15, a16, a17, a18, a19, a20, a21, a22, a23;
   casadi_real a24, a25, a26;
@@ -1310,7 +1781,7 @@ static int casadi_f3(const casadi_real** arg, casadi_real** res, casadi_int* iw,
 }
 
 /* haa_decide16:(basis[17x8],const[3],point[4])->(n_unstable,certified) */
-static int casadi_f2(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
+static int casadi_f4(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
   casadi_int i;
   casadi_real **res1=res+2, *rr, *w00=w+27, *w01=w+44, w02, *w03=w+180, w04, *w05=w+184, w06, w07, w08, w09;
   casadi_real w10, w11, w12, *w13=w+187, *w14=w+195, w15, w16, w17, w18, *w19=w+212;
@@ -1385,7 +1856,7 @@ static int casadi_f2(const casadi_real** arg, casadi_real** res, casadi_int* iw,
   arg1[0]=w00;
   res1[0]=(&w06);
   res1[1]=(&w04);
-  if (casadi_f3(arg1, res1, iw, w, 0)) return 1;
+  if (casadi_f5(arg1, res1, iw, w, 0)) return 1;
   /* #30: output[0][0] = @6 */
   if (res[0]) res[0][0] = w06;
   /* #31: @8 = 3.55271e-15 */
@@ -1472,7 +1943,7 @@ static int casadi_f2(const casadi_real** arg, casadi_real** res, casadi_int* iw,
   arg1[0]=w19;
   res1[0]=(&w02);
   res1[1]=(&w08);
-  if (casadi_f3(arg1, res1, iw, w, 0)) return 1;
+  if (casadi_f5(arg1, res1, iw, w, 0)) return 1;
   /* #68: @4 = (@4*@8) */
   w04 *= w08;
   /* #69: @8 = 0.5 */
@@ -1497,7 +1968,7 @@ static int casadi_f2(const casadi_real** arg, casadi_real** res, casadi_int* iw,
   arg1[0]=w19;
   res1[0]=(&w02);
   res1[1]=(&w08);
-  if (casadi_f3(arg1, res1, iw, w, 0)) return 1;
+  if (casadi_f5(arg1, res1, iw, w, 0)) return 1;
   /* #79: @4 = (@4*@8) */
   w04 *= w08;
   /* #80: @8 = 0.5 */
@@ -1518,7 +1989,7 @@ static int casadi_f2(const casadi_real** arg, casadi_real** res, casadi_int* iw,
   arg1[0]=w19;
   res1[0]=(&w02);
   res1[1]=(&w08);
-  if (casadi_f3(arg1, res1, iw, w, 0)) return 1;
+  if (casadi_f5(arg1, res1, iw, w, 0)) return 1;
   /* #88: @4 = (@4*@8) */
   w04 *= w08;
   /* #89: @8 = 0.5 */
@@ -1539,7 +2010,7 @@ static int casadi_f2(const casadi_real** arg, casadi_real** res, casadi_int* iw,
   arg1[0]=w00;
   res1[0]=(&w02);
   res1[1]=(&w08);
-  if (casadi_f3(arg1, res1, iw, w, 0)) return 1;
+  if (casadi_f5(arg1, res1, iw, w, 0)) return 1;
   /* #97: @4 = (@4*@8) */
   w04 *= w08;
   /* #98: @8 = 0.5 */
@@ -1556,7 +2027,7 @@ static int casadi_f2(const casadi_real** arg, casadi_real** res, casadi_int* iw,
 }
 
 CASADI_SYMBOL_EXPORT int haa_decide16(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem){
-  return casadi_f2(arg, res, iw, w, mem);
+  return casadi_f4(arg, res, iw, w, mem);
 }
 
 CASADI_SYMBOL_EXPORT int haa_decide16_checkout(void) {
@@ -1601,9 +2072,9 @@ CASADI_SYMBOL_EXPORT const char* haa_decide16_name_out(casadi_int i) {
 
 CASADI_SYMBOL_EXPORT const casadi_int* haa_decide16_sparsity_in(casadi_int i) {
   switch (i) {
-    case 0: return casadi_s10;
-    case 1: return casadi_s6;
-    case 2: return casadi_s11;
+    case 0: return casadi_s14;
+    case 1: return casadi_s10;
+    case 2: return casadi_s15;
     default: return 0;
   }
 }
@@ -1633,7 +2104,7 @@ CASADI_SYMBOL_EXPORT int haa_decide16_work_bytes(casadi_int *sz_arg, casadi_int*
 }
 
 /* haa_routh32:(a[33])->(changes,regular) */
-static int casadi_f5(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
+static int casadi_f7(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
   casadi_real a00, a01, a02, a03, a04, a05, a06, a07, a08, a09, a10, a11;
   casadi_real a12, a13, a14, a15, a16, a17, a18, a19, a20, a21, a22, a23;
   casadi_real a24, a25, a26, a27, a28, a29, a30, a31, a32, a33, a34, a35;
@@ -2546,7 +3017,7 @@ static int casadi_f5(const casadi_real** arg, casadi_real** res, casadi_int* iw,
 }
 
 /* haa_decide32:(basis[33x8],const[3],point[4])->(n_unstable,certified) */
-static int casadi_f4(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
+static int casadi_f6(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
   casadi_int i;
   casadi_real **res1=res+2, *rr, *w00=w+51, *w01=w+84, w02, *w03=w+348, w04, *w05=w+352, w06, w07, w08, w09;
   casadi_real w10, w11, w12, *w13=w+355, *w14=w+363, w15, w16, w17, w18, *w19=w+396;
@@ -2621,7 +3092,7 @@ static int casadi_f4(const casadi_real** arg, casadi_real** res, casadi_int* iw,
   arg1[0]=w00;
   res1[0]=(&w06);
   res1[1]=(&w04);
-  if (casadi_f5(arg1, res1, iw, w, 0)) return 1;
+  if (casadi_f7(arg1, res1, iw, w, 0)) return 1;
   /* #30: output[0][0] = @6 */
   if (res[0]) res[0][0] = w06;
   /* #31: @8 = 3.55271e-15 */
@@ -2708,7 +3179,7 @@ static int casadi_f4(const casadi_real** arg, casadi_real** res, casadi_int* iw,
   arg1[0]=w19;
   res1[0]=(&w02);
   res1[1]=(&w08);
-  if (casadi_f5(arg1, res1, iw, w, 0)) return 1;
+  if (casadi_f7(arg1, res1, iw, w, 0)) return 1;
   /* #68: @4 = (@4*@8) */
   w04 *= w08;
   /* #69: @8 = 0.5 */
@@ -2733,7 +3204,7 @@ static int casadi_f4(const casadi_real** arg, casadi_real** res, casadi_int* iw,
   arg1[0]=w19;
   res1[0]=(&w02);
   res1[1]=(&w08);
-  if (casadi_f5(arg1, res1, iw, w, 0)) return 1;
+  if (casadi_f7(arg1, res1, iw, w, 0)) return 1;
   /* #79: @4 = (@4*@8) */
   w04 *= w08;
   /* #80: @8 = 0.5 */
@@ -2754,7 +3225,7 @@ static int casadi_f4(const casadi_real** arg, casadi_real** res, casadi_int* iw,
   arg1[0]=w19;
   res1[0]=(&w02);
   res1[1]=(&w08);
-  if (casadi_f5(arg1, res1, iw, w, 0)) return 1;
+  if (casadi_f7(arg1, res1, iw, w, 0)) return 1;
   /* #88: @4 = (@4*@8) */
   w04 *= w08;
   /* #89: @8 = 0.5 */
@@ -2775,7 +3246,7 @@ static int casadi_f4(const casadi_real** arg, casadi_real** res, casadi_int* iw,
   arg1[0]=w00;
   res1[0]=(&w02);
   res1[1]=(&w08);
-  if (casadi_f5(arg1, res1, iw, w, 0)) return 1;
+  if (casadi_f7(arg1, res1, iw, w, 0)) return 1;
   /* #97: @4 = (@4*@8) */
   w04 *= w08;
   /* #98: @8 = 0.5 */
@@ -2792,7 +3263,7 @@ static int casadi_f4(const casadi_real** arg, casadi_real** res, casadi_int* iw,
 }
 
 CASADI_SYMBOL_EXPORT int haa_decide32(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem){
-  return casadi_f4(arg, res, iw, w, mem);
+  return casadi_f6(arg, res, iw, w, mem);
 }
 
 CASADI_SYMBOL_EXPORT int haa_decide32_checkout(void) {
@@ -2837,9 +3308,9 @@ CASADI_SYMBOL_EXPORT const char* haa_decide32_name_out(casadi_int i) {
 
 CASADI_SYMBOL_EXPORT const casadi_int* haa_decide32_sparsity_in(casadi_int i) {
   switch (i) {
-    case 0: return casadi_s12;
-    case 1: return casadi_s6;
-    case 2: return casadi_s11;
+    case 0: return casadi_s16;
+    case 1: return casadi_s10;
+    case 2: return casadi_s15;
     default: return 0;
   }
 }
@@ -2869,7 +3340,7 @@ CASADI_SYMBOL_EXPORT int haa_decide32_work_bytes(casadi_int *sz_arg, casadi_int*
 }
 
 /* haa_routh64:(a[65])->(changes,regular) */
-static int casadi_f7(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
+static int casadi_f9(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
   casadi_real a00, a01, a02, a03, a04, a05, a06, a07, a08, a09, a10, a11;
   casadi_real a12, a13, a14, a15, a16, a17, a18, a19, a20, a21, a22, a23;
   casadi_real a24, a25, a26, a27, a28, a29, a30, a31, a32, a33, a34, a35;
@@ -5706,7 +6177,7 @@ static int casadi_f7(const casadi_real** arg, casadi_real** res, casadi_int* iw,
 }
 
 /* haa_decide64:(basis[65x8],const[3],point[4])->(n_unstable,certified) */
-static int casadi_f6(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
+static int casadi_f8(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
   casadi_int i;
   casadi_real **res1=res+2, *rr, *w00=w+99, *w01=w+164, w02, *w03=w+684, w04, *w05=w+688, w06, w07, w08, w09;
   casadi_real w10, w11, w12, *w13=w+691, *w14=w+699, w15, w16, w17, w18, *w19=w+764;
@@ -5781,7 +6252,7 @@ static int casadi_f6(const casadi_real** arg, casadi_real** res, casadi_int* iw,
   arg1[0]=w00;
   res1[0]=(&w06);
   res1[1]=(&w04);
-  if (casadi_f7(arg1, res1, iw, w, 0)) return 1;
+  if (casadi_f9(arg1, res1, iw, w, 0)) return 1;
   /* #30: output[0][0] = @6 */
   if (res[0]) res[0][0] = w06;
   /* #31: @8 = 3.55271e-15 */
@@ -5868,7 +6339,7 @@ static int casadi_f6(const casadi_real** arg, casadi_real** res, casadi_int* iw,
   arg1[0]=w19;
   res1[0]=(&w02);
   res1[1]=(&w08);
-  if (casadi_f7(arg1, res1, iw, w, 0)) return 1;
+  if (casadi_f9(arg1, res1, iw, w, 0)) return 1;
   /* #68: @4 = (@4*@8) */
   w04 *= w08;
   /* #69: @8 = 0.5 */
@@ -5893,7 +6364,7 @@ static int casadi_f6(const casadi_real** arg, casadi_real** res, casadi_int* iw,
   arg1[0]=w19;
   res1[0]=(&w02);
   res1[1]=(&w08);
-  if (casadi_f7(arg1, res1, iw, w, 0)) return 1;
+  if (casadi_f9(arg1, res1, iw, w, 0)) return 1;
   /* #79: @4 = (@4*@8) */
   w04 *= w08;
   /* #80: @8 = 0.5 */
@@ -5914,7 +6385,7 @@ static int casadi_f6(const casadi_real** arg, casadi_real** res, casadi_int* iw,
   arg1[0]=w19;
   res1[0]=(&w02);
   res1[1]=(&w08);
-  if (casadi_f7(arg1, res1, iw, w, 0)) return 1;
+  if (casadi_f9(arg1, res1, iw, w, 0)) return 1;
   /* #88: @4 = (@4*@8) */
   w04 *= w08;
   /* #89: @8 = 0.5 */
@@ -5935,7 +6406,7 @@ static int casadi_f6(const casadi_real** arg, casadi_real** res, casadi_int* iw,
   arg1[0]=w00;
   res1[0]=(&w02);
   res1[1]=(&w08);
-  if (casadi_f7(arg1, res1, iw, w, 0)) return 1;
+  if (casadi_f9(arg1, res1, iw, w, 0)) return 1;
   /* #97: @4 = (@4*@8) */
   w04 *= w08;
   /* #98: @8 = 0.5 */
@@ -5952,7 +6423,7 @@ static int casadi_f6(const casadi_real** arg, casadi_real** res, casadi_int* iw,
 }
 
 CASADI_SYMBOL_EXPORT int haa_decide64(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem){
-  return casadi_f6(arg, res, iw, w, mem);
+  return casadi_f8(arg, res, iw, w, mem);
 }
 
 CASADI_SYMBOL_EXPORT int haa_decide64_checkout(void) {
@@ -5997,9 +6468,9 @@ CASADI_SYMBOL_EXPORT const char* haa_decide64_name_out(casadi_int i) {
 
 CASADI_SYMBOL_EXPORT const casadi_int* haa_decide64_sparsity_in(casadi_int i) {
   switch (i) {
-    case 0: return casadi_s13;
-    case 1: return casadi_s6;
-    case 2: return casadi_s11;
+    case 0: return casadi_s17;
+    case 1: return casadi_s10;
+    case 2: return casadi_s15;
     default: return 0;
   }
 }

@@ -17,6 +17,24 @@ extern "C" {
 #define casadi_int long long int
 #endif
 
+int haa_plant_1c37b2fe0b35(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem);
+int haa_plant_1c37b2fe0b35_checkout(void);
+void haa_plant_1c37b2fe0b35_release(int mem);
+void haa_plant_1c37b2fe0b35_incref(void);
+void haa_plant_1c37b2fe0b35_decref(void);
+casadi_int haa_plant_1c37b2fe0b35_n_in(void);
+casadi_int haa_plant_1c37b2fe0b35_n_out(void);
+casadi_real haa_plant_1c37b2fe0b35_default_in(casadi_int i);
+const char* haa_plant_1c37b2fe0b35_name_in(casadi_int i);
+const char* haa_plant_1c37b2fe0b35_name_out(casadi_int i);
+const casadi_int* haa_plant_1c37b2fe0b35_sparsity_in(casadi_int i);
+const casadi_int* haa_plant_1c37b2fe0b35_sparsity_out(casadi_int i);
+int haa_plant_1c37b2fe0b35_work(casadi_int *sz_arg, casadi_int* sz_res, casadi_int *sz_iw, casadi_int *sz_w);
+int haa_plant_1c37b2fe0b35_work_bytes(casadi_int *sz_arg, casadi_int* sz_res, casadi_int *sz_iw, casadi_int *sz_w);
+#define haa_plant_1c37b2fe0b35_SZ_ARG 1
+#define haa_plant_1c37b2fe0b35_SZ_RES 4
+#define haa_plant_1c37b2fe0b35_SZ_IW 0
+#define haa_plant_1c37b2fe0b35_SZ_W 0
 int haa_plant_5cfa27f41820(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem);
 int haa_plant_5cfa27f41820_checkout(void);
 void haa_plant_5cfa27f41820_release(int mem);
@@ -35,6 +53,24 @@ int haa_plant_5cfa27f41820_work_bytes(casadi_int *sz_arg, casadi_int* sz_res, ca
 #define haa_plant_5cfa27f41820_SZ_RES 4
 #define haa_plant_5cfa27f41820_SZ_IW 0
 #define haa_plant_5cfa27f41820_SZ_W 0
+int haa_plant_b107ac0be577(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem);
+int haa_plant_b107ac0be577_checkout(void);
+void haa_plant_b107ac0be577_release(int mem);
+void haa_plant_b107ac0be577_incref(void);
+void haa_plant_b107ac0be577_decref(void);
+casadi_int haa_plant_b107ac0be577_n_in(void);
+casadi_int haa_plant_b107ac0be577_n_out(void);
+casadi_real haa_plant_b107ac0be577_default_in(casadi_int i);
+const char* haa_plant_b107ac0be577_name_in(casadi_int i);
+const char* haa_plant_b107ac0be577_name_out(casadi_int i);
+const casadi_int* haa_plant_b107ac0be577_sparsity_in(casadi_int i);
+const casadi_int* haa_plant_b107ac0be577_sparsity_out(casadi_int i);
+int haa_plant_b107ac0be577_work(casadi_int *sz_arg, casadi_int* sz_res, casadi_int *sz_iw, casadi_int *sz_w);
+int haa_plant_b107ac0be577_work_bytes(casadi_int *sz_arg, casadi_int* sz_res, casadi_int *sz_iw, casadi_int *sz_w);
+#define haa_plant_b107ac0be577_SZ_ARG 1
+#define haa_plant_b107ac0be577_SZ_RES 4
+#define haa_plant_b107ac0be577_SZ_IW 0
+#define haa_plant_b107ac0be577_SZ_W 0
 int haa_loopcoef(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem);
 int haa_loopcoef_checkout(void);
 void haa_loopcoef_release(int mem);

@@ -6,7 +6,8 @@
   haa-sym step [--duration 0.3] [--out step.csv] [--plot step.png]
   haa-sym margins [--P-gain 0] [--D-gain 0]
   haa-sym stability --P-gain 200 --D-gain 10
-  haa-sym verify                              check the paper's equations
+  haa-sym verify [--params FILE]              check the paper's equations (any actuator: the generic rows)
+  haa-sym compile FILE                        compile an actuator file's plant ahead of time
 
 Every analysis command takes ``--params FILE`` (default: the bundled HyQ parameters),
 ``--configuration NAME`` (e.g. retracted), ``--set KEY=VALUE`` for any key of the parameter file
@@ -231,6 +232,22 @@ def _cmd_reproduce(args) -> int:
     return 0
 
 
+def _cmd_compile(args) -> int:
+    from haa_sym.compiled import evaluators
+    from haa_sym.plant_code import compile_topology
+    params = load_params(args.file)
+    top = params.plant.topology
+    entry = evaluators().code.manifest["topologies"].get(top.fingerprint)
+    if entry is not None:
+        print(f"{args.file}: topology {top.fingerprint[:12]} is built in ({entry['function']} in "
+              "the generated code); nothing to compile")
+        return 0
+    code = compile_topology(top, quiet=args.quiet)
+    where = code.library if code.library is not None else f"{code.casadi_file} (CasADi's virtual machine)"
+    print(f"{args.file}: topology {top.fingerprint[:12]} ({top.describe()}) compiled: {where}")
+    return 0
+
+
 def _progress_flags(p: argparse.ArgumentParser, default) -> None:
     g = p.add_mutually_exclusive_group()
     g.add_argument("-q", "--quiet", action="store_true", default=default,
@@ -249,6 +266,8 @@ def main(argv: list[str] | None = None) -> int:
     sub = ap.add_subparsers(dest="cmd", required=True)
     v = sub.add_parser("verify", help="check the paper's equations")
     v.add_argument("--params")
+    c = sub.add_parser("compile", help="compile the plant of an actuator file into the cache (ahead of first use)")
+    c.add_argument("file", help="actuator file (TOML)")
     s = sub.add_parser("stability", help="stability of one gain point")
     _common(s)
     s.add_argument("--P-gain", type=float, required=True)
@@ -299,7 +318,7 @@ def main(argv: list[str] | None = None) -> int:
             print(f"stable: {bool(res.stable)}  spectral radius: {float(res.spectral_radius):.12g}")
             return 0
         return {"regions": _cmd_regions, "passivity": _cmd_passivity, "step": _cmd_step,
-                "margins": _cmd_margins, "reproduce": _cmd_reproduce}[args.cmd](args)
+                "margins": _cmd_margins, "reproduce": _cmd_reproduce, "compile": _cmd_compile}[args.cmd](args)
     except ParameterError as exc:
         print(f"haa-sym: error: {exc}", file=sys.stderr)
         return 2

@@ -216,7 +216,8 @@ def row_chain_state_space(params: Params, n_points: int = 3) -> Row:
             for i, y in enumerate(outputs):
                 val = y.subs(sub).subs(chain.s, s0).subs(sol)
                 worst = max(worst, abs(sp.Rational(sp.nsimplify(G_ss[i, j] - val))))
-    return Row(f"Chain equations ({len(top.bodies)} bodies, {len(top.couplings)} couplings): state space "
+    nb, nc = len(top.bodies), len(top.couplings)
+    return Row(f"Chain equations ({nb} bod{'y' if nb == 1 else 'ies'}, {nc} coupling{'' if nc == 1 else 's'}): state space "
                "== Laplace form, every output from V_m, T_fr, T_dist", worst == 0,
                f"exact rational check at {n_points} random (params, s), {len(outputs)} x 3 transfer "
                f"functions: max |diff| = {worst}")
