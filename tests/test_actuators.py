@@ -1,0 +1,378 @@
+"""Actuators as data (issue 8): every built-in actuator file and a user's own chain load,
+compile, give maps and pass verify's generic rows; the plant equals an independent numpy
+assembly; the closed loop agrees with the explicit reference on >= 1,000 random points per new
+topology; every bad input of the format is one ParameterError; the legacy [plant] file is HyQ."""
+import itertools
+import re
+
+import numpy as np
+import pytest
+
+from haa_sym import ClosedLoop, LoopOptions, ParameterError, load_params, region_map
+from haa_sym import reference as ref
+from haa_sym.actuator import HYQ, ROTOR
+from haa_sym.params import builtin_actuators
+from haa_sym.plant import continuous_plant
+
+from conftest import ROOT
+
+USER = """\
+[about]
+name = "three-body test chain"
+description = "rotor, gearbox g, A, spring s1, B, spring s2, C (with gravity)"
+[about.references]
+mine = "A test chain of the haa_sym test suite"
+
+[motor]
+L   = { value = 1e-3,  unit = "H",      source = "mine", description = "coil" }
+R   = 1.0
+k_t = 0.1
+k_w = 0.1
+J_m = 2e-5
+B_m = 1e-4
+N   = 50
+
+[bodies.A]
+J = 1e-3
+B = 0.01
+[bodies.B]
+J = 0.05
+B = 0.1
+[bodies.C]
+J = { value = 0.2, unit = "kg m^2", source = "C", description = "link" }
+B = 0.3
+K = 5.0
+
+[couplings.g]
+between = ["rotor", "A"]
+K = 5000.0
+D = 5.0
+[couplings.s1]
+between = ["A", "B"]
+K = 2000.0
+D = 2.0
+[couplings.s2]
+between = ["C", "B"]
+K = 800.0
+D = 1.0
+
+[sensors]
+torque = "s1"
+torque_damping = false
+encoder = "A"
+port = "C"
+
+[controller]
+Ts = 1e-3
+N_av = 4
+alpha = 0.9
+beta = 1.0
+P_t0 = 0.3
+I_t0 = 10.0
+
+[configurations.heavy]
+J_C = 0.6
+"""
+
+BUILTIN = builtin_actuators()
+NEW = [p for p in BUILTIN if p.name != "hyq_haa.toml"]
+
+
+@pytest.fixture(scope="module")
+def cache(tmp_path_factory):
+    return tmp_path_factory.mktemp("cache")
+
+
+@pytest.fixture(scope="module")
+def user_file(tmp_path_factory, cache):
+    import os
+    os.environ["HAA_SYM_CACHE"] = str(cache)    # the user's chain is compiled here, not in ~/.cache
+    path = tmp_path_factory.mktemp("user") / "three.toml"
+    path.write_text(USER)
+    return path
+
+
+def all_files(user_file):
+    return BUILTIN + [user_file]
+
+
+def _options(params):
+    return LoopOptions(port=f"dtheta_{params.plant.topology.port}")
+
+
+def test_builtin_files_present():
+    names = {p.name for p in BUILTIN}
+    assert "hyq_haa.toml" in names and len(BUILTIN) >= 3, names
+
+
+# --- the plant against an independent assembly ----------------------------------------------
+def numpy_plant(plant):
+    """A, B, C from mass, damping and stiffness matrices of the topology (no sympy, no CasADi).
+
+    Mechanical coordinates q = [theta_m, theta_X...]; a coupling c between a and b has
+    e_c . q = theta_a - theta_b (theta_rotor = theta_m / N) and adds K_c e_c e_c^T, D_c e_c e_c^T.
+    """
+    top, v = plant.topology, plant.as_dict()
+    names = ["m"] + list(top.body_names)
+    n = len(names)
+    M = np.diag([v["J_m"]] + [v[f"J_{b}"] for b in top.body_names])
+    Dm = np.diag([v["B_m"]] + [v[f"B_{b}"] for b in top.body_names])
+    Km = np.diag([0.0] + [v.get(f"K_{b.name}", 0.0) if b.ground else 0.0 for b in top.bodies])
+    E = {}
+    for c in top.couplings:
+        e = np.zeros(n)
+        for end, sign in ((c.a, 1.0), (c.b, -1.0)):
+            if end == ROTOR:
+                e[0] += sign / v["N"]
+            else:
+                e[names.index(end)] += sign
+        E[c.name] = e
+        Km += v[f"K_{c.name}"] * np.outer(e, e)
+        Dm += v[f"D_{c.name}"] * np.outer(e, e)
+    Minv = np.linalg.inv(M)
+    nx = 1 + 2 * n
+    A = np.zeros((nx, nx))
+    pos = [1 + 2 * i for i in range(n)]
+    vel = [2 + 2 * i for i in range(n)]
+    A[0, 0], A[0, vel[0]] = -v["R"] / v["L"], -v["k_w"] / v["L"]
+    for i in range(n):
+        A[pos[i], vel[i]] = 1.0
+    A[np.ix_(vel, pos)] = -Minv @ Km
+    A[np.ix_(vel, vel)] = -Minv @ Dm
+    A[vel[0], 0] = v["k_t"] / v["J_m"]
+    B = np.zeros((nx, 3))
+    B[0, 0] = 1 / v["L"]
+    B[vel[0], 1] = 1 / v["J_m"]
+    B[vel[names.index(top.port)], 2] = 1 / v[f"J_{top.port}"]
+    e = E[top.sensor]
+    C = np.zeros((3 + len(top.bodies), nx))
+    C[0, pos], C[0, vel] = v[f"K_{top.sensor}"] * e, v[f"D_{top.sensor}"] * e
+    C[1, pos] = v[f"K_{top.sensor}"] * e
+    C[2, pos[names.index(top.encoder)]] = 1.0
+    for i in range(len(top.bodies)):
+        C[3 + i, vel[1 + i]] = 1.0
+    return A, B, C
+
+
+def test_plant_equals_independent_assembly(user_file):
+    rng = np.random.default_rng(8)
+    worst = 0.0
+    for path in all_files(user_file):
+        params = load_params(path)
+        for _ in range(5):
+            changes = {k: v * 10 ** rng.uniform(-0.5, 0.5) for k, v in params.plant.as_dict().items()}
+            plant = params.plant.replace(**changes)
+            cp = continuous_plant(plant)
+            assert cp.states == plant.topology.state_names and cp.outputs == plant.topology.output_names
+            for got, want in zip((cp.A, cp.B, cp.C), numpy_plant(plant)):
+                assert got.shape == want.shape
+                scale = np.abs(want).max(axis=1, keepdims=True)        # per row: no cancellation issue
+                err = np.abs(got - want) / np.where(scale > 0, scale, 1.0)
+                worst = max(worst, float(err.max()))
+            vc0 = plant.N / plant.k_t * (plant.R * plant.B_m + plant.k_t * plant.k_w)
+            assert abs(cp.VC0 - vc0) <= 1e-14 * vc0
+    assert worst < 1e-12, worst
+
+
+# --- every actuator: compile, map, verify --------------------------------------------------
+def test_every_actuator_gives_a_map_and_passes_verify(user_file, capsys):
+    from haa_sym import verify
+    for path in all_files(user_file):
+        params = load_params(path)
+        m = region_map(params, np.logspace(0, 3.3, 12), np.linspace(0.5, 30, 8), options=_options(params))
+        assert m.stable.shape == (12, 8) and m.stable.any(), path.name
+        rows = verify.generic_rows(params)
+        bad = [r for r in rows if r.applies and not r.ok]
+        assert not bad, (path.name, [(r.claim, r.numbers) for r in bad])
+        na = [r for r in rows if not r.applies]
+        applies, why = __import__("haa_sym.symbolic.chain", fromlist=["x"]).exact_vc_condition(
+            params.plant.topology)
+        assert len(na) == (0 if applies else 1)
+        assert all(r.numbers.startswith("does not apply: ") for r in na)
+
+
+def test_user_file_compiled_into_cache_and_cli(user_file, cache, capsys):
+    from haa_sym.cli import main
+    assert main(["compile", str(user_file)]) == 0
+    out = capsys.readouterr().out
+    assert "compiled: " + str(cache) in out
+    assert main(["stability", "--params", str(user_file), "--P-gain", "200", "--D-gain", "5",
+                 "--option", "port=dtheta_C"]) == 0
+    assert "stable:" in capsys.readouterr().out
+    assert main(["compile", str(ROOT / "model" / "hyq_haa.toml")]) == 0
+    assert "is built in" in capsys.readouterr().out
+
+
+def test_port_option_is_checked_against_the_plant(user_file):
+    with pytest.raises(ParameterError, match=r"port = 'dtheta_L2' is not a velocity of the actuator "
+                                             r".*three.toml; allowed: \['dtheta_A', 'dtheta_B', "
+                                             r"'dtheta_C', 'encoder_average'\]"):
+        ClosedLoop(load_params(user_file))
+
+
+# --- closed loop against the explicit reference, >= 1,000 points per new topology -----------
+CASES = ((1e-3, 4, 0), (5e-4, 10, 1), (2e-3, 1, 0), (1e-3, 20, 1))
+
+
+@pytest.mark.parametrize("name", [p.name for p in NEW] + ["user"])
+def test_closed_loop_agrees_with_reference(name, user_file):
+    path = user_file if name == "user" else ROOT / "model" / name
+    params = load_params(path)
+    rng = np.random.default_rng(len(name))
+    n_points, disagree, refined, near = 0, 0, 0, 0
+    fr_worst = 0.0
+    for (Ts, N_av, delay), filt in zip(CASES, itertools.cycle(("both", "impedance", "compensation"))):
+        p = params.with_values(Ts=Ts, N_av=N_av)
+        loop = ClosedLoop(p, LoopOptions(delay=delay, filter=filt, port=f"dtheta_{p.plant.topology.port}"))
+        k = 260
+        pts = np.stack([10 ** rng.uniform(0, np.log10(20000), k), rng.uniform(0, 50, k),
+                        rng.uniform(0.5, 4, k), rng.uniform(0, 1.2, k)])
+        res = loop.stability(*pts)
+        rho = np.abs(ref.closed_loop_eigenvalues(loop, pts)).max(axis=1)
+        away = np.abs(rho - 1) > 1e-9
+        disagree += int((res.stable != (rho < 1))[away].sum())
+        near += int((~away).sum())
+        refined += int(res.refined.sum())
+        n_points += k
+        w = np.logspace(-1, np.log10(np.pi / Ts * 0.999), 20)
+        fr = loop.frequency_response(w, *pts[:, :3])
+        for i in range(3):
+            for key, val in ref.frequency_response(loop, w, *pts[:, i]).items():
+                err = np.abs(fr[key][i] - val)
+                # pointwise as test_evaluators; the summary is relative to the curve's scale:
+                # near Nyquist L_imp of the SEA falls to ~1e-12 with errors of ~1e-18 (cancellation)
+                assert ((err <= 1e-8 * np.abs(val)) | (err <= 1e-12)).all(), (name, key, pts[:, i])
+                fr_worst = max(fr_worst, float(err.max() / np.abs(val).max()))
+    assert n_points >= 1000
+    assert disagree == 0, (name, disagree, n_points)
+    assert near < n_points // 20, near
+    assert fr_worst < 1e-10, fr_worst
+
+
+# --- HyQ: the new file and the legacy flat [plant] file are the same model --------------------
+def test_hyq_new_and_legacy_files_are_identical(params):
+    legacy = load_params(ROOT / "tests" / "data" / "hyq_haa_legacy.toml")
+    assert params.plant.topology == HYQ and legacy.plant.topology == HYQ
+    assert params.plant == legacy.plant and params.controller == legacy.controller
+    assert params.configurations == legacy.configurations
+    a, b = continuous_plant(params.plant), continuous_plant(legacy.plant)
+    for x, y in ((a.A, b.A), (a.B, b.B), (a.C, b.C)):
+        np.testing.assert_array_equal(x, y)
+    P, D = np.logspace(0, np.log10(20000), 40), np.linspace(1, 50, 20)
+    ma, mb = region_map(params, P, D), region_map(legacy, P, D)
+    for k in ("stable", "low_pm", "passive"):
+        np.testing.assert_array_equal(getattr(ma, k), getattr(mb, k))
+    assert params.to_dict()["topology"]["fingerprint"] == HYQ.fingerprint
+
+
+def test_plant_is_immutable_and_validated(params):
+    with pytest.raises(AttributeError):
+        params.plant.J_L2 = 1.0
+    with pytest.raises(ParameterError, match=r"J_L2 = -1.0 is out of range"):
+        params.plant.replace(J_L2=-1.0)
+    assert params.plant.replace(J_L2=0.2).J_L2 == 0.2
+    assert params.plant.as_tuple() == tuple(getattr(params.plant, k) for k in HYQ.parameter_keys)
+
+
+def test_fingerprint_is_structure_only(user_file):
+    a = load_params(user_file)
+    b = load_params(user_file).configuration("heavy")
+    assert a.plant.topology.fingerprint == b.plant.topology.fingerprint
+    text = USER.replace('torque = "s1"', 'torque = "s2"')
+    assert load_params_text(user_file.parent, text).plant.topology.fingerprint != a.plant.topology.fingerprint
+
+
+def load_params_text(directory, text, name="act.toml"):
+    p = directory / name
+    p.write_text(text)
+    return load_params(p)
+
+
+def test_contact_needs_a_ground_stiffness_on_the_port(tmp_path):
+    from haa_sym.contact import contact_stability
+    params = load_params_text(tmp_path, USER.replace('port = "C"', 'port = "B"'))
+    with pytest.raises(ParameterError, match=r"act.toml \[bodies.B\]: the port body 'B' has no stiffness "
+                                             r"to ground K \(K_B\)"):
+        contact_stability(params, [10.0, 100.0], options=LoopOptions(port="dtheta_B"))
+
+
+# --- bad input: one ParameterError naming file, section, key, value, allowed -----------------
+BAD = [
+    ("no bodies", lambda t: re.sub(r"\[bodies\.\w+\]\nJ = [^\n]*\nB = [^\n]*\n(K = [^\n]*\n)?", "", t)
+     .replace("[couplings.s1]", "[couplings.x1]"),
+     r"\[bodies\]: no bodies; allowed: at least one"),
+    ("unknown body in between", lambda t: t.replace('between = ["A", "B"]', 'between = ["A", "Q"]'),
+     r"\[couplings.s1\]: between = \['A', 'Q'\] names unknown body 'Q'; allowed: \['rotor', 'A', 'B', 'C'\]"),
+    ("disconnected chain", lambda t: t.replace('between = ["C", "B"]', 'between = ["C", "C2"]')
+     .replace("[couplings.g]", "[bodies.C2]\nJ = 1.0\nB = 0.0\n\n[couplings.g]")
+     .replace('between = ["A", "B"]', 'between = ["A", "C2"]'),
+     r"\[bodies.B\]: body 'B' is not connected to the rotor through couplings \(disconnected chain\)"),
+    ("no coupling on rotor", lambda t: t.replace('between = ["rotor", "A"]', 'between = ["B", "A"]'),
+     r"\[couplings\]: 0 couplings touch 'rotor' \(none\); allowed: exactly one \(the gearbox\)"),
+    ("two couplings on rotor", lambda t: t.replace('between = ["A", "B"]', 'between = ["rotor", "B"]'),
+     r"\[couplings\]: 2 couplings touch 'rotor' \(\['g', 's1'\]\); allowed: exactly one"),
+    ("self coupling", lambda t: t.replace('between = ["C", "B"]', 'between = ["C", "C"]'),
+     r"\[couplings.s2\]: between = \['C', 'C'\] couples a body to itself"),
+    ("sensor on missing coupling", lambda t: t.replace('torque = "s1"', 'torque = "s9"'),
+     r"\[sensors\]: torque = 's9' is not a coupling; allowed: \['g', 's1', 's2'\]"),
+    ("encoder on missing body", lambda t: t.replace('encoder = "A"', 'encoder = "Z"'),
+     r"\[sensors\]: encoder = 'Z' is not a body; allowed: \['A', 'B', 'C'\]"),
+    ("port on missing body", lambda t: t.replace('port = "C"', 'port = "L2"'),
+     r"\[sensors\]: port = 'L2' is not a body; allowed: \['A', 'B', 'C'\]"),
+    ("unknown section", lambda t: t + "\n[gearbox]\nK = 1\n",
+     r"unknown table\(s\) \['gearbox'\]; allowed: \['about', 'motor', 'bodies', 'couplings', 'sensors'"),
+    ("unknown body key", lambda t: t.replace("[bodies.A]\nJ = 1e-3", "[bodies.A]\nM = 3\nJ = 1e-3"),
+     r"\[bodies.A\]: unknown key\(s\) \['M'\]; allowed: \['J', 'B', 'K'\]"),
+    ("unknown motor key", lambda t: t.replace("N   = 50", "N   = 50\nJ_x = 1"),
+     r"\[motor\]: unknown key\(s\) \['J_x'\]; allowed: \['L', 'R', 'k_t', 'k_w', 'J_m', 'B_m', 'N'\]"),
+    ("missing motor key", lambda t: t.replace("k_w = 0.1\n", ""),
+     r"\[motor\]: missing key\(s\) \['k_w'\]; every key of"),
+    ("missing coupling key", lambda t: t.replace("K = 2000.0\n", ""),
+     r"\[couplings.s1\]: missing key\(s\) \['K'\]"),
+    ("missing sensors key", lambda t: t.replace('port = "C"\n', ""),
+     r"\[sensors\]: missing key\(s\) \['port'\]"),
+    ("J out of domain", lambda t: t.replace("J = 0.05", "J = 0.0"),
+     r"\[bodies.B\]: J = 0.0 is out of range; allowed: a finite number > 0"),
+    ("coupling K out of domain", lambda t: t.replace("K = 800.0", "K = 0.0"),
+     r"\[couplings.s2\]: K = 0.0 is out of range; allowed: a finite number > 0"),
+    ("ground K negative", lambda t: t.replace("K = 5.0", "K = -5.0"),
+     r"\[bodies.C\]: K = -5.0 is out of range; allowed: a finite number >= 0"),
+    ("damping negative", lambda t: t.replace("D = 2.0", "D = -2.0"),
+     r"\[couplings.s1\]: D = -2.0 is out of range; allowed: a finite number >= 0"),
+    ("motor value", lambda t: t.replace("R   = 1.0", "R   = nan"),
+     r"\[motor\]: R = nan is not finite; allowed: a finite number > 0"),
+    ("name collision", lambda t: t.replace("[bodies.C]", "[bodies.s1]").replace('port = "C"', 'port = "s1"')
+     .replace('between = ["C", "B"]', 'between = ["s1", "B"]').replace("J_C", "J_s1"),
+     r"\[couplings.s1\]: parameter name K_s1 collides with \[bodies.s1\]'s K_s1"),
+    ("reserved name", lambda t: t.replace("[bodies.A]", "[bodies.rotor]"),
+     r"\[bodies.rotor\]: name 'rotor' is not allowed; allowed: an identifier"),
+    ("bad between", lambda t: t.replace('between = ["A", "B"]', 'between = "A"'),
+     r"\[couplings.s1\]: between = 'A'; allowed: two body names \[a, b\]"),
+    ("unknown source", lambda t: t.replace('source = "mine"', 'source = "yours"'),
+     r"\[motor\]: L: source = 'yours'; allowed: \['D', 'I', 'C', '-', 'mine'\]"),
+    ("torque_damping not bool", lambda t: t.replace("torque_damping = false", 'torque_damping = "no"'),
+     r"\[sensors\]: torque_damping = 'no'; allowed: true or false"),
+    ("configuration key", lambda t: t.replace("J_C = 0.6", "J_L2 = 0.6"),
+     r"\[configurations.heavy\]: unknown key\(s\) \['J_L2'\]; allowed: \['L', "),
+    ("legacy and new mixed", lambda t: t + "\n[plant]\nJ_m = 1.0\n",
+     r"unknown table\(s\) \['bodies', 'couplings', 'motor', 'sensors'\]; allowed: \['about', 'plant', "),
+]
+
+
+@pytest.mark.parametrize("case,edit,msg", BAD, ids=[b[0] for b in BAD])
+def test_bad_input(tmp_path, case, edit, msg):
+    text = edit(USER)
+    assert text != USER, case
+    with pytest.raises(ParameterError) as exc:
+        load_params_text(tmp_path, text)
+    assert re.search(r"act.toml.*" + msg, str(exc.value)), (case, str(exc.value))
+    assert "\n" not in str(exc.value)
+
+
+def test_bad_input_in_the_cli_exits_2(tmp_path, capsys):
+    from haa_sym.cli import main
+    p = tmp_path / "act.toml"
+    p.write_text(USER.replace('torque = "s1"', 'torque = "s9"'))
+    assert main(["compile", str(p)]) == 2
+    err = capsys.readouterr().err
+    assert err.startswith("haa-sym: error: ") and "is not a coupling" in err and "Traceback" not in err
