@@ -80,13 +80,15 @@ NEW = [p for p in BUILTIN if p.name != "hyq_haa.toml"]
 
 @pytest.fixture(scope="module")
 def cache(tmp_path_factory):
-    return tmp_path_factory.mktemp("cache")
+    # the user's chain is compiled here, not in ~/.cache (HAA_SYM_CACHE); restored afterwards
+    with pytest.MonkeyPatch.context() as mp:
+        path = tmp_path_factory.mktemp("cache")
+        mp.setenv("HAA_SYM_CACHE", str(path))
+        yield path
 
 
 @pytest.fixture(scope="module")
 def user_file(tmp_path_factory, cache):
-    import os
-    os.environ["HAA_SYM_CACHE"] = str(cache)    # the user's chain is compiled here, not in ~/.cache
     path = tmp_path_factory.mktemp("user") / "three.toml"
     path.write_text(USER)
     return path
@@ -376,3 +378,58 @@ def test_bad_input_in_the_cli_exits_2(tmp_path, capsys):
     assert main(["compile", str(p)]) == 2
     err = capsys.readouterr().err
     assert err.startswith("haa-sym: error: ") and "is not a coupling" in err and "Traceback" not in err
+
+
+# --- the compile step of a user's topology --------------------------------------------------
+def test_user_topology_without_compiler_runs_in_the_vm(user_file, tmp_path, monkeypatch):
+    from haa_sym.plant_code import compile_topology
+    top = load_params(user_file).plant.topology
+    compiled = compile_topology(top, "compiled", cache_dir=tmp_path, quiet=True)
+    monkeypatch.setenv("CC", "/nonexistent/cc")
+    monkeypatch.setenv("PATH", "/nonexistent")
+    with pytest.warns(RuntimeWarning, match="no C compiler found.*virtual machine"):
+        vm = compile_topology(top, "auto", cache_dir=tmp_path, quiet=True)
+    assert vm.backend == "vm" and compiled.backend == "compiled"
+    x = np.linspace(0.5, 2.0, len(top.parameter_keys))
+    for a, b in zip(compiled.function()(x), vm.function()(x)):
+        np.testing.assert_array_equal(np.array(a), np.array(b))
+
+
+def test_damaged_cached_code_is_regenerated(user_file, tmp_path, capsys):
+    from haa_sym.plant_code import compile_topology
+    from haa_sym.progress import set_progress
+    set_progress(None)
+    top = load_params(user_file).plant.topology
+    first = compile_topology(top, "compiled", cache_dir=tmp_path)
+    assert "haa_sym: compiling the plant of" in capsys.readouterr().err
+    again = compile_topology(top, "compiled", cache_dir=tmp_path)
+    assert again.library == first.library and capsys.readouterr().err == ""   # cached: silent
+    first.c_file.write_text(first.c_file.read_text().replace("casadi_real", "casadi_real ", 1))
+    fixed = compile_topology(top, "compiled", cache_dir=tmp_path)
+    assert "haa_sym: compiling the plant of" in capsys.readouterr().err
+    assert fixed.library == first.library                  # same C again: the same library
+
+
+def test_compiler_failure_exits_2_with_one_message(user_file, tmp_path):
+    import os
+    import subprocess
+    import sys
+    env = dict(os.environ, CC="/bin/false", HAA_SYM_CACHE=str(tmp_path / "cache"))
+    proc = subprocess.run([sys.executable, "-m", "haa_sym.cli", "--quiet", "compile", str(user_file)],
+                          env=env, capture_output=True, text=True, timeout=120)
+    assert proc.returncode == 2, proc.stderr
+    assert proc.stderr.startswith("haa-sym: error: compiling ") and "Traceback" not in proc.stderr
+    assert "set CC to a working C compiler" in proc.stderr
+
+
+def test_builtin_runtime_does_not_import_sympy():
+    import subprocess
+    import sys
+    code = ("import sys\n"
+            "from haa_sym import load_params, ClosedLoop, LoopOptions\n"
+            "from haa_sym.params import builtin_actuators\n"
+            "for f in builtin_actuators():\n"
+            "    p = load_params(f)\n"
+            "    ClosedLoop(p, LoopOptions(port='dtheta_' + p.plant.topology.port)).stability(200.0, 10.0)\n"
+            "assert 'sympy' not in sys.modules, 'sympy imported by the runtime'\n")
+    subprocess.run([sys.executable, "-c", code], check=True, cwd=ROOT)

@@ -16,7 +16,6 @@ from __future__ import annotations
 import functools
 import hashlib
 import os
-import sys
 import tempfile
 import warnings
 from pathlib import Path
@@ -25,6 +24,7 @@ import casadi as ca
 
 from haa_sym.actuator import Topology
 from haa_sym.compiled import Compiler, CompilerError, NoCompiler, _sha256, default_cache_dir, evaluators
+from haa_sym.progress import message
 
 __all__ = ["plant_function", "compile_topology", "CompiledTopology"]
 
@@ -79,9 +79,9 @@ def _generate(topology: Topology, directory: Path, quiet: bool) -> tuple[Path, P
     c_file, cas_file = directory / f"{name}.c", directory / f"{name}.casadi"
     if _verified(c_file) and _verified(cas_file):
         return c_file, cas_file
-    if not quiet:
-        print(f"haa_sym: compiling the plant of {topology.source} (topology {topology.fingerprint[:12]}: "
-              f"{topology.describe()}) into {directory}; once per topology", file=sys.stderr)
+    if not quiet:                                   # silenced by --quiet (set_progress(False))
+        message(f"haa_sym: compiling the plant of {topology.source} (topology "
+                f"{topology.fingerprint[:12]}: {topology.describe()}) into {directory}; once per topology")
     try:
         directory.mkdir(parents=True, exist_ok=True)
     except OSError as exc:
