@@ -221,7 +221,7 @@ def test_closed_loop_agrees_with_reference(name, user_file):
     path = user_file if name == "user" else ROOT / "model" / name
     params = load_params(path)
     rng = np.random.default_rng(len(name))
-    n_points, disagree, refined, near = 0, 0, 0, 0
+    n_points, disagree, refined, near, n_stable = 0, 0, 0, 0, 0
     fr_worst = 0.0
     for (Ts, N_av, delay), filt in zip(CASES, itertools.cycle(("both", "impedance", "compensation"))):
         p = params.with_values(Ts=Ts, N_av=N_av)
@@ -230,9 +230,11 @@ def test_closed_loop_agrees_with_reference(name, user_file):
         pts = np.stack([10 ** rng.uniform(0, np.log10(20000), k), rng.uniform(0, 50, k),
                         rng.uniform(0.5, 4, k), rng.uniform(0, 1.2, k)])
         res = loop.stability(*pts)
+        raw = loop.stability(*pts, certify=False)           # the generated decision alone
         rho = np.abs(ref.closed_loop_eigenvalues(loop, pts)).max(axis=1)
         away = np.abs(rho - 1) > 1e-9
-        disagree += int((res.stable != (rho < 1))[away].sum())
+        disagree += int((res.stable != (rho < 1))[away].sum() + (raw.stable != (rho < 1))[away].sum())
+        n_stable += int((rho < 1).sum())
         near += int((~away).sum())
         refined += int(res.refined.sum())
         n_points += k
@@ -248,6 +250,7 @@ def test_closed_loop_agrees_with_reference(name, user_file):
     assert n_points >= 1000
     assert disagree == 0, (name, disagree, n_points)
     assert near < n_points // 20, near
+    assert 0.05 < n_stable / n_points < 0.95, n_stable      # both branches exercised
     assert fr_worst < 1e-10, fr_worst
 
 
@@ -433,3 +436,21 @@ def test_builtin_runtime_does_not_import_sympy():
             "    ClosedLoop(p, LoopOptions(port='dtheta_' + p.plant.topology.port)).stability(200.0, 10.0)\n"
             "assert 'sympy' not in sys.modules, 'sympy imported by the runtime'\n")
     subprocess.run([sys.executable, "-c", code], check=True, cwd=ROOT)
+
+
+def test_actuator_defined_in_code(params, cache):
+    """The Python API: a Topology and its values give the same plant as the same file."""
+    from haa_sym import Params, Plant
+    from haa_sym.actuator import Body, Coupling, Topology
+    top = Topology(bodies=(Body("L1"), Body("L2", ground=True)),
+                   couplings=(Coupling("hd", "rotor", "L1"), Coupling("p", "L1", "L2")),
+                   sensor="hd", torque_damping=True, encoder="L1", port="L2")
+    assert top == HYQ and top.fingerprint == HYQ.fingerprint
+    mine = Params(Plant(top, **params.plant.as_dict()), params.controller)
+    a, b = continuous_plant(mine.plant), continuous_plant(params.plant)
+    for x, y in ((a.A, b.A), (a.B, b.B), (a.C, b.C)):
+        np.testing.assert_array_equal(x, y)
+    with pytest.raises(ParameterError, match=r"<memory> \[sensors\]: port = 'L3' is not a body"):
+        Topology(top.bodies, top.couplings, "hd", True, "L1", "L3")
+    with pytest.raises(ParameterError, match=r"missing key\(s\) \['K_L2'\]"):
+        Plant(top, **{k: v for k, v in params.plant.as_dict().items() if k != "K_L2"})
