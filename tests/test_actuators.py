@@ -454,3 +454,44 @@ def test_actuator_defined_in_code(params, cache):
         Topology(top.bodies, top.couplings, "hd", True, "L1", "L3")
     with pytest.raises(ParameterError, match=r"missing key\(s\) \['K_L2'\]"):
         Plant(top, **{k: v for k, v in params.plant.as_dict().items() if k != "K_L2"})
+
+
+# --- generated code per topology ------------------------------------------------------------
+def test_manifest_lists_every_builtin_topology():
+    from haa_sym.compiled import GeneratedCode
+    code = GeneratedCode()
+    topologies = code.manifest["topologies"]
+    for path in BUILTIN:
+        top = load_params(path).plant.topology
+        entry = topologies[top.fingerprint]
+        assert entry["function"] == top.function_name and path.name in entry["actuators"]
+        assert entry["function"] in code.function_names
+    assert "paper.toml" not in {a for t in topologies.values() for a in t["actuators"]}
+
+
+def test_changed_builtin_topology_is_refused(tmp_path):
+    import shutil
+    from haa_sym.compiled import GeneratedCode, StaleGeneratedCode
+    root = tmp_path / "tree"
+    for rel in ("generated", "src/haa_sym/symbolic", "codegen", "model"):
+        shutil.copytree(ROOT / rel, root / rel)
+    shutil.copy(ROOT / "src/haa_sym/actuator.py", root / "src/haa_sym/actuator.py")
+    hyq = root / "model" / "hyq_haa.toml"
+    hyq.write_text(hyq.read_text().replace("J = { value = 0.439", "J = { value = 0.5"))
+    GeneratedCode(root / "generated", root=root)            # a value is an input: still valid
+    hyq.write_text(hyq.read_text().replace('encoder = "L1"', 'encoder = "L2"'))
+    with pytest.raises(StaleGeneratedCode, match=r"topology of the built-in actuator file\(s\) "
+                                                 r"\['hyq_haa.toml'\] changed.*run `make derive`"):
+        GeneratedCode(root / "generated", root=root)
+
+
+def test_malformed_topologies_in_manifest_are_refused(tmp_path):
+    import json
+    import shutil
+    from haa_sym.compiled import GeneratedCode, StaleGeneratedCode
+    gen = shutil.copytree(ROOT / "generated", tmp_path / "generated")
+    m = json.loads((gen / "MANIFEST.json").read_text())
+    m["topologies"][HYQ.fingerprint]["function"] = "haa_plant_nonexistent"
+    (gen / "MANIFEST.json").write_text(json.dumps(m))
+    with pytest.raises(StaleGeneratedCode, match=r"missing or malformed: topologies\['" + HYQ.fingerprint):
+        GeneratedCode(gen)
