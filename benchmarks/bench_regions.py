@@ -61,7 +61,7 @@ def control_point(params, P, D):
     from haa_sym.plant import continuous_plant
     ctrl, Ts, N = params.controller, params.controller.Ts, params.controller.N_av
     cp = continuous_plant(params.plant)
-    rows = [cp.outputs.index("T_sensor"), cp.outputs.index("theta_encoder")]
+    rows = [cp.output_names.index("T_sensor"), cp.output_names.index("theta_encoder")]
     G = ct.c2d(ct.ss(cp.A, cp.B[:, :1], cp.C[rows], 0), Ts, method="zoh")   # V_m -> (T, theta)
     PI = ct.tf([ctrl.P_t + ctrl.I_t * Ts, -ctrl.P_t], [1, -1], Ts)          # Eq. (7)
     F = ct.tf([1] + [0] * (N - 1) + [-1], [N * Ts] + [0] * N, Ts)           # averaging filter

@@ -165,7 +165,7 @@ def test_plant_equals_independent_assembly(user_file):
             changes = {k: v * 10 ** rng.uniform(-0.5, 0.5) for k, v in params.plant.as_dict().items()}
             plant = params.plant.replace(**changes)
             cp = continuous_plant(plant)
-            assert cp.states == plant.topology.state_names and cp.outputs == plant.topology.output_names
+            assert cp.state_names == plant.topology.state_names and cp.output_names == plant.topology.output_names
             for got, want in zip((cp.A, cp.B, cp.C), numpy_plant(plant)):
                 assert got.shape == want.shape
                 scale = np.abs(want).max(axis=1, keepdims=True)        # per row: no cancellation issue

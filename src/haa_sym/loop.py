@@ -246,7 +246,7 @@ class ClosedLoop:
                 "codegen/generate.py of a source tree and `make derive`)")
         self.capacity = caps[0]
         self.const = np.array([ctrl.P_t0, ctrl.I_t0, self.plant.VC0])
-        ports = [o for o in self.plant.outputs if o.startswith("dtheta_")] + ["encoder_average"]
+        ports = [o for o in self.plant.output_names if o.startswith("dtheta_")] + ["encoder_average"]
         if self.options.port not in ports:
             raise ParameterError(
                 f"port = {self.options.port!r} is not a velocity of the actuator {params.source}; "
@@ -279,8 +279,8 @@ class ClosedLoop:
         """Exact descending coefficients of b0..b7 in z, each of degree ``self.degree``."""
         p, ctrl, opt = self.plant, self.params.controller, self.options
         d, nums = _transfer_polynomials(p)
-        n_T = nums[p.outputs.index(self.torque_output)][0]
-        n_th = nums[p.outputs.index("theta_encoder")][0]
+        n_T = nums[p.output_names.index(self.torque_output)][0]
+        n_th = nums[p.output_names.index("theta_encoder")][0]
         N = ctrl.N_av                      # the longest average: z^N clears every denominator
         N_vc, N_d = self.filter_lengths
         Ts = Fraction(ctrl.Ts)

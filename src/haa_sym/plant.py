@@ -1,7 +1,7 @@
 """The actuator plant (Eq. 1-2 for HyQ, any chain of haa_sym.actuator): continuous state space
 (generated from the sympy model of its topology) and its zero-order-hold discretisation at Ts.
 
-Signals are named per plant (``plant.states``, ``plant.inputs``, ``plant.outputs``, from the
+Signals are named per plant (``state_names``, ``input_names``, ``output_names``, from the
 topology): states ``[I_m, theta_m, dtheta_m, theta_X, dtheta_X ...]``, inputs
 ``[V_m, T_fr, T_dist]``, outputs ``[T_sensor, T_sensor_spring, theta_encoder, dtheta_X ...]``
 where ``T_sensor`` is the torque sensor's coupling torque (Eq. 2, T_l for HyQ),
@@ -39,9 +39,9 @@ class ContinuousPlant:
     C: np.ndarray
     VC0: float
     plant: Plant | None = field(default=None, repr=False, compare=False)
-    states: tuple[str, ...] = ()
-    inputs: tuple[str, ...] = ()
-    outputs: tuple[str, ...] = ()
+    state_names: tuple[str, ...] = ()
+    input_names: tuple[str, ...] = ()
+    output_names: tuple[str, ...] = ()
 
 
 @dataclass(frozen=True)
@@ -53,19 +53,19 @@ class DiscretePlant:
     C: np.ndarray
     Ts: float
     VC0: float
-    states: tuple[str, ...] = ()
-    inputs: tuple[str, ...] = ()
-    outputs: tuple[str, ...] = ()
+    state_names: tuple[str, ...] = ()
+    input_names: tuple[str, ...] = ()
+    output_names: tuple[str, ...] = ()
 
     def frequency_response(self, omega: np.ndarray, outputs=None, inputs=None) -> np.ndarray:
         """``C (e^{j w Ts} I - Phi)^-1 Gamma`` for rows ``outputs``, columns ``inputs`` (names;
-        default all of :attr:`outputs` and :attr:`inputs`).
+        default all of :attr:`output_names` and :attr:`input_names`).
 
         Returns a complex array of shape ``(len(outputs), len(inputs), len(omega))``; omega in rad/s.
         """
         omega = np.asarray(omega, dtype=float)
-        rows = _index(self.outputs, self.outputs if outputs is None else outputs, "output(s)")
-        cols = _index(self.inputs, self.inputs if inputs is None else inputs, "input(s)")
+        rows = _index(self.output_names, self.output_names if outputs is None else outputs, "output(s)")
+        cols = _index(self.input_names, self.input_names if inputs is None else inputs, "input(s)")
         z = np.exp(1j * omega * self.Ts)
         M = z[:, None, None] * np.eye(self.Phi.shape[0]) - self.Phi
         X = np.linalg.solve(M, np.broadcast_to(self.Gamma[:, cols], (len(z),) + self.Gamma[:, cols].shape))
@@ -94,7 +94,8 @@ def discretize(cont: ContinuousPlant, Ts: float) -> DiscretePlant:
     C = cont.C.copy()
     for arr in (Phi, Gamma, C):          # shared by every ClosedLoop of this plant (memoised)
         arr.setflags(write=False)
-    return DiscretePlant(Phi, Gamma, C, float(Ts), cont.VC0, cont.states, cont.inputs, cont.outputs)
+    return DiscretePlant(Phi, Gamma, C, float(Ts), cont.VC0, cont.state_names, cont.input_names,
+                         cont.output_names)
 
 
 def _evaluate(plant: Plant, backend: str = "auto") -> ContinuousPlant:

@@ -45,7 +45,7 @@ def _closed_loop_batch(loop: ClosedLoop, P_gain: np.ndarray, D_gain: np.ndarray,
         return np.zeros(n + nin)
     def row_from_C(name):
         r = zero()
-        r[:nx] = pl.C[pl.outputs.index(name)]
+        r[:nx] = pl.C[pl.output_names.index(name)]
         return r
     th = row_from_C("theta_encoder")
     T = row_from_C(loop.torque_output)

@@ -239,7 +239,7 @@ def p1_roots(params: Params) -> np.ndarray:
     from haa_sym.plant import continuous_plant
     cp = continuous_plant(params.plant)
     _, nums = transfer_polynomials(cp.A, cp.B[:, :1], cp.C)
-    num = np.trim_zeros(to_float(nums[cp.outputs.index("T_sensor")][0]), "f")
+    num = np.trim_zeros(to_float(nums[cp.output_names.index("T_sensor")][0]), "f")
     roots = np.roots(num)
     sensor = params.plant.topology.sensor
     D = getattr(params.plant, f"D_{sensor}")
