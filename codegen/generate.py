@@ -31,6 +31,7 @@ CAPACITIES = (16, 32, 64)
 # checked by the runtime (a changed source means stale generated code).
 SOURCES = (
     "src/haa_sym/params.py",
+    "src/haa_sym/layout.py",
     "src/haa_sym/symbolic/eom.py",
     "src/haa_sym/symbolic/torque_tf.py",
     "codegen/kernels.py",

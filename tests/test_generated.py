@@ -35,9 +35,10 @@ def test_no_dates_in_generated_files():
 
 def _copy_tree(tmp_path):
     root = tmp_path / "tree"
-    for rel in ("generated", "src/haa_sym/symbolic", "codegen"):
-        shutil.copytree(ROOT / rel, root / rel)
-    shutil.copy(ROOT / "src/haa_sym/params.py", root / "src/haa_sym/params.py")
+    shutil.copytree(ROOT / "generated", root / "generated")
+    for rel in json.loads((ROOT / "generated" / "MANIFEST.json").read_text())["sources"]:
+        (root / rel).parent.mkdir(parents=True, exist_ok=True)
+        shutil.copy(ROOT / rel, root / rel)
     return root
 
 

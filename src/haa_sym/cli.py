@@ -22,7 +22,7 @@ import argparse
 import sys
 from pathlib import Path
 
-from haa_sym.params import ParameterError, gain_array, load_params
+from haa_sym.params import STRING_KEYS, ParameterError, gain_array, load_params
 from haa_sym.progress import set_progress
 
 OUTPUT_SUFFIXES = {"regions": (".npz",), "passivity": (".csv", ".json"), "step": (".csv",)}
@@ -35,6 +35,9 @@ def _parse_set(items: list[str]) -> dict[str, float]:
         if not sep:
             raise ParameterError(f"--set {item!r}: expected KEY=VALUE")
         key, value = key.strip(), value.strip()
+        if key in STRING_KEYS:          # a choice by name (velocity_filter), checked by Controller
+            out[key] = value
+            continue
         try:
             # an integer stays one, so that messages show the value as typed (N_av = 0, not 0.0)
             out[key] = int(value) if value.lstrip("+-").isdigit() else float(value)
@@ -98,12 +101,16 @@ def _params(args):
     params = load_params(args.params)
     if args.configuration:
         params = params.configuration(args.configuration)
-    for key, value in _parse_set(args.set).items():
-        try:
-            params = params.with_values(**{key: value})
-        except ParameterError as exc:
-            raise ParameterError(f"--set {key}={value}: {exc}") from None
-    return params
+    sets = _parse_set(args.set)
+    if not sets:
+        return params
+    try:                  # all at once: velocity_filter and f_c are only valid together
+        return params.with_values(**sets)
+    except ParameterError as exc:
+        msg = str(exc)
+        named = [k for k in sets if msg.startswith((f"{k} ", f"unknown parameter key(s) ['{k}'"))]
+        given = " ".join(f"--set {k}={v}" for k, v in sets.items() if not named or k in named)
+        raise ParameterError(f"{given}: {msg}") from None
 
 
 def _check_out(path: str | None, cmd: str, flag: str = "--out") -> Path | None:
