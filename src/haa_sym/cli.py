@@ -178,7 +178,7 @@ def _cmd_passivity(args) -> int:
     from haa_sym.outputs import Transaction
     with Transaction() as tx:
         if out:
-            from haa_sym.reproduce import _csv
+            from haa_sym.outputs import csv_text as _csv
             from haa_sym.regions import run_meta
             text = (json.dumps({"cells": rows, "meta": run_meta(params, options)}, indent=1) + "\n"
                     if out.suffix == ".json" else _csv(rows))
@@ -201,7 +201,7 @@ def _cmd_step(args) -> int:
     from haa_sym.outputs import Transaction
     with Transaction() as tx:
         if out:
-            from haa_sym.reproduce import _csv
+            from haa_sym.outputs import csv_text as _csv
             tx.write_text(out, _csv([{"t_s": f"{t:.6g}", "T_Nm": f"{v:.9g}"} for t, v in zip(s.t, s.T)]), "--out")
         if plot:
             from haa_sym.plots import plot_steps, save_figure
@@ -231,7 +231,7 @@ def _cmd_margins(args) -> int:
 
 
 def _cmd_reproduce(args) -> int:
-    from haa_sym.reproduce import reproduce
+    from haa_sym.paper.reproduce import reproduce
     params = _params(args)
     options = _parse_options(args.option)
     reproduce(args.out, params, options, quick=args.quick, field="--out")
