@@ -38,6 +38,7 @@ CAPACITIES = (16, 32, 64)
 # model/ (haa_sym.compiled.GeneratedCode), so editing a value never stales generated/.
 SOURCES = (
     "src/haa_sym/actuator.py",
+    "src/haa_sym/layout.py",
     "src/haa_sym/symbolic/chain.py",
     "src/haa_sym/symbolic/symbolic_to_casadi.py",
     "codegen/kernels.py",

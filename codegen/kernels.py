@@ -1,25 +1,23 @@
 """CasADi kernels of the discrete closed loop (Sec. 3): pure CasADi, no sympy.
 
 The closed loop has one actuated input (V_m). With the measured torque T, the encoder angle
-theta_L1, the averaging filters F_N(z) = (1 - z^-N)/(N Ts) of the D term (N = N_D) and of the
-velocity compensation (N = N_VC), PI_t(z) of Eq. (7), the impedance law Eq. (8), velocity
-compensation VC * F_NVC(z) * theta_L1 (Eq. 6) and a computation delay of ``d`` samples, the
-characteristic polynomial is
+theta, the velocity estimates F_d (D term, Eq. 8) and F_vc (velocity compensation, Eq. 6), the
+torque PI of Eq. (7), the impedance law Eq. (8) and a computation delay, the characteristic
+polynomial is affine in the gain monomials of ``haa_sym.layout``:
 
     chi(z) = b0 + P_t b1 + I_t b2 + P_t P_gain b3 + I_t P_gain b4 + (P_t D_gain - VC) b5
              + I_t D_gain b6 - VC b7
 
-where b7 is the exact difference of the compensation's and the D term's polynomials (zero when
-both use the same average): P_t D_gain and VC nearly cancel in parts of the gain plane, so the
-two must not be rounded separately.
-
-with basis polynomials b_j fixed per discretised plant (see ``haa_sym.loop``). The stability
-kernel works on their bilinear transforms (z = (1 + s)/(1 - s), computed exactly), where the
-poles that crowd at z = 1 under fast sampling stay resolved: it returns the Routh-Hurwitz
-decision and whether the rounding of the coefficients could change it. Per frequency the
-kernels return the gain-affine coefficients of the loop transfer functions in real
-arithmetic (a gain sweep then costs one small matrix product per frequency grid, see
-``haa_sym.regions``).
+with basis polynomials b_j fixed per sampled plant and loop structure, built exactly from the
+controller's elements (``haa_sym.elements``, ``haa_sym.loop``); b7 is the exact difference of
+the compensation's and the D term's polynomials (zero when both use the same estimate). The
+stability kernel works on their bilinear transforms (z = (1 + s)/(1 - s), computed exactly),
+where the poles that crowd at z = 1 under fast sampling stay resolved: it returns the
+Routh-Hurwitz decision and whether the rounding of the coefficients could change it. Per
+frequency the loop-coefficient kernel takes the plant's and the elements' responses and returns
+the gain-affine coefficients of the loop transfer functions (a gain sweep then costs one small
+matrix product per frequency grid, see ``haa_sym.regions``). Every vector crossing to the
+runtime is laid out by name in ``haa_sym.layout``.
 """
 from __future__ import annotations
 
@@ -27,9 +25,9 @@ import functools
 
 import casadi as ca
 
-N_BASIS = 8
-N_CONST = 3   # P_t0, I_t0, VC0
-N_POINT = 4   # P_gain, D_gain, beta, alpha
+from haa_sym import layout as L
+
+N_BASIS, N_CONST, N_POINT = len(L.GAIN_MONOMIALS), len(L.CONST), len(L.POINT)
 # Bound on the rounding error of each coefficient of q = basis @ g, in units of the unit
 # roundoff times (|basis| @ |g|): the basis rounded once (1), the products (1), the gain
 # monomials themselves (3, g_5 = P_t D_gain - VC is a difference), the 8-term sum (8), the
@@ -42,22 +40,13 @@ KHARITONOV_PATTERNS = ((-1, -1, +1, +1), (+1, +1, -1, -1), (-1, +1, +1, -1), (+1
 
 
 def gain_monomials(point, const):
-    """The coefficients g_j of chi = sum_j g_j b_j for one gain point."""
-    P, D, beta, alpha = point[0], point[1], point[2], point[3]
-    P_t = beta * const[0]
-    I_t = beta * const[1]
-    VC = alpha * const[2]
-    return ca.vertcat(1, P_t, I_t, P_t * P, I_t * P, P_t * D - VC, I_t * D, -VC)
+    """The coefficients g_j of chi = sum_j g_j b_j for one gain point (haa_sym.layout)."""
+    return ca.vertcat(*L.gain_monomials(point, const))
 
 
 def gain_monomial_bounds(point, const):
     """Upper bounds of |g_j| that also cover the rounding of g_5 = P_t D_gain - VC."""
-    P, D, beta, alpha = point[0], point[1], point[2], point[3]
-    P_t = ca.fabs(beta * const[0])
-    I_t = ca.fabs(beta * const[1])
-    VC = ca.fabs(alpha * const[2])
-    P, D = ca.fabs(P), ca.fabs(D)
-    return ca.vertcat(1, P_t, I_t, P_t * P, I_t * P, P_t * D + VC, I_t * D, VC)
+    return ca.vertcat(*L.gain_monomial_bounds(point, const, ca.fabs))
 
 
 @functools.lru_cache(maxsize=None)
@@ -153,75 +142,57 @@ def _div(a, b):
     return ((a[0] * b[0] + a[1] * b[1]) / den, (a[1] * b[0] - a[0] * b[1]) / den)
 
 
-N_PLANT_RESP = 12  # re/im of G_TV, G_Td, G_thV, G_thd, G_pV, G_pd
-N_STRUCT = 6       # Ts, N_av, delay (samples), port_average (0/1), N_VC, N_D
-N_TORQUE_GAINS = 2  # beta, alpha
-# Every loop transfer below is affine in x = (1, P_gain, D_gain) or a ratio of two such forms,
-# because the impedance law Eq. (8) enters linearly through the torque reference.
-COEF_OUTPUTS = ("L_t", "L_imp", "Z_num", "Z_den")
-
-
 def loop_coefficient_function() -> ca.Function:
     """Gain-affine coefficients of the loop transfer functions at one frequency.
 
-    Inputs: ``Gw`` (13): the discretised plant's responses at z = exp(j w Ts) from V_m and
-    T_dist to the measured torque T, the encoder angle theta_L1 and the port velocity p (re, im
-    each), then w Ts (rad): one column per frequency for the column driver; ``const`` [P_t0, I_t0, VC0]; ``gains`` [beta, alpha];
-    ``struct`` [Ts, N_av, delay, port_average, N_VC, N_D]: the averaging lengths of the port
-    velocity (when averaged), the velocity compensation and the D term.
+    Inputs: ``Gw``: one column per frequency, the complex values (re, im) named by
+    ``haa_sym.layout.FREQ_COLUMN``: the sampled plant's responses from V_m and T_dist to the
+    measured torque T, the encoder angle theta and the port velocity p, and the controller
+    elements (``haa_sym.elements``) at z = exp(j w Ts): the velocity estimates of the D term
+    (F_d) and of the compensation (F_vc), the PI's integral part I_z = Ts z/(z - 1) and the
+    delay z^-d. ``const`` (layout.CONST) and ``gains`` (layout.TORQUE_GAINS).
 
-    Output ``coef`` (26 reals): for each of L_t, L_imp, Z_num, Z_den the complex coefficients
-    (c_1, c_P, c_D), each as (re, im), so that, with x = (1, P_gain, D_gain),
+    Output ``coef``: the complex values (re, im) named by ``layout.COEF_OUTPUTS``: for each of
+    L_t, L_imp, Z_num, Z_den the coefficients of x = (1, P_gain, D_gain), so that
 
     L_t   = c . x  torque loop opened at the PI output (VC loop and impedance loop closed;
                    P_gain = D_gain = 0 is the torque loop alone);
     L_imp = c . x  impedance loop opened at the torque reference T_lref (torque and VC loops closed);
     Z     = (Z_num . x) / (Z_den . x), the driving-port impedance T_dist / velocity (Sec. 5);
 
-    then H_T = T / T_lref with the impedance loop open (re, im).
+    then H_T = T / T_lref with the impedance loop open.
     Sign convention: negative feedback, closed loop 1/(1 + L).
     """
-    Gw = ca.SX.sym("Gw", N_PLANT_RESP + 1)
-    G, wTs = Gw[:N_PLANT_RESP], Gw[N_PLANT_RESP]
+    Gw = ca.SX.sym("Gw", 2 * len(L.FREQ_COLUMN))
+    v = {name: _c(Gw[2 * i], Gw[2 * i + 1]) for i, name in enumerate(L.FREQ_COLUMN)}
     const = ca.SX.sym("const", N_CONST)
-    gains = ca.SX.sym("gains", N_TORQUE_GAINS)
-    struct = ca.SX.sym("struct", N_STRUCT)
-    G_TV, G_Td, G_thV, G_thd, G_pV, G_pd = (_c(G[2 * i], G[2 * i + 1]) for i in range(6))
-    beta, alpha = gains[0], gains[1]
-    P_t, I_t, VC = beta * const[0], beta * const[1], alpha * const[2]
-    Ts, N_av, delay, port_avg, N_vc, N_d = (struct[i] for i in range(6))
-    # 1 - exp(-j x) = 2 sin^2(x/2) + j sin(x): no cancellation at low frequency
-    def one_minus_expm(x):
-        return _c(2 * ca.sin(x / 2) ** 2, ca.sin(x))
+    gains = ca.SX.sym("gains", len(L.TORQUE_GAINS))
+    g = L.torque_gains(gains[L.TORQUE_GAINS.index("beta")], gains[L.TORQUE_GAINS.index("alpha")], const)
+    P_t, I_t, VC = g["P_t"], g["I_t"], g["VC"]
+    G_TV, G_Td, G_thV, G_thd, G_pV, G_pd = (v[k] for k in ("G_TV", "G_Td", "G_thV", "G_thd", "G_pV", "G_pd"))
+    F, F_vc, zd = v["F_d"], v["F_vc"], v["z_delay"]
     zero = _c(0, 0)
-    def average(N):                                                    # (1 - z^-N)/(N Ts)
-        return _scale(1 / (N * Ts), one_minus_expm(N * wTs))
-    F = average(N_d)                                                   # D term of Eq. (8)
-    F_vc = average(N_vc)                                               # Eq. (6)
-    F_port = average(N_av)                                             # averaged port velocity
-    PI = _add(_c(P_t, 0), _div(_c(I_t * Ts, 0), one_minus_expm(wTs)))  # Eq. (7)
-    zd = _c(ca.cos(delay * wTs), -ca.sin(delay * wTs))                 # z^-delay
+    PI = _add(_c(P_t, 0), _scale(I_t, v["I_z"]))                        # Eq. (7)
     dPI = _mul(zd, PI)
-    dVCF = _mul(zd, _scale(VC, F_vc))                                  # Eq. (6) on the filtered v
-    vc_loop = _sub(_c(1, 0), _mul(dVCF, G_thV))                        # 1 - z^-d VC F G_thV
+    dVCF = _mul(zd, _scale(VC, F_vc))                                  # Eq. (6) on the estimate
+    vc_loop = _sub(_c(1, 0), _mul(dVCF, G_thV))                        # 1 - z^-d VC F_vc G_thV
     R0 = _add(vc_loop, _mul(dPI, G_TV))                                # torque + VC loops closed
-    # the impedance law imp = P_gain + D_gain F (Eq. 8) multiplies everything below
+    # the impedance law imp = P_gain + D_gain F_d (Eq. 8) multiplies everything below
     A = _div(_mul(dPI, G_thV), R0)
     L_imp = (zero, A, _mul(F, A))
     L_t = (_div(_mul(dPI, G_TV), vc_loop), _div(_mul(dPI, G_thV), vc_loop),
            _div(_mul(_mul(dPI, F), G_thV), vc_loop))
     # every loop closed: R = R0 + imp dPI G_thV; V/T_dist = N/R with
-    # N = (z^-d VC F - dPI imp) G_thd - dPI G_Td; port velocity/T_dist = pd + pV N/R
+    # N = (z^-d VC F_vc - dPI imp) G_thd - dPI G_Td; port velocity/T_dist = pd + pV N/R
     r = (R0, _mul(dPI, G_thV), _mul(_mul(F, dPI), G_thV))
     n = (_sub(_mul(dVCF, G_thd), _mul(dPI, G_Td)), _scale(-1, _mul(dPI, G_thd)),
          _scale(-1, _mul(_mul(F, dPI), G_thd)))
-    pick = lambda avg, other: (ca.if_else(port_avg > 0.5, avg[0], other[0]),
-                               ca.if_else(port_avg > 0.5, avg[1], other[1]))
-    pV = pick(_mul(F_port, G_thV), G_pV)
-    pd = pick(_mul(F_port, G_thd), G_pd)
     Z_num = r
-    Z_den = tuple(_add(_mul(pd, r[i]), _mul(pV, n[i])) for i in range(3))
+    Z_den = tuple(_add(_mul(G_pd, r[i]), _mul(G_pV, n[i])) for i in range(3))
     H_T = _div(_mul(dPI, G_TV), R0)
-    out = [v for form in (L_t, L_imp, Z_num, Z_den) for c in form for v in c] + list(H_T)
-    return ca.Function("haa_loopcoef", [Gw, const, gains, struct], [ca.vertcat(*out)],
-                       ["Gw", "const", "gains", "struct"], ["coef"])
+    forms = dict(zip(L.COEF_FORMS, (L_t, L_imp, Z_num, Z_den)))
+    values = {f"{form}.{t}": forms[form][i] for form in L.COEF_FORMS for i, t in enumerate(L.COEF_TERMS)}
+    values["H_T"] = H_T
+    out = [x for name in L.COEF_OUTPUTS for x in values[name]]
+    return ca.Function("haa_loopcoef", [Gw, const, gains], [ca.vertcat(*out)],
+                       ["Gw", "const", "gains"], ["coef"])

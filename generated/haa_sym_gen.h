@@ -85,7 +85,7 @@ const casadi_int* haa_loopcoef_sparsity_in(casadi_int i);
 const casadi_int* haa_loopcoef_sparsity_out(casadi_int i);
 int haa_loopcoef_work(casadi_int *sz_arg, casadi_int* sz_res, casadi_int *sz_iw, casadi_int *sz_w);
 int haa_loopcoef_work_bytes(casadi_int *sz_arg, casadi_int* sz_res, casadi_int *sz_iw, casadi_int *sz_w);
-#define haa_loopcoef_SZ_ARG 4
+#define haa_loopcoef_SZ_ARG 3
 #define haa_loopcoef_SZ_RES 1
 #define haa_loopcoef_SZ_IW 0
 #define haa_loopcoef_SZ_W 0

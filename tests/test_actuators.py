@@ -251,7 +251,10 @@ def test_closed_loop_agrees_with_reference(name, user_file):
     assert disagree == 0, (name, disagree, n_points)
     assert near < n_points // 20, near
     assert 0.05 < n_stable / n_points < 0.95, n_stable      # both branches exercised
-    assert fr_worst < 1e-10, fr_worst
+    # the project's accuracy of the frequency responses (test_evaluators): 1e-8; measured against
+    # the independent reference (its own ZOH and interconnection): 5.7e-9 for the SEA (Z at
+    # 0.1 rad/s, where z = e^{j w Ts} is within 1e-4 of 1), 4e-11 harmonic drive, 2e-12 HyQ
+    assert fr_worst < 1e-8, fr_worst
 
 
 # --- HyQ: the new file and the legacy flat [plant] file are the same model --------------------
@@ -472,10 +475,13 @@ def test_manifest_lists_every_builtin_topology():
 def test_changed_builtin_topology_is_refused(tmp_path):
     import shutil
     from haa_sym.compiled import GeneratedCode, StaleGeneratedCode
+    import json
     root = tmp_path / "tree"
-    for rel in ("generated", "src/haa_sym/symbolic", "codegen", "model"):
+    for rel in ("generated", "model"):
         shutil.copytree(ROOT / rel, root / rel)
-    shutil.copy(ROOT / "src/haa_sym/actuator.py", root / "src/haa_sym/actuator.py")
+    for rel in json.loads((ROOT / "generated" / "MANIFEST.json").read_text())["sources"]:
+        (root / rel).parent.mkdir(parents=True, exist_ok=True)
+        shutil.copy(ROOT / rel, root / rel)
     hyq = root / "model" / "hyq_haa.toml"
     hyq.write_text(hyq.read_text().replace("J = { value = 0.439", "J = { value = 0.5"))
     GeneratedCode(root / "generated", root=root)            # a value is an input: still valid

@@ -35,9 +35,11 @@ def test_no_dates_in_generated_files():
 
 def _copy_tree(tmp_path):
     root = tmp_path / "tree"
-    for rel in ("generated", "src/haa_sym/symbolic", "codegen", "model"):
-        shutil.copytree(ROOT / rel, root / rel)
-    shutil.copy(ROOT / "src/haa_sym/actuator.py", root / "src/haa_sym/actuator.py")
+    shutil.copytree(ROOT / "generated", root / "generated")
+    for rel in json.loads((ROOT / "generated" / "MANIFEST.json").read_text())["sources"]:
+        (root / rel).parent.mkdir(parents=True, exist_ok=True)
+        shutil.copy(ROOT / rel, root / rel)
+    shutil.copytree(ROOT / "model", root / "model")        # the built-in actuators' topologies
     return root
 
 

@@ -118,7 +118,7 @@ def old_results(directory):
 
 
 def test_interrupted_reproduce_keeps_the_old_results(tmp_path, capsys, monkeypatch):
-    import haa_sym.reproduce as rp
+    import haa_sym.paper.reproduce as rp
     old_results(tmp_path / "results")
     before = snapshot(tmp_path)
 

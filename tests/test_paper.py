@@ -12,7 +12,7 @@ from haa_sym.contact import contact_stability, intervals
 from haa_sym.paper import paper_spec
 from haa_sym.passivity import bands_beyond, corrected_phase
 from haa_sym.regions import grid
-from haa_sym.table2 import score_options, table2
+from haa_sym.paper.table2 import score_options, table2
 from haa_sym.torque import step_response
 
 KNOWN_DIFFERENCES = {

@@ -2,6 +2,7 @@
 
 These use the legacy flat-[plant] HyQ file (tests/data/hyq_haa_legacy.toml, read as the HyQ
 topology); the actuator format's own cases are in test_actuators.py."""
+import re
 import math
 
 import pytest
@@ -100,5 +101,29 @@ def test_overrides_are_validated(params):
         params.configuration("sitting")
 
 
-def test_all_keys_required_in_controller():
-    assert CONTROLLER_KEYS == ("Ts", "N_av", "alpha", "beta", "P_t0", "I_t0")
+def test_controller_keys_and_the_velocity_filter_default(params):
+    assert CONTROLLER_KEYS == ("Ts", "N_av", "alpha", "beta", "P_t0", "I_t0", "velocity_filter", "f_c")
+    # the paper's filter is the stated default; a file need not name it
+    assert params.controller.velocity_filter == "average" and params.controller.f_c is None
+    lp = params.with_values(velocity_filter="lowpass1", f_c=40.0)
+    assert lp.controller.velocity_filter == "lowpass1" and lp.controller.f_c == 40.0
+
+
+@pytest.mark.parametrize("changes, message", [
+    ({"velocity_filter": "median"}, "velocity_filter = 'median'; allowed: one of ['average', 'lowpass1', 'butterworth2']"),
+    ({"velocity_filter": "lowpass1"}, "f_c is missing; allowed: a cut-off frequency in Hz, 0 < f_c < 500"),
+    ({"velocity_filter": "butterworth2", "f_c": 500.0}, "f_c = 500.0 is at or above Nyquist 1/(2 Ts) = 500 Hz; allowed: 0 < f_c < 500"),
+    ({"velocity_filter": "lowpass1", "f_c": -3.0}, "f_c = -3.0 is out of range; allowed: a finite number > 0"),
+])
+def test_velocity_filter_errors_name_the_key(params, changes, message):
+    with pytest.raises(ParameterError, match=re.escape(message)):
+        params.with_values(**changes)
+
+
+def test_missing_N_av_for_the_average_is_one_clear_error(tmp_path):
+    text = GOOD.replace("N_av  = { value = 4,", "#N_av = { value = 4,")
+    f = tmp_path / "p.toml"
+    f.write_text(text)
+    with pytest.raises(ParameterError, match=r"\[controller\]: N_av is missing; allowed: an integer >= 1, "
+                                             "required by velocity_filter = 'average'"):
+        load_params(f)

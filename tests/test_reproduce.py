@@ -8,7 +8,7 @@ import numpy as np
 
 from haa_sym.cli import main
 from haa_sym.progress import set_progress
-from haa_sym.reproduce import foreign_entries
+from haa_sym.paper.reproduce import foreign_entries
 from haa_sym.torque import STEP_CONVENTION
 
 

@@ -23,7 +23,7 @@ import argparse
 import sys
 from pathlib import Path
 
-from haa_sym.params import ParameterError, gain_array, load_params
+from haa_sym.params import STRING_KEYS, ParameterError, gain_array, load_params
 from haa_sym.progress import set_progress
 
 OUTPUT_SUFFIXES = {"regions": (".npz",), "passivity": (".csv", ".json"), "step": (".csv",)}
@@ -36,6 +36,9 @@ def _parse_set(items: list[str]) -> dict[str, float]:
         if not sep:
             raise ParameterError(f"--set {item!r}: expected KEY=VALUE")
         key, value = key.strip(), value.strip()
+        if key in STRING_KEYS:          # a choice by name (velocity_filter), checked by Controller
+            out[key] = value
+            continue
         try:
             # an integer stays one, so that messages show the value as typed (N_av = 0, not 0.0)
             out[key] = int(value) if value.lstrip("+-").isdigit() else float(value)
@@ -99,12 +102,16 @@ def _params(args):
     params = load_params(args.params)
     if args.configuration:
         params = params.configuration(args.configuration)
-    for key, value in _parse_set(args.set).items():
-        try:
-            params = params.with_values(**{key: value})
-        except ParameterError as exc:
-            raise ParameterError(f"--set {key}={value}: {exc}") from None
-    return params
+    sets = _parse_set(args.set)
+    if not sets:
+        return params
+    try:                  # all at once: velocity_filter and f_c are only valid together
+        return params.with_values(**sets)
+    except ParameterError as exc:
+        msg = str(exc)
+        named = [k for k in sets if msg.startswith((f"{k} ", f"unknown parameter key(s) ['{k}'"))]
+        given = " ".join(f"--set {k}={v}" for k, v in sets.items() if not named or k in named)
+        raise ParameterError(f"{given}: {msg}") from None
 
 
 def _check_out(path: str | None, cmd: str, flag: str = "--out") -> Path | None:
@@ -172,7 +179,7 @@ def _cmd_passivity(args) -> int:
     from haa_sym.outputs import Transaction
     with Transaction() as tx:
         if out:
-            from haa_sym.reproduce import _csv
+            from haa_sym.outputs import csv_text as _csv
             from haa_sym.regions import run_meta
             text = (json.dumps({"cells": rows, "meta": run_meta(params, options)}, indent=1) + "\n"
                     if out.suffix == ".json" else _csv(rows))
@@ -195,7 +202,7 @@ def _cmd_step(args) -> int:
     from haa_sym.outputs import Transaction
     with Transaction() as tx:
         if out:
-            from haa_sym.reproduce import _csv
+            from haa_sym.outputs import csv_text as _csv
             tx.write_text(out, _csv([{"t_s": f"{t:.6g}", "T_Nm": f"{v:.9g}"} for t, v in zip(s.t, s.T)]), "--out")
         if plot:
             from haa_sym.plots import plot_steps, save_figure
@@ -225,7 +232,7 @@ def _cmd_margins(args) -> int:
 
 
 def _cmd_reproduce(args) -> int:
-    from haa_sym.reproduce import reproduce
+    from haa_sym.paper.reproduce import reproduce
     params = _params(args)
     options = _parse_options(args.option)
     reproduce(args.out, params, options, quick=args.quick, field="--out")

@@ -34,7 +34,7 @@ def contact_stability(params: Params, K_env, *, P_gain: float = 0.0, D_gain: flo
     """
     from tqdm.auto import tqdm
 
-    from haa_sym.reference import spectral_radius
+    from haa_sym.statespace import closed_loop_batch
     P_gain, D_gain, beta, alpha = gain_points(P_gain, D_gain, beta, alpha)
     K_env = gain_array("K_env", K_env).ravel()
     top = params.plant.topology
@@ -49,7 +49,7 @@ def contact_stability(params: Params, K_env, *, P_gain: float = 0.0, D_gain: flo
     for i, K in enumerate(tqdm(K_env, desc="contact stiffness", leave=False,
                                disable=None if progress is None else not progress)):
         loop = ClosedLoop(params.with_values(**{key: float(K)}), options, basis=False)
-        rho[i] = spectral_radius(loop, P_gain, D_gain, beta, alpha)
+        rho[i] = np.abs(np.linalg.eigvals(closed_loop_batch(loop, P_gain, D_gain, beta, alpha)[0][0])).max()
         stable[i] = rho[i] < 1
     return stable, rho
 

@@ -40,7 +40,11 @@ from haa_sym.cache import BoundedCache, array_key
 from haa_sym.compiled import evaluators
 from haa_sym.exact import bilinear, polymul, polysub, to_float, transfer_polynomials
 from haa_sym.params import ParameterError, Params, gain_array
+from haa_sym.elements import backward_difference, common_denominator, delay, pi_integral, velocity_filter
+from haa_sym.layout import (COEF_FORMS, COEF_OUTPUTS, COEF_TERMS, FREQ_COLUMN, N_BASIS, TORQUE_GAINS,
+                            gain_monomials)
 from haa_sym.plant import DiscretePlant, continuous_plant, discretize
+from haa_sym.statespace import closed_loop_eigenvalues, to_statespace
 
 __all__ = ["LoopOptions", "LoopCoefficients", "ClosedLoop", "StabilityResult", "PORTS", "FREQ_OUTPUTS"]
 
@@ -235,13 +239,17 @@ class ClosedLoop:
             (params.plant, ctrl.Ts, backend),
             lambda: discretize(continuous_plant(params.plant, backend), ctrl.Ts))
         # chi = (z - 1) z^delay z^N_av d(z) + ...: integrator, delay, filter, plant states
-        self.degree = self.plant.Phi.shape[0] + 1 + ctrl.N_av + self.options.delay
+        el = self.elements
+        filter_order = common_denominator(el["F_d"], el["F_vc"])[0].__len__() - 1
+        self.degree = self.plant.Phi.shape[0] + el["I_z"].order + el["z_delay"].order + filter_order
         caps = [c for c in evaluators(backend).capacities if c >= self.degree]
         if not caps:
             cap = max(evaluators(backend).capacities)
+            what = f"N_av = {ctrl.N_av}" if ctrl.velocity_filter == "average" else \
+                f"velocity_filter = {ctrl.velocity_filter!r}"
             raise ParameterError(
-                f"N_av = {ctrl.N_av} gives a closed loop of order {self.degree}, above the largest "
-                f"generated capacity {cap}; allowed: N_av <= {cap - self.degree + ctrl.N_av} (with "
+                f"{what} gives a closed loop of order {self.degree}, above the largest generated "
+                f"capacity {cap}; allowed: N_av <= {cap - self.degree + filter_order} (with "
                 f"delay = {self.options.delay}; a larger capacity needs CAPACITIES in "
                 "codegen/generate.py of a source tree and `make derive`)")
         self.capacity = caps[0]
@@ -256,6 +264,10 @@ class ClosedLoop:
         self.basis, self._z_basis = self._basis() if basis else (None, None)
 
     # --- the characteristic polynomial -------------------------------------------------------
+    def plant_output(self, name: str) -> int:
+        """Row of the plant's output ``name`` (its C matrix and transfer numerators)."""
+        return self.plant.output_names.index(name)
+
     @property
     def torque_output(self) -> str:
         # the actuator file says what the sensor measures; the option can drop the damping term
@@ -263,51 +275,57 @@ class ClosedLoop:
         return "T_sensor" if damped else "T_sensor_spring"
 
     @property
-    def filter_lengths(self) -> tuple[int, int]:
-        """(N_VC, N_D): samples averaged by the compensation and by the D term (option ``filter``)."""
-        N = self.params.controller.N_av
-        f = self.options.filter
-        return (N if f in ("both", "compensation") else 1, N if f in ("both", "impedance") else 1)
+    def elements(self) -> dict:
+        """The controller's elements (:mod:`haa_sym.elements`) in this loop, by role.
+
+        ``F_d`` the velocity estimate of the D term (Eq. 8), ``F_vc`` that of the velocity
+        compensation (Eq. 6) (option ``filter``: the chosen ``velocity_filter`` on both, or on one
+        with the backward difference on the other), ``F_port`` the estimate an averaged port reads,
+        ``I_z`` the integral part of the torque PI (Eq. 7) and ``z_delay`` the computation delay.
+        """
+        ctrl, f = self.params.controller, self.options.filter
+        F = velocity_filter(ctrl.velocity_filter, ctrl.Ts, ctrl.N_av, ctrl.f_c)
+        diff = backward_difference(ctrl.Ts)
+        return {"F_d": F if f in ("both", "impedance") else diff,
+                "F_vc": F if f in ("both", "compensation") else diff,
+                "F_port": F, "I_z": pi_integral(ctrl.Ts), "z_delay": delay(self.options.delay)}
 
     def _structure_key(self) -> tuple:
         """Everything the basis depends on: the sampled plant and the loop's structure."""
-        p, ctrl = self.plant, self.params.controller
-        return (array_key(p.Phi, p.Gamma[:, :1], p.C), ctrl.Ts, ctrl.N_av, self.filter_lengths,
-                self.options.delay, self.torque_output, self.capacity)
+        p, el = self.plant, self.elements
+        return (array_key(p.Phi, p.Gamma[:, :1], p.C), self.params.controller.Ts,
+                tuple((e.numerator, e.denominator) for e in el.values()), self.torque_output,
+                self.capacity)
 
     def _exact_basis(self) -> list[list[Fraction]]:
-        """Exact descending coefficients of b0..b7 in z, each of degree ``self.degree``."""
-        p, ctrl, opt = self.plant, self.params.controller, self.options
-        d, nums = _transfer_polynomials(p)
-        n_T = nums[p.output_names.index(self.torque_output)][0]
-        n_th = nums[p.output_names.index("theta_encoder")][0]
-        N = ctrl.N_av                      # the longest average: z^N clears every denominator
-        N_vc, N_d = self.filter_lengths
-        Ts = Fraction(ctrl.Ts)
+        """Exact descending coefficients of b0..b7 in z (haa_sym.layout.GAIN_MONOMIALS), each of
+        degree ``self.degree``.
 
-        def zpow(k):
-            return [Fraction(1)] + [Fraction(0)] * k
-
-        def zk_minus_1(k):
-            return [Fraction(1)] + [Fraction(0)] * (k - 1) + [Fraction(-1)]
-        zm1 = [Fraction(1), Fraction(-1)]                          # z - 1
-        z1 = zpow(1)
-        # chi(z): return difference at V_m times (z-1) z^(N+d) d(z), Eq. (6)-(8), where
-        # F_k(z) z^N = z^(N-k) (z^k - 1)/(k Ts). P_t D_gain and VC multiply b_d and b_vc; they
-        # nearly cancel in parts of the plane, so chi uses (P_t D_gain - VC) b_d - VC (b_vc - b_d)
-        # with the difference exact (zero for filter = "both").
-        b_d = polymul([1 / (N_d * Ts)], zm1, zpow(N - N_d), zk_minus_1(N_d), n_th)
-        b_vc = polymul([1 / (N_vc * Ts)], zm1, zpow(N - N_vc), zk_minus_1(N_vc), n_th)
+        chi(z) is the return difference at V_m times (z - 1) z^d d(z) D(z), with D the common
+        denominator of the two velocity estimates, F_d = A_d/D and F_vc = A_vc/D (Eq. 6-8). P_t
+        D_gain and VC multiply the same polynomial when both estimates are one filter; they nearly
+        cancel in parts of the plane, so chi uses (P_t D_gain - VC) b_d - VC (b_vc - b_d) with the
+        difference exact (zero for filter = "both").
+        """
+        el = self.elements
+        d, nums = _transfer_polynomials(self.plant)
+        n_T = nums[self.plant_output(self.torque_output)][0]
+        n_th = nums[self.plant_output("theta_encoder")][0]
+        D, (A_d, A_vc) = common_denominator(el["F_d"], el["F_vc"])
+        I_num, I_den = el["I_z"].numerator, el["I_z"].denominator        # Ts z, z - 1
+        z_num, z_den = el["z_delay"].numerator, el["z_delay"].denominator  # 1, z^d
+        b_d = polymul(I_den, z_num, A_d, n_th)
         basis = [
-            polymul(zm1, zpow(N), zpow(opt.delay), d),                                # 1
-            polymul(zm1, zpow(N), n_T),                                               # P_t
-            polymul([Ts], z1, zpow(N), n_T),                                          # I_t
-            polymul(zm1, zpow(N), n_th),                                              # P_t P_gain
-            polymul([Ts], z1, zpow(N), n_th),                                         # I_t P_gain
-            b_d,                                                                      # P_t D_gain - VC
-            polymul([Fraction(1, N_d)], z1, zpow(N - N_d), zk_minus_1(N_d), n_th),    # I_t D_gain
-            polysub(b_vc, b_d),                                                       # -VC (rest)
+            polymul(I_den, z_den, d, D),                                  # 1
+            polymul(I_den, z_num, D, n_T),                                # P_t
+            polymul(I_num, z_num, D, n_T),                                # I_t
+            polymul(I_den, z_num, D, n_th),                               # P_t P_gain
+            polymul(I_num, z_num, D, n_th),                               # I_t P_gain
+            b_d,                                                          # P_t D_gain - VC
+            polymul(I_num, z_num, A_d, n_th),                             # I_t D_gain
+            polysub(polymul(I_den, z_num, A_vc, n_th), b_d),              # -VC (rest)
         ]
+        assert len(basis) == N_BASIS
         return [[Fraction(0)] * (self.degree + 1 - len(b)) + list(b) for b in basis]
 
     def _basis(self) -> tuple[np.ndarray, np.ndarray]:
@@ -338,10 +356,7 @@ class ClosedLoop:
         pts, shape = self._points(P_gain, D_gain, beta, alpha)
         if pts.shape[1] != 1:
             raise ValueError("characteristic_polynomial takes one gain point")
-        P, D, b, a = pts[:, 0]
-        P_t, I_t, VC = b * self.const[0], b * self.const[1], a * self.const[2]
-        g = np.array([1, P_t, I_t, P_t * P, I_t * P, P_t * D - VC, I_t * D, -VC])
-        return self._z_basis @ g
+        return self._z_basis @ np.array(gain_monomials(pts[:, 0], self.const))
 
     # --- evaluators -------------------------------------------------------------------------
     def stability(self, P_gain, D_gain, beta=None, alpha=None, *, radius: bool = False,
@@ -391,7 +406,6 @@ class ClosedLoop:
         rho = np.full(n_unstable.shape, np.nan)
         need = np.ones_like(refined) if radius else refined
         if need.any():
-            from haa_sym.reference import closed_loop_eigenvalues
             eig = np.abs(closed_loop_eigenvalues(self, pts[:, need]))
             rho[need] = eig.max(axis=1)
             n_unstable[refined] = (eig[refined[need]] >= 1).sum(axis=1)
@@ -410,32 +424,49 @@ class ClosedLoop:
         omega = self.options.omega(ctrl.Ts) if omega is None else _finite_array("omega", omega).ravel()
         beta = float(_finite_array("beta", ctrl.beta if beta is None else beta))
         alpha = float(_finite_array("alpha", ctrl.alpha if alpha is None else alpha))
-        struct = (ctrl.Ts, ctrl.N_av, self.options.delay,
-                  1.0 if self.options.port == "encoder_average" else 0.0, *self.filter_lengths)
-        key = (array_key(self.plant.Phi, self.plant.Gamma, self.plant.C, omega, self.const), struct,
-               self.torque_output, self.options.port, beta, alpha, self.backend)
-        return _COEFFICIENTS.get(key, lambda: self._loop_coefficients(omega, beta, alpha, struct))
+        el = self.elements
+        key = (array_key(self.plant.Phi, self.plant.Gamma, self.plant.C, omega, self.const),
+               tuple((e.numerator, e.denominator) for e in el.values()), self.torque_output,
+               self.options.port, beta, alpha, self.backend)
+        return _COEFFICIENTS.get(key, lambda: self._loop_coefficients(omega, beta, alpha))
 
-    def _loop_coefficients(self, omega, beta, alpha, struct) -> LoopCoefficients:
-        ctrl = self.params.controller
-        # with port = "encoder_average" the kernel uses the averaged encoder, not this row
-        port = f"dtheta_{self.params.plant.topology.encoder}" if self.options.port == "encoder_average" \
-            else self.options.port
+    def _loop_coefficients(self, omega, beta, alpha) -> LoopCoefficients:
+        ctrl, el = self.params.controller, self.elements
+        averaged = self.options.port == "encoder_average"
+        port = "theta_encoder" if averaged else self.options.port
         G = self.plant.frequency_response(omega, outputs=(self.torque_output, "theta_encoder", port),
                                           inputs=("V_m", "T_dist"))
-        # one column per frequency: re/im of the 6 plant responses, then w Ts
-        cols = np.empty((13, omega.size))
-        cols[0:12:2] = G.reshape(6, -1).real
-        cols[1:12:2] = G.reshape(6, -1).imag
-        cols[12] = omega * ctrl.Ts
+        values = dict(zip(("G_TV", "G_Td", "G_thV", "G_thd", "G_pV", "G_pd"), G.reshape(6, -1)))
+        for k in ("F_d", "F_vc", "I_z", "z_delay"):
+            values[k] = el[k].frequency_response(omega, ctrl.Ts)
+        if averaged:                      # the port reads the controller's velocity estimate
+            F = el["F_port"].frequency_response(omega, ctrl.Ts)
+            values["G_pV"], values["G_pd"] = F * values["G_thV"], F * values["G_thd"]
+        cols = np.empty((2 * len(FREQ_COLUMN), omega.size))
+        for i, k in enumerate(FREQ_COLUMN):
+            cols[2 * i], cols[2 * i + 1] = values[k].real, values[k].imag
         (out,) = evaluators(self.backend).call_columns(
-            "haa_loopcoef", [cols, self.const, np.array([beta, alpha]), np.array(struct)], 0)
-        c = (out[:, 0::2] + 1j * out[:, 1::2]).T            # 13 x n_w
-        forms = {k: c[3 * i:3 * i + 3].T.copy() for i, k in enumerate(("L_t", "L_imp", "Z_num", "Z_den"))}
-        res = LoopCoefficients(omega=omega.copy(), Ts=ctrl.Ts, H_T=c[12].copy(), **forms)
+            "haa_loopcoef", [cols, self.const, np.array([{"beta": beta, "alpha": alpha}[k] for k in TORQUE_GAINS])], 0)
+        c = dict(zip(COEF_OUTPUTS, (out[:, 0::2] + 1j * out[:, 1::2]).T))
+        forms = {f: np.stack([c[f"{f}.{t}"] for t in COEF_TERMS], axis=1) for f in COEF_FORMS}
+        res = LoopCoefficients(omega=omega.copy(), Ts=ctrl.Ts, H_T=c["H_T"].copy(), **forms)
         for arr in (res.omega, res.H_T, *forms.values()):
             arr.setflags(write=False)
         return res
+
+    def to_statespace(self, P_gain: float, D_gain: float, beta=None, alpha=None, cut: str | None = None):
+        """The closed loop at one gain point as a python-control ``StateSpace`` with named signals
+        (:func:`haa_sym.statespace.to_statespace`); ``cut`` in {None, "T_ref", "PI"}.
+
+        Examples
+        --------
+        >>> from haa_sym import load_params, ClosedLoop
+        >>> sys = ClosedLoop(load_params()).to_statespace(200.0, 10.0)        # doctest: +SKIP
+        >>> sys.input_labels, sys.output_labels                               # doctest: +SKIP
+        (['T_dist', 'r'], ['T_meas', 'theta_encoder', 'port_velocity', 'y'])
+        """
+        P, D, b, a = self._points(P_gain, D_gain, beta, alpha)[0][:, 0]
+        return to_statespace(self, P, D, b, a, cut)
 
     def frequency_response(self, omega, P_gain=0.0, D_gain=0.0, beta=None, alpha=None) -> dict:
         """Loop transfer functions at ``omega`` (rad/s) for gain points.

@@ -20,7 +20,10 @@ Example
 from __future__ import annotations
 
 import contextlib
+import csv
+import io
 import os
+import re
 import secrets
 import shutil
 from pathlib import Path
@@ -28,7 +31,8 @@ from typing import Callable, Iterator
 
 from haa_sym.params import ParameterError
 
-__all__ = ["OutputError", "Transaction", "transaction", "check_file", "check_directory", "write_text"]
+__all__ = ["OutputError", "Transaction", "transaction", "check_file", "check_directory", "write_text",
+           "csv_text"]
 
 
 class OutputError(ParameterError):
@@ -241,3 +245,24 @@ def write_text(path: str | Path, text: str, tx: Transaction | None = None, field
     """Write ``text`` to ``path`` through ``tx`` (or on its own, atomically)."""
     with transaction(tx) as t:
         return t.write_text(path, text, field)
+
+
+_CSV_NAME = re.compile(r"[A-Za-z_][A-Za-z0-9_]*")
+
+
+def csv_text(rows: list[dict]) -> str:
+    """CSV text that ``numpy.genfromtxt(..., delimiter=",", names=True)`` reads back unchanged:
+    headers are plain identifiers (genfromtxt rewrites others, e.g. drops dots) and no value
+    holds a comma, quote or newline (genfromtxt does not parse CSV quoting)."""
+    for name in rows[0]:
+        if not _CSV_NAME.fullmatch(name):
+            raise ValueError(f"CSV header {name!r} is not a plain identifier")
+    for row in rows:
+        for v in row.values():
+            if any(ch in str(v) for ch in ',"\n'):
+                raise ValueError(f"CSV value {v!r} holds a comma, quote or newline")
+    buf = io.StringIO()
+    w = csv.DictWriter(buf, fieldnames=list(rows[0]), lineterminator="\n")
+    w.writeheader()
+    w.writerows(rows)
+    return buf.getvalue()

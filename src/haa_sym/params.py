@@ -58,11 +58,18 @@ class ParameterError(ValueError):
 # dimension; alpha = 0 switches velocity compensation off (Fig. 9a).
 _CONTROLLER_DOMAIN: dict[str, str] = {
     "Ts": ">0", "N_av": "int>=1", "alpha": ">=0", "beta": ">0", "P_t0": ">=0", "I_t0": ">=0",
+    "velocity_filter": "filter", "f_c": ">0",
 }
+# The velocity estimate is a modelling choice with a stated default (the paper's average);
+# N_av is needed by "average" only and f_c (Hz) by the low-pass filters only (Controller checks).
+_CONTROLLER_OPTIONAL = {"velocity_filter": "average", "N_av": None, "f_c": None}
+_VELOCITY_FILTERS = ("average", "lowpass1", "butterworth2")   # haa_sym.elements.VELOCITY_FILTERS
+STRING_KEYS = ("velocity_filter",)   # keys whose value is a name, not a number
 _DOMAIN_TEXT = {
     ">0": "a finite number > 0",
     ">=0": "a finite number >= 0",
     "int>=1": "an integer >= 1",
+    "filter": f"one of {list(_VELOCITY_FILTERS)}",
 }
 # Gain points of every analysis: the impedance gains of Eq. (8) and the torque-loop gains, whose
 # rule is the controller file's (beta = 0 switches the torque PI off; negative gains are positive
@@ -152,21 +159,39 @@ def _plant_from(topology, values):
 
 @dataclass(frozen=True)
 class Controller:
-    """Controller defaults of Sec. 3: sampling, filter, velocity compensation and PI gains.
+    """Controller defaults of Sec. 3: sampling, velocity estimate, velocity compensation, PI gains.
 
     ``P_t = beta * P_t0`` and ``I_t = beta * I_t0`` (Eq. 7); the simplified velocity compensation
-    gain is ``alpha * N / k_t * (R B_m + k_t k_w)`` (Eq. 6).
+    gain is ``alpha * N / k_t * (R B_m + k_t k_w)`` (Eq. 6). The velocity estimate
+    ``velocity_filter`` (default ``"average"``, the paper's) is one of ``haa_sym.elements``:
+    ``"average"`` of ``N_av`` samples, or the backward difference followed by a Tustin
+    ``"lowpass1"`` or ``"butterworth2"`` filter of cut-off ``f_c`` Hz (below Nyquist 1/(2 Ts)).
     """
 
     Ts: float
-    N_av: int
+    N_av: int | None
     alpha: float
     beta: float
     P_t0: float
     I_t0: float
+    velocity_filter: str = "average"
+    f_c: float | None = None
 
     def __post_init__(self):
-        _check_fields(self, _CONTROLLER_DOMAIN)
+        _check_fields(self, {k: d for k, d in _CONTROLLER_DOMAIN.items()
+                             if not (k in ("N_av", "f_c") and getattr(self, k) is None)})
+        kind = self.velocity_filter
+        if kind == "average" and self.N_av is None:
+            raise ParameterError("N_av is missing; allowed: an integer >= 1, required by "
+                                 "velocity_filter = 'average'")
+        if kind != "average":
+            nyquist = 0.5 / self.Ts
+            if self.f_c is None:
+                raise ParameterError(f"f_c is missing; allowed: a cut-off frequency in Hz, 0 < f_c < "
+                                     f"{nyquist:g} (Nyquist), required by velocity_filter = {kind!r}")
+            if not self.f_c < nyquist:
+                raise ParameterError(f"f_c = {self.f_c!r} is at or above Nyquist 1/(2 Ts) = {nyquist:g} Hz; "
+                                     f"allowed: 0 < f_c < {nyquist:g} (Hz)")
 
     @property
     def P_t(self) -> float:
@@ -178,7 +203,8 @@ class Controller:
 
     def replace(self, **changes: float) -> "Controller":
         """A copy with some keys changed, validated like a file."""
-        return _validated(Controller, {**self.__dict__, **changes}, _CONTROLLER_DOMAIN)
+        return _validated(Controller, {**self.__dict__, **changes}, _CONTROLLER_DOMAIN,
+                          optional=_CONTROLLER_OPTIONAL)
 
 
 @dataclass(frozen=True)
@@ -264,6 +290,10 @@ def _check_value(key: str, value: object, domain: str, where: str | None = None)
     """``value`` of ``key`` checked against ``domain``; the message names where, key, value, allowed."""
     allowed = _DOMAIN_TEXT[domain]
     prefix = f"{where}: " if where else ""
+    if domain == "filter":
+        if value not in _VELOCITY_FILTERS:
+            raise ParameterError(f"{prefix}{key} = {value!r}; allowed: {allowed}")
+        return value
     if isinstance(value, bool) or not isinstance(value, (int, float)):
         raise ParameterError(f"{prefix}{key} = {value!r} is not a number; allowed: {allowed}")
     try:
@@ -289,14 +319,17 @@ def _check_fields(obj, domain: Mapping[str, str]) -> None:
         object.__setattr__(obj, key, _check_value(key, getattr(obj, key), dom))
 
 
-def _validated(cls, values: Mapping[str, object], domain: Mapping[str, str], where: str | None = None):
+def _validated(cls, values: Mapping[str, object], domain: Mapping[str, str], where: str | None = None,
+               optional: Mapping[str, object] = {}):
     prefix = f"{where}: " if where else ""
     unknown = sorted(set(values) - set(domain))
     if unknown:
         raise ParameterError(f"{prefix}unknown key(s) {unknown}; allowed: {list(domain)}")
-    missing = [k for k in domain if k not in values]
+    missing = [k for k in domain if k not in values and k not in optional]
     if missing:
-        raise ParameterError(f"{prefix}missing key(s) {missing}; every key of {list(domain)} is required")
+        required = [k for k in domain if k not in optional]
+        raise ParameterError(f"{prefix}missing key(s) {missing}; every key of {required} is required")
+    values = {**{k: v for k, v in optional.items() if k not in values}, **values}
     try:
         return cls(**values)
     except ParameterError as exc:
@@ -385,7 +418,7 @@ def parse_params(data: Mapping[str, object], source: str = "<memory>") -> Params
         raise ParameterError(f"{source}: missing table [controller]")
     refs = about["references"]
     controller = _validated(Controller, entry_values(data["controller"], f"{source} [controller]", refs),
-                            _CONTROLLER_DOMAIN, f"{source} [controller]")
+                            _CONTROLLER_DOMAIN, f"{source} [controller]", optional=_CONTROLLER_OPTIONAL)
     raw_configs = data.get("configurations", {})
     if not isinstance(raw_configs, Mapping):
         raise ParameterError(f"{source}: [configurations] must be a table of tables")

@@ -1,112 +1,181 @@
-"""Independent reference: the closed loop as an explicit discrete state space (numpy only).
+"""Independent reference: the closed loop by block interconnection (numpy and scipy.signal).
 
-This is the textbook construction, sample by sample, used by the tests and the benchmarks to
-check the generated evaluators (which work on the characteristic polynomial and on loop
-algebra instead). It shares only the ZOH-discretised plant with them.
+Used by the tests, the benchmarks and the reproduction's cross-check to check the evaluators
+(:class:`haa_sym.ClosedLoop`, which work on the characteristic polynomial, on loop algebra in the
+frequency domain and on :mod:`haa_sym.statespace`). It is built from the parameters and the loop
+options alone, with its own algebra:
 
-Closed-loop state ``[x (7), theta[k-1..k-N_av], integrator[k-1], V[k-1] (if delay)]``,
-inputs ``[T_dist, r]`` where ``r`` is injected at the cut point, outputs
-``[T_meas, theta_L1, port velocity, y]`` where ``y`` is what returns to the cut point with
-negative sign (so the loop transfer r -> y is the ``L`` of 1/(1+L)).
+* the plant: the continuous state space of the actuator (the generated or compiled plant function, the one
+  thing it shares with the evaluators; the tests check that against an independent assembly of
+  the equations of motion), sampled by ``scipy.signal.cont2discrete(..., "zoh")``;
+* the velocity estimate: the average as an FIR filter; the low-pass filters as the backward
+  difference followed by the analog prototype w_c/(s + w_c) or w_c^2/(s^2 + sqrt(2) w_c s + w_c^2)
+  realised in state space and mapped by ``scipy.signal.cont2discrete(..., "bilinear")``; the
+  PI's integral Ts/(1 - z^-1) and the delay z^-d; transfer functions realised by
+  ``scipy.signal.tf2ss``;
+* velocity compensation VC = alpha N/k_t (R B_m + k_t k_w) (Eq. 6) from the parameters;
+* the static part (impedance law Eq. 8, PI gains Eq. 7, compensation, the sums) as an
+  interconnection matrix u = K y + E w of the blocks' outputs y and the external inputs w,
+  closed by y = (I - D K)^-1 (C x + D E w), as python-control's ``interconnect`` does.
+
+Closed-loop inputs ``[T_dist, r]`` (``r`` injected at the cut point), outputs
+``[T_meas, theta, port velocity, y]`` where ``y`` returns to the cut point with negative sign.
+The functions take a ``ClosedLoop`` only to read its ``params`` and ``options``.
 """
 from __future__ import annotations
 
-import numpy as np
+import math
 
-from haa_sym.loop import ClosedLoop
+import numpy as np
+import scipy.linalg
+import scipy.signal
 
 __all__ = ["closed_loop_matrices", "closed_loop_eigenvalues", "spectral_radius", "frequency_response"]
 
 
-def closed_loop_matrices(loop: ClosedLoop, P_gain: float, D_gain: float, beta: float | None = None,
-                         alpha: float | None = None, cut: str | None = None):
-    """``(A, B, C, D)`` of the sampled closed loop; ``cut`` in {None, "T_ref", "PI"}."""
-    A, B, C, D = _closed_loop_batch(loop, np.atleast_1d(np.asarray(P_gain, float)),
-                                    np.atleast_1d(np.asarray(D_gain, float)), beta, alpha, cut)
-    return A[0], B[0], C[0], D[0]
+def _zoh_plant(params, outputs):
+    from haa_sym.plant import continuous_plant
+    cont = continuous_plant(params.plant)
+    C = cont.C[[cont.output_names.index(o) for o in outputs]]
+    B = cont.B[:, [0, 2]]                                # V_m, T_dist
+    Ad, Bd, Cd, Dd, _ = scipy.signal.cont2discrete((cont.A, B, C, np.zeros((len(outputs), 2))),
+                                                   params.controller.Ts, method="zoh")
+    return Ad, Bd, Cd, Dd
 
 
-def _closed_loop_batch(loop: ClosedLoop, P_gain: np.ndarray, D_gain: np.ndarray, beta=None, alpha=None,
-                       cut: str | None = None):
-    """The construction of :func:`closed_loop_matrices` for k gain points at once (shape (k,))."""
-    ctrl, opt, pl = loop.params.controller, loop.options, loop.plant
+def _tf_block(b, a):
+    """(A, B, C, D) of b(z^-1)/a(z^-1) (coefficients in powers of z^-1), by scipy's tf2ss."""
+    b, a = np.atleast_1d(np.asarray(b, float)), np.atleast_1d(np.asarray(a, float))
+    if len(a) == 1 and len(b) == 1:
+        return np.zeros((0, 0)), np.zeros((0, 1)), np.zeros((1, 0)), np.array([[b[0] / a[0]]])
+    n = max(len(a), len(b))
+    b = np.concatenate([b, np.zeros(n - len(b))])
+    a = np.concatenate([a, np.zeros(n - len(a))])
+    return scipy.signal.tf2ss(b, a)
+
+
+def _velocity_estimate_blocks(ctrl):
+    """The velocity estimate theta -> v_F as one or two blocks in series: (name, (A,B,C,D), y, u)."""
+    Ts = ctrl.Ts
+    if ctrl.velocity_filter == "average":
+        N = ctrl.N_av
+        b = np.zeros(N + 1)
+        b[0], b[N] = 1 / (N * Ts), -1 / (N * Ts)
+        return [("F", _tf_block(b, np.r_[1.0, np.zeros(N)]), ["v_F"], ["u_F"])]
+    # the analog prototype in state space, then the bilinear map in state-space form (well
+    # conditioned at fast sampling, where the discrete polynomial's roots crowd at z = 1)
+    w_c = 2 * math.pi * ctrl.f_c
+    num, den = {"lowpass1": ([w_c], [1.0, w_c]),
+                "butterworth2": ([w_c ** 2], [1.0, math.sqrt(2) * w_c, w_c ** 2])}[ctrl.velocity_filter]
+    A, B, C, D = scipy.signal.tf2ss(num, den)
+    # scale the states (diagonal balancing of [[A, B], [C, D]]): the companion form's states
+    # differ by powers of w_c, which costs digits in the frequency responses near Nyquist
+    _, (scale, _) = scipy.linalg.matrix_balance(np.block([[A, B], [C, D]]), permute=False, separate=True)
+    s = scale[:A.shape[0]]
+    A, B, C = A * s[None, :] / s[:, None], B / s[:, None], C * s[None, :]
+    lowpass = scipy.signal.cont2discrete((A, B, C, D), Ts, method="bilinear")[:4]
+    return [("bd", _tf_block([1 / Ts, -1 / Ts], [1.0]), ["v_raw"], ["u_F"]),
+            ("lowpass", lowpass, ["v_F"], ["u_lp"])]
+
+
+def _blocks(params, options, torque_output):
+    """The dynamic blocks: (name, (A, B, C, D), output names, input names)."""
+    ctrl = params.controller
+    port_body = options.port != "encoder_average"
+    outs = [torque_output, "theta_encoder"] + ([options.port] if port_body else [])
+    blocks = [("plant", _zoh_plant(params, outs), [f"y_{o}" for o in ("T", "th", "p")[:len(outs)]],
+               ["u_V", "u_Tdist"])]
+    blocks += _velocity_estimate_blocks(ctrl)
+    if options.filter != "both":
+        blocks.append(("diff", _tf_block([1 / ctrl.Ts, -1 / ctrl.Ts], [1.0]), ["v_diff"], ["u_diff"]))
+    # backward Euler (Eq. 7) with the state in N s (the integral itself), so it is scaled like e
+    blocks.append(("integral", (np.eye(1), ctrl.Ts * np.eye(1), np.eye(1), ctrl.Ts * np.eye(1)), ["y_I"], ["u_I"]))
+    if options.delay:
+        d = options.delay                                 # a shift register of d samples
+        shift = (np.eye(d, k=-1), np.eye(d, 1), np.eye(1, d, d - 1), np.zeros((1, 1)))
+        blocks.append(("delay", shift, ["y_del"], ["u_del"]))
+    return blocks
+
+
+def _batch(loop, P_gain, D_gain, beta=None, alpha=None, cut=None):
+    params, opt = loop.params, loop.options
+    ctrl, pl = params.controller, params.plant
     beta = ctrl.beta if beta is None else beta
     alpha = ctrl.alpha if alpha is None else alpha
-    P_t, I_t, VC = beta * ctrl.P_t0, beta * ctrl.I_t0, alpha * pl.VC0
-    N, Ts, d = ctrl.N_av, ctrl.Ts, opt.delay
-    nx = pl.Phi.shape[0]
-    n = nx + N + 1 + d
-    i_h, i_int, i_u = nx, nx + N, nx + N + 1
-    nin = 2  # T_dist, r
-    k = P_gain.shape[0]
-    Pg, Dg = P_gain[:, None], D_gain[:, None]
-    # every signal at sample k is a row over [state (n), inputs (2)]
-    def zero():
-        return np.zeros(n + nin)
-    def row_from_C(name):
-        r = zero()
-        r[:nx] = pl.C[pl.output_names.index(name)]
+    P, D, beta, alpha = (np.atleast_1d(np.asarray(v, float)).ravel()
+                         for v in np.broadcast_arrays(P_gain, D_gain, beta, alpha))
+    k = P.size
+    P_t, I_t = beta * ctrl.P_t0, beta * ctrl.I_t0
+    VC = alpha * pl.N / pl.k_t * (pl.R * pl.B_m + pl.k_t * pl.k_w)           # Eq. (6)
+    # the actuator file says what the sensor measures; the option can drop the damping term
+    damped = opt.torque_damping and params.plant.topology.torque_damping
+    blocks = _blocks(params, opt, "T_sensor" if damped else "T_sensor_spring")
+    ys = [y for _, _, yn, _ in blocks for y in yn]
+    us = [u for _, _, _, un in blocks for u in un]
+    ws = ["T_dist", "r"]
+    nx = sum(b[1][0].shape[0] for b in blocks)
+    Ab = np.zeros((nx, nx)); Bb = np.zeros((nx, len(us)))
+    Cb = np.zeros((len(ys), nx)); Db = np.zeros((len(ys), len(us)))
+    i = 0
+    for _, (A, B, C, Dm), yn, un in blocks:
+        m = A.shape[0]
+        r0, c0 = ys.index(yn[0]), us.index(un[0])
+        Ab[i:i + m, i:i + m] = A
+        Bb[i:i + m, c0:c0 + B.shape[1]] = B
+        Cb[r0:r0 + C.shape[0], i:i + m] = C
+        Db[r0:r0 + C.shape[0], c0:c0 + B.shape[1]] = Dm
+        i += m
+    # signals as rows over [y, w], per point: shape (k, ny + nw)
+    width = len(ys) + len(ws)
+
+    def sig(name, scale=None):
+        r = np.zeros((k, width))
+        r[:, ys.index(name) if name in ys else len(ys) + ws.index(name)] = 1.0 if scale is None else scale
         return r
-    th = row_from_C("theta_encoder")
-    T = row_from_C(loop.torque_output)
-    r_in = zero(); r_in[n + 1] = 1
-    def average(k):                                       # (theta[k] - theta[k-k]) / (k Ts)
-        th_k = zero(); th_k[i_h + k - 1] = 1
-        return (th - th_k) / (k * Ts)
-    N_vc, N_d = loop.filter_lengths
-    v = average(N)                                        # the encoder average (port option)
-    v_vc, v_d = average(N_vc), average(N_d)
-    imp = Pg * th + Dg * v_d                              # Eq. (8) with theta_ref = 0: T_ref = -imp
-    T_ref = np.broadcast_to(r_in, imp.shape) if cut == "T_ref" else -imp
-    e = T_ref - T
-    i_prev = zero(); i_prev[i_int] = 1
-    i_k = i_prev + Ts * e                                 # backward Euler, Eq. (7)
-    u_pi = P_t * e + I_t * i_k
-    V_k = (np.broadcast_to(r_in, imp.shape) if cut == "PI" else u_pi) + VC * v_vc   # Eq. (6)
-    if d:
-        V_applied = np.broadcast_to(i_u == np.arange(n + nin), imp.shape).astype(float)
-    else:
-        V_applied = V_k
-    rows = np.zeros((k, n, n + nin))
-    rows[:, :nx, :nx] = pl.Phi
-    rows[:, :nx] += pl.Gamma[None, :, 0, None] * V_applied[:, None, :]
-    rows[:, :nx, n] += pl.Gamma[:, 2]                     # T_dist
-    rows[:, i_h] = th
-    for j in range(1, N):
-        rows[:, i_h + j, i_h + j - 1] = 1
-    rows[:, i_int] = i_k
-    if d:
-        rows[:, i_u] = V_k
-    port = v if opt.port == "encoder_average" else row_from_C(opt.port)
-    y = {None: np.zeros_like(imp), "T_ref": imp, "PI": -u_pi}[cut]
-    out = np.concatenate([np.broadcast_to(r, imp.shape)[:, None] for r in (T, th, port)] + [y[:, None]], axis=1)
-    return rows[:, :, :n], rows[:, :, n:], out[:, :, :n], out[:, :, n:]
+    th = sig("y_th")
+    v_F = sig("v_F")
+    v_diff = sig("v_diff") if "v_diff" in ys else v_F
+    v_d = v_F if opt.filter in ("both", "impedance") else v_diff
+    v_vc = v_F if opt.filter in ("both", "compensation") else v_diff
+    imp = P[:, None] * th + D[:, None] * v_d                                  # Eq. (8)
+    T_ref = sig("r") if cut == "T_ref" else -imp
+    e = T_ref - sig("y_T")
+    u_pi = P_t[:, None] * e + I_t[:, None] * sig("y_I")                       # Eq. (7)
+    V_k = (sig("r") if cut == "PI" else u_pi) + VC[:, None] * v_vc
+    inputs = {"u_V": sig("y_del") if opt.delay else V_k, "u_Tdist": sig("T_dist"), "u_F": th,
+              "u_diff": th, "u_I": e, "u_del": V_k, "u_lp": sig("v_raw") if "v_raw" in ys else None}
+    KE = np.stack([inputs[u] for u in us], axis=1)                           # (k, nu, ny + nw)
+    K, E = KE[:, :, :len(ys)], KE[:, :, len(ys):]
+    port = v_F if opt.port == "encoder_average" else sig("y_p")
+    y_cut = {None: np.zeros((k, width)), "T_ref": imp, "PI": -u_pi}[cut]
+    Z = np.stack([sig("y_T"), th, port, y_cut], axis=1)                      # (k, 4, ny + nw)
+    Zy, Zw = Z[:, :, :len(ys)], Z[:, :, len(ys):]
+    M = np.linalg.inv(np.eye(len(ys)) - Db @ K)                              # y = M (C x + D E w)
+    A_cl = Ab + Bb @ K @ M @ Cb
+    B_cl = Bb @ (K @ M @ Db @ E + E)
+    C_cl = Zy @ M @ Cb
+    D_cl = Zy @ M @ Db @ E + Zw
+    return A_cl, B_cl, C_cl, D_cl
 
 
-def closed_loop_eigenvalues(loop: ClosedLoop, points, chunk_bytes: int = 64 << 20) -> np.ndarray:
-    """Eigenvalues of the closed-loop state matrix at gain points, shape (k, order).
+def closed_loop_matrices(loop, P_gain: float, D_gain: float, beta: float | None = None,
+                         alpha: float | None = None, cut: str | None = None):
+    """``(A, B, C, D)`` of the sampled closed loop at one gain point; ``cut`` in {None, "T_ref", "PI"}."""
+    return tuple(m[0] for m in _batch(loop, P_gain, D_gain, beta, alpha, cut))
 
-    ``points`` is (4, k): rows P_gain, D_gain, beta, alpha. One ``numpy.linalg.eigvals`` call
-    per chunk of stacked matrices (``chunk_bytes`` of them at a time) and distinct (beta, alpha).
-    """
+
+def closed_loop_eigenvalues(loop, points, chunk: int = 2048) -> np.ndarray:
+    """Eigenvalues of the closed-loop state matrix at gain points (4, k), shape (k, order)."""
     pts = np.asarray(points, dtype=float).reshape(4, -1)
-    order = loop.degree
-    out = np.empty((pts.shape[1], order), complex)
-    pairs, inv = np.unique(pts[2:].T, axis=0, return_inverse=True)
-    step = max(1, chunk_bytes // (8 * order * order))
-    for j, (b, a) in enumerate(pairs):
-        sel = np.flatnonzero(inv.ravel() == j)
-        for c in range(0, sel.size, step):
-            idx = sel[c:c + step]
-            A = _closed_loop_batch(loop, pts[0, idx], pts[1, idx], b, a)[0]
-            out[idx] = np.linalg.eigvals(A)
-    return out
+    out = []
+    for c in range(0, pts.shape[1], chunk):
+        out.append(np.linalg.eigvals(_batch(loop, *pts[:, c:c + chunk])[0]))
+    return np.concatenate(out) if out else np.empty((0, 0), complex)
 
 
-def spectral_radius(loop: ClosedLoop, P_gain, D_gain, beta=None, alpha=None) -> float:
-    """max |eig| of the closed-loop state matrix (numpy.linalg.eigvals)."""
-    A = closed_loop_matrices(loop, P_gain, D_gain, beta, alpha)[0]
-    return float(np.abs(np.linalg.eigvals(A)).max())
+def spectral_radius(loop, P_gain, D_gain, beta=None, alpha=None) -> float:
+    """max |eig| of the closed-loop state matrix at one gain point."""
+    return float(np.abs(np.linalg.eigvals(closed_loop_matrices(loop, P_gain, D_gain, beta, alpha)[0])).max())
 
 
 def _tf(A, B, C, D, omega, Ts, out, inp):
@@ -116,7 +185,7 @@ def _tf(A, B, C, D, omega, Ts, out, inp):
     return X @ C[out] + D[out, inp]
 
 
-def frequency_response(loop: ClosedLoop, omega, P_gain, D_gain, beta=None, alpha=None) -> dict:
+def frequency_response(loop, omega, P_gain, D_gain, beta=None, alpha=None) -> dict:
     """``L_t``, ``L_imp``, ``Z``, ``H_T`` of :meth:`ClosedLoop.frequency_response`, by state space."""
     Ts = loop.params.controller.Ts
     res = {}

@@ -161,7 +161,7 @@ def step_response(params: Params, *, duration: float = 0.3, options: LoopOptions
     -------
     StepResponse
     """
-    from haa_sym.reference import closed_loop_matrices
+    from haa_sym.statespace import closed_loop_batch
     if not np.isfinite(duration) or duration <= 0:
         raise ParameterError(f"duration = {duration!r}; allowed: a finite time > 0 (s)")
     _, _, beta, alpha = gain_points(0.0, 0.0, beta, alpha)
@@ -169,7 +169,7 @@ def step_response(params: Params, *, duration: float = 0.3, options: LoopOptions
     n = int(round(duration / Ts)) + 1
     check_memory(16 * n, f"duration = {duration!r} s: a step response of {float(n):.4g} samples")
     loop = loop or ClosedLoop(params, options)
-    A, B, C, D = closed_loop_matrices(loop, 0.0, 0.0, beta, alpha, cut="T_ref")
+    A, B, C, D = (m[0] for m in closed_loop_batch(loop, 0.0, 0.0, beta, alpha, cut="T_ref"))
     x = np.zeros(A.shape[0])
     T = np.empty(n)
     for k in range(n):

@@ -1,4 +1,4 @@
-"""``results/REPORT.md``: the paper says / we compute, from the dict of :mod:`haa_sym.reproduce`."""
+"""``results/REPORT.md``: the paper says / we compute, from the dict of :mod:`haa_sym.paper.reproduce`."""
 from __future__ import annotations
 
 import math

@@ -21,8 +21,6 @@ outputs, so no other file is ever deleted.
 """
 from __future__ import annotations
 
-import csv
-import io
 import json
 import re
 import subprocess
@@ -36,13 +34,13 @@ import numpy as np
 from haa_sym.contact import contact_stability, intervals
 from haa_sym.budget import check_memory, sweep_bytes
 from haa_sym.loop import ClosedLoop, LoopOptions
-from haa_sym.outputs import Transaction, check_directory, write_text
+from haa_sym.outputs import Transaction, check_directory, csv_text as _csv, write_text
 from haa_sym.paper import panel_params, paper_spec
 from haa_sym.params import Params, load_params
 from haa_sym.passivity import bands_beyond, corrected_phase
 from haa_sym.progress import message, progress as progress_bar
 from haa_sym.regions import CHUNK, eigenvalue_crosscheck, grid, region_map, run_meta
-from haa_sym.table2 import score_options, table2
+from haa_sym.paper.table2 import score_options, table2
 from haa_sym.torque import p1_roots, step_response, torque_bandwidth, torque_loop_margins
 
 __all__ = ["reproduce", "region_trends"]
@@ -80,25 +78,6 @@ def _write_text(path: Path, text: str) -> None:
     write_text(path, text)
 
 
-_CSV_NAME = re.compile(r"[A-Za-z_][A-Za-z0-9_]*")
-
-
-def _csv(rows: list[dict]) -> str:
-    """CSV text that ``numpy.genfromtxt(..., delimiter=",", names=True)`` reads back unchanged:
-    headers are plain identifiers (genfromtxt rewrites others, e.g. drops dots) and no value
-    holds a comma, quote or newline (genfromtxt does not parse CSV quoting)."""
-    for name in rows[0]:
-        if not _CSV_NAME.fullmatch(name):
-            raise ValueError(f"CSV header {name!r} is not a plain identifier")
-    for row in rows:
-        for v in row.values():
-            if any(ch in str(v) for ch in ',"\n'):
-                raise ValueError(f"CSV value {v!r} holds a comma, quote or newline")
-    buf = io.StringIO()
-    w = csv.DictWriter(buf, fieldnames=list(rows[0]), lineterminator="\n")
-    w.writeheader()
-    w.writerows(rows)
-    return buf.getvalue()
 
 
 def _json_default(x):
@@ -296,7 +275,7 @@ def _trend_alternatives(job: _Job, trends: list[dict], split: tuple[float, float
 
 def _table2(job: _Job) -> dict:
     """Table 2 (csv, md), the scores of every option combination, and what rescues each miss."""
-    from haa_sym.report import table2_markdown
+    from haa_sym.paper.report import table2_markdown
     _log("Table 2 and option scores")
     cells = table2(job.params, job.options, job.spec)
     rows = [{"row": c.row, "column": c.column, "P_gain": c.P_gain, "D_gain": c.D_gain,
@@ -477,7 +456,7 @@ def reproduce(out: str | Path = "results", params: Params | None = None,
             bar.update(1)
         result["elapsed_s"] = round(time.time() - t_start, 1)
         _write_text(job.out / "claims.json", json.dumps(result, indent=1, default=_json_default) + "\n")
-        from haa_sym.report import write_report
+        from haa_sym.paper.report import write_report
         write_report(job.out, result, spec, options, verify_text)
     _log(f"wrote {out}/REPORT.md in {result['elapsed_s']} s")
     return result

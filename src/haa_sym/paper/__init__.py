@@ -1,4 +1,11 @@
-"""What the paper reports, as data (``model/paper.toml``): Figs. 8-11 panels, Table 2, claims."""
+"""The reproduction of Focchi et al. (2016), apart from the library.
+
+This package holds what is about the paper only: what it reports, as data (``model/paper.toml``:
+the panels of Figs. 8-11, Table 2, the claims; this module), Table 2 and the option scoring
+(:mod:`haa_sym.paper.table2`), the whole reproduction (:mod:`haa_sym.paper.reproduce`,
+``haa-sym reproduce`` / ``make paper``) and its report (:mod:`haa_sym.paper.report`). The
+library (actuator model, code generation, runtime, closed loop, analyses) never imports it.
+"""
 from __future__ import annotations
 
 import tomllib

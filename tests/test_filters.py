@@ -1,0 +1,147 @@
+"""The velocity estimate as a choice (issue 8): "average", "lowpass1", "butterworth2".
+
+Each controller element is defined once (haa_sym.elements); the characteristic polynomial, the
+frequency responses and the explicit state space (haa_sym.statespace) all derive from it. The
+reference (haa_sym.reference) builds the loop independently: scipy's bilinear map of the analog
+prototype, tf2ss realisations and a block interconnection. More than 1,000 random gain points
+per new filter, over sampling times, cut-offs, filter placements, delays and both legs.
+"""
+import itertools
+
+import numpy as np
+import pytest
+import scipy.signal
+
+from haa_sym import ClosedLoop, LoopOptions
+from haa_sym import reference as ref
+from haa_sym import statespace
+from haa_sym.cli import main
+from haa_sym.elements import backward_difference, delay, pi_integral, velocity_filter
+
+TSS = (20e-6, 100e-6, 1e-3, 4e-3)
+CUTOFFS = (0.02, 0.1, 0.3)          # f_c as a fraction of the sampling frequency 1/Ts
+PLACEMENTS = ("both", "impedance", "compensation")
+POINTS = 12   # per case: 4 Ts x 3 f_c x 3 placements x 2 delays x 2 legs x 12 = 1,728 per filter
+
+
+def _points(rng, n):
+    return np.stack([10 ** rng.uniform(0, np.log10(50000), n), rng.uniform(0, 60, n),
+                     rng.uniform(0.3, 8, n), rng.uniform(0, 1.2, n)])
+
+
+@pytest.fixture(scope="module", params=("lowpass1", "butterworth2"))
+def cases(request, params):
+    rng = np.random.default_rng(11)
+    out = []
+    for Ts, frac, place, d, cfg in itertools.product(TSS, CUTOFFS, PLACEMENTS, (0, 1), ("extended", "retracted")):
+        p = params.configuration(cfg).with_values(Ts=Ts, velocity_filter=request.param, f_c=frac / Ts)
+        loop = ClosedLoop(p, LoopOptions(delay=d, filter=place, port="encoder_average" if d else "dtheta_L2"))
+        pts = _points(rng, POINTS)
+        out.append((loop, pts, ref.closed_loop_eigenvalues(loop, pts)))
+    return request.param, out
+
+
+def test_decisions_agree_with_the_independent_closed_loop(cases):
+    kind, cases = cases
+    bad, decided, unstable, refined = [], 0, 0, 0
+    for loop, pts, eig in cases:
+        res = loop.stability(*pts)                    # certified, as the maps use it
+        raw = loop.stability(*pts, certify=False)
+        rho = np.abs(eig).max(axis=1)
+        away = np.abs(rho - 1) > 1e-6
+        decided += away.sum()
+        unstable += (rho > 1).sum()
+        refined += res.refined.sum()
+        for i in np.flatnonzero(away & ((res.stable != (rho < 1)) | (raw.stable != (rho < 1)))):
+            bad.append((loop.params.controller.Ts, loop.params.controller.f_c, loop.options.filter,
+                        pts[:, i], rho[i]))
+        clear = np.all(np.abs(np.abs(eig) - 1) > 1e-6, axis=1)
+        np.testing.assert_array_equal(raw.n_unstable[clear], (np.abs(eig[clear]) > 1).sum(axis=1))
+    assert not bad, (kind, bad[:5])
+    assert decided >= 1000 and decided > 0.98 * len(cases) * POINTS
+    assert 0.05 * decided < unstable < 0.95 * decided      # both answers occur
+    assert refined < 0.02 * decided
+
+
+def test_library_state_space_has_the_reference_spectrum(cases):
+    _, cases = cases
+    for loop, pts, eig in cases[::7]:
+        mine = np.abs(statespace.closed_loop_eigenvalues(loop, pts)).max(axis=1)
+        np.testing.assert_allclose(mine, np.abs(eig).max(axis=1), rtol=0, atol=1e-9)
+
+
+def test_frequency_responses_agree_with_the_reference(cases):
+    _, cases = cases
+    worst = 0.0
+    for loop, pts, _ in cases[::5]:
+        Ts = loop.params.controller.Ts
+        w = np.logspace(-1, np.log10(np.pi / Ts * 0.99), 40)
+        fr = loop.frequency_response(w, *pts[:, :2])
+        for j in range(2):
+            r = ref.frequency_response(loop, w, *pts[:, j])
+            for k in r:
+                # Tustin puts the low-pass filters' zeros at z = -1: near Nyquist some responses
+                # fall 10-12 orders below their low-frequency size, where every evaluation (the
+                # reference's and the library state space's too) keeps only an absolute accuracy
+                # relative to that size; so the error is measured against |ref| + 1e-6 max |ref|.
+                scale = np.abs(r[k]) + 1e-6 * np.abs(r[k]).max()
+                worst = max(worst, float(np.max(np.abs(fr[k][j] - r[k]) / scale)))
+    assert worst < 1e-7, worst
+
+
+@pytest.mark.parametrize("element", [
+    velocity_filter("average", 1e-3, N_av=7), velocity_filter("lowpass1", 1e-4, f_c=300.0),
+    velocity_filter("butterworth2", 1e-3, f_c=80.0), backward_difference(2e-4), pi_integral(1e-3),
+    delay(2)])
+def test_every_view_of_an_element_is_the_same_transfer_function(element):
+    Ts = 1e-3
+    w = np.logspace(-1, np.log10(np.pi / Ts * 0.999), 50)
+    num = [float(c) for c in element.numerator]
+    den = [float(c) for c in element.denominator]
+    num = [0.0] * (len(den) - len(num)) + num                   # freqz: powers of z^-1
+    _, h = scipy.signal.freqz(num, den, worN=w * Ts)
+    A, B, C, D = element.realization()
+    z = np.exp(1j * w * Ts)
+    hs = np.array([(C @ np.linalg.solve(zz * np.eye(A.shape[0]) - A, B) + D)[0, 0] if A.size else D[0, 0]
+                   for zz in z])
+    np.testing.assert_allclose(element.frequency_response(w, Ts), h, rtol=1e-9)
+    np.testing.assert_allclose(hs, h, rtol=1e-9)
+
+
+def test_lowpass_filters_follow_their_analog_prototype_at_low_frequency():
+    Ts, f_c = 1e-5, 100.0
+    w_c, w = 2 * np.pi * f_c, np.array([0.1, 10.0, 600.0])
+    s = 1j * w
+    for kind, analog in (("lowpass1", w_c / (s + w_c)),
+                         ("butterworth2", w_c ** 2 / (s ** 2 + np.sqrt(2) * w_c * s + w_c ** 2))):
+        F = velocity_filter(kind, Ts, f_c=f_c).frequency_response(w, Ts)
+        # backward difference and Tustin differ from s and the prototype by O(w Ts)
+        np.testing.assert_allclose(F / (s * analog), 1, atol=5 * w.max() * Ts)
+
+
+def test_to_statespace_names_its_signals_and_has_the_closed_loop_poles(params):
+    control = pytest.importorskip("control")
+    loop = ClosedLoop(params.with_values(velocity_filter="butterworth2", f_c=60.0))
+    sys = loop.to_statespace(300.0, 12.0, cut="T_ref")
+    assert isinstance(sys, control.StateSpace) and sys.dt == params.controller.Ts
+    assert sys.input_labels == ["T_dist", "r"]
+    assert sys.output_labels == ["T_meas", "theta_encoder", "port_velocity", "y"]
+    closed = loop.to_statespace(300.0, 12.0)
+    rho = np.abs(control.poles(closed)).max()
+    assert np.isclose(rho, ref.spectral_radius(loop, 300.0, 12.0), rtol=0, atol=1e-10)
+
+
+def test_cli_runs_a_map_with_a_lowpass_velocity_estimate(tmp_path):
+    out = tmp_path / "m.npz"
+    assert main(["regions", "--P-gain", "log:1:5000:6", "--D-gain", "lin:1:40:5", "--set",
+                 "velocity_filter=butterworth2", "--set", "f_c=40", "--out", str(out), "-q"]) == 0
+    with np.load(out, allow_pickle=False) as m:
+        assert m["stable"].shape == (6, 5)
+
+
+def test_cli_rejects_a_cutoff_above_nyquist(capsys):
+    assert main(["stability", "--P-gain", "100", "--D-gain", "5", "--set", "velocity_filter=lowpass1",
+                 "--set", "f_c=600"]) == 2
+    err = capsys.readouterr().err
+    assert "f_c = 600.0 is at or above Nyquist 1/(2 Ts) = 500 Hz; allowed: 0 < f_c < 500" in err
+    assert "Traceback" not in err
