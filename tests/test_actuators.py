@@ -213,7 +213,9 @@ def test_port_option_is_checked_against_the_plant(user_file):
 
 
 # --- closed loop against the explicit reference, >= 1,000 points per new topology -----------
-CASES = ((1e-3, 4, 0), (5e-4, 10, 1), (2e-3, 1, 0), (1e-3, 20, 1))
+# (Ts, N_av, delay, velocity estimate): the filter choices of haa_sym.elements on the new plants too
+CASES = ((1e-3, 4, 0, {}), (5e-4, 10, 1, {"velocity_filter": "lowpass1", "f_c": 60.0}),
+         (2e-3, 1, 0, {}), (1e-3, 20, 1, {"velocity_filter": "butterworth2", "f_c": 40.0}))
 
 
 @pytest.mark.parametrize("name", [p.name for p in NEW] + ["user"])
@@ -223,8 +225,8 @@ def test_closed_loop_agrees_with_reference(name, user_file):
     rng = np.random.default_rng(len(name))
     n_points, disagree, refined, near, n_stable = 0, 0, 0, 0, 0
     fr_worst = 0.0
-    for (Ts, N_av, delay), filt in zip(CASES, itertools.cycle(("both", "impedance", "compensation"))):
-        p = params.with_values(Ts=Ts, N_av=N_av)
+    for (Ts, N_av, delay, estimate), filt in zip(CASES, itertools.cycle(("both", "impedance", "compensation"))):
+        p = params.with_values(Ts=Ts, N_av=N_av, **estimate)
         loop = ClosedLoop(p, LoopOptions(delay=delay, filter=filt, port=f"dtheta_{p.plant.topology.port}"))
         k = 260
         pts = np.stack([10 ** rng.uniform(0, np.log10(20000), k), rng.uniform(0, 50, k),
