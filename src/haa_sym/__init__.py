@@ -5,12 +5,13 @@ Torque and Velocity Feedback Loops". The numeric runtime (this namespace) never 
 """
 from haa_sym.params import Controller, ParameterError, Params, Plant, load_params
 from haa_sym.actuator import Body, Coupling, Topology
-from haa_sym.loop import ClosedLoop, LoopOptions, StabilityResult
+from haa_sym.loop import (AnalysisConventions, ClosedLoop, FrequencyGrid, LoopOptions, LoopStructure,
+                          StabilityResult)
 from haa_sym.regions import RegionMap, grid, region_map
 from haa_sym.passivity import PassivityResult, passivity
 
 __all__ = ["Controller", "ParameterError", "Params", "Plant", "Topology", "Body", "Coupling", "load_params", "ClosedLoop",
-           "LoopOptions", "StabilityResult", "RegionMap", "grid", "region_map", "PassivityResult",
+           "LoopOptions", "LoopStructure", "AnalysisConventions", "FrequencyGrid", "StabilityResult", "RegionMap", "grid", "region_map", "PassivityResult",
            "passivity"]
 
 

@@ -50,7 +50,7 @@ def _parse_set(items: list[str]) -> dict[str, float]:
 
 def _parse_options(items: list[str]):
     from haa_sym.loop import LoopOptions
-    fields = LoopOptions.__dataclass_fields__
+    fields = LoopOptions.field_names()
     out = {}
     for item in items:
         key, sep, value = item.partition("=")
@@ -59,7 +59,7 @@ def _parse_options(items: list[str]):
             raise ParameterError(f"--option {item!r}: expected KEY=VALUE")
         if key not in fields:
             raise ParameterError(f"--option {item!r}: unknown option {key!r}; allowed: {list(fields)}")
-        default = fields[key].default
+        default = LoopOptions.field_default(key)
         try:
             if isinstance(default, bool):
                 if value.lower() not in ("true", "false", "1", "0"):
@@ -217,7 +217,7 @@ def _cmd_margins(args) -> int:
     params = _params(args)
     options = _parse_options(args.option)
     args.P_gain, args.D_gain = _gain(args, "P_gain", "--P-gain"), _gain(args, "D_gain", "--D-gain")
-    check_memory(sweep_bytes(1, options.n_omega), f"the loop gains on n_omega = {options.n_omega} frequencies")
+    check_memory(sweep_bytes(1, options.numerics.n_omega), f"the loop gains on n_omega = {options.numerics.n_omega} frequencies")
     loop = ClosedLoop(params, options)
     coef = loop.loop_coefficients()
     st = loop.stability(args.P_gain, args.D_gain, radius=True)

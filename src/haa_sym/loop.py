@@ -30,6 +30,7 @@ Example
 """
 from __future__ import annotations
 
+import dataclasses
 import re
 from dataclasses import dataclass, field
 from fractions import Fraction
@@ -46,7 +47,7 @@ from haa_sym.layout import (COEF_FORMS, COEF_OUTPUTS, COEF_TERMS, FREQ_COLUMN, N
 from haa_sym.plant import DiscretePlant, continuous_plant, discretize
 from haa_sym.statespace import closed_loop_eigenvalues, to_statespace
 
-__all__ = ["LoopOptions", "LoopCoefficients", "ClosedLoop", "StabilityResult", "PORTS", "FREQ_OUTPUTS"]
+__all__ = ["LoopOptions", "LoopStructure", "AnalysisConventions", "FrequencyGrid", "LoopCoefficients", "ClosedLoop", "StabilityResult", "PORTS", "FREQ_OUTPUTS"]
 
 PORTS = ("dtheta_L2", "dtheta_L1", "encoder_average")
 FREQ_OUTPUTS = ("L_t", "L_imp", "Z", "H_T")
@@ -70,60 +71,38 @@ PM_LOOPS = ("impedance", "torque")
 PM_RULES = ("min_abs", "worst")
 
 
-@dataclass(frozen=True)
-class LoopOptions:
-    """Modelling choices the paper leaves open; each is discussed in ``docs/model.md``.
+def _choice(obj, name, allowed):
+    if getattr(obj, name) not in allowed:
+        raise ParameterError(f"{name} = {getattr(obj, name)!r}; allowed: {list(allowed)}")
 
-    The defaults are the combination that reproduces the most cells of Table 2
-    (``haa-sym reproduce`` re-scores all combinations and writes the count to the report).
+
+@dataclass(frozen=True)
+class LoopStructure:
+    """What the closed loop is: the structural choices the paper leaves open.
 
     Parameters
     ----------
     delay : {0, 1}
         Computation delay between sampling and the applied voltage, samples. Default 0.
     torque_damping : bool
-        Whether the measured torque includes the D_hd term of Eq. (2). Default True.
+        Whether the measured torque includes the damping term of the sensed coupling (D_hd of
+        Eq. 2). Default True.
     filter : {"both", "impedance", "compensation"}
-        Where the N_av-sample averaging filter sits: on the velocity feeding both the D term of
-        Eq. (8) and the velocity compensation of Eq. (6) (default, the paper's Sec. 3.4 and
-        Fig. 6), on the D term only, or on the compensation only; the other path then uses the
-        one-sample first difference (theta[k] - theta[k-1])/Ts.
-    port : {"dtheta_L2", "dtheta_L1", "encoder_average"}
+        Where the velocity estimate (``velocity_filter`` of the controller) sits: on the velocity
+        feeding both the D term of Eq. (8) and the velocity compensation of Eq. (6) (default, the
+        paper's Sec. 3.4 and Fig. 6), on the D term only, or on the compensation only; the other
+        path then uses the one-sample backward difference (theta[k] - theta[k-1])/Ts.
+    port : {"dtheta_L2", "dtheta_L1", "encoder_average"}, or "dtheta_<body>"
         Velocity of the passivity port Z = T_dist / velocity (Sec. 5): the inertia J_L2 that
         T_dist acts on (default), the sampled link velocity of the paper's wording, or the
-        averaged encoder velocity the controller sees.
-    colgate : {"subtract", "add", "none"}
-        Colgate's sampled-data correction of the phase of Z: subtract w Ts/2 (the paper's
-        wording, default), add it, or none.
-    pm_loop : {"impedance", "torque"}
-        Loop on which the phase margin of the region maps is measured: the impedance loop opened
-        at the torque reference T_lref (default) or the torque loop opened at the PI output with
-        the impedance loop closed.
-    pm_rule : {"min_abs", "worst"}
-        When |L| crosses 1 more than once: the crossover with the smallest |PM| (default; what
-        Matlab's ``margin`` reports) or the smallest signed PM.
-    n_omega : int
-        Points of the log frequency grid from ``omega_min`` to Nyquist pi/Ts on which Z(z) and
-        the loop gains are sampled. Default 1000 (the maps are unchanged up to 16000, see
-        ``haa_sym.regions``).
-    omega_min : float
-        Lowest frequency of that grid, rad/s. Default 0.1.
-    passivity_tol_deg : float
-        A point is passive when the corrected phase of Z stays within 90 deg + this tolerance.
-        A spring (Z ~ K/(j w)) sits at -90 deg as w -> 0, so a zero tolerance would decide
-        such points by rounding. Default 1e-3.
+        controller's velocity estimate of the encoder angle; for another actuator file the
+        velocity of any of its bodies (ClosedLoop checks it against the plant's outputs).
     """
 
     delay: int = 0
     torque_damping: bool = True
     filter: str = "both"
     port: str = "dtheta_L2"
-    colgate: str = "subtract"
-    pm_loop: str = "impedance"
-    pm_rule: str = "min_abs"
-    n_omega: int = 1000
-    omega_min: float = 0.1
-    passivity_tol_deg: float = 1e-3
 
     def __post_init__(self):
         if self.delay not in (0, 1) or isinstance(self.delay, bool):
@@ -134,32 +113,150 @@ class LoopOptions:
                                                     and re.fullmatch(r"dtheta_[A-Za-z][A-Za-z0-9]*", self.port))):
             raise ParameterError(f"port = {self.port!r}; allowed: 'dtheta_<body>' (a body of the "
                                  f"actuator file, e.g. {list(PORTS)[:2]}) or 'encoder_average'")
-        for name, allowed in (("filter", FILTERS), ("colgate", COLGATE), ("pm_loop", PM_LOOPS),
-                              ("pm_rule", PM_RULES)):
-            if getattr(self, name) not in allowed:
-                raise ParameterError(f"{name} = {getattr(self, name)!r}; allowed: {list(allowed)}")
+        _choice(self, "filter", FILTERS)
+
+
+@dataclass(frozen=True)
+class AnalysisConventions:
+    """How the analyses judge a closed loop: the conventions the paper leaves open.
+
+    Parameters
+    ----------
+    colgate : {"subtract", "add", "none"}
+        Colgate's sampled-data correction of the phase of Z: subtract w Ts/2 (the paper's
+        wording, default), add it, or none.
+    pm_loop : {"impedance", "torque"}
+        Loop on which the phase margin of the region maps is measured: the impedance loop opened
+        at the torque reference T_lref (default) or the torque loop opened at the PI output with
+        the impedance loop closed.
+    pm_rule : {"min_abs", "worst"}
+        When |L| crosses 1 more than once: the crossover with the smallest |PM| (default; what
+        Matlab's ``margin`` reports) or the smallest signed PM.
+    passivity_tol_deg : float
+        A point is passive when the corrected phase of Z stays within 90 deg + this tolerance.
+        A spring (Z ~ K/(j w)) sits at -90 deg as w -> 0, so a zero tolerance would decide
+        such points by rounding. Default 1e-3.
+    """
+
+    colgate: str = "subtract"
+    pm_loop: str = "impedance"
+    pm_rule: str = "min_abs"
+    passivity_tol_deg: float = 1e-3
+
+    def __post_init__(self):
+        for name, allowed in (("colgate", COLGATE), ("pm_loop", PM_LOOPS), ("pm_rule", PM_RULES)):
+            _choice(self, name, allowed)
+        v = self.passivity_tol_deg
+        if isinstance(v, bool) or not isinstance(v, (int, float)) or not np.isfinite(v) or v < 0:
+            raise ParameterError(f"passivity_tol_deg = {v!r}; allowed: a finite number >= 0 (deg)")
+
+
+@dataclass(frozen=True)
+class FrequencyGrid:
+    """The numerics of the frequency-domain analyses: the log grid Z(z) and the loop gains are
+    sampled on, from ``omega_min`` to Nyquist pi/Ts.
+
+    Parameters
+    ----------
+    n_omega : int
+        Points of the grid. Default 1000 (the maps are unchanged up to 16000, see
+        ``haa_sym.regions``).
+    omega_min : float
+        Lowest frequency, rad/s. Default 0.1.
+    """
+
+    n_omega: int = 1000
+    omega_min: float = 0.1
+
+    def __post_init__(self):
         if isinstance(self.n_omega, bool) or not isinstance(self.n_omega, int) or self.n_omega < 10:
             raise ParameterError(f"n_omega = {self.n_omega!r}; allowed: an integer >= 10")
-        for name in ("omega_min", "passivity_tol_deg"):
-            v = getattr(self, name)
-            if isinstance(v, bool) or not isinstance(v, (int, float)) or not np.isfinite(v) or v < 0 \
-                    or (name == "omega_min" and v == 0):
-                raise ParameterError(f"{name} = {v!r}; allowed: a finite number "
-                                     f"{'> 0 (rad/s)' if name == 'omega_min' else '>= 0 (deg)'}")
-
-    def to_dict(self) -> dict:
-        return {f: getattr(self, f) for f in self.__dataclass_fields__}
-
-    @classmethod
-    def field_names(cls) -> tuple[str, ...]:
-        return tuple(cls.__dataclass_fields__)
+        v = self.omega_min
+        if isinstance(v, bool) or not isinstance(v, (int, float)) or not np.isfinite(v) or v <= 0:
+            raise ParameterError(f"omega_min = {v!r}; allowed: a finite number > 0 (rad/s)")
 
     def omega(self, Ts: float) -> np.ndarray:
-        """The frequency grid (rad/s) of this option set for sampling time ``Ts``."""
+        """The frequency grid (rad/s) for sampling time ``Ts``."""
         w_max = np.pi / Ts * (1 - 1e-9)
         if self.omega_min >= w_max:
             raise ParameterError(f"omega_min = {self.omega_min!r} is not below Nyquist pi/Ts = {w_max:.6g} rad/s")
         return np.logspace(np.log10(self.omega_min), np.log10(w_max), self.n_omega)
+
+
+_PARTS = (("structure", LoopStructure), ("conventions", AnalysisConventions), ("numerics", FrequencyGrid))
+
+
+class LoopOptions:
+    """Every modelling choice the paper leaves open, in three parts; each is discussed in
+    ``docs/model.md``.
+
+    ``structure`` (:class:`LoopStructure`: delay, torque_damping, filter, port) defines the
+    closed loop; ``conventions`` (:class:`AnalysisConventions`: colgate, pm_loop, pm_rule,
+    passivity_tol_deg) how it is judged; ``numerics`` (:class:`FrequencyGrid`: n_omega,
+    omega_min) how finely. Build it from the parts or from any of their fields by name
+    (``LoopOptions(delay=1, colgate="none")``, what ``--option KEY=VALUE`` does); the fields read
+    through (``options.delay``). The defaults are the combination that reproduces the most
+    cells of Table 2 (``haa-sym reproduce`` re-scores all combinations and writes the count to
+    the report).
+    """
+
+    __slots__ = ("structure", "conventions", "numerics")
+
+    def __init__(self, structure: LoopStructure | None = None, conventions: AnalysisConventions | None = None,
+                 numerics: FrequencyGrid | None = None, **fields):
+        given = {"structure": structure, "conventions": conventions, "numerics": numerics}
+        for part, cls in _PARTS:
+            mine = {k: fields.pop(k) for k in list(fields) if k in cls.__dataclass_fields__}
+            base = given[part] if given[part] is not None else cls()
+            if not isinstance(base, cls):
+                raise ParameterError(f"{part} = {base!r}; allowed: a haa_sym.{cls.__name__}")
+            object.__setattr__(self, part, dataclasses.replace(base, **mine) if mine else base)
+        if fields:
+            raise ParameterError(f"unknown option(s) {sorted(fields)}; allowed: {list(self.field_names())}")
+
+    def __setattr__(self, name, value):
+        raise AttributeError("LoopOptions is immutable; use replace(**changes)")
+
+    def __getattr__(self, name):
+        for part, cls in _PARTS:
+            if name in cls.__dataclass_fields__:
+                return getattr(object.__getattribute__(self, part), name)
+        raise AttributeError(name)
+
+    def __eq__(self, other):
+        return isinstance(other, LoopOptions) and self._parts() == other._parts()
+
+    def __hash__(self):
+        return hash(self._parts())
+
+    def __repr__(self):
+        return f"LoopOptions({', '.join(f'{k}={v!r}' for k, v in self.to_dict().items())})"
+
+    def _parts(self):
+        return tuple(object.__getattribute__(self, part) for part, _ in _PARTS)
+
+    def replace(self, **changes) -> "LoopOptions":
+        """A copy with some fields (of any part) changed, validated."""
+        return LoopOptions(*self._parts(), **changes)
+
+    def to_dict(self) -> dict:
+        """Every field by name (flat: the names are unique across the parts)."""
+        return {f: getattr(self, f) for f in self.field_names()}
+
+    @classmethod
+    def field_names(cls) -> tuple[str, ...]:
+        return tuple(f for _, c in _PARTS for f in c.__dataclass_fields__)
+
+    @classmethod
+    def field_default(cls, name: str):
+        for _, c in _PARTS:
+            if name in c.__dataclass_fields__:
+                return c.__dataclass_fields__[name].default
+        raise KeyError(name)
+
+    def omega(self, Ts: float) -> np.ndarray:
+        """The frequency grid (rad/s) of :attr:`numerics` for sampling time ``Ts``."""
+        return self.numerics.omega(Ts)
 
 
 @dataclass(frozen=True)
@@ -250,15 +347,15 @@ class ClosedLoop:
             raise ParameterError(
                 f"{what} gives a closed loop of order {self.degree}, above the largest generated "
                 f"capacity {cap}; allowed: N_av <= {cap - self.degree + filter_order} (with "
-                f"delay = {self.options.delay}; a larger capacity needs CAPACITIES in "
+                f"delay = {self.options.structure.delay}; a larger capacity needs CAPACITIES in "
                 "codegen/generate.py of a source tree and `make derive`)")
         self.capacity = caps[0]
         self.const = np.array([ctrl.P_t0, ctrl.I_t0, self.plant.VC0])
         ports = [o for o in self.plant.output_names if o.startswith("dtheta_")] + ["encoder_average"]
-        if self.options.port not in ports:
+        if self.options.structure.port not in ports:
             raise ParameterError(
-                f"port = {self.options.port!r} is not a velocity of the actuator {params.source}; "
-                f"allowed: {ports} (its [sensors] port body is "
+                f"port = {self.options.structure.port!r} is not a velocity of the actuator "
+                f"{params.source}; allowed: {ports} (its [sensors] port body is "
                 f"{params.plant.topology.port!r}: port = 'dtheta_{params.plant.topology.port}')")
         # basis=False: a loop used only for frequency responses or the explicit state space
         self.basis, self._z_basis = self._basis() if basis else (None, None)
@@ -271,7 +368,7 @@ class ClosedLoop:
     @property
     def torque_output(self) -> str:
         # the actuator file says what the sensor measures; the option can drop the damping term
-        damped = self.options.torque_damping and self.params.plant.topology.torque_damping
+        damped = self.options.structure.torque_damping and self.params.plant.topology.torque_damping
         return "T_sensor" if damped else "T_sensor_spring"
 
     @property
@@ -283,12 +380,12 @@ class ClosedLoop:
         with the backward difference on the other), ``F_port`` the estimate an averaged port reads,
         ``I_z`` the integral part of the torque PI (Eq. 7) and ``z_delay`` the computation delay.
         """
-        ctrl, f = self.params.controller, self.options.filter
+        ctrl, f = self.params.controller, self.options.structure.filter
         F = velocity_filter(ctrl.velocity_filter, ctrl.Ts, ctrl.N_av, ctrl.f_c)
         diff = backward_difference(ctrl.Ts)
         return {"F_d": F if f in ("both", "impedance") else diff,
                 "F_vc": F if f in ("both", "compensation") else diff,
-                "F_port": F, "I_z": pi_integral(ctrl.Ts), "z_delay": delay(self.options.delay)}
+                "F_port": F, "I_z": pi_integral(ctrl.Ts), "z_delay": delay(self.options.structure.delay)}
 
     def _structure_key(self) -> tuple:
         """Everything the basis depends on: the sampled plant and the loop's structure."""
@@ -421,19 +518,19 @@ class ClosedLoop:
         :class:`LoopCoefficients`).
         """
         ctrl = self.params.controller
-        omega = self.options.omega(ctrl.Ts) if omega is None else _finite_array("omega", omega).ravel()
+        omega = self.options.numerics.omega(ctrl.Ts) if omega is None else _finite_array("omega", omega).ravel()
         beta = float(_finite_array("beta", ctrl.beta if beta is None else beta))
         alpha = float(_finite_array("alpha", ctrl.alpha if alpha is None else alpha))
         el = self.elements
         key = (array_key(self.plant.Phi, self.plant.Gamma, self.plant.C, omega, self.const),
                tuple((e.numerator, e.denominator) for e in el.values()), self.torque_output,
-               self.options.port, beta, alpha, self.backend)
+               self.options.structure.port, beta, alpha, self.backend)
         return _COEFFICIENTS.get(key, lambda: self._loop_coefficients(omega, beta, alpha))
 
     def _loop_coefficients(self, omega, beta, alpha) -> LoopCoefficients:
         ctrl, el = self.params.controller, self.elements
-        averaged = self.options.port == "encoder_average"
-        port = "theta_encoder" if averaged else self.options.port
+        averaged = self.options.structure.port == "encoder_average"
+        port = "theta_encoder" if averaged else self.options.structure.port
         G = self.plant.frequency_response(omega, outputs=(self.torque_output, "theta_encoder", port),
                                           inputs=("V_m", "T_dist"))
         values = dict(zip(("G_TV", "G_Td", "G_thV", "G_thd", "G_pV", "G_pd"), G.reshape(6, -1)))

@@ -79,8 +79,8 @@ def passivity(params: Params, P_gain=0.0, D_gain=0.0, *, options: LoopOptions | 
     loop = loop or ClosedLoop(params, options, backend)
     options = loop.options
     # chunked: one chunk's sweep at a time, plus the coefficients and the per-point results
-    check_memory(sweep_bytes(P.size, options.n_omega, CHUNK),
-                 f"passivity of {P.size} gain points on n_omega = {options.n_omega} frequencies")
+    check_memory(sweep_bytes(P.size, options.numerics.n_omega, CHUNK),
+                 f"passivity of {P.size} gain points on n_omega = {options.numerics.n_omega} frequencies")
     shape = P.shape
     P, D = P.ravel(), D.ravel()
     coef = loop.loop_coefficients(None, beta, alpha)
@@ -93,12 +93,12 @@ def passivity(params: Params, P_gain=0.0, D_gain=0.0, *, options: LoopOptions | 
             sl = slice(s, min(s + CHUNK, n))
             stable[sl] = loop.stability(P[sl], D[sl], beta, alpha, radius=False).stable.ravel()
             ex[sl], ww[sl] = phase_excess(gain_rows(P[sl], D[sl]), coef.Z_num, coef.Z_den,
-                                          coef.omega, params.controller.Ts, options.colgate)
+                                          coef.omega, params.controller.Ts, options.conventions.colgate)
             bar.update(sl.stop - sl.start)
     ex = np.where(stable, ex, np.nan)
     ww = np.where(stable, ww, np.nan)
     with np.errstate(invalid="ignore"):
-        passive = stable & (ex <= options.passivity_tol_deg)
+        passive = stable & (ex <= options.conventions.passivity_tol_deg)
     return PassivityResult(stable.reshape(shape), passive.reshape(shape), ex.reshape(shape),
                            ww.reshape(shape))
 
@@ -118,12 +118,12 @@ def corrected_phase(params: Params, P_gain: float = 0.0, D_gain: float = 0.0, *,
     """
     P_gain, D_gain, beta, alpha = gain_points(P_gain, D_gain, beta, alpha)
     loop = loop or ClosedLoop(params, options)
-    n_omega = loop.options.n_omega if omega is None else np.size(omega)
+    n_omega = loop.options.numerics.n_omega if omega is None else np.size(omega)
     check_memory(sweep_bytes(P_gain.size, n_omega),
                  f"the phase of Z at {P_gain.size} gain points on {n_omega} frequencies")
     coef = loop.loop_coefficients(omega, beta, alpha)
     Z = coef.evaluate("Z", P_gain, D_gain)
-    c = colgate_factor(coef.omega, params.controller.Ts, loop.options.colgate)
+    c = colgate_factor(coef.omega, params.controller.Ts, loop.options.conventions.colgate)
     return coef.omega, np.degrees(np.angle(Z * c))
 
 

@@ -81,17 +81,17 @@ def _velocity_estimate_blocks(ctrl):
 def _blocks(params, options, torque_output):
     """The dynamic blocks: (name, (A, B, C, D), output names, input names)."""
     ctrl = params.controller
-    port_body = options.port != "encoder_average"
-    outs = [torque_output, "theta_encoder"] + ([options.port] if port_body else [])
+    port_body = options.structure.port != "encoder_average"
+    outs = [torque_output, "theta_encoder"] + ([options.structure.port] if port_body else [])
     blocks = [("plant", _zoh_plant(params, outs), [f"y_{o}" for o in ("T", "th", "p")[:len(outs)]],
                ["u_V", "u_Tdist"])]
     blocks += _velocity_estimate_blocks(ctrl)
-    if options.filter != "both":
+    if options.structure.filter != "both":
         blocks.append(("diff", _tf_block([1 / ctrl.Ts, -1 / ctrl.Ts], [1.0]), ["v_diff"], ["u_diff"]))
     # backward Euler (Eq. 7) with the state in N s (the integral itself), so it is scaled like e
     blocks.append(("integral", (np.eye(1), ctrl.Ts * np.eye(1), np.eye(1), ctrl.Ts * np.eye(1)), ["y_I"], ["u_I"]))
-    if options.delay:
-        d = options.delay                                 # a shift register of d samples
+    if options.structure.delay:
+        d = options.structure.delay                                 # a shift register of d samples
         shift = (np.eye(d, k=-1), np.eye(d, 1), np.eye(1, d, d - 1), np.zeros((1, 1)))
         blocks.append(("delay", shift, ["y_del"], ["u_del"]))
     return blocks
@@ -108,7 +108,7 @@ def _batch(loop, P_gain, D_gain, beta=None, alpha=None, cut=None):
     P_t, I_t = beta * ctrl.P_t0, beta * ctrl.I_t0
     VC = alpha * pl.N / pl.k_t * (pl.R * pl.B_m + pl.k_t * pl.k_w)           # Eq. (6)
     # the actuator file says what the sensor measures; the option can drop the damping term
-    damped = opt.torque_damping and params.plant.topology.torque_damping
+    damped = opt.structure.torque_damping and params.plant.topology.torque_damping
     blocks = _blocks(params, opt, "T_sensor" if damped else "T_sensor_spring")
     ys = [y for _, _, yn, _ in blocks for y in yn]
     us = [u for _, _, _, un in blocks for u in un]
@@ -135,18 +135,18 @@ def _batch(loop, P_gain, D_gain, beta=None, alpha=None, cut=None):
     th = sig("y_th")
     v_F = sig("v_F")
     v_diff = sig("v_diff") if "v_diff" in ys else v_F
-    v_d = v_F if opt.filter in ("both", "impedance") else v_diff
-    v_vc = v_F if opt.filter in ("both", "compensation") else v_diff
+    v_d = v_F if opt.structure.filter in ("both", "impedance") else v_diff
+    v_vc = v_F if opt.structure.filter in ("both", "compensation") else v_diff
     imp = P[:, None] * th + D[:, None] * v_d                                  # Eq. (8)
     T_ref = sig("r") if cut == "T_ref" else -imp
     e = T_ref - sig("y_T")
     u_pi = P_t[:, None] * e + I_t[:, None] * sig("y_I")                       # Eq. (7)
     V_k = (sig("r") if cut == "PI" else u_pi) + VC[:, None] * v_vc
-    inputs = {"u_V": sig("y_del") if opt.delay else V_k, "u_Tdist": sig("T_dist"), "u_F": th,
+    inputs = {"u_V": sig("y_del") if opt.structure.delay else V_k, "u_Tdist": sig("T_dist"), "u_F": th,
               "u_diff": th, "u_I": e, "u_del": V_k, "u_lp": sig("v_raw") if "v_raw" in ys else None}
     KE = np.stack([inputs[u] for u in us], axis=1)                           # (k, nu, ny + nw)
     K, E = KE[:, :, :len(ys)], KE[:, :, len(ys):]
-    port = v_F if opt.port == "encoder_average" else sig("y_p")
+    port = v_F if opt.structure.port == "encoder_average" else sig("y_p")
     y_cut = {None: np.zeros((k, width)), "T_ref": imp, "PI": -u_pi}[cut]
     Z = np.stack([sig("y_T"), th, port, y_cut], axis=1)                      # (k, 4, ny + nw)
     Zy, Zw = Z[:, :, :len(ys)], Z[:, :, len(ys):]

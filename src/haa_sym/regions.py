@@ -196,7 +196,7 @@ def region_map(params: Params, P_gain, D_gain, *, options: LoopOptions | None = 
     if loop is None:
         loop = ClosedLoop(params, options, backend)
     coef = loop.loop_coefficients(None, beta, alpha)
-    L = coef.L_imp if options.pm_loop == "impedance" else coef.L_t
+    L = coef.L_imp if options.conventions.pm_loop == "impedance" else coef.L_t
     PP, DD = np.meshgrid(P, D, indexing="ij")
     n = PP.size
     out = {k: np.empty(n) for k in ("rho", "pm", "excess")}
@@ -209,12 +209,12 @@ def region_map(params: Params, P_gain, D_gain, *, options: LoopOptions | None = 
         X = gain_rows(PP.flat[sl], DD.flat[sl])
         pm = np.full(X.shape[0], np.nan)
         ok = np.flatnonzero(st.stable)
-        pm[ok] = phase_margins(X[ok], L, coef.omega, options.pm_rule)[0]
+        pm[ok] = phase_margins(X[ok], L, coef.omega, options.conventions.pm_rule)[0]
         out["pm"][sl] = pm
         # Z(z) of an unstable loop has poles outside the circle: not passive, no phase to judge
         ex = np.full(X.shape[0], np.nan)
         if passivity:
-            ex[ok] = phase_excess(X[ok], coef.Z_num, coef.Z_den, coef.omega, ctrl.Ts, options.colgate)[0]
+            ex[ok] = phase_excess(X[ok], coef.Z_num, coef.Z_den, coef.omega, ctrl.Ts, options.conventions.colgate)[0]
         out["excess"][sl] = ex
         return sl.stop - sl.start
 
@@ -232,7 +232,7 @@ def region_map(params: Params, P_gain, D_gain, *, options: LoopOptions | None = 
                 bar.update(work(sl))
     shape = PP.shape
     with np.errstate(invalid="ignore"):
-        passive = stable & (out["excess"] <= options.passivity_tol_deg)
+        passive = stable & (out["excess"] <= options.conventions.passivity_tol_deg)
     return RegionMap(P_gain=P, D_gain=D, stable=stable.reshape(shape),
                      spectral_radius=out["rho"].reshape(shape),
                      phase_margin_deg=out["pm"].reshape(shape), passive=passive.reshape(shape),

@@ -30,7 +30,7 @@ OUTPUT_NAMES = ("T_meas", "theta_encoder", "port_velocity", "y")
 def _layout(loop):
     """States of the closed loop: the plant's, then each distinct element's, by role."""
     el = loop.elements
-    roles = ["F_d", "F_vc"] + (["F_port"] if loop.options.port == "encoder_average" else []) + \
+    roles = ["F_d", "F_vc"] + (["F_port"] if loop.options.structure.port == "encoder_average" else []) + \
         ["I_z", "z_delay"]
     blocks, owner, start = [], {}, loop.plant.Phi.shape[0]
     for role in roles:
@@ -104,7 +104,7 @@ def closed_loop_batch(loop, P_gain, D_gain, beta=None, alpha=None, cut: str | No
     V_k = (bcast(unit(i_r)) if cut == "PI" else u_pi) + VC[:, None] * v_vc
     V = element("z_delay", V_k)
     rows[:, :nx] += pl.Gamma[None, :, 0, None] * V[:, None, :]
-    port = element("F_port", th) if opt.port == "encoder_average" else bcast(plant_row(opt.port))
+    port = element("F_port", th) if opt.structure.port == "encoder_average" else bcast(plant_row(opt.structure.port))
     y = {None: np.zeros((k, width)), "T_ref": imp, "PI": -u_pi}[cut]
     out = np.stack([T, th, port, y], axis=1)
     return rows[:, :, :n], rows[:, :, n:], out[:, :, :n], out[:, :, n:]

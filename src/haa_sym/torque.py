@@ -207,7 +207,7 @@ def torque_bandwidth(params: Params, *, options: LoopOptions | None = None,
     """
     _, _, beta, alpha = gain_points(0.0, 0.0, beta, alpha)
     loop = loop or ClosedLoop(params, options)
-    check_memory(sweep_bytes(1, loop.options.n_omega), f"the torque loop on n_omega = {loop.options.n_omega} frequencies")
+    check_memory(sweep_bytes(1, loop.options.numerics.n_omega), f"the torque loop on n_omega = {loop.options.numerics.n_omega} frequencies")
     coef = loop.loop_coefficients(None, beta, alpha)
     mag = np.abs(coef.H_T)
     ref = mag[0]
@@ -258,10 +258,10 @@ def torque_loop_margins(params: Params, *, options: LoopOptions | None = None,
     from haa_sym.margins import stability_margins
     _, _, beta, alpha = gain_points(0.0, 0.0, beta, alpha)
     loop = ClosedLoop(params, options)
-    check_memory(sweep_bytes(1, 4 * loop.options.n_omega),
-                 f"the torque loop on 4 x n_omega = {4 * loop.options.n_omega} frequencies")
+    check_memory(sweep_bytes(1, 4 * loop.options.numerics.n_omega),
+                 f"the torque loop on 4 x n_omega = {4 * loop.options.numerics.n_omega} frequencies")
     ctrl = params.controller
-    w = np.logspace(np.log10(loop.options.omega_min), np.log10(np.pi / ctrl.Ts * (1 - 1e-9)),
-                    4 * loop.options.n_omega)
+    w = np.logspace(np.log10(loop.options.numerics.omega_min), np.log10(np.pi / ctrl.Ts * (1 - 1e-9)),
+                    4 * loop.options.numerics.n_omega)
     coef = loop.loop_coefficients(w, beta, alpha)
     return stability_margins(coef.evaluate("L_t", 0.0, 0.0), w)

@@ -199,7 +199,7 @@ class _Job:
         return self.spec["claims"]
 
     def with_options(self, **change) -> LoopOptions:
-        return LoopOptions(**{**self.options.to_dict(), **change})
+        return self.options.replace(**change)
 
 
 # options varied one at a time around the defaults (the sensitivity table and the trend recount)
@@ -308,8 +308,8 @@ def _fig12(job: _Job, loop: ClosedLoop) -> dict:
     """Fig. 12: corrected phase of Z, torque loop alone and impedance loop closed; the bands."""
     from haa_sym.plots import plot_corrected_phase, save_figure
     params, options = job.params, job.options
-    w_fine = np.logspace(np.log10(options.omega_min), np.log10(np.pi / params.controller.Ts * (1 - 1e-9)),
-                         4 * options.n_omega)
+    w_fine = np.logspace(np.log10(options.numerics.omega_min), np.log10(np.pi / params.controller.Ts * (1 - 1e-9)),
+                         4 * options.numerics.n_omega)
     w, ph_t = corrected_phase(params, 0.0, 0.0, omega=w_fine, loop=loop)
     P12, D12 = job.claims["fig12_gains"]
     _, ph_i = corrected_phase(params, P12, D12, omega=w_fine, loop=loop)
@@ -425,9 +425,9 @@ def reproduce(out: str | Path = "results", params: Params | None = None,
     P_grid = grid("log:1:20000:40" if quick else reg["P_gain"], "P_gain")
     D_grid = grid("lin:1:50:20" if quick else reg["D_gain"], "D_gain")
     # the largest pieces, before minutes of work: a region map and the fine Fig. 12 sweep
-    check_memory(max(sweep_bytes(P_grid.size * D_grid.size, options.n_omega, CHUNK),
-                     sweep_bytes(1, 4 * options.n_omega)),
-                 f"reproduce (region maps of {P_grid.size} x {D_grid.size} points, n_omega = {options.n_omega})")
+    check_memory(max(sweep_bytes(P_grid.size * D_grid.size, options.numerics.n_omega, CHUNK),
+                     sweep_bytes(1, 4 * options.numerics.n_omega)),
+                 f"reproduce (region maps of {P_grid.size} x {D_grid.size} points, n_omega = {options.numerics.n_omega})")
     with Transaction() as tx:
         stage = tx.directory(out, field, _replaceable)
         (stage / "regions").mkdir()

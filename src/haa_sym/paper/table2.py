@@ -75,7 +75,7 @@ def score_options(params: Params, spec: dict | None = None, base: LoopOptions | 
     keys = list(OPTION_GRID)
     for values in itertools.product(*(OPTION_GRID[k] for k in keys)):
         combo = dict(zip(keys, values))
-        opt = LoopOptions(**{**base.to_dict(), **combo})
+        opt = base.replace(**combo)
         cells = table2(params, opt, spec)
         out.append((combo, sum(c.agrees for c in cells), len(cells), cells))
     return sorted(out, key=lambda r: -r[1])
