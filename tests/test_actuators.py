@@ -206,10 +206,12 @@ def test_user_file_compiled_into_cache_and_cli(user_file, cache, capsys):
 
 
 def test_port_option_is_checked_against_the_plant(user_file):
+    # by default the port is the body T_dist acts on (the file's [sensors] port)
+    assert ClosedLoop(load_params(user_file), basis=False).options.structure.port == "dtheta_C"
     with pytest.raises(ParameterError, match=r"port = 'dtheta_L2' is not a velocity of the actuator "
                                              r".*three.toml; allowed: \['dtheta_A', 'dtheta_B', "
                                              r"'dtheta_C', 'encoder_average'\]"):
-        ClosedLoop(load_params(user_file))
+        ClosedLoop(load_params(user_file), LoopOptions(port="dtheta_L2"))
 
 
 # --- closed loop against the explicit reference, >= 1,000 points per new topology -----------

@@ -145,8 +145,12 @@ def test_readme_python_example(tmp_path, monkeypatch):
     exec(compile(blocks[0], "README.md", "exec"), ns)
     m, res = ns["m"], ns["res"]
     np.testing.assert_array_equal(m.stable, res.stable)
-    # the map is computed with the loop's options, and those are the documented defaults
-    assert m.meta["options"] == ns["loop"].options.to_dict() == LoopOptions().to_dict()
+    # the map is computed with the loop's options, and those are the documented defaults with
+    # the file's sensor and port (HyQ: Eq. 2 with its damping term, the leg inertia J_L2)
+    defaults = LoopOptions().to_dict()
+    assert defaults["torque_damping"] is None and defaults["port"] is None
+    assert m.meta["options"] == ns["loop"].options.to_dict() == {**defaults, "torque_damping": True,
+                                                                 "port": "dtheta_L2"}
     saved = RegionMap.load(tmp_path / "map.npz")
     assert saved.meta["params"]["plant"]["J_L2"] == ns["params"].plant.J_L2
     assert (tmp_path / "map.png").stat().st_size > 1000

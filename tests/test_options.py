@@ -14,10 +14,17 @@ def test_fields_are_routed_to_their_part():
     assert (o.delay, o.colgate, o.n_omega) == (1, "none", 200)
     assert o == LoopOptions(LoopStructure(delay=1), AnalysisConventions(colgate="none"), FrequencyGrid(n_omega=200))
     assert hash(o) == hash(LoopOptions(**o.to_dict()))
-    assert o.replace(port="dtheta_L1").structure.port == "dtheta_L1" and o.structure.port == "dtheta_L2"
+    assert o.replace(port="dtheta_L1").structure.port == "dtheta_L1" and o.structure.port is None
     assert set(o.to_dict()) == set(LoopOptions.field_names())
     with pytest.raises(AttributeError):
         o.delay = 0
+
+
+def test_file_backed_defaults_are_resolved_per_actuator(params):
+    o = LoopOptions(delay=1).resolved(params.plant.topology)
+    assert (o.structure.port, o.structure.torque_damping) == ("dtheta_L2", True)
+    explicit = LoopOptions(port="dtheta_L1", torque_damping=False).resolved(params.plant.topology)
+    assert (explicit.structure.port, explicit.structure.torque_damping) == ("dtheta_L1", False)
 
 
 def test_a_loop_depends_on_its_structure_only(params):

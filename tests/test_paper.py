@@ -43,7 +43,7 @@ def test_defaults_are_best_option_combination(params, cells):
     scores = score_options(params)
     best = scores[0][1]
     assert sum(c.agrees for c in cells) == best
-    defaults = LoopOptions()
+    defaults = LoopOptions().resolved(params.plant.topology)
     top = [combo for combo, n, _, _ in scores if n == best]
     assert {k: getattr(defaults, k) for k in top[0]} in top
 

@@ -100,7 +100,7 @@ def test_npz_roundtrip(params, tmp_path):
         assert f["stable"].dtype == bool and f["passive"].dtype == bool
         assert f["stable"].shape == (3, 3)
         meta = json.loads(str(f["meta"]))
-    assert meta["options"] == LoopOptions().to_dict()
+    assert meta["options"] == LoopOptions().resolved(params.plant.topology).to_dict()
     assert meta["params"]["controller"]["N_av"] == 4
     back = RegionMap.load(path)
     np.testing.assert_array_equal(back.stable, m.stable)

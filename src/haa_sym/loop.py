@@ -84,36 +84,47 @@ class LoopStructure:
     ----------
     delay : {0, 1}
         Computation delay between sampling and the applied voltage, samples. Default 0.
-    torque_damping : bool
+    torque_damping : bool or None
         Whether the measured torque includes the damping term of the sensed coupling (D_hd of
-        Eq. 2). Default True.
+        Eq. 2). Default None: what the actuator file's ``[sensors] torque_damping`` says (True
+        for HyQ, Eq. 2 as printed).
     filter : {"both", "impedance", "compensation"}
         Where the velocity estimate (``velocity_filter`` of the controller) sits: on the velocity
         feeding both the D term of Eq. (8) and the velocity compensation of Eq. (6) (default, the
         paper's Sec. 3.4 and Fig. 6), on the D term only, or on the compensation only; the other
         path then uses the one-sample backward difference (theta[k] - theta[k-1])/Ts.
-    port : {"dtheta_L2", "dtheta_L1", "encoder_average"}, or "dtheta_<body>"
-        Velocity of the passivity port Z = T_dist / velocity (Sec. 5): the inertia J_L2 that
-        T_dist acts on (default), the sampled link velocity of the paper's wording, or the
-        controller's velocity estimate of the encoder angle; for another actuator file the
-        velocity of any of its bodies (ClosedLoop checks it against the plant's outputs).
+    port : "dtheta_<body>", "encoder_average" or None
+        Velocity of the passivity port Z = T_dist / velocity (Sec. 5): the velocity of a body of
+        the actuator file (ClosedLoop checks it against the plant's outputs) or the controller's
+        velocity estimate of the encoder angle. Default None: the body T_dist acts on (the
+        file's ``[sensors] port``; ``dtheta_L2`` for HyQ, whose alternatives are the sampled link
+        velocity ``dtheta_L1`` of the paper's wording and ``encoder_average``).
+
+    :meth:`resolved` fills the two file-backed defaults for one actuator.
     """
 
     delay: int = 0
-    torque_damping: bool = True
+    torque_damping: bool | None = None
     filter: str = "both"
-    port: str = "dtheta_L2"
+    port: str | None = None
 
     def __post_init__(self):
         if self.delay not in (0, 1) or isinstance(self.delay, bool):
             raise ParameterError(f"delay = {self.delay!r}; allowed: 0 or 1 (samples)")
-        if not isinstance(self.torque_damping, bool):
-            raise ParameterError(f"torque_damping = {self.torque_damping!r}; allowed: True or False")
-        if not (self.port == "encoder_average" or (isinstance(self.port, str)
+        if not (self.torque_damping is None or isinstance(self.torque_damping, bool)):
+            raise ParameterError(f"torque_damping = {self.torque_damping!r}; allowed: True, False or "
+                                 "None (the actuator file's)")
+        if not (self.port is None or self.port == "encoder_average" or (isinstance(self.port, str)
                                                     and re.fullmatch(r"dtheta_[A-Za-z][A-Za-z0-9]*", self.port))):
             raise ParameterError(f"port = {self.port!r}; allowed: 'dtheta_<body>' (a body of the "
                                  f"actuator file, e.g. {list(PORTS)[:2]}) or 'encoder_average'")
         _choice(self, "filter", FILTERS)
+
+    def resolved(self, topology) -> "LoopStructure":
+        """This structure with the file-backed defaults of ``topology`` (an actuator) filled in."""
+        return dataclasses.replace(
+            self, torque_damping=topology.torque_damping if self.torque_damping is None else self.torque_damping,
+            port=f"dtheta_{topology.port}" if self.port is None else self.port)
 
 
 @dataclass(frozen=True)
@@ -254,6 +265,10 @@ class LoopOptions:
                 return c.__dataclass_fields__[name].default
         raise KeyError(name)
 
+    def resolved(self, topology) -> "LoopOptions":
+        """These options with the structure's file-backed defaults filled in for ``topology``."""
+        return LoopOptions(self.structure.resolved(topology), self.conventions, self.numerics)
+
     def omega(self, Ts: float) -> np.ndarray:
         """The frequency grid (rad/s) of :attr:`numerics` for sampling time ``Ts``."""
         return self.numerics.omega(Ts)
@@ -329,7 +344,8 @@ class ClosedLoop:
     def __init__(self, params: Params, options: LoopOptions | None = None, backend: str = "auto",
                  basis: bool = True):
         self.params = params
-        self.options = options or LoopOptions()
+        # the structure's file-backed defaults (sensor damping, port body) for this actuator
+        self.options = (options or LoopOptions()).resolved(params.plant.topology)
         self.backend = backend
         ctrl = params.controller
         self.plant: DiscretePlant = _PLANTS.get(
@@ -367,9 +383,7 @@ class ClosedLoop:
 
     @property
     def torque_output(self) -> str:
-        # the actuator file says what the sensor measures; the option can drop the damping term
-        damped = self.options.structure.torque_damping and self.params.plant.topology.torque_damping
-        return "T_sensor" if damped else "T_sensor_spring"
+        return "T_sensor" if self.options.structure.torque_damping else "T_sensor_spring"
 
     @property
     def elements(self) -> dict:

@@ -98,7 +98,8 @@ def _blocks(params, options, torque_output):
 
 
 def _batch(loop, P_gain, D_gain, beta=None, alpha=None, cut=None):
-    params, opt = loop.params, loop.options
+    params = loop.params
+    opt = loop.options.resolved(params.plant.topology)        # the file's sensor and port defaults
     ctrl, pl = params.controller, params.plant
     beta = ctrl.beta if beta is None else beta
     alpha = ctrl.alpha if alpha is None else alpha
@@ -107,8 +108,7 @@ def _batch(loop, P_gain, D_gain, beta=None, alpha=None, cut=None):
     k = P.size
     P_t, I_t = beta * ctrl.P_t0, beta * ctrl.I_t0
     VC = alpha * pl.N / pl.k_t * (pl.R * pl.B_m + pl.k_t * pl.k_w)           # Eq. (6)
-    # the actuator file says what the sensor measures; the option can drop the damping term
-    damped = opt.structure.torque_damping and params.plant.topology.torque_damping
+    damped = opt.structure.torque_damping
     blocks = _blocks(params, opt, "T_sensor" if damped else "T_sensor_spring")
     ys = [y for _, _, yn, _ in blocks for y in yn]
     us = [u for _, _, _, un in blocks for u in un]

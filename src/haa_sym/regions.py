@@ -246,7 +246,8 @@ def run_meta(params: Params, options: LoopOptions, *, backend: str = "auto", **e
     from haa_sym import __version__
     from haa_sym.compiled import evaluators
     ev = evaluators(backend)
-    return {"params": params.to_dict(), "options": options.to_dict(), "haa_sym": __version__,
+    return {"params": params.to_dict(), "options": options.resolved(params.plant.topology).to_dict(),
+            "haa_sym": __version__,
             "generated_source_sha256": ev.code.manifest["source_sha256"], **extra,
             "backend": ev.backend}
 

@@ -418,7 +418,7 @@ def reproduce(out: str | Path = "results", params: Params | None = None,
     """
     t_start = time.time()
     params = params or load_params()
-    options = options or LoopOptions()
+    options = (options or LoopOptions()).resolved(params.plant.topology)
     spec = spec or paper_spec()
     reg = spec["regions"]
     out = check_directory(out, field, _replaceable)
