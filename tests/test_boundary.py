@@ -55,3 +55,23 @@ def test_crossings_are_exact_to_rounding(case):
             # the decision changes within a relative 1e-9 of the crossing
             lo, hi = loop.stability([P * (1 - 1e-9), P * (1 + 1e-9)], [dj, dj], b.beta, b.alpha).stable
             assert lo != hi, (name, dj, P)
+
+
+def test_cli_boundary_writes_json_and_plot(tmp_path, capsys):
+    import json
+
+    from haa_sym.cli import main
+    out, plot = tmp_path / "b.json", tmp_path / "b.png"
+    assert main(["boundary", "--set", "N_av=10", "--out", str(out), "--plot", str(plot), "-q"]) == 0
+    data = json.loads(out.read_text())
+    assert data["boundary"] == "stability" and data["beta"] == 1.0 and data["curves"]
+    c = data["curves"][0]
+    assert len(c["P_gain"]) == len(c["D_gain"]) == len(c["omega"]) > 10
+    assert plot.stat().st_size > 1000
+    assert "curve(s)" in capsys.readouterr().out
+
+
+def test_cli_boundary_refuses_a_bad_output_and_writes_nothing(tmp_path, capsys):
+    from haa_sym.cli import main
+    assert main(["boundary", "--out", str(tmp_path / "b.csv")]) == 2
+    assert "--out" in capsys.readouterr().err and not list(tmp_path.iterdir())

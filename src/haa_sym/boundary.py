@@ -69,6 +69,20 @@ class StabilityBoundary:
     ABC: np.ndarray = field(default=None, repr=False)
     nu: np.ndarray = field(default=None, repr=False)
 
+    def to_dict(self) -> dict:
+        """Plain JSON-able data: the curves (P_gain Nm/rad, D_gain Nms/rad, omega rad/s, kind)
+        and what produced them."""
+        return {"boundary": "stability", "beta": self.beta, "alpha": self.alpha, "Ts": self.Ts,
+                "meta": self.meta,
+                "curves": [{"kind": c.kind, "P_gain": c.P_gain.tolist(), "D_gain": c.D_gain.tolist(),
+                            "omega": c.omega.tolist()} for c in self.curves]}
+
+    def save(self, path, tx=None, field: str | None = None):
+        """Write :meth:`to_dict` as JSON (all or nothing, see :mod:`haa_sym.outputs`)."""
+        import json
+        from haa_sym.outputs import write_text
+        return write_text(path, json.dumps(self.to_dict(), indent=1) + "\n", tx, field)
+
 
 def affine_polynomials(loop: ClosedLoop, beta=None, alpha=None) -> np.ndarray:
     """``(3, cap + 1)``: ascending coefficients in s of A, B, C with q = A + P_gain B + D_gain C,

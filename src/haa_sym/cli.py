@@ -26,7 +26,8 @@ from pathlib import Path
 from haa_sym.params import STRING_KEYS, ParameterError, gain_array, load_params
 from haa_sym.progress import set_progress
 
-OUTPUT_SUFFIXES = {"regions": (".npz",), "passivity": (".csv", ".json"), "step": (".csv",)}
+OUTPUT_SUFFIXES = {"regions": (".npz",), "passivity": (".csv", ".json"), "step": (".csv",),
+                   "boundary": (".json",)}
 
 
 def _parse_set(items: list[str]) -> dict[str, float]:
@@ -131,22 +132,49 @@ def _gain(args, name: str, flag: str) -> float:
 
 
 def _cmd_regions(args) -> int:
+    from haa_sym.loop import ClosedLoop
     from haa_sym.regions import grid, region_map
     params = _params(args)
     options = _parse_options(args.option)
     P, D = grid(args.P_gain, "--P-gain"), grid(args.D_gain, "--D-gain")
     out = _check_out(args.out, "regions")
     plot = _check_out(args.plot, "regions", "--plot")
-    m = region_map(params, P, D, options=options, radius=args.radius)
+    loop = ClosedLoop(params, options)
+    m = region_map(params, P, D, options=options, radius=args.radius, loop=loop)
     from haa_sym.outputs import Transaction
     with Transaction() as tx:
         if out:
             m.save(out, tx, "--out")
         if plot:
+            from haa_sym.boundary import stability_boundary
             from haa_sym.plots import plot_region, save_figure
-            save_figure(plot_region(m, title=args.title), plot, tx, "--plot")
+            b = stability_boundary(params, options=options, P_range=(P.min(), P.max()),
+                                   D_range=(D.min(), D.max()), loop=loop)
+            save_figure(plot_region(m, title=args.title, boundary=b), plot, tx, "--plot")
     print(f"{m.stable.size} points: {m.stable.sum()} stable, {m.low_pm.sum()} stable with PM < 30 deg, "
           f"{m.passive.sum()} passive" + (f"; wrote {out}" if out else ""))
+    return 0
+
+
+def _cmd_boundary(args) -> int:
+    from haa_sym.boundary import stability_boundary
+    from haa_sym.regions import grid
+    params = _params(args)
+    options = _parse_options(args.option)
+    P, D = grid(args.P_gain, "--P-gain"), grid(args.D_gain, "--D-gain")
+    out = _check_out(args.out, "boundary")
+    plot = _check_out(args.plot, "boundary", "--plot")
+    b = stability_boundary(params, options=options, P_range=(P.min(), P.max()), D_range=(D.min(), D.max()))
+    from haa_sym.outputs import Transaction
+    with Transaction() as tx:
+        if out:
+            b.save(out, tx, "--out")
+        if plot:
+            from haa_sym.plots import plot_boundary, save_figure
+            save_figure(plot_boundary(b, title=args.title), plot, tx, "--plot")
+    kinds = ", ".join(f"{c.kind}: {c.P_gain.size} points" for c in b.curves) or "no crossing in the box"
+    print(f"stability boundary in P_gain [{P.min():g}, {P.max():g}] x D_gain [{D.min():g}, {D.max():g}]: "
+          f"{len(b.curves)} curve(s) ({kinds})" + (f"; wrote {out}" if out else ""))
     return 0
 
 
@@ -288,6 +316,14 @@ def main(argv: list[str] | None = None) -> int:
     r.add_argument("--title")
     r.add_argument("--radius", action="store_true",
                    help="also compute the spectral radius from eigenvalues (slower)")
+    bd = sub.add_parser("boundary", help="exact stability boundary in the (P_gain, D_gain) plane "
+                        "(parameter-space method)")
+    _common(bd)
+    bd.add_argument("--P-gain", default="log:1:20000:200", help="the box: grid spec whose range is used")
+    bd.add_argument("--D-gain", default="lin:0:50:100", help="the box: grid spec whose range is used")
+    bd.add_argument("--out", help="output .json")
+    bd.add_argument("--plot", help="output figure (.png/.pdf/.svg)")
+    bd.add_argument("--title")
     p = sub.add_parser("passivity", help="passivity of Z(z) at gain pairs (Table 2, Fig. 12)")
     _common(p)
     p.add_argument("--P-gain", default="0,200,20000", help="values paired with --D-gain")
@@ -324,7 +360,7 @@ def main(argv: list[str] | None = None) -> int:
                                                                              radius=True)
             print(f"stable: {bool(res.stable)}  spectral radius: {float(res.spectral_radius):.12g}")
             return 0
-        return {"regions": _cmd_regions, "passivity": _cmd_passivity, "step": _cmd_step,
+        return {"regions": _cmd_regions, "boundary": _cmd_boundary, "passivity": _cmd_passivity, "step": _cmd_step,
                 "margins": _cmd_margins, "reproduce": _cmd_reproduce, "compile": _cmd_compile}[args.cmd](args)
     except ParameterError as exc:
         print(f"haa-sym: error: {exc}", file=sys.stderr)

@@ -28,8 +28,9 @@ def _edges(x: np.ndarray, log: bool) -> np.ndarray:
     return np.exp(e) if log else e
 
 
-def plot_region(m, ax=None, title: str | None = None, passivity: bool = True):
-    """Draw one :class:`haa_sym.regions.RegionMap` on ``ax`` (log P_gain, linear D_gain)."""
+def plot_region(m, ax=None, title: str | None = None, passivity: bool = True, boundary=None):
+    """Draw one :class:`haa_sym.regions.RegionMap` on ``ax`` (log P_gain, linear D_gain), with
+    the exact stability boundary (:mod:`haa_sym.boundary`) over it when given."""
     fig = None
     if ax is None:
         fig, ax = plt.subplots(figsize=(4.6, 4.4), layout="constrained")
@@ -46,6 +47,10 @@ def plot_region(m, ax=None, title: str | None = None, passivity: bool = True):
                              hatches=["////"])
             cs.set_edgecolor("tab:blue")
             cs.set_linewidth(0)
+    if boundary is not None:
+        plot_boundary(boundary, ax)
+        ax.set_xlim(_edges(m.P_gain, logP)[[0, -1]])
+        ax.set_ylim(_edges(m.D_gain, False)[[0, -1]])
     if logP:
         ax.set_xscale("log")
     ax.set_xlabel("P_gain (Nm/rad)")
@@ -53,7 +58,35 @@ def plot_region(m, ax=None, title: str | None = None, passivity: bool = True):
     if title:
         ax.set_title(title, fontsize=10)
     if fig is not None:
-        fig.legend(handles=_region_legend(), loc="outside lower center", ncol=2, fontsize=7)
+        extra = [plt.Line2D([], [], color="tab:red", lw=1.4, label="exact stability boundary")] \
+            if boundary is not None else []
+        fig.legend(handles=_region_legend() + extra, loc="outside lower center", ncol=2, fontsize=7)
+    return fig or ax.figure
+
+
+def plot_boundary(boundary, ax=None, title: str | None = None):
+    """Draw the curves of a :class:`haa_sym.boundary.StabilityBoundary` (on ``ax``: over a map)."""
+    fig = None
+    if ax is None:
+        fig, ax = plt.subplots(figsize=(4.6, 4.4), layout="constrained")
+        ax.set_xlabel("P_gain (Nm/rad)")
+        ax.set_ylabel("D_gain (Nms/rad)")
+        lo, hi = boundary.meta.get("P_range", (0, 1))
+        if lo > 0:
+            ax.set_xscale("log")
+        ax.set_xlim(lo, hi)
+        ax.set_ylim(*boundary.meta.get("D_range", (0, 1)))
+    styles = {"complex": dict(color="tab:red", lw=1.4), "z=1": dict(color="tab:orange", lw=1.4, ls="-."),
+              "z=-1": dict(color="tab:purple", lw=1.4, ls=":")}
+    seen = set()
+    for c in boundary.curves:
+        label = None if c.kind in seen else f"stability boundary ({c.kind})"
+        seen.add(c.kind)
+        ax.plot(c.P_gain, c.D_gain, label=label, **styles[c.kind])
+    if title:
+        ax.set_title(title, fontsize=10)
+    if fig is not None and boundary.curves:
+        ax.legend(fontsize=7)
     return fig or ax.figure
 
 
