@@ -27,7 +27,7 @@ from haa_sym.params import STRING_KEYS, ParameterError, gain_array, load_params
 from haa_sym.progress import set_progress
 
 OUTPUT_SUFFIXES = {"regions": (".npz",), "passivity": (".csv", ".json"), "step": (".csv",),
-                   "boundary": (".json",)}
+                   "boundary": (".json",), "contact": (".json",)}
 
 
 def _parse_set(items: list[str]) -> dict[str, float]:
@@ -178,6 +178,40 @@ def _cmd_boundary(args) -> int:
     return 0
 
 
+def _cmd_contact(args) -> int:
+    import json
+    from haa_sym.contact import contact_intervals
+    params = _params(args)
+    options = _parse_options(args.option)
+    lo, sep, hi = args.K_range.partition(":")
+    try:
+        K_range = (float(lo), float(hi)) if sep else None
+    except ValueError:
+        K_range = None
+    if K_range is None:
+        raise ParameterError(f"--K-range {args.K_range!r}; allowed: LO:HI in Nm/rad, 0 < LO < HI")
+    out = _check_out(args.out, "contact")
+    plot = _check_out(args.plot, "contact", "--plot")
+    r = contact_intervals(params, K_range, n_scan=args.n_scan, P_gain=_gain(args, "P_gain", "--P-gain"),
+                          D_gain=_gain(args, "D_gain", "--D-gain"), options=options, mode=args.mode)
+    data = {"analysis": "contact stability", "environment": f"K_env {'replaces' if r.mode == 'replace' else 'adds to'} {r.key}",
+            "mode": r.mode, "stiffness_key": r.key, "P_gain": args.P_gain, "D_gain": args.D_gain,
+            "K_range": list(K_range), "n_scan": args.n_scan, "rtol": r.rtol,
+            "unstable_intervals": [list(i) for i in r.unstable]}
+    from haa_sym.outputs import Transaction, write_text
+    with Transaction() as tx:
+        if out:
+            from haa_sym.regions import run_meta
+            data["meta"] = run_meta(params, options)
+            write_text(out, json.dumps(data, indent=1) + "\n", tx, "--out")
+        if plot:
+            from haa_sym.plots import plot_contact, save_figure
+            save_figure(plot_contact(r.K_env, r.spectral_radius, unstable=r.unstable, key=r.key), plot, tx, "--plot")
+    ends = ", ".join(f"{a:.10g}-{b:.10g}" for a, b in r.unstable) or "none"
+    print(f"unstable in contact ({data['environment']}): {ends} Nm/rad" + (f"; wrote {out}" if out else ""))
+    return 0
+
+
 def _cmd_passivity(args) -> int:
     import json
     from haa_sym.passivity import bands_beyond, corrected_phase, passivity
@@ -324,6 +358,16 @@ def main(argv: list[str] | None = None) -> int:
     bd.add_argument("--out", help="output .json")
     bd.add_argument("--plot", help="output figure (.png/.pdf/.svg)")
     bd.add_argument("--title")
+    ct = sub.add_parser("contact", help="environment stiffnesses that make the loop unstable (exact ends)")
+    _common(ct)
+    ct.add_argument("--K-range", default="1:100000", help="LO:HI environment stiffness, Nm/rad (default 1:100000)")
+    ct.add_argument("--n-scan", type=int, default=400, help="log-spaced stiffnesses that bracket the ends (default 400)")
+    ct.add_argument("--mode", choices=("replace", "add"), default="replace",
+                    help="K_env replaces the port body's ground stiffness (default, the paper's reading) or adds to it")
+    ct.add_argument("--P-gain", type=float, default=0.0, help="impedance gains (default 0: the torque loop alone)")
+    ct.add_argument("--D-gain", type=float, default=0.0)
+    ct.add_argument("--out", help="output .json")
+    ct.add_argument("--plot", help="output figure (.png/.pdf/.svg)")
     p = sub.add_parser("passivity", help="passivity of Z(z) at gain pairs (Table 2, Fig. 12)")
     _common(p)
     p.add_argument("--P-gain", default="0,200,20000", help="values paired with --D-gain")
@@ -360,7 +404,7 @@ def main(argv: list[str] | None = None) -> int:
                                                                              radius=True)
             print(f"stable: {bool(res.stable)}  spectral radius: {float(res.spectral_radius):.12g}")
             return 0
-        return {"regions": _cmd_regions, "boundary": _cmd_boundary, "passivity": _cmd_passivity, "step": _cmd_step,
+        return {"regions": _cmd_regions, "boundary": _cmd_boundary, "contact": _cmd_contact, "passivity": _cmd_passivity, "step": _cmd_step,
                 "margins": _cmd_margins, "reproduce": _cmd_reproduce, "compile": _cmd_compile}[args.cmd](args)
     except ParameterError as exc:
         print(f"haa-sym: error: {exc}", file=sys.stderr)

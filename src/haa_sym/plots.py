@@ -146,14 +146,18 @@ def plot_steps(panels, title: str = ""):
     return fig
 
 
-def plot_contact(K, rho, paper_range=None):
-    """Spectral radius of the torque loop alone against the environment stiffness."""
+def plot_contact(K, rho, paper_range=None, unstable=(), key: str = "K_L2"):
+    """Spectral radius of the loop against the environment stiffness, with the exact ends of the
+    unstable intervals (:func:`haa_sym.contact.contact_intervals`) and the paper's range."""
     fig, ax = plt.subplots(figsize=(6.4, 3.2), constrained_layout=True)
     ax.semilogx(K, rho, color="k")
     ax.axhline(1.0, color="tab:red", lw=0.8, label="|z| = 1")
     if paper_range:
         ax.axvspan(*paper_range, color="tab:orange", alpha=0.2, label="paper: unstable")
-    ax.set_xlabel("environment stiffness K_L2 (Nm/rad)")
+    for i, (lo, hi) in enumerate(unstable):
+        for k in (lo, hi):
+            ax.axvline(k, color="tab:blue", lw=0.8, ls="--", label=None if i or k == hi else "computed: interval ends")
+    ax.set_xlabel(f"environment stiffness {key} (Nm/rad)")
     ax.set_ylabel("spectral radius")
     ax.legend(fontsize=8)
     ax.grid(True, which="both", alpha=0.3)

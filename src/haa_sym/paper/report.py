@@ -107,8 +107,8 @@ def write_report(out: Path, r: dict, spec: dict, options: LoopOptions, verify_te
          "always within +-90 deg", f"beyond 90 deg: {_fmt_band(r['z_band_impedance_loop'])}"],
         ["environment stiffness making the torque loop alone unstable",
          f"{c['contact_unstable_K_L2'][0]:g}-{c['contact_unstable_K_L2'][1]:g} Nm/rad",
-         ", ".join(f"{a:.0f}-{b:.0f}" for a, b in r["contact_unstable_K_L2"]) + " Nm/rad (grid "
-         f"{c['contact_K_L2_grid']})"],
+         ", ".join(f"{a:.1f}-{b:.1f}" for a, b in r["contact_unstable_K_L2"]) + " Nm/rad (ends "
+         f"located by root-finding to 1e-12 relative, bracketed on the grid {c['contact_K_L2_grid']})"],
         [f"P = {c['beta_threshold']['P_gain']:g}, D = {c['beta_threshold']['D_gain']:g}: torque gain",
          f"beta = {bc['stable_at']:g} stable, beta >= {bc['unstable_from']:g} unstable",
          f"beta = {bc['stable_at']:g} {'stable' if bc['computed_stable_at'] else 'UNSTABLE'}; "

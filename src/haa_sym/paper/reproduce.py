@@ -31,7 +31,7 @@ from pathlib import Path
 
 import numpy as np
 
-from haa_sym.contact import contact_stability, intervals
+from haa_sym.contact import contact_intervals, intervals
 from haa_sym.budget import check_memory, sweep_bytes
 from haa_sym.loop import ClosedLoop, LoopOptions
 from haa_sym.outputs import Transaction, check_directory, csv_text as _csv, write_text
@@ -327,11 +327,13 @@ def _contact(job: _Job) -> dict:
     """Stability of the torque loop alone against the environment stiffness (Sec. 5)."""
     from haa_sym.plots import plot_contact, save_figure
     K = grid(job.claims["contact_K_L2_grid"] if not job.quick else "log:1:100000:80", "K_L2")
-    st, rho = contact_stability(job.params, K, options=job.options)
-    _write_text(job.out / "contact.csv", _csv([{"K_L2": f"{k:.6g}", "stable": bool(s), "spectral_radius": f"{r:.9f}"}
-                                               for k, s, r in zip(K, st, rho)]))
-    save_figure(plot_contact(K, rho, job.claims["contact_unstable_K_L2"]), job.out / "contact.png")
-    return {"contact_unstable_K_L2": intervals(K, ~st)}
+    # the scan brackets every change of stability; Brent's method locates each end exactly
+    r = contact_intervals(job.params, (K.min(), K.max()), n_scan=K.size, options=job.options)
+    st, rho = r.spectral_radius < 1, r.spectral_radius
+    _write_text(job.out / "contact.csv", _csv([{"K_L2": f"{k:.6g}", "stable": bool(s), "spectral_radius": f"{v:.9f}"}
+                                               for k, s, v in zip(r.K_env, st, rho)]))
+    save_figure(plot_contact(r.K_env, rho, job.claims["contact_unstable_K_L2"], r.unstable), job.out / "contact.png")
+    return {"contact_unstable_K_L2": r.unstable}
 
 
 def _beta_threshold(job: _Job, loop: ClosedLoop) -> dict:
