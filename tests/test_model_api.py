@@ -291,3 +291,25 @@ def test_bad_linearisation_and_values(params):
 
 def test_load_params_unchanged(params):
     assert params.plant.topology == HYQ and load_params().plant == params.plant
+
+
+def test_docs_example_runs(tmp_path, monkeypatch):
+    """docs/model.md, "An actuator in code": the example runs and prints what it shows."""
+    import doctest
+    monkeypatch.setenv("HAA_SYM_CACHE", str(tmp_path / "cache"))
+    text = (ROOT / "docs" / "model.md").read_text()
+    start = text.index("## An actuator in code")
+    section = text[start:text.index("\n## ", start + 1)]
+    test = doctest.DocTestParser().get_doctest(section, {}, "docs/model.md: An actuator in code",
+                                               str(ROOT / "docs" / "model.md"), 0)
+    assert len(test.examples) >= 10
+    runner = doctest.DocTestRunner(optionflags=doctest.ELLIPSIS)
+    runner.run(test)
+    assert runner.summarize(verbose=False).failed == 0
+
+
+def test_contact_needs_the_port_stiffness(two_mass_params):
+    from haa_sym.contact import contact_stability
+    with pytest.raises(ParameterError, match=r"<model two-mass joint>: the model has no parameter K_l \(the "
+                                             r"port's stiffness to ground"):
+        contact_stability(two_mass_params, [100.0])

@@ -34,11 +34,17 @@ def contact_stability(params: Params, K_env, *, P_gain: float = 0.0, D_gain: flo
     """
     from tqdm.auto import tqdm
 
+    from haa_sym.actuator import Topology
     from haa_sym.statespace import closed_loop_batch
     P_gain, D_gain, beta, alpha = gain_points(P_gain, D_gain, beta, alpha)
     K_env = gain_array("K_env", K_env).ravel()
     top = params.plant.topology
     key = f"K_{top.port}"
+    if key not in top.parameter_keys and not isinstance(top, Topology):
+        raise ParameterError(
+            f"{params.source}: the model has no parameter {key} (the port's stiffness to ground, "
+            f"which the contact scan replaces by the environment's); allowed: a model whose "
+            f"parameter {key} (Nm/rad) is the stiffness acting on the port")
     if key not in top.parameter_keys:
         raise ParameterError(
             f"{params.source} [bodies.{top.port}]: the port body {top.port!r} has no stiffness to "
