@@ -5,8 +5,6 @@ matrices with its own parameter names) gives the plant matrices and the stabilit
 equivalent Topology; each bad model is one ParameterError naming the field; a model is compiled
 once into the cache and reused; its ClosedLoop agrees with the reference eigenvalues."""
 import re
-import subprocess
-import sys
 
 import numpy as np
 import pytest
@@ -71,7 +69,9 @@ def test_hyq_by_hand_gives_the_topology_plant_and_map(params, cache):
     m1, m2 = region_map(mine, P, D), region_map(params, P, D)
     assert m1.stable.any() and not m1.stable.all()
     np.testing.assert_array_equal(m1.stable, m2.stable)
-    np.testing.assert_allclose(m1.spectral_radius, m2.spectral_radius, rtol=1e-9)
+    pm1, pm2 = m1.phase_margin_deg[m2.stable], m2.phase_margin_deg[m2.stable]
+    assert np.isfinite(pm2).any()
+    np.testing.assert_allclose(pm1, pm2, rtol=1e-9, atol=1e-9)
     # the chain topology's own model is a LinearActuatorModel too, with the generated code's name
     assert isinstance(HYQ.model(), LinearActuatorModel) and HYQ.model().parameter_keys == HYQ.parameter_keys
 
@@ -131,9 +131,9 @@ def test_two_mass_model_equals_its_topology(two_mass_params):
 
 
 def test_two_mass_closed_loop_agrees_with_reference(two_mass_params):
-    """A few hundred random gain points: the generated decision == reference eigenvalues.
-
-    The reference's VC0 is the model's own here (no parameters named N, k_t, ...)."""
+    """A few hundred random gain points: the generated decision == reference eigenvalues (the
+    reference reads the model's declared VC0; its plant is sampled by scipy, its loop assembled
+    by its own algebra)."""
     rng = np.random.default_rng(82)
     n_points, disagree, n_stable = 0, 0, 0
     for Ts, N_av, delay, filt in ((1e-3, 4, 0, "both"), (5e-4, 8, 1, "impedance")):
@@ -208,13 +208,6 @@ def test_content_defines_the_fingerprint():
     c = LinearActuatorModel(**{**kw, "VC0": 2 * kw["VC0"]})
     assert c.fingerprint != a.fingerprint and c.function_name != a.function_name
     assert a != LinearActuatorModel(**two_mass(port="l", torque_damping=False))
-
-
-def test_model_in_code_imports_sympy_but_builtin_runtime_does_not():
-    code = ("import sys\nfrom haa_sym import load_params, ClosedLoop\n"
-            "ClosedLoop(load_params()).stability(200.0, 10.0)\n"
-            "assert 'sympy' not in sys.modules\n")
-    subprocess.run([sys.executable, "-c", code], check=True, cwd=ROOT)
 
 
 # --- bad models: one ParameterError each, naming the field ----------------------------------

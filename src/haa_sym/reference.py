@@ -14,7 +14,7 @@ options alone, with its own algebra:
   PI's integral Ts/(1 - z^-1) and the delay z^-d; transfer functions realised by
   ``scipy.signal.tf2ss``;
 * velocity compensation VC = alpha N/k_t (R B_m + k_t k_w) (Eq. 6) from the parameters (an
-  actuator written in code without these motor parameters: its declared VC0);
+  actuator written in code as a sympy model: the VC0 it declares);
 * the static part (impedance law Eq. 8, PI gains Eq. 7, compensation, the sums) as an
   interconnection matrix u = K y + E w of the blocks' outputs y and the external inputs w,
   closed by y = (I - D K)^-1 (C x + D E w), as python-control's ``interconnect`` does.
@@ -44,14 +44,12 @@ def _zoh_plant(params, outputs):
     return Ad, Bd, Cd, Dd
 
 
-_MOTOR = ("N", "k_t", "R", "B_m", "k_w")
-
-
 def _vc0(plant) -> float:
-    """Eq. (6) at alpha = 1, N/k_t (R B_m + k_t k_w), from the motor's parameters; an actuator
-    written in code without them (haa_sym.symbolic.model) declares its own VC0, read from its
-    plant function (the one number shared with the evaluators then)."""
-    if all(k in plant.keys for k in _MOTOR):
+    """Eq. (6) at alpha = 1, N/k_t (R B_m + k_t k_w), from the motor's parameters of a chain; an
+    actuator written in code (haa_sym.symbolic.model) declares its own VC0, read from its plant
+    function (the one number shared with the evaluators then, besides the plant)."""
+    from haa_sym.actuator import Topology
+    if isinstance(plant.topology, Topology):
         return plant.N / plant.k_t * (plant.R * plant.B_m + plant.k_t * plant.k_w)
     from haa_sym.plant import continuous_plant
     return continuous_plant(plant).VC0
