@@ -40,6 +40,7 @@ SOURCES = (
     "src/haa_sym/actuator.py",
     "src/haa_sym/layout.py",
     "src/haa_sym/symbolic/chain.py",
+    "src/haa_sym/symbolic/model.py",
     "src/haa_sym/symbolic/symbolic_to_casadi.py",
     "codegen/kernels.py",
     "codegen/generate.py",
@@ -60,7 +61,7 @@ def builtin_topologies() -> dict[str, dict]:
 
 def functions(topologies: dict[str, dict] | None = None) -> list[ca.Function]:
     topologies = builtin_topologies() if topologies is None else topologies
-    fns = [plant_function(t["topology"]) for _, t in sorted(topologies.items())]
+    fns = [plant_function(t["topology"].model(), t["function"]) for _, t in sorted(topologies.items())]
     fns += [loop_coefficient_function()]
     fns += [decision_function(cap) for cap in CAPACITIES]
     return fns

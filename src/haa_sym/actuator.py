@@ -29,7 +29,7 @@ import re
 from dataclasses import dataclass, field
 from typing import Mapping
 
-__all__ = ["Body", "Coupling", "Topology", "HYQ", "MOTOR_DOMAIN", "ROTOR", "ACTUATOR_SECTIONS",
+__all__ = ["Actuator", "Body", "Coupling", "Topology", "HYQ", "MOTOR_DOMAIN", "ROTOR", "ACTUATOR_SECTIONS",
            "parse_actuator", "legacy_plant"]
 
 ROTOR = "rotor"
@@ -41,6 +41,10 @@ MOTOR_DOMAIN: dict[str, str] = {"L": ">0", "R": ">0", "k_t": ">0", "k_w": ">=0",
                                 "B_m": ">=0", "N": ">0"}
 BODY_DOMAIN: dict[str, str] = {"J": ">0", "B": ">=0", "K": ">=0"}
 COUPLING_DOMAIN: dict[str, str] = {"K": ">0", "D": ">=0"}
+MOTOR_UNITS: dict[str, str] = {"L": "H", "R": "Ohm", "k_t": "Nm/A", "k_w": "V s/rad", "J_m": "kg m^2",
+                               "B_m": "Nm s/rad", "N": "-"}
+BODY_UNITS: dict[str, str] = {"J": "kg m^2", "B": "Nm s/rad", "K": "Nm/rad"}
+COUPLING_UNITS: dict[str, str] = {"K": "Nm/rad", "D": "Nm s/rad"}
 SENSOR_KEYS = ("torque", "torque_damping", "encoder", "port")
 ACTUATOR_SECTIONS = ("about", "motor", "bodies", "couplings", "sensors")
 INPUT_NAMES = ("V_m", "T_fr", "T_dist")
@@ -53,6 +57,25 @@ _RESERVED = (ROTOR, "m")                        # "m" would give J_m, B_m: the r
 def _error(msg: str):
     from haa_sym.params import ParameterError     # params imports this module
     return ParameterError(msg)
+
+
+class Actuator:
+    """What the numeric runtime reads of an actuator, whatever defines it.
+
+    Implemented by :class:`Topology` (a chain, from a file or code) and by
+    :class:`haa_sym.symbolic.model.LinearActuatorModel` (a sympy model written in code):
+    ``parameter_keys`` and ``domain`` (the plant vector and its rules), ``units``,
+    ``state_names``, ``input_names`` and ``output_names`` (the plant's signals), ``port`` and
+    ``torque_damping`` (the loop's defaults), ``fingerprint`` and ``function_name`` (the plant
+    function's identity), ``source``, :meth:`describe`, :meth:`structure` and :meth:`model`, the
+    :class:`~haa_sym.symbolic.model.LinearActuatorModel` the code generator compiles (sympy:
+    called only when code is generated).
+    """
+
+    __slots__ = ()
+
+    def model(self):
+        raise NotImplementedError
 
 
 @dataclass(frozen=True)
@@ -75,7 +98,7 @@ class Coupling:
 
 
 @dataclass(frozen=True)
-class Topology:
+class Topology(Actuator):
     """The structure of an actuator (no values): bodies, couplings and sensors.
 
     Parameters
@@ -136,6 +159,17 @@ class Topology:
         return d
 
     @property
+    def units(self) -> dict[str, str]:
+        """Flat parameter name -> SI unit (the file's ``unit`` fields say the same)."""
+        u = dict(MOTOR_UNITS)
+        for k in self.domain:
+            if k not in u:
+                kind, _, name = k.partition("_")
+                sec = self.section_of(k)[0]
+                u[k] = (BODY_UNITS if sec.startswith("bodies.") else COUPLING_UNITS)[kind]
+        return u
+
+    @property
     def parameter_keys(self) -> tuple[str, ...]:
         """Flat parameter names: motor, then bodies, then couplings in file order (the order of
         the generated plant function's input vector)."""
@@ -187,6 +221,12 @@ class Topology:
     def function_name(self) -> str:
         """Name of the generated plant function of this topology."""
         return f"haa_plant_{self.fingerprint[:12]}"
+
+    def model(self):
+        """The chain's :class:`~haa_sym.symbolic.model.LinearActuatorModel` (derived by sympy,
+        :func:`haa_sym.symbolic.chain.actuator_model`; what the code generator compiles)."""
+        from haa_sym.symbolic.chain import actuator_model      # sympy: the compile step only
+        return actuator_model(self)
 
     def describe(self) -> str:
         chain = ", ".join(f"{c.name}: {c.a}-{c.b}" for c in self.couplings)

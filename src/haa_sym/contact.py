@@ -21,8 +21,14 @@ CONTACT_MODES = ("replace", "add")
 
 
 def _port_key(params: Params) -> str:
+    from haa_sym.actuator import Topology
     top = params.plant.topology
     key = f"K_{top.port}"
+    if key not in top.parameter_keys and not isinstance(top, Topology):
+        raise ParameterError(
+            f"{params.source}: the model has no parameter {key} (the port's stiffness to ground, "
+            f"which the contact scan replaces by the environment's); allowed: a model whose "
+            f"parameter {key} (Nm/rad) is the stiffness acting on the port")
     if key not in top.parameter_keys:
         raise ParameterError(
             f"{params.source} [bodies.{top.port}]: the port body {top.port!r} has no stiffness to "

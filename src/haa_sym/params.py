@@ -30,7 +30,7 @@ from typing import Mapping
 
 import numpy as np
 
-from haa_sym.actuator import ACTUATOR_SECTIONS, HYQ, Topology, entry_values, parse_actuator
+from haa_sym.actuator import ACTUATOR_SECTIONS, HYQ, Actuator, Topology, entry_values, parse_actuator
 from haa_sym.resources import data_dir
 
 __all__ = [
@@ -83,7 +83,7 @@ CONTROLLER_KEYS: tuple[str, ...] = tuple(_CONTROLLER_DOMAIN)
 
 
 class Plant:
-    """Physical parameters of one actuator topology, SI units, validated (Table 1 for HyQ).
+    """Physical parameters of one actuator, SI units, validated (Table 1 for HyQ).
 
     Values are read by their flat names (``plant.J_L2``, ``plant.K_hd``; see
     :class:`haa_sym.actuator.Topology`), the object is immutable, and :meth:`replace` validates
@@ -91,18 +91,21 @@ class Plant:
 
     Parameters
     ----------
-    topology : Topology, optional
-        Default: the HyQ HAA joint of the paper (:data:`haa_sym.actuator.HYQ`).
+    topology : Topology or LinearActuatorModel, optional
+        The actuator (any :class:`haa_sym.actuator.Actuator`: a chain topology, or a sympy model
+        written in code, :class:`haa_sym.symbolic.model.LinearActuatorModel`). Default: the HyQ
+        HAA joint of the paper (:data:`haa_sym.actuator.HYQ`). Also readable as ``actuator``.
     **values : float
-        Every key of ``topology.parameter_keys``.
+        Every key of ``topology.parameter_keys``, in the units of ``topology.units``.
     """
 
     __slots__ = ("topology", "_values")
 
     def __init__(self, topology: Topology | None = None, /, **values: float):
         topology = HYQ if topology is None else topology
-        if not isinstance(topology, Topology):
-            raise ParameterError(f"topology = {topology!r}; allowed: a haa_sym.actuator.Topology")
+        if not isinstance(topology, Actuator):
+            raise ParameterError(f"topology = {topology!r}; allowed: a haa_sym.actuator.Topology or a "
+                                 "haa_sym.symbolic.model.LinearActuatorModel")
         domain = topology.domain
         unknown = sorted(set(values) - set(domain))
         if unknown:
@@ -135,6 +138,11 @@ class Plant:
 
     def __reduce__(self):
         return (_plant_from, (self.topology, self._values))
+
+    @property
+    def actuator(self) -> Actuator:
+        """The actuator these values are for (the same object as ``topology``)."""
+        return self.topology
 
     @property
     def keys(self) -> tuple[str, ...]:
@@ -236,6 +244,58 @@ class Params:
                 raise ParameterError(f"{where}: unknown key(s) {unknown}; allowed: {list(domain)}")
             configs[name] = {k: _check_value(k, v, domain[k], where) for k, v in overrides.items()}
         object.__setattr__(self, "configurations", configs)
+
+    @classmethod
+    def from_model(cls, model: Actuator, values: Mapping[str, float],
+                   controller: "Controller | Mapping[str, object]", *,
+                   configurations: Mapping[str, Mapping[str, float]] | None = None,
+                   source: str | None = None) -> "Params":
+        """Parameters of an actuator defined in code (what :func:`load_params` reads from a file).
+
+        Parameters
+        ----------
+        model : LinearActuatorModel or Topology
+            The actuator: a sympy model (:class:`haa_sym.symbolic.model.LinearActuatorModel`) or
+            a chain (:class:`haa_sym.actuator.Topology`).
+        values : mapping str -> float
+            Every key of ``model.parameter_keys``, SI units (``model.units``), checked against
+            ``model.domain``.
+        controller : Controller or mapping
+            A :class:`Controller`, or its keys as in a file's ``[controller]`` table (``Ts`` in s,
+            ``N_av``, ``alpha``, ``beta``, ``P_t0`` in V/Nm, ``I_t0`` in V/(Nm s), optional
+            ``velocity_filter`` and ``f_c`` in Hz).
+        configurations : mapping, optional
+            Name -> plant keys to override (as ``[configurations.<name>]``).
+        source : str, optional
+            How messages name these parameters; default ``model.source``.
+
+        Returns
+        -------
+        Params
+
+        Raises
+        ------
+        ParameterError
+            Naming the source, ``values`` or ``controller``, the key and what is allowed.
+        """
+        if not isinstance(model, Actuator):
+            raise ParameterError(f"model = {model!r}; allowed: a haa_sym.symbolic.model.LinearActuatorModel "
+                                 "or a haa_sym.Topology")
+        source = model.source if source is None else source
+        if not isinstance(values, Mapping):
+            raise ParameterError(f"{source} values: {values!r}; allowed: a mapping of {list(model.parameter_keys)}")
+        try:
+            plant = Plant(model, **values)
+        except ParameterError as exc:
+            raise ParameterError(f"{source} values: {exc}") from None
+        if not isinstance(controller, Controller):
+            if not isinstance(controller, Mapping):
+                raise ParameterError(f"{source} controller: {controller!r}; allowed: a haa_sym.Controller "
+                                     f"or a mapping of {list(CONTROLLER_KEYS)}")
+            controller = _validated(Controller, controller, _CONTROLLER_DOMAIN, f"{source} controller",
+                                    optional=_CONTROLLER_OPTIONAL)
+        return cls(plant=plant, controller=controller, configurations=dict(configurations or {}),
+                   source=source)
 
     def configuration(self, name: str) -> "Params":
         """The parameters with the plant overrides of configuration ``name`` applied."""

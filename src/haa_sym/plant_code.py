@@ -1,11 +1,14 @@
-"""The plant function of an actuator topology: generated (built-in) or compiled on first use.
+"""The plant function of an actuator: generated (built-in) or compiled on first use.
 
-A built-in actuator's topology (``model/*.toml``) has its function in ``generated/`` (listed
-under its fingerprint in ``MANIFEST.json``); it is loaded with the other generated evaluators
-and needs no sympy. Any other topology (a user's actuator file) is compiled once: sympy derives
-its state space (:mod:`haa_sym.symbolic.chain`), CasADi writes C into the content-hash cache
-(``HAA_SYM_CACHE``, default ``~/.cache/haa_sym``) under a key of the topology's structure, the
-code generator's sources and the CasADi version, and :class:`haa_sym.compiled.Compiler` builds
+An actuator is a :class:`~haa_sym.actuator.Topology` (a chain, from a file or code) or a
+:class:`~haa_sym.symbolic.model.LinearActuatorModel` (a sympy model written in code); both reach
+the code generator as the latter (``actuator.model()``). A built-in actuator's topology
+(``model/*.toml``) has its function in ``generated/`` (listed under its fingerprint in
+``MANIFEST.json``); it is loaded with the other generated evaluators and needs no sympy. Any
+other actuator is compiled once: CasADi writes the C of its model into the content-hash cache
+(``HAA_SYM_CACHE``, default ``~/.cache/haa_sym``) under a key of its fingerprint (a topology's
+structure, a model's content: ``srepr`` of A, B, C, VC0 and the names), the code generator's
+sources and the CasADi version (sympy runs only when that entry is absent), and :class:`haa_sym.compiled.Compiler` builds
 and verifies the shared library; without a C compiler the serialised function runs in CasADi's
 virtual machine (one warning). The generated C and ``.casadi`` files are checked against their
 recorded SHA-256 before every use and regenerated when damaged. ``haa-sym compile FILE`` does
@@ -22,21 +25,21 @@ from pathlib import Path
 
 import casadi as ca
 
-from haa_sym.actuator import Topology
+from haa_sym.actuator import Actuator, Topology
 from haa_sym.compiled import Compiler, CompilerError, NoCompiler, _sha256, default_cache_dir, evaluators
 from haa_sym.progress import message
 
-__all__ = ["plant_function", "compile_topology", "CompiledTopology"]
+__all__ = ["plant_function", "compile_actuator", "compile_topology", "CompiledTopology"]
 
-# The files that define a compiled topology's code (besides its structure and CasADi's version).
-_CODE_SOURCES = ("actuator.py", "symbolic/chain.py", "symbolic/symbolic_to_casadi.py")
+# The files that define a compiled actuator's code (besides its fingerprint and CasADi's version).
+_CODE_SOURCES = ("actuator.py", "symbolic/chain.py", "symbolic/model.py", "symbolic/symbolic_to_casadi.py")
 
 
 class CompiledTopology:
-    """Where a user topology's code lives: ``c_file``, ``casadi_file`` and, when compiled,
+    """Where a user actuator's code lives: ``c_file``, ``casadi_file`` and, when compiled,
     ``library``; ``backend`` is "compiled" or "vm"."""
 
-    def __init__(self, topology: Topology, c_file: Path, casadi_file: Path, library: Path | None):
+    def __init__(self, topology: Actuator, c_file: Path, casadi_file: Path, library: Path | None):
         self.topology, self.c_file, self.casadi_file, self.library = topology, c_file, casadi_file, library
         self.backend = "compiled" if library is not None else "vm"
 
@@ -47,7 +50,7 @@ class CompiledTopology:
         return ca.Function.deserialize(self.casadi_file.read_text())
 
 
-def _code_key(topology: Topology) -> str:
+def _code_key(topology: Actuator) -> str:
     pkg = Path(__file__).resolve().parent
     h = hashlib.sha256(topology.fingerprint.encode() + b"\0" + ca.__version__.encode() + b"\0")
     for rel in _CODE_SOURCES:
@@ -73,15 +76,16 @@ def _write_verified(path: Path, data: bytes) -> None:
         os.replace(tmp, target)
 
 
-def _generate(topology: Topology, directory: Path, quiet: bool) -> tuple[Path, Path]:
-    """The topology's C and serialised function in ``directory`` (sympy only when absent)."""
+def _generate(topology: Actuator, directory: Path, quiet: bool) -> tuple[Path, Path]:
+    """The actuator's C and serialised function in ``directory`` (sympy only when absent)."""
     name = topology.function_name
     c_file, cas_file = directory / f"{name}.c", directory / f"{name}.casadi"
     if _verified(c_file) and _verified(cas_file):
         return c_file, cas_file
     if not quiet:                                   # silenced by --quiet (set_progress(False))
-        message(f"haa_sym: compiling the plant of {topology.source} (topology "
-                f"{topology.fingerprint[:12]}: {topology.describe()}) into {directory}; once per topology")
+        message(f"haa_sym: compiling the plant of {topology.source} ({_kind(topology)} "
+                f"{topology.fingerprint[:12]}: {topology.describe()}) into {directory}; once per "
+                f"{_kind(topology)}")
     try:
         directory.mkdir(parents=True, exist_ok=True)
     except OSError as exc:
@@ -90,7 +94,7 @@ def _generate(topology: Topology, directory: Path, quiet: bool) -> tuple[Path, P
             f"~/.cache/haa_sym) cannot be created: {exc.strerror or exc}; allowed: a writable "
             "directory") from None
     from haa_sym.symbolic.symbolic_to_casadi import plant_function as derive   # sympy: compile step only
-    f = derive(topology)
+    f = derive(topology.model(), name)
     with tempfile.TemporaryDirectory(dir=directory) as tmp:
         cg = ca.CodeGenerator(f"{name}.c", {"with_header": False})
         cg.add(f)
@@ -101,13 +105,18 @@ def _generate(topology: Topology, directory: Path, quiet: bool) -> tuple[Path, P
     return c_file, cas_file
 
 
-def compile_topology(topology: Topology, backend: str = "auto", *, cache_dir: str | Path | None = None,
+def _kind(actuator: Actuator) -> str:
+    return "topology" if isinstance(actuator, Topology) else "model"
+
+
+def compile_actuator(topology: Actuator, backend: str = "auto", *, cache_dir: str | Path | None = None,
                      compiler: Compiler | None = None, quiet: bool = False) -> CompiledTopology:
-    """Generate (sympy, once) and compile (C, once) the plant function of ``topology``.
+    """Generate (sympy, once) and compile (C, once) the plant function of an actuator.
 
     Parameters
     ----------
-    topology : Topology
+    topology : Topology or LinearActuatorModel
+        The actuator (a chain, or a sympy model written in code).
     backend : {"auto", "compiled", "vm"}
         "compiled" requires a C compiler; "auto" warns once and uses the VM without one.
     cache_dir : str or Path, optional
@@ -139,13 +148,16 @@ def compile_topology(topology: Topology, backend: str = "auto", *, cache_dir: st
     return CompiledTopology(topology, c_file, cas_file, library)
 
 
+compile_topology = compile_actuator        # the name of the first API (topologies only)
+
+
 @functools.lru_cache(maxsize=None)
-def _user_function(topology: Topology, backend: str) -> ca.Function:
-    return compile_topology(topology, backend).function()
+def _user_function(topology: Actuator, backend: str) -> ca.Function:
+    return compile_actuator(topology, backend).function()
 
 
-def plant_function(topology: Topology, backend: str = "auto") -> ca.Function:
-    """``f(p) -> (A, B, C, VC0)`` of ``topology``, ``p`` in ``topology.parameter_keys`` order:
+def plant_function(topology: Actuator, backend: str = "auto") -> ca.Function:
+    """``f(p) -> (A, B, C, VC0)`` of an actuator, ``p`` in ``topology.parameter_keys`` order:
     the generated function of a built-in topology, else compiled on first use (cached)."""
     ev = evaluators(backend)
     entry = ev.code.manifest["topologies"].get(topology.fingerprint)

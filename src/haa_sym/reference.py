@@ -13,7 +13,8 @@ options alone, with its own algebra:
   realised in state space and mapped by ``scipy.signal.cont2discrete(..., "bilinear")``; the
   PI's integral Ts/(1 - z^-1) and the delay z^-d; transfer functions realised by
   ``scipy.signal.tf2ss``;
-* velocity compensation VC = alpha N/k_t (R B_m + k_t k_w) (Eq. 6) from the parameters;
+* velocity compensation VC = alpha N/k_t (R B_m + k_t k_w) (Eq. 6) from the parameters (an
+  actuator written in code as a sympy model: the VC0 it declares);
 * the static part (impedance law Eq. 8, PI gains Eq. 7, compensation, the sums) as an
   interconnection matrix u = K y + E w of the blocks' outputs y and the external inputs w,
   closed by y = (I - D K)^-1 (C x + D E w), as python-control's ``interconnect`` does.
@@ -41,6 +42,17 @@ def _zoh_plant(params, outputs):
     Ad, Bd, Cd, Dd, _ = scipy.signal.cont2discrete((cont.A, B, C, np.zeros((len(outputs), 2))),
                                                    params.controller.Ts, method="zoh")
     return Ad, Bd, Cd, Dd
+
+
+def _vc0(plant) -> float:
+    """Eq. (6) at alpha = 1, N/k_t (R B_m + k_t k_w), from the motor's parameters of a chain; an
+    actuator written in code (haa_sym.symbolic.model) declares its own VC0, read from its plant
+    function (the one number shared with the evaluators then, besides the plant)."""
+    from haa_sym.actuator import Topology
+    if isinstance(plant.topology, Topology):
+        return plant.N / plant.k_t * (plant.R * plant.B_m + plant.k_t * plant.k_w)
+    from haa_sym.plant import continuous_plant
+    return continuous_plant(plant).VC0
 
 
 def _tf_block(b, a):
@@ -107,7 +119,7 @@ def _batch(loop, P_gain, D_gain, beta=None, alpha=None, cut=None):
                          for v in np.broadcast_arrays(P_gain, D_gain, beta, alpha))
     k = P.size
     P_t, I_t = beta * ctrl.P_t0, beta * ctrl.I_t0
-    VC = alpha * pl.N / pl.k_t * (pl.R * pl.B_m + pl.k_t * pl.k_w)           # Eq. (6)
+    VC = alpha * _vc0(pl)
     damped = opt.structure.torque_damping
     blocks = _blocks(params, opt, "T_sensor" if damped else "T_sensor_spring")
     ys = [y for _, _, yn, _ in blocks for y in yn]

@@ -25,7 +25,7 @@ import sympy as sp
 from haa_sym.compiled import CompilerError, StaleGeneratedCode, evaluators
 from haa_sym.loop import ClosedLoop
 from haa_sym.margins import default_omega, stability_margins
-from haa_sym.actuator import HYQ, MOTOR_DOMAIN
+from haa_sym.actuator import HYQ, MOTOR_DOMAIN, Topology
 from haa_sym.params import ParameterError, Params, load_params
 from haa_sym.symbolic import chain, eom, torque_tf as tt
 
@@ -249,22 +249,28 @@ def row_exact_vc_generalised(params: Params) -> Row:
 
 
 def row_plant_values(params: Params) -> Row:
-    """The generated (or compiled) plant function == the symbolic state space at the file's values."""
+    """The generated (or compiled) plant function == the actuator's sympy model
+    (``actuator.model()``: the chain's state space, or a model written in code) at the values."""
     from haa_sym.plant import continuous_plant
     top = params.plant.topology
     cp = continuous_plant(params.plant)
-    ss = chain.state_space(top)
-    sub = {ss.symbols[k]: sp.nsimplify(v, rational=True) for k, v in params.plant.as_dict().items()}
+    m = top.model()
+    syms = m.symbols
+    sub = {syms[k]: sp.nsimplify(v, rational=True) for k, v in params.plant.as_dict().items()}
     rel = 0.0
-    for name, M, num in (("A", ss.A, cp.A), ("B", ss.B, cp.B), ("C", ss.C, cp.C)):
+    for name, M, num in (("A", m.A, cp.A), ("B", m.B, cp.B), ("C", m.C, cp.C)):
         exact = np.array(M.subs(sub).evalf(30).tolist(), dtype=float)
         scale = np.maximum(np.abs(exact), np.abs(exact).max() * 1e-300)
         rel = max(rel, float(np.max(np.abs(num - exact) / np.where(exact != 0, scale, 1.0))))
-    vc0 = float(chain.vc_gain_simplified(ss.symbols, 1).subs(sub).evalf(30))
+    vc0 = float(m.VC0.subs(sub).evalf(30))
     rel = max(rel, abs(cp.VC0 - vc0) / abs(vc0) if vc0 else abs(cp.VC0))
-    where = "generated" if top.fingerprint in _manifest_topologies() else "compiled from the file"
-    return Row(f"Plant function ({where}, {top.function_name}) == symbolic state space at the file's "
-               "values; VC0 == N/k_t (R B_m + k_t k_w)", rel < 1e-12,
+    chain_ = isinstance(top, Topology)
+    where = "generated" if top.fingerprint in _manifest_topologies() else \
+        ("compiled from the file" if chain_ else "compiled from the model")
+    what = "symbolic state space" if chain_ else "the model's A, B, C"
+    vc = "VC0 == N/k_t (R B_m + k_t k_w)" if chain_ else "VC0 == the model's"
+    return Row(f"Plant function ({where}, {top.function_name}) == {what} at the "
+               f"values; {vc}", rel < 1e-12,
                f"max relative difference over A, B, C, VC0: {rel:.3g} (tolerance 1e-12)")
 
 
@@ -282,6 +288,8 @@ def run(params: Params) -> list[Row]:
         rows.append(row_alpha_range(params))
         rows.append(row_plant_values(params))
         return rows
+    if not isinstance(params.plant.topology, Topology):       # a sympy model written in code
+        return [row_pi(), row_plant_values(params)]
     return generic_rows(params)
 
 

@@ -19,6 +19,7 @@ V_m = V + VC_gain s theta_encoder closed (Cramer's rule, as :mod:`haa_sym.symbol
 """
 from __future__ import annotations
 
+import functools
 from dataclasses import dataclass
 
 import sympy as sp
@@ -29,7 +30,7 @@ from haa_sym.actuator import ROTOR, Topology
 s = sp.Symbol("s")
 VC = sp.Symbol("VC_gain")
 
-__all__ = ["s", "VC", "ChainStateSpace", "symbols", "state_space", "laplace_equations",
+__all__ = ["s", "VC", "ChainStateSpace", "symbols", "state_space", "actuator_model", "laplace_equations",
            "torque_tf_fraction", "exact_vc_condition", "load_free_g_tvc", "vc_gain_exact",
            "vc_gain_simplified"]
 
@@ -111,6 +112,21 @@ def state_space(top: Topology, p: dict | None = None) -> ChainStateSpace:
     C = y.jacobian(xv)
     return ChainStateSpace(A=sp.simplify(A), B=sp.simplify(B), C=C, symbols=p,
                            states=top.state_names, inputs=top.input_names, outputs=top.output_names)
+
+
+@functools.lru_cache(maxsize=None)
+def actuator_model(top: Topology):
+    """The chain as a :class:`~haa_sym.symbolic.model.LinearActuatorModel`: :func:`state_space`,
+    its parameters with domains and units, and VC0 = Eq. (6) at alpha = 1 (what the code
+    generator compiles; the matrices are the same sympy objects, so the same generated code)."""
+    from haa_sym.symbolic.model import LinearActuatorModel, Parameter
+    ss = state_space(top)
+    units = top.units
+    return LinearActuatorModel(
+        name=top.source, states=top.state_names, inputs=top.input_names, outputs=top.output_names,
+        parameters=tuple(Parameter(k, d, units[k]) for k, d in top.domain.items()),
+        A=ss.A, B=ss.B, C=ss.C, VC0=vc_gain_simplified(ss.symbols, 1), port=top.port,
+        torque_damping=top.torque_damping, source=top.source)
 
 
 def laplace_equations(top: Topology, p: dict | None = None):

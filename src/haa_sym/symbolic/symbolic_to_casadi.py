@@ -1,16 +1,15 @@
-"""Translate the sympy model of an actuator (haa_sym.symbolic.chain) into a CasADi Function.
+"""Translate the sympy model of an actuator (a :class:`~haa_sym.symbolic.model.LinearActuatorModel`,
+from a chain topology or written in code) into a CasADi Function.
 
-Used by ``make derive`` (codegen/generate.py, the built-in actuators) and by the runtime when a
-user's actuator file has a topology that was not generated (haa_sym.topology_code): the only
-place the compile step needs sympy.
+Used by ``make derive`` (codegen/generate.py, the built-in actuators) and by the runtime when an
+actuator has no generated code (haa_sym.plant_code): the only place the compile step needs sympy.
 """
 from __future__ import annotations
 
 import casadi as ca
 import sympy as sp
 
-from haa_sym.actuator import Topology
-from haa_sym.symbolic.chain import state_space, vc_gain_simplified
+from haa_sym.symbolic.model import LinearActuatorModel
 
 
 def to_sx(expr: sp.Expr, env: dict[sp.Symbol, ca.SX]) -> ca.SX:
@@ -41,21 +40,22 @@ def to_sx(expr: sp.Expr, env: dict[sp.Symbol, ca.SX]) -> ca.SX:
     raise ValueError(f"cannot translate {expr!r} ({type(expr).__name__})")
 
 
-def plant_function(topology: Topology) -> ca.Function:
-    """``haa_plant_<fingerprint>(p) -> (A, B, C, VC0)``: the chain's state space (Eq. 1-2 for
-    HyQ) and Eq. (6) at alpha = 1.
+def plant_function(model: LinearActuatorModel, name: str | None = None) -> ca.Function:
+    """``name(p) -> (A, B, C, VC0)``: the model's state space (Eq. 1-2 for HyQ) and VC0 (Eq. 6
+    at alpha = 1), exactly as written (no simplification, no floats).
 
-    ``p`` is the plant vector in the order of ``topology.parameter_keys``.
+    ``p`` is the plant vector in the order of ``model.parameter_keys``; ``name`` defaults to
+    ``model.function_name`` (a chain's is its topology's, ``Topology.function_name``).
     """
-    ss = state_space(topology)
-    keys = topology.parameter_keys
+    keys = model.parameter_keys
     p = ca.SX.sym("p", len(keys))
-    env = {ss.symbols[k]: p[i] for i, k in enumerate(keys)}
+    syms = model.symbols
+    env = {syms[k]: p[i] for i, k in enumerate(keys)}
 
     def mat(M: sp.Matrix) -> ca.SX:
         return ca.vertcat(*[ca.horzcat(*[to_sx(M[i, j], env) for j in range(M.cols)])
                             for i in range(M.rows)])
 
-    vc0 = to_sx(vc_gain_simplified(ss.symbols, 1), env)
-    return ca.Function(topology.function_name, [p], [mat(ss.A), mat(ss.B), mat(ss.C), vc0],
+    vc0 = to_sx(model.VC0, env)
+    return ca.Function(name or model.function_name, [p], [mat(model.A), mat(model.B), mat(model.C), vc0],
                        ["p"], ["A", "B", "C", "VC0"])
