@@ -131,6 +131,7 @@ class Topology(Actuator):
         object.__setattr__(self, "bodies", tuple(self.bodies))
         object.__setattr__(self, "couplings", tuple(self.couplings))
         _check_structure(self)
+        object.__setattr__(self, "couplings", _oriented(self.couplings))
 
     # --- names -----------------------------------------------------------------------------
     @property
@@ -240,6 +241,25 @@ def _hyq() -> Topology:
                     couplings=(Coupling("hd", ROTOR, "L1"), Coupling("p", "L1", "L2")),
                     sensor="hd", torque_damping=True, encoder="L1", port="L2",
                     source="the HyQ topology")
+
+
+def _oriented(couplings) -> tuple:
+    """Each coupling written from the motor side to the load side: ``a`` is the end nearer the
+    rotor (fewer couplings away). The transmitted torque K (theta_a - theta_b) + D (...), which
+    the torque sensor measures, is then positive when the motor drives the load, whichever order
+    a file writes ``between`` in (the other order made the torque loop positive feedback). Ends
+    equally far from the rotor (a coupling closing a loop) keep the file's order."""
+    dist, frontier = {ROTOR: 0}, [ROTOR]
+    while frontier:
+        nxt = []
+        for x in frontier:
+            for c in couplings:
+                for u, v in ((c.a, c.b), (c.b, c.a)):
+                    if u == x and v not in dist:
+                        dist[v] = dist[x] + 1
+                        nxt.append(v)
+        frontier = nxt
+    return tuple(Coupling(c.name, c.b, c.a) if dist[c.a] > dist[c.b] else c for c in couplings)
 
 
 def _check_structure(t: Topology) -> None:

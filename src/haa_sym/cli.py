@@ -20,6 +20,7 @@ Results go to stdout; progress bars (on a terminal, for work longer than 2 s) to
 from __future__ import annotations
 
 import argparse
+import os
 import sys
 from pathlib import Path
 
@@ -30,7 +31,7 @@ OUTPUT_SUFFIXES = {"regions": (".npz",), "passivity": (".csv", ".json"), "step":
                    "boundary": (".json",), "contact": (".json",)}
 
 
-def _parse_set(items: list[str]) -> dict[str, float]:
+def _parse_set(items: list[str], known: tuple[str, ...] | None = None) -> dict[str, float]:
     out = {}
     for item in items:
         key, sep, value = item.partition("=")
@@ -44,6 +45,9 @@ def _parse_set(items: list[str]) -> dict[str, float]:
             # an integer stays one, so that messages show the value as typed (N_av = 0, not 0.0)
             out[key] = int(value) if value.lstrip("+-").isdigit() else float(value)
         except ValueError:
+            if known is not None and key not in known:    # the key is the mistake, not the value
+                raise ParameterError(f"--set {key}={value}: unknown parameter key(s) {[key]}; "
+                                     f"allowed: {list(known)}") from None
             raise ParameterError(f"--set {key}={value}: {value!r} is not a number; allowed: a finite "
                                  "number") from None
     return out
@@ -60,22 +64,24 @@ def _parse_options(items: list[str]):
             raise ParameterError(f"--option {item!r}: expected KEY=VALUE")
         if key not in fields:
             raise ParameterError(f"--option {item!r}: unknown option {key!r}; allowed: {list(fields)}")
-        default = LoopOptions.field_default(key)
+        kind, optional = LoopOptions.field_type(key)
         try:
-            if isinstance(default, bool):
+            if optional and value.lower() == "none":        # the actuator file's default
+                out[key] = None
+            elif kind is bool:
                 if value.lower() not in ("true", "false", "1", "0"):
                     raise ValueError
                 out[key] = value.lower() in ("true", "1")
-            elif isinstance(default, int):
+            elif kind is int:
                 out[key] = int(value)
-            elif isinstance(default, float):
+            elif kind is float:
                 out[key] = float(value)
             else:
                 out[key] = value
         except ValueError:
-            kind = {bool: "true or false", int: "an integer", float: "a number"}.get(type(default), "text")
-            raise ParameterError(f"--option {item!r}: {value!r} is not a valid {type(default).__name__}; "
-                                 f"allowed: {kind}") from None
+            allowed = {bool: "true or false", int: "an integer", float: "a number"}.get(kind, "text")
+            raise ParameterError(f"--option {item!r}: {value!r} is not a valid {kind.__name__}; "
+                                 f"allowed: {allowed}{' or none' if optional else ''}") from None
     try:
         return LoopOptions(**out)
     except ParameterError as exc:
@@ -103,7 +109,8 @@ def _params(args):
     params = load_params(args.params)
     if args.configuration:
         params = params.configuration(args.configuration)
-    sets = _parse_set(args.set)
+    from haa_sym.params import CONTROLLER_KEYS
+    sets = _parse_set(args.set, tuple(params.plant.topology.parameter_keys) + CONTROLLER_KEYS)
     if not sets:
         return params
     try:                  # all at once: velocity_filter and f_c are only valid together
@@ -214,6 +221,8 @@ def _cmd_contact(args) -> int:
 
 def _cmd_passivity(args) -> int:
     import json
+
+    import numpy as np
     from haa_sym.passivity import bands_beyond, corrected_phase, passivity
     from haa_sym.regions import grid
     params = _params(args)
@@ -229,8 +238,9 @@ def _cmd_passivity(args) -> int:
     for i in range(P.size):
         rows.append({"P_gain": float(P[i]), "D_gain": float(D[i]), "status": str(r.status[i]),
                      "phase_excess_deg": float(r.phase_excess_deg[i]), "omega_worst_rad_s": float(r.omega_worst[i])})
-        print(f"P_gain {P[i]:g}  D_gain {D[i]:g}: {r.status[i]:8s}  worst corrected phase excess "
-              f"{r.phase_excess_deg[i]:+.3f} deg at {r.omega_worst[i]:.4g} rad/s")
+        excess = (f"worst corrected phase excess {r.phase_excess_deg[i]:+.3f} deg at {r.omega_worst[i]:.4g} rad/s"
+                  if np.isfinite(r.phase_excess_deg[i]) else "(the phase of Z of an unstable loop is not judged)")
+        print(f"P_gain {P[i]:g}  D_gain {D[i]:g}: {r.status[i]:8s}  {excess}")
     curves = []
     if plot:
         for i in range(P.size):
@@ -402,13 +412,21 @@ def main(argv: list[str] | None = None) -> int:
             args.P_gain, args.D_gain = _gain(args, "P_gain", "--P-gain"), _gain(args, "D_gain", "--D-gain")
             res = ClosedLoop(params, _parse_options(args.option)).stability(args.P_gain, args.D_gain,
                                                                              radius=True)
-            print(f"stable: {bool(res.stable)}  spectral radius: {float(res.spectral_radius):.12g}")
+            print(f"stable: {bool(res.stable)}  spectral radius: {float(res.spectral_radius):.12g}"
+                  + ("  (marginal: a pole within 1e-9 of |z| = 1, e.g. a free link's position mode;"
+                     " not asymptotically stable)" if bool(res.marginal) else ""))
             return 0
         return {"regions": _cmd_regions, "boundary": _cmd_boundary, "contact": _cmd_contact, "passivity": _cmd_passivity, "step": _cmd_step,
                 "margins": _cmd_margins, "reproduce": _cmd_reproduce, "compile": _cmd_compile}[args.cmd](args)
     except ParameterError as exc:
         print(f"haa-sym: error: {exc}", file=sys.stderr)
         return 2
+    except BrokenPipeError:
+        # the reader of stdout went away (haa-sym ... | head): not an error of the command; the
+        # recipe of the Python docs (signal module, "Note on SIGPIPE")
+        devnull = os.open(os.devnull, os.O_WRONLY)
+        os.dup2(devnull, sys.stdout.fileno())
+        return 1
     except OSError as exc:
         print(f"haa-sym: error: {exc.strerror or exc}: {exc.filename or ''}", file=sys.stderr)
         return 2

@@ -50,6 +50,9 @@ from haa_sym.statespace import closed_loop_eigenvalues, to_statespace
 __all__ = ["LoopOptions", "LoopStructure", "AnalysisConventions", "FrequencyGrid", "LoopCoefficients", "ClosedLoop", "StabilityResult", "PORTS", "FREQ_OUTPUTS"]
 
 PORTS = ("dtheta_L2", "dtheta_L1", "encoder_average")
+# A pole within this distance of |z| = 1 is closer than the sampled plant (expm, rounded once)
+# can place it: such points are reported marginal, not stable (StabilityResult.marginal).
+MARGINAL_TOL = 1e-9
 FREQ_OUTPUTS = ("L_t", "L_imp", "Z", "H_T")
 # Exact arithmetic (bases) and the plant's frequency responses are the costly parts of a
 # ClosedLoop; maps, Table 2 and the option scoring build thousands over a handful of plants.
@@ -259,6 +262,16 @@ class LoopOptions:
         return tuple(f for _, c in _PARTS for f in c.__dataclass_fields__)
 
     @classmethod
+    def field_type(cls, name: str) -> tuple[type, bool]:
+        """(bool, int, float or str; whether None is allowed) of field ``name``, from its annotation."""
+        for _, c in _PARTS:
+            if name in c.__dataclass_fields__:
+                ann = str(c.__dataclass_fields__[name].type).replace(" ", "")
+                base = {"bool": bool, "int": int, "float": float}.get(ann.split("|")[0], str)
+                return base, "None" in ann.split("|")
+        raise KeyError(name)
+
+    @classmethod
     def field_default(cls, name: str):
         for _, c in _PARTS:
             if name in c.__dataclass_fields__:
@@ -310,15 +323,19 @@ class StabilityResult:
 
     ``stable``: every closed-loop pole in |z| < 1. ``n_unstable``: the number of poles with
     |z| > 1. ``spectral_radius``: max |z| of the poles, from the eigenvalues of the explicit
-    closed loop (:mod:`haa_sym.reference`); NaN where not asked for. ``refined``: the points
+    closed loop (:mod:`haa_sym.statespace`); NaN where not asked for. ``refined``: the points
     whose generated decision could not be certified against rounding (a pole within rounding
-    distance of |z| = 1) and were decided from the eigenvalues instead.
+    distance of |z| = 1) and were decided from the eigenvalues instead. ``marginal``: refined
+    points with a pole within :data:`MARGINAL_TOL` of |z| = 1, closer than the sampled plant's
+    own accuracy can place it (e.g. the position mode of a free link, K_L2 = 0, with P_gain = 0:
+    a pole exactly at z = 1): reported not stable, as they are not asymptotically stable.
     """
 
     stable: np.ndarray
     spectral_radius: np.ndarray
     refined: np.ndarray = field(repr=False)
     n_unstable: np.ndarray = field(repr=False, default=None)
+    marginal: np.ndarray = field(repr=False, default=None)
 
 
 def _finite_array(name: str, value) -> np.ndarray:
@@ -514,15 +531,27 @@ class ClosedLoop:
             f"haa_decide{self.capacity}", [self.basis, self.const, pts], 2))
         n_unstable = n_unstable.astype(int)
         refined = (certified < 0.5) if certify else np.zeros(n_unstable.shape, bool)
+        if certify:
+            # a real pole at z = 1 or z = -1 (q(0) or q's leading coefficient ~ 0) that the
+            # rounding of the sampled plant itself, not covered by the certificate, may move
+            # across the circle (a free link's position mode): decide those by eigenvalues too
+            g = np.array(gain_monomials(pts, self.const, np.ones(pts.shape[1])))
+            zb = self._z_basis                                   # descending in z
+            scale = np.abs(zb).sum(axis=0) @ np.abs(g)
+            for z in (1.0, -1.0):                                # chi(z) against its terms' size
+                at = (z ** np.arange(zb.shape[0] - 1, -1, -1)) @ zb
+                refined |= np.abs(at @ g) <= MARGINAL_TOL * scale
         rho = np.full(n_unstable.shape, np.nan)
+        marginal = np.zeros(n_unstable.shape, bool)
         need = np.ones_like(refined) if radius else refined
         if need.any():
             eig = np.abs(closed_loop_eigenvalues(self, pts[:, need]))
             rho[need] = eig.max(axis=1)
             n_unstable[refined] = (eig[refined[need]] >= 1).sum(axis=1)
-        stable = n_unstable == 0
+            marginal[refined] = np.any(np.abs(eig[refined[need]] - 1) <= MARGINAL_TOL, axis=1)
+        stable = (n_unstable == 0) & ~marginal
         return StabilityResult(stable.reshape(shape), rho.reshape(shape), refined.reshape(shape),
-                               n_unstable.reshape(shape))
+                               n_unstable.reshape(shape), marginal.reshape(shape))
 
     def loop_coefficients(self, omega=None, beta=None, alpha=None) -> LoopCoefficients:
         """Gain-affine loop transfer functions on ``omega`` (rad/s; default: the options' grid).

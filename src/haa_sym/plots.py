@@ -38,11 +38,12 @@ def plot_region(m, ax=None, title: str | None = None, passivity: bool = True, bo
     logP = bool(np.all(m.P_gain > 0))
     ax.pcolormesh(_edges(m.P_gain, logP), _edges(m.D_gain, False), cls.T, cmap=REGION_COLORS,
                   vmin=-0.5, vmax=2.5, shading="flat", rasterized=True)
-    if passivity and m.passive.any() and (~m.passive).any() and m.P_gain.size > 1 and m.D_gain.size > 1:
-        ax.contour(m.P_gain, m.D_gain, m.passive.T.astype(float), levels=[0.5], colors="tab:blue",
-                   linewidths=1.0, linestyles="--")
+    if passivity and m.P_gain.size > 1 and m.D_gain.size > 1:
+        if m.passive.any() and (~m.passive).any():
+            ax.contour(m.P_gain, m.D_gain, m.passive.T.astype(float), levels=[0.5], colors="tab:blue",
+                       linewidths=1.0, linestyles="--")
         not_passive = (m.stable & ~m.passive).T.astype(float)
-        if not_passive.any():
+        if not_passive.any():                   # also when no point is passive (then all hatched)
             cs = ax.contourf(m.P_gain, m.D_gain, not_passive, levels=[0.5, 1.5], colors="none",
                              hatches=["////"])
             cs.set_edgecolor("tab:blue")
