@@ -171,19 +171,7 @@ def torque_tf_fraction(top: Topology, p: dict | None = None, vc=VC):
     V = sp.Symbol("V")
     enc = unknowns[2 + top.body_names.index(top.encoder)]
     subs = {sp.Symbol("V_m"): V + vc * s * enc, sp.Symbol("T_fr"): 0, sp.Symbol("T_dist"): 0}
-    eqs = [sp.numer(sp.together(e.subs(subs))) for e in eqs]
-    M, rhs = sp.linear_eq_to_matrix(eqs, unknowns)
-    gens = sorted(M.free_symbols | rhs.free_symbols | {V}, key=str)
-    ring = sp.QQ[tuple(gens)]
-    A = DomainMatrix([[ring.from_sympy(M[i, j]) for j in range(M.cols)] for i in range(M.rows)],
-                     M.shape, ring)
-    det = A.det()
-
-    def cramer(k):
-        rows = [[ring.from_sympy(rhs[i, 0]) if j == k else A[i, j].element for j in range(M.cols)]
-                for i in range(M.rows)]
-        return DomainMatrix(rows, M.shape, ring).det()
-    sol = {u: cramer(k) for k, u in enumerate(unknowns)}                  # times det
+    sol, det, ring = cramer_solve(eqs, unknowns, {V})                  # sol times det
     # the measured torque is linear in the unknowns: substitute each by its Cramer numerator
     T = sp.expand(outputs[0 if top.torque_damping else 1] * p["N"])      # clear 1/N of theta_rotor
     num = ring.zero
@@ -193,6 +181,29 @@ def torque_tf_fraction(top: Topology, p: dict | None = None, vc=VC):
             num += ring.from_sympy(coef) * sol[u]
     den = det * ring.from_sympy(p["N"] * V)
     return num, den, ring
+
+
+def cramer_solve(eqs, unknowns, extra_gens=frozenset()):
+    """Exact solution of linear equations ``eqs`` (expressions = 0) in ``unknowns``.
+
+    Returns ``(numerators, det, ring)``: each unknown is ``numerators[u] / det``, all elements of
+    the polynomial ring over QQ in every other symbol (and ``extra_gens``). Cramer's rule with
+    fraction-free determinants (Bareiss, sympy's DomainMatrix): seconds where sympy's ``solve``
+    and ``cancel`` on expressions took minutes. Denominators of the equations are cleared first
+    (they are nonzero polynomials).
+    """
+    eqs = [sp.numer(sp.together(e)) for e in eqs]
+    M, rhs = sp.linear_eq_to_matrix(eqs, unknowns)
+    gens = sorted(M.free_symbols | rhs.free_symbols | set(extra_gens), key=str)
+    ring = sp.QQ[tuple(gens)]
+    A = DomainMatrix([[ring.from_sympy(M[i, j]) for j in range(M.cols)] for i in range(M.rows)],
+                     M.shape, ring)
+
+    def column_replaced(k):                                 # det(A with column k = rhs)
+        rows = [[ring.from_sympy(rhs[i, 0]) if j == k else A[i, j].element for j in range(M.cols)]
+                for i in range(M.rows)]
+        return DomainMatrix(rows, M.shape, ring).det()
+    return {u: column_replaced(k) for k, u in enumerate(unknowns)}, A.det(), ring
 
 
 def vc_gain_exact(p: dict) -> sp.Expr:

@@ -7,8 +7,8 @@ T_l / V of Eq. (2). ``paper_g_tvc`` is Eq. (3) built from the printed p1, q1, q2
 from __future__ import annotations
 
 import sympy as sp
-from sympy.polys.matrices import DomainMatrix
 
+from haa_sym.symbolic.chain import cramer_solve
 from haa_sym.symbolic.eom import laplace_equations, load_torque, plant_symbols, s
 
 VC = sp.Symbol("VC_gain")  # the velocity-compensation transfer function, kept general
@@ -27,19 +27,8 @@ def derive_g_tvc_fraction(p: dict | None = None, vc=VC):
     p, unknowns, eqs = laplace_equations(p)
     V = sp.Symbol("V")
     subs = {sp.Symbol("V_m"): V + vc * s * unknowns[2], sp.Symbol("T_fr"): 0, sp.Symbol("T_dist"): 0}
-    eqs = [sp.numer(sp.together(e.subs(subs))) for e in eqs]   # clear the (nonzero) denominators
-    M, rhs = sp.linear_eq_to_matrix(eqs, unknowns)
-    gens = sorted(M.free_symbols | rhs.free_symbols | {V}, key=str)
-    ring = sp.QQ[tuple(gens)]
-    A = DomainMatrix([[ring.from_sympy(M[i, j]) for j in range(M.cols)] for i in range(M.rows)],
-                     M.shape, ring)
-    det = A.det()
-
-    def cramer(k):                                                  # det(A with column k = rhs)
-        rows = [[ring.from_sympy(rhs[i, 0]) if j == k else A[i, j].element for j in range(M.cols)]
-                for i in range(M.rows)]
-        return DomainMatrix(rows, M.shape, ring).det()
-    th_m, th_1 = cramer(1), cramer(2)                                # times det
+    sol, det, ring = cramer_solve([e.subs(subs) for e in eqs], unknowns, {V})
+    th_m, th_1 = sol[unknowns[1]], sol[unknowns[2]]                  # times det
     K, D, N = (ring.from_sympy(p[k]) for k in ("K_hd", "D_hd", "N"))
     # Eq. (2): T_l = (K_hd + s D_hd)(theta_m/N - theta_L1)
     num = (K + ring.from_sympy(s) * D) * (th_m - N * th_1)
