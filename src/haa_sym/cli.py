@@ -413,8 +413,9 @@ def main(argv: list[str] | None = None) -> int:
             res = ClosedLoop(params, _parse_options(args.option)).stability(args.P_gain, args.D_gain,
                                                                              radius=True)
             print(f"stable: {bool(res.stable)}  spectral radius: {float(res.spectral_radius):.12g}"
-                  + ("  (marginal: a pole within 1e-9 of |z| = 1, e.g. a free link's position mode;"
-                     " not asymptotically stable)" if bool(res.marginal) else ""))
+                  + ("  (marginal: a pole at z = 1, the free position mode of a link without stiffness"
+                     " to ground, which P_gain = 0 does not feed back; not asymptotically stable)"
+                     if bool(res.marginal) else ""))
             return 0
         return {"regions": _cmd_regions, "boundary": _cmd_boundary, "contact": _cmd_contact, "passivity": _cmd_passivity, "step": _cmd_step,
                 "margins": _cmd_margins, "reproduce": _cmd_reproduce, "compile": _cmd_compile}[args.cmd](args)

@@ -50,8 +50,8 @@ from haa_sym.statespace import closed_loop_eigenvalues, to_statespace
 __all__ = ["LoopOptions", "LoopStructure", "AnalysisConventions", "FrequencyGrid", "LoopCoefficients", "ClosedLoop", "StabilityResult", "PORTS", "FREQ_OUTPUTS"]
 
 PORTS = ("dtheta_L2", "dtheta_L1", "encoder_average")
-# A pole within this distance of |z| = 1 is closer than the sampled plant (expm, rounded once)
-# can place it: such points are reported marginal, not stable (StabilityResult.marginal).
+# A plant mode within this distance of z = 1 is a free rigid-body mode (the sampled plant cannot
+# place it more accurately): with P_gain = 0 the loop keeps it (StabilityResult.marginal).
 MARGINAL_TOL = 1e-9
 FREQ_OUTPUTS = ("L_t", "L_imp", "Z", "H_T")
 # Exact arithmetic (bases) and the plant's frequency responses are the costly parts of a
@@ -325,10 +325,11 @@ class StabilityResult:
     |z| > 1. ``spectral_radius``: max |z| of the poles, from the eigenvalues of the explicit
     closed loop (:mod:`haa_sym.statespace`); NaN where not asked for. ``refined``: the points
     whose generated decision could not be certified against rounding (a pole within rounding
-    distance of |z| = 1) and were decided from the eigenvalues instead. ``marginal``: refined
-    points with a pole within :data:`MARGINAL_TOL` of |z| = 1, closer than the sampled plant's
-    own accuracy can place it (e.g. the position mode of a free link, K_L2 = 0, with P_gain = 0:
-    a pole exactly at z = 1): reported not stable, as they are not asymptotically stable.
+    distance of |z| = 1) and were decided from the eigenvalues instead. ``marginal``: points
+    with a pole at z = 1 that no gain moves: the plant has a free rigid-body mode (a mode within
+    :data:`MARGINAL_TOL` of z = 1, e.g. the leg with K_L2 = 0) and P_gain = 0, so nothing feeds
+    its position back; reported not stable (not asymptotically stable), where the rounding of
+    the sampled plant would otherwise put the pole on either side of the circle.
     """
 
     stable: np.ndarray
@@ -390,6 +391,9 @@ class ClosedLoop:
                 f"port = {self.options.structure.port!r} is not a velocity of the actuator "
                 f"{params.source}; allowed: {ports} (its [sensors] port body is "
                 f"{params.plant.topology.port!r}: port = 'dtheta_{params.plant.topology.port}')")
+        # a plant mode within MARGINAL_TOL of z = 1: a free link (no stiffness to ground), whose
+        # position only P_gain feeds back (the sensor and the velocity estimates do not see it)
+        self.free_mode = bool(np.min(np.abs(np.linalg.eigvals(self.plant.Phi) - 1)) < MARGINAL_TOL)
         # basis=False: a loop used only for frequency responses or the explicit state space
         self.basis, self._z_basis = self._basis() if basis else (None, None)
 
@@ -531,24 +535,15 @@ class ClosedLoop:
             f"haa_decide{self.capacity}", [self.basis, self.const, pts], 2))
         n_unstable = n_unstable.astype(int)
         refined = (certified < 0.5) if certify else np.zeros(n_unstable.shape, bool)
-        if certify:
-            # a real pole at z = 1 or z = -1 (q(0) or q's leading coefficient ~ 0) that the
-            # rounding of the sampled plant itself, not covered by the certificate, may move
-            # across the circle (a free link's position mode): decide those by eigenvalues too
-            g = np.array(gain_monomials(pts, self.const, np.ones(pts.shape[1])))
-            zb = self._z_basis                                   # descending in z
-            scale = np.abs(zb).sum(axis=0) @ np.abs(g)
-            for z in (1.0, -1.0):                                # chi(z) against its terms' size
-                at = (z ** np.arange(zb.shape[0] - 1, -1, -1)) @ zb
-                refined |= np.abs(at @ g) <= MARGINAL_TOL * scale
         rho = np.full(n_unstable.shape, np.nan)
-        marginal = np.zeros(n_unstable.shape, bool)
         need = np.ones_like(refined) if radius else refined
         if need.any():
             eig = np.abs(closed_loop_eigenvalues(self, pts[:, need]))
             rho[need] = eig.max(axis=1)
             n_unstable[refined] = (eig[refined[need]] >= 1).sum(axis=1)
-            marginal[refined] = np.any(np.abs(eig[refined[need]] - 1) <= MARGINAL_TOL, axis=1)
+        # a free rigid-body mode of the plant stays at z = 1 when nothing feeds the position
+        # back (P_gain = 0): the rounding of the sampled plant, not the loop, decides its side
+        marginal = self.free_mode & (pts[0] == 0)
         stable = (n_unstable == 0) & ~marginal
         return StabilityResult(stable.reshape(shape), rho.reshape(shape), refined.reshape(shape),
                                n_unstable.reshape(shape), marginal.reshape(shape))

@@ -171,7 +171,7 @@ def torque_tf_fraction(top: Topology, p: dict | None = None, vc=VC):
     V = sp.Symbol("V")
     enc = unknowns[2 + top.body_names.index(top.encoder)]
     subs = {sp.Symbol("V_m"): V + vc * s * enc, sp.Symbol("T_fr"): 0, sp.Symbol("T_dist"): 0}
-    sol, det, ring = cramer_solve(eqs, unknowns, {V})                  # sol times det
+    sol, det, ring = cramer_solve([e.subs(subs) for e in eqs], unknowns, {V})   # sol times det
     # the measured torque is linear in the unknowns: substitute each by its Cramer numerator
     T = sp.expand(outputs[0 if top.torque_damping else 1] * p["N"])      # clear 1/N of theta_rotor
     num = ring.zero
