@@ -75,3 +75,28 @@ def test_cli_boundary_refuses_a_bad_output_and_writes_nothing(tmp_path, capsys):
     from haa_sym.cli import main
     assert main(["boundary", "--out", str(tmp_path / "b.csv")]) == 2
     assert "--out" in capsys.readouterr().err and not list(tmp_path.iterdir())
+
+
+def test_phase_margin_curves_are_crossovers_with_exactly_that_margin(params):
+    from haa_sym.boundary import phase_margin_curves
+    loop = ClosedLoop(params)
+    curves = phase_margin_curves(params, loop=loop)
+    assert curves
+    for c in curves:
+        idx = np.linspace(0, c.P_gain.size - 1, 12).astype(int)
+        for i in idx:
+            L = ref.frequency_response(loop, c.omega[i:i + 1], c.P_gain[i], c.D_gain[i])["L_imp"][0]
+            assert abs(abs(L) - 1) < 1e-9 and abs(180 + np.degrees(np.angle(L)) - 30) < 1e-6
+
+
+@pytest.mark.parametrize("changes", [{}, {"alpha": 0.0}, {"beta": 6.0}, {"N_av": 50}, {"Ts": 1e-4}])
+def test_regions_classified_from_the_curves_equal_the_map(params, changes):
+    from haa_sym.boundary import classify_regions
+    from haa_sym.regions import region_map
+    p = params.with_values(**changes)
+    loop = ClosedLoop(p)
+    P, D = grid("log:1:20000:90"), grid("lin:1:50:60")
+    stable, low_pm = classify_regions(loop, stability_boundary(p, loop=loop), P, D)
+    m = region_map(p, P, D, loop=loop, passivity=False, progress=False)
+    assert (stable != m.stable).sum() == 0 and (low_pm != m.low_pm).sum() == 0
+    assert m.low_pm.any() or changes == {"Ts": 1e-4}

@@ -37,7 +37,7 @@ from haa_sym.loop import ClosedLoop, LoopOptions
 from haa_sym.params import ParameterError, Params, gain_array
 
 __all__ = ["BoundaryCurve", "StabilityBoundary", "affine_polynomials", "stability_boundary",
-           "crossings", "classify_grid"]
+           "phase_margin_curves", "crossings", "classify_grid", "classify_regions"]
 
 
 @dataclass(frozen=True)
@@ -130,6 +130,66 @@ def _complex_branch(ABC: np.ndarray, nu: np.ndarray):
     return P, D
 
 
+def _complex_values(p: np.ndarray, nu: np.ndarray) -> np.ndarray:
+    """q(j nu) for the ascending rows p (r, m), each column scaled by one positive real factor
+    (nu^-(m-1) where nu > 1) that keeps it in range; shape (r, n_nu), complex."""
+    m = p.shape[1]
+    jk = (1j) ** np.arange(m)
+    out = np.empty((p.shape[0], nu.size), complex)
+    small = nu <= 1
+    v = np.zeros((p.shape[0], small.sum()), complex)
+    for c in (p * jk)[:, ::-1].T:                     # Horner in nu, coefficients p_k j^k
+        v = v * nu[small] + c[:, None]
+    out[:, small] = v
+    u = 1 / nu[~small]                                # nu > 1: sum_k p_k j^k nu^(k - m + 1)
+    v = np.zeros((p.shape[0], u.size), complex)
+    for c in (p * jk).T:                              # reversed: Horner in 1/nu
+        v = v * u + c[:, None]
+    out[:, ~small] = v
+    return out
+
+
+def _rotated_branch(ABC: np.ndarray, nu: np.ndarray, phi_deg: float):
+    """(P, D) with A(j nu) + exp(-j phi) (P B(j nu) + D C(j nu)) = 0: the loop gain
+    L_imp = (P b + D c)/a equals -exp(j phi) at z = exp(j theta), a crossover with phase margin
+    phi (1 + exp(-j phi) L = 0)."""
+    A, B, C = _complex_values(ABC, nu)
+    w = np.exp(-1j * np.deg2rad(phi_deg))
+    B, C = w * B, w * C
+    det = B.real * C.imag - C.real * B.imag
+    with np.errstate(divide="ignore", invalid="ignore"):
+        P = (-A.real * C.imag + C.real * A.imag) / det
+        D = (-B.real * A.imag + A.real * B.imag) / det
+    return P, D
+
+
+def phase_margin_curves(params: Params, beta=None, alpha=None, *, pm_deg: float = 30.0,
+                        options: LoopOptions | None = None, P_range=(0.0, 2e4), D_range=(0.0, 50.0),
+                        n_nu: int = 4000, loop: ClosedLoop | None = None) -> list:
+    """The gains where the impedance loop (opened at the torque reference) has a crossover with
+    phase margin exactly ``pm_deg``: polylines (kind "pm=<pm_deg>") in the box, with the
+    crossover frequency. Since 1 + L_imp = chi/a, L_imp = (P_gain b + D_gain c)/a and a crossover
+    with margin phi is a + exp(-j phi)(P_gain b + D_gain c) = 0 at z = exp(j theta): a real 2 x 2
+    solve per nu = tan(theta/2), as for the stability boundary (phi = 0)."""
+    loop = loop or ClosedLoop(params, options)
+    if loop.options.conventions.pm_loop != "impedance":
+        raise ParameterError("phase_margin_curves: pm_loop = 'torque' is not covered yet; allowed: "
+                             "pm_loop = 'impedance' (the maps' default)")
+    ctrl = params.controller
+    ABC = affine_polynomials(loop, beta, alpha)
+    nu = np.logspace(-10, 10, n_nu)
+    P, D = _rotated_branch(ABC, nu, pm_deg)
+    omega = 2 * np.arctan(nu) / ctrl.Ts
+    (P0, P1), (D0, D1) = P_range, D_range
+    inside = np.isfinite(P) & np.isfinite(D) & (P >= P0) & (P <= P1) & (D >= D0) & (D <= D1)
+    idx = np.flatnonzero(inside)
+    curves = []
+    if idx.size:
+        for r in np.split(idx, np.flatnonzero(np.diff(idx) > 1) + 1):
+            curves.append(BoundaryCurve(f"pm={pm_deg:g}", P[r], D[r], omega[r]))
+    return curves
+
+
 def stability_boundary(params: Params, beta=None, alpha=None, *, options: LoopOptions | None = None,
                        P_range=(0.0, 2e4), D_range=(0.0, 50.0), n_nu: int = 4000,
                        loop: ClosedLoop | None = None) -> StabilityBoundary:
@@ -216,7 +276,16 @@ def crossings(boundary: StabilityBoundary, D_gain) -> list:
         if b != 0:
             for j, P in enumerate(-(a + c * d) / b):
                 cuts[j].append(P)
-    _, D = _complex_branch(ABC, nu)
+    for j, P in enumerate(_branch_crossings(lambda x: _complex_branch(ABC, x), nu, d)):
+        cuts[j].extend(P)
+    return [np.unique(np.asarray(c, float)) for c in cuts]
+
+
+def _branch_crossings(branch, nu: np.ndarray, d: np.ndarray) -> list:
+    """For each d, the P of ``branch(nu) -> (P, D)`` where D(nu) = d: brackets on the nu grid,
+    then bisection in log nu to the last bit; sign changes across poles of D(nu) are dropped."""
+    cuts = [[] for _ in d]
+    _, D = branch(nu)
     f = D[None, :] - d[:, None]                         # (n_D, n_nu)
     with np.errstate(invalid="ignore"):
         ok = np.isfinite(f[:, :-1]) & np.isfinite(f[:, 1:]) & (np.sign(f[:, :-1]) * np.sign(f[:, 1:]) <= 0)
@@ -225,15 +294,15 @@ def crossings(boundary: StabilityBoundary, D_gain) -> list:
     f_lo = f[rows, i]
     for _ in range(64):                                 # bisection: the bracket shrinks to one ulp
         mid = 0.5 * (lo + hi)
-        f_mid = _complex_branch(ABC, np.exp(mid))[1] - d[rows]
+        f_mid = branch(np.exp(mid))[1] - d[rows]
         left = np.sign(f_mid) * np.sign(f_lo) <= 0
         hi = np.where(left, mid, hi)
         lo, f_lo = np.where(left, lo, mid), np.where(left, f_lo, f_mid)
-    Pc, Dc = _complex_branch(ABC, np.exp(0.5 * (lo + hi)))
+    Pc, Dc = branch(np.exp(0.5 * (lo + hi)))
     good = np.isfinite(Pc) & (np.abs(Dc - d[rows]) <= 1e-9 * (1 + np.abs(d[rows])))
     for j, P in zip(rows[good], Pc[good]):
         cuts[j].append(P)
-    return [np.unique(np.asarray(c, float)) for c in cuts]
+    return cuts
 
 
 def classify_grid(loop: ClosedLoop, boundary: StabilityBoundary, P_gain, D_gain) -> np.ndarray:
@@ -261,3 +330,67 @@ def classify_grid(loop: ClosedLoop, boundary: StabilityBoundary, P_gain, D_gain)
         out[:, j] = st[start:start + n[j]][np.searchsorted(labels, seg)]
         start += n[j]
     return out
+
+
+def classify_regions(loop: ClosedLoop, boundary: StabilityBoundary, P_gain, D_gain, *,
+                     pm_deg: float = 30.0):
+    """``(stable, low_pm)`` of every grid point (shapes (n_P, n_D)) from the exact curves.
+
+    On every D_gain row the crossings of the stability boundary and of the phase-margin curves
+    (margin ``pm_deg`` and the wrap of the margin at 180 deg) split the P_gain axis into segments;
+    one point per segment is decided (certified stability, and the phase margin of the maps:
+    ``haa_sym.sweep.phase_margins`` on the loop's frequency grid with the options' rule) and
+    labels its segment. The margin can also change where a pair of crossovers appears (|L|
+    touches 1) or where the rule switches crossover (``min_abs``: two with equal |PM|); those are
+    not curves here, so each segment's first, middle and last grid points are decided, and a
+    segment whose points disagree is decided point by point.
+    """
+    from haa_sym.sweep import gain_rows, phase_margins
+    P = gain_array("P_gain", P_gain).ravel()
+    D = gain_array("D_gain", D_gain).ravel()
+    ABC, nu = boundary.ABC, boundary.nu
+    cuts = crossings(boundary, D)
+    # the maps see crossovers on their frequency grid only (FrequencyGrid: omega_min to Nyquist)
+    w = loop.options.numerics.omega(boundary.Ts)
+    nu_w = np.tan(w * boundary.Ts / 2)
+    nu_pm = np.geomspace(nu_w[0], nu_w[-1], nu.size)
+    extra = [_branch_crossings(lambda x: _rotated_branch(ABC, x, phi), nu_pm, D) for phi in (pm_deg, 180.0)]
+    for j in range(D.size):
+        cuts[j] = np.unique(np.concatenate([cuts[j]] + [np.asarray(e[j], float) for e in extra]))
+    coef = loop.loop_coefficients(beta=boundary.beta, alpha=boundary.alpha)
+
+    def decide(Pq, Dq):
+        st = loop.stability(Pq, Dq, boundary.beta, boundary.alpha).stable
+        pm = phase_margins(gain_rows(Pq, Dq), coef.L_imp, coef.omega, loop.options.conventions.pm_rule)[0]
+        with np.errstate(invalid="ignore"):
+            return st, st & (pm < pm_deg)
+    # every segment's first, middle and last grid point
+    rows, cols = [], []
+    for j, c in enumerate(cuts):
+        seg = np.searchsorted(c, P)
+        for k in np.unique(seg):
+            idx = np.flatnonzero(seg == k)
+            for i in {idx[0], idx[idx.size // 2], idx[-1]}:
+                rows.append(i)
+                cols.append(j)
+    rows, cols = np.array(rows), np.array(cols)
+    st, low = decide(P[rows], D[cols])
+    stable, low_pm = np.empty((P.size, D.size), bool), np.empty((P.size, D.size), bool)
+    known = np.zeros((P.size, D.size), bool)
+    stable[rows, cols], low_pm[rows, cols], known[rows, cols] = st, low, True
+    # a segment whose checked points agree takes their label; one whose points differ (the
+    # chosen crossover switched inside it, or crossovers appeared) is decided point by point
+    todo = []
+    for j, c in enumerate(cuts):
+        seg = np.searchsorted(c, P)
+        for k in np.unique(seg):
+            idx = np.flatnonzero(seg == k)
+            chk = idx[known[idx, j]]
+            if (stable[chk, j] == stable[chk[0], j]).all() and (low_pm[chk, j] == low_pm[chk[0], j]).all():
+                stable[idx, j], low_pm[idx, j] = stable[chk[0], j], low_pm[chk[0], j]
+            else:
+                todo += [(i, j) for i in idx if not known[i, j]]
+    if todo:
+        r, c = np.array(todo).T
+        stable[r, c], low_pm[r, c] = decide(P[r], D[c])
+    return stable, low_pm
