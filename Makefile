@@ -31,6 +31,7 @@ paper: derive
 ## Speed ratios against numpy eigvals and python-control (prints a table, writes benchmarks/results.json).
 bench: $(STAMP)
 	$(PY) benchmarks/bench_regions.py
+	$(PY) benchmarks/bench_boundary.py
 
 ## The whole test suite.
 test: $(STAMP)
