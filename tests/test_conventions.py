@@ -181,3 +181,16 @@ def test_blas_limits_and_same_map(params):
     untouched = region_map(params, P, D, radius=False, blas_threads=None)
     for k in ("stable", "phase_margin_deg", "passive", "phase_excess_deg"):
         np.testing.assert_allclose(getattr(one, k), getattr(untouched, k), rtol=1e-12, err_msg=k)
+
+
+def test_torque_bandwidth_map_matches_the_pointwise_bandwidth(params):
+    from haa_sym.torque import torque_bandwidth, torque_bandwidth_map
+    p = params.with_values(K_L2=0.0)
+    B, A = np.array([0.5, 1.0, 3.0]), np.array([0.0, 0.94])
+    bw, stable = torque_bandwidth_map(p, B, A)
+    assert stable.all()
+    for i, b in enumerate(B):
+        for j, a in enumerate(A):
+            assert bw[i, j] == torque_bandwidth(p, beta=b, alpha=a)
+    # more torque gain, more bandwidth (Sec. 3.3), with and without velocity compensation
+    assert (np.diff(bw, axis=0) > 0).all()

@@ -165,6 +165,25 @@ def plot_contact(K, rho, paper_range=None, unstable=(), key: str = "K_L2"):
     return fig
 
 
+def plot_torque_bandwidth(panels, title: str = ""):
+    """Torque bandwidth over (beta, alpha) with the unstable torque loop shaded, one panel per
+    ``(label, beta, alpha, bandwidth, stable)``."""
+    fig, axes = plt.subplots(1, len(panels), figsize=(4.4 * len(panels), 3.6), squeeze=False,
+                             constrained_layout=True)
+    for ax, (label, B, A, bw, stable) in zip(axes[0], panels):
+        cs = ax.contourf(B, A, np.log10(bw).T, levels=20, cmap="viridis")
+        ax.contour(B, A, bw.T, levels=[10, 20, 30, 50, 100, 200], colors="w", linewidths=0.6)
+        if (~stable).any():
+            ax.contourf(B, A, (~stable).T.astype(float), levels=[0.5, 1.5], colors=["#3a3a3a"])
+        fig.colorbar(cs, ax=ax, label="log10 torque bandwidth (rad/s)")
+        ax.set_xlabel("beta")
+        ax.set_ylabel("alpha")
+        ax.set_title(f"{label} (dark: torque loop unstable)", fontsize=9)
+    if title:
+        fig.suptitle(title, fontsize=10)
+    return fig
+
+
 def save_figure(fig, path: str | Path, tx=None, field: str | None = None) -> Path:
     """Save a figure (format from the suffix) and close it.
 

@@ -18,7 +18,7 @@ import numpy as np
 
 from haa_sym.budget import check_memory, sweep_bytes
 from haa_sym.loop import ClosedLoop, LoopOptions
-from haa_sym.params import ParameterError, Params, gain_points
+from haa_sym.params import ParameterError, Params, gain_array, gain_points
 
 __all__ = ["StepResponse", "step_response", "step_info", "dc_gain", "describe_step",
            "torque_bandwidth", "STEP_CONVENTION"]
@@ -220,6 +220,29 @@ def torque_bandwidth(params: Params, *, options: LoopOptions | None = None,
     target = -0.5 * np.log(2)
     t = (target - m0) / (m1 - m0)
     return float(np.exp(lw[k - 1] + t * (lw[k] - lw[k - 1])))
+
+
+def torque_bandwidth_map(params: Params, beta, alpha, *, options: LoopOptions | None = None,
+                         loop: ClosedLoop | None = None):
+    """Torque bandwidth (rad/s, :func:`torque_bandwidth`) and stability of the torque loop alone
+    (impedance loop open) on the grid ``beta`` x ``alpha``: arrays of shape (n_beta, n_alpha).
+
+    The trade the paper's Sec. 3 describes: higher torque gains (beta, Eq. 7) and more velocity
+    compensation (alpha, Eq. 6) widen the bandwidth until the loop goes unstable. The bandwidth is
+    NaN where the torque loop is unstable. For the paper's definition (leg free in the air) pass
+    params with the port body's ground stiffness 0 (K_L2 = 0).
+    """
+    B = gain_array("beta", beta).ravel()
+    A = gain_array("alpha", alpha).ravel()
+    loop = loop or ClosedLoop(params, options)
+    BB, AA = np.meshgrid(B, A, indexing="ij")
+    # the free position mode of a free leg is not seen by the torque: stability without it
+    res = loop.stability(np.zeros(BB.shape), np.zeros(BB.shape), BB, AA)
+    stable = res.stable | res.marginal
+    bw = np.full(BB.shape, np.nan)
+    for i, j in zip(*np.nonzero(stable)):
+        bw[i, j] = torque_bandwidth(params, beta=B[i], alpha=A[j], loop=loop)
+    return bw, stable
 
 
 def p1_roots(params: Params) -> np.ndarray:

@@ -204,6 +204,14 @@ def write_report(out: Path, r: dict, spec: dict, options: LoopOptions, verify_te
                  "-" if c["pm_deg"] is None else f"{c['pm_deg']:.2f} @ " + ", ".join(f"{w:.4g}" for w in c["gain_crossover_rad_s"]),
                  "-" if c["gm_db"] is None else f"{c['gm_db']:.2f} @ " + ", ".join(f"{w:.4g}" for w in c["phase_crossover_rad_s"])]
                 for c in r["torque_loop_corners"]]))
+    add("\n## Torque bandwidth against the torque gains (Sec. 3.3)\n")
+    add("The -3 dB frequency of the torque tracking T/T_lref with the leg free in the air (K_L2 = 0, "
+        "impedance loop open), over beta and alpha, next to the region where the torque loop alone is "
+        "unstable (dark): the trade the paper's torque-gain choice makes. Data: `torque_bandwidth.csv`.\n")
+    add(_table(["leg", "largest bandwidth (rad/s)", "at beta", "at alpha", "unstable share of the grid"],
+               [[cfg, f"{s['max_bandwidth_rad_s']:.4g}", f"{s['at_beta']:.3g}", f"{s['at_alpha']:.3g}",
+                 f"{100 * s['unstable_fraction']:.0f} %"] for cfg, s in r["torque_bandwidth"].items()]))
+    add("\n![Torque bandwidth](torque_bandwidth.png)\n")
     add("\n## Symbolic checks\n")
     add("`python -m haa_sym.verify` (exit status "
         f"{r['verify_exit_status']}):\n\n```\n{verify_text.rstrip()}\n```\n")

@@ -9,6 +9,7 @@ Writes into the output directory, as data and as PNG:
   fig07.png, fig07.csv, fig07_step_info.csv            unit torque steps (Fig. 7) and their
                                                         step_info metrics
   contact.png, contact.csv                              stability against environment stiffness
+  torque_bandwidth.png, torque_bandwidth.csv            torque bandwidth over beta and alpha, both legs
   verify.txt                                            python -m haa_sym.verify (p1 roots, margins)
   claims.json                                           every computed claim, machine-readable
   REPORT.md                                             all of it, "the paper says / we compute"
@@ -49,6 +50,7 @@ __all__ = ["reproduce", "region_trends"]
 # The names reproduce writes (regions/ holds only the maps): an existing output directory with
 # anything else in it is not replaced.
 _OUTPUT_NAMES = re.compile(r"fig\d\d(_step_info)?\.(png|csv)|table2\.(md|csv)|options_table2\.csv|contact\.(png|csv)"
+                           r"|torque_bandwidth\.(png|csv)"
                            r"|verify\.txt|claims\.json|REPORT\.md|regions")
 _REGION_NAMES = re.compile(r"fig\d\d[a-z]\.npz")
 
@@ -399,6 +401,29 @@ def _torque_loop_corners(job: _Job) -> dict:
     return {"torque_loop_corners": corners}
 
 
+def _torque_bandwidth(job: _Job) -> dict:
+    """Torque bandwidth (leg free in the air, K_L2 = 0, Sec. 3.3) over beta and alpha for both
+    legs, next to the torque-loop stability it trades against."""
+    from haa_sym.plots import plot_torque_bandwidth, save_figure
+    from haa_sym.torque import torque_bandwidth_map
+    B = np.linspace(0.1, 8.0, 8 if job.quick else 25)
+    A = np.linspace(0.0, 1.2, 5 if job.quick else 13)
+    panels, rows, summary = [], [], {}
+    for cfg in sorted(job.params.configurations):
+        pc = job.params.configuration(cfg).with_values(K_L2=0.0)
+        bw, st = torque_bandwidth_map(pc, B, A, options=job.options)
+        panels.append((f"{cfg} leg", B, A, bw, st))
+        rows += [{"configuration": cfg, "beta": f"{b:.6g}", "alpha": f"{a:.6g}", "stable": bool(st[i, j]),
+                  "torque_bandwidth_rad_s": f"{bw[i, j]:.6g}"} for i, b in enumerate(B) for j, a in enumerate(A)]
+        k = np.nanargmax(np.where(st, bw, np.nan))
+        summary[cfg] = {"max_bandwidth_rad_s": float(bw.flat[k]), "at_beta": float(B[k // A.size]),
+                        "at_alpha": float(A[k % A.size]), "unstable_fraction": float(1 - st.mean())}
+    _write_text(job.out / "torque_bandwidth.csv", _csv(rows))
+    save_figure(plot_torque_bandwidth(panels, "Torque bandwidth (leg free, K_L2 = 0) against beta and alpha"),
+                job.out / "torque_bandwidth.png")
+    return {"torque_bandwidth": summary}
+
+
 def _verify(job: _Job) -> tuple[dict, str]:
     """``python -m haa_sym.verify`` in its own process: the numeric runtime never imports sympy."""
     src = job.params.source
@@ -437,7 +462,7 @@ def reproduce(out: str | Path = "results", params: Params | None = None,
                    P_grid=P_grid, D_grid=D_grid)
         result: dict = {"meta": run_meta(params, options, quick=quick)}
         # one bar over the sections (stderr; shown on a terminal after 2 s, see haa_sym.progress)
-        with progress_bar(10, "reproduce", "section") as bar:
+        with progress_bar(11, "reproduce", "section") as bar:
             def run(section, *args):
                 result.update(section(job, *args))
                 bar.update(1)
@@ -453,6 +478,7 @@ def reproduce(out: str | Path = "results", params: Params | None = None,
             run(_beta_threshold, loop)
             run(_fig7)
             run(_torque_loop_corners)
+            run(_torque_bandwidth)
             verify_status, verify_text = _verify(job)
             result.update(verify_status)
             bar.update(1)
