@@ -120,14 +120,14 @@ def _parts(p: np.ndarray, nu: np.ndarray):
     return re, im
 
 
-def _complex_branch(ABC: np.ndarray, nu: np.ndarray):
+def _complex_branch(ABC: np.ndarray, nu: np.ndarray, with_det: bool = False):
     """(P, D) with q(j nu) = 0 for every nu (NaN or inf where the 2 x 2 system is singular)."""
     re, im = _parts(ABC, nu)                          # (3, n_nu) each: rows A, B, C
     det = re[1] * im[2] - re[2] * im[1]
     with np.errstate(divide="ignore", invalid="ignore"):
         P = (-re[0] * im[2] + re[2] * im[0]) / det
         D = (-re[1] * im[0] + re[0] * im[1]) / det
-    return P, D
+    return (P, D, det) if with_det else (P, D)
 
 
 def _complex_values(p: np.ndarray, nu: np.ndarray) -> np.ndarray:
@@ -149,7 +149,7 @@ def _complex_values(p: np.ndarray, nu: np.ndarray) -> np.ndarray:
     return out
 
 
-def _rotated_branch(ABC: np.ndarray, nu: np.ndarray, phi_deg: float):
+def _rotated_branch(ABC: np.ndarray, nu: np.ndarray, phi_deg: float, with_det: bool = False):
     """(P, D) with A(j nu) + exp(-j phi) (P B(j nu) + D C(j nu)) = 0: the loop gain
     L_imp = (P b + D c)/a equals -exp(j phi) at z = exp(j theta), a crossover with phase margin
     phi (1 + exp(-j phi) L = 0)."""
@@ -160,7 +160,7 @@ def _rotated_branch(ABC: np.ndarray, nu: np.ndarray, phi_deg: float):
     with np.errstate(divide="ignore", invalid="ignore"):
         P = (-A.real * C.imag + C.real * A.imag) / det
         D = (-B.real * A.imag + A.real * B.imag) / det
-    return P, D
+    return (P, D, det) if with_det else (P, D)
 
 
 def phase_margin_curves(params: Params, beta=None, alpha=None, *, pm_deg: float = 30.0,
@@ -276,29 +276,51 @@ def crossings(boundary: StabilityBoundary, D_gain) -> list:
         if b != 0:
             for j, P in enumerate(-(a + c * d) / b):
                 cuts[j].append(P)
-    for j, P in enumerate(_branch_crossings(lambda x: _complex_branch(ABC, x), nu, d)):
+    for j, P in enumerate(_branch_crossings(lambda x, *a: _complex_branch(ABC, x, *a), nu, d)):
         cuts[j].extend(P)
     return [np.unique(np.asarray(c, float)) for c in cuts]
 
 
-def _branch_crossings(branch, nu: np.ndarray, d: np.ndarray) -> list:
+def _branch_crossings(branch, nu: np.ndarray, d: np.ndarray, P_range=None) -> list:
     """For each d, the P of ``branch(nu) -> (P, D)`` where D(nu) = d: brackets on the nu grid,
-    then bisection in log nu to the last bit; sign changes across poles of D(nu) are dropped."""
+    then the Illinois variant of regula falsi in log nu (all brackets at once; superlinear, the
+    bracket kept) until the bracket is 1e-13 wide in log nu or 60 steps; sign changes across
+    poles of D(nu) are dropped."""
     cuts = [[] for _ in d]
-    _, D = branch(nu)
+    Pn, D, det = branch(nu, True)
     f = D[None, :] - d[:, None]                         # (n_D, n_nu)
     with np.errstate(invalid="ignore"):
         ok = np.isfinite(f[:, :-1]) & np.isfinite(f[:, 1:]) & (np.sign(f[:, :-1]) * np.sign(f[:, 1:]) <= 0)
+        # where the 2 x 2 determinant changes sign, D(nu) passes a pole, not the value d
+        ok &= (np.sign(det[:-1]) * np.sign(det[1:]) > 0)[None, :]
+        if P_range is not None:
+            # a crossing matters only inside the grid's P range, where P(nu) is continuous
+            # between the bracket's ends: skip brackets whose P span misses the range
+            lo_P, hi_P = np.fmin(Pn[:-1], Pn[1:]), np.fmax(Pn[:-1], Pn[1:])
+            ok &= (np.isfinite(lo_P) & (hi_P >= P_range[0]) & (lo_P <= P_range[1]))[None, :]
     rows, i = np.nonzero(ok)
     lo, hi = np.log(nu[i]), np.log(nu[i + 1])
-    f_lo = f[rows, i]
-    for _ in range(64):                                 # bisection: the bracket shrinks to one ulp
-        mid = 0.5 * (lo + hi)
-        f_mid = branch(np.exp(mid))[1] - d[rows]
-        left = np.sign(f_mid) * np.sign(f_lo) <= 0
-        hi = np.where(left, mid, hi)
-        lo, f_lo = np.where(left, lo, mid), np.where(left, f_lo, f_mid)
-    Pc, Dc = branch(np.exp(0.5 * (lo + hi)))
+    f_lo, f_hi = f[rows, i], f[rows, i + 1]
+    side = np.zeros(rows.size, int)                     # which end moved last (Illinois)
+    x = 0.5 * (lo + hi)
+    live = np.ones(rows.size, bool)
+    for _ in range(60):
+        if not live.any():
+            break
+        k = np.flatnonzero(live)                        # only the brackets still moving
+        with np.errstate(invalid="ignore", divide="ignore"):
+            xn = (lo[k] * f_hi[k] - hi[k] * f_lo[k]) / (f_hi[k] - f_lo[k])
+        xn = np.where(np.isfinite(xn) & (xn > lo[k]) & (xn < hi[k]), xn, 0.5 * (lo[k] + hi[k]))
+        f_x = branch(np.exp(xn))[1] - d[rows[k]]
+        left = np.sign(f_x) * np.sign(f_lo[k]) <= 0     # the root is in [lo, x]
+        f_lo[k] = np.where(~left, f_x, np.where(side[k] == -1, 0.5 * f_lo[k], f_lo[k]))
+        f_hi[k] = np.where(left, f_x, np.where(side[k] == 1, 0.5 * f_hi[k], f_hi[k]))
+        lo[k], hi[k] = np.where(left, lo[k], xn), np.where(left, xn, hi[k])
+        side[k] = np.where(left, -1, 1)
+        done = (np.abs(xn - x[k]) <= 1e-14 * (1 + np.abs(xn))) | (f_x == 0) | (hi[k] - lo[k] <= 1e-13)
+        x[k] = xn
+        live[k[done]] = False
+    Pc, Dc = branch(np.exp(x))
     good = np.isfinite(Pc) & (np.abs(Dc - d[rows]) <= 1e-9 * (1 + np.abs(d[rows])))
     for j, P in zip(rows[good], Pc[good]):
         cuts[j].append(P)
@@ -354,7 +376,8 @@ def classify_regions(loop: ClosedLoop, boundary: StabilityBoundary, P_gain, D_ga
     w = loop.options.numerics.omega(boundary.Ts)
     nu_w = np.tan(w * boundary.Ts / 2)
     nu_pm = np.geomspace(nu_w[0], nu_w[-1], nu.size)
-    extra = [_branch_crossings(lambda x: _rotated_branch(ABC, x, phi), nu_pm, D) for phi in (pm_deg, 180.0)]
+    extra = [_branch_crossings(lambda x, *a: _rotated_branch(ABC, x, phi, *a), nu_pm, D, (P.min(), P.max()))
+             for phi in (pm_deg, 180.0)]
     for j in range(D.size):
         cuts[j] = np.unique(np.concatenate([cuts[j]] + [np.asarray(e[j], float) for e in extra]))
     coef = loop.loop_coefficients(beta=boundary.beta, alpha=boundary.alpha)
