@@ -79,15 +79,6 @@ NEW = [p for p in BUILTIN if p.name != "hyq_haa.toml"]
 
 
 @pytest.fixture(scope="module")
-def cache(tmp_path_factory):
-    # the user's chain is compiled here, not in ~/.cache (HAA_SYM_CACHE); restored afterwards
-    with pytest.MonkeyPatch.context() as mp:
-        path = tmp_path_factory.mktemp("cache")
-        mp.setenv("HAA_SYM_CACHE", str(path))
-        yield path
-
-
-@pytest.fixture(scope="module")
 def user_file(tmp_path_factory, cache):
     path = tmp_path_factory.mktemp("user") / "three.toml"
     path.write_text(USER)

@@ -19,14 +19,6 @@ from haa_sym.symbolic.model import LinearActuatorModel, Parameter
 
 from conftest import ROOT
 
-@pytest.fixture(scope="module")
-def cache(tmp_path_factory):
-    with pytest.MonkeyPatch.context() as mp:
-        path = tmp_path_factory.mktemp("model_cache")
-        mp.setenv("HAA_SYM_CACHE", str(path))
-        yield path
-
-
 # --- HyQ's Eq. (1)-(2) written by hand as equations of motion -------------------------------
 HYQ_PARAMETERS = {
     "L": (">0", "H"), "R": (">0", "Ohm"), "k_t": (">0", "Nm/A"), "k_w": (">=0", "V s/rad"),

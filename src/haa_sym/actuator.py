@@ -375,13 +375,28 @@ def _table(data: Mapping, key: str, where: str) -> Mapping:
     return value
 
 
-def _keys(table: Mapping, allowed: list[str] | tuple[str, ...], required, where: str) -> None:
+def check_keys(table, allowed, required, where: str | None = None) -> None:
+    """The one rule for the keys of a table (a file section, a Plant, a Controller): unknown keys
+    and missing required keys are each one error naming ``where``, the keys and what is allowed."""
+    prefix = f"{where}: " if where else ""
     unknown = sorted(set(table) - set(allowed))
     if unknown:
-        raise _error(f"{where}: unknown key(s) {unknown}; allowed: {list(allowed)}")
+        raise _error(f"{prefix}unknown key(s) {unknown}; allowed: {list(allowed)}")
     missing = [k for k in required if k not in table]
     if missing:
-        raise _error(f"{where}: missing key(s) {missing}; every key of {list(required)} is required")
+        raise _error(f"{prefix}missing key(s) {missing}; every key of {list(required)} is required")
+
+
+def _named_tables(data: Mapping, section: str, source: str, holds: str):
+    """``(name, table, where)`` of every ``[section.<name>]``, each checked to be a table."""
+    tables = data.get(section, {})
+    if not isinstance(tables, Mapping):
+        raise _error(f"{source} [{section}]: {tables!r}; allowed: tables [{section}.<name>]")
+    for name, tab in tables.items():
+        where = f"{source} [{section}.{name}]"
+        if not isinstance(tab, Mapping):
+            raise _error(f"{where}: {tab!r}; allowed: a table with {holds}")
+        yield name, tab, where
 
 
 def parse_about(data: Mapping, source: str) -> dict:
@@ -390,7 +405,7 @@ def parse_about(data: Mapping, source: str) -> dict:
     where = f"{source} [about]"
     if not isinstance(about, Mapping):
         raise _error(f"{where}: [about] = {about!r}; allowed: a table")
-    _keys(about, ("name", "description", "references"), (), where)
+    check_keys(about, ("name", "description", "references"), (), where)
     for k in ("name", "description"):
         if k in about and not isinstance(about[k], str):
             raise _error(f"{where}: {k} = {about[k]!r}; allowed: a string")
@@ -420,29 +435,17 @@ def parse_actuator(data: Mapping, source: str = "<memory>") -> tuple[Topology, d
         return legacy_plant(data, source, refs) + (about,)
     motor = _table(data, "motor", source)
     where = f"{source} [motor]"
-    _keys(motor, tuple(MOTOR_DOMAIN), tuple(MOTOR_DOMAIN), where)
+    check_keys(motor, tuple(MOTOR_DOMAIN), tuple(MOTOR_DOMAIN), where)
     values = {k: v for k, v in entry_values(motor, where, refs).items()}
-    bodies_t = data.get("bodies", {})
-    if not isinstance(bodies_t, Mapping):
-        raise _error(f"{source} [bodies]: {bodies_t!r}; allowed: tables [bodies.<name>]")
     bodies = []
-    for name, tab in bodies_t.items():
-        w = f"{source} [bodies.{name}]"
-        if not isinstance(tab, Mapping):
-            raise _error(f"{w}: {tab!r}; allowed: a table with J, B and optional K")
-        _keys(tab, tuple(BODY_DOMAIN), ("J", "B"), w)
+    for name, tab, w in _named_tables(data, "bodies", source, "J, B and optional K"):
+        check_keys(tab, tuple(BODY_DOMAIN), ("J", "B"), w)
         vals = entry_values(tab, w, refs)
         bodies.append(Body(name, ground="K" in tab))
         values.update({f"{k}_{name}": v for k, v in vals.items()})
-    couplings_t = data.get("couplings", {})
-    if not isinstance(couplings_t, Mapping):
-        raise _error(f"{source} [couplings]: {couplings_t!r}; allowed: tables [couplings.<name>]")
     couplings = []
-    for name, tab in couplings_t.items():
-        w = f"{source} [couplings.{name}]"
-        if not isinstance(tab, Mapping):
-            raise _error(f"{w}: {tab!r}; allowed: a table with between, K and D")
-        _keys(tab, ("between", "K", "D"), ("between", "K", "D"), w)
+    for name, tab, w in _named_tables(data, "couplings", source, "between, K and D"):
+        check_keys(tab, ("between", "K", "D"), ("between", "K", "D"), w)
         ends = tab["between"]
         if not (isinstance(ends, list) and len(ends) == 2 and all(isinstance(e, str) for e in ends)):
             raise _error(f"{w}: between = {ends!r}; allowed: two body names [a, b] ('rotor' for "
@@ -451,7 +454,7 @@ def parse_actuator(data: Mapping, source: str = "<memory>") -> tuple[Topology, d
         couplings.append(Coupling(name, ends[0], ends[1]))
         values.update({f"{k}_{name}": v for k, v in vals.items()})
     sensors = _table(data, "sensors", source)
-    _keys(sensors, SENSOR_KEYS, SENSOR_KEYS, f"{source} [sensors]")
+    check_keys(sensors, SENSOR_KEYS, SENSOR_KEYS, f"{source} [sensors]")
     for k in ("torque", "encoder", "port"):
         if not isinstance(sensors[k], str):
             raise _error(f"{source} [sensors]: {k} = {sensors[k]!r}; allowed: a name (string)")
@@ -467,5 +470,5 @@ def legacy_plant(data: Mapping, source: str, references: Mapping[str, str] | Non
     values = entry_values(plant, where, references)
     top = Topology(HYQ.bodies, HYQ.couplings, HYQ.sensor, HYQ.torque_damping, HYQ.encoder,
                    HYQ.port, source=source)
-    _keys(values, top.parameter_keys, top.parameter_keys, where)
+    check_keys(values, top.parameter_keys, top.parameter_keys, where)
     return top, values

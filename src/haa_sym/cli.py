@@ -138,26 +138,45 @@ def _gain(args, name: str, flag: str) -> float:
     return float(gain_array(name, getattr(args, name), flag))
 
 
-def _cmd_regions(args) -> int:
-    from haa_sym.loop import ClosedLoop
-    from haa_sym.regions import grid, region_map
-    params = _params(args)
-    options = _parse_options(args.option)
-    P, D = grid(args.P_gain, "--P-gain"), grid(args.D_gain, "--D-gain")
-    out = _check_out(args.out, "regions")
-    plot = _check_out(args.plot, "regions", "--plot")
-    loop = ClosedLoop(params, options)
-    m = region_map(params, P, D, options=options, radius=args.radius, loop=loop)
+def _setup(args, cmd: str):
+    """What every analysis command starts with: parameters, options and the output paths, all
+    checked before any computation."""
+    return (_params(args), _parse_options(args.option), _check_out(args.out, cmd),
+            _check_out(args.plot, cmd, "--plot"))
+
+
+def _plots():
+    """haa_sym.plots, imported only when a figure is asked for (matplotlib is slow to import)."""
+    from haa_sym import plots
+    return plots
+
+
+def _write_outputs(out, plot, write_out, figure) -> None:
+    """``--out`` through ``write_out(path, tx)`` and ``--plot`` from ``figure()``, all or nothing
+    (:mod:`haa_sym.outputs`): a failure leaves both as they were."""
     from haa_sym.outputs import Transaction
     with Transaction() as tx:
         if out:
-            m.save(out, tx, "--out")
+            write_out(out, tx)
         if plot:
-            from haa_sym.boundary import stability_boundary
-            from haa_sym.plots import plot_region, save_figure
-            b = stability_boundary(params, options=options, P_range=(P.min(), P.max()),
-                                   D_range=(D.min(), D.max()), loop=loop)
-            save_figure(plot_region(m, title=args.title, boundary=b), plot, tx, "--plot")
+            _plots().save_figure(figure(), plot, tx, "--plot")
+
+
+def _cmd_regions(args) -> int:
+    from haa_sym.loop import ClosedLoop
+    from haa_sym.regions import grid, region_map
+    params, options, out, plot = _setup(args, "regions")
+    P, D = grid(args.P_gain, "--P-gain"), grid(args.D_gain, "--D-gain")
+    loop = ClosedLoop(params, options)
+    m = region_map(params, P, D, options=options, radius=args.radius, loop=loop)
+
+    def figure():
+        from haa_sym.boundary import stability_boundary
+        from haa_sym.plots import plot_region
+        b = stability_boundary(params, options=options, P_range=(P.min(), P.max()),
+                               D_range=(D.min(), D.max()), loop=loop)
+        return plot_region(m, title=args.title, boundary=b)
+    _write_outputs(out, plot, lambda path, tx: m.save(path, tx, "--out"), figure)
     print(f"{m.stable.size} points: {m.stable.sum()} stable, {m.low_pm.sum()} stable with PM < 30 deg, "
           f"{m.passive.sum()} passive" + (f"; wrote {out}" if out else ""))
     return 0
@@ -166,19 +185,11 @@ def _cmd_regions(args) -> int:
 def _cmd_boundary(args) -> int:
     from haa_sym.boundary import stability_boundary
     from haa_sym.regions import grid
-    params = _params(args)
-    options = _parse_options(args.option)
+    params, options, out, plot = _setup(args, "boundary")
     P, D = grid(args.P_gain, "--P-gain"), grid(args.D_gain, "--D-gain")
-    out = _check_out(args.out, "boundary")
-    plot = _check_out(args.plot, "boundary", "--plot")
     b = stability_boundary(params, options=options, P_range=(P.min(), P.max()), D_range=(D.min(), D.max()))
-    from haa_sym.outputs import Transaction
-    with Transaction() as tx:
-        if out:
-            b.save(out, tx, "--out")
-        if plot:
-            from haa_sym.plots import plot_boundary, save_figure
-            save_figure(plot_boundary(b, title=args.title), plot, tx, "--plot")
+    _write_outputs(out, plot, lambda path, tx: b.save(path, tx, "--out"),
+                   lambda: _plots().plot_boundary(b, title=args.title))
     kinds = ", ".join(f"{c.kind}: {c.P_gain.size} points" for c in b.curves) or "no crossing in the box"
     print(f"stability boundary in P_gain [{P.min():g}, {P.max():g}] x D_gain [{D.min():g}, {D.max():g}]: "
           f"{len(b.curves)} curve(s) ({kinds})" + (f"; wrote {out}" if out else ""))
@@ -188,8 +199,9 @@ def _cmd_boundary(args) -> int:
 def _cmd_contact(args) -> int:
     import json
     from haa_sym.contact import contact_intervals
-    params = _params(args)
-    options = _parse_options(args.option)
+    from haa_sym.outputs import write_text
+    from haa_sym.regions import run_meta
+    params, options, out, plot = _setup(args, "contact")
     lo, sep, hi = args.K_range.partition(":")
     try:
         K_range = (float(lo), float(hi)) if sep else None
@@ -197,23 +209,16 @@ def _cmd_contact(args) -> int:
         K_range = None
     if K_range is None:
         raise ParameterError(f"--K-range {args.K_range!r}; allowed: LO:HI in Nm/rad, 0 < LO < HI")
-    out = _check_out(args.out, "contact")
-    plot = _check_out(args.plot, "contact", "--plot")
     r = contact_intervals(params, K_range, n_scan=args.n_scan, P_gain=_gain(args, "P_gain", "--P-gain"),
                           D_gain=_gain(args, "D_gain", "--D-gain"), options=options, mode=args.mode)
     data = {"analysis": "contact stability", "environment": f"K_env {'replaces' if r.mode == 'replace' else 'adds to'} {r.key}",
             "mode": r.mode, "stiffness_key": r.key, "P_gain": args.P_gain, "D_gain": args.D_gain,
             "K_range": list(K_range), "n_scan": args.n_scan, "rtol": r.rtol,
             "unstable_intervals": [list(i) for i in r.unstable]}
-    from haa_sym.outputs import Transaction, write_text
-    with Transaction() as tx:
-        if out:
-            from haa_sym.regions import run_meta
-            data["meta"] = run_meta(params, options)
-            write_text(out, json.dumps(data, indent=1) + "\n", tx, "--out")
-        if plot:
-            from haa_sym.plots import plot_contact, save_figure
-            save_figure(plot_contact(r.K_env, r.spectral_radius, unstable=r.unstable, key=r.key), plot, tx, "--plot")
+    _write_outputs(out, plot,
+                   lambda path, tx: write_text(path, json.dumps({**data, "meta": run_meta(params, options)},
+                                                                indent=1) + "\n", tx, "--out"),
+                   lambda: _plots().plot_contact(r.K_env, r.spectral_radius, unstable=r.unstable, key=r.key))
     ends = ", ".join(f"{a:.10g}-{b:.10g}" for a, b in r.unstable) or "none"
     print(f"unstable in contact ({data['environment']}): {ends} Nm/rad" + (f"; wrote {out}" if out else ""))
     return 0
@@ -225,14 +230,11 @@ def _cmd_passivity(args) -> int:
     import numpy as np
     from haa_sym.passivity import bands_beyond, corrected_phase, passivity
     from haa_sym.regions import grid
-    params = _params(args)
-    options = _parse_options(args.option)
+    params, options, out, plot = _setup(args, "passivity")
     P, D = grid(args.P_gain, "--P-gain"), grid(args.D_gain, "--D-gain")
     if P.size != D.size:
         raise ParameterError(f"--P-gain has {P.size} values and --D-gain {D.size}; they pair up, "
                              "so give the same number")
-    out = _check_out(args.out, "passivity")
-    plot = _check_out(args.plot, "passivity", "--plot")
     r = passivity(params, P, D, options=options)
     rows = []
     for i in range(P.size):
@@ -248,37 +250,27 @@ def _cmd_passivity(args) -> int:
             curves.append((w, ph, f"P_gain = {P[i]:g}, D_gain = {D[i]:g}"))
             print(f"  |phase| > 90 deg for P_gain {P[i]:g}, D_gain {D[i]:g}: "
                   + (", ".join(f"{a:.1f}-{b:.1f} rad/s" for a, b in bands_beyond(w, ph)) or "never"))
-    from haa_sym.outputs import Transaction
-    with Transaction() as tx:
-        if out:
-            from haa_sym.outputs import csv_text as _csv
-            from haa_sym.regions import run_meta
-            text = (json.dumps({"cells": rows, "meta": run_meta(params, options)}, indent=1) + "\n"
-                    if out.suffix == ".json" else _csv(rows))
-            tx.write_text(out, text, "--out")
-        if plot:
-            from haa_sym.plots import plot_corrected_phase, save_figure
-            save_figure(plot_corrected_phase(curves, "corrected phase of Z(z)"), plot, tx, "--plot")
+    from haa_sym.outputs import csv_text
+    from haa_sym.regions import run_meta
+
+    def write_out(path, tx):
+        tx.write_text(path, json.dumps({"cells": rows, "meta": run_meta(params, options)}, indent=1) + "\n"
+                      if path.suffix == ".json" else csv_text(rows), "--out")
+    _write_outputs(out, plot, write_out, lambda: _plots().plot_corrected_phase(curves, "corrected phase of Z(z)"))
     return 0
 
 
 def _cmd_step(args) -> int:
+    from haa_sym.outputs import csv_text
     from haa_sym.torque import STEP_CONVENTION, describe_step, step_response, torque_bandwidth
-    params = _params(args)
-    options = _parse_options(args.option)
-    out = _check_out(args.out, "step")
-    plot = _check_out(args.plot, "step", "--plot")
+    params, options, out, plot = _setup(args, "step")
     s = step_response(params, duration=args.duration, options=options)
     print(f"{describe_step(s)}, -3 dB bandwidth {torque_bandwidth(params, options=options):.2f} rad/s")
     print(f"({STEP_CONVENTION})")
-    from haa_sym.outputs import Transaction
-    with Transaction() as tx:
-        if out:
-            from haa_sym.outputs import csv_text as _csv
-            tx.write_text(out, _csv([{"t_s": f"{t:.6g}", "T_Nm": f"{v:.9g}"} for t, v in zip(s.t, s.T)]), "--out")
-        if plot:
-            from haa_sym.plots import plot_steps, save_figure
-            save_figure(plot_steps([("unit torque step", [(s, "T_l", "-")])]), plot, tx, "--plot")
+    rows = [{"t_s": f"{t:.6g}", "T_Nm": f"{v:.9g}"} for t, v in zip(s.t, s.T)]
+    # the measured torque: the sensed coupling's (T_l of Eq. 2 for HyQ)
+    _write_outputs(out, plot, lambda path, tx: tx.write_text(path, csv_text(rows), "--out"),
+                   lambda: _plots().plot_steps([("unit torque step", [(s, "T_sensor", "-")])]))
     return 0
 
 

@@ -30,7 +30,8 @@ from typing import Mapping
 
 import numpy as np
 
-from haa_sym.actuator import ACTUATOR_SECTIONS, HYQ, Actuator, Topology, entry_values, parse_actuator
+from haa_sym.actuator import (ACTUATOR_SECTIONS, HYQ, Actuator, Topology, check_keys, entry_values,
+                              parse_actuator)
 from haa_sym.resources import data_dir
 
 __all__ = [
@@ -107,12 +108,7 @@ class Plant:
             raise ParameterError(f"topology = {topology!r}; allowed: a haa_sym.actuator.Topology or a "
                                  "haa_sym.symbolic.model.LinearActuatorModel")
         domain = topology.domain
-        unknown = sorted(set(values) - set(domain))
-        if unknown:
-            raise ParameterError(f"unknown key(s) {unknown}; allowed: {list(domain)}")
-        missing = [k for k in domain if k not in values]
-        if missing:
-            raise ParameterError(f"missing key(s) {missing}; every key of {list(domain)} is required")
+        check_keys(values, tuple(domain), tuple(domain))
         checked = {k: _check_value(k, values[k], domain[k]) for k in domain}
         object.__setattr__(self, "topology", topology)
         object.__setattr__(self, "_values", checked)
@@ -382,13 +378,7 @@ def _check_fields(obj, domain: Mapping[str, str]) -> None:
 def _validated(cls, values: Mapping[str, object], domain: Mapping[str, str], where: str | None = None,
                optional: Mapping[str, object] = {}):
     prefix = f"{where}: " if where else ""
-    unknown = sorted(set(values) - set(domain))
-    if unknown:
-        raise ParameterError(f"{prefix}unknown key(s) {unknown}; allowed: {list(domain)}")
-    missing = [k for k in domain if k not in values and k not in optional]
-    if missing:
-        required = [k for k in domain if k not in optional]
-        raise ParameterError(f"{prefix}missing key(s) {missing}; every key of {required} is required")
+    check_keys(values, tuple(domain), [k for k in domain if k not in optional], where)
     values = {**{k: v for k, v in optional.items() if k not in values}, **values}
     try:
         return cls(**values)
