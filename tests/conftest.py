@@ -20,3 +20,20 @@ def cache(tmp_path_factory):
         path = tmp_path_factory.mktemp("cache")
         mp.setenv("HAA_SYM_CACHE", str(path))
         yield path
+
+
+def decisions_against_reference(loop, pts, band: float = 1e-9) -> dict:
+    """The certified and the raw generated decisions at gain points ``pts`` (4, k) against the
+    eigenvalues of the independent closed loop (haa_sym.reference), where the spectral radius is
+    farther than ``band`` from 1: counts of disagreements, stable points, points within the band
+    and refined points."""
+    import numpy as np
+
+    from haa_sym import reference as ref
+    res = loop.stability(*pts)
+    raw = loop.stability(*pts, certify=False)           # the generated decision alone
+    rho = np.abs(ref.closed_loop_eigenvalues(loop, pts)).max(axis=1)
+    away = np.abs(rho - 1) > band
+    return {"disagree": int((res.stable != (rho < 1))[away].sum() + (raw.stable != (rho < 1))[away].sum()),
+            "stable": int((rho < 1).sum()), "near": int((~away).sum()), "refined": int(res.refined.sum()),
+            "points": int(pts.shape[1])}

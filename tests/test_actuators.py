@@ -14,7 +14,7 @@ from haa_sym.actuator import HYQ, ROTOR
 from haa_sym.params import builtin_actuators
 from haa_sym.plant import continuous_plant
 
-from conftest import ROOT
+from conftest import ROOT, decisions_against_reference
 
 USER = """\
 [about]
@@ -224,14 +224,11 @@ def test_closed_loop_agrees_with_reference(name, user_file):
         k = 260
         pts = np.stack([10 ** rng.uniform(0, np.log10(20000), k), rng.uniform(0, 50, k),
                         rng.uniform(0.5, 4, k), rng.uniform(0, 1.2, k)])
-        res = loop.stability(*pts)
-        raw = loop.stability(*pts, certify=False)           # the generated decision alone
-        rho = np.abs(ref.closed_loop_eigenvalues(loop, pts)).max(axis=1)
-        away = np.abs(rho - 1) > 1e-9
-        disagree += int((res.stable != (rho < 1))[away].sum() + (raw.stable != (rho < 1))[away].sum())
-        n_stable += int((rho < 1).sum())
-        near += int((~away).sum())
-        refined += int(res.refined.sum())
+        c = decisions_against_reference(loop, pts)
+        disagree += c["disagree"]
+        n_stable += c["stable"]
+        near += c["near"]
+        refined += c["refined"]
         n_points += k
         w = np.logspace(-1, np.log10(np.pi / Ts * 0.999), 20)
         fr = loop.frequency_response(w, *pts[:, :3])

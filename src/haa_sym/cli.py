@@ -328,6 +328,15 @@ def _progress_flags(p: argparse.ArgumentParser, default) -> None:
                         "(default: on a terminal, for work longer than 2 s)")
 
 
+def _map_args(parser, D_default: str, what: str, suffix: str) -> None:
+    """The gain-plane arguments of ``regions`` and ``boundary``."""
+    parser.add_argument("--P-gain", default="log:1:20000:200", help=f"{what} (default log:1:20000:200)")
+    parser.add_argument("--D-gain", default=D_default, help=f"{what} (default {D_default})")
+    parser.add_argument("--out", help=f"output {suffix}")
+    parser.add_argument("--plot", help="output figure (.png/.pdf/.svg)")
+    parser.add_argument("--title")
+
+
 def main(argv: list[str] | None = None) -> int:
     from haa_sym import __version__
     ap = _Parser(prog="haa-sym", description=__doc__.splitlines()[0],
@@ -345,21 +354,13 @@ def main(argv: list[str] | None = None) -> int:
     s.add_argument("--D-gain", type=float, required=True)
     r = sub.add_parser("regions", help="stability / PM / passivity map on a gain grid (Figs. 8-11)")
     _common(r)
-    r.add_argument("--P-gain", default="log:1:20000:200", help="grid spec (default log:1:20000:200)")
-    r.add_argument("--D-gain", default="lin:1:50:100", help="grid spec (default lin:1:50:100)")
-    r.add_argument("--out", help="output .npz")
-    r.add_argument("--plot", help="output figure (.png/.pdf/.svg)")
-    r.add_argument("--title")
+    _map_args(r, "lin:1:50:100", "grid spec", ".npz")
     r.add_argument("--radius", action="store_true",
                    help="also compute the spectral radius from eigenvalues (slower)")
     bd = sub.add_parser("boundary", help="exact stability boundary in the (P_gain, D_gain) plane "
                         "(parameter-space method)")
     _common(bd)
-    bd.add_argument("--P-gain", default="log:1:20000:200", help="the box: grid spec whose range is used")
-    bd.add_argument("--D-gain", default="lin:0:50:100", help="the box: grid spec whose range is used")
-    bd.add_argument("--out", help="output .json")
-    bd.add_argument("--plot", help="output figure (.png/.pdf/.svg)")
-    bd.add_argument("--title")
+    _map_args(bd, "lin:0:50:100", "the box: grid spec whose range is used", ".json")
     ct = sub.add_parser("contact", help="environment stiffnesses that make the loop unstable (exact ends)")
     _common(ct)
     ct.add_argument("--K-range", default="1:100000", help="LO:HI environment stiffness, Nm/rad (default 1:100000)")
