@@ -64,11 +64,14 @@ def test_cli_boundary_writes_json_and_plot(tmp_path, capsys):
     out, plot = tmp_path / "b.json", tmp_path / "b.png"
     assert main(["boundary", "--set", "N_av=10", "--out", str(out), "--plot", str(plot), "-q"]) == 0
     data = json.loads(out.read_text())
-    assert data["boundary"] == "stability" and data["beta"] == 1.0 and data["curves"]
-    c = data["curves"][0]
-    assert len(c["P_gain"]) == len(c["D_gain"]) == len(c["omega"]) > 10
+    assert data["beta"] == 1.0 and data["pm_deg"] == 30.0
+    for key in ("stability", "phase_margin", "passivity"):
+        assert data[key], key
+        assert all(len(c["P_gain"]) == len(c["D_gain"]) == len(c["omega"]) for c in data[key]), key
+        assert max(len(c["P_gain"]) for c in data[key]) > 3, key
+    assert {c["kind"] for c in data["passivity"]} <= {"passivity", "passivity (omega_min)", "passivity (Nyquist)"}
     assert plot.stat().st_size > 1000
-    assert "curve(s)" in capsys.readouterr().out
+    assert "passivity" in capsys.readouterr().out
 
 
 def test_cli_boundary_refuses_a_bad_output_and_writes_nothing(tmp_path, capsys):
@@ -96,7 +99,73 @@ def test_regions_classified_from_the_curves_equal_the_map(params, changes):
     p = params.with_values(**changes)
     loop = ClosedLoop(p)
     P, D = grid("log:1:20000:90"), grid("lin:1:50:60")
-    stable, low_pm = classify_regions(loop, stability_boundary(p, loop=loop), P, D)
-    m = region_map(p, P, D, loop=loop, passivity=False, progress=False)
-    assert (stable != m.stable).sum() == 0 and (low_pm != m.low_pm).sum() == 0
+    r = classify_regions(loop, stability_boundary(p, loop=loop), P, D)
+    m = region_map(p, P, D, loop=loop, progress=False, method="grid")
+    assert (r.stable != m.stable).sum() == 0 and (r.low_pm != m.low_pm).sum() == 0
+    assert (r.passive != m.passive).sum() == 0
     assert m.low_pm.any() or changes == {"Ts": 1e-4}
+    assert (m.stable & ~m.passive).any() and m.passive.any()
+
+
+PASSIVITY_CASES = {**{k: v for k, v in CASES.items() if k != "N_av=50"},   # N_av = 50: in the map tests
+                   "Ts=8ms": lambda p: p.with_values(Ts=8e-3, N_av=1)}
+
+
+@pytest.fixture(scope="module", params=list(PASSIVITY_CASES) + ["harmonic_drive"])
+def passivity_curves(request, params):
+    from haa_sym.passivity_boundary import passivity_boundary
+    name = request.param
+    p = load_params(ROOT / "model" / "harmonic_drive.toml") if name == "harmonic_drive" \
+        else PASSIVITY_CASES[name](params)
+    loop = ClosedLoop(p)
+    c = p.controller
+    return name, loop, passivity_boundary(loop, c.beta, c.alpha, P_range=(1.0, 2e4), D_range=(0.0, 50.0),
+                                          n_lines=41)
+
+
+def _corrected_phase(loop, omega, P, D):
+    from haa_sym.sweep import colgate_factor
+    c = loop.params.controller
+    Z = ref.frequency_response(loop, omega, P, D, c.beta, c.alpha, which=("Z",))["Z"]
+    return np.degrees(np.angle(Z * colgate_factor(omega, c.Ts, loop.options.conventions.colgate)))
+
+
+def _spread(curves, per_curve, total):
+    pts = [(c, i) for c in curves for i in np.unique(np.linspace(0, c.P_gain.size - 1, per_curve).astype(int))]
+    return [pts[k] for k in np.unique(np.linspace(0, len(pts) - 1, min(total, len(pts))).astype(int))]
+
+
+def test_every_passivity_point_has_a_corrected_phase_of_90_deg(passivity_curves):
+    """By the state-space frequency response of the independent closed loop, at the point's own
+    frequency (25 points spread over the curves); and no frequency of a dense grid puts a point's phase beyond 90 deg
+    (a sample of points: the point is on the envelope, not inside the non-passive set)."""
+    name, loop, curves = passivity_curves
+    assert curves, name
+    for c, i in _spread(curves, 10 ** 6, 25):
+        ph = _corrected_phase(loop, c.omega[i:i + 1], c.P_gain[i], c.D_gain[i])[0]
+        assert abs(abs(ph) - 90) < 1e-6, (name, c.kind, c.P_gain[i], c.D_gain[i], ph)
+    Ts = loop.params.controller.Ts
+    dense = np.geomspace(loop.options.numerics.omega_min, np.pi / Ts * (1 - 1e-9), 1500)
+    for c, i in _spread(curves, 3, 8):
+        worst = np.abs(_corrected_phase(loop, np.sort(np.append(dense, c.omega[i])), c.P_gain[i], c.D_gain[i])).max()
+        assert worst - 90 < 1e-6, (name, c.kind, c.P_gain[i], c.D_gain[i], worst)
+
+
+def test_passivity_curves_separate_passive_from_not_passive(passivity_curves):
+    """Across a tangency point (kind "passivity") along its line, passivity changes: the phase
+    near the point's frequency goes beyond 90 deg on one side only."""
+    name, loop, curves = passivity_curves
+    tangency = [c for c in curves if c.kind == "passivity"]
+    assert tangency, name
+    Ts = loop.params.controller.Ts
+    for c, i in _spread(tangency, 2, 5):
+        w = c.omega[i]
+        band = np.geomspace(w / 1.2, min(w * 1.2, np.pi / Ts * (1 - 1e-9)), 401)
+        # a step of 1e-4 in P_gain or in D_gain (whichever crosses the curve; a curve parallel
+        # to one axis is not crossed by steps along it)
+        P, D = c.P_gain[i], c.D_gain[i]
+        ex = {(dP, dD): np.abs(_corrected_phase(loop, band, P * (1 + dP), D * (1 + dD))).max() - 90
+              for dP, dD in ((-1e-4, 0), (1e-4, 0), (0, -1e-4), (0, 1e-4))}
+        changes = [(ex[(-d, 0)] > 0) != (ex[(d, 0)] > 0) for d in (1e-4,)] + \
+            [(ex[(0, -d)] > 0) != (ex[(0, d)] > 0) for d in (1e-4,)]
+        assert any(changes), (name, P, D, ex)

@@ -60,7 +60,7 @@ def test_progress_goes_to_stderr_and_quiet_silences_it(capsys, reset_progress):
     assert main(REGIONS) == 0
     plain = capsys.readouterr()
     assert plain.err == ""
-    assert forced.out == quiet.out == plain.out and plain.out.startswith("600 points:")
+    assert forced.out == quiet.out == plain.out and plain.out.startswith("600 points (curves):")
 
 
 class _Terminal(io.StringIO):

@@ -58,7 +58,8 @@ def test_phase_margin_and_passivity_match_state_space(params, Ts):
     rng = np.random.default_rng(7)
     for pm_loop, key in (("impedance", "L_imp"), ("torque", "L_t")):
         opts = LoopOptions(pm_loop=pm_loop)
-        m = region_map(params, grid("log:10:20000:9"), grid("lin:1:50:5"), options=opts, progress=False)
+        m = region_map(params, grid("log:10:20000:9"), grid("lin:1:50:5"), options=opts, progress=False,
+                       method="grid")
         loop = ClosedLoop(params, opts)
         w = opts.omega(params.controller.Ts)
         checked = 0
@@ -82,9 +83,9 @@ def test_phase_margin_and_passivity_match_state_space(params, Ts):
 def test_phase_margin_rule(params):
     """'worst' takes the smallest signed PM, 'min_abs' the smallest |PM|: worst <= min_abs."""
     a = region_map(params, grid("log:100:20000:12"), grid("lin:1:50:6"), progress=False,
-                   options=LoopOptions(pm_rule="min_abs"))
+                   options=LoopOptions(pm_rule="min_abs"), method="grid")
     b = region_map(params, grid("log:100:20000:12"), grid("lin:1:50:6"), progress=False,
-                   options=LoopOptions(pm_rule="worst"))
+                   options=LoopOptions(pm_rule="worst"), method="grid")
     both = ~np.isnan(a.phase_margin_deg)
     assert both.any()
     assert np.all(b.phase_margin_deg[both] <= a.phase_margin_deg[both] + 1e-12)
@@ -136,6 +137,6 @@ def test_threaded_sweep_gives_the_same_map(params, monkeypatch):
     maps = []
     for threads in (1, 2):
         monkeypatch.setattr(regions, "SWEEP_THREADS", threads)
-        maps.append(region_map(params, P, D, progress=False))
+        maps.append(region_map(params, P, D, progress=False, method="grid"))
     for key, a in maps[0].arrays().items():
         np.testing.assert_array_equal(a, maps[1].arrays()[key], err_msg=key)

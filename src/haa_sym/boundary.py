@@ -29,6 +29,7 @@ Example
 from __future__ import annotations
 
 from dataclasses import dataclass, field
+from typing import NamedTuple
 
 import numpy as np
 
@@ -36,8 +37,9 @@ from haa_sym.layout import gain_monomials
 from haa_sym.loop import ClosedLoop, LoopOptions
 from haa_sym.params import ParameterError, Params, gain_array
 
-__all__ = ["BoundaryCurve", "StabilityBoundary", "affine_polynomials", "stability_boundary",
-           "phase_margin_curves", "crossings", "classify_grid", "classify_regions"]
+__all__ = ["BoundaryCurve", "StabilityBoundary", "Boundaries", "boundaries", "affine_polynomials", "stability_boundary",
+           "phase_margin_curves", "crossings", "classify_grid", "classify_regions",
+           "RegionDecisions"]
 
 
 @dataclass(frozen=True)
@@ -240,6 +242,84 @@ def stability_boundary(params: Params, beta=None, alpha=None, *, options: LoopOp
                                                       "D_range": list(D_range)}, ABC, nu)
 
 
+@dataclass(frozen=True)
+class Boundaries:
+    """The three boundaries of one configuration (fixed beta, alpha) in the gain plane.
+
+    ``stability``: :class:`StabilityBoundary` (a closed-loop pole on the unit circle);
+    ``phase_margin``: curves where the impedance loop has a crossover with margin ``pm_deg``;
+    ``passivity``: curves where the corrected phase of Z reaches +-90 deg
+    (:func:`haa_sym.passivity_boundary.passivity_boundary`). Every curve point carries its
+    critical frequency ``omega`` (rad/s) and every curve its ``kind``.
+    """
+
+    stability: StabilityBoundary
+    phase_margin: list
+    passivity: list
+    pm_deg: float
+
+    @property
+    def curves(self) -> list:
+        return list(self.stability.curves) + list(self.phase_margin) + list(self.passivity)
+
+    def to_dict(self) -> dict:
+        """Plain JSON-able data: per boundary its curves (P_gain Nm/rad, D_gain Nms/rad, omega
+        rad/s, kind) and what produced them."""
+        def curves(cs):
+            return [{"kind": c.kind, "P_gain": c.P_gain.tolist(), "D_gain": c.D_gain.tolist(),
+                     "omega": c.omega.tolist()} for c in cs]
+        b = self.stability
+        return {"beta": b.beta, "alpha": b.alpha, "Ts": b.Ts, "pm_deg": self.pm_deg, "meta": b.meta,
+                "stability": curves(b.curves), "phase_margin": curves(self.phase_margin),
+                "passivity": curves(self.passivity)}
+
+    def save(self, path, tx=None, field: str | None = None):
+        """Write :meth:`to_dict` as JSON (all or nothing, see :mod:`haa_sym.outputs`)."""
+        import json
+        from haa_sym.outputs import write_text
+        return write_text(path, json.dumps(self.to_dict(), indent=1) + "\n", tx, field)
+
+
+def boundaries(params: Params, beta=None, alpha=None, *, options: LoopOptions | None = None,
+               P_range=(0.0, 2e4), D_range=(0.0, 50.0), pm_deg: float = 30.0, n_nu: int = 4000,
+               n_lines: int = 101, passivity: bool = True, loop: ClosedLoop | None = None) -> Boundaries:
+    """Stability, phase-margin and passivity boundaries in the box ``P_range`` x ``D_range``.
+
+    Parameters
+    ----------
+    params : Params
+    beta, alpha : float, optional
+        Torque-gain scale (Eq. 7) and velocity compensation (Eq. 6); default the controller's.
+    options : LoopOptions, optional
+        ``pm_loop`` must be "impedance" for the phase-margin curves; the passivity boundary
+        follows ``port``, ``colgate`` and the frequency range (``omega_min`` to Nyquist).
+    P_range, D_range : (float, float)
+        The box, Nm/rad and Nms/rad.
+    pm_deg : float
+        Phase-margin threshold, deg (30: the paper's).
+    n_nu : int
+        Samples of nu = tan(theta/2) for the stability and phase-margin curves.
+    n_lines : int
+        Lines of each family on which the passivity boundary is located.
+    passivity : bool
+        Compute the passivity boundary (default).
+
+    Example
+    -------
+    >>> b = boundaries(load_params(), P_range=(1, 2e4), D_range=(1, 50))        # doctest: +SKIP
+    >>> sorted({c.kind for c in b.curves})                                     # doctest: +SKIP
+    """
+    from haa_sym.passivity_boundary import passivity_boundary
+    loop = loop or ClosedLoop(params, options)
+    st = stability_boundary(params, beta, alpha, P_range=P_range, D_range=D_range, n_nu=n_nu, loop=loop)
+    pm = phase_margin_curves(params, st.beta, st.alpha, pm_deg=pm_deg, P_range=P_range, D_range=D_range,
+                             n_nu=n_nu, loop=loop)
+    ps = passivity_boundary(loop, st.beta, st.alpha, P_range=P_range, D_range=D_range,
+                            n_lines=n_lines) if passivity else []
+    st.meta.update(pm_deg=pm_deg, n_lines=n_lines)
+    return Boundaries(st, pm, ps, pm_deg)
+
+
 def _clip_line(a, b, c, P_range, D_range):
     """The segment of a + b P + c D = 0 inside the box, as ([P0, P1], [D0, D1]); None if outside."""
     (P0, P1), (D0, D1) = P_range, D_range
@@ -354,23 +434,38 @@ def classify_grid(loop: ClosedLoop, boundary: StabilityBoundary, P_gain, D_gain)
     return out
 
 
-def classify_regions(loop: ClosedLoop, boundary: StabilityBoundary, P_gain, D_gain, *,
-                     pm_deg: float = 30.0):
-    """``(stable, low_pm)`` of every grid point (shapes (n_P, n_D)) from the exact curves.
+class RegionDecisions(NamedTuple):
+    """Decisions of every grid point (arrays (n_P, n_D)): ``stable``, ``low_pm`` (stable with a
+    phase margin below the threshold) and ``passive`` (stable and the corrected phase of Z within
+    +-90 deg up to the options' tolerance; None when not asked for)."""
 
-    On every D_gain row the crossings of the stability boundary and of the phase-margin curves
-    (margin ``pm_deg`` and the wrap of the margin at 180 deg) split the P_gain axis into segments;
-    one point per segment is decided (certified stability, and the phase margin of the maps:
-    ``haa_sym.sweep.phase_margins`` on the loop's frequency grid with the options' rule) and
-    labels its segment. The margin can also change where a pair of crossovers appears (|L|
-    touches 1) or where the rule switches crossover (``min_abs``: two with equal |PM|); those are
-    not curves here, so each segment's first, middle and last grid points are decided, and a
-    segment whose points disagree is decided point by point.
+    stable: np.ndarray
+    low_pm: np.ndarray
+    passive: np.ndarray | None
+
+
+def classify_regions(loop: ClosedLoop, boundary: StabilityBoundary, P_gain, D_gain, *,
+                     pm_deg: float = 30.0, passivity: bool = True) -> RegionDecisions:
+    """Stability, PM < ``pm_deg`` and passivity of every grid point from the exact curves.
+
+    On every D_gain row the crossings of the stability boundary, of the phase-margin curves
+    (margin ``pm_deg`` and the wrap of the margin at 180 deg) and of the passivity boundary
+    (:func:`haa_sym.passivity_boundary.passivity_crossings`, on the options' frequency grid)
+    split the P_gain axis into segments; one point per segment is decided (certified
+    stability, the phase margin of the maps: ``haa_sym.sweep.phase_margins`` with the options'
+    rule, and the maps' passivity excess) and labels its segment. The margin can also change
+    where a pair of crossovers appears (|L| touches 1) or where the rule switches crossover
+    (``min_abs``: two with equal |PM|), and the passivity decision where the worst phase
+    crosses the options' tolerance rather than +-90 deg; those are not curves here, so each
+    segment's first, middle and last grid points are decided, and a segment whose points
+    disagree is decided point by point.
     """
-    from haa_sym.sweep import gain_rows, phase_margins
+    from haa_sym.passivity_boundary import passivity_crossings
+    from haa_sym.sweep import gain_rows, phase_excess, phase_margins
     P = gain_array("P_gain", P_gain).ravel()
     D = gain_array("D_gain", D_gain).ravel()
     ABC, nu = boundary.ABC, boundary.nu
+    beta, alpha = boundary.beta, boundary.alpha
     cuts = crossings(boundary, D)
     # the maps see crossovers on their frequency grid only (FrequencyGrid: omega_min to Nyquist)
     w = loop.options.numerics.omega(boundary.Ts)
@@ -378,42 +473,53 @@ def classify_regions(loop: ClosedLoop, boundary: StabilityBoundary, P_gain, D_ga
     nu_pm = np.geomspace(nu_w[0], nu_w[-1], nu.size)
     extra = [_branch_crossings(lambda x, *a: _rotated_branch(ABC, x, phi, *a), nu_pm, D, (P.min(), P.max()))
              for phi in (pm_deg, 180.0)]
+    if passivity:
+        extra.append(passivity_crossings(loop, D, (P.min(), P.max()), beta, alpha))
     for j in range(D.size):
         cuts[j] = np.unique(np.concatenate([cuts[j]] + [np.asarray(e[j], float) for e in extra]))
-    coef = loop.loop_coefficients(beta=boundary.beta, alpha=boundary.alpha)
+    coef = loop.loop_coefficients(beta=beta, alpha=alpha)
+    conv = loop.options.conventions
 
     def decide(Pq, Dq):
-        st = loop.stability(Pq, Dq, boundary.beta, boundary.alpha).stable
-        pm = phase_margins(gain_rows(Pq, Dq), coef.L_imp, coef.omega, loop.options.conventions.pm_rule)[0]
+        st = loop.stability(Pq, Dq, beta, alpha).stable
+        X = gain_rows(Pq[st], Dq[st])
+        pm, passive = np.full(Pq.size, np.nan), np.zeros(Pq.size, bool)
+        pm[st] = phase_margins(X, coef.L_imp, coef.omega, conv.pm_rule)[0]
+        if passivity:
+            ex = phase_excess(X, coef.Z_num, coef.Z_den, coef.omega, boundary.Ts, conv.colgate)[0]
+            passive[st] = ex <= conv.passivity_tol_deg
         with np.errstate(invalid="ignore"):
-            return st, st & (pm < pm_deg)
+            return st, st & (pm < pm_deg), passive
     # every segment's first, middle and last grid point
+    segs = [np.searchsorted(c, P) for c in cuts]
     rows, cols = [], []
-    for j, c in enumerate(cuts):
-        seg = np.searchsorted(c, P)
+    for j, seg in enumerate(segs):
         for k in np.unique(seg):
             idx = np.flatnonzero(seg == k)
             for i in {idx[0], idx[idx.size // 2], idx[-1]}:
                 rows.append(i)
                 cols.append(j)
     rows, cols = np.array(rows), np.array(cols)
-    st, low = decide(P[rows], D[cols])
-    stable, low_pm = np.empty((P.size, D.size), bool), np.empty((P.size, D.size), bool)
+    out = [np.empty((P.size, D.size), bool) for _ in range(3)]
     known = np.zeros((P.size, D.size), bool)
-    stable[rows, cols], low_pm[rows, cols], known[rows, cols] = st, low, True
+    for o, v in zip(out, decide(P[rows], D[cols])):
+        o[rows, cols] = v
+    known[rows, cols] = True
     # a segment whose checked points agree takes their label; one whose points differ (the
-    # chosen crossover switched inside it, or crossovers appeared) is decided point by point
+    # chosen crossover switched inside it, crossovers appeared, the excess crossed the
+    # tolerance) is decided point by point
     todo = []
-    for j, c in enumerate(cuts):
-        seg = np.searchsorted(c, P)
+    for j, seg in enumerate(segs):
         for k in np.unique(seg):
             idx = np.flatnonzero(seg == k)
             chk = idx[known[idx, j]]
-            if (stable[chk, j] == stable[chk[0], j]).all() and (low_pm[chk, j] == low_pm[chk[0], j]).all():
-                stable[idx, j], low_pm[idx, j] = stable[chk[0], j], low_pm[chk[0], j]
+            if all((o[chk, j] == o[chk[0], j]).all() for o in out):
+                for o in out:
+                    o[idx, j] = o[chk[0], j]
             else:
                 todo += [(i, j) for i in idx if not known[i, j]]
     if todo:
         r, c = np.array(todo).T
-        stable[r, c], low_pm[r, c] = decide(P[r], D[c])
-    return stable, low_pm
+        for o, v in zip(out, decide(P[r], D[c])):
+            o[r, c] = v
+    return RegionDecisions(out[0], out[1], out[2] if passivity else None)

@@ -168,31 +168,37 @@ def _cmd_regions(args) -> int:
     params, options, out, plot = _setup(args, "regions")
     P, D = grid(args.P_gain, "--P-gain"), grid(args.D_gain, "--D-gain")
     loop = ClosedLoop(params, options)
-    m = region_map(params, P, D, options=options, radius=args.radius, loop=loop)
+    m = region_map(params, P, D, options=options, radius=args.radius, loop=loop, method=args.method)
 
     def figure():
-        from haa_sym.boundary import stability_boundary
+        from haa_sym.boundary import boundaries
         from haa_sym.plots import plot_region
-        b = stability_boundary(params, options=options, P_range=(P.min(), P.max()),
-                               D_range=(D.min(), D.max()), loop=loop)
+        b = boundaries(params, options=options, P_range=(P.min(), P.max()), D_range=(D.min(), D.max()),
+                       loop=loop) if loop.options.conventions.pm_loop == "impedance" else None
         return plot_region(m, title=args.title, boundary=b)
     _write_outputs(out, plot, lambda path, tx: m.save(path, tx, "--out"), figure)
-    print(f"{m.stable.size} points: {m.stable.sum()} stable, {m.low_pm.sum()} stable with PM < 30 deg, "
-          f"{m.passive.sum()} passive" + (f"; wrote {out}" if out else ""))
+    print(f"{m.stable.size} points ({m.meta['method']}): {m.stable.sum()} stable, {m.low_pm.sum()} stable "
+          f"with PM < 30 deg, {m.passive.sum()} passive" + (f"; wrote {out}" if out else ""))
     return 0
 
 
 def _cmd_boundary(args) -> int:
-    from haa_sym.boundary import stability_boundary
+    from haa_sym.boundary import boundaries
     from haa_sym.regions import grid
     params, options, out, plot = _setup(args, "boundary")
     P, D = grid(args.P_gain, "--P-gain"), grid(args.D_gain, "--D-gain")
-    b = stability_boundary(params, options=options, P_range=(P.min(), P.max()), D_range=(D.min(), D.max()))
+    if options.conventions.pm_loop != "impedance":
+        raise ParameterError(f"--option pm_loop={options.conventions.pm_loop}: the boundaries cover the "
+                             "impedance loop's margin; allowed: pm_loop=impedance (the default)")
+    b = boundaries(params, options=options, P_range=(P.min(), P.max()), D_range=(D.min(), D.max()))
     _write_outputs(out, plot, lambda path, tx: b.save(path, tx, "--out"),
                    lambda: _plots().plot_boundary(b, title=args.title))
-    kinds = ", ".join(f"{c.kind}: {c.P_gain.size} points" for c in b.curves) or "no crossing in the box"
-    print(f"stability boundary in P_gain [{P.min():g}, {P.max():g}] x D_gain [{D.min():g}, {D.max():g}]: "
-          f"{len(b.curves)} curve(s) ({kinds})" + (f"; wrote {out}" if out else ""))
+
+    def summary(curves):
+        return f"{len(curves)} curve(s), {sum(c.P_gain.size for c in curves)} points" if curves else "none in the box"
+    print(f"boundaries in P_gain [{P.min():g}, {P.max():g}] x D_gain [{D.min():g}, {D.max():g}]: "
+          f"stability {summary(b.stability.curves)}; PM = {b.pm_deg:g} deg {summary(b.phase_margin)}; "
+          f"passivity {summary(b.passivity)}" + (f"; wrote {out}" if out else ""))
     return 0
 
 
@@ -357,8 +363,11 @@ def main(argv: list[str] | None = None) -> int:
     _map_args(r, "lin:1:50:100", "grid spec", ".npz")
     r.add_argument("--radius", action="store_true",
                    help="also compute the spectral radius from eigenvalues (slower)")
-    bd = sub.add_parser("boundary", help="exact stability boundary in the (P_gain, D_gain) plane "
-                        "(parameter-space method)")
+    r.add_argument("--method", choices=("curves", "grid"), default="curves",
+                   help="decide the map from the exact boundaries (default) or every point on the grid "
+                        "(with per-point phase margin and passivity excess)")
+    bd = sub.add_parser("boundary", help="exact stability, phase-margin and passivity boundaries in the "
+                        "(P_gain, D_gain) plane (parameter-space method)")
     _common(bd)
     _map_args(bd, "lin:0:50:100", "the box: grid spec whose range is used", ".json")
     ct = sub.add_parser("contact", help="environment stiffnesses that make the loop unstable (exact ends)")

@@ -34,6 +34,7 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass
 from fractions import Fraction
+from functools import lru_cache
 from typing import Sequence
 
 import numpy as np
@@ -107,12 +108,21 @@ def _taylor_shift(p: Sequence[Fraction]) -> tuple[Fraction, ...]:
     return tuple(out)
 
 
+@lru_cache(maxsize=512)
+def _bases(p_desc: tuple) -> tuple[np.ndarray, np.ndarray]:
+    """p's float coefficients in z (descending) and in w = z - 1 (ascending), each rounded once
+    from the exact ones; cached, since every frequency evaluation needs both."""
+    cz = np.array([float(c) for c in p_desc])
+    cw = np.array([float(c) for c in _taylor_shift(p_desc)])
+    cz.flags.writeable = cw.flags.writeable = False
+    return cz, cw
+
+
 def _evaluate(p_desc: Sequence[Fraction], x: np.ndarray) -> np.ndarray:
     """p(exp(j x)) with the smaller of the z- and w-basis rounding bounds per frequency."""
     z = np.exp(1j * x)
     w = -2.0 * np.sin(x / 2) ** 2 + 1j * np.sin(x)      # z - 1 without cancellation
-    cz = np.array([float(c) for c in p_desc])
-    cw = np.array([float(c) for c in _taylor_shift(p_desc)])   # ascending in w
+    cz, cw = _bases(tuple(p_desc))                        # cw ascending in w
     vz = np.zeros_like(z)
     for c in cz:
         vz = vz * z + c

@@ -548,18 +548,21 @@ class ClosedLoop:
         return StabilityResult(stable.reshape(shape), rho.reshape(shape), refined.reshape(shape),
                                n_unstable.reshape(shape), marginal.reshape(shape))
 
-    def loop_coefficients(self, omega=None, beta=None, alpha=None) -> LoopCoefficients:
+    def loop_coefficients(self, omega=None, beta=None, alpha=None, *, cached: bool = True) -> LoopCoefficients:
         """Gain-affine loop transfer functions on ``omega`` (rad/s; default: the options' grid).
 
         ``beta`` and ``alpha`` are scalars (default from params). One generated evaluation per
         frequency; the P_gain/D_gain dependence is then a 3-vector product (see
-        :class:`LoopCoefficients`).
+        :class:`LoopCoefficients`). ``cached=False`` for one-off frequencies (a root refinement),
+        which would only push reused grids out of the bounded cache.
         """
         ctrl = self.params.controller
         omega = self.options.numerics.omega(ctrl.Ts) if omega is None else _finite_array("omega", omega).ravel()
         beta = float(_finite_array("beta", ctrl.beta if beta is None else beta))
         alpha = float(_finite_array("alpha", ctrl.alpha if alpha is None else alpha))
         el = self.elements
+        if not cached:
+            return self._loop_coefficients(omega, beta, alpha)
         key = (array_key(self.plant.Phi, self.plant.Gamma, self.plant.C, omega, self.const),
                tuple((e.numerator, e.denominator) for e in el.values()), self.torque_output,
                self.options.structure.port, beta, alpha, self.backend)

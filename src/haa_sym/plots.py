@@ -30,7 +30,7 @@ def _edges(x: np.ndarray, log: bool) -> np.ndarray:
 
 def plot_region(m, ax=None, title: str | None = None, passivity: bool = True, boundary=None):
     """Draw one :class:`haa_sym.regions.RegionMap` on ``ax`` (log P_gain, linear D_gain), with
-    the exact stability boundary (:mod:`haa_sym.boundary`) over it when given."""
+    the exact curves (:func:`haa_sym.boundary.boundaries`) over it when given."""
     fig = None
     if ax is None:
         fig, ax = plt.subplots(figsize=(4.6, 4.4), layout="constrained")
@@ -39,7 +39,7 @@ def plot_region(m, ax=None, title: str | None = None, passivity: bool = True, bo
     ax.pcolormesh(_edges(m.P_gain, logP), _edges(m.D_gain, False), cls.T, cmap=REGION_COLORS,
                   vmin=-0.5, vmax=2.5, shading="flat", rasterized=True)
     if passivity and m.P_gain.size > 1 and m.D_gain.size > 1:
-        if m.passive.any() and (~m.passive).any():
+        if m.passive.any() and (~m.passive).any() and boundary is None:   # else: the exact curve
             ax.contour(m.P_gain, m.D_gain, m.passive.T.astype(float), levels=[0.5], colors="tab:blue",
                        linewidths=1.0, linestyles="--")
         not_passive = (m.stable & ~m.passive).T.astype(float)
@@ -59,53 +59,88 @@ def plot_region(m, ax=None, title: str | None = None, passivity: bool = True, bo
     if title:
         ax.set_title(title, fontsize=10)
     if fig is not None:
-        extra = [plt.Line2D([], [], color="tab:red", lw=1.4, label="exact stability boundary")] \
-            if boundary is not None else []
-        fig.legend(handles=_region_legend() + extra, loc="outside lower center", ncol=2, fontsize=7)
+        extra = curve_legend(boundary) if boundary is not None else []
+        fig.legend(handles=_region_legend(boundary is None) + extra, loc="outside lower center", ncol=2,
+                   fontsize=7)
     return fig or ax.figure
 
 
+_CURVE_STYLES = {"complex": dict(color="tab:red", lw=1.4), "z=1": dict(color="tab:orange", lw=1.4, ls="-."),
+                 "z=-1": dict(color="tab:purple", lw=1.4, ls=":"),
+                 "pm": dict(color="tab:green", lw=1.1, ls="--"),
+                 "passivity": dict(color="tab:cyan", lw=1.2, ls="-")}
+
+
+def _curve_label(kind: str) -> tuple[str, str]:
+    """(style key, legend label) of a curve kind."""
+    if kind.startswith("pm="):
+        return "pm", f"phase margin {kind[3:]} deg"
+    if kind.startswith("passivity"):
+        return "passivity", "passivity boundary (|phase Z| = 90 deg)"
+    return kind, f"stability boundary ({kind})"
+
+
 def plot_boundary(boundary, ax=None, title: str | None = None):
-    """Draw the curves of a :class:`haa_sym.boundary.StabilityBoundary` (on ``ax``: over a map)."""
+    """Draw the curves of a :class:`haa_sym.boundary.Boundaries` (stability, phase margin,
+    passivity) or :class:`haa_sym.boundary.StabilityBoundary` (on ``ax``: over a map)."""
     fig = None
+    st = getattr(boundary, "stability", boundary)
     if ax is None:
         fig, ax = plt.subplots(figsize=(4.6, 4.4), layout="constrained")
         ax.set_xlabel("P_gain (Nm/rad)")
         ax.set_ylabel("D_gain (Nms/rad)")
-        lo, hi = boundary.meta.get("P_range", (0, 1))
+        lo, hi = st.meta.get("P_range", (0, 1))
         if lo > 0:
             ax.set_xscale("log")
         ax.set_xlim(lo, hi)
-        ax.set_ylim(*boundary.meta.get("D_range", (0, 1)))
-    styles = {"complex": dict(color="tab:red", lw=1.4), "z=1": dict(color="tab:orange", lw=1.4, ls="-."),
-              "z=-1": dict(color="tab:purple", lw=1.4, ls=":")}
+        ax.set_ylim(*st.meta.get("D_range", (0, 1)))
     seen = set()
     for c in boundary.curves:
-        label = None if c.kind in seen else f"stability boundary ({c.kind})"
-        seen.add(c.kind)
-        ax.plot(c.P_gain, c.D_gain, label=label, **styles[c.kind])
+        key, label = _curve_label(c.kind)
+        ax.plot(c.P_gain, c.D_gain, label=None if label in seen else label, **_CURVE_STYLES[key])
+        seen.add(label)
     if title:
         ax.set_title(title, fontsize=10)
-    if fig is not None and boundary.curves:
+    if fig is not None and seen:
         ax.legend(fontsize=7)
     return fig or ax.figure
 
 
-def _region_legend():
+def curve_legend(boundary) -> list:
+    """Legend handles for the curve kinds drawn by :func:`plot_boundary`."""
+    out, seen = [], set()
+    for c in boundary.curves:
+        key, label = _curve_label(c.kind)
+        if label not in seen:
+            seen.add(label)
+            out.append(plt.Line2D([], [], label=label, **_CURVE_STYLES[key]))
+    return out
+
+
+def _region_legend(grid_contour: bool = True):
     return [Patch(facecolor="#ffffff", edgecolor="k", label="stable, PM >= 30 deg"),
             Patch(facecolor="#c8c8c8", edgecolor="k", label="stable, PM < 30 deg"),
-            Patch(facecolor="#3a3a3a", edgecolor="k", label="unstable"),
-            plt.Line2D([], [], color="tab:blue", ls="--", label="passivity boundary"),
-            Patch(facecolor="none", edgecolor="tab:blue", hatch="////", label="stable, not passive")]
+            Patch(facecolor="#3a3a3a", edgecolor="k", label="unstable")] + \
+        ([plt.Line2D([], [], color="tab:blue", ls="--", label="passivity boundary (grid)")] if grid_contour else []) + \
+        [Patch(facecolor="none", edgecolor="tab:blue", hatch="////", label="stable, not passive")]
 
 
-def plot_region_panels(maps, titles, suptitle: str = ""):
-    """A row of region maps (one paper figure) with the legend of Figs. 8-11."""
+def plot_region_panels(maps, titles, suptitle: str = "", boundaries=None):
+    """A row of region maps (one paper figure) with the legend of Figs. 8-11, and each panel's
+    exact curves (:func:`haa_sym.boundary.boundaries`, one per map) over it when given."""
     fig, axes = plt.subplots(1, len(maps), figsize=(3.6 * len(maps), 3.4), squeeze=False,
                              constrained_layout=True)
-    for ax, m, t in zip(axes[0], maps, titles):
-        plot_region(m, ax, t)
-    fig.legend(handles=_region_legend(), loc="outside lower center", ncol=5 if len(maps) >= 3 else 3, fontsize=8)
+    boundaries = boundaries or [None] * len(maps)
+    for ax, m, t, b in zip(axes[0], maps, titles, boundaries):
+        plot_region(m, ax, t, boundary=b)
+    extra, seen = [], set()
+    for b in boundaries:
+        for h in (curve_legend(b) if b is not None else []):
+            if h.get_label() not in seen:
+                seen.add(h.get_label())
+                extra.append(h)
+    fig.legend(handles=_region_legend(not extra) + extra, loc="outside lower center",
+               ncol=5 if len(maps) >= 3 else 3, fontsize=8)
     if suptitle:
         fig.suptitle(suptitle, fontsize=11)
     return fig

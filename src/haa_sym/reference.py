@@ -197,15 +197,20 @@ def _tf(A, B, C, D, omega, Ts, out, inp):
     return X @ C[out] + D[out, inp]
 
 
-def frequency_response(loop, omega, P_gain, D_gain, beta=None, alpha=None) -> dict:
-    """``L_t``, ``L_imp``, ``Z``, ``H_T`` of :meth:`ClosedLoop.frequency_response`, by state space."""
+def frequency_response(loop, omega, P_gain, D_gain, beta=None, alpha=None,
+                       which=("L_t", "L_imp", "H_T", "Z")) -> dict:
+    """``L_t``, ``L_imp``, ``Z``, ``H_T`` of :meth:`ClosedLoop.frequency_response` (those named in
+    ``which``), by state space."""
     Ts = loop.params.controller.Ts
     res = {}
-    A, B, C, D = closed_loop_matrices(loop, P_gain, D_gain, beta, alpha, cut="PI")
-    res["L_t"] = _tf(A, B, C, D, omega, Ts, 3, 1)
-    A, B, C, D = closed_loop_matrices(loop, P_gain, D_gain, beta, alpha, cut="T_ref")
-    res["L_imp"] = _tf(A, B, C, D, omega, Ts, 3, 1)
-    res["H_T"] = _tf(A, B, C, D, omega, Ts, 0, 1)
-    A, B, C, D = closed_loop_matrices(loop, P_gain, D_gain, beta, alpha)
-    res["Z"] = 1 / _tf(A, B, C, D, omega, Ts, 2, 0)
+    if "L_t" in which:
+        A, B, C, D = closed_loop_matrices(loop, P_gain, D_gain, beta, alpha, cut="PI")
+        res["L_t"] = _tf(A, B, C, D, omega, Ts, 3, 1)
+    if "L_imp" in which or "H_T" in which:
+        A, B, C, D = closed_loop_matrices(loop, P_gain, D_gain, beta, alpha, cut="T_ref")
+        res["L_imp"] = _tf(A, B, C, D, omega, Ts, 3, 1)
+        res["H_T"] = _tf(A, B, C, D, omega, Ts, 0, 1)
+    if "Z" in which:
+        A, B, C, D = closed_loop_matrices(loop, P_gain, D_gain, beta, alpha)
+        res["Z"] = 1 / _tf(A, B, C, D, omega, Ts, 2, 0)
     return res

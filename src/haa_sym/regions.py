@@ -35,10 +35,12 @@ from haa_sym.params import ParameterError, Params, gain_array
 from haa_sym.progress import progress as progress_bar
 from haa_sym.sweep import BLAS_THREADS, SWEEP_THREADS, blas_limits, gain_rows, phase_excess, phase_margins
 
-__all__ = ["RegionMap", "region_map", "grid", "PM_THRESHOLD_DEG", "save_npz"]
+__all__ = ["RegionMap", "region_map", "grid", "PM_THRESHOLD_DEG", "MAP_METHODS", "save_npz"]
 
 # Figs. 8-11: light grey = stable with a phase margin below 30 degrees.
 PM_THRESHOLD_DEG = 30.0
+# how a map is decided: from the exact boundaries (default) or point by point on the grid
+MAP_METHODS = ("curves", "grid")
 CHUNK = 512
 
 
@@ -96,17 +98,23 @@ class RegionMap:
     phase_excess_deg: np.ndarray
     refined: np.ndarray
     meta: dict = field(default_factory=dict)
+    # the decision itself when the map was classified from the curves (no per-point margins)
+    low_pm_decided: np.ndarray | None = None
 
     @property
     def low_pm(self) -> np.ndarray:
         """Stable with a phase margin below 30 deg (the light grey of Figs. 8-11)."""
+        if self.low_pm_decided is not None:
+            return self.low_pm_decided
         with np.errstate(invalid="ignore"):
             return self.stable & (self.phase_margin_deg < PM_THRESHOLD_DEG)
 
     def arrays(self) -> dict:
-        return {k: getattr(self, k) for k in ("P_gain", "D_gain", "stable", "spectral_radius",
-                                              "phase_margin_deg", "passive", "phase_excess_deg",
-                                              "refined")}
+        out = {k: getattr(self, k) for k in ("P_gain", "D_gain", "stable", "spectral_radius",
+                                             "phase_margin_deg", "passive", "phase_excess_deg",
+                                             "refined")}
+        out["low_pm"] = self.low_pm
+        return out
 
     def save(self, path: str | Path, tx=None, field: str | None = None) -> Path:
         """Write an ``.npz`` (arrays + ``meta`` as a JSON string), atomically (see :func:`save_npz`)."""
@@ -117,7 +125,8 @@ class RegionMap:
         with np.load(path) as f:
             data = {k: f[k] for k in f.files}
         meta = json.loads(str(data.pop("meta")))
-        return cls(meta=meta, **data)
+        low_pm = data.pop("low_pm", None)
+        return cls(meta=meta, low_pm_decided=low_pm if meta.get("method") == "curves" else None, **data)
 
 
 def save_npz(path: str | Path, arrays: dict, meta: dict, tx=None, field: str | None = None) -> Path:
@@ -136,7 +145,7 @@ def region_map(params: Params, P_gain, D_gain, *, options: LoopOptions | None = 
                beta: float | None = None, alpha: float | None = None, radius: bool = False,
                progress: bool | None = None, backend: str = "auto",
                loop: ClosedLoop | None = None, passivity: bool = True,
-               blas_threads: int | None = BLAS_THREADS) -> RegionMap:
+               blas_threads: int | None = BLAS_THREADS, method: str = "curves") -> RegionMap:
     """Stability, phase margin and passivity on the grid ``P_gain`` x ``D_gain``.
 
     Parameters
@@ -168,6 +177,13 @@ def region_map(params: Params, P_gain, D_gain, *, options: LoopOptions | None = 
     blas_threads : int or None
         BLAS threads during the sweep (threadpoolctl); None leaves BLAS alone. Default
         :data:`haa_sym.sweep.BLAS_THREADS` (1, and why).
+    method : {"curves", "grid"}
+        "curves" (default): every D_gain row is split where the exact boundaries cross it
+        (:func:`haa_sym.boundary.classify_regions`) and each segment decided once; the
+        decisions equal the grid's (tested on every point); ``phase_margin_deg`` and
+        ``phase_excess_deg`` are NaN (not computed per point); the curves themselves come from
+        :func:`haa_sym.boundary.boundaries`. "grid": every point decided by the generated
+        evaluators, with its phase margin and passivity excess (the cross-check).
 
     Returns
     -------
@@ -186,6 +202,8 @@ def region_map(params: Params, P_gain, D_gain, *, options: LoopOptions | None = 
     for name, arr in (("P_gain", P), ("D_gain", D)):
         if arr.size == 0:
             raise ParameterError(f"{name} is empty; allowed: at least one value")
+    if method not in MAP_METHODS:
+        raise ParameterError(f"method = {method!r}; allowed: {list(MAP_METHODS)}")
     ctrl = params.controller
     beta = float(gain_array("beta", ctrl.beta if beta is None else beta))
     alpha = float(gain_array("alpha", ctrl.alpha if alpha is None else alpha))
@@ -195,6 +213,10 @@ def region_map(params: Params, P_gain, D_gain, *, options: LoopOptions | None = 
                  f"{n_omega} frequencies")
     if loop is None:
         loop = ClosedLoop(params, options, backend)
+    # the phase-margin curves are those of the impedance loop; the torque loop's margin
+    # (pm_loop = "torque") is decided on the grid
+    if method == "curves" and loop.options.conventions.pm_loop == "impedance":
+        return _map_from_curves(params, loop, P, D, beta, alpha, radius, passivity, progress)
     coef = loop.loop_coefficients(None, beta, alpha)
     L = coef.L_imp if options.conventions.pm_loop == "impedance" else coef.L_t
     PP, DD = np.meshgrid(P, D, indexing="ij")
@@ -237,7 +259,30 @@ def region_map(params: Params, P_gain, D_gain, *, options: LoopOptions | None = 
                      spectral_radius=out["rho"].reshape(shape),
                      phase_margin_deg=out["pm"].reshape(shape), passive=passive.reshape(shape),
                      phase_excess_deg=out["excess"].reshape(shape), refined=refined.reshape(shape),
-                     meta=run_meta(params, options, beta=beta, alpha=alpha, backend=loop.backend))
+                     meta=run_meta(params, options, beta=beta, alpha=alpha, backend=loop.backend,
+                                   method="grid"))
+
+
+def _map_from_curves(params, loop, P, D, beta, alpha, radius, passivity, progress) -> RegionMap:
+    """``region_map(method="curves")``: the decisions from the exact boundaries."""
+    from haa_sym.boundary import classify_regions, stability_boundary
+    box = dict(P_range=(float(P.min()), float(P.max())), D_range=(float(D.min()), float(D.max())))
+    shape = (P.size, D.size)
+    with progress_bar(P.size * D.size, "region map (from the curves)", "pt", progress) as bar:
+        b = stability_boundary(params, beta, alpha, loop=loop, **box)
+        r = classify_regions(loop, b, P, D, pm_deg=PM_THRESHOLD_DEG, passivity=passivity)
+        rho = np.full(shape, np.nan)
+        if radius:
+            PP, DD = np.meshgrid(P, D, indexing="ij")
+            rho = loop.stability(PP, DD, beta, alpha, radius=True).spectral_radius.reshape(shape)
+        bar.update(P.size * D.size)
+    nan = np.full(shape, np.nan)
+    passive = r.passive if passivity else np.zeros(shape, bool)
+    return RegionMap(P_gain=P, D_gain=D, stable=r.stable, spectral_radius=rho, phase_margin_deg=nan,
+                     passive=passive, phase_excess_deg=nan.copy(), refined=np.zeros(shape, bool),
+                     meta=run_meta(params, loop.options, beta=beta, alpha=alpha, backend=loop.backend,
+                                   method="curves"),
+                     low_pm_decided=r.low_pm)
 
 
 def run_meta(params: Params, options: LoopOptions, *, backend: str = "auto", **extra) -> dict:

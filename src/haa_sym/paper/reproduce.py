@@ -221,8 +221,9 @@ def _variants(options: LoopOptions) -> list[tuple[str, dict]]:
 
 def _regions(job: _Job) -> dict:
     """Figs. 8-11: every panel's map (npz), its eigenvalue cross-check, the figures, the trends."""
+    from haa_sym.boundary import boundaries
     from haa_sym.plots import plot_region_panels, save_figure
-    _log("regions: 16 maps (Figs. 8-11)")
+    _log("regions: 16 maps (Figs. 8-11), decided from the exact curves, drawn with them")
     splits = quadrant_splits(job.spec, job.P_grid, job.D_grid)
     stats, panels_by_fig, crosscheck = {k: {} for k in splits}, {}, {}
     for entry in job.spec["regions"]["panel"]:
@@ -230,15 +231,23 @@ def _regions(job: _Job) -> dict:
         p = panel_params(job.params, entry)
         loop = ClosedLoop(p, job.options)
         m = region_map(p, job.P_grid, job.D_grid, options=job.options, loop=loop)
+        curves = boundaries(p, options=job.options, loop=loop, P_range=(job.P_grid.min(), job.P_grid.max()),
+                            D_range=(job.D_grid.min(), job.D_grid.max())) \
+            if loop.options.conventions.pm_loop == "impedance" else None
         crosscheck[pid] = eigenvalue_crosscheck(m, loop, points="boundary")
+        if m.meta["method"] == "curves":          # the grid evaluators decide every point again
+            g = region_map(p, job.P_grid, job.D_grid, options=job.options, loop=loop, method="grid")
+            crosscheck[pid]["grid_disagree"] = {k: int((getattr(m, k) != getattr(g, k)).sum())
+                                                for k in ("stable", "low_pm", "passive")}
         m.meta.update(figure=entry["figure"], panel=entry["panel"], title=entry["title"])
         m.save(job.out / "regions" / f"fig{entry['figure']:02d}{entry['panel']}.npz")
         for split, (Ps, Ds) in splits.items():
             stats[split][pid] = _quadrants(m, Ps, Ds)
-        panels_by_fig.setdefault(entry["figure"], []).append((m, f"({entry['panel']}) {entry['title']}"))
+        panels_by_fig.setdefault(entry["figure"], []).append((m, f"({entry['panel']}) {entry['title']}", curves))
     for fig_no, items in panels_by_fig.items():
-        save_figure(plot_region_panels([m for m, _ in items], [t for _, t in items],
-                                       f"Fig. {fig_no}: stability regions varying {REGION_CAPTIONS.get(fig_no, '')}"),
+        save_figure(plot_region_panels([m for m, _, _ in items], [t for _, t, _ in items],
+                                       f"Fig. {fig_no}: stability regions varying {REGION_CAPTIONS.get(fig_no, '')}",
+                                       [c for _, _, c in items]),
                     job.out / f"fig{fig_no:02d}.png")
     return {"region_crosscheck": crosscheck, "region_splits": splits, "region_stats": stats,
             "region_trends": {k: region_trends(v) for k, v in stats.items()}}
