@@ -49,6 +49,14 @@ def test_reproduce_quick(tmp_path, capsys):
     assert len(cc) == 16 and all(v["disagree"] == 0 for v in cc.values())
     assert all(v["decided"] > 0.99 * v["checked"] and v["checked"] > v["points"] / 9 for v in cc.values())
     report = (tmp_path / "REPORT.md").read_text()
+    # Sec. 5: the torque loop alone is not passive wherever contact leaves it stable; the
+    # impedance loop of Fig. 12 is stable and passive on the whole scan
+    (lo, hi), = claims["contact_unstable_K_L2"]
+    assert claims["contact_not_passive_K_L2"] == [[1.0, lo], [hi, 1e5]]
+    assert claims["contact_impedance"]["unstable_K_L2"] == claims["contact_impedance"]["not_passive_K_L2"] == []
+    assert f"{1.0:.1f}-{lo:.1f}, {hi:.1f}-{1e5:.1f} Nm/rad: passive at no scanned stiffness" in report
+    contact = np.genfromtxt(tmp_path / "contact.csv", delimiter=",", names=True)
+    assert (np.isnan(contact["phase_excess_deg"]) == (contact["spectral_radius"] >= 1)).all()
     for heading in ("## Table 2: passivity", "## Quantitative claims", "## Qualitative trends",
                     "![Fig. 8: varying beta](fig08.png)", "Quick mode"):
         assert heading in report

@@ -220,13 +220,22 @@ def _cmd_contact(args) -> int:
     data = {"analysis": "contact stability", "environment": f"K_env {'replaces' if r.mode == 'replace' else 'adds to'} {r.key}",
             "mode": r.mode, "stiffness_key": r.key, "P_gain": args.P_gain, "D_gain": args.D_gain,
             "K_range": list(K_range), "n_scan": args.n_scan, "rtol": r.rtol,
-            "unstable_intervals": [list(i) for i in r.unstable]}
+            "unstable_intervals": [list(i) for i in r.unstable],
+            "not_passive_intervals": [list(i) for i in r.not_passive],
+            "not_passive": "stable, and the corrected phase of Z leaves +-(90 + passivity_tol_deg) deg "
+                           "somewhere on the options' frequency grid (meta: n_omega, omega_min); the "
+                           "ends are exact for that grid"}
     _write_outputs(out, plot,
                    lambda path, tx: write_text(path, json.dumps({**data, "meta": run_meta(params, options)},
                                                                 indent=1) + "\n", tx, "--out"),
-                   lambda: _plots().plot_contact(r.K_env, r.spectral_radius, unstable=r.unstable, key=r.key))
-    ends = ", ".join(f"{a:.10g}-{b:.10g}" for a, b in r.unstable) or "none"
-    print(f"unstable in contact ({data['environment']}): {ends} Nm/rad" + (f"; wrote {out}" if out else ""))
+                   lambda: _plots().plot_contact(r.K_env, r.spectral_radius, unstable=r.unstable, key=r.key,
+                                                 excess=r.phase_excess_deg, not_passive=r.not_passive,
+                                                 tol=r.passivity_tol_deg))
+
+    def ends(iv):
+        return ", ".join(f"{a:.10g}-{b:.10g}" for a, b in iv) + " Nm/rad" if iv else "none"
+    print(f"unstable in contact ({data['environment']}): {ends(r.unstable)}; stable but not passive: "
+          f"{ends(r.not_passive)}" + (f"; wrote {out}" if out else ""))
     return 0
 
 
@@ -370,7 +379,8 @@ def main(argv: list[str] | None = None) -> int:
                         "(P_gain, D_gain) plane (parameter-space method)")
     _common(bd)
     _map_args(bd, "lin:0:50:100", "the box: grid spec whose range is used", ".json")
-    ct = sub.add_parser("contact", help="environment stiffnesses that make the loop unstable (exact ends)")
+    ct = sub.add_parser("contact", help="environment stiffnesses where the loop is unstable, or stable but not "
+                        "passive (exact ends)")
     _common(ct)
     ct.add_argument("--K-range", default="1:100000", help="LO:HI environment stiffness, Nm/rad (default 1:100000)")
     ct.add_argument("--n-scan", type=int, default=400, help="log-spaced stiffnesses that bracket the ends (default 400)")

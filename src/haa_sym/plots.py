@@ -182,10 +182,16 @@ def plot_steps(panels, title: str = ""):
     return fig
 
 
-def plot_contact(K, rho, paper_range=None, unstable=(), key: str = "K_L2"):
+def plot_contact(K, rho, paper_range=None, unstable=(), key: str = "K_L2", excess=None,
+                 not_passive=(), tol: float | None = None):
     """Spectral radius of the loop against the environment stiffness, with the exact ends of the
-    unstable intervals (:func:`haa_sym.contact.contact_intervals`) and the paper's range."""
-    fig, ax = plt.subplots(figsize=(6.4, 3.2), constrained_layout=True)
+    unstable intervals (:func:`haa_sym.contact.contact_intervals`) and the paper's range; with
+    ``excess`` (deg, NaN where unstable) a second panel: the phase excess of Z beyond +-90 deg,
+    the tolerance ``tol`` and the exact ends of the stable, non-passive intervals."""
+    two = excess is not None
+    fig, axes = plt.subplots(2 if two else 1, 1, figsize=(6.4, 5.6 if two else 3.2), sharex=True,
+                             constrained_layout=True, squeeze=False)
+    ax = axes[0, 0]
     ax.semilogx(K, rho, color="k")
     ax.axhline(1.0, color="tab:red", lw=0.8, label="|z| = 1")
     if paper_range:
@@ -193,10 +199,29 @@ def plot_contact(K, rho, paper_range=None, unstable=(), key: str = "K_L2"):
     for i, (lo, hi) in enumerate(unstable):
         for k in (lo, hi):
             ax.axvline(k, color="tab:blue", lw=0.8, ls="--", label=None if i or k == hi else "computed: interval ends")
-    ax.set_xlabel(f"environment stiffness {key} (Nm/rad)")
     ax.set_ylabel("spectral radius")
     ax.legend(fontsize=8)
     ax.grid(True, which="both", alpha=0.3)
+    if two:
+        ax = axes[1, 0]
+        ax.semilogx(K, excess, color="k", label="stable: worst |phase of Z| - 90 deg")
+        # symmetric log: the passive side sits at rounding level (Z touches -90 deg at Nyquist),
+        # the non-passive side spans decades up to 90 deg
+        lin = tol if tol else 1e-3
+        ax.set_yscale("symlog", linthresh=lin)
+        if tol is not None:
+            ax.axhline(tol, color="tab:red", lw=0.8, label=f"tolerance {tol:g} deg")
+        for i, (lo, hi) in enumerate(unstable):
+            ax.axvspan(lo, hi, color="0.85", label=None if i else "unstable")
+        inner = [k for iv in not_passive for k in iv if K[0] < k < K[-1]]
+        for i, (lo, hi) in enumerate(not_passive):
+            ax.axvspan(lo, hi, color="tab:purple", alpha=0.12, label=None if i else "stable, not passive")
+        for i, k in enumerate(inner):
+            ax.axvline(k, color="tab:purple", lw=0.8, ls="--", label=None if i else "computed: interval ends")
+        ax.set_ylabel("phase excess of Z (deg)")
+        ax.legend(fontsize=8)
+        ax.grid(True, which="both", alpha=0.3)
+    axes[-1, 0].set_xlabel(f"environment stiffness {key} (Nm/rad)")
     return fig
 
 

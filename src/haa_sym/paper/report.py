@@ -14,6 +14,17 @@ def _fmt_band(bands) -> str:
     return ", ".join(f"{a:.1f}-{b:.1f}" for a, b in bands) if bands else "none"
 
 
+def _fmt_intervals(iv) -> str:
+    """Stiffness intervals (Nm/rad) for the report; "none" when empty."""
+    return ", ".join(f"{a:.1f}-{b:.1f}" for a, b in iv) + " Nm/rad" if iv else "none"
+
+
+def _covers(iv, lo, hi) -> bool:
+    """Whether the intervals ``iv`` (meeting end to end) cover [lo, hi]."""
+    iv = sorted(iv)
+    return bool(iv) and iv[0][0] == lo and iv[-1][1] == hi and all(a[1] == b[0] for a, b in zip(iv, iv[1:]))
+
+
 def _table(header, rows) -> str:
     lines = ["| " + " | ".join(header) + " |", "|" + "---|" * len(header)]
     lines += ["| " + " | ".join(str(c) for c in r) + " |" for r in rows]
@@ -99,6 +110,7 @@ def write_report(out: Path, r: dict, spec: dict, options: LoopOptions, verify_te
     bc = r["beta_check"]
     fig7 = {(s["K_L2"], s["alpha"]): s for s in r["fig7"]}
     a_on, a_off = c["fig7_alpha"]
+    ci = r["contact_impedance"]
     claim_rows = [
         ["phase of Z beyond 90 deg, torque loop alone (Fig. 12)",
          f"about {c['z_band_rad_s'][0]:g}-{c['z_band_rad_s'][1]:g} rad/s",
@@ -109,6 +121,19 @@ def write_report(out: Path, r: dict, spec: dict, options: LoopOptions, verify_te
          f"{c['contact_unstable_K_L2'][0]:g}-{c['contact_unstable_K_L2'][1]:g} Nm/rad",
          ", ".join(f"{a:.1f}-{b:.1f}" for a, b in r["contact_unstable_K_L2"]) + " Nm/rad (ends "
          f"located by root-finding to 1e-12 relative, bracketed on the grid {c['contact_K_L2_grid']})"],
+        ["environment stiffness where the torque loop alone is stable but not passive at the port",
+         "not passive (Sec. 5, Table 2): why some environments destabilise it",
+         f"{_fmt_intervals(r['contact_not_passive_K_L2'])}"
+         + (": passive at no scanned stiffness" if _covers(r["contact_unstable_K_L2"] + r["contact_not_passive_K_L2"],
+                                                            *r["contact_K_L2_range"]) else "")
+         + f" (corrected phase of Z beyond +-(90 + "
+         f"{options.passivity_tol_deg:g}) deg on the {options.n_omega}-point frequency grid; ends at the "
+         "unstable interval or located by root-finding)"],
+        [f"impedance loop closed (P = {ci['P_gain']:g}, D = {ci['D_gain']:g}) in contact with K_L2",
+         "passive (Table 2, Fig. 12), hence stable with any passive environment",
+         f"unstable: {_fmt_intervals(ci['unstable_K_L2'])}; stable but not passive: "
+         f"{_fmt_intervals(ci['not_passive_K_L2'])} (K_L2 from {r['contact_K_L2_range'][0]:g} to "
+         f"{r['contact_K_L2_range'][1]:g} Nm/rad)"],
         [f"P = {c['beta_threshold']['P_gain']:g}, D = {c['beta_threshold']['D_gain']:g}: torque gain",
          f"beta = {bc['stable_at']:g} stable, beta >= {bc['unstable_from']:g} unstable",
          f"beta = {bc['stable_at']:g} {'stable' if bc['computed_stable_at'] else 'UNSTABLE'}; "
@@ -192,7 +217,7 @@ def write_report(out: Path, r: dict, spec: dict, options: LoopOptions, verify_te
     for f, cap in (("fig08.png", "Fig. 8: varying beta"), ("fig09.png", "Fig. 9: varying alpha"),
                    ("fig10.png", "Fig. 10: varying N_av"), ("fig11.png", "Fig. 11: varying Ts; retracted leg"),
                    ("fig12.png", "Fig. 12: corrected phase of Z"), ("fig07.png", "Fig. 7: torque steps"),
-                   ("contact.png", "Torque loop alone in contact with a spring K_L2")):
+                   ("contact.png", "Torque loop alone in contact with a spring K_L2: stability and passivity")):
         add(f"### {cap}\n\n![{cap}]({f})\n")
     add("White: stable with PM >= 30 deg (or |L| never crossing 1); light grey: stable with PM < 30 deg; "
         "dark: unstable; dashed blue: boundary of the passive region, hatched: stable but not passive. Data: `regions/*.npz`.\n")

@@ -8,7 +8,8 @@ Writes into the output directory, as data and as PNG:
   fig12.png, fig12.csv                                  corrected phase of Z (Fig. 12)
   fig07.png, fig07.csv, fig07_step_info.csv            unit torque steps (Fig. 7) and their
                                                         step_info metrics
-  contact.png, contact.csv                              stability against environment stiffness
+  contact.png, contact.csv                              stability and passivity against environment
+                                                        stiffness (torque loop alone; Fig. 12's impedance)
   torque_bandwidth.png, torque_bandwidth.csv            torque bandwidth over beta and alpha, both legs
   verify.txt                                            python -m haa_sym.verify (p1 roots, margins)
   claims.json                                           every computed claim, machine-readable
@@ -335,16 +336,32 @@ def _fig12(job: _Job, loop: ClosedLoop) -> dict:
 
 
 def _contact(job: _Job) -> dict:
-    """Stability of the torque loop alone against the environment stiffness (Sec. 5)."""
+    """Stability and passivity against the environment stiffness (Sec. 5): the torque loop alone,
+    which the paper finds not passive and unstable for 72-3500 Nm/rad, and the impedance loop
+    closed at the gains of Fig. 12, which it finds passive (so stable with any passive spring)."""
     from haa_sym.plots import plot_contact, save_figure
     K = grid(job.claims["contact_K_L2_grid"] if not job.quick else "log:1:100000:80", "K_L2")
-    # the scan brackets every change of stability; Brent's method locates each end exactly
+    # the scan brackets every change of stability and passivity; Brent's method locates each end
     r = contact_intervals(job.params, (K.min(), K.max()), n_scan=K.size, options=job.options)
-    st, rho = r.spectral_radius < 1, r.spectral_radius
-    _write_text(job.out / "contact.csv", _csv([{"K_L2": f"{k:.6g}", "stable": bool(s), "spectral_radius": f"{v:.9f}"}
-                                               for k, s, v in zip(r.K_env, st, rho)]))
-    save_figure(plot_contact(r.K_env, rho, job.claims["contact_unstable_K_L2"], r.unstable), job.out / "contact.png")
-    return {"contact_unstable_K_L2": r.unstable}
+    P12, D12 = job.claims["fig12_gains"]
+    ri = contact_intervals(job.params, (K.min(), K.max()), n_scan=K.size, options=job.options,
+                           P_gain=P12, D_gain=D12)
+
+    def num(v, fmt):
+        return "" if np.isnan(v) else format(v, fmt)      # empty: unstable (NaN in genfromtxt)
+    _write_text(job.out / "contact.csv", _csv([
+        {"K_L2": f"{k:.6g}", "stable": bool(rho < 1), "spectral_radius": f"{rho:.9f}",
+         "phase_excess_deg": num(ex, ".9g"), "stable_impedance": bool(rho_i < 1),
+         "spectral_radius_impedance": f"{rho_i:.9f}", "phase_excess_impedance_deg": num(ex_i, ".9g")}
+        for k, rho, ex, rho_i, ex_i in zip(r.K_env, r.spectral_radius, r.phase_excess_deg,
+                                           ri.spectral_radius, ri.phase_excess_deg)]))
+    save_figure(plot_contact(r.K_env, r.spectral_radius, job.claims["contact_unstable_K_L2"], r.unstable,
+                             excess=r.phase_excess_deg, not_passive=r.not_passive, tol=r.passivity_tol_deg),
+                job.out / "contact.png")
+    return {"contact_K_L2_range": [float(K.min()), float(K.max())],
+            "contact_unstable_K_L2": r.unstable, "contact_not_passive_K_L2": r.not_passive,
+            "contact_impedance": {"P_gain": P12, "D_gain": D12, "unstable_K_L2": ri.unstable,
+                                  "not_passive_K_L2": ri.not_passive}}
 
 
 def _beta_threshold(job: _Job, loop: ClosedLoop) -> dict:
