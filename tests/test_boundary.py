@@ -169,3 +169,14 @@ def test_passivity_curves_separate_passive_from_not_passive(passivity_curves):
         changes = [(ex[(-d, 0)] > 0) != (ex[(d, 0)] > 0) for d in (1e-4,)] + \
             [(ex[(0, -d)] > 0) != (ex[(0, d)] > 0) for d in (1e-4,)]
         assert any(changes), (name, P, D, ex)
+
+
+def test_map_from_the_curves_on_unsorted_grids_equals_the_grid_method(params):
+    from haa_sym.regions import region_map
+    rng = np.random.default_rng(1)
+    P, D = rng.permutation(grid("log:1:20000:50")), rng.permutation(grid("lin:1:50:30"))
+    a = region_map(params, P, D, progress=False)
+    b = region_map(params, P, D, progress=False, method="grid")
+    assert a.meta["method"] == "curves" and b.meta["method"] == "grid"
+    for key in ("stable", "low_pm", "passive"):
+        np.testing.assert_array_equal(getattr(a, key), getattr(b, key), err_msg=key)

@@ -490,36 +490,39 @@ def classify_regions(loop: ClosedLoop, boundary: StabilityBoundary, P_gain, D_ga
             passive[st] = ex <= conv.passivity_tol_deg
         with np.errstate(invalid="ignore"):
             return st, st & (pm < pm_deg), passive
-    # every segment's first, middle and last grid point
-    segs = [np.searchsorted(c, P) for c in cuts]
-    rows, cols = [], []
-    for j, seg in enumerate(segs):
-        for k in np.unique(seg):
-            idx = np.flatnonzero(seg == k)
-            for i in {idx[0], idx[idx.size // 2], idx[-1]}:
-                rows.append(i)
-                cols.append(j)
-    rows, cols = np.array(rows), np.array(cols)
-    out = [np.empty((P.size, D.size), bool) for _ in range(3)]
-    known = np.zeros((P.size, D.size), bool)
-    for o, v in zip(out, decide(P[rows], D[cols])):
-        o[rows, cols] = v
-    known[rows, cols] = True
-    # a segment whose checked points agree takes their label; one whose points differ (the
-    # chosen crossover switched inside it, crossovers appeared, the excess crossed the
-    # tolerance) is decided point by point
-    todo = []
-    for j, seg in enumerate(segs):
-        for k in np.unique(seg):
-            idx = np.flatnonzero(seg == k)
-            chk = idx[known[idx, j]]
-            if all((o[chk, j] == o[chk[0], j]).all() for o in out):
-                for o in out:
-                    o[idx, j] = o[chk[0], j]
-            else:
-                todo += [(i, j) for i in idx if not known[i, j]]
-    if todo:
-        r, c = np.array(todo).T
-        for o, v in zip(out, decide(P[r], D[c])):
-            o[r, c] = v
+    # every segment of every row gets one id; with P sorted, a segment's points are consecutive
+    order = np.argsort(P, kind="stable")
+    Ps = P[order]
+    sizes = np.array([c.size + 1 for c in cuts])
+    offset = np.concatenate([[0], np.cumsum(sizes)[:-1]])
+    gid = np.stack([np.searchsorted(c, Ps) + o for c, o in zip(cuts, offset)], axis=1)   # (n_P, n_D)
+    flat = gid.T.ravel()                                   # column by column: non-decreasing ids
+    ids, first, count = np.unique(flat, return_index=True, return_counts=True)
+    # each segment's first, middle and last grid point
+    probe = np.stack([first, first + count // 2, first + count - 1], axis=1)        # (n_seg, 3)
+    cand = np.unique(probe)
+    rows, cols = cand % P.size, cand // P.size
+    dec = decide(Ps[rows], D[cols])
+    val = [np.empty(flat.size, bool) for _ in range(3)]
+    for v, d in zip(val, dec):
+        v[cand] = d
+    # a segment whose probes agree takes their label; one whose probes differ (the chosen
+    # crossover switched inside it, crossovers appeared, the excess crossed the tolerance) is
+    # decided point by point
+    agree = np.all([(v[probe] == v[probe[:, :1]]).all(axis=1) for v in val], axis=0)
+    seg_of = np.searchsorted(ids, flat)
+    known = np.zeros(flat.size, bool)
+    known[cand] = True
+    ok = agree[seg_of]
+    for v in val:
+        v[ok] = v[first[seg_of[ok]]]
+    todo = np.flatnonzero(~ok & ~known)
+    if todo.size:
+        for v, d in zip(val, decide(Ps[todo % P.size], D[todo // P.size])):
+            v[todo] = d
+    out = []
+    for v in val:
+        o = np.empty((P.size, D.size), bool)
+        o[order] = v.reshape(D.size, P.size).T
+        out.append(o)
     return RegionDecisions(out[0], out[1], out[2] if passivity else None)
