@@ -28,8 +28,10 @@ verify: $(STAMP)
 paper: derive
 	$(PY) -m haa_sym.cli reproduce --out results
 
-## Speed ratios against numpy eigvals and python-control (prints a table, writes benchmarks/results.json).
+## Speed: the full map against python-control and numpy baselines, haa_sym's own timings and the
+## whole-process targets, the exact curves (prints tables, writes benchmarks/results*.json; ~5 min).
 bench: $(STAMP)
+	$(PY) benchmarks/bench_baselines.py
 	$(PY) benchmarks/bench_regions.py
 	$(PY) benchmarks/bench_boundary.py
 

@@ -1,0 +1,426 @@
+"""The full region map against a python-control and a numpy baseline, side by side in one run.
+
+The map: 200 x 200 points, P_gain log 1..20000 Nm/rad x D_gain lin 1..50 Nms/rad, nominal
+(N_av = 4, closed-loop order 12) and N_av = 50 (order 58). Every path decides, at every point it
+sees, the three things of the map (``haa_sym.regions``) by the map's own rules:
+
+* stability: every closed-loop pole in |z| < 1;
+* PM < 30 deg: the phase margin of the impedance loop L_imp (opened at the torque reference),
+  180 + arg L_imp at the gain crossover of smallest |PM| (``pm_rule = "min_abs"``), located on
+  the maps' frequency grid by interpolating log|L| in log(omega) (``haa_sym.sweep.phase_margins``);
+  judged on stable points only;
+* passive: stable, and the phase of the port impedance Z = T_dist / port velocity, corrected by
+  Colgate's exp(-j w Ts/2) (``haa_sym.sweep.colgate_factor``), within +-90 deg (+ the options'
+  ``passivity_tol_deg``) at every frequency of the grid.
+
+The frequency grid is the maps' (``loop.options.numerics.omega(Ts)``: 1000 log points from
+0.1 rad/s to Nyquist) for every path. The baselines:
+
+(1) python-control, per point, used competently: at each of ``N_SAMPLE`` points spread over the
+    map (a jittered 5 x 4 lattice of grid indices), the closed loop is built once as a discrete
+    ``control.StateSpace`` (dt = Ts) from the explicit closed-loop matrices
+    (``ClosedLoop.to_statespace``), ``poles()`` decides stability, ``control.frequency_response``
+    of the loop opened at the torque reference (L_imp) and of T_dist -> port velocity (1/Z) on
+    the explicit grid give the margin and the phase of Z. No ``frd``, no spline-based
+    ``stability_margins`` (what made the 0.3-1.2 s per point of the issue). Each point is timed
+    once; an unstable point stops after ``poles()``, so the whole-map time is EXTRAPOLATED from
+    the sample's mean times of stable and of unstable points, weighted by the numbers of stable
+    and unstable points of the grid map.
+(2) numpy, the whole map batched the best way numpy allows: stability from stacked
+    ``numpy.linalg.eigvals`` of A(P, D) = A0 + P A1 + D A2 (built by broadcasting from the
+    explicit closed loop of ``haa_sym.reference``; building A0, A1, A2 is not timed); the
+    frequency responses from the state space too, but only at three gain points: every feedback
+    path enters through the one input V_m, so the characteristic polynomial and the numerator
+    of the port velocity are affine in (P, D) (matrix determinant lemma) and
+    1 + L_imp = chi / chi(0, 0). Hence L_imp = P L_10 + D L_01 and
+    Z = (1 + P L_10 + D L_01) / (M_00 + P (M_10 - M_00) + D (M_01 - M_00)) with
+    M_k = (1 + L_k) H_v,k (H_v: T_dist -> port velocity) from ``numpy.linalg.solve`` at the
+    1000 frequencies (per configuration, like haa_sym's cached loop coefficients: timed and
+    printed apart, not in the map's time), then one small matrix product per chunk of points
+    and the two reductions above written in plain numpy. Chunks run on the same threads as haa_sym's maps (``SWEEP_THREADS``, BLAS on one
+    thread). Only stability is per point here; the issue's 1.4-6 ms per point evaluated each
+    point's polynomials and was not batched.
+(3) haa_sym: ``region_map`` with the generated grid evaluators (certified Routh-Hurwitz test,
+    phase margin and passivity sweeps), and a map from the exact curves: today
+    ``stability_boundary`` + ``classify_regions`` (stability, PM < 30) + the grid evaluators'
+    passivity sweep on the points the curves call stable; passivity from the curves as well
+    once haa_sym has it (:func:`curves_map`, the hook; the output says which route ran).
+    The ``ClosedLoop`` is built once per configuration, outside every timing.
+
+Every ratio printed names its baseline. Decisions of every path are compared with the grid map's
+on every point they share, and disagreements are printed, not dropped. In-process timings are
+the best of ``REPEATS`` except where one run already takes tens of seconds (numpy at N_av = 50:
+one run; python-control: one timing per point). Prints a table, writes
+``benchmarks/results_baselines.json``. Usage: python benchmarks/bench_baselines.py
+"""
+from __future__ import annotations
+
+import inspect
+import json
+import platform
+import sys
+import time
+from concurrent.futures import ThreadPoolExecutor
+from pathlib import Path
+
+import control as ct
+import numpy as np
+
+from haa_sym import ClosedLoop, load_params
+from haa_sym.boundary import classify_regions, stability_boundary
+from haa_sym.reference import closed_loop_matrices
+from haa_sym.regions import CHUNK, PM_THRESHOLD_DEG, grid, region_map
+from haa_sym.sweep import BLAS_THREADS, SWEEP_THREADS, blas_limits, colgate_factor, gain_rows, phase_excess
+
+REPEATS = 3
+N_SAMPLE = 20                      # python-control points per configuration (5 x 4 lattice)
+BAND = 1e-6                        # |rho - 1| below this: a pole on the circle, not compared
+CONFIGS = (("nominal (N_av = 4)", {}), ("N_av = 50", {"N_av": 50}))
+OUT = Path(__file__).with_name("results_baselines.json")
+# the curve-based classification as it grows (see curves_map): region_map(method="curves"),
+# classify_regions(passivity=True); and the grid evaluators named explicitly once there is a choice
+MAP_METHODS = "method" in inspect.signature(region_map).parameters
+CURVES_PASSIVITY = "passivity" in inspect.signature(classify_regions).parameters
+GRID = {"method": "grid"} if MAP_METHODS else {}
+
+
+def best(fn, repeats=REPEATS):
+    times, out = [], None
+    for _ in range(repeats):
+        t = time.perf_counter()
+        out = fn()
+        times.append(time.perf_counter() - t)
+    return min(times), out
+
+
+def chunked(fn, n, chunk=CHUNK):
+    """fn(slice) over [0, n) in chunks on SWEEP_THREADS threads, BLAS on BLAS_THREADS: the
+    resources haa_sym's region map uses."""
+    chunks = [slice(s, min(s + chunk, n)) for s in range(0, n, chunk)]
+    with blas_limits(BLAS_THREADS), ThreadPoolExecutor(SWEEP_THREADS) as pool:
+        list(pool.map(fn, chunks))
+
+
+# --- the map's rules, written in plain numpy for the baselines ---------------------------------
+
+def pm_by_rule(L: np.ndarray, omega: np.ndarray, rule: str) -> np.ndarray:
+    """Phase margin (deg) of every row of ``L`` (k, n_omega): 180 + arg L at the crossover of
+    |L| = 1 chosen by ``rule`` ("min_abs": smallest |PM|, "worst": smallest PM); NaN where |L|
+    does not cross 1 on the grid. Crossovers by linear interpolation of log|L| in log(omega),
+    the phase along the short arc between the two samples (the maps' rule)."""
+    pm = np.full(L.shape[0], np.nan)
+    logmag = np.log(np.abs(L))
+    above = logmag > 0
+    r, k = np.nonzero(above[:, 1:] != above[:, :-1])
+    if r.size == 0:
+        return pm
+    t = logmag[r, k] / (logmag[r, k] - logmag[r, k + 1])
+    phase = np.angle(L[r, k]) + t * np.angle(L[r, k + 1] / L[r, k])
+    margin = (np.degrees(phase) + 360.0) % 360.0 - 180.0          # 180 + arg L in [-180, 180)
+    margin = np.where(margin == -180.0, 180.0, margin)
+    key = np.abs(margin) if rule == "min_abs" else margin
+    order = np.lexsort((key, r))
+    first = order[np.unique(r[order], return_index=True)[1]]
+    pm[r[first]] = margin[first]
+    return pm
+
+
+def excess_deg(W: np.ndarray) -> np.ndarray:
+    """max over omega of |phase of W| - 90 deg, per row of ``W`` (k, n_omega), W any complex
+    array with the phase of the corrected Z (Z exp(-j w Ts/2), or num conj(den) exp(-j w Ts/2))."""
+    return np.degrees(np.abs(np.angle(W)).max(axis=1)) - 90.0
+
+
+# --- (1) python-control, per point --------------------------------------------------------------
+
+def sample_indices(n_P: int, n_D: int, seed: int = 0) -> tuple[np.ndarray, np.ndarray]:
+    """Grid indices of N_SAMPLE points spread over the map: one per cell of a 5 x 4 lattice,
+    jittered inside it."""
+    rng = np.random.default_rng(seed)
+    cP, cD = 5, N_SAMPLE // 5
+    iP = ((np.arange(cP)[:, None] + rng.uniform(0.1, 0.9, (cP, cD))) * n_P / cP).astype(int)
+    iD = ((np.arange(cD)[None, :] + rng.uniform(0.1, 0.9, (cP, cD))) * n_D / cD).astype(int)
+    return iP.ravel(), iD.ravel()
+
+
+def control_point(loop: ClosedLoop, P: float, D: float, omega: np.ndarray, colgate: np.ndarray):
+    """One point with python-control: (stable, PM deg, passivity excess deg)."""
+    closed = loop.to_statespace(P, D)                            # every loop closed
+    stable = bool(np.all(np.abs(closed.poles()) < 1))
+    if not stable:
+        return False, np.nan, np.nan
+    L = ct.frequency_response(loop.to_statespace(P, D, cut="T_ref")["y", "r"], omega).complex
+    H_v = ct.frequency_response(closed["port_velocity", "T_dist"], omega).complex
+    rule = loop.options.conventions.pm_rule
+    return True, float(pm_by_rule(L[None], omega, rule)[0]), float(excess_deg((colgate / H_v)[None])[0])
+
+
+def python_control_baseline(loop, P_grid, D_grid, omega, colgate):
+    iP, iD = sample_indices(P_grid.size, D_grid.size)
+    times, res = [], []
+    for i, j in zip(iP, iD):
+        t = time.perf_counter()
+        res.append(control_point(loop, P_grid[i], D_grid[j], omega, colgate))
+        times.append(time.perf_counter() - t)
+    st, pm, ex = (np.array(v) for v in zip(*res))
+    return np.array(times), iP, iD, st, pm, ex
+
+
+# --- (2) numpy, the whole map batched ----------------------------------------------------------
+
+def numpy_model(loop):
+    """The gain-independent state-space data of the numpy baseline (not timed: the model)."""
+    m = {key: closed_loop_matrices(loop, P, D) for key, (P, D) in
+         (("00", (0.0, 0.0)), ("10", (1.0, 0.0)), ("01", (0.0, 1.0)))}
+    A0 = m["00"][0]
+    return {"A": (A0, m["10"][0] - A0, m["01"][0] - A0), "closed": m,
+            "cut": {key: closed_loop_matrices(loop, P, D, cut="T_ref") for key, (P, D) in
+                    (("10", (1.0, 0.0)), ("01", (0.0, 1.0)))}}
+
+
+def _response(ABCD, z, out, inp):
+    A, B, C, D = ABCD
+    X = np.linalg.solve(z[:, None, None] * np.eye(A.shape[0]) - A,
+                        np.broadcast_to(B[:, inp], (z.size, A.shape[0]))[..., None])[..., 0]
+    return X @ C[out] + D[out, inp]
+
+
+def numpy_responses(model, omega, Ts):
+    """Gain-affine coefficients (n_omega, 3) on x = (1, P, D): L_imp = x.Lc, Z = x.Zn / x.Zd."""
+    z = np.exp(1j * omega * Ts)
+    L = {"00": np.zeros(z.size, complex)}
+    for key in ("10", "01"):
+        L[key] = _response(model["cut"][key], z, 3, 1)          # r -> y, loop opened at T_ref
+    # port velocity per unit T_dist, times chi / chi(0, 0) = 1 + L: affine in (P, D)
+    M = {key: (1 + L[key]) * _response(model["closed"][key], z, 2, 0) for key in ("00", "10", "01")}
+    Lc = np.stack([L["00"], L["10"], L["01"]], axis=1)
+    Zn = np.stack([np.ones(z.size, complex), L["10"], L["01"]], axis=1)
+    Zd = np.stack([M["00"], M["10"] - M["00"], M["01"] - M["00"]], axis=1)
+    return Lc, Zn, Zd
+
+
+def numpy_stability(model, P, D):
+    """Spectral radius of every point by stacked eigvals (chunked, threaded)."""
+    A0, A1, A2 = model["A"]
+    rho = np.empty(P.size)
+
+    def work(sl):
+        A = A0 + P[sl, None, None] * A1 + D[sl, None, None] * A2
+        rho[sl] = np.abs(np.linalg.eigvals(A)).max(axis=1)
+    chunked(work, P.size)
+    return rho
+
+
+def numpy_margins(responses, P, D, stable, omega, colgate, rule):
+    """PM and passivity excess on the stable points (NaN elsewhere), from the gain-affine
+    ``responses`` of :func:`numpy_responses`."""
+    Lc, Zn, Zd = responses
+    idx = np.flatnonzero(stable)
+    pm, ex = np.full(P.size, np.nan), np.full(P.size, np.nan)
+
+    def work(sl):
+        i = idx[sl]
+        X = np.stack([np.ones(i.size), P[i], D[i]], axis=1)
+        pm[i] = pm_by_rule(X @ Lc.T, omega, rule)
+        ex[i] = excess_deg((X @ Zn.T) * np.conj(X @ Zd.T) * colgate)
+    chunked(work, idx.size)
+    return pm, ex
+
+
+# --- (3) haa_sym from the curves ---------------------------------------------------------------
+
+def curves_map(params, loop, P_grid, D_grid):
+    """(stable, low_pm, passive, excess or None) from the exact curves, arrays (n_P, n_D).
+
+    HOOK, in order: ``region_map(method="curves")`` when haa_sym's map has that option (the
+    user's route); else ``classify_regions(..., passivity=True)`` when boundary classifies
+    passivity from its curves (being added); else ``classify_regions`` for stability and
+    PM < 30 and the grid evaluators' passivity sweep (``phase_excess`` on the generated
+    coefficients) over the points the curves call stable. :func:`curves_route` names the one.
+    """
+    if MAP_METHODS:
+        m = region_map(params, P_grid, D_grid, loop=loop, progress=False, method="curves")
+        return m.stable, m.low_pm, m.passive, None
+    b = stability_boundary(params, loop=loop)
+    if CURVES_PASSIVITY:
+        stable, low_pm, passive = classify_regions(loop, b, P_grid, D_grid, passivity=True)[:3]
+        return stable, low_pm, passive, None
+    ctrl, conv = params.controller, loop.options.conventions
+    stable, low_pm = classify_regions(loop, b, P_grid, D_grid)[:2]
+    PP, DD = np.meshgrid(P_grid, D_grid, indexing="ij")
+    coef = loop.loop_coefficients()
+    idx = np.flatnonzero(stable.ravel())
+    ex = np.full(PP.size, np.nan)
+
+    def work(sl):
+        i = idx[sl]
+        ex[i] = phase_excess(gain_rows(PP.flat[i], DD.flat[i]), coef.Z_num, coef.Z_den, coef.omega,
+                             ctrl.Ts, conv.colgate)[0]
+    chunked(work, idx.size)
+    ex = ex.reshape(PP.shape)
+    with np.errstate(invalid="ignore"):
+        passive = stable & (ex <= conv.passivity_tol_deg)
+    return stable, low_pm, passive, ex
+
+
+def curves_route() -> str:
+    if MAP_METHODS:
+        return "region_map(method='curves'): stability, PM and passivity from the curves"
+    if CURVES_PASSIVITY:
+        return "stability_boundary + classify_regions(passivity=True): all three from the curves"
+    return ("stability_boundary + classify_regions (stability, PM < 30) + the grid evaluators' "
+            "passivity sweep on the curves' stable points (no passivity curves yet)")
+
+
+# --- comparison ------------------------------------------------------------------------------
+
+def compare(name, ref, stable, low_pm, passive, pm=None, ex=None, skip=None):
+    """Disagreements of one path with the grid map ``ref`` on the points given (flat arrays
+    aligned with ``ref``'s flat points; ``skip``: points not compared, e.g. |rho - 1| < BAND)."""
+    keep = np.ones(stable.shape, bool) if skip is None else ~skip
+    out = {"path": name, "compared": int(keep.sum())}
+    for key, mine in (("stable", stable), ("low_pm", low_pm), ("passive", passive)):
+        bad = np.flatnonzero(keep & (mine != ref[key]))
+        out[f"{key}_disagree"] = int(bad.size)
+        out[f"{key}_disagree_points"] = [[float(ref["P"][i]), float(ref["D"][i])] for i in bad[:10]]
+    for key, mine in (("pm", pm), ("excess", ex)):
+        if mine is not None:
+            both = keep & np.isfinite(mine) & np.isfinite(ref[key])
+            out[f"max_abs_{key}_diff_deg"] = float(np.abs(mine - ref[key])[both].max()) if both.any() else None
+    return out
+
+
+def run_config(label, changes, P_grid, D_grid):
+    params = load_params().with_values(**changes)
+    loop = ClosedLoop(params)
+    ctrl, conv = params.controller, loop.options.conventions
+    omega = loop.options.numerics.omega(ctrl.Ts)
+    colgate = colgate_factor(omega, ctrl.Ts, conv.colgate)
+    PP, DD = np.meshgrid(P_grid, D_grid, indexing="ij")
+    P, D = PP.ravel(), DD.ravel()
+    n = P.size
+    region_map(params, P_grid[:4], D_grid[:4], loop=loop, progress=False, **GRID)   # load outside timing
+
+    # (3) haa_sym
+    t_stab, _ = best(lambda: loop.stability(P, D))
+    t_grid, m = best(lambda: region_map(params, P_grid, D_grid, loop=loop, progress=False, **GRID))
+    t_curves, (c_st, c_low, c_pas, c_ex) = best(lambda: curves_map(params, loop, P_grid, D_grid))
+    ref = {"P": P, "D": D, "stable": m.stable.ravel(), "low_pm": m.low_pm.ravel(),
+           "passive": m.passive.ravel(), "pm": m.phase_margin_deg.ravel(), "excess": m.phase_excess_deg.ravel()}
+
+    # (2) numpy
+    model = numpy_model(loop)
+    rep = REPEATS if loop.degree < 30 else 1
+    # like haa_sym's loop coefficients (computed once per loop and cached), the three-point
+    # responses are per-configuration data: timed apart, not in the map's time
+    t_np_setup, responses = best(lambda: numpy_responses(model, omega, ctrl.Ts))
+    t_eig, rho = best(lambda: numpy_stability(model, P, D), rep)
+    np_stable = rho < 1
+    t_np_freq, (np_pm, np_ex) = best(lambda: numpy_margins(responses, P, D, np_stable, omega,
+                                                           colgate, conv.pm_rule), rep)
+    with np.errstate(invalid="ignore"):
+        np_low = np_stable & (np_pm < PM_THRESHOLD_DEG)
+        np_pas = np_stable & (np_ex <= conv.passivity_tol_deg)
+    on_circle = np.abs(rho - 1) < BAND
+
+    # (1) python-control
+    times, iP, iD, pc_st, pc_pm, pc_ex = python_control_baseline(loop, P_grid, D_grid, omega, colgate)
+    flat = iP * D_grid.size + iD
+    sub = {k: v[flat] for k, v in ref.items()}
+    with np.errstate(invalid="ignore"):
+        pc_low = pc_st & (pc_pm < PM_THRESHOLD_DEG)
+        pc_pas = pc_st & (pc_ex <= conv.passivity_tol_deg)
+    # unstable points stop after poles(): extrapolate each kind by its count in the grid map
+    n_st = int(m.stable.sum())
+    t_pc_st = float(times[pc_st].mean()) if pc_st.any() else float(times.mean())
+    t_pc_un = float(times[~pc_st].mean()) if (~pc_st).any() else float(times.mean())
+    t_pc_map = t_pc_st * n_st + t_pc_un * (n - n_st)
+
+    t_np = t_eig + t_np_freq
+    row = {
+        "config": label, "points": n, "closed_loop_order": loop.degree, "n_omega": omega.size,
+        "repeats": {"haa_sym": REPEATS, "numpy": rep, "python_control": 1},
+        "haa_sym_stability_map_s": t_stab,
+        "haa_sym_full_map_grid_s": t_grid,
+        "haa_sym_full_map_curves_s": t_curves,
+        "curves_route": curves_route(),
+        "numpy_eigvals_stability_s": t_eig,
+        "numpy_freq_responses_pm_passivity_s": t_np_freq,
+        "numpy_full_map_s": t_np,
+        "numpy_setup_three_point_responses_s": t_np_setup,
+        "numpy_per_point_ms": 1e3 * t_np / n,
+        "python_control_per_point_s": t_pc_map / n,
+        "python_control_per_stable_point_s": t_pc_st,
+        "python_control_per_unstable_point_s": t_pc_un,
+        "python_control_sample_points": N_SAMPLE,
+        "python_control_sample_stable": int(pc_st.sum()),
+        "python_control_full_map_extrapolated_s": t_pc_map,
+        "ratios": {
+            "grid map vs python-control per point (extrapolated)": t_pc_map / t_grid,
+            "curves map vs python-control per point (extrapolated)": t_pc_map / t_curves,
+            "grid map vs numpy stacked eigvals + batched freq responses": t_np / t_grid,
+            "curves map vs numpy stacked eigvals + batched freq responses": t_np / t_curves,
+            "stability map vs numpy stacked eigvals (stability only)": t_eig / t_stab,
+        },
+        "agreement_with_grid_map": [
+            compare("curves map", ref, c_st.ravel(), c_low.ravel(), c_pas.ravel(),
+                    ex=None if c_ex is None else c_ex.ravel()),
+            compare("numpy", ref, np_stable, np_low, np_pas, np_pm, np_ex, skip=on_circle),
+            compare("python-control sample", sub, pc_st, pc_low, pc_pas, pc_pm, pc_ex),
+        ],
+        "numpy_points_on_circle_not_compared": int(on_circle.sum()),
+        "curves_map_vs_numpy_eigvals_stable_disagree": int(((c_st.ravel() != np_stable) & ~on_circle).sum()),
+        "map_fractions": {"stable": float(m.stable.mean()), "low_pm": float(m.low_pm.mean()),
+                          "passive": float(m.passive.mean())},
+    }
+    return row
+
+
+def print_row(r):
+    print(f"\n{r['config']}: closed-loop order {r['closed_loop_order']}, {r['points']} points, "
+          f"{r['n_omega']} frequencies")
+    print(f"  haa_sym full map, grid evaluators             {r['haa_sym_full_map_grid_s']:9.3f} s")
+    print(f"  haa_sym full map, curves                      {r['haa_sym_full_map_curves_s']:9.3f} s  "
+          "(see below)")
+    print(f"  haa_sym stability map only                    {r['haa_sym_stability_map_s']:9.3f} s")
+    print(f"  numpy, whole map batched                      {r['numpy_full_map_s']:9.3f} s  "
+          f"(eigvals {r['numpy_eigvals_stability_s']:.3f} s + freq. responses "
+          f"{r['numpy_freq_responses_pm_passivity_s']:.3f} s; {r['numpy_per_point_ms']:.3f} ms/point)")
+    print(f"  numpy setup, responses at 3 gain points       {r['numpy_setup_three_point_responses_s']:9.3f} s  "
+          "(not in the map time, like haa_sym's cached loop coefficients)")
+    print(f"  python-control per point                      {r['python_control_per_point_s']:9.3f} s  "
+          f"({r['python_control_per_stable_point_s']:.3f} s stable, "
+          f"{r['python_control_per_unstable_point_s']:.4f} s unstable; "
+          f"{r['python_control_sample_points']} points, {r['python_control_sample_stable']} stable)")
+    print(f"  python-control whole map, EXTRAPOLATED        {r['python_control_full_map_extrapolated_s']:9.0f} s")
+    print(f"  (curves map: {r['curves_route']})")
+    for name, v in r["ratios"].items():
+        print(f"  ratio {name:60s} {v:10.1f} x")
+    for a in r["agreement_with_grid_map"]:
+        diffs = ", ".join(f"{k[8:]} {a[k]:.2g}" for k in a if k.startswith("max_abs") and a[k] is not None)
+        print(f"  vs grid map, {a['path']:22s} on {a['compared']:5d} points: disagree stable "
+              f"{a['stable_disagree']}, PM<30 {a['low_pm_disagree']}, passive {a['passive_disagree']}"
+              + (f"; {diffs}" if diffs else ""))
+        for key in ("stable", "low_pm", "passive"):
+            if a[f"{key}_disagree"]:
+                print(f"    {key} disagrees at (P, D) = {a[f'{key}_disagree_points']}")
+    print(f"  curves map vs numpy eigvals: stability disagrees on "
+          f"{r['curves_map_vs_numpy_eigvals_stable_disagree']} points "
+          f"({r['numpy_points_on_circle_not_compared']} within {BAND:g} of |z| = 1 not compared)")
+
+
+def main() -> int:
+    P_grid, D_grid = grid("log:1:20000:200"), grid("lin:1:50:200")
+    rows = []
+    for label, changes in CONFIGS:
+        rows.append(run_config(label, changes, P_grid, D_grid))
+        print_row(rows[-1])
+    OUT.write_text(json.dumps({"machine": platform.platform(), "python": platform.python_version(),
+                               "grid": "200 x 200, P_gain log 1..20000, D_gain lin 1..50",
+                               "rows": rows}, indent=1) + "\n")
+    print(f"\nwrote {OUT}")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
