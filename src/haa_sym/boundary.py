@@ -461,7 +461,7 @@ def classify_regions(loop: ClosedLoop, boundary: StabilityBoundary, P_gain, D_ga
     disagree is decided point by point.
     """
     from haa_sym.passivity_boundary import passivity_crossings
-    from haa_sym.sweep import gain_rows, phase_excess, phase_margins
+    from haa_sym.regions import decide_points
     P = gain_array("P_gain", P_gain).ravel()
     D = gain_array("D_gain", D_gain).ravel()
     ABC, nu = boundary.ABC, boundary.nu
@@ -477,19 +477,9 @@ def classify_regions(loop: ClosedLoop, boundary: StabilityBoundary, P_gain, D_ga
         extra.append(passivity_crossings(loop, D, (P.min(), P.max()), beta, alpha))
     for j in range(D.size):
         cuts[j] = np.unique(np.concatenate([cuts[j]] + [np.asarray(e[j], float) for e in extra]))
-    coef = loop.loop_coefficients(beta=beta, alpha=alpha)
-    conv = loop.options.conventions
 
     def decide(Pq, Dq):
-        st = loop.stability(Pq, Dq, beta, alpha).stable
-        X = gain_rows(Pq[st], Dq[st])
-        pm, passive = np.full(Pq.size, np.nan), np.zeros(Pq.size, bool)
-        pm[st] = phase_margins(X, coef.L_imp, coef.omega, conv.pm_rule)[0]
-        if passivity:
-            ex = phase_excess(X, coef.Z_num, coef.Z_den, coef.omega, boundary.Ts, conv.colgate)[0]
-            passive[st] = ex <= conv.passivity_tol_deg
-        with np.errstate(invalid="ignore"):
-            return st, st & (pm < pm_deg), passive
+        return decide_points(loop, Pq, Dq, beta, alpha, pm_deg=pm_deg, passivity=passivity)
     # every segment of every row gets one id; with P sorted, a segment's points are consecutive
     order = np.argsort(P, kind="stable")
     Ps = P[order]

@@ -28,7 +28,7 @@ from haa_sym.params import STRING_KEYS, ParameterError, gain_array, load_params
 from haa_sym.progress import set_progress
 
 OUTPUT_SUFFIXES = {"regions": (".npz",), "passivity": (".csv", ".json"), "step": (".csv",),
-                   "boundary": (".json",), "contact": (".json",)}
+                   "boundary": (".json",), "contact": (".json",), "schedule": (".csv",)}
 
 
 def _parse_set(items: list[str], known: tuple[str, ...] | None = None) -> dict[str, float]:
@@ -239,6 +239,56 @@ def _cmd_contact(args) -> int:
     return 0
 
 
+def _range(text: str, flag: str, what: str) -> tuple[float, float]:
+    lo, sep, hi = str(text).partition(":")
+    try:
+        r = (float(lo), float(hi)) if sep else None
+    except ValueError:
+        r = None
+    if r is None or not (0 < r[0] < r[1] < float("inf")):
+        raise ParameterError(f"{flag} {text!r}; allowed: LO:HI with 0 < LO < HI ({what})")
+    return r
+
+
+def _cmd_schedule(args) -> int:
+    from haa_sym.outputs import Transaction
+    from haa_sym.regions import grid
+    from haa_sym.schedule import schedule
+    from haa_sym.schedule_c import check_c_directory, write_c
+    params, options, out, plot = _setup(args, "schedule")
+    if args.c_out is not None:
+        check_c_directory(args.c_out)
+    P, D = grid(args.P_gain, "--P-gain"), grid(args.D_gain, "--D-gain")
+    beta_range = _range(args.beta_range, "--beta-range", "the torque-gain scale beta, Eq. 7")
+    alphas = None if args.alpha_values is None else grid(args.alpha_values, "--alpha-values")
+    req = tuple(r.strip() for r in args.require.split(",") if r.strip())
+    leg = None
+    if args.leg is not None:
+        a, sep, b = args.leg.partition(":")
+        if not sep:
+            raise ParameterError(f"--leg {args.leg!r}; allowed: FROM:TO, two configuration names of the "
+                                 f"file (or 'nominal'): {['nominal'] + list(params.configurations)}")
+        leg = (a.strip(), b.strip())
+    s = schedule(params, P, D, beta_range=beta_range, beta_tol=args.beta_tol, alpha_values=alphas,
+                 requirements=req, leg=leg, leg_mode=args.leg_mode, options=options,
+                 scheduler=args.scheduler)
+    table = s.table() if args.c_out is not None else None
+    with Transaction() as tx:
+        if out:
+            s.save_csv(out, tx, "--out")
+        if table is not None:
+            write_c(table, args.c_out, tx)
+        if plot:
+            _plots().save_figure(_plots().plot_schedule(s, title=args.title), plot, tx, "--plot")
+    feas = int(s.feasible.sum())
+    unsafe = int((~s.beta_fixed_feasible & s.feasible).sum())
+    print(f"{s.feasible.size} impedances: {feas} with a robust beta in [{beta_range[0]:g}, {beta_range[1]:g}] "
+          f"(tolerance {args.beta_tol:g}; leg {s.meta['leg'][0]}..{s.meta['leg'][1]}, {s.n_configurations} "
+          f"configurations{'' if s.converged else ', NOT converged'}); beta = 1 fails for some leg at {unsafe} of "
+          f"them" + (f"; wrote {out}" if out else "") + (f"; C in {args.c_out}" if args.c_out else ""))
+    return 0
+
+
 def _cmd_passivity(args) -> int:
     import json
 
@@ -379,6 +429,24 @@ def main(argv: list[str] | None = None) -> int:
                         "(P_gain, D_gain) plane (parameter-space method)")
     _common(bd)
     _map_args(bd, "lin:0:50:100", "the box: grid spec whose range is used", ".json")
+    sc = sub.add_parser("schedule", help="torque-gain scheduler: the largest beta per impedance that keeps "
+                        "the joint stable with PM >= 30 deg for every leg configuration (CSV, embedded C)")
+    _common(sc)
+    sc.add_argument("--P-gain", default="log:1:2000:30", help="impedance stiffness grid (default log:1:2000:30)")
+    sc.add_argument("--D-gain", default="lin:1:50:20", help="impedance damping grid (default lin:1:50:20)")
+    sc.add_argument("--beta-range", default="0.1:8", help="LO:HI of beta (default 0.1:8)")
+    sc.add_argument("--beta-tol", type=float, default=0.02, help="relative step of the beta grid (default 0.02)")
+    sc.add_argument("--alpha-values", help="schedule alpha too, from these values (grid spec, e.g. 0,0.5,0.94)")
+    sc.add_argument("--require", default="stable,pm", help="stable[,pm][,passive] (default stable,pm)")
+    sc.add_argument("--leg", help="FROM:TO configurations bounding the leg range (default retracted:extended "
+                    "or the file's first two)")
+    sc.add_argument("--leg-mode", choices=("segment", "box"), default="segment",
+                    help="the leg range: the segment between the two (default) or the box of every pair")
+    sc.add_argument("--scheduler", help="address of a dask.distributed scheduler (default: in-process)")
+    sc.add_argument("--out", help="output .csv")
+    sc.add_argument("--c-out", help="directory for haa_schedule.h and haa_schedule.c")
+    sc.add_argument("--plot", help="output figure (.png/.pdf/.svg)")
+    sc.add_argument("--title")
     ct = sub.add_parser("contact", help="environment stiffnesses where the loop is unstable, or stable but not "
                         "passive (exact ends)")
     _common(ct)
@@ -429,7 +497,7 @@ def main(argv: list[str] | None = None) -> int:
                      " to ground, which P_gain = 0 does not feed back; not asymptotically stable)"
                      if bool(res.marginal) else ""))
             return 0
-        return {"regions": _cmd_regions, "boundary": _cmd_boundary, "contact": _cmd_contact, "passivity": _cmd_passivity, "step": _cmd_step,
+        return {"regions": _cmd_regions, "boundary": _cmd_boundary, "schedule": _cmd_schedule, "contact": _cmd_contact, "passivity": _cmd_passivity, "step": _cmd_step,
                 "margins": _cmd_margins, "reproduce": _cmd_reproduce, "compile": _cmd_compile}[args.cmd](args)
     except ParameterError as exc:
         print(f"haa-sym: error: {exc}", file=sys.stderr)

@@ -259,3 +259,40 @@ def save_figure(fig, path: str | Path, tx=None, field: str | None = None) -> Pat
     finally:
         plt.close(fig)
     return path
+
+
+def plot_schedule(s, title: str = ""):
+    """A :class:`haa_sym.schedule.Schedule`: the scheduled beta over the impedance grid (no
+    robust gain: grey) and the torque bandwidth it gains over fixed beta = 1 (impedances where
+    beta = 1 fails for some leg configuration marked)."""
+    from matplotlib.colors import LogNorm
+    fig, axes = plt.subplots(1, 2, figsize=(10.0, 4.2), layout="constrained")
+    logP = bool(np.all(s.P_gain > 0))
+    Pe, De = _edges(s.P_gain, logP), _edges(s.D_gain, False)
+    ax = axes[0]
+    ax.pcolormesh(Pe, De, (~s.feasible).T.astype(float), cmap=ListedColormap(["white", "#9a9a9a"]),
+                  vmin=0, vmax=1, shading="flat")
+    b = np.ma.masked_invalid(s.beta)
+    pc = ax.pcolormesh(Pe, De, b.T, cmap="viridis", norm=LogNorm(vmin=np.nanmin(s.beta), vmax=np.nanmax(s.beta))
+                       if s.feasible.any() else None, shading="flat")
+    fig.colorbar(pc, ax=ax, label="scheduled beta (Eq. 7)")
+    ax.set_title("largest robust beta (grey: none)", fontsize=10)
+    ax = axes[1]
+    bw1 = s.meta.get("torque_bandwidth_beta_1_rad_s")
+    gain = np.ma.masked_invalid(s.torque_bandwidth_rad_s / bw1) if bw1 else np.ma.masked_all(s.beta.shape)
+    pc = ax.pcolormesh(Pe, De, gain.T, cmap="magma", shading="flat")
+    fig.colorbar(pc, ax=ax, label="torque bandwidth / that of beta = 1")
+    bad = s.feasible & ~s.beta_fixed_feasible
+    if bad.any():
+        PP, DD = np.meshgrid(s.P_gain, s.D_gain, indexing="ij")
+        ax.plot(PP[bad], DD[bad], "x", color="tab:cyan", ms=4, label="beta = 1 unsafe for some leg")
+        ax.legend(fontsize=7, loc="upper left")
+    ax.set_title("bandwidth gained by the schedule", fontsize=10)
+    for ax in axes:
+        if logP:
+            ax.set_xscale("log")
+        ax.set_xlabel("P_gain (Nm/rad)")
+        ax.set_ylabel("D_gain (Nms/rad)")
+    if title:
+        fig.suptitle(title, fontsize=11)
+    return fig

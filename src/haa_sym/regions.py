@@ -35,7 +35,7 @@ from haa_sym.params import ParameterError, Params, gain_array
 from haa_sym.progress import progress as progress_bar
 from haa_sym.sweep import BLAS_THREADS, SWEEP_THREADS, blas_limits, gain_rows, phase_excess, phase_margins
 
-__all__ = ["RegionMap", "region_map", "grid", "PM_THRESHOLD_DEG", "MAP_METHODS", "save_npz"]
+__all__ = ["RegionMap", "region_map", "grid", "decide_points", "PM_THRESHOLD_DEG", "MAP_METHODS", "save_npz"]
 
 # Figs. 8-11: light grey = stable with a phase margin below 30 degrees.
 PM_THRESHOLD_DEG = 30.0
@@ -261,6 +261,30 @@ def region_map(params: Params, P_gain, D_gain, *, options: LoopOptions | None = 
                      phase_excess_deg=out["excess"].reshape(shape), refined=refined.reshape(shape),
                      meta=run_meta(params, options, beta=beta, alpha=alpha, backend=loop.backend,
                                    method="grid"))
+
+
+def decide_points(loop: ClosedLoop, P_gain, D_gain, beta: float, alpha: float, *,
+                  pm_deg: float = PM_THRESHOLD_DEG, passivity: bool = True):
+    """``(stable, low_pm, passive)`` at gain points (flat arrays of equal size), the maps'
+    decisions point by point: certified stability, the impedance loop's phase margin by the
+    options' rule (``low_pm``: stable with PM < ``pm_deg``) and passivity (stable, excess within
+    ``passivity_tol_deg``; all False when ``passivity`` is False). One loop-coefficient
+    evaluation for (beta, alpha), then per point products on the frequency grid."""
+    P = np.asarray(P_gain, float).ravel()
+    D = np.asarray(D_gain, float).ravel()
+    conv = loop.options.conventions
+    coef = loop.loop_coefficients(beta=beta, alpha=alpha)
+    L = coef.L_imp if conv.pm_loop == "impedance" else coef.L_t
+    st = loop.stability(P, D, beta, alpha).stable.ravel()
+    X = gain_rows(P[st], D[st])
+    pm, passive = np.full(P.size, np.nan), np.zeros(P.size, bool)
+    if X.shape[0]:
+        pm[st] = phase_margins(X, L, coef.omega, conv.pm_rule)[0]
+        if passivity:
+            ex = phase_excess(X, coef.Z_num, coef.Z_den, coef.omega, loop.params.controller.Ts, conv.colgate)[0]
+            passive[st] = ex <= conv.passivity_tol_deg
+    with np.errstate(invalid="ignore"):
+        return st, st & (pm < pm_deg), passive
 
 
 def _map_from_curves(params, loop, P, D, beta, alpha, radius, passivity, progress) -> RegionMap:

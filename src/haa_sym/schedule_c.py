@@ -640,6 +640,19 @@ int haa_schedule_feasible(double P_gain, double D_gain)
 """
 
 
+def check_c_directory(directory: str | Path, field: str = "--c-out") -> Path:
+    """``directory`` as a Path if it is an existing, writable directory; else an OutputError
+    naming ``field`` (a command checks this before computing anything)."""
+    d = Path(directory)
+    allowed = "allowed: an existing, writable directory (it is not created)"
+    if not d.is_dir():
+        what = "does not exist" if not d.exists() else "is not a directory"
+        raise OutputError(f"{field} {str(d)!r} {what}; {allowed}")
+    if not os.access(d, os.W_OK | os.X_OK):
+        raise OutputError(f"{field} {str(d)!r} is not writable; {allowed}")
+    return d
+
+
 def write_c(table: ScheduleTable, directory: str | Path, tx: Transaction | None = None,
             field: str = "--c-out") -> tuple[Path, Path]:
     """Write ``haa_schedule.h`` and ``haa_schedule.c`` for ``table`` into ``directory``.
@@ -668,13 +681,7 @@ def write_c(table: ScheduleTable, directory: str | Path, tx: Transaction | None 
         (an :class:`haa_sym.outputs.OutputError`) naming ``field`` when ``directory`` is not an
         existing writable directory or a file cannot be written; nothing is written.
     """
-    d = Path(directory)
-    allowed = "allowed: an existing, writable directory (it is not created)"
-    if not d.is_dir():
-        what = "does not exist" if not d.exists() else "is not a directory"
-        raise OutputError(f"{field} {str(d)!r} {what}; {allowed}")
-    if not os.access(d, os.W_OK | os.X_OK):
-        raise OutputError(f"{field} {str(d)!r} is not writable; {allowed}")
+    d = check_c_directory(directory, field)
     header, source = c_code(table)                  # every check before the first byte
     with transaction(tx) as t:
         for name, text in ((HEADER, header), (SOURCE, source)):
