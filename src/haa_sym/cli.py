@@ -162,11 +162,27 @@ def _write_outputs(out, plot, write_out, figure) -> None:
             _plots().save_figure(figure(), plot, tx, "--plot")
 
 
+def _leg(args, params):
+    if args.leg is None:
+        return None
+    a, sep, b = args.leg.partition(":")
+    if not sep:
+        raise ParameterError(f"--leg {args.leg!r}; allowed: FROM:TO, two configuration names of the file "
+                             f"(or 'nominal'): {['nominal'] + list(params.configurations)}")
+    return (a.strip(), b.strip())
+
+
+def _requirements(args):
+    return tuple(r.strip() for r in args.require.split(",") if r.strip())
+
+
 def _cmd_regions(args) -> int:
     from haa_sym.loop import ClosedLoop
     from haa_sym.regions import grid, region_map
     params, options, out, plot = _setup(args, "regions")
     P, D = grid(args.P_gain, "--P-gain"), grid(args.D_gain, "--D-gain")
+    if args.robust:
+        return _robust_regions(args, params, options, out, plot, P, D)
     loop = ClosedLoop(params, options)
     m = region_map(params, P, D, options=options, radius=args.radius, loop=loop, method=args.method)
 
@@ -179,6 +195,23 @@ def _cmd_regions(args) -> int:
     _write_outputs(out, plot, lambda path, tx: m.save(path, tx, "--out"), figure)
     print(f"{m.stable.size} points ({m.meta['method']}): {m.stable.sum()} stable, {m.low_pm.sum()} stable "
           f"with PM < 30 deg, {m.passive.sum()} passive" + (f"; wrote {out}" if out else ""))
+    return 0
+
+
+def _robust_regions(args, params, options, out, plot, P, D) -> int:
+    from haa_sym.regions import run_meta, save_npz
+    from haa_sym.robust import robust_region
+    r = robust_region(params, P, D, requirements=_requirements(args), leg=_leg(args, params),
+                      leg_mode=args.leg_mode, options=options)
+    meta = run_meta(params, options, **r.meta, n_configurations=r.n_configurations, converged=r.converged,
+                    history=r.history, configurations=r.configurations)
+    _write_outputs(out, plot,
+                   lambda path, tx: save_npz(path, {"P_gain": r.P_gain, "D_gain": r.D_gain, "feasible": r.feasible},
+                                             meta, tx, "--out"),
+                   lambda: _plots().plot_robust(r, title=args.title))
+    print(f"{r.feasible.size} points: {int(r.feasible.sum())} meet {'+'.join(r.meta['requirements'])} for every leg "
+          f"configuration ({r.meta['leg'][0]}..{r.meta['leg'][1]}, {r.meta['leg_mode']}, {r.n_configurations} "
+          f"configurations{'' if r.converged else ', NOT converged'})" + (f"; wrote {out}" if out else ""))
     return 0
 
 
@@ -261,17 +294,13 @@ def _cmd_schedule(args) -> int:
     P, D = grid(args.P_gain, "--P-gain"), grid(args.D_gain, "--D-gain")
     beta_range = _range(args.beta_range, "--beta-range", "the torque-gain scale beta, Eq. 7")
     alphas = None if args.alpha_values is None else grid(args.alpha_values, "--alpha-values")
-    req = tuple(r.strip() for r in args.require.split(",") if r.strip())
-    leg = None
-    if args.leg is not None:
-        a, sep, b = args.leg.partition(":")
-        if not sep:
-            raise ParameterError(f"--leg {args.leg!r}; allowed: FROM:TO, two configuration names of the "
-                                 f"file (or 'nominal'): {['nominal'] + list(params.configurations)}")
-        leg = (a.strip(), b.strip())
     s = schedule(params, P, D, beta_range=beta_range, beta_tol=args.beta_tol, alpha_values=alphas,
-                 requirements=req, leg=leg, leg_mode=args.leg_mode, options=options,
-                 scheduler=args.scheduler)
+                 requirements=_requirements(args), leg=_leg(args, params), leg_mode=args.leg_mode,
+                 options=options, scheduler=args.scheduler)
+    if not s.feasible.any():
+        raise ParameterError(f"--beta-range {args.beta_range}: no beta in the range meets "
+                             f"{'+'.join(s.meta['requirements'])} for every leg configuration at any impedance of "
+                             "the grid; allowed: a range (or requirements) that some impedance meets")
     table = s.table() if args.c_out is not None else None
     with Transaction() as tx:
         if out:
@@ -402,6 +431,15 @@ def _map_args(parser, D_default: str, what: str, suffix: str) -> None:
     parser.add_argument("--title")
 
 
+def _leg_args(parser) -> None:
+    """The leg range and the requirements of ``regions --robust`` and ``schedule``."""
+    parser.add_argument("--require", default="stable,pm", help="stable[,pm][,passive] (default stable,pm)")
+    parser.add_argument("--leg", help="FROM:TO configurations bounding the leg range (default "
+                        "retracted:extended, or the file's first two)")
+    parser.add_argument("--leg-mode", choices=("segment", "box"), default="segment",
+                        help="the leg range: the segment between the two (default) or the box of every pair")
+
+
 def main(argv: list[str] | None = None) -> int:
     from haa_sym import __version__
     ap = _Parser(prog="haa-sym", description=__doc__.splitlines()[0],
@@ -422,6 +460,9 @@ def main(argv: list[str] | None = None) -> int:
     _map_args(r, "lin:1:50:100", "grid spec", ".npz")
     r.add_argument("--radius", action="store_true",
                    help="also compute the spectral radius from eigenvalues (slower)")
+    r.add_argument("--robust", action="store_true",
+                   help="the gains meeting --require for every leg configuration of the range (npz: feasible)")
+    _leg_args(r)
     r.add_argument("--method", choices=("curves", "grid"), default="curves",
                    help="decide the map from the exact boundaries (default) or every point on the grid "
                         "(with per-point phase margin and passivity excess)")
@@ -437,11 +478,7 @@ def main(argv: list[str] | None = None) -> int:
     sc.add_argument("--beta-range", default="0.1:8", help="LO:HI of beta (default 0.1:8)")
     sc.add_argument("--beta-tol", type=float, default=0.02, help="relative step of the beta grid (default 0.02)")
     sc.add_argument("--alpha-values", help="schedule alpha too, from these values (grid spec, e.g. 0,0.5,0.94)")
-    sc.add_argument("--require", default="stable,pm", help="stable[,pm][,passive] (default stable,pm)")
-    sc.add_argument("--leg", help="FROM:TO configurations bounding the leg range (default retracted:extended "
-                    "or the file's first two)")
-    sc.add_argument("--leg-mode", choices=("segment", "box"), default="segment",
-                    help="the leg range: the segment between the two (default) or the box of every pair")
+    _leg_args(sc)
     sc.add_argument("--scheduler", help="address of a dask.distributed scheduler (default: in-process)")
     sc.add_argument("--out", help="output .csv")
     sc.add_argument("--c-out", help="directory for haa_schedule.h and haa_schedule.c")

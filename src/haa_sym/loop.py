@@ -231,6 +231,10 @@ class LoopOptions:
     def __setattr__(self, name, value):
         raise AttributeError("LoopOptions is immutable; use replace(**changes)")
 
+    def __reduce__(self):
+        # pickled by its parts (a dask worker rebuilds it; __setattr__ refuses the default way)
+        return (LoopOptions, self._parts())
+
     def __getattr__(self, name):
         for part, cls in _PARTS:
             if name in cls.__dataclass_fields__:

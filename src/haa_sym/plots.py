@@ -296,3 +296,21 @@ def plot_schedule(s, title: str = ""):
     if title:
         fig.suptitle(title, fontsize=11)
     return fig
+
+
+def plot_robust(r, title: str = ""):
+    """A :class:`haa_sym.robust.RobustRegion`: the gains meeting the requirements for every leg
+    configuration of the range."""
+    fig, ax = plt.subplots(figsize=(4.8, 4.2), layout="constrained")
+    logP = bool(np.all(r.P_gain > 0))
+    ax.pcolormesh(_edges(r.P_gain, logP), _edges(r.D_gain, False), (~r.feasible).T.astype(float),
+                  cmap=ListedColormap(["#ffffff", "#3a3a3a"]), vmin=0, vmax=1, shading="flat")
+    if logP:
+        ax.set_xscale("log")
+    ax.set_xlabel("P_gain (Nm/rad)")
+    ax.set_ylabel("D_gain (Nms/rad)")
+    leg = r.meta["leg"]
+    ax.set_title(title or f"{'+'.join(r.meta['requirements'])} for every leg configuration\n"
+                 f"{leg[0]}..{leg[1]} ({r.meta['leg_mode']}, {r.n_configurations} configurations; dark: fails)",
+                 fontsize=9)
+    return fig

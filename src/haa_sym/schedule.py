@@ -54,6 +54,10 @@ CSV_COLUMNS = ("P_gain", "D_gain", "beta", "alpha", "torque_bandwidth_rad_s", "f
 DEFAULT_P_GAIN = "log:1:2000:30"
 DEFAULT_D_GAIN = "lin:1:50:20"
 COARSE_RATIO = 1.25
+# |L|^2 of a grid sample next to a hidden peak: a peak reaching |L| = 1 between samples of the
+# default grid (1000 points, 0.1 rad/s to Nyquist) shows |L| > 0.1 on its neighbours down to a
+# damping ratio of about 3e-4
+PEAK_FLOOR = 1e-2
 
 
 def beta_grid(beta_range=(0.1, 8.0), beta_tol: float = 0.02) -> tuple[np.ndarray, np.ndarray]:
@@ -148,6 +152,93 @@ def _task_points(params, config, P, D, beta, alpha, requirements, options):
     return ok
 
 
+def _golden(f, lo, hi, sign, steps: int = 40):
+    """Maximise sign * f(x) on every bracket [lo, hi] at once (golden sections)."""
+    g = 0.3819660112501051
+    a, b = lo.copy(), hi.copy()
+    x1, x2 = a + g * (b - a), b - g * (b - a)
+    f1, f2 = sign * f(x1), sign * f(x2)
+    for _ in range(steps):
+        left = f1 >= f2                                  # the maximum is in [a, x2]
+        b = np.where(left, x2, b)
+        a = np.where(left, a, x1)
+        x1n = np.where(left, a + g * (b - a), x2)
+        x2n = np.where(left, x1, b - g * (b - a))
+        fn = sign * f(np.where(left, x1n, x2n))
+        f1, f2 = np.where(left, fn, f2), np.where(left, f1, fn)
+        x1, x2 = x1n, x2n
+    x = np.where(f1 >= f2, x1, x2)
+    return x, sign * np.maximum(f1, f2)
+
+
+def exact_low_pm(loop, P, D, beta: float, alpha: float, pm_deg: float = 30.0) -> np.ndarray:
+    """Per gain point: the impedance loop's phase margin, from crossovers located exactly, is
+    below ``pm_deg`` (the options' rule chooses the crossover, as in the maps).
+
+    The maps locate a crossover between two grid samples by interpolation and miss a pair that
+    a resonance narrower than the grid step hides; near a lightly damped mode both can be wrong
+    by tens of degrees (measured: the SEA's light link at beta 7.6, grid PM 124.9 deg, true
+    crossovers at 340 and 342 rad/s with -96 and 173 deg). Here every sign change of |L| - 1
+    on the grid, and every local extremum of |L| whose neighbours stay on one side of 1 but
+    which refined by golden sections reaches the other side, is located by the Illinois method
+    on the loop's exact frequency response, and the margin taken there.
+    """
+    from haa_sym.sweep import gain_rows, monomial_rows, product_form
+    X = gain_rows(P, D)
+    coef = loop.loop_coefficients(beta=beta, alpha=alpha)
+    lw = np.log(coef.omega)
+    mag2 = monomial_rows(X) @ product_form(coef.L_imp, coef.L_imp).real      # (n, n_omega)
+
+    def L_at(rows, x):
+        return np.einsum("ij,ij->i", X[rows], loop.loop_coefficients(np.exp(x), beta, alpha, cached=False).L_imp)
+
+    # brackets of |L|^2 - 1: sign changes on the grid ...
+    rows, i = np.nonzero((mag2[:, 1:] > 1) != (mag2[:, :-1] > 1))
+    br = [(rows, lw[i], lw[i + 1])]
+    # ... and hidden pairs around narrow peaks (below 1 on the grid) or notches (above)
+    up = np.diff(mag2, axis=1)
+    for mask, sign in (((up[:, :-1] > 0) & (up[:, 1:] < 0) & (mag2[:, 1:-1] < 1) & (mag2[:, 1:-1] > PEAK_FLOOR), 1.0),
+                       ((up[:, :-1] < 0) & (up[:, 1:] > 0) & (mag2[:, 1:-1] > 1) & (mag2[:, 1:-1] < 1 / PEAK_FLOOR), -1.0)):
+        r, k = np.nonzero(mask)
+        if not r.size:
+            continue
+        k = k + 1
+        xe, fe = _golden(lambda x: np.abs(L_at(r, x)) ** 2, lw[k - 1], lw[k + 1], sign)
+        hit = sign * (fe - 1.0) > 0
+        br += [(r[hit], lw[k - 1][hit], xe[hit]), (r[hit], xe[hit], lw[k + 1][hit])]
+    rows = np.concatenate([b[0] for b in br])
+    a = np.concatenate([b[1] for b in br])
+    b = np.concatenate([b[2] for b in br])
+    low = np.zeros(X.shape[0], bool)
+    if not rows.size:
+        return low
+    fa = np.abs(L_at(rows, a)) ** 2 - 1.0
+    fb = np.abs(L_at(rows, b)) ** 2 - 1.0
+    side = np.zeros(rows.size, int)
+    for _ in range(60):                               # Illinois on |L|^2 - 1 in log omega
+        with np.errstate(invalid="ignore", divide="ignore"):
+            x = (a * fb - b * fa) / (fb - fa)
+        x = np.where(np.isfinite(x) & (x > np.minimum(a, b)) & (x < np.maximum(a, b)), x, 0.5 * (a + b))
+        fx = np.abs(L_at(rows, x)) ** 2 - 1.0
+        left = np.sign(fx) == np.sign(fa)              # the root is in [x, b]
+        fb = np.where(left, np.where(side == 1, 0.5 * fb, fb), fx)
+        fa = np.where(left, fx, np.where(side == -1, 0.5 * fa, fa))
+        a, b = np.where(left, x, a), np.where(left, b, x)
+        side = np.where(left, 1, -1)
+        if np.all(np.abs(b - a) <= 1e-12 * (1 + np.abs(a))):
+            break
+    L = L_at(rows, 0.5 * (a + b))
+    margin = np.degrees(np.angle(L)) + 180.0
+    margin = (margin + 180.0) % 360.0 - 180.0
+    margin = np.where(margin == -180.0, 180.0, margin)
+    rule = loop.options.conventions.pm_rule
+    key = np.abs(margin) if rule == "min_abs" else margin
+    order = np.lexsort((key, rows))
+    first = order[np.unique(rows[order], return_index=True)[1]]
+    low[rows[first]] = margin[first] < pm_deg
+    return low
+
+
 class _Runner:
     """Runs task lists on dask (threaded, in-process) or on a dask.distributed cluster."""
 
@@ -197,6 +288,40 @@ class _Runner:
             tasks = [dask.delayed(fn, pure=False)(*a, dask_key_name=f"task-{k}") for k, a in enumerate(args_list)]
             with _Bar():
                 return list(dask.compute(*tasks, scheduler="threads", num_workers=2))
+
+
+def _verify(params, configs, P, D, fine, alphas, best_k, req, options):
+    """Lower each point's beta until its phase margin from exactly located crossovers
+    (:func:`exact_low_pm`) is at least 30 deg at every leg configuration and the maps'
+    requirements still hold; returns the new indices and how many points were lowered."""
+    from haa_sym.loop import ClosedLoop
+    from haa_sym.regions import decide_points
+    loops = [ClosedLoop(params.with_values(**c), options) for c in configs]
+    PP, DD = np.meshgrid(P, D, indexing="ij")
+    PP, DD = PP.ravel(), DD.ravel()
+    best_k = best_k.copy()
+    lowered = set()
+    for a in range(alphas.size):
+        todo = np.flatnonzero(best_k[a] >= 0)
+        checked_maps = False                   # the first round's values passed the maps already
+        while todo.size:
+            bad = np.zeros(best_k.shape[1], bool)
+            for k in np.unique(best_k[a, todo]):
+                pts = todo[best_k[a, todo] == k]
+                for loop in loops:
+                    fail = exact_low_pm(loop, PP[pts], DD[pts], float(fine[k]), float(alphas[a])) \
+                        if "pm" in req else np.zeros(pts.size, bool)
+                    if checked_maps:
+                        st, low, passive = decide_points(loop, PP[pts], DD[pts], float(fine[k]), float(alphas[a]),
+                                                         passivity="passive" in req)
+                        fail |= ~st | (low if "pm" in req else False) | (~passive if "passive" in req else False)
+                    bad[pts[fail]] = True
+            todo = np.flatnonzero(bad)
+            lowered.update(todo.tolist())
+            best_k[a, todo] -= 1                # -1: no beta of the range is left
+            todo = todo[best_k[a, todo] >= 0]
+            checked_maps = True
+    return best_k, len(lowered)
 
 
 def _free_in_the_air(params: Params) -> Params:
@@ -328,6 +453,7 @@ def schedule(params: Params, P_gain=None, D_gain=None, *, beta_range=(0.1, 8.0),
             if same:
                 converged = True
                 break
+        current, lowered = _verify(params, configs, P, D, fine, alphas, current, req, options)
         # beta = 1 (the file's own torque gains) at the file's alpha, for the comparison
         res = runner.run(_task_map, [(params, c, P, D, 1.0, float(ctrl.alpha if alpha is None else alpha), req,
                                       options) for c in configs], "schedule: beta = 1")
@@ -361,7 +487,7 @@ def schedule(params: Params, P_gain=None, D_gain=None, *, beta_range=(0.1, 8.0),
             "alpha_scheduled": alpha_values is not None, "alpha_values": alphas.tolist(),
             "leg": list(ends), "leg_mode": leg_mode, "haa_sym": __version__,
             "scheduler": "dask threads (in-process)" if scheduler is None else "dask.distributed",
-            "torque_bandwidth_beta_1_rad_s": bw_1,
+            "torque_bandwidth_beta_1_rad_s": bw_1, "lowered_by_exact_margins": lowered,
             "options": options.resolved(params.plant.topology).to_dict()}
     return Schedule(P, D, beta_out.reshape(shape), alpha_out.reshape(shape), bw_out.reshape(shape),
                     feasible.reshape(shape), len(configs), converged, history, meta,

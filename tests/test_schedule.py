@@ -1,0 +1,162 @@
+"""The torque-gain scheduler and robust regions (issue 10): the schedule's feasible rows are
+stable with PM >= 30 deg at both leg ends and in between by an independent computation (the
+explicit closed loop's eigenvalues and state-space frequency response), beta 10 % higher fails
+for at least one of them; the CSV, the embedded C, the dask cluster and bad input."""
+import csv
+import ctypes
+import io
+import subprocess
+
+import numpy as np
+import pytest
+
+from haa_sym import ClosedLoop, ParameterError, load_params
+from haa_sym import reference as ref
+from haa_sym.cli import main
+from haa_sym.margins import stability_margins
+from haa_sym.robust import feasible_map, leg_configurations, robust_region
+from haa_sym.schedule import CSV_COLUMNS, schedule
+
+from conftest import ROOT
+
+P_SMALL, D_SMALL = np.geomspace(5.0, 2000.0, 6), np.linspace(1.0, 50.0, 5)
+
+
+@pytest.fixture(scope="module")
+def hyq_schedule():
+    return schedule(load_params(), P_SMALL, D_SMALL, progress=False)
+
+
+def _meets(params, config, P, D, beta, alpha) -> bool:
+    """Stable with PM >= 30 deg, independently: eigenvalues of the explicit closed loop and the
+    impedance loop's state-space frequency response on a dense grid (smallest-|PM| crossover)."""
+    p = params.with_values(**config)
+    loop = ClosedLoop(p, basis=False)
+    if ref.spectral_radius(loop, P, D, beta, alpha) >= 1:
+        return False
+    Ts = p.controller.Ts
+    w = np.geomspace(0.1, np.pi / Ts * (1 - 1e-9), 3000)
+    pm = stability_margins(ref.frequency_response(loop, w, P, D, beta, alpha, which=("L_imp",))["L_imp"], w)
+    return pm.phase_margins_deg.size == 0 or np.abs(pm.phase_margins_deg).min() >= 30.0 and \
+        pm.phase_margins_deg[np.argmin(np.abs(pm.phase_margins_deg))] >= 30.0
+
+
+def test_feasible_rows_hold_at_every_leg_configuration_and_10_percent_more_fails(hyq_schedule):
+    s = hyq_schedule
+    params = load_params()
+    assert s.converged and s.feasible.any() and not s.feasible.all()
+    checks = leg_configurations(params, 5)              # both ends, the middle, the quarters
+    rng = np.random.default_rng(3)
+    feas = np.argwhere(s.feasible)
+    below_top = [(i, j) for i, j in feas if s.beta[i, j] * 1.1 < s.meta["beta_range"][1]]
+    assert below_top
+    for i, j in [feas[k] for k in rng.choice(len(feas), 4, replace=False)] + \
+            [below_top[k] for k in rng.choice(len(below_top), min(4, len(below_top)), replace=False)]:
+        P, D, beta, alpha = s.P_gain[i], s.D_gain[j], s.beta[i, j], s.alpha[i, j]
+        assert all(_meets(params, c, P, D, beta, alpha) for c in checks), (P, D, beta)
+        if beta * 1.1 < s.meta["beta_range"][1]:
+            assert not all(_meets(params, c, P, D, beta * 1.1, alpha) for c in checks), (P, D, beta)
+
+
+def test_infeasible_points_have_no_robust_beta_on_the_coarse_grid(hyq_schedule):
+    """Where the schedule finds nothing, even the smallest beta of the range fails at some leg."""
+    s = hyq_schedule
+    params = load_params()
+    assert (~s.feasible).any()
+    for i, j in np.argwhere(~s.feasible)[:3]:
+        lo = s.meta["beta_range"][0]
+        assert not all(_meets(params, c, s.P_gain[i], s.D_gain[j], lo, params.controller.alpha)
+                       for c in leg_configurations(params, 2))
+
+
+def test_csv_has_exactly_the_issue_columns(tmp_path, capsys):
+    out = tmp_path / "s.csv"
+    assert main(["schedule", "--P-gain", "log:5:2000:4", "--D-gain", "lin:1:50:3", "--out", str(out), "-q"]) == 0
+    rows = list(csv.reader(io.StringIO(out.read_text())))
+    assert tuple(rows[0]) == CSV_COLUMNS
+    assert len(rows) == 1 + 4 * 3
+    for r in rows[1:]:
+        assert r[5] in ("true", "false")
+        if r[5] == "true":
+            assert float(r[2]) > 0 and float(r[4]) > 0
+        else:
+            assert r[2] == r[3] == r[4] == ""
+    assert "impedances" in capsys.readouterr().out
+
+
+@pytest.mark.parametrize("name", ["sea", "harmonic_drive"])
+def test_runs_on_the_other_built_in_actuators(name):
+    p = load_params(ROOT / "model" / f"{name}.toml")
+    s = schedule(p, np.geomspace(5.0, 2000.0, 4), np.linspace(1.0, 50.0, 3), beta_tol=0.05, progress=False)
+    assert s.meta["leg"] == ["light", "heavy"] and s.feasible.any()
+    i, j = np.argwhere(s.feasible)[0]
+    assert all(_meets(p, c, s.P_gain[i], s.D_gain[j], s.beta[i, j], s.alpha[i, j])
+               for c in leg_configurations(p, 3))
+
+
+def test_c_lookup_returns_the_schedule_at_the_grid_points(tmp_path):
+    from haa_sym.compiled import Compiler, NoCompiler
+    try:
+        cc = Compiler().argv
+    except NoCompiler as exc:
+        pytest.skip(str(exc))
+    out = tmp_path / "s.csv"
+    assert main(["schedule", "--P-gain", "log:5:2000:5", "--D-gain", "lin:1:50:4", "--out", str(out),
+                 "--c-out", str(tmp_path), "-q"]) == 0
+    lib = tmp_path / "libs.so"
+    proc = subprocess.run([*cc, "-std=c99", "-Wall", "-Wextra", "-Werror", "-pedantic", "-O2", "-fPIC", "-shared",
+                           "-o", str(lib), str(tmp_path / "haa_schedule.c"), "-lm"], capture_output=True, text=True)
+    assert proc.returncode == 0, proc.stderr
+    c = ctypes.CDLL(str(lib))
+    for f in (c.haa_schedule_beta, c.haa_schedule_feasible):
+        f.argtypes = [ctypes.c_double, ctypes.c_double]
+    c.haa_schedule_beta.restype = ctypes.c_double
+    rows = list(csv.DictReader(io.StringIO(out.read_text())))
+    for r in rows:
+        P, D = float(r["P_gain"]), float(r["D_gain"])
+        if r["feasible"] == "true":
+            assert c.haa_schedule_beta(P, D) == pytest.approx(float(r["beta"]), rel=1e-11)
+
+
+def test_box_is_inside_the_segment_and_the_ends_bound_it():
+    p = load_params()
+    P, D = np.geomspace(5.0, 2000.0, 12), np.linspace(1.0, 50.0, 8)
+    seg = robust_region(p, P, D, beta=3.0)
+    box = robust_region(p, P, D, beta=3.0, leg_mode="box")
+    assert seg.converged and box.converged and box.n_configurations >= 4
+    assert not (box.feasible & ~seg.feasible).any()          # the box contains the segment
+    for name in ("retracted", "extended"):
+        end = feasible_map(p.configuration(name), P, D, 3.0, p.controller.alpha)
+        assert not (seg.feasible & ~end).any()
+
+
+def test_distributed_cluster_gives_the_same_bytes():
+    distributed = pytest.importorskip("distributed")
+    p = load_params()
+    P, D = np.geomspace(5.0, 2000.0, 4), np.linspace(1.0, 50.0, 3)
+    local = schedule(p, P, D, beta_tol=0.05, progress=False).csv_text()
+    with distributed.LocalCluster(n_workers=2, threads_per_worker=1, processes=True, dashboard_address=None) as cl, \
+            distributed.Client(cl) as client:
+        remote = schedule(p, P, D, beta_tol=0.05, progress=False, scheduler=client).csv_text()
+        by_address = schedule(p, P, D, beta_tol=0.05, progress=False, scheduler=cl.scheduler_address).csv_text()
+    assert remote.encode() == local.encode() == by_address.encode()
+
+
+@pytest.mark.parametrize("argv, message", [
+    (["--beta-range", "8:0.1"], "--beta-range '8:0.1'; allowed: LO:HI with 0 < LO < HI"),
+    (["--beta-range", "2:2"], "--beta-range '2:2'; allowed: LO:HI with 0 < LO < HI"),
+    (["--beta-range", "1000:2000"], "no beta in the range meets"),
+    (["--P-gain", "lin:0:100:4"], "allowed: P_gain > 0"),
+    (["--P-gain", "5"], "P_gain: 1 value(s); allowed: at least 2"),
+    (["--leg", "retracted:flying"], "allowed: two different names of ['nominal', 'extended', 'retracted']"),
+    (["--require", "pm"], "allowed: 'stable' and any of"),
+    (["--scheduler", "tcp://127.0.0.1:9"], "no dask scheduler answers there"),
+    (["--c-out", "/nonexistent-dir"], "--c-out '/nonexistent-dir' does not exist"),
+])
+def test_bad_input_one_message_nothing_written(tmp_path, capsys, argv, message):
+    out = tmp_path / "s.csv"
+    opts = {"--P-gain": "log:5:2000:3", "--D-gain": "lin:1:50:2", "--out": str(out), **dict(zip(argv[::2], argv[1::2]))}
+    assert main(["schedule", "-q"] + [x for kv in opts.items() for x in kv]) == 2
+    err = capsys.readouterr().err
+    assert message in err and err.count("\n") == 1, err
+    assert not out.exists()
