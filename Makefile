@@ -34,6 +34,7 @@ bench: $(STAMP)
 	$(PY) benchmarks/bench_baselines.py
 	$(PY) benchmarks/bench_regions.py
 	$(PY) benchmarks/bench_boundary.py
+	$(PY) benchmarks/bench_schedule.py
 
 ## The whole test suite.
 test: $(STAMP)

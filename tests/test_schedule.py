@@ -135,11 +135,10 @@ def test_distributed_cluster_gives_the_same_bytes():
     p = load_params()
     P, D = np.geomspace(5.0, 2000.0, 4), np.linspace(1.0, 50.0, 3)
     local = schedule(p, P, D, beta_tol=0.05, progress=False).csv_text()
-    with distributed.LocalCluster(n_workers=2, threads_per_worker=1, processes=True, dashboard_address=None) as cl, \
-            distributed.Client(cl) as client:
-        remote = schedule(p, P, D, beta_tol=0.05, progress=False, scheduler=client).csv_text()
-        by_address = schedule(p, P, D, beta_tol=0.05, progress=False, scheduler=cl.scheduler_address).csv_text()
-    assert remote.encode() == local.encode() == by_address.encode()
+    with distributed.LocalCluster(n_workers=2, threads_per_worker=1, processes=True, dashboard_address=None) as cl:
+        # by address, as `haa-sym schedule --scheduler ADDRESS` does
+        remote = schedule(p, P, D, beta_tol=0.05, progress=False, scheduler=cl.scheduler_address).csv_text()
+    assert remote.encode() == local.encode()
 
 
 @pytest.mark.parametrize("argv, message", [

@@ -269,8 +269,16 @@ def delay(d: int) -> Element:
 
 def common_denominator(*elements: Element):
     """``(D, [A_i])``: the monic least common multiple D(z) of the denominators and the
-    numerators A_i(z) with element_i = A_i / D, exact."""
+    numerators A_i(z) with element_i = A_i / D, exact (memoised: every closed loop of a sweep
+    over plants asks for the same few)."""
+    D, nums = _common_denominator(tuple((e.numerator, e.denominator) for e in elements))
+    return D, list(nums)
+
+
+@lru_cache(maxsize=256)
+def _common_denominator(parts: tuple):
     D = (Fraction(1),)
+    elements = [Element("", n, d) for n, d in parts]
     for e in elements:
         den = _monic(e.denominator)
         D = _monic(_divmod(_mul(D, den), _gcd(D, den))[0])
@@ -279,4 +287,4 @@ def common_denominator(*elements: Element):
         q, r = _divmod(D, _monic(e.denominator))
         assert not any(r)
         nums.append(_mul(tuple(c / e.denominator[0] for c in e.numerator), q))
-    return D, nums
+    return D, tuple(nums)

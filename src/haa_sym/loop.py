@@ -31,6 +31,7 @@ Example
 from __future__ import annotations
 
 import dataclasses
+import functools
 import re
 from dataclasses import dataclass, field
 from fractions import Fraction
@@ -410,9 +411,10 @@ class ClosedLoop:
     def torque_output(self) -> str:
         return "T_sensor" if self.options.structure.torque_damping else "T_sensor_spring"
 
-    @property
+    @functools.cached_property
     def elements(self) -> dict:
-        """The controller's elements (:mod:`haa_sym.elements`) in this loop, by role.
+        """The controller's elements (:mod:`haa_sym.elements`) in this loop, by role (built once
+        per loop: their exact coefficients cost rational arithmetic).
 
         ``F_d`` the velocity estimate of the D term (Eq. 8), ``F_vc`` that of the velocity
         compensation (Eq. 6) (option ``filter``: the chosen ``velocity_filter`` on both, or on one

@@ -256,7 +256,7 @@ class _Runner:
             return
         address = str(scheduler)
         try:
-            self.client = Client(address, timeout="5s", set_as_default=False)
+            self.client = Client(address, timeout="2s")
         except (OSError, TimeoutError, ValueError) as e:
             raise ParameterError(f"--scheduler {address!r}: no dask scheduler answers there ({type(e).__name__}: "
                                  f"{str(e).splitlines()[0] if str(e) else 'timed out'}); allowed: the address of "

@@ -209,8 +209,8 @@ def write_report(out: Path, r: dict, spec: dict, options: LoopOptions, verify_te
     if grid:
         add(f"\nThe maps were decided from the exact boundaries (`haa_sym.boundary.classify_regions`: "
             f"each grid row split where the stability, 30 deg phase-margin and passivity curves cross "
-            f"it, one decision per segment). The generated grid evaluators decided all {n_pts} points "
-            f"again: they disagree on **{sum(g['stable'] for g in grid)}** stability, "
+            f"it, one decision per segment). The generated grid evaluators decided every point of "
+            f"{len(grid)} of the {len(cc)} maps again: they disagree on **{sum(g['stable'] for g in grid)}** stability, "
             f"**{sum(g['low_pm'] for g in grid)}** PM < 30 deg and **{sum(g['passive'] for g in grid)}** "
             "passivity decisions. The curves drawn over the maps are the exact boundaries.")
     add("\n## Figures\n")

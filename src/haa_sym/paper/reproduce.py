@@ -233,10 +233,12 @@ def _regions(job: _Job) -> dict:
         loop = ClosedLoop(p, job.options)
         m = region_map(p, job.P_grid, job.D_grid, options=job.options, loop=loop)
         curves = boundaries(p, options=job.options, loop=loop, P_range=(job.P_grid.min(), job.P_grid.max()),
-                            D_range=(job.D_grid.min(), job.D_grid.max())) \
+                            D_range=(job.D_grid.min(), job.D_grid.max()), n_lines=31 if job.quick else 101) \
             if loop.options.conventions.pm_loop == "impedance" else None
         crosscheck[pid] = eigenvalue_crosscheck(m, loop, points="boundary")
-        if m.meta["method"] == "curves":          # the grid evaluators decide every point again
+        # the grid evaluators decide every point again (quick mode: the first panel of each figure)
+        first = entry["figure"] not in panels_by_fig
+        if m.meta["method"] == "curves" and (first or not job.quick):
             g = region_map(p, job.P_grid, job.D_grid, options=job.options, loop=loop, method="grid")
             crosscheck[pid]["grid_disagree"] = {k: int((getattr(m, k) != getattr(g, k)).sum())
                                                 for k in ("stable", "low_pm", "passive")}

@@ -1,0 +1,60 @@
+"""How the torque-gain schedule's time grows with the impedance grid, in-process and on a
+two-worker dask.distributed LocalCluster, side by side in one run.
+
+HyQ (model/hyq_haa.toml), requirements stable + PM >= 30 deg, beta 0.1..8 with tolerance 0.02,
+leg retracted..extended; impedance grids P_gain log 1..2000 x D_gain lin 1..50 of 10 x 10,
+20 x 15 and 40 x 25 points. In-process runs dask's threaded scheduler (2 threads); the cluster
+has two worker processes of one thread each, started before the timing. Every schedule is
+compared byte for byte (CSV) between the two.
+
+Prints a table and writes ``benchmarks/results_schedule.json``.
+Usage: python benchmarks/bench_schedule.py
+"""
+from __future__ import annotations
+
+import json
+import platform
+import time
+from pathlib import Path
+
+import numpy as np
+
+from haa_sym import load_params
+from haa_sym.schedule import schedule
+
+OUT = Path(__file__).with_name("results_schedule.json")
+GRIDS = ((10, 10), (20, 15), (40, 25))
+
+
+def main() -> int:
+    import distributed
+    p = load_params()
+    results = {"machine": platform.machine(), "python": platform.python_version(), "rows": []}
+    with distributed.LocalCluster(n_workers=2, threads_per_worker=1, processes=True,
+                                  dashboard_address=None) as cluster, distributed.Client(cluster) as client:
+        client.run(lambda: __import__("haa_sym.schedule"))          # warm the workers' imports
+        for n_P, n_D in GRIDS:
+            P, D = np.geomspace(1.0, 2000.0, n_P), np.linspace(1.0, 50.0, n_D)
+            t = time.perf_counter()
+            local = schedule(p, P, D, progress=False)
+            t_local = time.perf_counter() - t
+            t = time.perf_counter()
+            remote = schedule(p, P, D, progress=False, scheduler=client)
+            t_cluster = time.perf_counter() - t
+            same = local.csv_text() == remote.csv_text()
+            row = {"grid": f"{n_P} x {n_D}", "points": n_P * n_D, "local_s": t_local, "cluster_s": t_cluster,
+                   "same_bytes": same, "leg_configurations": local.n_configurations,
+                   "feasible": int(local.feasible.sum()), "lowered_by_exact_margins": local.meta["lowered_by_exact_margins"]}
+            results["rows"].append(row)
+            print(f"{row['grid']:>8} ({row['points']:4d} points): in-process {t_local:6.1f} s, two-worker cluster "
+                  f"{t_cluster:6.1f} s, same bytes: {same}, leg configurations {local.n_configurations}")
+    r = results["rows"]
+    print(f"time per point in-process: {r[0]['local_s'] / r[0]['points'] * 1e3:.1f} ms ({r[0]['grid']}) -> "
+          f"{r[-1]['local_s'] / r[-1]['points'] * 1e3:.1f} ms ({r[-1]['grid']})")
+    OUT.write_text(json.dumps(results, indent=1) + "\n")
+    print(f"wrote {OUT}")
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())
