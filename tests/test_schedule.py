@@ -69,21 +69,6 @@ def test_infeasible_points_have_no_robust_beta_on_the_coarse_grid(hyq_schedule):
                        for c in leg_configurations(params, 2))
 
 
-def test_csv_has_exactly_the_issue_columns(tmp_path, capsys):
-    out = tmp_path / "s.csv"
-    assert main(["schedule", "--P-gain", "log:5:2000:4", "--D-gain", "lin:1:50:3", "--out", str(out), "-q"]) == 0
-    rows = list(csv.reader(io.StringIO(out.read_text())))
-    assert tuple(rows[0]) == CSV_COLUMNS
-    assert len(rows) == 1 + 4 * 3
-    for r in rows[1:]:
-        assert r[5] in ("true", "false")
-        if r[5] == "true":
-            assert float(r[2]) > 0 and float(r[4]) > 0
-        else:
-            assert r[2] == r[3] == r[4] == ""
-    assert "impedances" in capsys.readouterr().out
-
-
 @pytest.mark.parametrize("name", ["sea", "harmonic_drive"])
 def test_runs_on_the_other_built_in_actuators(name):
     p = load_params(ROOT / "model" / f"{name}.toml")
@@ -94,15 +79,24 @@ def test_runs_on_the_other_built_in_actuators(name):
                for c in leg_configurations(p, 3))
 
 
-def test_c_lookup_returns_the_schedule_at_the_grid_points(tmp_path):
+def test_cli_csv_has_the_issue_columns_and_the_c_lookup_returns_it(tmp_path, capsys):
     from haa_sym.compiled import Compiler, NoCompiler
+    out = tmp_path / "s.csv"
+    assert main(["schedule", "--P-gain", "log:5:2000:5", "--D-gain", "lin:1:50:4", "--beta-tol", "0.05",
+                 "--out", str(out), "--c-out", str(tmp_path), "--plot", str(tmp_path / "s.png"), "-q"]) == 0
+    assert "impedances" in capsys.readouterr().out
+    rows = list(csv.reader(io.StringIO(out.read_text())))
+    assert tuple(rows[0]) == CSV_COLUMNS and len(rows) == 1 + 5 * 4
+    for r in rows[1:]:
+        assert r[5] in ("true", "false")
+        if r[5] == "true":
+            assert float(r[2]) > 0 and float(r[4]) > 0
+        else:
+            assert r[2] == r[3] == r[4] == ""
     try:
         cc = Compiler().argv
     except NoCompiler as exc:
         pytest.skip(str(exc))
-    out = tmp_path / "s.csv"
-    assert main(["schedule", "--P-gain", "log:5:2000:5", "--D-gain", "lin:1:50:4", "--out", str(out),
-                 "--c-out", str(tmp_path), "-q"]) == 0
     lib = tmp_path / "libs.so"
     proc = subprocess.run([*cc, "-std=c99", "-Wall", "-Wextra", "-Werror", "-pedantic", "-O2", "-fPIC", "-shared",
                            "-o", str(lib), str(tmp_path / "haa_schedule.c"), "-lm"], capture_output=True, text=True)

@@ -92,8 +92,8 @@ def _candidates(r: np.ndarray, neutral: np.ndarray):
     ``inner`` ends of a run inside the range, where the two roots meet between two samples: the
     root's extremum can lie between that meeting point and the next sample, unbracketed."""
     fin = np.isfinite(r)
-    up = np.diff(r, axis=1)
-    with np.errstate(invalid="ignore"):
+    with np.errstate(invalid="ignore"):                # inf - inf where a root is at infinity
+        up = np.diff(r, axis=1)
         ext = np.zeros_like(fin)
         ext[:, 1:-1] = fin[:, :-2] & fin[:, 1:-1] & fin[:, 2:] & (up[:, :-1] * up[:, 1:] <= 0) \
             & ~((up[:, :-1] == 0) & (up[:, 1:] == 0))

@@ -51,7 +51,7 @@ __all__ = ["reproduce", "region_trends"]
 # The names reproduce writes (regions/ holds only the maps): an existing output directory with
 # anything else in it is not replaced.
 _OUTPUT_NAMES = re.compile(r"fig\d\d(_step_info)?\.(png|csv)|table2\.(md|csv)|options_table2\.csv|contact\.(png|csv)"
-                           r"|torque_bandwidth\.(png|csv)"
+                           r"|torque_bandwidth\.(png|csv)|schedule\.(png|csv)"
                            r"|verify\.txt|claims\.json|REPORT\.md|regions")
 _REGION_NAMES = re.compile(r"fig\d\d[a-z]\.npz")
 
@@ -452,6 +452,33 @@ def _torque_bandwidth(job: _Job) -> dict:
     return {"torque_bandwidth": summary}
 
 
+def _schedule(job: _Job) -> dict:
+    """The paper's outlook (Sec. 6): the torque-gain schedule over the locomotion impedances,
+    robust to the leg, against the fixed beta = 1 of the paper's tuning."""
+    from haa_sym.plots import plot_schedule, save_figure
+    from haa_sym.schedule import schedule
+    P = grid("log:5:2000:4" if job.quick else "log:1:2000:30", "P_gain")
+    D = grid("lin:1:50:3" if job.quick else "lin:1:50:20", "D_gain")
+    s = schedule(job.params, P, D, options=job.options, beta_tol=0.1 if job.quick else 0.02)
+    _write_text(job.out / "schedule.csv", s.csv_text())
+    save_figure(plot_schedule(s, "Torque-gain schedule (stable, PM >= 30 deg for every leg configuration)"),
+                job.out / "schedule.png")
+    bw1 = s.meta["torque_bandwidth_beta_1_rad_s"]
+    both = s.feasible & s.beta_fixed_feasible
+    gain = s.torque_bandwidth_rad_s[both] / bw1
+    return {"schedule": {"grid": f"{P.size} x {D.size}", "points": int(s.feasible.size),
+                         "P_range": [float(P[0]), float(P[-1])], "D_range": [float(D[0]), float(D[-1])],
+                         "feasible": int(s.feasible.sum()), "beta_1_safe": int(s.beta_fixed_feasible.sum()),
+                         "beta_1_unsafe_where_schedule_safe": int((s.feasible & ~s.beta_fixed_feasible).sum()),
+                         "no_robust_beta": int((~s.feasible).sum()),
+                         "bandwidth_beta_1_rad_s": bw1,
+                         "bandwidth_gain_median": float(np.median(gain)) if gain.size else None,
+                         "bandwidth_gain_range": [float(gain.min()), float(gain.max())] if gain.size else None,
+                         "beta_range": s.meta["beta_range"], "beta_tol": s.meta["beta_tol"],
+                         "leg": s.meta["leg"], "leg_configurations": s.n_configurations,
+                         "lowered_by_exact_margins": s.meta["lowered_by_exact_margins"]}}
+
+
 def _verify(job: _Job) -> tuple[dict, str]:
     """``python -m haa_sym.verify`` in its own process: the numeric runtime never imports sympy."""
     src = job.params.source
@@ -490,7 +517,7 @@ def reproduce(out: str | Path = "results", params: Params | None = None,
                    P_grid=P_grid, D_grid=D_grid)
         result: dict = {"meta": run_meta(params, options, quick=quick)}
         # one bar over the sections (stderr; shown on a terminal after 2 s, see haa_sym.progress)
-        with progress_bar(11, "reproduce", "section") as bar:
+        with progress_bar(12, "reproduce", "section") as bar:
             def run(section, *args):
                 result.update(section(job, *args))
                 bar.update(1)
@@ -507,6 +534,7 @@ def reproduce(out: str | Path = "results", params: Params | None = None,
             run(_fig7)
             run(_torque_loop_corners)
             run(_torque_bandwidth)
+            run(_schedule)
             verify_status, verify_text = _verify(job)
             result.update(verify_status)
             bar.update(1)
