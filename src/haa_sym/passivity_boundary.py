@@ -47,6 +47,9 @@ ON_BOUNDARY_DEG = 1e-6
 # Brent's method from the grid's bracket (one grid step, ~1.4e-2 in log omega by default) to
 # 1e-10 in log omega: the root at the extremum is then exact to rounding (its error is quadratic)
 REFINE_XTOL = 1e-10
+# a candidate whose grid sample another grid frequency puts this far beyond +-90 deg is inside
+# the non-passive set (the refinement moves a boundary point by far less)
+PRUNE_DEG = 1e-2
 REFINE_STEPS = 80
 
 
@@ -293,20 +296,32 @@ def passivity_boundary(loop: ClosedLoop, beta: float | None = None, alpha: float
     for along, t in lines.items():
         found[along], todo[along] = _line_points(Q, omega, along, t)
     # every extremum of every line refined together: one frequency evaluation per step
+    fam = np.concatenate([np.full(v[0].size, a == "P_gain") for a, v in todo.items()])
     j = np.concatenate([v[0] for v in todo.values()])
-    on_P = np.concatenate([np.full(v[0].size, a == "P_gain") for a, v in todo.items()])
     t = np.concatenate([lines[a][v[0]] for a, v in todo.items()])
     branch, sign, tri, col = (np.concatenate([v[k] for v in todo.values()]) for k in (1, 2, 3, 4))
+    # only candidates that can be on the boundary: in the box (with room for the refinement to
+    # move them) and not inside the non-passive set at their grid sample (another grid frequency
+    # puts that point beyond +-90 deg by more than PRUNE_DEG)
+    i = np.clip(np.searchsorted(np.log(omega), tri[:, 1]), 0, omega.size - 1)
+    r0 = [_roots(Q[:, i], t, along, pointwise=True) for along in ("D_gain", "P_gain")]
+    r0 = np.where(branch == 0, np.where(fam, r0[1][0], r0[0][0]), np.where(fam, r0[1][1], r0[0][1]))
+    lo = np.where(fam, D_range[0], P_range[0])
+    hi = np.where(fam, D_range[1], P_range[1])
+    span = hi - lo
+    keep = np.isfinite(r0) & (r0 >= lo - 0.05 * span) & (r0 <= hi + 0.05 * span)
+    P0, D0 = np.where(fam, t, r0), np.where(fam, r0, t)
+    k = np.flatnonzero(keep)
+    keep[k] = _worst_excess(loop, P0[k], D0[k], beta, alpha, omega) <= PRUNE_DEG
+    fam, j, t, branch, sign, tri, col = (v[keep] for v in (fam, j, t, branch, sign, tri, col))
     k = np.flatnonzero(col >= 0)
     if k.size:
-        tri[k, col[k]] = _meeting_points(loop, tri[k, 1], tri[k, col[k]], on_P[k], t[k], branch[k], beta, alpha)
-    x, wx = _refine(loop, on_P, t, branch, sign, tri, beta, alpha)
-    start = 0
+        tri[k, col[k]] = _meeting_points(loop, tri[k, 1], tri[k, col[k]], fam[k], t[k], branch[k], beta, alpha)
+    x, wx = _refine(loop, fam, t, branch, sign, tri, beta, alpha)
     for along, f in found.items():
-        n = todo[along][0].size
-        sl = slice(start, start + n)
-        start += n
-        f[0], f[1], f[2] = np.concatenate([f[0], j[sl]]), np.concatenate([f[1], x[sl]]), np.concatenate([f[2], wx[sl]])
+        m = fam == (along == "P_gain")
+        n = int(m.sum())
+        f[0], f[1], f[2] = np.concatenate([f[0], j[m]]), np.concatenate([f[1], x[m]]), np.concatenate([f[2], wx[m]])
         f[3] = np.concatenate([f[3], np.full(n, "passivity")])
         lo, hi = box["P_gain" if along == "D_gain" else "D_gain"]
         keep = np.isfinite(f[1]) & (f[1] >= lo) & (f[1] <= hi)
