@@ -153,3 +153,13 @@ def test_bad_input_one_message_nothing_written(tmp_path, capsys, argv, message):
     err = capsys.readouterr().err
     assert message in err and err.count("\n") == 1, err
     assert not out.exists()
+
+
+def test_progress_counts_the_tasks_in_process(capsys):
+    from haa_sym.schedule import _Runner, _task_map
+    p = load_params()
+    r = _Runner(None, True)
+    out = r.run(_task_map, [(p, {}, np.array([10.0, 100.0]), np.array([1.0, 5.0]), b, p.controller.alpha,
+                             ("stable", "pm"), None) for b in (0.5, 1.0, 2.0)], "schedule: maps")
+    assert len(out) == 3 and all(o.shape == (2, 2) for o in out)
+    assert "3/3" in capsys.readouterr().err

@@ -158,6 +158,8 @@ def _refine(loop, on_P_line, t, branch, sign, lw, beta, alpha):
     def f(k, x):                                      # Brent minimises
         return -sign[k] * _root_at(loop, x, on_P_line[k], t[k], branch[k], beta, alpha)
     n = lw.shape[0]
+    if n == 0:
+        return np.zeros(0), np.zeros(0)
     a, b = lw[:, 0].copy(), lw[:, 2].copy()
     x = lw[:, 1].copy()
     fx = f(np.arange(n), x)

@@ -283,7 +283,7 @@ class _Runner:
 
             class _Bar(Callback):
                 def _posttask(self, key, result, dsk, state, worker_id):
-                    if isinstance(key, tuple) and str(key[0]).startswith("task-"):
+                    if str(key[0] if isinstance(key, tuple) else key).startswith("task-"):
                         bar.update(1)
             tasks = [dask.delayed(fn, pure=False)(*a, dask_key_name=f"task-{k}") for k, a in enumerate(args_list)]
             with _Bar():
