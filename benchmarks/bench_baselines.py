@@ -66,13 +66,13 @@ from pathlib import Path
 import control as ct
 import numpy as np
 
+from timing import REPEATS, best
 from haa_sym import ClosedLoop, load_params
 from haa_sym.boundary import classify_regions, stability_boundary
 from haa_sym.reference import closed_loop_matrices
 from haa_sym.regions import CHUNK, PM_THRESHOLD_DEG, grid, region_map
 from haa_sym.sweep import BLAS_THREADS, SWEEP_THREADS, blas_limits, colgate_factor, gain_rows, phase_excess
 
-REPEATS = 3
 N_SAMPLE = 20                      # python-control points per configuration (5 x 4 lattice)
 BAND = 1e-6                        # |rho - 1| below this: a pole on the circle, not compared
 CONFIGS = (("nominal (N_av = 4)", {}), ("N_av = 50", {"N_av": 50}))
@@ -84,13 +84,6 @@ CURVES_PASSIVITY = "passivity" in inspect.signature(classify_regions).parameters
 GRID = {"method": "grid"} if MAP_METHODS else {}
 
 
-def best(fn, repeats=REPEATS):
-    times, out = [], None
-    for _ in range(repeats):
-        t = time.perf_counter()
-        out = fn()
-        times.append(time.perf_counter() - t)
-    return min(times), out
 
 
 def chunked(fn, n, chunk=CHUNK):

@@ -18,9 +18,9 @@ from __future__ import annotations
 import inspect
 import json
 import platform
-import time
 from pathlib import Path
 
+from timing import REPEATS, best
 from haa_sym import ClosedLoop, load_params
 from haa_sym.boundary import boundaries, classify_regions, phase_margin_curves, stability_boundary
 from haa_sym.regions import grid, region_map
@@ -30,17 +30,9 @@ GRID = {"method": "grid"} if "method" in inspect.signature(region_map).parameter
 # stability and PM < 30 only, like the grid map below, once classify_regions can do passivity too
 STAB_PM = {"passivity": False} if "passivity" in inspect.signature(classify_regions).parameters else {}
 
-REPEATS = 3
 OUT = Path(__file__).with_name("results_boundary.json")
 
 
-def best(fn, repeats=REPEATS):
-    times, out = [], None
-    for _ in range(repeats):
-        t = time.perf_counter()
-        out = fn()
-        times.append(time.perf_counter() - t)
-    return min(times), out
 
 
 def main() -> int:

@@ -39,26 +39,19 @@ from pathlib import Path
 
 import numpy as np
 
+from timing import REPEATS, best
 from haa_sym import ClosedLoop, load_params
 from haa_sym.regions import grid, region_map
 
 # the grid evaluators, named explicitly once region_map has a choice of method
 GRID = {"method": "grid"} if "method" in inspect.signature(region_map).parameters else {}
 
-REPEATS = 3
 BAND = 1e-6
 HERE = Path(__file__).resolve().parent
 # (grid side, N_av, the target ratio: stacked-eigvals script / haa-sym regions)
 WHOLE_PROCESS = ((1000, 4, 20.0), (250, 50, 50.0))
 
 
-def best(fn, repeats=REPEATS):
-    out, times = None, []
-    for _ in range(repeats):
-        t = time.perf_counter()
-        out = fn()
-        times.append(time.perf_counter() - t)
-    return min(times), out
 
 
 def run(n_P=200, n_D=200, configs=(("nominal (N_av = 4)", {}), ("N_av = 50", {"N_av": 50}))):

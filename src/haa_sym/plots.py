@@ -28,6 +28,14 @@ def _edges(x: np.ndarray, log: bool) -> np.ndarray:
     return np.exp(e) if log else e
 
 
+def _gain_axes(ax, logP: bool) -> None:
+    """The impedance-gain plane's axes: P_gain (log when every value is > 0) and D_gain."""
+    if logP:
+        ax.set_xscale("log")
+    ax.set_xlabel("P_gain (Nm/rad)")
+    ax.set_ylabel("D_gain (Nms/rad)")
+
+
 def plot_region(m, ax=None, title: str | None = None, passivity: bool = True, boundary=None):
     """Draw one :class:`haa_sym.regions.RegionMap` on ``ax`` (log P_gain, linear D_gain), with
     the exact curves (:func:`haa_sym.boundary.boundaries`) over it when given."""
@@ -52,10 +60,7 @@ def plot_region(m, ax=None, title: str | None = None, passivity: bool = True, bo
         plot_boundary(boundary, ax)
         ax.set_xlim(_edges(m.P_gain, logP)[[0, -1]])
         ax.set_ylim(_edges(m.D_gain, False)[[0, -1]])
-    if logP:
-        ax.set_xscale("log")
-    ax.set_xlabel("P_gain (Nm/rad)")
-    ax.set_ylabel("D_gain (Nms/rad)")
+    _gain_axes(ax, logP)
     if title:
         ax.set_title(title, fontsize=10)
     if fig is not None:
@@ -289,10 +294,7 @@ def plot_schedule(s, title: str = ""):
         ax.legend(fontsize=7, loc="upper left")
     ax.set_title("bandwidth gained by the schedule", fontsize=10)
     for ax in axes:
-        if logP:
-            ax.set_xscale("log")
-        ax.set_xlabel("P_gain (Nm/rad)")
-        ax.set_ylabel("D_gain (Nms/rad)")
+        _gain_axes(ax, logP)
     if title:
         fig.suptitle(title, fontsize=11)
     return fig
@@ -305,10 +307,7 @@ def plot_robust(r, title: str = ""):
     logP = bool(np.all(r.P_gain > 0))
     ax.pcolormesh(_edges(r.P_gain, logP), _edges(r.D_gain, False), (~r.feasible).T.astype(float),
                   cmap=ListedColormap(["#ffffff", "#3a3a3a"]), vmin=0, vmax=1, shading="flat")
-    if logP:
-        ax.set_xscale("log")
-    ax.set_xlabel("P_gain (Nm/rad)")
-    ax.set_ylabel("D_gain (Nms/rad)")
+    _gain_axes(ax, logP)
     leg = r.meta["leg"]
     ax.set_title(title or f"{'+'.join(r.meta['requirements'])} for every leg configuration\n"
                  f"{leg[0]}..{leg[1]} ({r.meta['leg_mode']}, {r.n_configurations} configurations; dark: fails)",
