@@ -172,8 +172,9 @@ def _golden(f, lo, hi, sign, steps: int = 40):
 
 
 def exact_low_pm(loop, P, D, beta: float, alpha: float, pm_deg: float = 30.0) -> np.ndarray:
-    """Per gain point: the impedance loop's phase margin, from crossovers located exactly, is
-    below ``pm_deg`` (the options' rule chooses the crossover, as in the maps).
+    """Per gain point: the phase margin of the options' ``pm_loop`` (the impedance loop by
+    default), from crossovers located exactly, is below ``pm_deg`` (the options' rule chooses
+    the crossover, as in the maps).
 
     The maps locate a crossover between two grid samples by interpolation and miss a pair that
     a resonance narrower than the grid step hides; near a lightly damped mode both can be wrong
@@ -186,11 +187,14 @@ def exact_low_pm(loop, P, D, beta: float, alpha: float, pm_deg: float = 30.0) ->
     from haa_sym.sweep import gain_rows, monomial_rows, product_form
     X = gain_rows(P, D)
     coef = loop.loop_coefficients(beta=beta, alpha=alpha)
+    which = "L_imp" if loop.options.conventions.pm_loop == "impedance" else "L_t"     # as the maps
     lw = np.log(coef.omega)
-    mag2 = monomial_rows(X) @ product_form(coef.L_imp, coef.L_imp).real      # (n, n_omega)
+    L_grid = getattr(coef, which)
+    mag2 = monomial_rows(X) @ product_form(L_grid, L_grid).real      # (n, n_omega)
 
     def L_at(rows, x):
-        return np.einsum("ij,ij->i", X[rows], loop.loop_coefficients(np.exp(x), beta, alpha, cached=False).L_imp)
+        return np.einsum("ij,ij->i", X[rows],
+                         getattr(loop.loop_coefficients(np.exp(x), beta, alpha, cached=False), which))
 
     # brackets of |L|^2 - 1: sign changes on the grid ...
     rows, i = np.nonzero((mag2[:, 1:] > 1) != (mag2[:, :-1] > 1))
