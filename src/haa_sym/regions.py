@@ -278,12 +278,26 @@ def decide_points(loop: ClosedLoop, P_gain, D_gain, beta: float, alpha: float, *
     st = loop.stability(P, D, beta, alpha).stable.ravel()
     X = gain_rows(P[st], D[st])
     pm, passive = np.full(P.size, np.nan), np.zeros(P.size, bool)
-    if X.shape[0]:
-        pm[st] = phase_margins(X, L, coef.omega, conv.pm_rule)[0]
+    n = X.shape[0]
+    pm_st, ex = np.empty(n), np.full(n, np.nan)
+
+    def work(sl):
+        pm_st[sl] = phase_margins(X[sl], L, coef.omega, conv.pm_rule)[0]
         if passivity:
-            ex = phase_excess(X, coef.Z_num, coef.Z_den, coef.omega, loop.params.controller.Ts, conv.colgate)[0]
-            passive[st] = ex <= conv.passivity_tol_deg
+            ex[sl] = phase_excess(X[sl], coef.Z_num, coef.Z_den, coef.omega, loop.params.controller.Ts,
+                                  conv.colgate)[0]
+    # chunks in cache, on SWEEP_THREADS threads (numpy releases the GIL), as region_map's sweep
+    chunks = [slice(s, min(s + CHUNK, n)) for s in range(0, n, CHUNK)]
+    if SWEEP_THREADS > 1 and len(chunks) > 1:
+        from concurrent.futures import ThreadPoolExecutor
+        with blas_limits(BLAS_THREADS), ThreadPoolExecutor(SWEEP_THREADS) as pool:
+            list(pool.map(work, chunks))
+    else:
+        for sl in chunks:
+            work(sl)
+    pm[st] = pm_st
     with np.errstate(invalid="ignore"):
+        passive[st] = ex <= conv.passivity_tol_deg
         return st, st & (pm < pm_deg), passive
 
 
