@@ -194,3 +194,33 @@ def test_map_from_the_curves_on_unsorted_grids_equals_the_grid_method(params):
     assert a.meta["method"] == "curves" and b.meta["method"] == "grid"
     for key in ("stable", "low_pm", "passive"):
         np.testing.assert_array_equal(getattr(a, key), getattr(b, key), err_msg=key)
+
+
+def test_curves_reach_the_edge_of_the_box_and_small_boxes_are_drawn_finely(params):
+    """A curve leaving the box ends on its edge (located by bisection), and a small box gets as
+    many points as a large one (the runs are resampled)."""
+    loop = ClosedLoop(params)
+    b = stability_boundary(params, loop=loop)
+    ends = np.concatenate([[c.D_gain[0], c.D_gain[-1]] for c in b.curves if c.kind == "complex"])
+    assert np.abs(ends).min() < 1e-6                     # the D_gain = 0 edge, to bisection accuracy
+    small = stability_boundary(params, loop=loop, P_range=(2000.0, 20000.0), D_range=(0.0, 2.0))
+    pts = sum(c.P_gain.size for c in small.curves if c.kind == "complex")
+    assert pts >= 200
+    P = np.concatenate([c.P_gain for c in small.curves if c.kind == "complex"])
+    D = np.concatenate([c.D_gain for c in small.curves if c.kind == "complex"])
+    rho = np.abs(ref.closed_loop_eigenvalues(loop, np.vstack([P[::20], D[::20], np.full(P[::20].size, small.beta),
+                                                              np.full(P[::20].size, small.alpha)]))).max(axis=1)
+    assert np.abs(rho - 1).max() < 1e-9
+
+
+@pytest.mark.parametrize("argv, message", [
+    (["regions", "--leg", "retracted:extended"], "--leg applies to the leg range; allowed: with --robust"),
+    (["regions", "--require", "stable"], "--require applies to the leg range"),
+    (["regions", "--robust", "--radius"], "--radius with --robust"),
+    (["regions", "--robust", "--method", "grid"], "--method grid with --robust"),
+])
+def test_robust_only_and_plain_only_arguments_are_not_silently_ignored(tmp_path, capsys, argv, message):
+    from haa_sym.cli import main
+    out = tmp_path / "m.npz"
+    assert main(argv + ["--P-gain", "log:1:100:3", "--D-gain", "lin:1:5:2", "--out", str(out), "-q"]) == 2
+    assert message in capsys.readouterr().err and not out.exists()

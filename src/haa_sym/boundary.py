@@ -37,6 +37,9 @@ from haa_sym.layout import gain_monomials
 from haa_sym.loop import ClosedLoop, LoopOptions
 from haa_sym.params import ParameterError, Params, gain_array
 
+# points of a drawn curve at the least (each run of the nu grid inside the box is resampled)
+CURVE_POINTS = 200
+
 __all__ = ["BoundaryCurve", "StabilityBoundary", "Boundaries", "boundaries", "affine_polynomials", "stability_boundary",
            "phase_margin_curves", "crossings", "classify_grid", "classify_regions",
            "RegionDecisions"]
@@ -180,16 +183,8 @@ def phase_margin_curves(params: Params, beta=None, alpha=None, *, pm_deg: float 
     ctrl = params.controller
     ABC = affine_polynomials(loop, beta, alpha)
     nu = np.logspace(-10, 10, n_nu)
-    P, D = _rotated_branch(ABC, nu, pm_deg)
-    omega = 2 * np.arctan(nu) / ctrl.Ts
-    (P0, P1), (D0, D1) = P_range, D_range
-    inside = np.isfinite(P) & np.isfinite(D) & (P >= P0) & (P <= P1) & (D >= D0) & (D <= D1)
-    idx = np.flatnonzero(inside)
-    curves = []
-    if idx.size:
-        for r in np.split(idx, np.flatnonzero(np.diff(idx) > 1) + 1):
-            curves.append(BoundaryCurve(f"pm={pm_deg:g}", P[r], D[r], omega[r]))
-    return curves
+    return _box_curves(lambda x: _rotated_branch(ABC, x, pm_deg), nu, ctrl.Ts, P_range, D_range,
+                       f"pm={pm_deg:g}")
 
 
 def stability_boundary(params: Params, beta=None, alpha=None, *, options: LoopOptions | None = None,
@@ -224,15 +219,7 @@ def stability_boundary(params: Params, beta=None, alpha=None, *, options: LoopOp
     (P0, P1), (D0, D1) = P_range, D_range
     curves = []
     nu = np.logspace(-10, 10, n_nu)
-    P, D = _complex_branch(ABC, nu)
-    omega = 2 * np.arctan(nu) / Ts
-    inside = np.isfinite(P) & np.isfinite(D) & (P >= P0) & (P <= P1) & (D >= D0) & (D <= D1)
-    # split into runs of consecutive samples inside the box
-    idx = np.flatnonzero(inside)
-    if idx.size:
-        runs = np.split(idx, np.flatnonzero(np.diff(idx) > 1) + 1)
-        for r in runs:
-            curves.append(BoundaryCurve("complex", P[r], D[r], omega[r]))
+    curves += _box_curves(lambda x: _complex_branch(ABC, x), nu, Ts, P_range, D_range, "complex")
     # the two real-root lines, clipped to the box: a + P b + D c = 0
     for kind, (a, b, c), w in (("z=1", ABC[:, 0], 0.0), ("z=-1", ABC[:, -1], np.pi / Ts)):
         seg = _clip_line(a, b, c, P_range, D_range)
@@ -316,8 +303,50 @@ def boundaries(params: Params, beta=None, alpha=None, *, options: LoopOptions | 
                              n_nu=n_nu, loop=loop)
     ps = passivity_boundary(loop, st.beta, st.alpha, P_range=P_range, D_range=D_range,
                             n_lines=n_lines) if passivity else []
-    st.meta.update(pm_deg=pm_deg, n_lines=n_lines)
+    st.meta.update(n_lines=n_lines)
     return Boundaries(st, pm, ps, pm_deg)
+
+
+def _box_curves(branch, nu: np.ndarray, Ts: float, P_range, D_range, kind: str,
+                min_points: int = CURVE_POINTS) -> list:
+    """The parts of the branch ``nu -> (P, D)`` inside the box as polylines: each run of samples
+    inside is extended to where the branch leaves the box (bisection in log nu between the run's
+    end and the neighbour outside, when that neighbour is finite) and resampled on at least
+    ``min_points`` log-spaced nu, so that a curve reaches the box's edge and a small box is drawn
+    as finely as a large one."""
+    (P0, P1), (D0, D1) = P_range, D_range
+
+    def inside(P, D):
+        return np.isfinite(P) & np.isfinite(D) & (P >= P0) & (P <= P1) & (D >= D0) & (D <= D1)
+    P, D = branch(nu)
+    ok = inside(P, D)
+    idx = np.flatnonzero(ok)
+    if not idx.size:
+        return []
+    runs = np.split(idx, np.flatnonzero(np.diff(idx) > 1) + 1)
+    lo = np.log(np.array([nu[r[0]] for r in runs]))
+    hi = np.log(np.array([nu[r[-1]] for r in runs]))
+    for ends, step in ((lo, -1), (hi, 1)):
+        nb = np.array([r[0] - 1 if step < 0 else r[-1] + 1 for r in runs])
+        valid = (nb >= 0) & (nb < nu.size)
+        nb = np.clip(nb, 0, nu.size - 1)
+        Pn, Dn = P[nb], D[nb]
+        valid &= np.isfinite(Pn) & np.isfinite(Dn)
+        a, b = ends.copy(), np.log(nu[nb])                 # a inside, b outside
+        for _ in range(60):
+            m = 0.5 * (a + b)
+            Pm, Dm = branch(np.exp(m))
+            good = inside(Pm, Dm)
+            a, b = np.where(good, m, a), np.where(good, b, m)
+        ends[valid] = a[valid]
+    out = []
+    for r, x0, x1 in zip(runs, lo, hi):
+        x = np.exp(np.linspace(x0, x1, max(min_points, r.size)))
+        Pr, Dr = branch(x)
+        keep = inside(Pr, Dr)
+        if keep.any():
+            out.append(BoundaryCurve(kind, Pr[keep], Dr[keep], 2 * np.arctan(x[keep]) / Ts))
+    return out
 
 
 def _clip_line(a, b, c, P_range, D_range):

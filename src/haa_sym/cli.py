@@ -181,7 +181,16 @@ def _cmd_regions(args) -> int:
     from haa_sym.regions import grid, region_map
     params, options, out, plot = _setup(args, "regions")
     P, D = grid(args.P_gain, "--P-gain"), grid(args.D_gain, "--D-gain")
+    robust_only = [f for f, given in (("--require", args.require != "stable,pm"), ("--leg", args.leg is not None),
+                                      ("--leg-mode", args.leg_mode != "segment")) if given]
+    if robust_only and not args.robust:
+        raise ParameterError(f"{robust_only[0]} applies to the leg range; allowed: with --robust")
     if args.robust:
+        plain_only = [f for f, given in (("--radius", args.radius), ("--method grid", args.method != "curves"),
+                                         ("--configuration", args.configuration is not None)) if given]
+        if plain_only:
+            raise ParameterError(f"{plain_only[0]} with --robust: the robust map spans the leg range "
+                                 "(decided from the curves); allowed: one of them")
         return _robust_regions(args, params, options, out, plot, P, D)
     loop = ClosedLoop(params, options)
     m = region_map(params, P, D, options=options, radius=args.radius, loop=loop, method=args.method)
@@ -224,6 +233,9 @@ def _cmd_boundary(args) -> int:
         raise ParameterError(f"--option pm_loop={options.conventions.pm_loop}: the boundaries cover the "
                              "impedance loop's margin; allowed: pm_loop=impedance (the default)")
     b = boundaries(params, options=options, P_range=(P.min(), P.max()), D_range=(D.min(), D.max()))
+    from haa_sym.regions import run_meta
+    b.stability.meta.update(run_meta(params, options), omega_unit="rad/s", P_gain_unit="Nm/rad",
+                            D_gain_unit="Nms/rad")
     _write_outputs(out, plot, lambda path, tx: b.save(path, tx, "--out"),
                    lambda: _plots().plot_boundary(b, title=args.title))
 
@@ -298,7 +310,8 @@ def _cmd_schedule(args) -> int:
                  requirements=_requirements(args), leg=_leg(args, params), leg_mode=args.leg_mode,
                  options=options, scheduler=args.scheduler)
     if not s.feasible.any():
-        raise ParameterError(f"--beta-range {args.beta_range}: no beta in the range meets "
+        with_alpha = f" with --alpha-values {args.alpha_values}" if args.alpha_values is not None else ""
+        raise ParameterError(f"--beta-range {args.beta_range}{with_alpha}: no beta in the range meets "
                              f"{'+'.join(s.meta['requirements'])} for every leg configuration at any impedance of "
                              "the grid; allowed: a range (or requirements) that some impedance meets")
     table = s.table() if args.c_out is not None else None

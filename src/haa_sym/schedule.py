@@ -106,7 +106,9 @@ class Schedule:
             for j, D in enumerate(self.D_gain):
                 ok = bool(self.feasible[i, j])
                 num = (lambda v: f"{v:.12g}" if ok and np.isfinite(v) else "")
-                lines.append(f"{P:.12g},{D:.12g},{num(self.beta[i, j])},{num(self.alpha[i, j])},"
+                # the grid exactly (17 digits round-trip): fed back to the C lookup, a grid point
+                # must hit the table's grid point, not a neighbour's cell
+                lines.append(f"{P:.17g},{D:.17g},{num(self.beta[i, j])},{num(self.alpha[i, j])},"
                              f"{num(self.torque_bandwidth_rad_s[i, j])},{'true' if ok else 'false'}")
         return "\n".join(lines) + "\n"
 
