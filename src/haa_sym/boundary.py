@@ -310,8 +310,9 @@ def boundaries(params: Params, beta=None, alpha=None, *, options: LoopOptions | 
 def _box_curves(branch, nu: np.ndarray, Ts: float, P_range, D_range, kind: str,
                 min_points: int = CURVE_POINTS) -> list:
     """The parts of the branch ``nu -> (P, D)`` inside the box as polylines: each run of samples
-    inside is extended to where the branch leaves the box (bisection in log nu between the run's
-    end and the neighbour outside, when that neighbour is finite) and resampled on at least
+    inside is extended to where the branch leaves the box (the Illinois method in log nu on the
+    distance to the box's edge, between the run's end and the neighbour outside, when that
+    neighbour is finite) and resampled on at least
     ``min_points`` log-spaced nu, so that a curve reaches the box's edge and a small box is drawn
     as finely as a large one."""
     (P0, P1), (D0, D1) = P_range, D_range
@@ -324,21 +325,38 @@ def _box_curves(branch, nu: np.ndarray, Ts: float, P_range, D_range, kind: str,
     if not idx.size:
         return []
     runs = np.split(idx, np.flatnonzero(np.diff(idx) > 1) + 1)
-    lo = np.log(np.array([nu[r[0]] for r in runs]))
-    hi = np.log(np.array([nu[r[-1]] for r in runs]))
-    for ends, step in ((lo, -1), (hi, 1)):
-        nb = np.array([r[0] - 1 if step < 0 else r[-1] + 1 for r in runs])
-        valid = (nb >= 0) & (nb < nu.size)
-        nb = np.clip(nb, 0, nu.size - 1)
-        Pn, Dn = P[nb], D[nb]
-        valid &= np.isfinite(Pn) & np.isfinite(Dn)
-        a, b = ends.copy(), np.log(nu[nb])                 # a inside, b outside
-        for _ in range(60):
-            m = 0.5 * (a + b)
-            Pm, Dm = branch(np.exp(m))
-            good = inside(Pm, Dm)
-            a, b = np.where(good, m, a), np.where(good, b, m)
-        ends[valid] = a[valid]
+    first = np.array([r[0] for r in runs])
+    last = np.array([r[-1] for r in runs])
+    # every run end and its neighbour outside the box, all at once
+    end = np.concatenate([first, last])
+    nb = np.concatenate([first - 1, last + 1])
+    valid = (nb >= 0) & (nb < nu.size)
+    nb = np.clip(nb, 0, nu.size - 1)
+    valid &= np.isfinite(P[nb]) & np.isfinite(D[nb])
+    spanP, spanD = max(P1 - P0, 1e-300), max(D1 - D0, 1e-300)
+
+    def slack(x):
+        """Distance inside the box (negative outside), in box widths: continuous in log nu."""
+        Px, Dx = branch(np.exp(x))
+        g = np.minimum(np.minimum(Px - P0, P1 - Px) / spanP, np.minimum(Dx - D0, D1 - Dx) / spanD)
+        return np.where(np.isfinite(g), g, -1.0)
+    a, b = np.log(nu[end]), np.log(nu[nb])                  # slack(a) >= 0 > slack(b)
+    fa, fb = slack(a), slack(b)
+    side = np.zeros(a.size, int)
+    for _ in range(60):                                     # Illinois, the bracket kept
+        with np.errstate(invalid="ignore", divide="ignore"):
+            x = (a * fb - b * fa) / (fb - fa)
+        x = np.where(np.isfinite(x) & (x > np.minimum(a, b)) & (x < np.maximum(a, b)), x, 0.5 * (a + b))
+        fx = slack(x)
+        inside_x = fx >= 0
+        fb = np.where(inside_x, np.where(side == 1, 0.5 * fb, fb), fx)
+        fa = np.where(inside_x, fx, np.where(side == -1, 0.5 * fa, fa))
+        a, b = np.where(inside_x, x, a), np.where(inside_x, b, x)
+        side = np.where(inside_x, 1, -1)
+        if np.all(np.abs(b - a) <= 1e-13 * (1 + np.abs(a))):
+            break
+    ends = np.where(valid, a, np.log(nu[end]))
+    lo, hi = ends[:first.size], ends[first.size:]
     out = []
     for r, x0, x1 in zip(runs, lo, hi):
         x = np.exp(np.linspace(x0, x1, max(min_points, r.size)))
