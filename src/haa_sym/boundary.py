@@ -340,21 +340,8 @@ def _box_curves(branch, nu: np.ndarray, Ts: float, P_range, D_range, kind: str,
         Px, Dx = branch(np.exp(x))
         g = np.minimum(np.minimum(Px - P0, P1 - Px) / spanP, np.minimum(Dx - D0, D1 - Dx) / spanD)
         return np.where(np.isfinite(g), g, -1.0)
-    a, b = np.log(nu[end]), np.log(nu[nb])                  # slack(a) >= 0 > slack(b)
-    fa, fb = slack(a), slack(b)
-    side = np.zeros(a.size, int)
-    for _ in range(60):                                     # Illinois, the bracket kept
-        with np.errstate(invalid="ignore", divide="ignore"):
-            x = (a * fb - b * fa) / (fb - fa)
-        x = np.where(np.isfinite(x) & (x > np.minimum(a, b)) & (x < np.maximum(a, b)), x, 0.5 * (a + b))
-        fx = slack(x)
-        inside_x = fx >= 0
-        fb = np.where(inside_x, np.where(side == 1, 0.5 * fb, fb), fx)
-        fa = np.where(inside_x, fx, np.where(side == -1, 0.5 * fa, fa))
-        a, b = np.where(inside_x, x, a), np.where(inside_x, b, x)
-        side = np.where(inside_x, 1, -1)
-        if np.all(np.abs(b - a) <= 1e-13 * (1 + np.abs(a))):
-            break
+    from haa_sym.rootfind import illinois
+    a, _ = illinois(slack, np.log(nu[end]), np.log(nu[nb]))      # slack(a) >= 0 > slack(b)
     ends = np.where(valid, a, np.log(nu[end]))
     lo, hi = ends[:first.size], ends[first.size:]
     out = []

@@ -218,21 +218,8 @@ def exact_low_pm(loop, P, D, beta: float, alpha: float, pm_deg: float = 30.0) ->
     low = np.zeros(X.shape[0], bool)
     if not rows.size:
         return low
-    fa = np.abs(L_at(rows, a)) ** 2 - 1.0
-    fb = np.abs(L_at(rows, b)) ** 2 - 1.0
-    side = np.zeros(rows.size, int)
-    for _ in range(60):                               # Illinois on |L|^2 - 1 in log omega
-        with np.errstate(invalid="ignore", divide="ignore"):
-            x = (a * fb - b * fa) / (fb - fa)
-        x = np.where(np.isfinite(x) & (x > np.minimum(a, b)) & (x < np.maximum(a, b)), x, 0.5 * (a + b))
-        fx = np.abs(L_at(rows, x)) ** 2 - 1.0
-        left = np.sign(fx) == np.sign(fa)              # the root is in [x, b]
-        fb = np.where(left, np.where(side == 1, 0.5 * fb, fb), fx)
-        fa = np.where(left, fx, np.where(side == -1, 0.5 * fa, fa))
-        a, b = np.where(left, x, a), np.where(left, b, x)
-        side = np.where(left, 1, -1)
-        if np.all(np.abs(b - a) <= 1e-12 * (1 + np.abs(a))):
-            break
+    from haa_sym.rootfind import illinois
+    a, b = illinois(lambda x: np.abs(L_at(rows, x)) ** 2 - 1.0, a, b, xtol=1e-12)   # |L| = 1 in log omega
     L = L_at(rows, 0.5 * (a + b))
     margin = np.degrees(np.angle(L)) + 180.0
     margin = (margin + 180.0) % 360.0 - 180.0
