@@ -10,7 +10,7 @@ import subprocess
 import numpy as np
 import pytest
 
-from haa_sym import ClosedLoop, ParameterError, load_params
+from haa_sym import ClosedLoop, load_params
 from haa_sym import reference as ref
 from haa_sym.cli import main
 from haa_sym.margins import stability_margins

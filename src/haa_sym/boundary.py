@@ -216,7 +216,6 @@ def stability_boundary(params: Params, beta=None, alpha=None, *, options: LoopOp
     if n_nu < 10:
         raise ParameterError(f"n_nu = {n_nu!r}; allowed: an integer >= 10")
     ABC = affine_polynomials(loop, beta, alpha)
-    (P0, P1), (D0, D1) = P_range, D_range
     curves = []
     nu = np.logspace(-10, 10, n_nu)
     curves += _box_curves(lambda x: _complex_branch(ABC, x), nu, Ts, P_range, D_range, "complex")

@@ -101,7 +101,7 @@ def write_report(out: Path, r: dict, spec: dict, options: LoopOptions, verify_te
             rescue = r["differing_cells_rescued_by"].get(f"{x['row']} | {x['column']}")
             if rescue:
                 diff = {k: v for k, v in rescue["options"].items() if getattr(options, k) != v}
-                add(f"  The best-scoring option set that reproduces this cell changes "
+                add("  The best-scoring option set that reproduces this cell changes "
                     + ", ".join(f"`{k}={v}`" for k, v in diff.items())
                     + f" and reproduces {rescue['agree']}/{rescue['cells']} cells in all; the defaults stay.")
             else:
