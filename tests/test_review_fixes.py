@@ -5,7 +5,7 @@ import sys
 import numpy as np
 import pytest
 
-from haa_sym import ClosedLoop, LoopOptions, load_params
+from haa_sym import ClosedLoop, load_params
 from haa_sym.cli import main
 
 from conftest import ROOT

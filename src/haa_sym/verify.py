@@ -310,7 +310,6 @@ def main(argv: list[str] | None = None) -> int:
     except (ParameterError, StaleGeneratedCode, CompilerError) as exc:
         print(f"haa-sym: error: {exc}", file=sys.stderr)
         return 2
-    width = max(len(r.claim) for r in rows)
     for i, r in enumerate(rows, 1):
         print(f"{i:2d} {r.status}  {r.claim}")
         print(f"          {r.numbers}")
