@@ -134,6 +134,11 @@ def _check_out(path: str | None, cmd: str, flag: str = "--out") -> Path | None:
     return check_file(p, flag)
 
 
+def _wrote(out) -> str:
+    """The end of a command's summary line: which file it wrote, if any."""
+    return f"; wrote {out}" if out else ""
+
+
 def _gain(args, name: str, flag: str) -> float:
     return float(gain_array(name, getattr(args, name), flag))
 
@@ -203,7 +208,7 @@ def _cmd_regions(args) -> int:
         return plot_region(m, title=args.title, boundary=b)
     _write_outputs(out, plot, lambda path, tx: m.save(path, tx, "--out"), figure)
     print(f"{m.stable.size} points ({m.meta['method']}): {m.stable.sum()} stable, {m.low_pm.sum()} stable "
-          f"with PM < 30 deg, {m.passive.sum()} passive" + (f"; wrote {out}" if out else ""))
+          f"with PM < 30 deg, {m.passive.sum()} passive" + _wrote(out))
     return 0
 
 
@@ -220,7 +225,7 @@ def _robust_regions(args, params, options, out, plot, P, D) -> int:
                    lambda: _plots().plot_robust(r, title=args.title))
     print(f"{r.feasible.size} points: {int(r.feasible.sum())} meet {'+'.join(r.meta['requirements'])} for every leg "
           f"configuration ({r.meta['leg'][0]}..{r.meta['leg'][1]}, {r.meta['leg_mode']}, {r.n_configurations} "
-          f"configurations{'' if r.converged else ', NOT converged'})" + (f"; wrote {out}" if out else ""))
+          f"configurations{'' if r.converged else ', NOT converged'})" + _wrote(out))
     return 0
 
 
@@ -243,7 +248,7 @@ def _cmd_boundary(args) -> int:
         return f"{len(curves)} curve(s), {sum(c.P_gain.size for c in curves)} points" if curves else "none in the box"
     print(f"boundaries in P_gain [{P.min():g}, {P.max():g}] x D_gain [{D.min():g}, {D.max():g}]: "
           f"stability {summary(b.stability.curves)}; PM = {b.pm_deg:g} deg {summary(b.phase_margin)}; "
-          f"passivity {summary(b.passivity)}" + (f"; wrote {out}" if out else ""))
+          f"passivity {summary(b.passivity)}" + _wrote(out))
     return 0
 
 
@@ -280,7 +285,7 @@ def _cmd_contact(args) -> int:
     def ends(iv):
         return ", ".join(f"{a:.10g}-{b:.10g}" for a, b in iv) + " Nm/rad" if iv else "none"
     print(f"unstable in contact ({data['environment']}): {ends(r.unstable)}; stable but not passive: "
-          f"{ends(r.not_passive)}" + (f"; wrote {out}" if out else ""))
+          f"{ends(r.not_passive)}" + _wrote(out))
     return 0
 
 
@@ -327,7 +332,7 @@ def _cmd_schedule(args) -> int:
     print(f"{s.feasible.size} impedances: {feas} with a robust beta in [{beta_range[0]:g}, {beta_range[1]:g}] "
           f"(tolerance {args.beta_tol:g}; leg {s.meta['leg'][0]}..{s.meta['leg'][1]}, {s.n_configurations} "
           f"configurations{'' if s.converged else ', NOT converged'}); beta = 1 fails for some leg at {unsafe} of "
-          f"them" + (f"; wrote {out}" if out else "") + (f"; C in {args.c_out}" if args.c_out else ""))
+          f"them" + _wrote(out) + (f"; C in {args.c_out}" if args.c_out else ""))
     return 0
 
 
