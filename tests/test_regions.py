@@ -29,6 +29,21 @@ def _params(params, changes, cfg):
     return p.with_values(**changes)
 
 
+def _radius_tolerance(loop, m) -> np.ndarray:
+    """1e-12 + eps ||A||_2 kappa per point: the first-order bound on the error of the largest
+    eigenvalue of A computed in floating point, kappa its condition number (left and right
+    eigenvectors)."""
+    import scipy.linalg
+    tol = np.empty(m.spectral_radius.shape)
+    for idx in np.ndindex(tol.shape):
+        A = ref.closed_loop_matrices(loop, m.P_gain[idx[0]], m.D_gain[idx[1]])[0]
+        w, vl, vr = scipy.linalg.eig(A, left=True, right=True)
+        k = np.argmax(np.abs(w))
+        kappa = np.linalg.norm(vl[:, k]) * np.linalg.norm(vr[:, k]) / abs(np.vdot(vl[:, k], vr[:, k]))
+        tol[idx] = 1e-12 + np.finfo(float).eps * np.linalg.norm(A, 2) * kappa
+    return tol
+
+
 @pytest.mark.parametrize("name,changes,extra", CASES, ids=[c[0] for c in CASES])
 @pytest.mark.parametrize("radius", [True, False], ids=["radius", "decision"])
 def test_map_agrees_with_eigvals(params, name, changes, extra, radius):
@@ -42,7 +57,10 @@ def test_map_agrees_with_eigvals(params, name, changes, extra, radius):
     np.testing.assert_array_equal(m.stable[decided], (rho < 1)[decided])
     if radius:
         # the map's radius comes from the stacked eigenvalues of the same explicit closed loop
-        np.testing.assert_allclose(m.spectral_radius, rho, rtol=0, atol=1e-12)
+        # two assemblies of one matrix: their eigenvalues differ by up to eps ||A|| kappa, kappa
+        # the condition number of the largest eigenvalue (~1e3 at Ts = 20 us, where the poles
+        # crowd at z = 1: 1.6e-12 measured there with numpy 2.4, bound 3.6e-10)
+        np.testing.assert_array_less(np.abs(m.spectral_radius - rho), _radius_tolerance(loop, m))
     else:
         assert np.isnan(m.spectral_radius[~m.refined]).all()
     # the maps are not trivial: both decisions occur somewhere in these cases
