@@ -2,15 +2,15 @@
 
 The map: 200 x 200 points, P_gain log 1..20000 Nm/rad x D_gain lin 1..50 Nms/rad, nominal
 (N_av = 4, closed-loop order 12) and N_av = 50 (order 58). Every path decides, at every point it
-sees, the three things of the map (``haa_sym.regions``) by the map's own rules:
+sees, the three things of the map (``haa_sym.analysis.regions``) by the map's own rules:
 
 * stability: every closed-loop pole in |z| < 1;
 * PM < 30 deg: the phase margin of the impedance loop L_imp (opened at the torque reference),
   180 + arg L_imp at the gain crossover of smallest |PM| (``pm_rule = "min_abs"``), located on
-  the maps' frequency grid by interpolating log|L| in log(omega) (``haa_sym.sweep.phase_margins``);
+  the maps' frequency grid by interpolating log|L| in log(omega) (``haa_sym.analysis.sweep.phase_margins``);
   judged on stable points only;
 * passive: stable, and the phase of the port impedance Z = T_dist / port velocity, corrected by
-  Colgate's exp(-j w Ts/2) (``haa_sym.sweep.colgate_factor``), within +-90 deg (+ the options'
+  Colgate's exp(-j w Ts/2) (``haa_sym.analysis.sweep.colgate_factor``), within +-90 deg (+ the options'
   ``passivity_tol_deg``) at every frequency of the grid.
 
 The frequency grid is the maps' (``loop.options.numerics.omega(Ts)``: 1000 log points from
@@ -28,7 +28,7 @@ The frequency grid is the maps' (``loop.options.numerics.omega(Ts)``: 1000 log p
     and unstable points of the grid map.
 (2) numpy, the whole map batched the best way numpy allows: stability from stacked
     ``numpy.linalg.eigvals`` of A(P, D) = A0 + P A1 + D A2 (built by broadcasting from the
-    explicit closed loop of ``haa_sym.reference``; building A0, A1, A2 is not timed); the
+    explicit closed loop of ``haa_sym.check.reference``; building A0, A1, A2 is not timed); the
     frequency responses from the state space too, but only at three gain points: every feedback
     path enters through the one input V_m, so the characteristic polynomial and the numerator
     of the port velocity are affine in (P, D) (matrix determinant lemma) and
@@ -68,10 +68,10 @@ import numpy as np
 
 from timing import REPEATS, best
 from haa_sym import ClosedLoop, load_params
-from haa_sym.boundary import classify_regions, stability_boundary
-from haa_sym.reference import closed_loop_matrices
-from haa_sym.regions import CHUNK, PM_THRESHOLD_DEG, grid, region_map
-from haa_sym.sweep import BLAS_THREADS, SWEEP_THREADS, blas_limits, colgate_factor, gain_rows, phase_excess
+from haa_sym.analysis.boundaries.stability import classify_regions, stability_boundary
+from haa_sym.check.reference import closed_loop_matrices
+from haa_sym.analysis.regions import CHUNK, PM_THRESHOLD_DEG, grid, region_map
+from haa_sym.analysis.sweep import BLAS_THREADS, SWEEP_THREADS, blas_limits, colgate_factor, gain_rows, phase_excess
 
 N_SAMPLE = 20                      # python-control points per configuration (5 x 4 lattice)
 BAND = 1e-6                        # |rho - 1| below this: a pole on the circle, not compared

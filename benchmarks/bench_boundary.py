@@ -22,8 +22,8 @@ from pathlib import Path
 
 from timing import REPEATS, best
 from haa_sym import ClosedLoop, load_params
-from haa_sym.boundary import boundaries, classify_regions, phase_margin_curves, stability_boundary
-from haa_sym.regions import grid, region_map
+from haa_sym.analysis.boundaries.stability import boundaries, classify_regions, phase_margin_curves, stability_boundary
+from haa_sym.analysis.regions import grid, region_map
 
 # the grid evaluators, named explicitly once region_map has a choice of method
 GRID = {"method": "grid"} if "method" in inspect.signature(region_map).parameters else {}

@@ -41,7 +41,7 @@ import numpy as np
 
 from timing import REPEATS, best
 from haa_sym import ClosedLoop, load_params
-from haa_sym.regions import grid, region_map
+from haa_sym.analysis.regions import grid, region_map
 
 # the grid evaluators, named explicitly once region_map has a choice of method
 GRID = {"method": "grid"} if "method" in inspect.signature(region_map).parameters else {}
@@ -89,7 +89,7 @@ def run(n_P=200, n_D=200, configs=(("nominal (N_av = 4)", {}), ("N_av = 50", {"N
 EIGVALS_SCRIPT = """
 import sys, numpy as np
 from haa_sym import ClosedLoop, load_params
-from haa_sym.reference import closed_loop_matrices
+from haa_sym.check.reference import closed_loop_matrices
 n, N_av = int(sys.argv[1]), int(sys.argv[2])
 loop = ClosedLoop(load_params().with_values(N_av=N_av), basis=False)
 A0 = closed_loop_matrices(loop, 0, 0)[0]

@@ -20,7 +20,7 @@ from pathlib import Path
 import numpy as np
 
 from haa_sym import load_params
-from haa_sym.schedule import schedule
+from haa_sym.design.schedule import schedule
 
 OUT = Path(__file__).with_name("results_schedule.json")
 GRIDS = ((10, 10), (20, 15), (40, 25))
@@ -32,7 +32,7 @@ def main() -> int:
     results = {"machine": platform.machine(), "python": platform.python_version(), "rows": []}
     with distributed.LocalCluster(n_workers=2, threads_per_worker=1, processes=True,
                                   dashboard_address=None) as cluster, distributed.Client(cluster) as client:
-        client.run(lambda: __import__("haa_sym.schedule"))          # warm the workers' imports
+        client.run(lambda: __import__("haa_sym.design.schedule"))          # warm the workers' imports
         for n_P, n_D in GRIDS:
             P, D = np.geomspace(1.0, 2000.0, n_P), np.linspace(1.0, 50.0, n_D)
             t = time.perf_counter()

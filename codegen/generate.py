@@ -23,7 +23,7 @@ import casadi as ca
 import sympy
 
 from codegen.kernels import decision_function, loop_coefficient_function
-from haa_sym.params import builtin_actuators, load_params
+from haa_sym.model.params import builtin_actuators, load_params
 from haa_sym.symbolic.symbolic_to_casadi import plant_function
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -35,10 +35,10 @@ CAPACITIES = (16, 32, 64)
 # checked by the runtime (a changed source means stale generated code). The actuator files
 # define it through their topology only (not their values): the manifest's "topologies" lists
 # each built-in file under its topology's fingerprint, and the runtime checks that list against
-# model/ (haa_sym.compiled.GeneratedCode), so editing a value never stales generated/.
+# model/ (haa_sym.compiled.generated.GeneratedCode), so editing a value never stales generated/.
 SOURCES = (
-    "src/haa_sym/actuator.py",
-    "src/haa_sym/layout.py",
+    "src/haa_sym/model/actuator.py",
+    "src/haa_sym/compiled/layout.py",
     "src/haa_sym/symbolic/chain.py",
     "src/haa_sym/symbolic/model.py",
     "src/haa_sym/symbolic/symbolic_to_casadi.py",

@@ -3,21 +3,21 @@
 The closed loop has one actuated input (V_m). With the measured torque T, the encoder angle
 theta, the velocity estimates F_d (D term, Eq. 8) and F_vc (velocity compensation, Eq. 6), the
 torque PI of Eq. (7), the impedance law Eq. (8) and a computation delay, the characteristic
-polynomial is affine in the gain monomials of ``haa_sym.layout``:
+polynomial is affine in the gain monomials of ``haa_sym.compiled.layout``:
 
     chi(z) = b0 + P_t b1 + I_t b2 + P_t P_gain b3 + I_t P_gain b4 + (P_t D_gain - VC) b5
              + I_t D_gain b6 - VC b7
 
 with basis polynomials b_j fixed per sampled plant and loop structure, built exactly from the
-controller's elements (``haa_sym.elements``, ``haa_sym.loop``); b7 is the exact difference of
+controller's elements (``haa_sym.loop.elements``, ``haa_sym.loop.closed_loop``); b7 is the exact difference of
 the compensation's and the D term's polynomials (zero when both use the same estimate). The
 stability kernel works on their bilinear transforms (z = (1 + s)/(1 - s), computed exactly),
 where the poles that crowd at z = 1 under fast sampling stay resolved: it returns the
 Routh-Hurwitz decision and whether the rounding of the coefficients could change it. Per
 frequency the loop-coefficient kernel takes the plant's and the elements' responses and returns
 the gain-affine coefficients of the loop transfer functions (a gain sweep then costs one small
-matrix product per frequency grid, see ``haa_sym.regions``). Every vector crossing to the
-runtime is laid out by name in ``haa_sym.layout``.
+matrix product per frequency grid, see ``haa_sym.analysis.regions``). Every vector crossing to the
+runtime is laid out by name in ``haa_sym.compiled.layout``.
 """
 from __future__ import annotations
 
@@ -25,7 +25,7 @@ import functools
 
 import casadi as ca
 
-from haa_sym import layout as L
+from haa_sym.compiled import layout as L
 
 N_BASIS, N_CONST, N_POINT = len(L.GAIN_MONOMIALS), len(L.CONST), len(L.POINT)
 # Bound on the rounding error of each coefficient of q = basis @ g, in units of the unit
@@ -40,7 +40,7 @@ KHARITONOV_PATTERNS = ((-1, -1, +1, +1), (+1, +1, -1, -1), (-1, +1, +1, -1), (+1
 
 
 def gain_monomials(point, const):
-    """The coefficients g_j of chi = sum_j g_j b_j for one gain point (haa_sym.layout)."""
+    """The coefficients g_j of chi = sum_j g_j b_j for one gain point (haa_sym.compiled.layout)."""
     return ca.vertcat(*L.gain_monomials(point, const))
 
 
@@ -84,7 +84,7 @@ def decision_function(cap: int) -> ca.Function:
 
     Inputs: ``basis`` (cap+1 x 8): ascending coefficients of the bilinear transforms
     q_j(s) = (1 - s)^cap b_j((1 + s)/(1 - s)) of the basis polynomials (computed exactly, rounded
-    once; ``haa_sym.loop``), const [P_t0, I_t0, VC0], point [P_gain, D_gain, beta, alpha].
+    once; ``haa_sym.loop.closed_loop``), const [P_t0, I_t0, VC0], point [P_gain, D_gain, beta, alpha].
 
     chi is Schur stable iff q = basis @ g is Hurwitz stable. Outputs:
     ``n_unstable``  sign changes of q's Routh array = closed-loop poles outside |z| = 1;
@@ -146,9 +146,9 @@ def loop_coefficient_function() -> ca.Function:
     """Gain-affine coefficients of the loop transfer functions at one frequency.
 
     Inputs: ``Gw``: one column per frequency, the complex values (re, im) named by
-    ``haa_sym.layout.FREQ_COLUMN``: the sampled plant's responses from V_m and T_dist to the
+    ``haa_sym.compiled.layout.FREQ_COLUMN``: the sampled plant's responses from V_m and T_dist to the
     measured torque T, the encoder angle theta and the port velocity p, and the controller
-    elements (``haa_sym.elements``) at z = exp(j w Ts): the velocity estimates of the D term
+    elements (``haa_sym.loop.elements``) at z = exp(j w Ts): the velocity estimates of the D term
     (F_d) and of the compensation (F_vc), the PI's integral part I_z = Ts z/(z - 1) and the
     delay z^-d. ``const`` (layout.CONST) and ``gains`` (layout.TORQUE_GAINS).
 

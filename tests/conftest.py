@@ -2,7 +2,7 @@ import pathlib
 
 import pytest
 
-from haa_sym.params import load_params
+from haa_sym.model.params import load_params
 
 ROOT = pathlib.Path(__file__).resolve().parents[1]
 
@@ -24,12 +24,12 @@ def cache(tmp_path_factory):
 
 def decisions_against_reference(loop, pts, band: float = 1e-9) -> dict:
     """The certified and the raw generated decisions at gain points ``pts`` (4, k) against the
-    eigenvalues of the independent closed loop (haa_sym.reference), where the spectral radius is
+    eigenvalues of the independent closed loop (haa_sym.check.reference), where the spectral radius is
     farther than ``band`` from 1: counts of disagreements, stable points, points within the band
     and refined points."""
     import numpy as np
 
-    from haa_sym import reference as ref
+    from haa_sym.check import reference as ref
     res = loop.stability(*pts)
     raw = loop.stability(*pts, certify=False)           # the generated decision alone
     rho = np.abs(ref.closed_loop_eigenvalues(loop, pts)).max(axis=1)

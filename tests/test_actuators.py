@@ -9,10 +9,10 @@ import numpy as np
 import pytest
 
 from haa_sym import ClosedLoop, LoopOptions, ParameterError, load_params, region_map
-from haa_sym import reference as ref
-from haa_sym.actuator import HYQ, ROTOR
-from haa_sym.params import builtin_actuators
-from haa_sym.plant import continuous_plant
+from haa_sym.check import reference as ref
+from haa_sym.model.actuator import HYQ, ROTOR
+from haa_sym.model.params import builtin_actuators
+from haa_sym.loop.plant import continuous_plant
 
 from conftest import ROOT, decisions_against_reference
 
@@ -169,7 +169,7 @@ def test_plant_equals_independent_assembly(user_file):
 
 # --- every actuator: compile, map, verify --------------------------------------------------
 def test_every_actuator_gives_a_map_and_passes_verify(user_file, capsys):
-    from haa_sym import verify
+    from haa_sym.check import verify
     for path in all_files(user_file):
         params = load_params(path)
         m = region_map(params, np.logspace(0, 3.3, 12), np.linspace(0.5, 30, 8), options=_options(params))
@@ -206,7 +206,7 @@ def test_port_option_is_checked_against_the_plant(user_file):
 
 
 # --- closed loop against the explicit reference, >= 1,000 points per new topology -----------
-# (Ts, N_av, delay, velocity estimate): the filter choices of haa_sym.elements on the new plants too
+# (Ts, N_av, delay, velocity estimate): the filter choices of haa_sym.loop.elements on the new plants too
 CASES = ((1e-3, 4, 0, {}), (5e-4, 10, 1, {"velocity_filter": "lowpass1", "f_c": 60.0}),
          (2e-3, 1, 0, {}), (1e-3, 20, 1, {"velocity_filter": "butterworth2", "f_c": 40.0}))
 
@@ -302,7 +302,7 @@ def load_params_text(directory, text, name="act.toml"):
 
 
 def test_contact_needs_a_ground_stiffness_on_the_port(tmp_path):
-    from haa_sym.contact import contact_stability
+    from haa_sym.analysis.contact import contact_stability
     params = load_params_text(tmp_path, USER.replace('port = "C"', 'port = "B"'))
     with pytest.raises(ParameterError, match=r"act.toml \[bodies.B\]: the port body 'B' has no stiffness "
                                              r"to ground K \(K_B\)"):
@@ -393,7 +393,7 @@ def test_bad_input_in_the_cli_exits_2(tmp_path, capsys):
 
 # --- the compile step of a user's topology --------------------------------------------------
 def test_user_topology_without_compiler_runs_in_the_vm(user_file, tmp_path, monkeypatch):
-    from haa_sym.plant_code import compile_topology
+    from haa_sym.compiled.plant_code import compile_topology
     top = load_params(user_file).plant.topology
     compiled = compile_topology(top, "compiled", cache_dir=tmp_path, quiet=True)
     monkeypatch.setenv("CC", "/nonexistent/cc")
@@ -407,8 +407,8 @@ def test_user_topology_without_compiler_runs_in_the_vm(user_file, tmp_path, monk
 
 
 def test_damaged_cached_code_is_regenerated(user_file, tmp_path, capsys):
-    from haa_sym.plant_code import compile_topology
-    from haa_sym.progress import set_progress
+    from haa_sym.compiled.plant_code import compile_topology
+    from haa_sym.io.progress import set_progress
     set_progress(None)
     top = load_params(user_file).plant.topology
     first = compile_topology(top, "compiled", cache_dir=tmp_path)
@@ -438,7 +438,7 @@ def test_builtin_runtime_does_not_import_sympy():
     import sys
     code = ("import sys\n"
             "from haa_sym import load_params, ClosedLoop, LoopOptions\n"
-            "from haa_sym.params import builtin_actuators\n"
+            "from haa_sym.model.params import builtin_actuators\n"
             "for f in builtin_actuators():\n"
             "    p = load_params(f)\n"
             "    ClosedLoop(p, LoopOptions(port='dtheta_' + p.plant.topology.port)).stability(200.0, 10.0)\n"
@@ -449,7 +449,7 @@ def test_builtin_runtime_does_not_import_sympy():
 def test_actuator_defined_in_code(params, cache):
     """The Python API: a Topology and its values give the same plant as the same file."""
     from haa_sym import Params, Plant
-    from haa_sym.actuator import Body, Coupling, Topology
+    from haa_sym.model.actuator import Body, Coupling, Topology
     top = Topology(bodies=(Body("L1"), Body("L2", ground=True)),
                    couplings=(Coupling("hd", "rotor", "L1"), Coupling("p", "L1", "L2")),
                    sensor="hd", torque_damping=True, encoder="L1", port="L2")
@@ -466,7 +466,7 @@ def test_actuator_defined_in_code(params, cache):
 
 # --- generated code per topology ------------------------------------------------------------
 def test_manifest_lists_every_builtin_topology():
-    from haa_sym.compiled import GeneratedCode
+    from haa_sym.compiled.generated import GeneratedCode
     code = GeneratedCode()
     topologies = code.manifest["topologies"]
     for path in BUILTIN:
@@ -479,7 +479,8 @@ def test_manifest_lists_every_builtin_topology():
 
 def test_changed_builtin_topology_is_refused(tmp_path):
     import shutil
-    from haa_sym.compiled import GeneratedCode, StaleGeneratedCode
+    from haa_sym.errors import StaleGeneratedCode
+    from haa_sym.compiled.generated import GeneratedCode
     import json
     root = tmp_path / "tree"
     for rel in ("generated", "model"):
@@ -499,7 +500,8 @@ def test_changed_builtin_topology_is_refused(tmp_path):
 def test_malformed_topologies_in_manifest_are_refused(tmp_path):
     import json
     import shutil
-    from haa_sym.compiled import GeneratedCode, StaleGeneratedCode
+    from haa_sym.errors import StaleGeneratedCode
+    from haa_sym.compiled.generated import GeneratedCode
     gen = shutil.copytree(ROOT / "generated", tmp_path / "generated")
     m = json.loads((gen / "MANIFEST.json").read_text())
     m["topologies"][HYQ.fingerprint]["function"] = "haa_plant_nonexistent"

@@ -5,9 +5,9 @@ import numpy as np
 import pytest
 
 from haa_sym import ClosedLoop, load_params
-from haa_sym import reference as ref
-from haa_sym.boundary import classify_grid, crossings, stability_boundary
-from haa_sym.regions import grid
+from haa_sym.check import reference as ref
+from haa_sym.analysis.boundaries.stability import classify_grid, crossings, stability_boundary
+from haa_sym.analysis.regions import grid
 
 from conftest import ROOT
 
@@ -81,7 +81,7 @@ def test_cli_boundary_refuses_a_bad_output_and_writes_nothing(tmp_path, capsys):
 
 
 def test_phase_margin_curves_are_crossovers_with_exactly_that_margin(params):
-    from haa_sym.boundary import phase_margin_curves
+    from haa_sym.analysis.boundaries.stability import phase_margin_curves
     loop = ClosedLoop(params)
     curves = phase_margin_curves(params, loop=loop)
     assert curves
@@ -95,8 +95,8 @@ def test_phase_margin_curves_are_crossovers_with_exactly_that_margin(params):
 @pytest.mark.parametrize("changes", [{}, {"alpha": 0.0}, {"beta": 6.0}, {"N_av": 50}, {"Ts": 1e-4},
                                      {"Ts": 1e-5}, {"Ts": 8e-3, "N_av": 1}])
 def test_regions_classified_from_the_curves_equal_the_map(params, changes):
-    from haa_sym.boundary import classify_regions
-    from haa_sym.regions import region_map
+    from haa_sym.analysis.boundaries.stability import classify_regions
+    from haa_sym.analysis.regions import region_map
     p = params.with_values(**changes)
     loop = ClosedLoop(p)
     P, D = grid("log:1:20000:90"), grid("lin:1:50:60")
@@ -110,7 +110,7 @@ def test_regions_classified_from_the_curves_equal_the_map(params, changes):
 
 @pytest.mark.parametrize("name", ["sea", "harmonic_drive"])
 def test_maps_of_the_other_actuators_from_the_curves_equal_the_grid(name):
-    from haa_sym.regions import region_map
+    from haa_sym.analysis.regions import region_map
     p = load_params(ROOT / "model" / f"{name}.toml")
     loop = ClosedLoop(p)
     P, D = grid("log:1:20000:70"), grid("lin:0:50:40")
@@ -127,7 +127,7 @@ PASSIVITY_CASES = {**{k: v for k, v in CASES.items() if k != "N_av=50"},   # N_a
 
 @pytest.fixture(scope="module", params=list(PASSIVITY_CASES) + ["harmonic_drive"])
 def passivity_curves(request, params):
-    from haa_sym.passivity_boundary import passivity_boundary
+    from haa_sym.analysis.boundaries.passivity import passivity_boundary
     name = request.param
     p = load_params(ROOT / "model" / "harmonic_drive.toml") if name == "harmonic_drive" \
         else PASSIVITY_CASES[name](params)
@@ -138,7 +138,7 @@ def passivity_curves(request, params):
 
 
 def _corrected_phase(loop, omega, P, D):
-    from haa_sym.sweep import colgate_factor
+    from haa_sym.analysis.sweep import colgate_factor
     c = loop.params.controller
     Z = ref.frequency_response(loop, omega, P, D, c.beta, c.alpha, which=("Z",))["Z"]
     return np.degrees(np.angle(Z * colgate_factor(omega, c.Ts, loop.options.conventions.colgate)))
@@ -186,7 +186,7 @@ def test_passivity_curves_separate_passive_from_not_passive(passivity_curves):
 
 
 def test_map_from_the_curves_on_unsorted_grids_equals_the_grid_method(params):
-    from haa_sym.regions import region_map
+    from haa_sym.analysis.regions import region_map
     rng = np.random.default_rng(1)
     P, D = rng.permutation(grid("log:1:20000:50")), rng.permutation(grid("lin:1:50:30"))
     a = region_map(params, P, D, progress=False)

@@ -10,7 +10,8 @@ import sys
 
 import pytest
 
-from haa_sym.compiled import Compiler, CompilerError, NoCompiler
+from haa_sym.errors import CompilerError, NoCompiler
+from haa_sym.compiled.generated import Compiler
 
 pytestmark = pytest.mark.skipif(not (shutil.which("cc") or shutil.which("gcc")),
                                 reason="needs a C compiler")
@@ -92,7 +93,7 @@ def test_missing_compiler_command_is_no_compiler(tmp_path):
 
 
 @pytest.mark.parametrize("command", [["-m", "haa_sym.cli", "stability", "--P-gain", "200",
-                                      "--D-gain", "10"], ["-m", "haa_sym.verify"]])
+                                      "--D-gain", "10"], ["-m", "haa_sym.check.verify"]])
 def test_failing_compiler_exits_2(tmp_path, command):
     env = dict(os.environ, CC="/bin/false", HAA_SYM_CACHE=str(tmp_path / "cache"))
     proc = subprocess.run([sys.executable, *command], cwd=tmp_path, env=env, capture_output=True,

@@ -1,16 +1,16 @@
 """Contact with an environment spring (Sec. 5, issue 9): interval ends located by root-finding,
 checked against the eigenvalues and the frequency response of the independent closed loop
-(haa_sym.reference) on both sides of every end."""
+(haa_sym.check.reference) on both sides of every end."""
 import json
 
 import numpy as np
 import pytest
 
 from haa_sym import ClosedLoop, LoopOptions, ParameterError, load_params
-from haa_sym import reference as ref
+from haa_sym.check import reference as ref
 from haa_sym.cli import main
-from haa_sym.contact import contact_intervals
-from haa_sym.sweep import colgate_factor
+from haa_sym.analysis.contact import contact_intervals
+from haa_sym.analysis.sweep import colgate_factor
 
 from conftest import ROOT
 
@@ -21,7 +21,7 @@ def _rho(params, key, K, P=0.0, D=0.0):
 
 def _ref_excess(params, key, K, P=0.0, D=0.0):
     """Worst corrected phase of Z beyond +-90 deg on the options' frequency grid, from the
-    reference closed loop (haa_sym.reference: block interconnection, no generated loop
+    reference closed loop (haa_sym.check.reference: block interconnection, no generated loop
     coefficients): Z = T_dist / port velocity = 1 / (C_p (zI - A)^-1 B_d + D_pd)."""
     A, B, C, Dm = ref.closed_loop_matrices(ClosedLoop(params.with_values(**{key: K}), basis=False), P, D)
     Ts = params.controller.Ts

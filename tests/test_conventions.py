@@ -11,12 +11,13 @@ import numpy as np
 import pytest
 
 import haa_sym
-from haa_sym import LoopOptions, RegionMap, progress
+from haa_sym import LoopOptions, RegionMap
+from haa_sym.io import progress
 from haa_sym.cli import main
-from haa_sym.compiled import evaluators
-from haa_sym.regions import region_map
-from haa_sym.sweep import blas_limits
-from haa_sym.torque import STEP_CONVENTION, step_info, step_response
+from haa_sym.compiled.generated import evaluators
+from haa_sym.analysis.regions import region_map
+from haa_sym.analysis.sweep import blas_limits
+from haa_sym.analysis.torque import STEP_CONVENTION, step_info, step_response
 
 from conftest import ROOT
 
@@ -34,7 +35,7 @@ def test_version_falls_back_to_pyproject_in_a_source_tree(monkeypatch):
         raise importlib.metadata.PackageNotFoundError(name)
     monkeypatch.setattr(importlib.metadata, "version", not_installed)
     with open(ROOT / "pyproject.toml", "rb") as fh:
-        assert haa_sym._version() == tomllib.load(fh)["project"]["version"]
+        assert haa_sym._version._version() == tomllib.load(fh)["project"]["version"]
 
 
 # --- progress: stderr only, --quiet silences, --progress forces ----------------------------------
@@ -184,7 +185,7 @@ def test_blas_limits_and_same_map(params):
 
 
 def test_torque_bandwidth_map_matches_the_pointwise_bandwidth(params):
-    from haa_sym.torque import torque_bandwidth, torque_bandwidth_map
+    from haa_sym.analysis.torque import torque_bandwidth, torque_bandwidth_map
     p = params.with_values(K_L2=0.0)
     B, A = np.array([0.5, 1.0, 3.0]), np.array([0.0, 0.94])
     bw, stable = torque_bandwidth_map(p, B, A)

@@ -4,9 +4,9 @@ import importlib
 
 import pytest
 
-MODULES = ["haa_sym.regions", "haa_sym.passivity", "haa_sym.contact", "haa_sym.margins",
-           "haa_sym.sweep", "haa_sym.torque", "haa_sym.paper.table2", "haa_sym.actuator",
-           "haa_sym.symbolic.model", "haa_sym.schedule_c"]
+MODULES = ["haa_sym.analysis.regions", "haa_sym.analysis.passivity", "haa_sym.analysis.contact", "haa_sym.analysis.margins",
+           "haa_sym.analysis.sweep", "haa_sym.analysis.torque", "haa_sym.paper.table2", "haa_sym.model.actuator",
+           "haa_sym.symbolic.model", "haa_sym.design.schedule_c"]
 
 
 @pytest.mark.parametrize("name", MODULES)

@@ -1,4 +1,4 @@
-"""The generated evaluators against an independent state-space construction (haa_sym.reference).
+"""The generated evaluators against an independent state-space construction (haa_sym.check.reference).
 
 Issue 2's acceptance: >= 1,000 random points across beta in [0.5, 6], alpha in [0, 1.2],
 N_av in {1, 4, 10, 20, 50}, Ts in {0.5, 1, 2, 4, 6, 8} ms and both leg configurations; the
@@ -11,8 +11,8 @@ import numpy as np
 import pytest
 
 from haa_sym import ClosedLoop, LoopOptions
-from haa_sym import reference as ref
-from haa_sym.loop import FILTERS, PORTS
+from haa_sym.check import reference as ref
+from haa_sym.loop.closed_loop import FILTERS, PORTS
 
 N_AVS = (1, 4, 10, 20, 50)
 TSS = (0.5e-3, 1e-3, 2e-3, 4e-3, 6e-3, 8e-3)

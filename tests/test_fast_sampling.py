@@ -3,7 +3,7 @@
 The monomial coefficients of chi(z) lose the poles that crowd at z = 1 as Ts shrinks (the
 old Schur-Cohn evaluator decided 58 % of a nominal map wrongly at Ts = 100 us). The generated
 test now works on the exact bilinear transform of chi. Reference: numpy eigenvalues and
-state-space frequency responses of the explicit closed loop (haa_sym.reference), which share
+state-space frequency responses of the explicit closed loop (haa_sym.check.reference), which share
 only the ZOH-discretised plant with the evaluators.
 """
 import itertools
@@ -12,7 +12,7 @@ import numpy as np
 import pytest
 
 from haa_sym import ClosedLoop, LoopOptions
-from haa_sym import reference as ref
+from haa_sym.check import reference as ref
 from haa_sym.cli import main
 
 TSS = (10e-6, 20e-6, 50e-6, 100e-6, 150e-6, 500e-6, 1e-3, 8e-3)

@@ -1,8 +1,8 @@
 """The velocity estimate as a choice (issue 8): "average", "lowpass1", "butterworth2".
 
-Each controller element is defined once (haa_sym.elements); the characteristic polynomial, the
-frequency responses and the explicit state space (haa_sym.statespace) all derive from it. The
-reference (haa_sym.reference) builds the loop independently: scipy's bilinear map of the analog
+Each controller element is defined once (haa_sym.loop.elements); the characteristic polynomial, the
+frequency responses and the explicit state space (haa_sym.loop.statespace) all derive from it. The
+reference (haa_sym.check.reference) builds the loop independently: scipy's bilinear map of the analog
 prototype, tf2ss realisations and a block interconnection. More than 1,000 random gain points
 per new filter, over sampling times, cut-offs, filter placements, delays and both legs.
 """
@@ -13,10 +13,10 @@ import pytest
 import scipy.signal
 
 from haa_sym import ClosedLoop, LoopOptions
-from haa_sym import reference as ref
-from haa_sym import statespace
+from haa_sym.check import reference as ref
+from haa_sym.loop import statespace
 from haa_sym.cli import main
-from haa_sym.elements import backward_difference, delay, pi_integral, velocity_filter
+from haa_sym.loop.elements import backward_difference, delay, pi_integral, velocity_filter
 
 TSS = (20e-6, 100e-6, 1e-3, 4e-3)
 CUTOFFS = (0.02, 0.1, 0.3)          # f_c as a fraction of the sampling frequency 1/Ts

@@ -11,7 +11,8 @@ import numpy as np
 import pytest
 
 from haa_sym import ClosedLoop
-from haa_sym.compiled import Compiler, Evaluators, GeneratedCode, StaleGeneratedCode
+from haa_sym.errors import StaleGeneratedCode
+from haa_sym.compiled.generated import Compiler, Evaluators, GeneratedCode
 
 from conftest import ROOT
 
@@ -74,7 +75,7 @@ print(repr([np.array(r).ravel(order="F").tolist() for r in f.call(args)]))
 
 def _plant_values(lib):
     # a fresh process: truncating a library this process has mapped would crash it (SIGBUS)
-    from haa_sym.actuator import HYQ
+    from haa_sym.model.actuator import HYQ
     return subprocess.run([sys.executable, "-c", _PLANT, str(lib), HYQ.function_name], capture_output=True,
                           text=True, check=True).stdout
 
@@ -133,7 +134,7 @@ def test_runtime_does_not_import_sympy():
 def test_column_driver_matches_casadi_call(params):
     """codegen/driver.c runs the generated functions over all columns in one C call; it must
     give exactly what CasADi's own per-column call of the same compiled function gives."""
-    from haa_sym.compiled import evaluators
+    from haa_sym.compiled.generated import evaluators
     ev = evaluators("compiled")
     rng = np.random.default_rng(5)
     loop = ClosedLoop(params.with_values(N_av=10), backend="compiled")
@@ -161,7 +162,7 @@ def test_installed_package_needs_no_sources(tmp_path):
     # root=None is the installed layout: no symbolic sources, the digests alone are checked
     gen = shutil.copytree(GEN, tmp_path / "generated")
     assert GeneratedCode(gen, root=None).function_names
-    from haa_sym.actuator import HYQ
+    from haa_sym.model.actuator import HYQ
     (gen / f"{HYQ.function_name}.casadi").write_bytes(b"")
     with pytest.raises(StaleGeneratedCode, match="unset HAA_SYM_GENERATED"):
         GeneratedCode(gen, root=None)
@@ -212,7 +213,7 @@ _REGIONS = ["-m", "haa_sym.cli", "regions", "--P-gain", "log:1:20000:5", "--D-ga
 
 @pytest.mark.parametrize("command,tamper", [(_REGIONS, _tamper_edit_byte),
                                             (_REGIONS, _tamper_truncate_manifest),
-                                            (["-m", "haa_sym.verify"], _tamper_truncate_manifest)])
+                                            (["-m", "haa_sym.check.verify"], _tamper_truncate_manifest)])
 def test_damaged_generated_code_exits_2_with_one_message(tmp_path, command, tamper):
     # a fresh process: the evaluators are cached per process
     gen = shutil.copytree(GEN, tmp_path / "generated")

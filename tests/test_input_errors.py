@@ -7,12 +7,12 @@ import numpy as np
 import pytest
 
 from haa_sym import ClosedLoop, ParameterError, passivity, region_map
-from haa_sym.budget import check_memory, memory_budget
+from haa_sym.io.budget import check_memory, memory_budget
 from haa_sym.cli import main
-from haa_sym.contact import contact_stability
-from haa_sym.margins import stability_margins
-from haa_sym.params import Controller, Params, load_params
-from haa_sym.torque import step_response, torque_bandwidth
+from haa_sym.analysis.contact import contact_stability
+from haa_sym.analysis.margins import stability_margins
+from haa_sym.model.params import Controller, Params, load_params
+from haa_sym.analysis.torque import step_response, torque_bandwidth
 
 from conftest import ROOT
 

@@ -70,7 +70,7 @@ def _run(site, cwd, *args, **env):
 
 
 def test_installed_layout_runs_from_any_directory(site, tmp_path, params):
-    where = _run(site, tmp_path, "-c", "import haa_sym, haa_sym.resources as r; "
+    where = _run(site, tmp_path, "-c", "import haa_sym, haa_sym.model.resources as r; "
                  "print(haa_sym.__file__, r.source_root(), r.data_dir('model'))")
     pkg, root, model = where.stdout.split()
     assert pkg.startswith(str(site)) and root == "None" and model == str(site / "haa_sym/_model")
@@ -86,7 +86,7 @@ def test_installed_layout_runs_from_any_directory(site, tmp_path, params):
 
 def test_damaged_install_says_reinstall(site, tmp_path):
     copy = shutil.copytree(site, tmp_path / "site")
-    from haa_sym.actuator import HYQ
+    from haa_sym.model.actuator import HYQ
     plant = copy / f"haa_sym/_generated/{HYQ.function_name}.casadi"
     plant.write_bytes(plant.read_bytes()[:-1])
     (tmp_path / "work").mkdir()

@@ -1,9 +1,9 @@
-"""The numeric plant against python-control, and the paper's equations (haa_sym.verify)."""
+"""The numeric plant against python-control, and the paper's equations (haa_sym.check.verify)."""
 import numpy as np
 import pytest
 
-from haa_sym.plant import continuous_plant, discretize
-from haa_sym.margins import stability_margins
+from haa_sym.loop.plant import continuous_plant, discretize
+from haa_sym.analysis.margins import stability_margins
 
 
 def test_zoh_matches_python_control(params):
@@ -32,7 +32,7 @@ def test_margins_match_python_control():
 
 
 def test_verify_all_rows_pass(params):
-    from haa_sym import verify
+    from haa_sym.check import verify
     rows = verify.run(params)
     failed = [r for r in rows if not r.ok]
     assert not failed, [(r.claim, r.numbers) for r in failed]
@@ -40,13 +40,13 @@ def test_verify_all_rows_pass(params):
 
 
 def test_numeric_p1_roots_match_the_paper_polynomial(params):
-    """haa_sym.torque.p1_roots (zeros of the generated plant, no sympy) against the roots of p1
+    """haa_sym.analysis.torque.p1_roots (zeros of the generated plant, no sympy) against the roots of p1
     as printed in Eq. (4) (sympy, exact parameters), both legs, K_L2 = 0 and the configured K_L2."""
     import sympy as sp
 
     from haa_sym.symbolic import eom
     from haa_sym.symbolic import torque_tf as tt
-    from haa_sym.torque import p1_roots
+    from haa_sym.analysis.torque import p1_roots
     syms = eom.plant_symbols()
     for cfg in sorted(params.configurations):
         for K in (0.0, params.configuration(cfg).plant.K_L2):

@@ -12,8 +12,8 @@ import sympy as sp
 
 from haa_sym import (ClosedLoop, Controller, LoopOptions, ParameterError, Params, load_params, passivity,
                      region_map)
-from haa_sym.actuator import HYQ, Body, Coupling, Topology
-from haa_sym.plant import continuous_plant
+from haa_sym.model.actuator import HYQ, Body, Coupling, Topology
+from haa_sym.loop.plant import continuous_plant
 from haa_sym.symbolic.model import LinearActuatorModel, Parameter
 
 from conftest import ROOT, decisions_against_reference
@@ -142,8 +142,8 @@ def test_two_mass_closed_loop_agrees_with_reference(two_mass_params):
 
 
 def test_every_analysis_runs_on_a_model(two_mass_params):
-    from haa_sym import verify
-    from haa_sym.torque import step_response, torque_loop_margins
+    from haa_sym.check import verify
+    from haa_sym.analysis.torque import step_response, torque_loop_margins
     pa = passivity(two_mass_params, np.array([100.0, 300.0]), np.array([2.0, 5.0]))
     assert pa.stable.shape == (2,)
     assert np.isfinite(torque_loop_margins(two_mass_params).pm_deg)
@@ -157,8 +157,8 @@ def test_every_analysis_runs_on_a_model(two_mass_params):
 
 # --- compiled once into the cache, reused ---------------------------------------------------
 def test_compiled_once_and_reused(tmp_path, capsys, monkeypatch):
-    from haa_sym import plant_code
-    from haa_sym.progress import set_progress
+    from haa_sym.compiled import plant_code
+    from haa_sym.io.progress import set_progress
     import haa_sym.symbolic.symbolic_to_casadi as s2c
     cache = tmp_path / "cache"
     monkeypatch.setenv("HAA_SYM_CACHE", str(cache))
@@ -290,7 +290,7 @@ def test_docs_example_runs(tmp_path, monkeypatch):
 
 
 def test_contact_needs_the_port_stiffness(two_mass_params):
-    from haa_sym.contact import contact_stability
+    from haa_sym.analysis.contact import contact_stability
     with pytest.raises(ParameterError, match=r"<model two-mass joint>: the model has no parameter K_l \(the "
                                              r"port's stiffness to ground"):
         contact_stability(two_mass_params, [100.0])

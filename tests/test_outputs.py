@@ -5,9 +5,10 @@ import os
 import matplotlib.figure
 import pytest
 
-from haa_sym import outputs
+from haa_sym.io import outputs
 from haa_sym.cli import main
-from haa_sym.outputs import OutputError, Transaction
+from haa_sym.errors import OutputError
+from haa_sym.io.outputs import Transaction
 
 SMALL = ["--P-gain", "log:1:100:3", "--D-gain", "1,2"]
 
@@ -172,7 +173,7 @@ def test_a_failed_write_is_never_committed(tmp_path):
 
 def test_interrupt_is_one_line_and_writes_nothing(tmp_path, capsys, monkeypatch):
     """Ctrl-C during a command: exit 130, one line, no traceback, existing output untouched."""
-    import haa_sym.regions as regions
+    import haa_sym.analysis.regions as regions
     out = tmp_path / "old.npz"
     out.write_bytes(b"the user's file")
 

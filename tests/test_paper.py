@@ -8,12 +8,12 @@ import numpy as np
 import pytest
 
 from haa_sym import ClosedLoop, LoopOptions
-from haa_sym.contact import contact_stability, intervals
+from haa_sym.analysis.contact import contact_stability, intervals
 from haa_sym.paper import paper_spec
-from haa_sym.passivity import bands_beyond, corrected_phase
-from haa_sym.regions import grid
+from haa_sym.analysis.passivity import bands_beyond, corrected_phase
+from haa_sym.analysis.regions import grid
 from haa_sym.paper.table2 import score_options, table2
-from haa_sym.torque import step_response
+from haa_sym.analysis.torque import step_response
 
 KNOWN_DIFFERENCES = {
     # The 50-sample average lags the D term by w N_av Ts/2 ~ 32 deg at the 22 rad/s where Z's

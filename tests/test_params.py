@@ -7,7 +7,8 @@ import math
 
 import pytest
 
-from haa_sym.params import ParameterError, load_params, CONTROLLER_KEYS
+from haa_sym.errors import ParameterError
+from haa_sym.model.params import load_params, CONTROLLER_KEYS
 
 from conftest import ROOT
 

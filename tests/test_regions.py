@@ -6,10 +6,10 @@ import numpy as np
 import pytest
 
 from haa_sym import ClosedLoop, LoopOptions, ParameterError
-from haa_sym import reference as ref
-from haa_sym.margins import stability_margins
-from haa_sym.regions import RegionMap, grid, region_map
-from haa_sym.sweep import colgate_factor
+from haa_sym.check import reference as ref
+from haa_sym.analysis.margins import stability_margins
+from haa_sym.analysis.regions import RegionMap, grid, region_map
+from haa_sym.analysis.sweep import colgate_factor
 
 P_GRID = "log:1:20000:24"
 D_GRID = "lin:1:50:12"
@@ -150,7 +150,7 @@ def test_bad_options():
 
 
 def test_threaded_sweep_gives_the_same_map(params, monkeypatch):
-    import haa_sym.regions as regions
+    import haa_sym.analysis.regions as regions
     P, D = grid("log:1:20000:40"), grid("lin:1:50:40")       # 1,600 points: four chunks
     maps = []
     for threads in (1, 2):

@@ -7,9 +7,9 @@ import re
 import numpy as np
 
 from haa_sym.cli import main
-from haa_sym.progress import set_progress
+from haa_sym.io.progress import set_progress
 from haa_sym.paper.reproduce import foreign_entries
-from haa_sym.torque import STEP_CONVENTION
+from haa_sym.analysis.torque import STEP_CONVENTION
 
 
 def test_reproduce_quick(tmp_path, capsys):

@@ -11,11 +11,11 @@ import numpy as np
 import pytest
 
 from haa_sym import ClosedLoop, load_params
-from haa_sym import reference as ref
+from haa_sym.check import reference as ref
 from haa_sym.cli import main
-from haa_sym.margins import stability_margins
-from haa_sym.robust import feasible_map, leg_configurations, robust_region
-from haa_sym.schedule import CSV_COLUMNS, schedule
+from haa_sym.analysis.margins import stability_margins
+from haa_sym.analysis.robust import feasible_map, leg_configurations, robust_region
+from haa_sym.design.schedule import CSV_COLUMNS, schedule
 
 from conftest import ROOT
 
@@ -80,7 +80,8 @@ def test_runs_on_the_other_built_in_actuators(name):
 
 
 def test_cli_csv_has_the_issue_columns_and_the_c_lookup_returns_it(tmp_path, capsys):
-    from haa_sym.compiled import Compiler, NoCompiler
+    from haa_sym.errors import NoCompiler
+    from haa_sym.compiled.generated import Compiler
     out = tmp_path / "s.csv"
     assert main(["schedule", "--P-gain", "log:5:2000:5", "--D-gain", "lin:1:50:4", "--beta-tol", "0.05",
                  "--out", str(out), "--c-out", str(tmp_path), "--plot", str(tmp_path / "s.png"), "-q"]) == 0
@@ -156,7 +157,7 @@ def test_bad_input_one_message_nothing_written(tmp_path, capsys, argv, message):
 
 
 def test_progress_counts_the_tasks_in_process(capsys):
-    from haa_sym.schedule import _Runner, _task_map
+    from haa_sym.design.schedule import _Runner, _task_map
     p = load_params()
     r = _Runner(None, True)
     out = r.run(_task_map, [(p, {}, np.array([10.0, 100.0]), np.array([1.0, 5.0]), b, p.controller.alpha,

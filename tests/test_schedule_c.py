@@ -1,4 +1,4 @@
-"""The embedded-C torque-gain schedule (haa_sym.schedule_c): the emitted C, compiled with the
+"""The embedded-C torque-gain schedule (haa_sym.design.schedule_c): the emitted C, compiled with the
 system compiler under strict C99 warnings, against the table and against the Python twin."""
 import ctypes
 import math
@@ -10,10 +10,11 @@ import sys
 import numpy as np
 import pytest
 
-from haa_sym.compiled import Compiler, NoCompiler
-from haa_sym.outputs import Transaction
-from haa_sym.params import ParameterError
-from haa_sym.schedule_c import (HEADER, SOURCE, ScheduleTable, c_code, lookup_alpha, lookup_beta,
+from haa_sym.errors import NoCompiler
+from haa_sym.compiled.generated import Compiler
+from haa_sym.io.outputs import Transaction
+from haa_sym.errors import ParameterError
+from haa_sym.design.schedule_c import (HEADER, SOURCE, ScheduleTable, c_code, lookup_alpha, lookup_beta,
                                 lookup_feasible, write_c)
 
 STRICT = ("-std=c99", "-pedantic", "-Wall", "-Wextra", "-Werror", "-Wconversion", "-Wshadow",
@@ -291,7 +292,7 @@ def test_feasible_as_zero_one_and_nan_at_infeasible_points_accepted():
     assert c_code(same) == c_code(t)
     with pytest.raises(ParameterError, match="lookup_alpha: this ScheduleTable has no alpha table"):
         lookup_alpha(synthetic(alpha=False), 10.0, 10.0)
-    with pytest.raises(ParameterError, match="table = 'x'; allowed: a haa_sym.schedule_c.ScheduleTable"):
+    with pytest.raises(ParameterError, match="table = 'x'; allowed: a haa_sym.design.schedule_c.ScheduleTable"):
         write_c("x", ".")
 
 
@@ -398,6 +399,6 @@ def test_cost_of_one_call(tmp_path, record_property):
 
 
 def test_module_does_not_import_sympy():
-    code = ("import sys, haa_sym.schedule_c\n"
-            "assert 'sympy' not in sys.modules, 'sympy imported by haa_sym.schedule_c'\n")
+    code = ("import sys, haa_sym.design.schedule_c\n"
+            "assert 'sympy' not in sys.modules, 'sympy imported by haa_sym.design.schedule_c'\n")
     subprocess.run([sys.executable, "-c", code], check=True)

@@ -1,9 +1,9 @@
-"""The grid reductions of haa_sym.sweep on loops with known answers."""
+"""The grid reductions of haa_sym.analysis.sweep on loops with known answers."""
 import numpy as np
 import pytest
 
-from haa_sym.margins import stability_margins
-from haa_sym.sweep import gain_rows, monomial_rows, phase_excess, phase_margins, product_form
+from haa_sym.analysis.margins import stability_margins
+from haa_sym.analysis.sweep import gain_rows, monomial_rows, phase_excess, phase_margins, product_form
 
 
 def test_product_form_is_the_product():

@@ -24,8 +24,9 @@ import os
 import sys
 from pathlib import Path
 
-from haa_sym.params import STRING_KEYS, ParameterError, gain_array, load_params
-from haa_sym.progress import set_progress
+from haa_sym.errors import ParameterError
+from haa_sym.model.params import STRING_KEYS, gain_array, load_params
+from haa_sym.io.progress import set_progress
 
 OUTPUT_SUFFIXES = {"regions": (".npz",), "passivity": (".csv", ".json"), "step": (".csv",),
                    "boundary": (".json",), "contact": (".json",), "schedule": (".csv",)}
@@ -54,7 +55,7 @@ def _parse_set(items: list[str], known: tuple[str, ...] | None = None) -> dict[s
 
 
 def _parse_options(items: list[str]):
-    from haa_sym.loop import LoopOptions
+    from haa_sym.loop.closed_loop import LoopOptions
     fields = LoopOptions.field_names()
     out = {}
     for item in items:
@@ -109,7 +110,7 @@ def _params(args):
     params = load_params(args.params)
     if args.configuration:
         params = params.configuration(args.configuration)
-    from haa_sym.params import CONTROLLER_KEYS
+    from haa_sym.model.params import CONTROLLER_KEYS
     sets = _parse_set(args.set, tuple(params.plant.topology.parameter_keys) + CONTROLLER_KEYS)
     if not sets:
         return params
@@ -126,7 +127,7 @@ def _check_out(path: str | None, cmd: str, flag: str = "--out") -> Path | None:
     """Validate an output path before any computation: suffix, existing writable directory."""
     if path is None:
         return None
-    from haa_sym.outputs import check_file
+    from haa_sym.io.outputs import check_file
     p = Path(path)
     allowed = OUTPUT_SUFFIXES[cmd] if flag == "--out" else (".png", ".pdf", ".svg")
     if p.suffix.lower() not in allowed:
@@ -151,15 +152,15 @@ def _setup(args, cmd: str):
 
 
 def _plots():
-    """haa_sym.plots, imported only when a figure is asked for (matplotlib is slow to import)."""
-    from haa_sym import plots
+    """haa_sym.io.plots, imported only when a figure is asked for (matplotlib is slow to import)."""
+    from haa_sym.io import plots
     return plots
 
 
 def _write_outputs(out, plot, write_out, figure) -> None:
     """``--out`` through ``write_out(path, tx)`` and ``--plot`` from ``figure()``, all or nothing
-    (:mod:`haa_sym.outputs`): a failure leaves both as they were."""
-    from haa_sym.outputs import Transaction
+    (:mod:`haa_sym.io.outputs`): a failure leaves both as they were."""
+    from haa_sym.io.outputs import Transaction
     with Transaction() as tx:
         if out:
             write_out(out, tx)
@@ -182,8 +183,8 @@ def _requirements(args):
 
 
 def _cmd_regions(args) -> int:
-    from haa_sym.loop import ClosedLoop
-    from haa_sym.regions import grid, region_map
+    from haa_sym.loop.closed_loop import ClosedLoop
+    from haa_sym.analysis.regions import grid, region_map
     params, options, out, plot = _setup(args, "regions")
     P, D = grid(args.P_gain, "--P-gain"), grid(args.D_gain, "--D-gain")
     robust_only = [f for f, given in (("--require", args.require != "stable,pm"), ("--leg", args.leg is not None),
@@ -201,8 +202,8 @@ def _cmd_regions(args) -> int:
     m = region_map(params, P, D, options=options, radius=args.radius, loop=loop, method=args.method)
 
     def figure():
-        from haa_sym.boundary import boundaries
-        from haa_sym.plots import plot_region
+        from haa_sym.analysis.boundaries.stability import boundaries
+        from haa_sym.io.plots import plot_region
         b = boundaries(params, options=options, P_range=(P.min(), P.max()), D_range=(D.min(), D.max()),
                        loop=loop) if loop.options.conventions.pm_loop == "impedance" else None
         return plot_region(m, title=args.title, boundary=b)
@@ -213,8 +214,8 @@ def _cmd_regions(args) -> int:
 
 
 def _robust_regions(args, params, options, out, plot, P, D) -> int:
-    from haa_sym.regions import run_meta, save_npz
-    from haa_sym.robust import robust_region
+    from haa_sym.analysis.regions import run_meta, save_npz
+    from haa_sym.analysis.robust import robust_region
     r = robust_region(params, P, D, requirements=_requirements(args), leg=_leg(args, params),
                       leg_mode=args.leg_mode, options=options)
     meta = run_meta(params, options, **r.meta, n_configurations=r.n_configurations, converged=r.converged,
@@ -230,15 +231,15 @@ def _robust_regions(args, params, options, out, plot, P, D) -> int:
 
 
 def _cmd_boundary(args) -> int:
-    from haa_sym.boundary import boundaries
-    from haa_sym.regions import grid
+    from haa_sym.analysis.boundaries.stability import boundaries
+    from haa_sym.analysis.regions import grid
     params, options, out, plot = _setup(args, "boundary")
     P, D = grid(args.P_gain, "--P-gain"), grid(args.D_gain, "--D-gain")
     if options.conventions.pm_loop != "impedance":
         raise ParameterError(f"--option pm_loop={options.conventions.pm_loop}: the boundaries cover the "
                              "impedance loop's margin; allowed: pm_loop=impedance (the default)")
     b = boundaries(params, options=options, P_range=(P.min(), P.max()), D_range=(D.min(), D.max()))
-    from haa_sym.regions import run_meta
+    from haa_sym.analysis.regions import run_meta
     b.stability.meta.update(run_meta(params, options), omega_unit="rad/s", P_gain_unit="Nm/rad",
                             D_gain_unit="Nms/rad")
     _write_outputs(out, plot, lambda path, tx: b.save(path, tx, "--out"),
@@ -254,9 +255,9 @@ def _cmd_boundary(args) -> int:
 
 def _cmd_contact(args) -> int:
     import json
-    from haa_sym.contact import contact_intervals
-    from haa_sym.outputs import write_text
-    from haa_sym.regions import run_meta
+    from haa_sym.analysis.contact import contact_intervals
+    from haa_sym.io.outputs import write_text
+    from haa_sym.analysis.regions import run_meta
     params, options, out, plot = _setup(args, "contact")
     lo, sep, hi = args.K_range.partition(":")
     try:
@@ -301,10 +302,10 @@ def _range(text: str, flag: str, what: str) -> tuple[float, float]:
 
 
 def _cmd_schedule(args) -> int:
-    from haa_sym.outputs import Transaction
-    from haa_sym.regions import grid
-    from haa_sym.schedule import schedule
-    from haa_sym.schedule_c import check_c_directory, write_c
+    from haa_sym.io.outputs import Transaction
+    from haa_sym.analysis.regions import grid
+    from haa_sym.design.schedule import schedule
+    from haa_sym.design.schedule_c import check_c_directory, write_c
     params, options, out, plot = _setup(args, "schedule")
     if args.c_out is not None:
         check_c_directory(args.c_out)
@@ -340,8 +341,8 @@ def _cmd_passivity(args) -> int:
     import json
 
     import numpy as np
-    from haa_sym.passivity import bands_beyond, corrected_phase, passivity
-    from haa_sym.regions import grid
+    from haa_sym.analysis.passivity import bands_beyond, corrected_phase, passivity
+    from haa_sym.analysis.regions import grid
     params, options, out, plot = _setup(args, "passivity")
     P, D = grid(args.P_gain, "--P-gain"), grid(args.D_gain, "--D-gain")
     if P.size != D.size:
@@ -362,8 +363,8 @@ def _cmd_passivity(args) -> int:
             curves.append((w, ph, f"P_gain = {P[i]:g}, D_gain = {D[i]:g}"))
             print(f"  |phase| > 90 deg for P_gain {P[i]:g}, D_gain {D[i]:g}: "
                   + (", ".join(f"{a:.1f}-{b:.1f} rad/s" for a, b in bands_beyond(w, ph)) or "never"))
-    from haa_sym.outputs import csv_text
-    from haa_sym.regions import run_meta
+    from haa_sym.io.outputs import csv_text
+    from haa_sym.analysis.regions import run_meta
 
     def write_out(path, tx):
         tx.write_text(path, json.dumps({"cells": rows, "meta": run_meta(params, options)}, indent=1) + "\n"
@@ -373,8 +374,8 @@ def _cmd_passivity(args) -> int:
 
 
 def _cmd_step(args) -> int:
-    from haa_sym.outputs import csv_text
-    from haa_sym.torque import STEP_CONVENTION, describe_step, step_response, torque_bandwidth
+    from haa_sym.io.outputs import csv_text
+    from haa_sym.analysis.torque import STEP_CONVENTION, describe_step, step_response, torque_bandwidth
     params, options, out, plot = _setup(args, "step")
     s = step_response(params, duration=args.duration, options=options)
     print(f"{describe_step(s)}, -3 dB bandwidth {torque_bandwidth(params, options=options):.2f} rad/s")
@@ -387,9 +388,9 @@ def _cmd_step(args) -> int:
 
 
 def _cmd_margins(args) -> int:
-    from haa_sym.budget import check_memory, sweep_bytes
-    from haa_sym.loop import ClosedLoop
-    from haa_sym.margins import stability_margins
+    from haa_sym.io.budget import check_memory, sweep_bytes
+    from haa_sym.loop.closed_loop import ClosedLoop
+    from haa_sym.analysis.margins import stability_margins
     params = _params(args)
     options = _parse_options(args.option)
     args.P_gain, args.D_gain = _gain(args, "P_gain", "--P-gain"), _gain(args, "D_gain", "--D-gain")
@@ -416,8 +417,8 @@ def _cmd_reproduce(args) -> int:
 
 
 def _cmd_compile(args) -> int:
-    from haa_sym.compiled import evaluators
-    from haa_sym.plant_code import compile_topology
+    from haa_sym.compiled.generated import evaluators
+    from haa_sym.compiled.plant_code import compile_topology
     params = load_params(args.file)
     top = params.plant.topology
     entry = evaluators().code.manifest["topologies"].get(top.fingerprint)
@@ -459,7 +460,7 @@ def _leg_args(parser) -> None:
 
 
 def main(argv: list[str] | None = None) -> int:
-    from haa_sym import __version__
+    from haa_sym._version import __version__
     ap = _Parser(prog="haa-sym", description=__doc__.splitlines()[0],
                                  formatter_class=argparse.RawDescriptionHelpFormatter, epilog=__doc__)
     ap.add_argument("--version", action="version", version=f"%(prog)s {__version__}")
@@ -539,10 +540,10 @@ def main(argv: list[str] | None = None) -> int:
     set_progress(False if args.quiet else True if args.progress else None)
     try:
         if args.cmd == "verify":
-            from haa_sym.verify import main as verify_main
+            from haa_sym.check.verify import main as verify_main
             return verify_main(["--params", args.params] if args.params else [])
         if args.cmd == "stability":
-            from haa_sym.loop import ClosedLoop
+            from haa_sym.loop.closed_loop import ClosedLoop
             params = _params(args)
             args.P_gain, args.D_gain = _gain(args, "P_gain", "--P-gain"), _gain(args, "D_gain", "--D-gain")
             res = ClosedLoop(params, _parse_options(args.option)).stability(args.P_gain, args.D_gain,
@@ -568,13 +569,13 @@ def main(argv: list[str] | None = None) -> int:
         return 2
     except RuntimeError as exc:
         # generated/ stale or damaged, or the C compiler failing: a fault the user fixes, not a bug
-        from haa_sym.compiled import CompilerError, StaleGeneratedCode
+        from haa_sym.errors import CompilerError, StaleGeneratedCode
         if not isinstance(exc, (StaleGeneratedCode, CompilerError)):
             raise
         print(f"haa-sym: error: {exc}", file=sys.stderr)
         return 2
     except KeyboardInterrupt:
-        # outputs are staged (haa_sym.outputs): an interrupted command leaves existing files as
+        # outputs are staged (haa_sym.io.outputs): an interrupted command leaves existing files as
         # they were; 128 + SIGINT, the shell's convention
         print("haa-sym: interrupted; no output written", file=sys.stderr)
         return 130

@@ -11,8 +11,9 @@ from __future__ import annotations
 import tomllib
 from pathlib import Path
 
-from haa_sym.params import ParameterError, Params
-from haa_sym.resources import data_dir
+from haa_sym.errors import ParameterError
+from haa_sym.model.params import Params
+from haa_sym.model.resources import data_dir
 
 __all__ = ["paper_spec", "panel_params", "default_paper_path"]
 

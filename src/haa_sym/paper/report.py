@@ -4,8 +4,8 @@ from __future__ import annotations
 import math
 from pathlib import Path
 
-from haa_sym.loop import LoopOptions
-from haa_sym.torque import STEP_CONVENTION
+from haa_sym.loop.closed_loop import LoopOptions
+from haa_sym.analysis.torque import STEP_CONVENTION
 
 __all__ = ["write_report"]
 
@@ -56,7 +56,7 @@ def option_sensitivity_markdown(rows: list[dict]) -> str:
 
 
 def write_report(out: Path, r: dict, spec: dict, options: LoopOptions, verify_text: str) -> Path:
-    from haa_sym.outputs import write_text
+    from haa_sym.io.outputs import write_text
     c = spec["claims"]
     meta = r["meta"]
     ctrl = meta["params"]["controller"]
@@ -201,13 +201,13 @@ def write_report(out: Path, r: dict, spec: dict, options: LoopOptions, verify_te
     add("\n## Cross-check of the maps\n")
     add(f"{n_chk} of the {n_pts} points of the {len(cc)} maps (every point next to a stability boundary "
         f"of its map, and every third point in both directions) were re-decided by `numpy.linalg.eigvals` of "
-        f"the explicit closed-loop matrix (`haa_sym.reference`, independent of the generated code): "
+        f"the explicit closed-loop matrix (`haa_sym.check.reference`, independent of the generated code): "
         f"{n_dec} of them have a spectral radius farther than 1e-6 from 1, and the generated decision "
         f"(Routh-Hurwitz on the bilinear basis) disagrees on **{n_bad}** of them. {n_ref} points "
         "could not be certified against rounding and were decided from eigenvalues in the maps.")
     grid = [v["grid_disagree"] for v in cc.values() if "grid_disagree" in v]
     if grid:
-        add(f"\nThe maps were decided from the exact boundaries (`haa_sym.boundary.classify_regions`: "
+        add(f"\nThe maps were decided from the exact boundaries (`haa_sym.analysis.boundaries.stability.classify_regions`: "
             f"each grid row split where the stability, 30 deg phase-margin and passivity curves cross "
             f"it, one decision per segment). The generated grid evaluators decided every point of "
             f"{len(grid)} of the {len(cc)} maps again: they disagree on **{sum(g['stable'] for g in grid)}** stability, "
@@ -271,7 +271,7 @@ def write_report(out: Path, r: dict, spec: dict, options: LoopOptions, verify_te
                 "choose the beta range accordingly.\n")
         add("\n![Torque-gain schedule](schedule.png)\n")
     add("\n## Symbolic checks\n")
-    add("`python -m haa_sym.verify` (exit status "
+    add("`python -m haa_sym.check.verify` (exit status "
         f"{r['verify_exit_status']}):\n\n```\n{verify_text.rstrip()}\n```\n")
     path = out / "REPORT.md"
     write_text(path, "\n".join(L) + "\n")

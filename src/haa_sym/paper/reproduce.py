@@ -11,13 +11,13 @@ Writes into the output directory, as data and as PNG:
   contact.png, contact.csv                              stability and passivity against environment
                                                         stiffness (torque loop alone; Fig. 12's impedance)
   torque_bandwidth.png, torque_bandwidth.csv            torque bandwidth over beta and alpha, both legs
-  verify.txt                                            python -m haa_sym.verify (p1 roots, margins)
+  verify.txt                                            python -m haa_sym.check.verify (p1 roots, margins)
   claims.json                                           every computed claim, machine-readable
   REPORT.md                                             all of it, "the paper says / we compute"
 Everything is computed from ``model/hyq_haa.toml`` and ``model/paper.toml``; nothing is typed in.
 
 The directory is built as a temporary sibling and swapped in when complete
-(:class:`haa_sym.outputs.Transaction`): an interrupted or failed run leaves the previous
+(:class:`haa_sym.io.outputs.Transaction`): an interrupted or failed run leaves the previous
 results as they were. An existing directory is replaced only if it holds nothing but such
 outputs, so no other file is ever deleted.
 """
@@ -33,17 +33,17 @@ from pathlib import Path
 
 import numpy as np
 
-from haa_sym.contact import contact_intervals, intervals
-from haa_sym.budget import check_memory, sweep_bytes
-from haa_sym.loop import ClosedLoop, LoopOptions
-from haa_sym.outputs import Transaction, check_directory, csv_text as _csv, write_text
+from haa_sym.analysis.contact import contact_intervals, intervals
+from haa_sym.io.budget import check_memory, sweep_bytes
+from haa_sym.loop.closed_loop import ClosedLoop, LoopOptions
+from haa_sym.io.outputs import Transaction, check_directory, csv_text as _csv, write_text
 from haa_sym.paper import panel_params, paper_spec
-from haa_sym.params import Params, load_params
-from haa_sym.passivity import bands_beyond, corrected_phase
-from haa_sym.progress import message, progress as progress_bar
-from haa_sym.regions import CHUNK, eigenvalue_crosscheck, grid, region_map, run_meta
+from haa_sym.model.params import Params, load_params
+from haa_sym.analysis.passivity import bands_beyond, corrected_phase
+from haa_sym.io.progress import message, progress as progress_bar
+from haa_sym.analysis.regions import CHUNK, eigenvalue_crosscheck, grid, region_map, run_meta
 from haa_sym.paper.table2 import score_options, table2
-from haa_sym.torque import p1_roots, step_response, torque_bandwidth, torque_loop_margins
+from haa_sym.analysis.torque import p1_roots, step_response, torque_bandwidth, torque_loop_margins
 
 __all__ = ["reproduce", "region_trends"]
 
@@ -222,8 +222,8 @@ def _variants(options: LoopOptions) -> list[tuple[str, dict]]:
 
 def _regions(job: _Job) -> dict:
     """Figs. 8-11: every panel's map (npz), its eigenvalue cross-check, the figures, the trends."""
-    from haa_sym.boundary import boundaries
-    from haa_sym.plots import plot_region_panels, save_figure
+    from haa_sym.analysis.boundaries.stability import boundaries
+    from haa_sym.io.plots import plot_region_panels, save_figure
     _log("regions: 16 maps (Figs. 8-11), decided from the exact curves, drawn with them")
     splits = quadrant_splits(job.spec, job.P_grid, job.D_grid)
     stats, panels_by_fig, crosscheck = {k: {} for k in splits}, {}, {}
@@ -320,7 +320,7 @@ def _table2(job: _Job) -> dict:
 
 def _fig12(job: _Job, loop: ClosedLoop) -> dict:
     """Fig. 12: corrected phase of Z, torque loop alone and impedance loop closed; the bands."""
-    from haa_sym.plots import plot_corrected_phase, save_figure
+    from haa_sym.io.plots import plot_corrected_phase, save_figure
     params, options = job.params, job.options
     w_fine = np.logspace(np.log10(options.numerics.omega_min), np.log10(np.pi / params.controller.Ts * (1 - 1e-9)),
                          4 * options.numerics.n_omega)
@@ -341,7 +341,7 @@ def _contact(job: _Job) -> dict:
     """Stability and passivity against the environment stiffness (Sec. 5): the torque loop alone,
     which the paper finds not passive and unstable for 72-3500 Nm/rad, and the impedance loop
     closed at the gains of Fig. 12, which it finds passive (so stable with any passive spring)."""
-    from haa_sym.plots import plot_contact, save_figure
+    from haa_sym.io.plots import plot_contact, save_figure
     K = grid(job.claims["contact_K_L2_grid"] if not job.quick else "log:1:100000:80", "K_L2")
     # the scan brackets every change of stability and passivity; Brent's method locates each end
     r = contact_intervals(job.params, (K.min(), K.max()), n_scan=K.size, options=job.options)
@@ -383,7 +383,7 @@ def _beta_threshold(job: _Job, loop: ClosedLoop) -> dict:
 
 def _fig7(job: _Job) -> dict:
     """Fig. 7: unit torque steps, K_L2 = 0 and 11.2, with and without velocity compensation."""
-    from haa_sym.plots import plot_steps, save_figure
+    from haa_sym.io.plots import plot_steps, save_figure
     c = job.claims
     panels, steps = [], []
     for K_L2 in c["fig7_K_L2"]:
@@ -432,8 +432,8 @@ def _torque_loop_corners(job: _Job) -> dict:
 def _torque_bandwidth(job: _Job) -> dict:
     """Torque bandwidth (leg free in the air, K_L2 = 0, Sec. 3.3) over beta and alpha for both
     legs, next to the torque-loop stability it trades against."""
-    from haa_sym.plots import plot_torque_bandwidth, save_figure
-    from haa_sym.torque import torque_bandwidth_map
+    from haa_sym.io.plots import plot_torque_bandwidth, save_figure
+    from haa_sym.analysis.torque import torque_bandwidth_map
     B = np.linspace(0.1, 8.0, 8 if job.quick else 25)
     A = np.linspace(0.0, 1.2, 5 if job.quick else 13)
     panels, rows, summary = [], [], {}
@@ -455,8 +455,8 @@ def _torque_bandwidth(job: _Job) -> dict:
 def _schedule(job: _Job) -> dict:
     """The paper's outlook (Sec. 6): the torque-gain schedule over the locomotion impedances,
     robust to the leg, against the fixed beta = 1 of the paper's tuning."""
-    from haa_sym.plots import plot_schedule, save_figure
-    from haa_sym.schedule import schedule
+    from haa_sym.io.plots import plot_schedule, save_figure
+    from haa_sym.design.schedule import schedule
     P = grid("log:5:2000:4" if job.quick else "log:1:2000:30", "P_gain")
     D = grid("lin:1:50:3" if job.quick else "lin:1:50:20", "D_gain")
     s = schedule(job.params, P, D, options=job.options, beta_tol=0.1 if job.quick else 0.02)
@@ -480,9 +480,9 @@ def _schedule(job: _Job) -> dict:
 
 
 def _verify(job: _Job) -> tuple[dict, str]:
-    """``python -m haa_sym.verify`` in its own process: the numeric runtime never imports sympy."""
+    """``python -m haa_sym.check.verify`` in its own process: the numeric runtime never imports sympy."""
     src = job.params.source
-    proc = subprocess.run([sys.executable, "-m", "haa_sym.verify"] +
+    proc = subprocess.run([sys.executable, "-m", "haa_sym.check.verify"] +
                           (["--params", src] if Path(src).is_file() else []),
                           capture_output=True, text=True)
     _write_text(job.out / "verify.txt", proc.stdout + proc.stderr)
@@ -516,7 +516,7 @@ def reproduce(out: str | Path = "results", params: Params | None = None,
         job = _Job(out=stage, params=params, options=options, spec=spec, quick=quick,
                    P_grid=P_grid, D_grid=D_grid)
         result: dict = {"meta": run_meta(params, options, quick=quick)}
-        # one bar over the sections (stderr; shown on a terminal after 2 s, see haa_sym.progress)
+        # one bar over the sections (stderr; shown on a terminal after 2 s, see haa_sym.io.progress)
         with progress_bar(12, "reproduce", "section") as bar:
             def run(section, *args):
                 result.update(section(job, *args))

@@ -2,7 +2,7 @@
 
 The rows, columns and the paper's statuses are data in ``model/paper.toml``; this module
 computes our status and worst phase excess per cell, and scores option combinations by how many
-of the 45 cells they reproduce (how the defaults of :class:`haa_sym.loop.LoopOptions` were chosen).
+of the 45 cells they reproduce (how the defaults of :class:`haa_sym.loop.closed_loop.LoopOptions` were chosen).
 """
 from __future__ import annotations
 
@@ -11,10 +11,10 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from haa_sym.loop import COLGATE, FILTERS, PORTS, ClosedLoop, LoopOptions
+from haa_sym.loop.closed_loop import COLGATE, FILTERS, PORTS, ClosedLoop, LoopOptions
 from haa_sym.paper import panel_params, paper_spec
-from haa_sym.params import Params
-from haa_sym.passivity import passivity
+from haa_sym.model.params import Params
+from haa_sym.analysis.passivity import passivity
 
 __all__ = ["Cell", "table2", "score_options", "OPTION_GRID"]
 

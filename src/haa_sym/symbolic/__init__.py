@@ -1,2 +1,2 @@
-"""Symbolic derivations (sympy). Imported by ``haa_sym.verify`` and ``codegen/``, never by the
+"""Symbolic derivations (sympy). Imported by ``haa_sym.check.verify`` and ``codegen/``, never by the
 numeric runtime."""

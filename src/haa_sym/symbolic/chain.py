@@ -1,4 +1,4 @@
-"""Any geared, compliant chain (a :class:`~haa_sym.actuator.Topology`) as symbolic equations.
+"""Any geared, compliant chain (a :class:`~haa_sym.model.actuator.Topology`) as symbolic equations.
 
 The generalisation of Eq. (1)-(2) (docs/model.md, "The chain equations"):
 
@@ -25,7 +25,7 @@ from dataclasses import dataclass
 import sympy as sp
 from sympy.polys.matrices import DomainMatrix
 
-from haa_sym.actuator import ROTOR, Topology
+from haa_sym.model.actuator import ROTOR, Topology
 
 s = sp.Symbol("s")
 VC = sp.Symbol("VC_gain")

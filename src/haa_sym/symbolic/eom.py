@@ -16,7 +16,7 @@ from dataclasses import dataclass
 
 import sympy as sp
 
-from haa_sym.actuator import HYQ
+from haa_sym.model.actuator import HYQ
 
 STATE_NAMES = ("I_m", "theta_m", "dtheta_m", "theta_L1", "dtheta_L1", "theta_L2", "dtheta_L2")
 INPUT_NAMES = ("V_m", "T_fr", "T_dist")

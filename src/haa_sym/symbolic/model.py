@@ -4,12 +4,12 @@
 ``AcadosModel`` and PyDy's ``System`` takes the equations of a ``KanesMethod``): the state space
 ``dx/dt = A x + B u``, ``y = C x`` with entries that are rational expressions of named,
 domain-checked parameters, and the velocity-compensation constant ``VC0`` (Eq. 6 at
-alpha = 1). A chain :class:`~haa_sym.actuator.Topology` is one producer of it
+alpha = 1). A chain :class:`~haa_sym.model.actuator.Topology` is one producer of it
 (:meth:`Topology.model`, derived by :mod:`haa_sym.symbolic.chain`); an engineer writes one by
 hand, either as matrices or as equations of motion linearised at a point
 (:meth:`LinearActuatorModel.from_equations`). Either way the model is compiled on first use into
-the content-hash cache (:mod:`haa_sym.plant_code`) and evaluated by the same
-:class:`~haa_sym.plant.ContinuousPlant` path, so every analysis (``ClosedLoop``, ``region_map``,
+the content-hash cache (:mod:`haa_sym.compiled.plant_code`) and evaluated by the same
+:class:`~haa_sym.loop.plant.ContinuousPlant` path, so every analysis (``ClosedLoop``, ``region_map``,
 ``passivity``, margins, steps) works on it; :meth:`haa_sym.Params.from_model` gives it values and
 a controller.
 
@@ -23,7 +23,7 @@ The closed loop reads the model through fixed signal roles:
   velocities; ``dtheta_<port>`` is the velocity conjugate to ``T_dist`` (the default port).
 
 Every check is made on construction; a bad model raises one
-:class:`~haa_sym.params.ParameterError` naming the model, the field and what is allowed. The
+:class:`~haa_sym.model.params.ParameterError` naming the model, the field and what is allowed. The
 expressions must be exact: integers and rationals (``sp.Rational(1, 2)``), no floats, and only
 ``+``, ``*`` and integer powers (what :func:`haa_sym.symbolic.symbolic_to_casadi.to_sx`
 translates without rounding).
@@ -47,12 +47,13 @@ from typing import Mapping, Sequence
 
 import sympy as sp
 
-from haa_sym.actuator import INPUT_NAMES, Actuator
-from haa_sym.params import CONTROLLER_KEYS, ParameterError
+from haa_sym.model.actuator import INPUT_NAMES, Actuator
+from haa_sym.errors import ParameterError
+from haa_sym.model.params import CONTROLLER_KEYS
 
 __all__ = ["Parameter", "LinearActuatorModel", "ROLE_OUTPUTS", "INPUT_NAMES", "DOMAINS"]
 
-# The outputs the closed loop reads by role (haa_sym.loop: the measured torque with or without the
+# The outputs the closed loop reads by role (haa_sym.loop.closed_loop: the measured torque with or without the
 # sensor's damping term, the encoder angle); port velocities are the outputs named dtheta_<name>.
 ROLE_OUTPUTS = ("T_sensor", "T_sensor_spring", "theta_encoder")
 DOMAINS = (">0", ">=0")
@@ -246,7 +247,7 @@ class LinearActuatorModel(Actuator):
             if swap:
                 set_(fld, value.xreplace(swap))
 
-    # --- what the numeric runtime reads (haa_sym.actuator.Actuator) --------------------------
+    # --- what the numeric runtime reads (haa_sym.model.actuator.Actuator) --------------------------
     @property
     def domain(self) -> dict[str, str]:
         """Parameter name -> domain (">0" or ">=0"), in :attr:`parameter_keys` order."""

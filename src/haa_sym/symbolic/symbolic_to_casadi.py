@@ -2,7 +2,7 @@
 from a chain topology or written in code) into a CasADi Function.
 
 Used by ``make derive`` (codegen/generate.py, the built-in actuators) and by the runtime when an
-actuator has no generated code (haa_sym.plant_code): the only place the compile step needs sympy.
+actuator has no generated code (haa_sym.compiled.plant_code): the only place the compile step needs sympy.
 """
 from __future__ import annotations
 

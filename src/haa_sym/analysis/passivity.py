@@ -1,0 +1,148 @@
+"""Passivity of the driving-port impedance Z(z) (Sec. 5, Table 2, Fig. 12).
+
+Z(z) = T_dist / port velocity with every loop closed (the port velocity is
+``LoopOptions.port``). Following the paper (after Colgate), a gain point is passive when the
+closed loop is stable and the phase of Z, corrected by ``LoopOptions.colgate`` (default: minus
+w Ts/2), stays within +-90 deg for every frequency up to Nyquist. The torque loop alone is the
+impedance loop open, i.e. P_gain = D_gain = 0.
+
+Example
+-------
+>>> from haa_sym import load_params
+>>> from haa_sym.analysis.passivity import passivity
+>>> r = passivity(load_params(), [0, 200], [0, 10])            # doctest: +SKIP
+>>> r.status                                                    # doctest: +SKIP
+array(['No', 'Yes'], dtype='<U8')
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from haa_sym.io.budget import check_memory, sweep_bytes
+from haa_sym.loop.closed_loop import ClosedLoop, LoopOptions
+from haa_sym.model.params import Params, gain_points
+from haa_sym.io.progress import progress as progress_bar
+from haa_sym.analysis.sweep import BLAS_THREADS, blas_limits, colgate_factor, gain_rows, phase_excess
+
+__all__ = ["PassivityResult", "passivity", "corrected_phase", "bands_beyond", "status"]
+
+
+def status(stable, passive) -> np.ndarray:
+    """Table 2 wording per point: "Unstable", "Yes" (passive) or "No" (stable, not passive)."""
+    stable, passive = np.broadcast_arrays(np.asarray(stable, bool), np.asarray(passive, bool))
+    return np.where(~stable, "Unstable", np.where(passive, "Yes", "No"))
+
+
+@dataclass(frozen=True)
+class PassivityResult:
+    """Per gain point: ``stable``, ``passive``, ``phase_excess_deg`` (worst corrected phase of Z
+    beyond +-90 deg; <= 0 inside, NaN when unstable) and ``omega_worst`` (rad/s)."""
+
+    stable: np.ndarray
+    passive: np.ndarray
+    phase_excess_deg: np.ndarray
+    omega_worst: np.ndarray
+
+    @property
+    def status(self) -> np.ndarray:
+        return status(self.stable, self.passive)
+
+
+def passivity(params: Params, P_gain=0.0, D_gain=0.0, *, options: LoopOptions | None = None,
+              beta: float | None = None, alpha: float | None = None,
+              loop: ClosedLoop | None = None, backend: str = "auto",
+              progress: bool | None = None, blas_threads: int | None = BLAS_THREADS) -> PassivityResult:
+    """Passivity of Z(z) at gain points (P_gain, D_gain broadcast together).
+
+    Parameters
+    ----------
+    params : Params
+    P_gain, D_gain : array_like
+        Impedance gains, Nm/rad and Nms/rad (Eq. 8); 0, 0 is the torque loop alone.
+    options : LoopOptions, optional
+        Port, Colgate correction, frequency grid and tolerance (``passivity_tol_deg``).
+    beta, alpha : float, optional
+        Torque-gain scale and velocity compensation; default from ``params``.
+    progress : bool or None
+        Progress bar on stderr; None follows :func:`haa_sym.io.progress.set_progress`.
+    blas_threads : int or None
+        BLAS threads during the sweep; see :data:`haa_sym.analysis.sweep.BLAS_THREADS`.
+
+    Returns
+    -------
+    PassivityResult
+    """
+    from haa_sym.analysis.regions import CHUNK
+    P, D, beta, alpha = gain_points(P_gain, D_gain, beta, alpha)
+    loop = loop or ClosedLoop(params, options, backend)
+    options = loop.options
+    # chunked: one chunk's sweep at a time, plus the coefficients and the per-point results
+    check_memory(sweep_bytes(P.size, options.numerics.n_omega, CHUNK),
+                 f"passivity of {P.size} gain points on n_omega = {options.numerics.n_omega} frequencies")
+    shape = P.shape
+    P, D = P.ravel(), D.ravel()
+    coef = loop.loop_coefficients(None, beta, alpha)
+    n = P.size
+    stable = np.empty(n, bool)
+    ex = np.empty(n)
+    ww = np.empty(n)
+    with blas_limits(blas_threads), progress_bar(n, "passivity", "pt", progress) as bar:
+        for s in range(0, n, CHUNK):
+            sl = slice(s, min(s + CHUNK, n))
+            stable[sl] = loop.stability(P[sl], D[sl], beta, alpha, radius=False).stable.ravel()
+            ex[sl], ww[sl] = phase_excess(gain_rows(P[sl], D[sl]), coef.Z_num, coef.Z_den,
+                                          coef.omega, params.controller.Ts, options.conventions.colgate)
+            bar.update(sl.stop - sl.start)
+    ex = np.where(stable, ex, np.nan)
+    ww = np.where(stable, ww, np.nan)
+    with np.errstate(invalid="ignore"):
+        passive = stable & (ex <= options.conventions.passivity_tol_deg)
+    return PassivityResult(stable.reshape(shape), passive.reshape(shape), ex.reshape(shape),
+                           ww.reshape(shape))
+
+
+def corrected_phase(params: Params, P_gain: float = 0.0, D_gain: float = 0.0, *,
+                    omega=None, options: LoopOptions | None = None, beta: float | None = None,
+                    alpha: float | None = None, loop: ClosedLoop | None = None):
+    """Phase of Z(z) with Colgate's correction, degrees in (-180, 180], on ``omega`` (rad/s).
+
+    Returns ``(omega, phase_deg)``; ``omega`` defaults to the options' grid (Fig. 12).
+
+    Example
+    -------
+    >>> w, ph = corrected_phase(load_params(), 0.0, 0.0)      # torque loop alone  # doctest: +SKIP
+    >>> bands_beyond(w, ph)                                                         # doctest: +SKIP
+    [(11.57..., 59.17...)]
+    """
+    P_gain, D_gain, beta, alpha = gain_points(P_gain, D_gain, beta, alpha)
+    loop = loop or ClosedLoop(params, options)
+    n_omega = loop.options.numerics.n_omega if omega is None else np.size(omega)
+    check_memory(sweep_bytes(P_gain.size, n_omega),
+                 f"the phase of Z at {P_gain.size} gain points on {n_omega} frequencies")
+    coef = loop.loop_coefficients(omega, beta, alpha)
+    Z = coef.evaluate("Z", P_gain, D_gain)
+    c = colgate_factor(coef.omega, params.controller.Ts, loop.options.conventions.colgate)
+    return coef.omega, np.degrees(np.angle(Z * c))
+
+
+def bands_beyond(omega, phase_deg, limit: float = 90.0) -> list[tuple[float, float]]:
+    """Frequency intervals (rad/s) where |phase| > ``limit``, edges interpolated in log(omega).
+
+    >>> [(round(a, 4), round(b, 4)) for a, b in bands_beyond([1.0, 2, 4, 8], [80.0, 100, 100, 80])]
+    [(1.4142, 5.6569)]
+    """
+    omega = np.asarray(omega, float)
+    s = np.abs(np.asarray(phase_deg, float)) - limit
+    out, start = [], None
+    lw = np.log(omega)
+    for k in range(len(s)):
+        if s[k] > 0 and start is None:
+            start = omega[0] if k == 0 else float(np.exp(lw[k - 1] + s[k - 1] / (s[k - 1] - s[k]) * (lw[k] - lw[k - 1])))
+        if s[k] <= 0 and start is not None:
+            out.append((start, float(np.exp(lw[k - 1] + s[k - 1] / (s[k - 1] - s[k]) * (lw[k] - lw[k - 1])))))
+            start = None
+    if start is not None:
+        out.append((start, float(omega[-1])))
+    return out

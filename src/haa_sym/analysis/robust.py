@@ -1,0 +1,202 @@
+"""Regions robust to the leg: stable, PM >= 30 deg (and passive) for every leg configuration.
+
+A leg is not only "retracted" or "extended": its inertia and stiffness (HyQ: J_L2, K_L2) move
+continuously between them. The leg range is given by two configurations of the actuator file
+(``[configurations.<name>]``; "nominal" names the file's own values):
+
+* ``leg_mode = "segment"`` (default): every key either end overrides is interpolated linearly
+  between the two ends, all together (t from 0 to 1);
+* ``leg_mode = "box"``: every such key independently over its range (the box of all pairs).
+
+A robust region intersects the requirement over configurations spread over the range: both
+ends, then the midpoints, doubling the number of intervals until the result no longer changes
+(:func:`robust_region` says how many that took). Each configuration's map is decided from the
+exact boundaries (:func:`haa_sym.analysis.regions.region_map`).
+
+Example
+-------
+>>> from haa_sym import load_params
+>>> from haa_sym.analysis.robust import robust_region
+>>> r = robust_region(load_params(), [100, 1000], [5, 20])                  # doctest: +SKIP
+>>> r.feasible, r.n_configurations                                           # doctest: +SKIP
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from itertools import product
+
+import numpy as np
+
+from haa_sym.loop.closed_loop import ClosedLoop, LoopOptions
+from haa_sym.errors import ParameterError
+from haa_sym.model.params import Params, gain_array
+
+__all__ = ["LEG_MODES", "REQUIREMENTS", "leg_ends", "leg_configurations", "feasible_map",
+           "RobustRegion", "robust_region"]
+
+LEG_MODES = ("segment", "box")
+# what a gain point must satisfy: closed loop stable, impedance-loop PM >= 30 deg, passive port
+REQUIREMENTS = ("stable", "pm", "passive")
+NOMINAL = "nominal"
+# doubling the number of leg intervals up to this many configurations per axis
+MAX_LEG_POINTS = 33
+
+
+def leg_ends(params: Params, leg: tuple[str, str] | None = None) -> tuple[str, str]:
+    """The two configurations bounding the leg range: ``leg`` (names from the file's
+    [configurations], or "nominal"); by default "retracted" and "extended" when the file has
+    both, else its first two configurations, else "nominal" and its only one."""
+    names = list(params.configurations)
+    if leg is None:
+        if {"retracted", "extended"} <= set(names):
+            leg = ("retracted", "extended")
+        elif len(names) >= 2:
+            leg = (names[0], names[1])
+        elif len(names) == 1:
+            leg = (NOMINAL, names[0])
+        else:
+            raise ParameterError(f"{params.source}: no [configurations] to span a leg range; allowed: "
+                                 "a file with at least one configuration, or the leg range given as FROM:TO")
+    leg = tuple(leg)
+    allowed = [NOMINAL] + names
+    if len(leg) != 2 or leg[0] == leg[1] or any(n not in allowed for n in leg):
+        raise ParameterError(f"leg = {':'.join(map(str, leg))!r}; allowed: two different names of "
+                             f"{allowed} (FROM:TO)")
+    return leg
+
+
+def _end_values(params: Params, name: str) -> dict:
+    return {} if name == NOMINAL else dict(params.configurations[name])
+
+
+def leg_configurations(params: Params, n: int, *, leg=None, leg_mode: str = "segment") -> list[dict]:
+    """Plant overrides of the leg configurations: ``n`` points per axis, evenly spaced from one
+    end to the other (``n`` = 2: the ends). "segment": one axis, every differing key
+    interpolated together; "box": one axis per key, the product (n^keys configurations)."""
+    if leg_mode not in LEG_MODES:
+        raise ParameterError(f"leg_mode = {leg_mode!r}; allowed: {list(LEG_MODES)}")
+    a, b = leg_ends(params, leg)
+    va, vb = _end_values(params, a), _end_values(params, b)
+    keys = sorted(set(va) | set(vb))
+    base = {k: float(getattr(params.plant, k)) for k in keys}
+    lo = {k: float(va.get(k, base[k])) for k in keys}
+    hi = {k: float(vb.get(k, base[k])) for k in keys}
+    keys = [k for k in keys if lo[k] != hi[k]]
+    if not keys:
+        raise ParameterError(f"leg = {a}:{b}: the two configurations do not differ; allowed: two "
+                             "configurations with different plant values")
+    t = np.linspace(0.0, 1.0, n)
+    if leg_mode == "segment":
+        return [{k: lo[k] + s * (hi[k] - lo[k]) for k in keys} for s in t]
+    return [{k: lo[k] + s * (hi[k] - lo[k]) for k, s in zip(keys, ss)} for ss in product(t, repeat=len(keys))]
+
+
+def _check_requirements(requirements) -> tuple[str, ...]:
+    req = tuple(requirements)
+    bad = [r for r in req if r not in REQUIREMENTS]
+    if bad or "stable" not in req:
+        raise ParameterError(f"requirements = {list(req)}; allowed: 'stable' and any of "
+                             f"{list(REQUIREMENTS[1:])}")
+    return req
+
+
+def feasible_map(params: Params, P_gain, D_gain, beta: float, alpha: float, *,
+                 requirements=("stable", "pm"), options: LoopOptions | None = None,
+                 loop: ClosedLoop | None = None) -> np.ndarray:
+    """``(n_P, n_D)`` bool: the requirements hold at every grid point (one configuration),
+    decided from the exact boundaries."""
+    from haa_sym.analysis.regions import region_map
+    req = _check_requirements(requirements)
+    m = region_map(params, P_gain, D_gain, options=options, beta=beta, alpha=alpha, loop=loop,
+                   passivity="passive" in req, progress=False, blas_threads=None)
+    ok = m.stable.copy()
+    if "pm" in req:
+        ok &= ~m.low_pm
+    if "passive" in req:
+        ok &= m.passive
+    return ok
+
+
+@dataclass(frozen=True)
+class RobustRegion:
+    """``feasible`` (n_P, n_D): the requirements hold for every leg configuration checked;
+    ``n_configurations`` checked (per axis ``n_per_axis``); ``converged``: the result did not
+    change when the number of leg intervals last doubled; ``history``: (configurations,
+    feasible points) at every doubling."""
+
+    P_gain: np.ndarray
+    D_gain: np.ndarray
+    feasible: np.ndarray
+    n_configurations: int
+    n_per_axis: int
+    converged: bool
+    history: list
+    configurations: list = field(repr=False)
+    meta: dict = field(default_factory=dict)
+
+
+def _doubling(n: int) -> int:
+    return 2 * n - 1
+
+
+def robust_region(params: Params, P_gain, D_gain, *, beta: float | None = None, alpha: float | None = None,
+                  requirements=("stable", "pm"), leg=None, leg_mode: str = "segment",
+                  options: LoopOptions | None = None, max_per_axis: int = MAX_LEG_POINTS) -> RobustRegion:
+    """The gains meeting ``requirements`` for every leg configuration of the range.
+
+    Parameters
+    ----------
+    params : Params
+    P_gain, D_gain : array_like
+        The grid (Nm/rad, Nms/rad).
+    beta, alpha : float, optional
+        Inner gains (default the controller's).
+    requirements : sequence of {"stable", "pm", "passive"}
+        "stable" always; "pm": impedance-loop phase margin >= 30 deg; "passive": the port.
+    leg : (str, str), optional
+        The two configurations bounding the range (see :func:`leg_ends`).
+    leg_mode : {"segment", "box"}
+    max_per_axis : int
+        Stop doubling at this many configurations per axis (``converged`` says whether the
+        last doubling changed nothing).
+
+    Returns
+    -------
+    RobustRegion
+    """
+    P = gain_array("P_gain", P_gain).ravel()
+    D = gain_array("D_gain", D_gain).ravel()
+    ctrl = params.controller
+    beta = ctrl.beta if beta is None else float(beta)
+    alpha = ctrl.alpha if alpha is None else float(alpha)
+    req = _check_requirements(requirements)
+    maps: dict = {}
+
+    def region(configs):
+        out = np.ones((P.size, D.size), bool)
+        for c in configs:
+            key = tuple(sorted(c.items()))
+            if key not in maps:
+                maps[key] = feasible_map(params.with_values(**c), P, D, beta, alpha, requirements=req,
+                                         options=options)
+            out &= maps[key]
+        return out
+
+    n = 2
+    configs = leg_configurations(params, n, leg=leg, leg_mode=leg_mode)
+    current = region(configs)
+    history = [(len(configs), int(current.sum()))]
+    converged = False
+    while _doubling(n) <= max_per_axis:
+        n2 = _doubling(n)
+        configs2 = leg_configurations(params, n2, leg=leg, leg_mode=leg_mode)
+        nxt = region(configs2)
+        history.append((len(configs2), int(nxt.sum())))
+        same = np.array_equal(nxt, current)
+        n, configs, current = n2, configs2, nxt
+        if same:
+            converged = True
+            break
+    return RobustRegion(P, D, current, len(configs), n, converged, history, configs,
+                        {"leg": list(leg_ends(params, leg)), "leg_mode": leg_mode, "requirements": list(req),
+                         "beta": beta, "alpha": alpha})

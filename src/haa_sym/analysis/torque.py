@@ -1,0 +1,291 @@
+"""The torque loop alone (Sec. 3.2-3.3, Fig. 7): unit torque step responses and bandwidth.
+
+The impedance loop is open: the torque reference T_lref is the input, the measured torque the
+output, with the PI of Eq. (7) and the velocity compensation of Eq. (6) closed.
+
+Example
+-------
+>>> from haa_sym import load_params
+>>> from haa_sym.analysis.torque import step_response
+>>> s = step_response(load_params(), duration=0.3)              # doctest: +SKIP
+>>> s.rise_time, s.settling_time, s.overshoot_pct                # doctest: +SKIP
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from haa_sym.io.budget import check_memory, sweep_bytes
+from haa_sym.loop.closed_loop import ClosedLoop, LoopOptions
+from haa_sym.errors import ParameterError
+from haa_sym.model.params import Params, gain_array, gain_points
+
+__all__ = ["StepResponse", "step_response", "step_info", "dc_gain", "describe_step",
+           "torque_bandwidth", "STEP_CONVENTION"]
+
+
+# python-control ``step_info`` / MATLAB ``stepinfo`` defaults
+SETTLING_THRESHOLD = 0.02
+RISE_LIMITS = (0.1, 0.9)
+STEP_CONVENTION = ("rise 10-90 % of the final value, settling within 2 % of it, overshoot in % of "
+                   "it (python-control step_info / MATLAB stepinfo); final value = DC gain T/T_lref")
+
+
+def step_info(t, y, final_value: float | None = None, *,
+              settling_threshold: float = SETTLING_THRESHOLD,
+              rise_limits: tuple[float, float] = RISE_LIMITS) -> dict:
+    """Step-response characteristics of sampled data, python-control ``step_info`` convention.
+
+    Parameters
+    ----------
+    t : (n,) array
+        Sample times, s.
+    y : (n,) array
+        Response to a step applied at ``t[0]``.
+    final_value : float, optional
+        Steady-state value the metrics are relative to; default ``y[-1]`` (``step_info``'s
+        default for data, which calls any response "settled" at its last sample).
+    settling_threshold : float
+        Settled: |y / final_value - 1| < this from some sample to the end of the data.
+    rise_limits : (float, float)
+        Rise time from the first sample at ``rise_limits[0]`` to the first at ``rise_limits[1]``
+        of the final value.
+
+    Returns
+    -------
+    dict
+        The keys of ``control.step_info``: ``RiseTime``, ``SettlingTime``, ``PeakTime`` (s),
+        ``Overshoot``, ``Undershoot`` (% of the final value), ``SettlingMin``, ``SettlingMax``,
+        ``Peak``, ``SteadyStateValue`` (units of ``y``). The numbers equal ``step_info``'s
+        whenever the data settle, with two differences where they do not: ``RiseTime`` is NaN
+        when ``y`` never reaches the upper rise limit (``step_info`` raises IndexError), and
+        ``Overshoot`` is NaN when ``y`` has not settled by ``t[-1]`` (a later peak may be higher;
+        ``step_info`` reports the peak seen so far). ``SettlingTime`` is NaN when not settled.
+
+    Example
+    -------
+    >>> t = np.arange(6.0)
+    >>> info = step_info(t, np.array([0, 0.5, 1.2, 0.99, 1.0, 1.0]), 1.0)
+    >>> info["RiseTime"], info["SettlingTime"], round(info["Overshoot"], 6)
+    (1.0, 3.0, 20.0)
+    >>> step_info(t, t / 10, 1.0)["RiseTime"]       # never reaches 90 % of the final value
+    nan
+    """
+    t = np.asarray(t, float)
+    y = np.asarray(y, float)
+    yf = float(y[-1] if final_value is None else final_value)
+    nan = float("nan")
+    info = {"RiseTime": nan, "SettlingTime": nan, "SettlingMin": nan, "SettlingMax": nan,
+            "Overshoot": nan, "Undershoot": nan, "Peak": nan, "PeakTime": nan, "SteadyStateValue": yf}
+    if not np.isfinite(yf) or yf == 0:
+        return info
+    sgn = np.sign(yf)
+    lo = np.flatnonzero(sgn * (y - rise_limits[0] * yf) >= 0)
+    hi = np.flatnonzero(sgn * (y - rise_limits[1] * yf) >= 0)
+    outside = np.flatnonzero(np.abs(y / yf - 1) >= settling_threshold)
+    settled = 0 if outside.size == 0 else outside[-1] + 1
+    if hi.size:
+        info.update(RiseTime=t[hi[0]] - t[lo[0]], SettlingMin=min(y[hi[0]:].min(), yf),
+                    SettlingMax=max(y[hi[0]:].max(), yf))
+    if settled < t.size:
+        info["SettlingTime"] = t[settled]
+        info["Overshoot"] = max(0.0, 100.0 * (np.abs((sgn * y).max()) - abs(yf)) / abs(yf))
+    y_us = y[(sgn * y).argmin()]
+    info["Undershoot"] = -100.0 * y_us / yf if sgn * y_us < 0 else 0.0
+    k = np.abs(y).argmax()
+    info.update(Peak=np.abs(y[k]), PeakTime=t[k])
+    return {key: float(v) for key, v in info.items()}
+
+
+@dataclass(frozen=True)
+class StepResponse:
+    """Samples ``t`` (s) and measured torque ``T`` (Nm) after a unit step of T_lref at t = 0;
+    ``final_value`` is the steady state the loop tends to (its DC gain; 1 with the PI's integral
+    action). The metrics follow :func:`step_info` relative to ``final_value``: NaN when the
+    response does not reach 90 % of it / does not settle within 2 % of it inside the window."""
+
+    t: np.ndarray
+    T: np.ndarray
+    final_value: float = 1.0
+
+    @property
+    def info(self) -> dict:
+        """:func:`step_info` of the samples relative to ``final_value``."""
+        return step_info(self.t, self.T, self.final_value)
+
+    @property
+    def rise_time(self) -> float:
+        """10 % to 90 % of the final value, s (NaN if 90 % is not reached in the window)."""
+        return float(self.info["RiseTime"])
+
+    @property
+    def settling_time(self) -> float:
+        """Entry into +-2 % of the final value for good, s (NaN if not settled in the window)."""
+        return float(self.info["SettlingTime"])
+
+    @property
+    def overshoot_pct(self) -> float:
+        """Peak above the final value, % of it (0 if none; NaN if not settled in the window)."""
+        return float(self.info["Overshoot"])
+
+
+def describe_step(s: StepResponse) -> str:
+    """One line of step metrics for people, saying "not reached" / "not settled" where
+    :func:`step_info` gives NaN, and the window they refer to."""
+    info, end = s.info, f"{s.t[-1]:g} s"
+
+    def ms(x, never):
+        return f"{x * 1e3:.1f} ms" if np.isfinite(x) else never
+    return (f"final value (DC gain) {s.final_value:.4f}; rise time (10-90 %) "
+            f"{ms(info['RiseTime'], 'not reached within ' + end)}, settling time (2 %) "
+            f"{ms(info['SettlingTime'], 'not settled within ' + end)}, overshoot "
+            + (f"{info['Overshoot']:.1f} %" if np.isfinite(info["Overshoot"]) else "undefined (not settled)")
+            + f"; T at {end} = {s.T[-1]:.4f}")
+
+
+def step_response(params: Params, *, duration: float = 0.3, options: LoopOptions | None = None,
+                  beta: float | None = None, alpha: float | None = None,
+                  loop: ClosedLoop | None = None) -> StepResponse:
+    """Unit step of the torque reference with the impedance loop open (Fig. 7).
+
+    Parameters
+    ----------
+    params : Params
+        Plant and controller; K_L2 = 0 is the gravity-compensated free leg.
+    duration : float
+        Simulated time, s.
+    beta, alpha : float, optional
+        Torque-gain scale (Eq. 7) and velocity compensation (Eq. 6).
+
+    Returns
+    -------
+    StepResponse
+    """
+    from haa_sym.loop.statespace import closed_loop_batch
+    if not np.isfinite(duration) or duration <= 0:
+        raise ParameterError(f"duration = {duration!r}; allowed: a finite time > 0 (s)")
+    _, _, beta, alpha = gain_points(0.0, 0.0, beta, alpha)
+    Ts = params.controller.Ts
+    n = int(round(duration / Ts)) + 1
+    check_memory(16 * n, f"duration = {duration!r} s: a step response of {float(n):.4g} samples")
+    loop = loop or ClosedLoop(params, options)
+    A, B, C, D = (m[0] for m in closed_loop_batch(loop, 0.0, 0.0, beta, alpha, cut="T_ref"))
+    x = np.zeros(A.shape[0])
+    T = np.empty(n)
+    for k in range(n):
+        T[k] = C[0] @ x + D[0, 1]
+        x = A @ x + B[:, 1]
+    return StepResponse(np.arange(n) * Ts, T, dc_gain(params, loop=loop, beta=beta, alpha=alpha))
+
+
+def dc_gain(params: Params, *, options: LoopOptions | None = None, beta: float | None = None,
+            alpha: float | None = None, loop: ClosedLoop | None = None) -> float:
+    """Steady-state gain T_l / T_lref of the torque loop (impedance loop open), Nm/Nm.
+
+    Evaluated on the generated frequency response at 1e-6 rad/s rather than as
+    C (I - A)^-1 B + D: with the leg free (K_L2 = 0) the closed loop keeps a pole at z = 1 that
+    the torque output does not see, and the matrix form is then singular (python-control's
+    ``dcgain`` returns 1.22 for a loop whose step tends to 1).
+    """
+    loop = loop or ClosedLoop(params, options)
+    coef = loop.loop_coefficients(np.array([1e-6]), beta, alpha)
+    return float(coef.H_T[0].real)
+
+
+def torque_bandwidth(params: Params, *, options: LoopOptions | None = None,
+                     beta: float | None = None, alpha: float | None = None,
+                     loop: ClosedLoop | None = None) -> float:
+    """Lowest frequency (rad/s) where |T/T_lref| falls 3 dB below its low-frequency value.
+
+    The paper defines the torque bandwidth with the leg free to move in the air (Sec. 3.3);
+    pass K_L2 = 0 in ``params`` for that. NaN if |H_T| never drops 3 dB below Nyquist.
+
+    Example
+    -------
+    >>> torque_bandwidth(load_params().with_values(K_L2=0.0))             # doctest: +SKIP
+    30.36...
+    """
+    _, _, beta, alpha = gain_points(0.0, 0.0, beta, alpha)
+    loop = loop or ClosedLoop(params, options)
+    check_memory(sweep_bytes(1, loop.options.numerics.n_omega), f"the torque loop on n_omega = {loop.options.numerics.n_omega} frequencies")
+    coef = loop.loop_coefficients(None, beta, alpha)
+    mag = np.abs(coef.H_T)
+    ref = mag[0]
+    k = np.flatnonzero(mag < ref / np.sqrt(2))
+    if k.size == 0:
+        return float("nan")
+    k = k[0]
+    lw = np.log(coef.omega)
+    m0, m1 = np.log(mag[k - 1] / ref), np.log(mag[k] / ref)
+    target = -0.5 * np.log(2)
+    t = (target - m0) / (m1 - m0)
+    return float(np.exp(lw[k - 1] + t * (lw[k] - lw[k - 1])))
+
+
+def torque_bandwidth_map(params: Params, beta, alpha, *, options: LoopOptions | None = None,
+                         loop: ClosedLoop | None = None):
+    """Torque bandwidth (rad/s, :func:`torque_bandwidth`) and stability of the torque loop alone
+    (impedance loop open) on the grid ``beta`` x ``alpha``: arrays of shape (n_beta, n_alpha).
+
+    The trade the paper's Sec. 3 describes: higher torque gains (beta, Eq. 7) and more velocity
+    compensation (alpha, Eq. 6) widen the bandwidth until the loop goes unstable. The bandwidth is
+    NaN where the torque loop is unstable. For the paper's definition (leg free in the air) pass
+    params with the port body's ground stiffness 0 (K_L2 = 0).
+    """
+    B = gain_array("beta", beta).ravel()
+    A = gain_array("alpha", alpha).ravel()
+    loop = loop or ClosedLoop(params, options)
+    BB, AA = np.meshgrid(B, A, indexing="ij")
+    # the free position mode of a free leg is not seen by the torque: stability without it
+    res = loop.stability(np.zeros(BB.shape), np.zeros(BB.shape), BB, AA)
+    stable = res.stable | res.marginal
+    bw = np.full(BB.shape, np.nan)
+    for i, j in zip(*np.nonzero(stable)):
+        bw[i, j] = torque_bandwidth(params, beta=B[i], alpha=A[j], loop=loop)
+    return bw, stable
+
+
+def p1_roots(params: Params) -> np.ndarray:
+    """Roots (1/s) of p1 of Eq. (3)-(4), computed numerically from the plant (no sympy).
+
+    The zeros of V_m -> T_l (Eq. 2) are those of (K_hd + D_hd s) p1(s) (the velocity
+    compensation does not move them); the root at -K_hd/D_hd is removed. An independent check of
+    the symbolic rows of ``python -m haa_sym.check.verify``. For another topology: the zeros of
+    V_m -> T_sensor without the sensor coupling's own zero -K/D (p1 is the paper's, HyQ's, name).
+
+    Example
+    -------
+    >>> np.round(p1_roots(load_params().with_values(K_L2=0.0)).real, 3)    # doctest: +SKIP
+    array([-7.53619948e+04, -2.55227e+02, -1.722e+00,  0.0])
+    """
+    from haa_sym.loop.exact import to_float, transfer_polynomials
+    from haa_sym.loop.plant import continuous_plant
+    cp = continuous_plant(params.plant)
+    _, nums = transfer_polynomials(cp.A, cp.B[:, :1], cp.C)
+    num = np.trim_zeros(to_float(nums[cp.output_names.index("T_sensor")][0]), "f")
+    roots = np.roots(num)
+    sensor = params.plant.topology.sensor
+    D = getattr(params.plant, f"D_{sensor}")
+    if D > 0:                       # the sensor coupling's own zero (K + D s)
+        spring_zero = -getattr(params.plant, f"K_{sensor}") / D
+        roots = np.delete(roots, np.argmin(np.abs(roots - spring_zero)))
+    roots = np.where(np.abs(roots) < 1e-9 * np.abs(roots).max(), 0.0, roots)
+    return np.sort_complex(roots)
+
+
+def torque_loop_margins(params: Params, *, options: LoopOptions | None = None,
+                        beta: float | None = None, alpha: float | None = None):
+    """Margins of the torque loop alone, opened at the PI output (Sec. 3.2 design targets:
+    PM > 30 deg, GM > 12 dB at the leg-inertia and stiffness bounds). Returns
+    :class:`haa_sym.analysis.margins.Margins`."""
+    from haa_sym.analysis.margins import stability_margins
+    _, _, beta, alpha = gain_points(0.0, 0.0, beta, alpha)
+    loop = ClosedLoop(params, options)
+    check_memory(sweep_bytes(1, 4 * loop.options.numerics.n_omega),
+                 f"the torque loop on 4 x n_omega = {4 * loop.options.numerics.n_omega} frequencies")
+    ctrl = params.controller
+    w = np.logspace(np.log10(loop.options.numerics.omega_min), np.log10(np.pi / ctrl.Ts * (1 - 1e-9)),
+                    4 * loop.options.numerics.n_omega)
+    coef = loop.loop_coefficients(w, beta, alpha)
+    return stability_margins(coef.evaluate("L_t", 0.0, 0.0), w)

@@ -1,0 +1,216 @@
+"""Independent reference: the closed loop by block interconnection (numpy and scipy.signal).
+
+Used by the tests, the benchmarks and the reproduction's cross-check to check the evaluators
+(:class:`haa_sym.ClosedLoop`, which work on the characteristic polynomial, on loop algebra in the
+frequency domain and on :mod:`haa_sym.loop.statespace`). It is built from the parameters and the loop
+options alone, with its own algebra:
+
+* the plant: the continuous state space of the actuator (the generated or compiled plant function, the one
+  thing it shares with the evaluators; the tests check that against an independent assembly of
+  the equations of motion), sampled by ``scipy.signal.cont2discrete(..., "zoh")``;
+* the velocity estimate: the average as an FIR filter; the low-pass filters as the backward
+  difference followed by the analog prototype w_c/(s + w_c) or w_c^2/(s^2 + sqrt(2) w_c s + w_c^2)
+  realised in state space and mapped by ``scipy.signal.cont2discrete(..., "bilinear")``; the
+  PI's integral Ts/(1 - z^-1) and the delay z^-d; transfer functions realised by
+  ``scipy.signal.tf2ss``;
+* velocity compensation VC = alpha N/k_t (R B_m + k_t k_w) (Eq. 6) from the parameters (an
+  actuator written in code as a sympy model: the VC0 it declares);
+* the static part (impedance law Eq. 8, PI gains Eq. 7, compensation, the sums) as an
+  interconnection matrix u = K y + E w of the blocks' outputs y and the external inputs w,
+  closed by y = (I - D K)^-1 (C x + D E w), as python-control's ``interconnect`` does.
+
+Closed-loop inputs ``[T_dist, r]`` (``r`` injected at the cut point), outputs
+``[T_meas, theta, port velocity, y]`` where ``y`` returns to the cut point with negative sign.
+The functions take a ``ClosedLoop`` only to read its ``params`` and ``options``.
+"""
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import scipy.linalg
+import scipy.signal
+
+__all__ = ["closed_loop_matrices", "closed_loop_eigenvalues", "spectral_radius", "frequency_response"]
+
+
+def _zoh_plant(params, outputs):
+    from haa_sym.loop.plant import continuous_plant
+    cont = continuous_plant(params.plant)
+    C = cont.C[[cont.output_names.index(o) for o in outputs]]
+    B = cont.B[:, [0, 2]]                                # V_m, T_dist
+    Ad, Bd, Cd, Dd, _ = scipy.signal.cont2discrete((cont.A, B, C, np.zeros((len(outputs), 2))),
+                                                   params.controller.Ts, method="zoh")
+    return Ad, Bd, Cd, Dd
+
+
+def _vc0(plant) -> float:
+    """Eq. (6) at alpha = 1, N/k_t (R B_m + k_t k_w), from the motor's parameters of a chain; an
+    actuator written in code (haa_sym.symbolic.model) declares its own VC0, read from its plant
+    function (the one number shared with the evaluators then, besides the plant)."""
+    from haa_sym.model.actuator import Topology
+    if isinstance(plant.topology, Topology):
+        return plant.N / plant.k_t * (plant.R * plant.B_m + plant.k_t * plant.k_w)
+    from haa_sym.loop.plant import continuous_plant
+    return continuous_plant(plant).VC0
+
+
+def _tf_block(b, a):
+    """(A, B, C, D) of b(z^-1)/a(z^-1) (coefficients in powers of z^-1), by scipy's tf2ss."""
+    b, a = np.atleast_1d(np.asarray(b, float)), np.atleast_1d(np.asarray(a, float))
+    if len(a) == 1 and len(b) == 1:
+        return np.zeros((0, 0)), np.zeros((0, 1)), np.zeros((1, 0)), np.array([[b[0] / a[0]]])
+    n = max(len(a), len(b))
+    b = np.concatenate([b, np.zeros(n - len(b))])
+    a = np.concatenate([a, np.zeros(n - len(a))])
+    return scipy.signal.tf2ss(b, a)
+
+
+def _velocity_estimate_blocks(ctrl):
+    """The velocity estimate theta -> v_F as one or two blocks in series: (name, (A,B,C,D), y, u)."""
+    Ts = ctrl.Ts
+    if ctrl.velocity_filter == "average":
+        N = ctrl.N_av
+        b = np.zeros(N + 1)
+        b[0], b[N] = 1 / (N * Ts), -1 / (N * Ts)
+        return [("F", _tf_block(b, np.r_[1.0, np.zeros(N)]), ["v_F"], ["u_F"])]
+    # the analog prototype in state space, then the bilinear map in state-space form (well
+    # conditioned at fast sampling, where the discrete polynomial's roots crowd at z = 1)
+    w_c = 2 * math.pi * ctrl.f_c
+    num, den = {"lowpass1": ([w_c], [1.0, w_c]),
+                "butterworth2": ([w_c ** 2], [1.0, math.sqrt(2) * w_c, w_c ** 2])}[ctrl.velocity_filter]
+    A, B, C, D = scipy.signal.tf2ss(num, den)
+    # scale the states (diagonal balancing of [[A, B], [C, D]]): the companion form's states
+    # differ by powers of w_c, which costs digits in the frequency responses near Nyquist
+    _, (scale, _) = scipy.linalg.matrix_balance(np.block([[A, B], [C, D]]), permute=False, separate=True)
+    s = scale[:A.shape[0]]
+    A, B, C = A * s[None, :] / s[:, None], B / s[:, None], C * s[None, :]
+    lowpass = scipy.signal.cont2discrete((A, B, C, D), Ts, method="bilinear")[:4]
+    return [("bd", _tf_block([1 / Ts, -1 / Ts], [1.0]), ["v_raw"], ["u_F"]),
+            ("lowpass", lowpass, ["v_F"], ["u_lp"])]
+
+
+def _blocks(params, options, torque_output):
+    """The dynamic blocks: (name, (A, B, C, D), output names, input names)."""
+    ctrl = params.controller
+    port_body = options.structure.port != "encoder_average"
+    outs = [torque_output, "theta_encoder"] + ([options.structure.port] if port_body else [])
+    blocks = [("plant", _zoh_plant(params, outs), [f"y_{o}" for o in ("T", "th", "p")[:len(outs)]],
+               ["u_V", "u_Tdist"])]
+    blocks += _velocity_estimate_blocks(ctrl)
+    if options.structure.filter != "both":
+        blocks.append(("diff", _tf_block([1 / ctrl.Ts, -1 / ctrl.Ts], [1.0]), ["v_diff"], ["u_diff"]))
+    # backward Euler (Eq. 7) with the state in N s (the integral itself), so it is scaled like e
+    blocks.append(("integral", (np.eye(1), ctrl.Ts * np.eye(1), np.eye(1), ctrl.Ts * np.eye(1)), ["y_I"], ["u_I"]))
+    if options.structure.delay:
+        d = options.structure.delay                                 # a shift register of d samples
+        shift = (np.eye(d, k=-1), np.eye(d, 1), np.eye(1, d, d - 1), np.zeros((1, 1)))
+        blocks.append(("delay", shift, ["y_del"], ["u_del"]))
+    return blocks
+
+
+def _batch(loop, P_gain, D_gain, beta=None, alpha=None, cut=None):
+    params = loop.params
+    opt = loop.options.resolved(params.plant.topology)        # the file's sensor and port defaults
+    ctrl, pl = params.controller, params.plant
+    beta = ctrl.beta if beta is None else beta
+    alpha = ctrl.alpha if alpha is None else alpha
+    P, D, beta, alpha = (np.atleast_1d(np.asarray(v, float)).ravel()
+                         for v in np.broadcast_arrays(P_gain, D_gain, beta, alpha))
+    k = P.size
+    P_t, I_t = beta * ctrl.P_t0, beta * ctrl.I_t0
+    VC = alpha * _vc0(pl)
+    damped = opt.structure.torque_damping
+    blocks = _blocks(params, opt, "T_sensor" if damped else "T_sensor_spring")
+    ys = [y for _, _, yn, _ in blocks for y in yn]
+    us = [u for _, _, _, un in blocks for u in un]
+    ws = ["T_dist", "r"]
+    nx = sum(b[1][0].shape[0] for b in blocks)
+    Ab = np.zeros((nx, nx)); Bb = np.zeros((nx, len(us)))
+    Cb = np.zeros((len(ys), nx)); Db = np.zeros((len(ys), len(us)))
+    i = 0
+    for _, (A, B, C, Dm), yn, un in blocks:
+        m = A.shape[0]
+        r0, c0 = ys.index(yn[0]), us.index(un[0])
+        Ab[i:i + m, i:i + m] = A
+        Bb[i:i + m, c0:c0 + B.shape[1]] = B
+        Cb[r0:r0 + C.shape[0], i:i + m] = C
+        Db[r0:r0 + C.shape[0], c0:c0 + B.shape[1]] = Dm
+        i += m
+    # signals as rows over [y, w], per point: shape (k, ny + nw)
+    width = len(ys) + len(ws)
+
+    def sig(name, scale=None):
+        r = np.zeros((k, width))
+        r[:, ys.index(name) if name in ys else len(ys) + ws.index(name)] = 1.0 if scale is None else scale
+        return r
+    th = sig("y_th")
+    v_F = sig("v_F")
+    v_diff = sig("v_diff") if "v_diff" in ys else v_F
+    v_d = v_F if opt.structure.filter in ("both", "impedance") else v_diff
+    v_vc = v_F if opt.structure.filter in ("both", "compensation") else v_diff
+    imp = P[:, None] * th + D[:, None] * v_d                                  # Eq. (8)
+    T_ref = sig("r") if cut == "T_ref" else -imp
+    e = T_ref - sig("y_T")
+    u_pi = P_t[:, None] * e + I_t[:, None] * sig("y_I")                       # Eq. (7)
+    V_k = (sig("r") if cut == "PI" else u_pi) + VC[:, None] * v_vc
+    inputs = {"u_V": sig("y_del") if opt.structure.delay else V_k, "u_Tdist": sig("T_dist"), "u_F": th,
+              "u_diff": th, "u_I": e, "u_del": V_k, "u_lp": sig("v_raw") if "v_raw" in ys else None}
+    KE = np.stack([inputs[u] for u in us], axis=1)                           # (k, nu, ny + nw)
+    K, E = KE[:, :, :len(ys)], KE[:, :, len(ys):]
+    port = v_F if opt.structure.port == "encoder_average" else sig("y_p")
+    y_cut = {None: np.zeros((k, width)), "T_ref": imp, "PI": -u_pi}[cut]
+    Z = np.stack([sig("y_T"), th, port, y_cut], axis=1)                      # (k, 4, ny + nw)
+    Zy, Zw = Z[:, :, :len(ys)], Z[:, :, len(ys):]
+    M = np.linalg.inv(np.eye(len(ys)) - Db @ K)                              # y = M (C x + D E w)
+    A_cl = Ab + Bb @ K @ M @ Cb
+    B_cl = Bb @ (K @ M @ Db @ E + E)
+    C_cl = Zy @ M @ Cb
+    D_cl = Zy @ M @ Db @ E + Zw
+    return A_cl, B_cl, C_cl, D_cl
+
+
+def closed_loop_matrices(loop, P_gain: float, D_gain: float, beta: float | None = None,
+                         alpha: float | None = None, cut: str | None = None):
+    """``(A, B, C, D)`` of the sampled closed loop at one gain point; ``cut`` in {None, "T_ref", "PI"}."""
+    return tuple(m[0] for m in _batch(loop, P_gain, D_gain, beta, alpha, cut))
+
+
+def closed_loop_eigenvalues(loop, points, chunk: int = 2048) -> np.ndarray:
+    """Eigenvalues of the closed-loop state matrix at gain points (4, k), shape (k, order)."""
+    pts = np.asarray(points, dtype=float).reshape(4, -1)
+    out = []
+    for c in range(0, pts.shape[1], chunk):
+        out.append(np.linalg.eigvals(_batch(loop, *pts[:, c:c + chunk])[0]))
+    return np.concatenate(out) if out else np.empty((0, 0), complex)
+
+
+def spectral_radius(loop, P_gain, D_gain, beta=None, alpha=None) -> float:
+    """max |eig| of the closed-loop state matrix at one gain point."""
+    return float(np.abs(np.linalg.eigvals(closed_loop_matrices(loop, P_gain, D_gain, beta, alpha)[0])).max())
+
+
+def _tf(A, B, C, D, omega, Ts, out, inp):
+    z = np.exp(1j * np.asarray(omega) * Ts)
+    M = z[:, None, None] * np.eye(A.shape[0]) - A
+    X = np.linalg.solve(M, np.broadcast_to(B[:, inp:inp + 1], (len(z), A.shape[0], 1)))[..., 0]
+    return X @ C[out] + D[out, inp]
+
+
+def frequency_response(loop, omega, P_gain, D_gain, beta=None, alpha=None,
+                       which=("L_t", "L_imp", "H_T", "Z")) -> dict:
+    """``L_t``, ``L_imp``, ``Z``, ``H_T`` of :meth:`ClosedLoop.frequency_response` (those named in
+    ``which``), by state space."""
+    Ts = loop.params.controller.Ts
+    res = {}
+    if "L_t" in which:
+        A, B, C, D = closed_loop_matrices(loop, P_gain, D_gain, beta, alpha, cut="PI")
+        res["L_t"] = _tf(A, B, C, D, omega, Ts, 3, 1)
+    if "L_imp" in which or "H_T" in which:
+        A, B, C, D = closed_loop_matrices(loop, P_gain, D_gain, beta, alpha, cut="T_ref")
+        res["L_imp"] = _tf(A, B, C, D, omega, Ts, 3, 1)
+        res["H_T"] = _tf(A, B, C, D, omega, Ts, 0, 1)
+    if "Z" in which:
+        A, B, C, D = closed_loop_matrices(loop, P_gain, D_gain, beta, alpha)
+        res["Z"] = 1 / _tf(A, B, C, D, omega, Ts, 2, 0)
+    return res

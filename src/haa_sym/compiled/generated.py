@@ -1,0 +1,353 @@
+"""Load the generated evaluators: compiled C (cached by content hash) or CasADi's VM.
+
+Steps, one small class each (PyDy-style): :class:`GeneratedCode` locates ``generated/`` (the
+source tree's, or the copy an installed package carries; see :mod:`haa_sym.model.resources`) and
+refuses stale, damaged or unreadable code; :class:`Compiler` builds the shared library into a
+cache keyed by the SHA-256 of the C source, the compiler command and its flags (written with
+``os.replace``, never in the source tree, no ``os.chdir``), records the library's own SHA-256
+beside it and checks it before every use, so a truncated or altered library is rebuilt instead
+of crashing the process or changing results; :class:`Evaluators` loads the functions with
+``casadi.external``, or with ``casadi.Function.load`` on the serialised copies when no C
+compiler is found (one warning, never silently).
+"""
+from __future__ import annotations
+
+import ctypes
+import functools
+import hashlib
+import json
+import os
+import shlex
+import shutil
+import subprocess
+import tempfile
+import warnings
+from pathlib import Path
+
+import casadi as ca
+import numpy as np
+
+from haa_sym.errors import CompilerError, NoCompiler, StaleGeneratedCode
+from haa_sym.model.resources import data_dir, remedy, source_root
+
+__all__ = ["StaleGeneratedCode", "CompilerError", "NoCompiler", "GeneratedCode", "Compiler",
+           "Evaluators", "evaluators", "default_cache_dir"]
+
+CFLAGS = ("-O2", "-fPIC", "-shared", "-ffp-contract=off")
+# Manifest keys and their JSON types, as codegen/generate.py writes them.
+_MANIFEST_KEYS = {"capacities": list, "files": dict, "functions": list, "library": str,
+                  "source_sha256": str, "sources": list, "tools": dict, "topologies": dict}
+_DEFAULT = object()
+
+
+
+def default_cache_dir() -> Path:
+    """env ``HAA_SYM_CACHE``, else ``$XDG_CACHE_HOME/haa_sym`` (``~/.cache/haa_sym``)."""
+    return Path(os.environ.get("HAA_SYM_CACHE")
+                or Path(os.environ.get("XDG_CACHE_HOME", Path.home() / ".cache")) / "haa_sym")
+
+
+def _sha256(path: str | Path) -> str:
+    h = hashlib.sha256()
+    with open(path, "rb") as f:
+        for block in iter(lambda: f.read(1 << 20), b""):
+            h.update(block)
+    return h.hexdigest()
+
+
+class GeneratedCode:
+    """The checked content of ``generated/``.
+
+    Parameters
+    ----------
+    directory : str or Path, optional
+        Default: env ``HAA_SYM_GENERATED``, else ``generated/`` of the source tree or the
+        installed package.
+    root : Path or None, optional
+        Root of the source tree whose symbolic sources the code must match; default the tree
+        this package was loaded from, None for an installed package (whose sources are absent).
+    """
+
+    def __init__(self, directory: str | Path | None = None, root: Path | None = _DEFAULT):
+        self.dir = Path(directory or os.environ.get("HAA_SYM_GENERATED") or data_dir("generated"))
+        self.root = source_root() if root is _DEFAULT else root
+        self.manifest = self._read_manifest(self.dir / "MANIFEST.json")
+        self.check()
+
+    def _fix(self) -> str:
+        if self.root is not None:
+            return "run `make derive`"
+        if self.dir.resolve() != data_dir("generated").resolve():
+            return "regenerate it in a source tree (`make derive`) or unset HAA_SYM_GENERATED"
+        return remedy()
+
+    def _read_manifest(self, man: Path) -> dict:
+        if not man.is_file():
+            raise StaleGeneratedCode(f"{man} is missing: {self._fix()}")
+        try:
+            m = json.loads(man.read_text(encoding="utf-8"))
+        except (OSError, UnicodeDecodeError, json.JSONDecodeError) as exc:
+            raise StaleGeneratedCode(f"{man} is unreadable ({exc}): {self._fix()}") from None
+        bad = [k for k, t in _MANIFEST_KEYS.items()
+               if not isinstance(m, dict) or not isinstance(m.get(k), t)]
+        if not bad:
+            # Every file the runtime reads must be covered by a digest.
+            needed = [f"{m['library']}.c"] + [f"{fn}.casadi" for fn in m["functions"]]
+            bad += [f"files[{n!r}]" for n in needed if not isinstance(m["files"].get(n), str)]
+            bad += [] if all(isinstance(r, str) for r in m["sources"]) else ["sources"]
+            bad += [] if isinstance(m["tools"].get("casadi"), str) else ["tools.casadi"]
+            bad += [] if all(type(c) is int and c > 0 for c in m["capacities"]) else ["capacities"]
+            bad += [f"topologies[{fp!r}]" for fp, t in m["topologies"].items()
+                    if not (isinstance(t, dict) and t.get("function") in m["functions"]
+                            and isinstance(t.get("actuators"), list))]
+        if bad:
+            raise StaleGeneratedCode(
+                f"{man} is invalid (missing or malformed: {', '.join(bad)}): {self._fix()}")
+        return m
+
+    def check(self) -> None:
+        for name, digest in self.manifest["files"].items():
+            path = self.dir / name
+            if not path.is_file() or _sha256(path) != digest:
+                raise StaleGeneratedCode(
+                    f"{path} does not match {self.dir / 'MANIFEST.json'}: {self._fix()}")
+        # In a source tree, the symbolic sources must be the ones the code was generated from;
+        # an installed package legitimately carries none of them.
+        if self.root is not None:
+            h = hashlib.sha256()
+            for rel in self.manifest["sources"]:
+                p = self.root / rel
+                if not p.is_file():
+                    raise StaleGeneratedCode(
+                        f"{p}, a source of generated/ (MANIFEST.json), is missing: run `make derive`")
+                h.update(rel.encode() + b"\0" + p.read_bytes() + b"\0")
+            if h.hexdigest() != self.manifest["source_sha256"]:
+                raise StaleGeneratedCode(
+                    "the symbolic model or code generator changed since generated/ was written: "
+                    "run `make derive`")
+            self._check_actuators()
+        if self.manifest["tools"]["casadi"] != ca.__version__:
+            fix = ("install the pinned version (`make venv`) or run `make derive`"
+                   if self.root is not None else
+                   f"install casadi=={self.manifest['tools']['casadi']}, the version haa_sym pins")
+            raise StaleGeneratedCode(
+                f"generated/ was written by casadi {self.manifest['tools']['casadi']}, this is "
+                f"casadi {ca.__version__}: {fix}")
+
+    def _check_actuators(self) -> None:
+        """The built-in actuator files' topologies must be the ones generated (their values may
+        change freely: they are inputs of the generated functions)."""
+        from haa_sym.errors import ParameterError
+        from haa_sym.model.params import builtin_actuators, load_params
+        have = {(name, fp) for fp, t in self.manifest["topologies"].items() for name in t["actuators"]}
+        want = set()
+        for path in builtin_actuators(self.root / "model"):
+            try:
+                want.add((path.name, load_params(path).plant.topology.fingerprint))
+            except ParameterError:
+                continue          # a broken file is reported when it is used, with its own message
+        if want - have or {n for n, _ in have} - {n for n, _ in want}:
+            changed = sorted({n for n, _ in want ^ have})
+            raise StaleGeneratedCode(
+                f"the topology of the built-in actuator file(s) {changed} changed since generated/ "
+                "was written: run `make derive`")
+
+    @property
+    def c_file(self) -> Path:
+        return self.dir / f"{self.manifest['library']}.c"
+
+    @property
+    def function_names(self) -> list[str]:
+        return list(self.manifest["functions"])
+
+
+class Compiler:
+    """Compile one C file into a shared library cached by content hash.
+
+    Parameters
+    ----------
+    cc : str, optional
+        Compiler command, split like a shell word list ("gcc -O0", "ccache gcc"); default env
+        ``CC``, else the first of cc, gcc, clang on PATH.
+    cache_dir : str or Path, optional
+        Default env ``HAA_SYM_CACHE``, else ``$XDG_CACHE_HOME/haa_sym`` (``~/.cache/haa_sym``).
+    """
+
+    def __init__(self, cc: str | None = None, cache_dir: str | Path | None = None):
+        cc = cc or os.environ.get("CC") or shutil.which("cc") or shutil.which("gcc") \
+            or shutil.which("clang")
+        try:
+            self.argv = shlex.split(cc) if cc else []
+        except ValueError as exc:
+            raise CompilerError(f"CC = {cc!r} cannot be split into a command ({exc})") from None
+        if not self.argv or not shutil.which(self.argv[0]):
+            raise NoCompiler(f"no C compiler found (CC = {cc!r}; set CC or install gcc)"
+                             if cc else "no C compiler found (set CC or install gcc)")
+        self.cc = cc
+        self.cache = Path(cache_dir or default_cache_dir())
+
+    def _version(self) -> str:
+        try:
+            out = subprocess.run([*self.argv, "--version"], capture_output=True, text=True)
+        except OSError:
+            return self.cc
+        return out.stdout.splitlines()[0] if out.stdout else self.cc
+
+    @staticmethod
+    def digest_path(library: Path) -> Path:
+        """Where the SHA-256 of ``library`` is recorded (written after the library)."""
+        return library.with_name(library.name + ".sha256")
+
+    def verified(self, library: Path) -> bool:
+        """True if ``library`` exists and matches its recorded SHA-256."""
+        try:
+            recorded = self.digest_path(library).read_text().strip()
+            return _sha256(library) == recorded
+        except OSError:
+            return False
+
+    def build(self, c_file: Path) -> Path:
+        """The verified shared library built from ``c_file``; (re)built if absent or damaged."""
+        src = c_file.read_bytes()
+        key = hashlib.sha256(src + "\0".join((self._version(), *self.argv) + CFLAGS).encode()
+                             ).hexdigest()[:24]
+        target = self.cache / key / (c_file.stem + ".so")
+        if self.verified(target):
+            return target
+        try:
+            target.parent.mkdir(parents=True, exist_ok=True)
+        except OSError as exc:
+            raise CompilerError(
+                f"the compiled-code cache {self.cache} (HAA_SYM_CACHE, default "
+                f"~/.cache/haa_sym) cannot be created: {exc.strerror or exc}; allowed: a writable "
+                "directory") from None
+        # Both files are written under temporary names and renamed: a concurrent process sees
+        # the old or the new file, never a partial one; a library whose digest is not (yet)
+        # the recorded one is rebuilt, never loaded.
+        fd, tmp = tempfile.mkstemp(dir=target.parent, suffix=".so")
+        os.close(fd)
+        try:
+            try:
+                proc = subprocess.run([*self.argv, *CFLAGS, str(c_file), "-o", tmp, "-lm"],
+                                      capture_output=True, text=True)
+            except OSError as exc:
+                raise CompilerError(f"cannot run the C compiler CC = {self.cc!r}: {exc}") from None
+            if proc.returncode != 0:
+                tail = "\n".join((proc.stderr or proc.stdout).strip().splitlines()[-15:])
+                raise CompilerError(
+                    f"compiling {c_file} with CC = {self.cc!r} failed (exit status "
+                    f"{proc.returncode}); set CC to a working C compiler. Compiler output:\n"
+                    f"{tail or '(none)'}")
+            digest = _sha256(tmp)
+            os.replace(tmp, target)
+        finally:
+            if os.path.exists(tmp):
+                os.unlink(tmp)
+        fd, tmp = tempfile.mkstemp(dir=target.parent, suffix=".sha256")
+        with os.fdopen(fd, "w") as f:
+            f.write(digest + "\n")
+        os.replace(tmp, self.digest_path(target))
+        return target
+
+
+class Evaluators:
+    """The generated CasADi Functions, by name: ``ev["haa_decide16"]``.
+
+    Parameters
+    ----------
+    backend : {"auto", "compiled", "vm"}
+        "compiled" requires a C compiler; "vm" evaluates the serialised Functions in CasADi's
+        virtual machine; "auto" compiles when it can and otherwise warns once and uses the VM.
+    """
+
+    def __init__(self, backend: str = "auto", code: GeneratedCode | None = None,
+                 compiler: Compiler | None = None):
+        if backend not in ("auto", "compiled", "vm"):
+            raise ValueError(f"backend = {backend!r}; allowed: 'auto', 'compiled', 'vm'")
+        self.code = code or GeneratedCode()
+        self._fns: dict[str, ca.Function] = {}
+        if backend in ("auto", "compiled"):
+            try:
+                comp = compiler or Compiler()
+            except NoCompiler as exc:
+                if backend == "compiled":
+                    raise
+                warnings.warn(f"haa_sym: {exc}; evaluating the generated CasADi functions in "
+                              "CasADi's virtual machine (slower, same numbers)", RuntimeWarning,
+                              stacklevel=2)
+                backend = "vm"
+            else:
+                self.library = comp.build(self.code.c_file)
+                backend = "compiled"
+        self.backend = backend
+
+    def __getitem__(self, name: str) -> ca.Function:
+        if name not in self._fns:
+            if name not in self.code.function_names:
+                raise KeyError(f"no generated function {name!r}; have {self.code.function_names}")
+            if self.backend == "compiled":
+                self._fns[name] = ca.external(name, str(self.library))
+            else:
+                self._fns[name] = ca.Function.deserialize(
+                    (self.code.dir / f"{name}.casadi").read_text())
+        return self._fns[name]
+
+    def call_columns(self, name: str, args: list, col: int) -> list[np.ndarray]:
+        """Evaluate ``name`` on every column of ``args[col]``, the other inputs shared.
+
+        Compiled: one call of the generated column driver (``codegen/driver.c``) for all
+        columns. VM: CasADi's own column mapping. Returns each output as (n_columns, size).
+        """
+        f = self[name]
+        cols = np.asfortranarray(np.atleast_2d(np.asarray(args[col], dtype=float)))
+        n = cols.shape[1]
+        if cols.shape[0] != f.size1_in(col):
+            raise ValueError(f"{name}: input {col} has {cols.shape[0]} rows, expected {f.size1_in(col)}")
+        shared = []
+        for i, a in enumerate(args):
+            if i == col:
+                shared.append(cols)
+                continue
+            a = np.asfortranarray(np.asarray(a, dtype=float))
+            if a.size != f.numel_in(i):
+                raise ValueError(f"{name}: input {i} has {a.size} values, expected {f.numel_in(i)}")
+            shared.append(a)
+        sizes = [f.numel_out(j) for j in range(f.n_out())]
+        if self.backend != "compiled" or n == 0:
+            res = f(*shared)
+            res = res if isinstance(res, (list, tuple)) else [res]
+            return [np.array(r).reshape(sizes[j], n, order="F").T for j, r in enumerate(res)]
+        lib = self._cdll()
+        outs = [np.empty((n, sz)) for sz in sizes]
+        dbl = ctypes.POINTER(ctypes.c_double)
+        arg_ptrs = (dbl * len(shared))(*[a.ctypes.data_as(dbl) for a in shared])
+        out_ptrs = (dbl * len(outs))(*[o.ctypes.data_as(dbl) for o in outs])
+        strides = (ctypes.c_longlong * len(outs))(*sizes)
+        flag = lib.haa_columns(ctypes.cast(getattr(lib, name), ctypes.c_void_p),
+                               ctypes.cast(getattr(lib, f"{name}_work"), ctypes.c_void_p),
+                               len(shared), arg_ptrs, col, cols.shape[0], n, len(outs), out_ptrs,
+                               strides)
+        if flag:
+            raise RuntimeError(f"generated {name} failed on a column (code {flag})")
+        return outs
+
+    def _cdll(self):
+        if getattr(self, "_lib", None) is None:
+            lib = ctypes.CDLL(str(self.library))
+            lib.haa_columns.restype = ctypes.c_int
+            lib.haa_columns.argtypes = [ctypes.c_void_p, ctypes.c_void_p, ctypes.c_longlong,
+                                        ctypes.c_void_p, ctypes.c_longlong, ctypes.c_longlong,
+                                        ctypes.c_longlong, ctypes.c_longlong, ctypes.c_void_p,
+                                        ctypes.c_void_p]
+            self._lib = lib
+        return self._lib
+
+    @property
+    def capacities(self) -> list[int]:
+        return list(self.code.manifest["capacities"])
+
+
+@functools.lru_cache(maxsize=None)
+def evaluators(backend: str = "auto") -> Evaluators:
+    """The process-wide :class:`Evaluators` for ``backend`` (compiled once, then cached)."""
+    return Evaluators(backend)

@@ -1,0 +1,107 @@
+"""The contract between code generation and runtime: every vector that crosses it, by name.
+
+Both ``codegen/kernels.py`` (which writes the CasADi functions) and the runtime
+(:mod:`haa_sym.loop.closed_loop`) read the layouts below; nothing across that boundary is a positional
+vector or a magic offset written twice. This module imports neither sympy nor CasADi: the
+functions take whatever arithmetic the caller works in (CasADi SX/MX or numpy arrays).
+
+The gain layout
+---------------
+Every feedback path of the loop enters through the one actuated input V_m, so the closed-loop
+characteristic polynomial is affine in a few *gain monomials* (matrix determinant lemma):
+
+    chi(z) = sum_j g_j b_j(z)
+
+with basis polynomials b_j fixed per sampled plant and loop structure (``haa_sym.loop.closed_loop``) and
+g_j products of the torque PI gains P_t = beta P_t0, I_t = beta I_t0 (Eq. 7), the velocity
+compensation VC = alpha VC0 (Eq. 6) and the impedance gains P_gain, D_gain (Eq. 8).
+:data:`GAIN_MONOMIALS` lists them; ``g_5 = P_t D_gain - VC`` is kept as one difference
+because the two nearly cancel in parts of the gain plane and must be rounded together.
+"""
+from __future__ import annotations
+
+__all__ = ["CONST", "POINT", "TORQUE_GAINS", "GAIN_MONOMIALS", "N_BASIS", "torque_gains",
+           "gain_monomials", "gain_monomial_bounds", "FREQ_COLUMN", "COEF_FORMS", "COEF_TERMS",
+           "COEF_OUTPUTS"]
+
+# Per-loop constants, per-point gains (the order of the generated functions' inputs).
+CONST = ("P_t0", "I_t0", "VC0")              # V/Nm, V/(Nm s), V s/rad (Eq. 6 at alpha = 1)
+POINT = ("P_gain", "D_gain", "beta", "alpha")  # Nm/rad, Nms/rad, -, -
+TORQUE_GAINS = ("beta", "alpha")
+
+# Each monomial is a sum of signed products of named factors (P_t, I_t, VC, P_gain, D_gain).
+GAIN_MONOMIALS: tuple[tuple[str, tuple[tuple[int, tuple[str, ...]], ...]], ...] = (
+    ("1", ((1, ()),)),
+    ("P_t", ((1, ("P_t",)),)),
+    ("I_t", ((1, ("I_t",)),)),
+    ("P_t*P_gain", ((1, ("P_t", "P_gain")),)),
+    ("I_t*P_gain", ((1, ("I_t", "P_gain")),)),
+    ("P_t*D_gain-VC", ((1, ("P_t", "D_gain")), (-1, ("VC",)))),
+    ("I_t*D_gain", ((1, ("I_t", "D_gain")),)),
+    ("-VC", ((-1, ("VC",)),)),
+)
+N_BASIS = len(GAIN_MONOMIALS)
+
+
+def torque_gains(beta, alpha, const):
+    """Eq. (6)-(7): ``{P_t, I_t, VC}`` from the scales beta, alpha and ``const`` (:data:`CONST`)."""
+    P_t0, I_t0, VC0 = (const[i] for i in range(len(CONST)))
+    return {"P_t": beta * P_t0, "I_t": beta * I_t0, "VC": alpha * VC0}
+
+
+def _factors(point, const, absolute=None):
+    P, D, beta, alpha = (point[i] for i in range(len(POINT)))
+    f = {"P_gain": P, "D_gain": D, **torque_gains(beta, alpha, const)}
+    return {k: absolute(v) for k, v in f.items()} if absolute else f
+
+
+def _product(names, f, one):
+    out = one
+    for n in names:
+        out = out * f[n]
+    return out
+
+
+def gain_monomials(point, const, one=1.0) -> list:
+    """g_j of :data:`GAIN_MONOMIALS` at ``point`` (:data:`POINT`), in the caller's arithmetic.
+
+    ``one`` is the unit of that arithmetic (e.g. ``np.ones(k)`` for k points at once).
+    """
+    f = _factors(point, const)
+    out = []
+    for _, terms in GAIN_MONOMIALS:
+        g = None
+        for sign, names in terms:
+            t = _product(names, f, one)
+            t = t if sign > 0 else -t
+            g = t if g is None else g + t
+        out.append(g)
+    return out
+
+
+def gain_monomial_bounds(point, const, absolute, one=1.0) -> list:
+    """Upper bounds of |g_j| that also cover the rounding of a difference (sum of |terms|)."""
+    f = _factors(point, const, absolute)
+    out = []
+    for _, terms in GAIN_MONOMIALS:
+        g = None
+        for _sign, names in terms:
+            t = _product(names, f, one)
+            g = t if g is None else g + t
+        out.append(g)
+    return out
+
+
+# The loop-coefficient function takes one column per frequency: complex values (re, im) of
+# the sampled plant's responses (measured torque T, encoder angle theta and port velocity p,
+# each from V_m and from T_dist) and of the controller elements at z = exp(j w Ts)
+# (haa_sym.loop.elements): the velocity estimates feeding the D term and the compensation, the PI's
+# integral part Ts z/(z - 1) and the delay z^-d. (A port that reads the velocity estimate gets
+# its G_pV, G_pd from the estimate times the encoder's responses.)
+FREQ_COLUMN = ("G_TV", "G_Td", "G_thV", "G_thd", "G_pV", "G_pd",
+               "F_d", "F_vc", "I_z", "z_delay")
+# Its output: for each gain-affine form, the complex coefficients of (1, P_gain, D_gain), then
+# the torque tracking H_T = T / T_lref (impedance loop open).
+COEF_FORMS = ("L_t", "L_imp", "Z_num", "Z_den")
+COEF_TERMS = ("1", "P_gain", "D_gain")
+COEF_OUTPUTS = tuple(f"{form}.{t}" for form in COEF_FORMS for t in COEF_TERMS) + ("H_T",)

@@ -1,0 +1,86 @@
+"""Memory budget: work that would need more than it is refused before anything is allocated.
+
+The budget is :data:`MEMORY_BUDGET_BYTES` (a quarter of the physical memory), overridden by the
+environment variable ``HAA_SYM_MEMORY_BUDGET`` (bytes, or with a binary suffix K, M, G or T,
+e.g. ``HAA_SYM_MEMORY_BUDGET=2G``). The estimates are peak bytes measured with ``tracemalloc``
+(numpy reports its buffers there) and rounded up:
+
+* the loop coefficients of :meth:`haa_sym.loop.closed_loop.ClosedLoop.loop_coefficients`: 1.6-1.7 kB per
+  frequency (the 7 x 7 complex resolvent of every frequency dominates);
+* a sweep over gain points (:mod:`haa_sym.analysis.sweep`): 30-32 B per point and frequency of the block
+  evaluated at once (``regions.CHUNK`` points in a region map, every point in ``passivity``),
+  plus 44 B per point for the result arrays of a region map.
+
+Example
+-------
+>>> check_memory(sweep_bytes(200 * 100, 1000, chunk=512), "a region map")   # passes: ~25 MB
+>>> sweep_bytes(10**6 * 10**6, 1000, chunk=512) > 2**40
+True
+"""
+from __future__ import annotations
+
+import os
+import re
+
+from haa_sym.errors import ParameterError
+
+__all__ = ["MEMORY_BUDGET_BYTES", "memory_budget", "check_memory", "sweep_bytes", "BYTES_PER_OMEGA",
+           "BYTES_PER_POINT", "BYTES_PER_CELL"]
+
+BYTES_PER_OMEGA = 2048      # loop coefficients, per frequency (measured 1.6-1.7 kB)
+BYTES_PER_POINT = 64        # result arrays of a region map, per gain point (measured 44 B)
+BYTES_PER_CELL = 40         # sweep products, per gain point x frequency (measured 30-32 B)
+
+
+def _physical_memory() -> int:
+    try:
+        return os.sysconf("SC_PHYS_PAGES") * os.sysconf("SC_PAGE_SIZE")
+    except (ValueError, OSError, AttributeError):
+        return 8 * 2**30
+
+
+# A quarter of the machine: the analyses share it with other work (and the two BLAS threads).
+MEMORY_BUDGET_BYTES: int = _physical_memory() // 4
+_ENV = "HAA_SYM_MEMORY_BUDGET"
+_SUFFIX = {"": 1, "K": 2**10, "M": 2**20, "G": 2**30, "T": 2**40}
+
+
+def memory_budget() -> int:
+    """The budget in bytes: ``HAA_SYM_MEMORY_BUDGET`` if set, else :data:`MEMORY_BUDGET_BYTES`."""
+    text = os.environ.get(_ENV, "").strip()
+    if not text:
+        return MEMORY_BUDGET_BYTES
+    m = re.fullmatch(r"(\d+(?:\.\d*)?(?:[eE]\d+)?)\s*([KMGT]?)(?:i?B)?", text, re.IGNORECASE)
+    if not m or float(m.group(1)) <= 0:
+        raise ParameterError(f"{_ENV} = {text!r}; allowed: a number of bytes > 0, optionally with a "
+                             "suffix K, M, G or T (powers of 1024), e.g. 2G")
+    return int(float(m.group(1)) * _SUFFIX[m.group(2).upper()])
+
+
+def _human(n: float) -> str:
+    units = ("B", "KiB", "MiB", "GiB", "TiB", "PiB", "EiB")
+    i = 0
+    while n >= 1024 and i < len(units) - 1:
+        n, i = n / 1024, i + 1
+    return f"{n:.3g} {units[i]}"
+
+
+def check_memory(nbytes: float, what: str) -> None:
+    """Refuse work estimated at ``nbytes`` if it exceeds :func:`memory_budget`.
+
+    Raises
+    ------
+    ParameterError
+        Naming the work, the bytes it would need and the budget.
+    """
+    budget = memory_budget()
+    if nbytes > budget:
+        raise ParameterError(f"{what} would need about {_human(nbytes)} of memory; allowed: at most "
+                             f"{_human(budget)} (the memory budget; set {_ENV} to change it)")
+
+
+def sweep_bytes(n_points: int, n_omega: int, chunk: int | None = None) -> int:
+    """Peak bytes of a frequency sweep over ``n_points`` gain points on ``n_omega`` frequencies,
+    evaluated ``chunk`` points at a time (None: all at once)."""
+    block = n_points if chunk is None else min(chunk, n_points)
+    return n_omega * BYTES_PER_OMEGA + n_points * BYTES_PER_POINT + block * n_omega * BYTES_PER_CELL

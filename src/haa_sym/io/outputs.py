@@ -1,0 +1,264 @@
+"""All-or-nothing output files: a command's outputs appear together, or none changes.
+
+A :class:`Transaction` stages every output to a temporary file in the target's own directory
+(created with mode 0666 minus the umask, like any new file), and :meth:`Transaction.commit`
+moves them into place with ``os.replace`` only when every one has been written. On any failure,
+including ``KeyboardInterrupt``, the temporaries are removed and the existing files are left
+untouched. A whole directory (``haa-sym reproduce --out DIR``) is staged as a temporary sibling
+directory and swapped in at the end, so DIR is either the old one or the complete new one.
+
+Paths are checked before any work starts (:func:`check_file`, :func:`check_directory`): the
+parent directory must exist (nothing is created above the target) and a file target must not
+be a directory. Messages name the user's path, never a temporary one.
+
+Example
+-------
+>>> with Transaction() as tx:                                   # doctest: +SKIP
+...     tx.write_text("table.csv", "a,b\\n1,2\\n")
+...     save_figure(fig, "plot.png", tx)       # both appear at the end of the block, or neither
+"""
+from __future__ import annotations
+
+import contextlib
+import csv
+import io
+import os
+import re
+import secrets
+import shutil
+from pathlib import Path
+from typing import Callable, Iterator
+
+from haa_sym.errors import OutputError, ParameterError
+
+__all__ = ["OutputError", "Transaction", "transaction", "check_file", "check_directory", "write_text",
+           "csv_text"]
+
+
+def _label(path: Path, field: str | None) -> str:
+    return f"{field} {str(path)!r}" if field else repr(str(path))
+
+
+def _check_parent(path: Path, field: str | None) -> None:
+    parent = path.parent
+    if not parent.exists():
+        raise OutputError(f"{_label(path, field)}: directory {str(parent)!r} does not exist; allowed: "
+                          "a path in an existing directory (create it first)")
+    if not parent.is_dir():
+        raise OutputError(f"{_label(path, field)}: {str(parent)!r} is not a directory; allowed: a path "
+                          "in an existing directory")
+    if not os.access(parent, os.W_OK | os.X_OK):
+        raise OutputError(f"{_label(path, field)}: directory {str(parent)!r} is not writable")
+
+
+def check_file(path: str | Path, field: str | None = None) -> Path:
+    """Check that ``path`` can be written as a file: existing, writable parent; not a directory.
+
+    ``field`` (e.g. ``--out``) is how messages name the path.
+    """
+    path = Path(path)
+    if path.is_dir():
+        raise OutputError(f"{_label(path, field)} is a directory; allowed: a file path")
+    _check_parent(path, field)
+    return path
+
+
+def check_directory(path: str | Path, field: str | None = None,
+                    replaceable: Callable[[Path], str | None] | None = None) -> Path:
+    """Check that ``path`` can be (re)placed as a whole directory.
+
+    The parent must exist (only ``path`` itself is created). An existing ``path`` must be a
+    directory that ``replaceable`` accepts: it returns None, or why the directory must not be
+    replaced (e.g. it holds files the command does not write). Returns the path with a final
+    symbolic link resolved (the directory it points to is the one replaced).
+    """
+    path = Path(path)
+    if path.is_symlink():
+        path = path.resolve()
+    if path.exists():
+        if not path.is_dir():
+            raise OutputError(f"{_label(path, field)} is not a directory; allowed: a new or existing "
+                              "directory")
+        why = replaceable(path) if replaceable else None
+        if why:
+            raise OutputError(f"{_label(path, field)}: {why}")
+    _check_parent(path, field)
+    return path
+
+
+def _sibling(target: Path, tag: str) -> Path:
+    # hidden, in the target's directory (same file system, so os.replace is a rename)
+    return target.parent / f".{target.name}.{secrets.token_hex(4)}.{tag}"
+
+
+def _create_sibling(target: Path, field: str | None, make, verb: str, what: str):
+    """``(tmp, make(tmp))`` for a fresh temporary sibling of ``target``; a name taken by a
+    concurrent writer is retried, any other failure is one error naming the user's path."""
+    for _ in range(100):
+        tmp = _sibling(target, "tmp")
+        try:
+            return tmp, make(tmp)
+        except FileExistsError:
+            continue
+        except OSError as exc:
+            raise OutputError(f"{_label(target, field)}: cannot {verb} ({exc.strerror})") from None
+    raise OutputError(f"{_label(target, field)}: cannot create {what} next to it")
+
+
+def _remove(path: Path) -> None:
+    if path.is_dir() and not path.is_symlink():
+        shutil.rmtree(path, ignore_errors=True)
+    else:
+        with contextlib.suppress(FileNotFoundError):
+            path.unlink()
+
+
+class Transaction:
+    """Outputs staged to temporaries and committed together (see the module docstring).
+
+    Use as a context manager: a normal exit commits, an exception (any, including
+    ``KeyboardInterrupt``) rolls back and propagates.
+    """
+
+    def __init__(self) -> None:
+        self._staged: list[tuple[Path, Path, bool]] = []   # (temporary, target, is_directory)
+        self._dir_checks: dict[Path, tuple] = {}             # target -> (field, replaceable)
+
+    def __enter__(self) -> "Transaction":
+        return self
+
+    def __exit__(self, exc_type, exc, tb) -> bool:
+        if exc_type is None:
+            self.commit()
+        else:
+            self.rollback()
+        return False
+
+    @contextlib.contextmanager
+    def open(self, path: str | Path, mode: str = "wb", field: str | None = None) -> Iterator:
+        """A file object writing the staged content of ``path`` (``mode`` "w" or "wb")."""
+        target = check_file(path, field)
+        # 0o666 & ~umask, as open() gives a new file (mkstemp would force 0600)
+        flags = os.O_WRONLY | os.O_CREAT | os.O_EXCL | getattr(os, "O_CLOEXEC", 0)
+        tmp, fd = _create_sibling(target, field, lambda t: os.open(t, flags, 0o666), "write",
+                                  "a temporary file")
+        try:
+            with os.fdopen(fd, mode) as fh:
+                yield fh
+        except BaseException as exc:
+            _remove(tmp)                         # a failed write is never committed
+            if isinstance(exc, OSError):
+                raise OutputError(f"{_label(target, field)}: cannot write ({exc.strerror or exc})") from None
+            raise
+        self._staged.append((tmp, target, False))
+
+    def write_text(self, path: str | Path, text: str, field: str | None = None) -> Path:
+        with self.open(path, "w", field) as fh:
+            fh.write(text)
+        return Path(path)
+
+    def directory(self, path: str | Path, field: str | None = None,
+                  replaceable: Callable[[Path], str | None] | None = None) -> Path:
+        """Stage the whole directory ``path``: returns an empty temporary sibling to fill.
+
+        At commit the old directory (if any, and if ``replaceable`` still accepts it, see
+        :func:`check_directory`) is replaced by the staged one.
+        """
+        target = check_directory(path, field, replaceable)
+        # 0o777 & ~umask, like mkdir (mkdtemp forces 0700)
+        tmp, _ = _create_sibling(target, field, lambda t: os.mkdir(t, 0o777), "create",
+                                 "a temporary directory")
+        self._staged.append((tmp, target, True))
+        self._dir_checks[target] = (field, replaceable)
+        return tmp
+
+    def commit(self) -> None:
+        """Move every staged output into place; on failure put back what was there."""
+        done: list[tuple[Path, Path | None, bool]] = []   # (target, backup of the old one, existed)
+        target = None
+        try:
+            # everything that can be checked is checked before the first target changes
+            for _, target, is_dir in self._staged:
+                if is_dir:
+                    check_directory(target, *self._dir_checks[target])
+                else:
+                    check_file(target)
+            for tmp, target, is_dir in self._staged:
+                existed = target.exists()
+                backup = _sibling(target, "old") if existed else None
+                if existed and is_dir:
+                    os.rename(target, backup)            # DIR is absent until the next rename
+                elif existed:
+                    try:
+                        os.link(target, backup)          # keeps the old file while it is replaced
+                    except OSError:
+                        backup = None                    # no hard links here: no way back
+                try:
+                    os.replace(tmp, target)
+                except BaseException:
+                    if backup is not None:
+                        (os.rename(backup, target) if is_dir else backup.unlink())
+                    raise
+                done.append((target, backup, existed))
+        except BaseException as exc:
+            for old_target, backup, existed in reversed(done):
+                with contextlib.suppress(OSError):
+                    if backup is not None:
+                        if backup.is_dir():
+                            _remove(old_target)
+                            os.rename(backup, old_target)
+                        else:
+                            os.replace(backup, old_target)
+                    elif not existed:
+                        _remove(old_target)
+            self.rollback()
+            if isinstance(exc, OSError) and target is not None:
+                raise OutputError(f"{_label(target, None)}: cannot write ({exc.strerror or exc})") from None
+            raise
+        self._staged = []
+        for _, backup, _ in done:
+            if backup is not None:
+                _remove(backup)
+
+    def rollback(self) -> None:
+        """Remove every staged temporary; the targets are untouched."""
+        for tmp, _, _ in self._staged:
+            _remove(tmp)
+        self._staged = []
+
+
+@contextlib.contextmanager
+def transaction(tx: Transaction | None = None) -> Iterator[Transaction]:
+    """``tx`` itself (committed by its owner), or a new transaction committed at the end."""
+    if tx is not None:
+        yield tx
+    else:
+        with Transaction() as own:
+            yield own
+
+
+def write_text(path: str | Path, text: str, tx: Transaction | None = None, field: str | None = None) -> Path:
+    """Write ``text`` to ``path`` through ``tx`` (or on its own, atomically)."""
+    with transaction(tx) as t:
+        return t.write_text(path, text, field)
+
+
+_CSV_NAME = re.compile(r"[A-Za-z_][A-Za-z0-9_]*")
+
+
+def csv_text(rows: list[dict]) -> str:
+    """CSV text that ``numpy.genfromtxt(..., delimiter=",", names=True)`` reads back unchanged:
+    headers are plain identifiers (genfromtxt rewrites others, e.g. drops dots) and no value
+    holds a comma, quote or newline (genfromtxt does not parse CSV quoting)."""
+    for name in rows[0]:
+        if not _CSV_NAME.fullmatch(name):
+            raise ValueError(f"CSV header {name!r} is not a plain identifier")
+    for row in rows:
+        for v in row.values():
+            if any(ch in str(v) for ch in ',"\n'):
+                raise ValueError(f"CSV value {v!r} holds a comma, quote or newline")
+    buf = io.StringIO()
+    w = csv.DictWriter(buf, fieldnames=list(rows[0]), lineterminator="\n")
+    w.writeheader()
+    w.writerows(rows)
+    return buf.getvalue()

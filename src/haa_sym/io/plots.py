@@ -1,0 +1,315 @@
+"""Figures (matplotlib, no computation): region maps as in Figs. 8-11, Z phase as in Fig. 12,
+torque steps as in Fig. 7. Every function takes computed data and returns the Figure."""
+from __future__ import annotations
+
+from pathlib import Path
+
+import matplotlib
+
+matplotlib.use("Agg")
+import matplotlib.pyplot as plt  # noqa: E402
+import numpy as np  # noqa: E402
+from matplotlib.colors import ListedColormap  # noqa: E402
+from matplotlib.patches import Patch  # noqa: E402
+
+__all__ = ["plot_region", "plot_region_panels", "plot_corrected_phase", "plot_steps",
+           "plot_contact", "save_figure"]
+
+# Figs. 8-11: white stable, light grey stable with PM < 30 deg, dark unstable.
+REGION_COLORS = ListedColormap(["#ffffff", "#c8c8c8", "#3a3a3a"])
+
+
+def _edges(x: np.ndarray, log: bool) -> np.ndarray:
+    if x.size == 1:
+        return np.array([x[0] * 0.9, x[0] * 1.1]) if log else np.array([x[0] - 0.5, x[0] + 0.5])
+    v = np.log(x) if log else x
+    mid = (v[1:] + v[:-1]) / 2
+    e = np.concatenate([[2 * v[0] - mid[0]], mid, [2 * v[-1] - mid[-1]]])
+    return np.exp(e) if log else e
+
+
+def _gain_axes(ax, logP: bool) -> None:
+    """The impedance-gain plane's axes: P_gain (log when every value is > 0) and D_gain."""
+    if logP:
+        ax.set_xscale("log")
+    ax.set_xlabel("P_gain (Nm/rad)")
+    ax.set_ylabel("D_gain (Nms/rad)")
+
+
+def plot_region(m, ax=None, title: str | None = None, passivity: bool = True, boundary=None):
+    """Draw one :class:`haa_sym.analysis.regions.RegionMap` on ``ax`` (log P_gain, linear D_gain), with
+    the exact curves (:func:`haa_sym.analysis.boundaries.stability.boundaries`) over it when given."""
+    fig = None
+    if ax is None:
+        fig, ax = plt.subplots(figsize=(4.6, 4.4), layout="constrained")
+    cls = np.where(~m.stable, 2, np.where(m.low_pm, 1, 0))
+    logP = bool(np.all(m.P_gain > 0))
+    ax.pcolormesh(_edges(m.P_gain, logP), _edges(m.D_gain, False), cls.T, cmap=REGION_COLORS,
+                  vmin=-0.5, vmax=2.5, shading="flat", rasterized=True)
+    if passivity and m.P_gain.size > 1 and m.D_gain.size > 1:
+        if m.passive.any() and (~m.passive).any() and boundary is None:   # else: the exact curve
+            ax.contour(m.P_gain, m.D_gain, m.passive.T.astype(float), levels=[0.5], colors="tab:blue",
+                       linewidths=1.0, linestyles="--")
+        not_passive = (m.stable & ~m.passive).T.astype(float)
+        if not_passive.any():                   # also when no point is passive (then all hatched)
+            cs = ax.contourf(m.P_gain, m.D_gain, not_passive, levels=[0.5, 1.5], colors="none",
+                             hatches=["////"])
+            cs.set_edgecolor("tab:blue")
+            cs.set_linewidth(0)
+    if boundary is not None:
+        plot_boundary(boundary, ax)
+        ax.set_xlim(_edges(m.P_gain, logP)[[0, -1]])
+        ax.set_ylim(_edges(m.D_gain, False)[[0, -1]])
+    _gain_axes(ax, logP)
+    if title:
+        ax.set_title(title, fontsize=10)
+    if fig is not None:
+        extra = curve_legend(boundary) if boundary is not None else []
+        fig.legend(handles=_region_legend(boundary is None) + extra, loc="outside lower center", ncol=2,
+                   fontsize=7)
+    return fig or ax.figure
+
+
+_CURVE_STYLES = {"complex": dict(color="tab:red", lw=1.4), "z=1": dict(color="tab:orange", lw=1.4, ls="-."),
+                 "z=-1": dict(color="tab:purple", lw=1.4, ls=":"),
+                 "pm": dict(color="tab:green", lw=1.1, ls="--"),
+                 "passivity": dict(color="tab:cyan", lw=1.2, ls="-")}
+
+
+def _curve_label(kind: str) -> tuple[str, str]:
+    """(style key, legend label) of a curve kind."""
+    if kind.startswith("pm="):
+        return "pm", f"phase margin {kind[3:]} deg"
+    if kind.startswith("passivity"):
+        return "passivity", "passivity boundary (|phase Z| = 90 deg)"
+    return kind, f"stability boundary ({kind})"
+
+
+def plot_boundary(boundary, ax=None, title: str | None = None):
+    """Draw the curves of a :class:`haa_sym.analysis.boundaries.stability.Boundaries` (stability, phase margin,
+    passivity) or :class:`haa_sym.analysis.boundaries.stability.StabilityBoundary` (on ``ax``: over a map)."""
+    fig = None
+    st = getattr(boundary, "stability", boundary)
+    if ax is None:
+        fig, ax = plt.subplots(figsize=(4.6, 4.4), layout="constrained")
+        ax.set_xlabel("P_gain (Nm/rad)")
+        ax.set_ylabel("D_gain (Nms/rad)")
+        lo, hi = st.meta.get("P_range", (0, 1))
+        if lo > 0:
+            ax.set_xscale("log")
+        ax.set_xlim(lo, hi)
+        ax.set_ylim(*st.meta.get("D_range", (0, 1)))
+    seen = set()
+    for c in boundary.curves:
+        key, label = _curve_label(c.kind)
+        ax.plot(c.P_gain, c.D_gain, label=None if label in seen else label, **_CURVE_STYLES[key])
+        seen.add(label)
+    if title:
+        ax.set_title(title, fontsize=10)
+    if fig is not None and seen:
+        ax.legend(fontsize=7)
+    return fig or ax.figure
+
+
+def curve_legend(boundary) -> list:
+    """Legend handles for the curve kinds drawn by :func:`plot_boundary`."""
+    out, seen = [], set()
+    for c in boundary.curves:
+        key, label = _curve_label(c.kind)
+        if label not in seen:
+            seen.add(label)
+            out.append(plt.Line2D([], [], label=label, **_CURVE_STYLES[key]))
+    return out
+
+
+def _region_legend(grid_contour: bool = True):
+    return [Patch(facecolor="#ffffff", edgecolor="k", label="stable, PM >= 30 deg"),
+            Patch(facecolor="#c8c8c8", edgecolor="k", label="stable, PM < 30 deg"),
+            Patch(facecolor="#3a3a3a", edgecolor="k", label="unstable")] + \
+        ([plt.Line2D([], [], color="tab:blue", ls="--", label="passivity boundary (grid)")] if grid_contour else []) + \
+        [Patch(facecolor="none", edgecolor="tab:blue", hatch="////", label="stable, not passive")]
+
+
+def plot_region_panels(maps, titles, suptitle: str = "", boundaries=None):
+    """A row of region maps (one paper figure) with the legend of Figs. 8-11, and each panel's
+    exact curves (:func:`haa_sym.analysis.boundaries.stability.boundaries`, one per map) over it when given."""
+    fig, axes = plt.subplots(1, len(maps), figsize=(3.6 * len(maps), 3.4), squeeze=False,
+                             constrained_layout=True)
+    boundaries = boundaries or [None] * len(maps)
+    for ax, m, t, b in zip(axes[0], maps, titles, boundaries):
+        plot_region(m, ax, t, boundary=b)
+    extra, seen = [], set()
+    for b in boundaries:
+        for h in (curve_legend(b) if b is not None else []):
+            if h.get_label() not in seen:
+                seen.add(h.get_label())
+                extra.append(h)
+    fig.legend(handles=_region_legend(not extra) + extra, loc="outside lower center",
+               ncol=5 if len(maps) >= 3 else 3, fontsize=8)
+    if suptitle:
+        fig.suptitle(suptitle, fontsize=11)
+    return fig
+
+
+def plot_corrected_phase(curves, title: str = ""):
+    """Corrected phase of Z(z) (Fig. 12): ``curves`` = [(omega, phase_deg, label), ...]."""
+    fig, ax = plt.subplots(figsize=(6.4, 3.6), constrained_layout=True)
+    for (w, ph, label), color in zip(curves, ("tab:red", "tab:blue", "tab:green", "tab:orange")):
+        ax.semilogx(w, ph, color=color, label=label)
+    for y in (90, -90):
+        ax.axhline(y, color="k", lw=0.8)
+    ax.set_xlabel("omega (rad/s)")
+    ax.set_ylabel("corrected phase of Z (deg)")
+    ax.set_ylim(-180, 180)
+    ax.set_yticks(range(-180, 181, 45))
+    ax.grid(True, which="both", alpha=0.3)
+    ax.legend(fontsize=8)
+    if title:
+        ax.set_title(title, fontsize=10)
+    return fig
+
+
+def plot_steps(panels, title: str = ""):
+    """Torque steps (Fig. 7): ``panels`` = [(panel_title, [(StepResponse, label, linestyle)])]."""
+    fig, axes = plt.subplots(len(panels), 1, figsize=(6.4, 2.8 * len(panels)), sharex=True,
+                             constrained_layout=True, squeeze=False)
+    for ax, (ptitle, lines) in zip(axes[:, 0], panels):
+        for s, label, ls in lines:
+            ax.plot(s.t, s.T, ls, color="k", label=label)
+        ax.axhline(1.0, color="0.6", lw=0.8)
+        ax.set_ylabel("T_l (Nm)")
+        ax.set_title(ptitle, fontsize=10)
+        ax.legend(fontsize=8)
+        ax.grid(True, alpha=0.3)
+    axes[-1, 0].set_xlabel("t (s)")
+    if title:
+        fig.suptitle(title, fontsize=11)
+    return fig
+
+
+def plot_contact(K, rho, paper_range=None, unstable=(), key: str = "K_L2", excess=None,
+                 not_passive=(), tol: float | None = None):
+    """Spectral radius of the loop against the environment stiffness, with the exact ends of the
+    unstable intervals (:func:`haa_sym.analysis.contact.contact_intervals`) and the paper's range; with
+    ``excess`` (deg, NaN where unstable) a second panel: the phase excess of Z beyond +-90 deg,
+    the tolerance ``tol`` and the exact ends of the stable, non-passive intervals."""
+    two = excess is not None
+    fig, axes = plt.subplots(2 if two else 1, 1, figsize=(6.4, 5.6 if two else 3.2), sharex=True,
+                             constrained_layout=True, squeeze=False)
+    ax = axes[0, 0]
+    ax.semilogx(K, rho, color="k")
+    ax.axhline(1.0, color="tab:red", lw=0.8, label="|z| = 1")
+    if paper_range:
+        ax.axvspan(*paper_range, color="tab:orange", alpha=0.2, label="paper: unstable")
+    for i, (lo, hi) in enumerate(unstable):
+        for k in (lo, hi):
+            ax.axvline(k, color="tab:blue", lw=0.8, ls="--", label=None if i or k == hi else "computed: interval ends")
+    ax.set_ylabel("spectral radius")
+    ax.legend(fontsize=8)
+    ax.grid(True, which="both", alpha=0.3)
+    if two:
+        ax = axes[1, 0]
+        ax.semilogx(K, excess, color="k", label="stable: worst |phase of Z| - 90 deg")
+        # symmetric log: the passive side sits at rounding level (Z touches -90 deg at Nyquist),
+        # the non-passive side spans decades up to 90 deg
+        lin = tol if tol else 1e-3
+        ax.set_yscale("symlog", linthresh=lin)
+        if tol is not None:
+            ax.axhline(tol, color="tab:red", lw=0.8, label=f"tolerance {tol:g} deg")
+        for i, (lo, hi) in enumerate(unstable):
+            ax.axvspan(lo, hi, color="0.85", label=None if i else "unstable")
+        inner = [k for iv in not_passive for k in iv if K[0] < k < K[-1]]
+        for i, (lo, hi) in enumerate(not_passive):
+            ax.axvspan(lo, hi, color="tab:purple", alpha=0.12, label=None if i else "stable, not passive")
+        for i, k in enumerate(inner):
+            ax.axvline(k, color="tab:purple", lw=0.8, ls="--", label=None if i else "computed: interval ends")
+        ax.set_ylabel("phase excess of Z (deg)")
+        ax.legend(fontsize=8)
+        ax.grid(True, which="both", alpha=0.3)
+    axes[-1, 0].set_xlabel(f"environment stiffness {key} (Nm/rad)")
+    return fig
+
+
+def plot_torque_bandwidth(panels, title: str = ""):
+    """Torque bandwidth over (beta, alpha) with the unstable torque loop shaded, one panel per
+    ``(label, beta, alpha, bandwidth, stable)``."""
+    fig, axes = plt.subplots(1, len(panels), figsize=(4.4 * len(panels), 3.6), squeeze=False,
+                             constrained_layout=True)
+    for ax, (label, B, A, bw, stable) in zip(axes[0], panels):
+        cs = ax.contourf(B, A, np.log10(bw).T, levels=20, cmap="viridis")
+        ax.contour(B, A, bw.T, levels=[10, 20, 30, 50, 100, 200], colors="w", linewidths=0.6)
+        if (~stable).any():
+            ax.contourf(B, A, (~stable).T.astype(float), levels=[0.5, 1.5], colors=["#3a3a3a"])
+        fig.colorbar(cs, ax=ax, label="log10 torque bandwidth (rad/s)")
+        ax.set_xlabel("beta")
+        ax.set_ylabel("alpha")
+        ax.set_title(f"{label} (dark: torque loop unstable)", fontsize=9)
+    if title:
+        fig.suptitle(title, fontsize=10)
+    return fig
+
+
+def save_figure(fig, path: str | Path, tx=None, field: str | None = None) -> Path:
+    """Save a figure (format from the suffix) and close it.
+
+    Written through the :class:`haa_sym.io.outputs.Transaction` ``tx`` (committed with the other
+    outputs of its command), or on its own, atomically, when ``tx`` is None.
+    """
+    from haa_sym.io.outputs import transaction
+    path = Path(path)
+    try:
+        with transaction(tx) as t, t.open(path, "wb", field) as fh:
+            fig.savefig(fh, format=path.suffix.lstrip(".").lower(), dpi=120,
+                        metadata={"Software": None} if path.suffix.lower() == ".png" else None)
+    finally:
+        plt.close(fig)
+    return path
+
+
+def plot_schedule(s, title: str = ""):
+    """A :class:`haa_sym.design.schedule.Schedule`: the scheduled beta over the impedance grid (no
+    robust gain: grey) and the torque bandwidth it gains over fixed beta = 1 (impedances where
+    beta = 1 fails for some leg configuration marked)."""
+    from matplotlib.colors import LogNorm
+    fig, axes = plt.subplots(1, 2, figsize=(10.0, 4.2), layout="constrained")
+    logP = bool(np.all(s.P_gain > 0))
+    Pe, De = _edges(s.P_gain, logP), _edges(s.D_gain, False)
+    ax = axes[0]
+    ax.pcolormesh(Pe, De, (~s.feasible).T.astype(float), cmap=ListedColormap(["white", "#9a9a9a"]),
+                  vmin=0, vmax=1, shading="flat")
+    b = np.ma.masked_invalid(s.beta)
+    pc = ax.pcolormesh(Pe, De, b.T, cmap="viridis", norm=LogNorm(vmin=np.nanmin(s.beta), vmax=np.nanmax(s.beta))
+                       if s.feasible.any() else None, shading="flat")
+    fig.colorbar(pc, ax=ax, label="scheduled beta (Eq. 7)")
+    ax.set_title("largest robust beta (grey: none)", fontsize=10)
+    ax = axes[1]
+    bw1 = s.meta.get("torque_bandwidth_beta_1_rad_s")
+    gain = np.ma.masked_invalid(s.torque_bandwidth_rad_s / bw1) if bw1 else np.ma.masked_all(s.beta.shape)
+    pc = ax.pcolormesh(Pe, De, gain.T, cmap="magma", shading="flat")
+    fig.colorbar(pc, ax=ax, label="torque bandwidth / that of beta = 1")
+    bad = s.feasible & ~s.beta_fixed_feasible
+    if bad.any():
+        PP, DD = np.meshgrid(s.P_gain, s.D_gain, indexing="ij")
+        ax.plot(PP[bad], DD[bad], "x", color="tab:cyan", ms=4, label="beta = 1 unsafe for some leg")
+        ax.legend(fontsize=7, loc="upper left")
+    ax.set_title("bandwidth gained by the schedule", fontsize=10)
+    for ax in axes:
+        _gain_axes(ax, logP)
+    if title:
+        fig.suptitle(title, fontsize=11)
+    return fig
+
+
+def plot_robust(r, title: str = ""):
+    """A :class:`haa_sym.analysis.robust.RobustRegion`: the gains meeting the requirements for every leg
+    configuration of the range."""
+    fig, ax = plt.subplots(figsize=(4.8, 4.2), layout="constrained")
+    logP = bool(np.all(r.P_gain > 0))
+    ax.pcolormesh(_edges(r.P_gain, logP), _edges(r.D_gain, False), (~r.feasible).T.astype(float),
+                  cmap=ListedColormap(["#ffffff", "#3a3a3a"]), vmin=0, vmax=1, shading="flat")
+    _gain_axes(ax, logP)
+    leg = r.meta["leg"]
+    ax.set_title(title or f"{'+'.join(r.meta['requirements'])} for every leg configuration\n"
+                 f"{leg[0]}..{leg[1]} ({r.meta['leg_mode']}, {r.n_configurations} configurations; dark: fails)",
+                 fontsize=9)
+    return fig

@@ -1,0 +1,634 @@
+"""The sampled closed loop of Sec. 3 and its generated evaluators.
+
+Per sample k (Fig. 6): the encoder angle theta_L1[k] and the torque sensor T[k] are read;
+the averaging filter of N_av first differences gives v[k] = (theta[k] - theta[k-N_av])/(N_av Ts);
+the impedance law Eq. (8) gives T_ref = -P_gain theta - D_gain v (theta_ref = 0); the PI of Eq. (7)
+(backward Euler) acts on T_ref - T; velocity compensation adds VC_gain v with Eq. (6); the
+voltage is applied through a zero-order hold after ``delay`` samples.
+
+Options the paper leaves open (:class:`LoopOptions`):
+
+``delay``          computation delay between sampling and the applied voltage, 0 or 1 samples;
+``torque_damping`` whether the measured torque includes the D_hd term of Eq. (2);
+``port``           the velocity of the passivity port Z(z) = T_dist / velocity (Sec. 5):
+                   "dtheta_L1" (sampled, the paper's wording), "dtheta_L2" (the inertia T_dist
+                   acts on) or "encoder_average" (the filtered encoder velocity v).
+
+Because every feedback path enters through the single input V_m, the characteristic polynomial
+is affine in the gain monomials (see ``codegen/kernels.py``); :class:`ClosedLoop` builds its
+basis polynomials exactly, once per distinct plant and loop structure (a process-wide cache),
+maps them by the bilinear transform z = (1 + s)/(1 - s) and rounds once; the generated code
+decides gain points by a Routh-Hurwitz test certified against that rounding, and the few
+points it cannot certify are decided from eigenvalues (docs/model.md, "Fast sampling").
+
+Example
+-------
+>>> from haa_sym import load_params, ClosedLoop
+>>> loop = ClosedLoop(load_params())                                      # doctest: +SKIP
+>>> res = loop.stability(P_gain=[200, 20000], D_gain=[10, 50])            # doctest: +SKIP
+>>> res.stable, res.spectral_radius                                       # doctest: +SKIP
+"""
+from __future__ import annotations
+
+import dataclasses
+import functools
+import re
+from dataclasses import dataclass, field
+from fractions import Fraction
+
+import numpy as np
+
+from haa_sym.compiled.cache import BoundedCache, array_key
+from haa_sym.compiled.generated import evaluators
+from haa_sym.loop.exact import bilinear, polymul, polysub, to_float, transfer_polynomials
+from haa_sym.errors import ParameterError
+from haa_sym.model.params import Params, gain_array
+from haa_sym.loop.elements import backward_difference, common_denominator, delay, pi_integral, velocity_filter
+from haa_sym.compiled.layout import (COEF_FORMS, COEF_OUTPUTS, COEF_TERMS, FREQ_COLUMN, N_BASIS, TORQUE_GAINS,
+                            gain_monomials)
+from haa_sym.loop.plant import DiscretePlant, continuous_plant, discretize
+from haa_sym.loop.statespace import closed_loop_eigenvalues, to_statespace
+
+__all__ = ["LoopOptions", "LoopStructure", "AnalysisConventions", "FrequencyGrid", "LoopCoefficients", "ClosedLoop", "StabilityResult", "PORTS", "FREQ_OUTPUTS"]
+
+PORTS = ("dtheta_L2", "dtheta_L1", "encoder_average")
+# A plant mode within this distance of z = 1 is a free rigid-body mode (the sampled plant cannot
+# place it more accurately): with P_gain = 0 the loop keeps it (StabilityResult.marginal).
+MARGINAL_TOL = 1e-9
+FREQ_OUTPUTS = ("L_t", "L_imp", "Z", "H_T")
+# Exact arithmetic (bases) and the plant's frequency responses are the costly parts of a
+# ClosedLoop; maps, Table 2 and the option scoring build thousands over a handful of plants.
+_PLANTS = BoundedCache()
+_PLANT_POLYS = BoundedCache()
+_BASES = BoundedCache()
+_COEFFICIENTS = BoundedCache(64)
+
+
+def _transfer_polynomials(plant: DiscretePlant):
+    """Exact d(z) and the V_m numerators of ``plant`` (Faddeev-LeVerrier in integers), memoised."""
+    return _PLANT_POLYS.get(array_key(plant.Phi, plant.Gamma[:, :1], plant.C),
+                            lambda: transfer_polynomials(plant.Phi, plant.Gamma[:, :1], plant.C))
+
+
+COLGATE = ("subtract", "add", "none")
+FILTERS = ("both", "impedance", "compensation")
+PM_LOOPS = ("impedance", "torque")
+PM_RULES = ("min_abs", "worst")
+
+
+def _choice(obj, name, allowed):
+    if getattr(obj, name) not in allowed:
+        raise ParameterError(f"{name} = {getattr(obj, name)!r}; allowed: {list(allowed)}")
+
+
+@dataclass(frozen=True)
+class LoopStructure:
+    """What the closed loop is: the structural choices the paper leaves open.
+
+    Parameters
+    ----------
+    delay : {0, 1}
+        Computation delay between sampling and the applied voltage, samples. Default 0.
+    torque_damping : bool or None
+        Whether the measured torque includes the damping term of the sensed coupling (D_hd of
+        Eq. 2). Default None: what the actuator file's ``[sensors] torque_damping`` says (True
+        for HyQ, Eq. 2 as printed).
+    filter : {"both", "impedance", "compensation"}
+        Where the velocity estimate (``velocity_filter`` of the controller) sits: on the velocity
+        feeding both the D term of Eq. (8) and the velocity compensation of Eq. (6) (default, the
+        paper's Sec. 3.4 and Fig. 6), on the D term only, or on the compensation only; the other
+        path then uses the one-sample backward difference (theta[k] - theta[k-1])/Ts.
+    port : "dtheta_<body>", "encoder_average" or None
+        Velocity of the passivity port Z = T_dist / velocity (Sec. 5): the velocity of a body of
+        the actuator file (ClosedLoop checks it against the plant's outputs) or the controller's
+        velocity estimate of the encoder angle. Default None: the body T_dist acts on (the
+        file's ``[sensors] port``; ``dtheta_L2`` for HyQ, whose alternatives are the sampled link
+        velocity ``dtheta_L1`` of the paper's wording and ``encoder_average``).
+
+    :meth:`resolved` fills the two file-backed defaults for one actuator.
+    """
+
+    delay: int = 0
+    torque_damping: bool | None = None
+    filter: str = "both"
+    port: str | None = None
+
+    def __post_init__(self):
+        if self.delay not in (0, 1) or isinstance(self.delay, bool):
+            raise ParameterError(f"delay = {self.delay!r}; allowed: 0 or 1 (samples)")
+        if not (self.torque_damping is None or isinstance(self.torque_damping, bool)):
+            raise ParameterError(f"torque_damping = {self.torque_damping!r}; allowed: True, False or "
+                                 "None (the actuator file's)")
+        if not (self.port is None or self.port == "encoder_average" or (isinstance(self.port, str)
+                                                    and re.fullmatch(r"dtheta_[A-Za-z][A-Za-z0-9]*", self.port))):
+            raise ParameterError(f"port = {self.port!r}; allowed: 'dtheta_<body>' (a body of the "
+                                 f"actuator file, e.g. {list(PORTS)[:2]}) or 'encoder_average'")
+        _choice(self, "filter", FILTERS)
+
+    def resolved(self, topology) -> "LoopStructure":
+        """This structure with the file-backed defaults of ``topology`` (an actuator) filled in."""
+        return dataclasses.replace(
+            self, torque_damping=topology.torque_damping if self.torque_damping is None else self.torque_damping,
+            port=f"dtheta_{topology.port}" if self.port is None else self.port)
+
+
+@dataclass(frozen=True)
+class AnalysisConventions:
+    """How the analyses judge a closed loop: the conventions the paper leaves open.
+
+    Parameters
+    ----------
+    colgate : {"subtract", "add", "none"}
+        Colgate's sampled-data correction of the phase of Z: subtract w Ts/2 (the paper's
+        wording, default), add it, or none.
+    pm_loop : {"impedance", "torque"}
+        Loop on which the phase margin of the region maps is measured: the impedance loop opened
+        at the torque reference T_lref (default) or the torque loop opened at the PI output with
+        the impedance loop closed.
+    pm_rule : {"min_abs", "worst"}
+        When |L| crosses 1 more than once: the crossover with the smallest |PM| (default; what
+        Matlab's ``margin`` reports) or the smallest signed PM.
+    passivity_tol_deg : float
+        A point is passive when the corrected phase of Z stays within 90 deg + this tolerance.
+        A spring (Z ~ K/(j w)) sits at -90 deg as w -> 0, so a zero tolerance would decide
+        such points by rounding. Default 1e-3.
+    """
+
+    colgate: str = "subtract"
+    pm_loop: str = "impedance"
+    pm_rule: str = "min_abs"
+    passivity_tol_deg: float = 1e-3
+
+    def __post_init__(self):
+        for name, allowed in (("colgate", COLGATE), ("pm_loop", PM_LOOPS), ("pm_rule", PM_RULES)):
+            _choice(self, name, allowed)
+        v = self.passivity_tol_deg
+        if isinstance(v, bool) or not isinstance(v, (int, float)) or not np.isfinite(v) or v < 0:
+            raise ParameterError(f"passivity_tol_deg = {v!r}; allowed: a finite number >= 0 (deg)")
+
+
+@dataclass(frozen=True)
+class FrequencyGrid:
+    """The numerics of the frequency-domain analyses: the log grid Z(z) and the loop gains are
+    sampled on, from ``omega_min`` to Nyquist pi/Ts.
+
+    Parameters
+    ----------
+    n_omega : int
+        Points of the grid. Default 1000 (the maps are unchanged up to 16000, see
+        ``haa_sym.analysis.regions``).
+    omega_min : float
+        Lowest frequency, rad/s. Default 0.1.
+    """
+
+    n_omega: int = 1000
+    omega_min: float = 0.1
+
+    def __post_init__(self):
+        if isinstance(self.n_omega, bool) or not isinstance(self.n_omega, int) or self.n_omega < 10:
+            raise ParameterError(f"n_omega = {self.n_omega!r}; allowed: an integer >= 10")
+        v = self.omega_min
+        if isinstance(v, bool) or not isinstance(v, (int, float)) or not np.isfinite(v) or v <= 0:
+            raise ParameterError(f"omega_min = {v!r}; allowed: a finite number > 0 (rad/s)")
+
+    def omega(self, Ts: float) -> np.ndarray:
+        """The frequency grid (rad/s) for sampling time ``Ts``."""
+        w_max = np.pi / Ts * (1 - 1e-9)
+        if self.omega_min >= w_max:
+            raise ParameterError(f"omega_min = {self.omega_min!r} is not below Nyquist pi/Ts = {w_max:.6g} rad/s")
+        return np.logspace(np.log10(self.omega_min), np.log10(w_max), self.n_omega)
+
+
+_PARTS = (("structure", LoopStructure), ("conventions", AnalysisConventions), ("numerics", FrequencyGrid))
+
+
+class LoopOptions:
+    """Every modelling choice the paper leaves open, in three parts; each is discussed in
+    ``docs/model.md``.
+
+    ``structure`` (:class:`LoopStructure`: delay, torque_damping, filter, port) defines the
+    closed loop; ``conventions`` (:class:`AnalysisConventions`: colgate, pm_loop, pm_rule,
+    passivity_tol_deg) how it is judged; ``numerics`` (:class:`FrequencyGrid`: n_omega,
+    omega_min) how finely. Build it from the parts or from any of their fields by name
+    (``LoopOptions(delay=1, colgate="none")``, what ``--option KEY=VALUE`` does); the fields read
+    through (``options.delay``). The defaults are the combination that reproduces the most
+    cells of Table 2 (``haa-sym reproduce`` re-scores all combinations and writes the count to
+    the report).
+    """
+
+    __slots__ = ("structure", "conventions", "numerics")
+
+    def __init__(self, structure: LoopStructure | None = None, conventions: AnalysisConventions | None = None,
+                 numerics: FrequencyGrid | None = None, **fields):
+        given = {"structure": structure, "conventions": conventions, "numerics": numerics}
+        for part, cls in _PARTS:
+            mine = {k: fields.pop(k) for k in list(fields) if k in cls.__dataclass_fields__}
+            base = given[part] if given[part] is not None else cls()
+            if not isinstance(base, cls):
+                raise ParameterError(f"{part} = {base!r}; allowed: a haa_sym.{cls.__name__}")
+            object.__setattr__(self, part, dataclasses.replace(base, **mine) if mine else base)
+        if fields:
+            raise ParameterError(f"unknown option(s) {sorted(fields)}; allowed: {list(self.field_names())}")
+
+    def __setattr__(self, name, value):
+        raise AttributeError("LoopOptions is immutable; use replace(**changes)")
+
+    def __reduce__(self):
+        # pickled by its parts (a dask worker rebuilds it; __setattr__ refuses the default way)
+        return (LoopOptions, self._parts())
+
+    def __getattr__(self, name):
+        for part, cls in _PARTS:
+            if name in cls.__dataclass_fields__:
+                return getattr(object.__getattribute__(self, part), name)
+        raise AttributeError(name)
+
+    def __eq__(self, other):
+        return isinstance(other, LoopOptions) and self._parts() == other._parts()
+
+    def __hash__(self):
+        return hash(self._parts())
+
+    def __repr__(self):
+        return f"LoopOptions({', '.join(f'{k}={v!r}' for k, v in self.to_dict().items())})"
+
+    def _parts(self):
+        return tuple(object.__getattribute__(self, part) for part, _ in _PARTS)
+
+    def replace(self, **changes) -> "LoopOptions":
+        """A copy with some fields (of any part) changed, validated."""
+        return LoopOptions(*self._parts(), **changes)
+
+    def to_dict(self) -> dict:
+        """Every field by name (flat: the names are unique across the parts)."""
+        return {f: getattr(self, f) for f in self.field_names()}
+
+    @classmethod
+    def field_names(cls) -> tuple[str, ...]:
+        return tuple(f for _, c in _PARTS for f in c.__dataclass_fields__)
+
+    @classmethod
+    def field_type(cls, name: str) -> tuple[type, bool]:
+        """(bool, int, float or str; whether None is allowed) of field ``name``, from its annotation."""
+        for _, c in _PARTS:
+            if name in c.__dataclass_fields__:
+                ann = str(c.__dataclass_fields__[name].type).replace(" ", "")
+                base = {"bool": bool, "int": int, "float": float}.get(ann.split("|")[0], str)
+                return base, "None" in ann.split("|")
+        raise KeyError(name)
+
+    @classmethod
+    def field_default(cls, name: str):
+        for _, c in _PARTS:
+            if name in c.__dataclass_fields__:
+                return c.__dataclass_fields__[name].default
+        raise KeyError(name)
+
+    def resolved(self, topology) -> "LoopOptions":
+        """These options with the structure's file-backed defaults filled in for ``topology``."""
+        return LoopOptions(self.structure.resolved(topology), self.conventions, self.numerics)
+
+    def omega(self, Ts: float) -> np.ndarray:
+        """The frequency grid (rad/s) of :attr:`numerics` for sampling time ``Ts``."""
+        return self.numerics.omega(Ts)
+
+
+@dataclass(frozen=True)
+class LoopCoefficients:
+    """Gain-affine loop transfer functions on a frequency grid (fixed beta, alpha).
+
+    With x = (1, P_gain, D_gain): ``L_t @ x``, ``L_imp @ x`` and ``(Z_num @ x) / (Z_den @ x)``
+    give the torque loop, the impedance loop and the port impedance at every ``omega``.
+    Arrays are complex, shape (n_omega, 3); ``H_T`` (n_omega,) is the torque tracking T/T_lref.
+    """
+
+    omega: np.ndarray
+    Ts: float
+    L_t: np.ndarray
+    L_imp: np.ndarray
+    Z_num: np.ndarray
+    Z_den: np.ndarray
+    H_T: np.ndarray
+
+    def evaluate(self, name: str, P_gain, D_gain) -> np.ndarray:
+        """``L_t``, ``L_imp``, ``Z`` or ``H_T`` at gain points: shape point_shape + (n_omega,)."""
+        P = np.asarray(P_gain, dtype=float)
+        D = np.asarray(D_gain, dtype=float)
+        P, D = np.broadcast_arrays(P, D)
+        x = np.stack([np.ones_like(P), P, D], axis=-1)
+        if name == "H_T":
+            return np.broadcast_to(self.H_T, P.shape + self.H_T.shape).copy()
+        if name == "Z":
+            return (x @ self.Z_num.T) / (x @ self.Z_den.T)
+        return x @ getattr(self, name).T
+
+
+@dataclass(frozen=True)
+class StabilityResult:
+    """Stability of the closed loop at gain points (arrays of the points' shape).
+
+    ``stable``: every closed-loop pole in |z| < 1. ``n_unstable``: the number of poles with
+    |z| > 1. ``spectral_radius``: max |z| of the poles, from the eigenvalues of the explicit
+    closed loop (:mod:`haa_sym.loop.statespace`); NaN where not asked for. ``refined``: the points
+    whose generated decision could not be certified against rounding (a pole within rounding
+    distance of |z| = 1) and were decided from the eigenvalues instead. ``marginal``: points
+    with a pole at z = 1 that no gain moves: the plant has a free rigid-body mode (a mode within
+    :data:`MARGINAL_TOL` of z = 1, e.g. the leg with K_L2 = 0) and P_gain = 0, so nothing feeds
+    its position back; reported not stable (not asymptotically stable), where the rounding of
+    the sampled plant would otherwise put the pole on either side of the circle.
+    """
+
+    stable: np.ndarray
+    spectral_radius: np.ndarray
+    refined: np.ndarray = field(repr=False)
+    n_unstable: np.ndarray = field(repr=False, default=None)
+    marginal: np.ndarray = field(repr=False, default=None)
+
+
+def _finite_array(name: str, value) -> np.ndarray:
+    # gains (P_gain, D_gain, beta, alpha) follow the one rule of haa_sym.model.params.gain_array;
+    # other arrays (omega) must be finite
+    return gain_array(name, value)
+
+
+class ClosedLoop:
+    """The discrete closed loop of one plant, controller and option set.
+
+    Parameters
+    ----------
+    params : Params
+        Plant and controller (``Ts``, ``N_av``, default ``alpha``, ``beta``, ``P_t0``, ``I_t0``).
+    options : LoopOptions, optional
+    backend : {"auto", "compiled", "vm"}
+        How the generated functions run (see :mod:`haa_sym.compiled.generated`).
+    basis : bool
+        Build the exact characteristic-polynomial basis (needed by :meth:`stability`; default).
+    """
+
+    def __init__(self, params: Params, options: LoopOptions | None = None, backend: str = "auto",
+                 basis: bool = True):
+        self.params = params
+        # the structure's file-backed defaults (sensor damping, port body) for this actuator
+        self.options = (options or LoopOptions()).resolved(params.plant.topology)
+        self.backend = backend
+        ctrl = params.controller
+        self.plant: DiscretePlant = _PLANTS.get(
+            (params.plant, ctrl.Ts, backend),
+            lambda: discretize(continuous_plant(params.plant, backend), ctrl.Ts))
+        # chi = (z - 1) z^delay z^N_av d(z) + ...: integrator, delay, filter, plant states
+        el = self.elements
+        filter_order = common_denominator(el["F_d"], el["F_vc"])[0].__len__() - 1
+        self.degree = self.plant.Phi.shape[0] + el["I_z"].order + el["z_delay"].order + filter_order
+        caps = [c for c in evaluators(backend).capacities if c >= self.degree]
+        if not caps:
+            cap = max(evaluators(backend).capacities)
+            what = f"N_av = {ctrl.N_av}" if ctrl.velocity_filter == "average" else \
+                f"velocity_filter = {ctrl.velocity_filter!r}"
+            raise ParameterError(
+                f"{what} gives a closed loop of order {self.degree}, above the largest generated "
+                f"capacity {cap}; allowed: N_av <= {cap - self.degree + filter_order} (with "
+                f"delay = {self.options.structure.delay}; a larger capacity needs CAPACITIES in "
+                "codegen/generate.py of a source tree and `make derive`)")
+        self.capacity = caps[0]
+        self.const = np.array([ctrl.P_t0, ctrl.I_t0, self.plant.VC0])
+        ports = [o for o in self.plant.output_names if o.startswith("dtheta_")] + ["encoder_average"]
+        if self.options.structure.port not in ports:
+            raise ParameterError(
+                f"port = {self.options.structure.port!r} is not a velocity of the actuator "
+                f"{params.source}; allowed: {ports} (its [sensors] port body is "
+                f"{params.plant.topology.port!r}: port = 'dtheta_{params.plant.topology.port}')")
+        # a plant mode within MARGINAL_TOL of z = 1: a free link (no stiffness to ground), whose
+        # position only P_gain feeds back (the sensor and the velocity estimates do not see it)
+        self.free_mode = bool(np.min(np.abs(np.linalg.eigvals(self.plant.Phi) - 1)) < MARGINAL_TOL)
+        # basis=False: a loop used only for frequency responses or the explicit state space
+        self.basis, self._z_basis = self._basis() if basis else (None, None)
+
+    # --- the characteristic polynomial -------------------------------------------------------
+    def plant_output(self, name: str) -> int:
+        """Row of the plant's output ``name`` (its C matrix and transfer numerators)."""
+        return self.plant.output_names.index(name)
+
+    @property
+    def torque_output(self) -> str:
+        return "T_sensor" if self.options.structure.torque_damping else "T_sensor_spring"
+
+    @functools.cached_property
+    def elements(self) -> dict:
+        """The controller's elements (:mod:`haa_sym.loop.elements`) in this loop, by role (built once
+        per loop: their exact coefficients cost rational arithmetic).
+
+        ``F_d`` the velocity estimate of the D term (Eq. 8), ``F_vc`` that of the velocity
+        compensation (Eq. 6) (option ``filter``: the chosen ``velocity_filter`` on both, or on one
+        with the backward difference on the other), ``F_port`` the estimate an averaged port reads,
+        ``I_z`` the integral part of the torque PI (Eq. 7) and ``z_delay`` the computation delay.
+        """
+        ctrl, f = self.params.controller, self.options.structure.filter
+        F = velocity_filter(ctrl.velocity_filter, ctrl.Ts, ctrl.N_av, ctrl.f_c)
+        diff = backward_difference(ctrl.Ts)
+        return {"F_d": F if f in ("both", "impedance") else diff,
+                "F_vc": F if f in ("both", "compensation") else diff,
+                "F_port": F, "I_z": pi_integral(ctrl.Ts), "z_delay": delay(self.options.structure.delay)}
+
+    def _structure_key(self) -> tuple:
+        """Everything the basis depends on: the sampled plant and the loop's structure."""
+        p, el = self.plant, self.elements
+        return (array_key(p.Phi, p.Gamma[:, :1], p.C), self.params.controller.Ts,
+                tuple((e.numerator, e.denominator) for e in el.values()), self.torque_output,
+                self.capacity)
+
+    def _exact_basis(self) -> list[list[Fraction]]:
+        """Exact descending coefficients of b0..b7 in z (haa_sym.compiled.layout.GAIN_MONOMIALS), each of
+        degree ``self.degree``.
+
+        chi(z) is the return difference at V_m times (z - 1) z^d d(z) D(z), with D the common
+        denominator of the two velocity estimates, F_d = A_d/D and F_vc = A_vc/D (Eq. 6-8). P_t
+        D_gain and VC multiply the same polynomial when both estimates are one filter; they nearly
+        cancel in parts of the plane, so chi uses (P_t D_gain - VC) b_d - VC (b_vc - b_d) with the
+        difference exact (zero for filter = "both").
+        """
+        el = self.elements
+        d, nums = _transfer_polynomials(self.plant)
+        n_T = nums[self.plant_output(self.torque_output)][0]
+        n_th = nums[self.plant_output("theta_encoder")][0]
+        D, (A_d, A_vc) = common_denominator(el["F_d"], el["F_vc"])
+        I_num, I_den = el["I_z"].numerator, el["I_z"].denominator        # Ts z, z - 1
+        z_num, z_den = el["z_delay"].numerator, el["z_delay"].denominator  # 1, z^d
+        b_d = polymul(I_den, z_num, A_d, n_th)
+        basis = [
+            polymul(I_den, z_den, d, D),                                  # 1
+            polymul(I_den, z_num, D, n_T),                                # P_t
+            polymul(I_num, z_num, D, n_T),                                # I_t
+            polymul(I_den, z_num, D, n_th),                               # P_t P_gain
+            polymul(I_num, z_num, D, n_th),                               # I_t P_gain
+            b_d,                                                          # P_t D_gain - VC
+            polymul(I_num, z_num, A_d, n_th),                             # I_t D_gain
+            polysub(polymul(I_den, z_num, A_vc, n_th), b_d),              # -VC (rest)
+        ]
+        assert len(basis) == N_BASIS
+        return [[Fraction(0)] * (self.degree + 1 - len(b)) + list(b) for b in basis]
+
+    def _basis(self) -> tuple[np.ndarray, np.ndarray]:
+        """(bilinear, z) bases: (capacity+1) x 8 ascending coefficients of the bilinear
+        transforms of z^(capacity - degree) b_j (the extra roots at z = 0, s = -1, change no
+        decision), and degree+1 x 8 descending coefficients of b_j in z. Cached per structure.
+        """
+        def build():
+            exact = self._exact_basis()
+            pad = [Fraction(0)] * (self.capacity - self.degree)
+            s_basis = np.array([to_float(bilinear(b + pad)) for b in exact]).T
+            z_basis = np.array([to_float(b) for b in exact]).T
+            for arr in (s_basis, z_basis):
+                arr.setflags(write=False)
+            return s_basis, z_basis
+        return _BASES.get(self._structure_key(), build)
+
+    def _points(self, P_gain, D_gain, beta, alpha) -> np.ndarray:
+        ctrl = self.params.controller
+        beta = ctrl.beta if beta is None else beta
+        alpha = ctrl.alpha if alpha is None else alpha
+        arrs = np.broadcast_arrays(*(_finite_array(n, v) for n, v in
+                                     (("P_gain", P_gain), ("D_gain", D_gain), ("beta", beta), ("alpha", alpha))))
+        return np.stack([a.ravel() for a in arrs]), arrs[0].shape
+
+    def characteristic_polynomial(self, P_gain, D_gain, beta=None, alpha=None) -> np.ndarray:
+        """Descending coefficients of chi (monic up to the factor N_av Ts) for one point."""
+        pts, shape = self._points(P_gain, D_gain, beta, alpha)
+        if pts.shape[1] != 1:
+            raise ValueError("characteristic_polynomial takes one gain point")
+        return self._z_basis @ np.array(gain_monomials(pts[:, 0], self.const))
+
+    # --- evaluators -------------------------------------------------------------------------
+    def stability(self, P_gain, D_gain, beta=None, alpha=None, *, radius: bool = False,
+                  certify: bool = True) -> StabilityResult:
+        """Stability decision (and optionally the spectral radius) of the closed loop at gain points.
+
+        Parameters
+        ----------
+        P_gain : array_like
+            Impedance stiffness (Nm/rad), Eq. (8).
+        D_gain : array_like
+            Impedance damping (Nms/rad), Eq. (8).
+        beta, alpha : array_like, optional
+            Torque-gain scale (Eq. 7) and velocity-compensation gain (Eq. 6); default from params.
+            All four broadcast together.
+        radius : bool
+            Also return the spectral radius of every point, from the eigenvalues of the explicit
+            closed loop (costs about as much as a stacked ``numpy.linalg.eigvals``); default
+            False: NaN except at refined points.
+        certify : bool
+            Re-decide from eigenvalues the points whose generated decision is not certified
+            against the rounding of the characteristic polynomial (default). False returns the
+            raw generated decision everywhere (for tests and benchmarks).
+
+        Returns
+        -------
+        StabilityResult
+            Every point is decided by the generated Routh-Hurwitz test of the bilinear
+            transform of chi; its certificate (Kharitonov's vertex polynomials of the
+            coefficients' rounding bound) says whether rounding could change the decision.
+
+        Examples
+        --------
+        >>> from haa_sym import load_params, ClosedLoop
+        >>> loop = ClosedLoop(load_params().with_values(Ts=1e-4))                 # doctest: +SKIP
+        >>> bool(loop.stability(200.0, 10.0).stable)                              # doctest: +SKIP
+        True
+        """
+        if self.basis is None:
+            raise ValueError("this ClosedLoop was built with basis=False: no stability evaluator")
+        pts, shape = self._points(P_gain, D_gain, beta, alpha)
+        ev = evaluators(self.backend)
+        n_unstable, certified = (v.ravel() for v in ev.call_columns(
+            f"haa_decide{self.capacity}", [self.basis, self.const, pts], 2))
+        n_unstable = n_unstable.astype(int)
+        refined = (certified < 0.5) if certify else np.zeros(n_unstable.shape, bool)
+        rho = np.full(n_unstable.shape, np.nan)
+        need = np.ones_like(refined) if radius else refined
+        if need.any():
+            eig = np.abs(closed_loop_eigenvalues(self, pts[:, need]))
+            rho[need] = eig.max(axis=1)
+            n_unstable[refined] = (eig[refined[need]] >= 1).sum(axis=1)
+        # a free rigid-body mode of the plant stays at z = 1 when nothing feeds the position
+        # back (P_gain = 0): the rounding of the sampled plant, not the loop, decides its side
+        marginal = self.free_mode & (pts[0] == 0)
+        stable = (n_unstable == 0) & ~marginal
+        return StabilityResult(stable.reshape(shape), rho.reshape(shape), refined.reshape(shape),
+                               n_unstable.reshape(shape), marginal.reshape(shape))
+
+    def loop_coefficients(self, omega=None, beta=None, alpha=None, *, cached: bool = True) -> LoopCoefficients:
+        """Gain-affine loop transfer functions on ``omega`` (rad/s; default: the options' grid).
+
+        ``beta`` and ``alpha`` are scalars (default from params). One generated evaluation per
+        frequency; the P_gain/D_gain dependence is then a 3-vector product (see
+        :class:`LoopCoefficients`). ``cached=False`` for one-off frequencies (a root refinement),
+        which would only push reused grids out of the bounded cache.
+        """
+        ctrl = self.params.controller
+        omega = self.options.numerics.omega(ctrl.Ts) if omega is None else _finite_array("omega", omega).ravel()
+        beta = float(_finite_array("beta", ctrl.beta if beta is None else beta))
+        alpha = float(_finite_array("alpha", ctrl.alpha if alpha is None else alpha))
+        el = self.elements
+        if not cached:
+            return self._loop_coefficients(omega, beta, alpha)
+        key = (array_key(self.plant.Phi, self.plant.Gamma, self.plant.C, omega, self.const),
+               tuple((e.numerator, e.denominator) for e in el.values()), self.torque_output,
+               self.options.structure.port, beta, alpha, self.backend)
+        return _COEFFICIENTS.get(key, lambda: self._loop_coefficients(omega, beta, alpha))
+
+    def _loop_coefficients(self, omega, beta, alpha) -> LoopCoefficients:
+        ctrl, el = self.params.controller, self.elements
+        averaged = self.options.structure.port == "encoder_average"
+        port = "theta_encoder" if averaged else self.options.structure.port
+        G = self.plant.frequency_response(omega, outputs=(self.torque_output, "theta_encoder", port),
+                                          inputs=("V_m", "T_dist"))
+        values = dict(zip(("G_TV", "G_Td", "G_thV", "G_thd", "G_pV", "G_pd"), G.reshape(6, -1)))
+        for k in ("F_d", "F_vc", "I_z", "z_delay"):
+            values[k] = el[k].frequency_response(omega, ctrl.Ts)
+        if averaged:                      # the port reads the controller's velocity estimate
+            F = el["F_port"].frequency_response(omega, ctrl.Ts)
+            values["G_pV"], values["G_pd"] = F * values["G_thV"], F * values["G_thd"]
+        cols = np.empty((2 * len(FREQ_COLUMN), omega.size))
+        for i, k in enumerate(FREQ_COLUMN):
+            cols[2 * i], cols[2 * i + 1] = values[k].real, values[k].imag
+        (out,) = evaluators(self.backend).call_columns(
+            "haa_loopcoef", [cols, self.const, np.array([{"beta": beta, "alpha": alpha}[k] for k in TORQUE_GAINS])], 0)
+        c = dict(zip(COEF_OUTPUTS, (out[:, 0::2] + 1j * out[:, 1::2]).T))
+        forms = {f: np.stack([c[f"{f}.{t}"] for t in COEF_TERMS], axis=1) for f in COEF_FORMS}
+        res = LoopCoefficients(omega=omega.copy(), Ts=ctrl.Ts, H_T=c["H_T"].copy(), **forms)
+        for arr in (res.omega, res.H_T, *forms.values()):
+            arr.setflags(write=False)
+        return res
+
+    def to_statespace(self, P_gain: float, D_gain: float, beta=None, alpha=None, cut: str | None = None):
+        """The closed loop at one gain point as a python-control ``StateSpace`` with named signals
+        (:func:`haa_sym.loop.statespace.to_statespace`); ``cut`` in {None, "T_ref", "PI"}.
+
+        Examples
+        --------
+        >>> from haa_sym import load_params, ClosedLoop
+        >>> sys = ClosedLoop(load_params()).to_statespace(200.0, 10.0)        # doctest: +SKIP
+        >>> sys.input_labels, sys.output_labels                               # doctest: +SKIP
+        (['T_dist', 'r'], ['T_meas', 'theta_encoder', 'port_velocity', 'y'])
+        """
+        P, D, b, a = self._points(P_gain, D_gain, beta, alpha)[0][:, 0]
+        return to_statespace(self, P, D, b, a, cut)
+
+    def frequency_response(self, omega, P_gain=0.0, D_gain=0.0, beta=None, alpha=None) -> dict:
+        """Loop transfer functions at ``omega`` (rad/s) for gain points.
+
+        Returns a dict of complex arrays of shape ``point_shape + (len(omega),)`` with keys
+        ``L_t`` (torque loop opened at the PI output), ``L_imp`` (impedance loop opened at the
+        torque reference), ``Z`` (port impedance T_dist/velocity, every loop closed) and ``H_T``
+        (torque tracking T/T_ref, impedance loop open). Negative-feedback convention 1/(1+L).
+        ``beta`` and ``alpha`` may vary per point (one coefficient evaluation per distinct pair).
+        """
+        omega = _finite_array("omega", omega).ravel()
+        pts, shape = self._points(P_gain, D_gain, beta, alpha)
+        out = {k: np.empty((pts.shape[1], omega.size), complex) for k in FREQ_OUTPUTS}
+        pairs, inv = np.unique(pts[2:].T, axis=0, return_inverse=True)
+        for j, (b, a) in enumerate(pairs):
+            sel = np.flatnonzero(inv.ravel() == j)
+            co = self.loop_coefficients(omega, b, a)
+            for k in FREQ_OUTPUTS:
+                out[k][sel] = co.evaluate(k, pts[0, sel], pts[1, sel])
+        return {k: v.reshape(shape + (omega.size,)) for k, v in out.items()}

@@ -1,0 +1,511 @@
+"""Actuator and controller parameters as validated data (Table 1 and Sec. 3 of the paper).
+
+A parameter file (TOML, see ``model/hyq_haa.toml`` and docs/model.md, "Actuator files")
+describes an actuator ([motor], [bodies.*], [couplings.*], [sensors]; the structure is a
+:class:`haa_sym.model.actuator.Topology`, the values a :class:`Plant`), a ``[controller]`` table and
+optional ``[configurations.<name>]`` tables overriding plant keys (the leg configurations of
+Table 1). The legacy flat ``[plant]`` table is read as the HyQ topology. Loading validates
+everything and raises :class:`ParameterError` naming the file, the section, the key, the value
+and what is allowed; nothing is silently defaulted.
+
+Validation lives here and only here: :class:`Plant`, :class:`Controller` and :class:`Params`
+check themselves on construction (so ``dataclasses.replace`` cannot make an invalid object
+either), and :func:`gain_array` is the one rule for the gain points every analysis takes
+(P_gain, D_gain, beta, alpha).
+
+Example
+-------
+>>> from haa_sym.model.params import load_params
+>>> p = load_params("model/hyq_haa.toml")                       # doctest: +SKIP
+>>> p.configuration("retracted").plant.J_L2                     # doctest: +SKIP
+0.129
+"""
+from __future__ import annotations
+
+import math
+import tomllib
+from dataclasses import dataclass, field, replace
+from pathlib import Path
+from typing import Mapping
+
+import numpy as np
+
+from haa_sym.errors import ParameterError
+from haa_sym.model.actuator import (ACTUATOR_SECTIONS, HYQ, Actuator, Topology, check_keys, entry_values,
+                              parse_actuator)
+from haa_sym.model.resources import data_dir
+
+__all__ = [
+    "ParameterError",
+    "Plant",
+    "Controller",
+    "Params",
+    "CONTROLLER_KEYS",
+    "GAIN_KEYS",
+    "gain_array",
+    "gain_points",
+    "load_params",
+    "default_params_path",
+    "builtin_actuators",
+]
+
+
+# Domain of every key: ">0" strictly positive, ">=0" non-negative, "int>=1" integer >= 1.
+# The plant's domains are per topology (haa_sym.model.actuator: inertias, couplings, L, R, k_t, N > 0;
+# frictions, dampings, k_w and stiffness to ground >= 0). Ts sets the sampling, N_av the state
+# dimension; alpha = 0 switches velocity compensation off (Fig. 9a).
+_CONTROLLER_DOMAIN: dict[str, str] = {
+    "Ts": ">0", "N_av": "int>=1", "alpha": ">=0", "beta": ">0", "P_t0": ">=0", "I_t0": ">=0",
+    "velocity_filter": "filter", "f_c": ">0",
+}
+# The velocity estimate is a modelling choice with a stated default (the paper's average);
+# N_av is needed by "average" only and f_c (Hz) by the low-pass filters only (Controller checks).
+_CONTROLLER_OPTIONAL = {"velocity_filter": "average", "N_av": None, "f_c": None}
+_VELOCITY_FILTERS = ("average", "lowpass1", "butterworth2")   # haa_sym.loop.elements.VELOCITY_FILTERS
+STRING_KEYS = ("velocity_filter",)   # keys whose value is a name, not a number
+_DOMAIN_TEXT = {
+    ">0": "a finite number > 0",
+    ">=0": "a finite number >= 0",
+    "int>=1": "an integer >= 1",
+    "filter": f"one of {list(_VELOCITY_FILTERS)}",
+}
+# Gain points of every analysis: the impedance gains of Eq. (8) and the torque-loop gains, whose
+# rule is the controller file's (beta = 0 switches the torque PI off; negative gains are positive
+# feedback, which the analysis, the paper and the generated sign conventions do not cover).
+_GAIN_DOMAIN: dict[str, str] = {"P_gain": ">=0", "D_gain": ">=0",
+                                "beta": _CONTROLLER_DOMAIN["beta"], "alpha": _CONTROLLER_DOMAIN["alpha"]}
+_GAIN_UNITS = {"P_gain": " (Nm/rad)", "D_gain": " (Nms/rad)", "beta": "", "alpha": ""}
+GAIN_KEYS: tuple[str, ...] = tuple(_GAIN_DOMAIN)
+
+CONTROLLER_KEYS: tuple[str, ...] = tuple(_CONTROLLER_DOMAIN)
+
+
+class Plant:
+    """Physical parameters of one actuator, SI units, validated (Table 1 for HyQ).
+
+    Values are read by their flat names (``plant.J_L2``, ``plant.K_hd``; see
+    :class:`haa_sym.model.actuator.Topology`), the object is immutable, and :meth:`replace` validates
+    like a file.
+
+    Parameters
+    ----------
+    topology : Topology or LinearActuatorModel, optional
+        The actuator (any :class:`haa_sym.model.actuator.Actuator`: a chain topology, or a sympy model
+        written in code, :class:`haa_sym.symbolic.model.LinearActuatorModel`). Default: the HyQ
+        HAA joint of the paper (:data:`haa_sym.model.actuator.HYQ`). Also readable as ``actuator``.
+    **values : float
+        Every key of ``topology.parameter_keys``, in the units of ``topology.units``.
+    """
+
+    __slots__ = ("topology", "_values")
+
+    def __init__(self, topology: Topology | None = None, /, **values: float):
+        topology = HYQ if topology is None else topology
+        if not isinstance(topology, Actuator):
+            raise ParameterError(f"topology = {topology!r}; allowed: a haa_sym.model.actuator.Topology or a "
+                                 "haa_sym.symbolic.model.LinearActuatorModel")
+        domain = topology.domain
+        check_keys(values, tuple(domain), tuple(domain))
+        checked = {k: _check_value(k, values[k], domain[k]) for k in domain}
+        object.__setattr__(self, "topology", topology)
+        object.__setattr__(self, "_values", checked)
+
+    def __getattr__(self, name: str) -> float:
+        try:
+            return object.__getattribute__(self, "_values")[name]
+        except KeyError:
+            raise AttributeError(f"Plant has no parameter {name!r}") from None
+
+    def __setattr__(self, name, value):
+        raise AttributeError("Plant is immutable; use plant.replace(key=value)")
+
+    def __eq__(self, other) -> bool:
+        return (isinstance(other, Plant) and self.topology == other.topology
+                and self.as_tuple() == other.as_tuple())
+
+    def __hash__(self) -> int:
+        return hash((self.topology, self.as_tuple()))
+
+    def __repr__(self) -> str:
+        return "Plant(" + ", ".join(f"{k}={v!r}" for k, v in self._values.items()) + ")"
+
+    def __reduce__(self):
+        return (_plant_from, (self.topology, self._values))
+
+    @property
+    def actuator(self) -> Actuator:
+        """The actuator these values are for (the same object as ``topology``)."""
+        return self.topology
+
+    @property
+    def keys(self) -> tuple[str, ...]:
+        return self.topology.parameter_keys
+
+    def as_dict(self) -> dict[str, float]:
+        """Values by flat name, in ``topology.parameter_keys`` order."""
+        return dict(self._values)
+
+    def as_tuple(self) -> tuple[float, ...]:
+        """Values in ``topology.parameter_keys`` order (the order the generated code expects)."""
+        return tuple(self._values.values())
+
+    def replace(self, **changes: float) -> "Plant":
+        """A copy with some keys changed, validated like a file."""
+        return Plant(self.topology, **{**self._values, **changes})
+
+
+def _plant_from(topology, values):
+    return Plant(topology, **values)
+
+
+@dataclass(frozen=True)
+class Controller:
+    """Controller defaults of Sec. 3: sampling, velocity estimate, velocity compensation, PI gains.
+
+    ``P_t = beta * P_t0`` and ``I_t = beta * I_t0`` (Eq. 7); the simplified velocity compensation
+    gain is ``alpha * N / k_t * (R B_m + k_t k_w)`` (Eq. 6). The velocity estimate
+    ``velocity_filter`` (default ``"average"``, the paper's) is one of ``haa_sym.loop.elements``:
+    ``"average"`` of ``N_av`` samples, or the backward difference followed by a Tustin
+    ``"lowpass1"`` or ``"butterworth2"`` filter of cut-off ``f_c`` Hz (below Nyquist 1/(2 Ts)).
+    """
+
+    Ts: float
+    N_av: int | None
+    alpha: float
+    beta: float
+    P_t0: float
+    I_t0: float
+    velocity_filter: str = "average"
+    f_c: float | None = None
+
+    def __post_init__(self):
+        _check_fields(self, {k: d for k, d in _CONTROLLER_DOMAIN.items()
+                             if not (k in ("N_av", "f_c") and getattr(self, k) is None)})
+        kind = self.velocity_filter
+        if kind == "average" and self.N_av is None:
+            raise ParameterError("N_av is missing; allowed: an integer >= 1, required by "
+                                 "velocity_filter = 'average'")
+        if kind != "average":
+            nyquist = 0.5 / self.Ts
+            if self.f_c is None:
+                raise ParameterError(f"f_c is missing; allowed: a cut-off frequency in Hz, 0 < f_c < "
+                                     f"{nyquist:g} (Nyquist), required by velocity_filter = {kind!r}")
+            if not self.f_c < nyquist:
+                raise ParameterError(f"f_c = {self.f_c!r} is at or above Nyquist 1/(2 Ts) = {nyquist:g} Hz; "
+                                     f"allowed: 0 < f_c < {nyquist:g} (Hz)")
+
+    @property
+    def P_t(self) -> float:
+        return self.beta * self.P_t0
+
+    @property
+    def I_t(self) -> float:
+        return self.beta * self.I_t0
+
+    def replace(self, **changes: float) -> "Controller":
+        """A copy with some keys changed, validated like a file."""
+        return _validated(Controller, {**self.__dict__, **changes}, _CONTROLLER_DOMAIN,
+                          optional=_CONTROLLER_OPTIONAL)
+
+
+@dataclass(frozen=True)
+class Params:
+    """A validated parameter file: nominal plant (of its topology), controller and named leg
+    configurations; ``about`` is the file's [about] table (name, description, references)."""
+
+    plant: Plant
+    controller: Controller
+    configurations: Mapping[str, Mapping[str, float]] = field(default_factory=dict)
+    source: str = "<memory>"
+    about: Mapping[str, object] = field(default_factory=dict, compare=False)
+
+    def __post_init__(self):
+        if not isinstance(self.plant, Plant):
+            raise ParameterError(f"{self.source}: plant = {self.plant!r}; allowed: a haa_sym.Plant")
+        if not isinstance(self.controller, Controller):
+            raise ParameterError(f"{self.source}: controller = {self.controller!r}; allowed: a haa_sym.Controller")
+        if not isinstance(self.configurations, Mapping):
+            raise ParameterError(f"{self.source}: [configurations] must be a table of tables")
+        configs = {}
+        for name, overrides in self.configurations.items():
+            where = f"{self.source} [configurations.{name}]"
+            if not isinstance(overrides, Mapping):
+                raise ParameterError(f"{where}: must be a table of plant keys")
+            domain = self.plant.topology.domain
+            unknown = sorted(set(overrides) - set(domain))
+            if unknown:
+                raise ParameterError(f"{where}: unknown key(s) {unknown}; allowed: {list(domain)}")
+            configs[name] = {k: _check_value(k, v, domain[k], where) for k, v in overrides.items()}
+        object.__setattr__(self, "configurations", configs)
+
+    @classmethod
+    def from_model(cls, model: Actuator, values: Mapping[str, float],
+                   controller: "Controller | Mapping[str, object]", *,
+                   configurations: Mapping[str, Mapping[str, float]] | None = None,
+                   source: str | None = None) -> "Params":
+        """Parameters of an actuator defined in code (what :func:`load_params` reads from a file).
+
+        Parameters
+        ----------
+        model : LinearActuatorModel or Topology
+            The actuator: a sympy model (:class:`haa_sym.symbolic.model.LinearActuatorModel`) or
+            a chain (:class:`haa_sym.model.actuator.Topology`).
+        values : mapping str -> float
+            Every key of ``model.parameter_keys``, SI units (``model.units``), checked against
+            ``model.domain``.
+        controller : Controller or mapping
+            A :class:`Controller`, or its keys as in a file's ``[controller]`` table (``Ts`` in s,
+            ``N_av``, ``alpha``, ``beta``, ``P_t0`` in V/Nm, ``I_t0`` in V/(Nm s), optional
+            ``velocity_filter`` and ``f_c`` in Hz).
+        configurations : mapping, optional
+            Name -> plant keys to override (as ``[configurations.<name>]``).
+        source : str, optional
+            How messages name these parameters; default ``model.source``.
+
+        Returns
+        -------
+        Params
+
+        Raises
+        ------
+        ParameterError
+            Naming the source, ``values`` or ``controller``, the key and what is allowed.
+        """
+        if not isinstance(model, Actuator):
+            raise ParameterError(f"model = {model!r}; allowed: a haa_sym.symbolic.model.LinearActuatorModel "
+                                 "or a haa_sym.Topology")
+        source = model.source if source is None else source
+        if not isinstance(values, Mapping):
+            raise ParameterError(f"{source} values: {values!r}; allowed: a mapping of {list(model.parameter_keys)}")
+        try:
+            plant = Plant(model, **values)
+        except ParameterError as exc:
+            raise ParameterError(f"{source} values: {exc}") from None
+        if not isinstance(controller, Controller):
+            if not isinstance(controller, Mapping):
+                raise ParameterError(f"{source} controller: {controller!r}; allowed: a haa_sym.Controller "
+                                     f"or a mapping of {list(CONTROLLER_KEYS)}")
+            controller = _validated(Controller, controller, _CONTROLLER_DOMAIN, f"{source} controller",
+                                    optional=_CONTROLLER_OPTIONAL)
+        return cls(plant=plant, controller=controller, configurations=dict(configurations or {}),
+                   source=source)
+
+    def configuration(self, name: str) -> "Params":
+        """The parameters with the plant overrides of configuration ``name`` applied."""
+        if name not in self.configurations:
+            raise ParameterError(
+                f"{self.source}: unknown configuration {name!r}; "
+                f"allowed: {sorted(self.configurations) or 'none defined'}"
+            )
+        return replace(self, plant=self.plant.replace(**self.configurations[name]))
+
+    def with_values(self, **changes: float) -> "Params":
+        """A copy with any plant or controller keys changed (what ``--set KEY=VALUE`` does)."""
+        keys = self.plant.topology.parameter_keys
+        plant_changes = {k: v for k, v in changes.items() if k in keys}
+        ctrl_changes = {k: v for k, v in changes.items() if k in _CONTROLLER_DOMAIN}
+        unknown = sorted(set(changes) - set(plant_changes) - set(ctrl_changes))
+        if unknown:
+            raise ParameterError(
+                f"unknown parameter key(s) {unknown}; allowed: {list(keys + CONTROLLER_KEYS)}"
+            )
+        return replace(
+            self,
+            plant=self.plant.replace(**plant_changes) if plant_changes else self.plant,
+            controller=self.controller.replace(**ctrl_changes) if ctrl_changes else self.controller,
+        )
+
+    def to_dict(self) -> dict:
+        """Plain values, for saving next to results (with the topology: self-describing)."""
+        top = self.plant.topology
+        return {
+            "plant": self.plant.as_dict(),
+            "topology": {**top.structure(), "fingerprint": top.fingerprint},
+            "controller": dict(self.controller.__dict__),
+            "configurations": {k: dict(v) for k, v in self.configurations.items()},
+            "source": self.source,
+        }
+
+
+def builtin_actuators(directory: str | Path | None = None) -> list[Path]:
+    """The bundled actuator files: every ``model/*.toml`` except ``paper.toml`` (the paper's
+    reported results), sorted by name; their plant functions are generated (``make derive``)."""
+    d = Path(directory) if directory is not None else data_dir("model")
+    return sorted(p for p in d.glob("*.toml") if p.name != "paper.toml")
+
+
+def default_params_path() -> Path:
+    """``model/hyq_haa.toml``, the bundled HyQ parameters (source tree or installed package)."""
+    return data_dir("model") / "hyq_haa.toml"
+
+
+def _check_value(key: str, value: object, domain: str, where: str | None = None) -> float | int:
+    """``value`` of ``key`` checked against ``domain``; the message names where, key, value, allowed."""
+    allowed = _DOMAIN_TEXT[domain]
+    prefix = f"{where}: " if where else ""
+    if domain == "filter":
+        if value not in _VELOCITY_FILTERS:
+            raise ParameterError(f"{prefix}{key} = {value!r}; allowed: {allowed}")
+        return value
+    if isinstance(value, bool) or not isinstance(value, (int, float)):
+        raise ParameterError(f"{prefix}{key} = {value!r} is not a number; allowed: {allowed}")
+    try:
+        finite = math.isfinite(value)
+    except OverflowError:                      # an integer beyond the float range (TOML allows it)
+        finite = False
+    if not finite:
+        raise ParameterError(f"{prefix}{key} = {value!r} is not finite; allowed: {allowed}")
+    if domain == "int>=1":
+        if float(value) != int(value):
+            raise ParameterError(f"{prefix}{key} = {value!r} is not an integer; allowed: {allowed}")
+        if value < 1:
+            raise ParameterError(f"{prefix}{key} = {value!r} is out of range; allowed: {allowed}")
+        return int(value)
+    if (domain == ">0" and not value > 0) or (domain == ">=0" and not value >= 0):
+        raise ParameterError(f"{prefix}{key} = {value!r} is out of range; allowed: {allowed}")
+    return float(value)
+
+
+def _check_fields(obj, domain: Mapping[str, str]) -> None:
+    """Validate and normalise (float, or int for N_av) every field of a frozen dataclass."""
+    for key, dom in domain.items():
+        object.__setattr__(obj, key, _check_value(key, getattr(obj, key), dom))
+
+
+def _validated(cls, values: Mapping[str, object], domain: Mapping[str, str], where: str | None = None,
+               optional: Mapping[str, object] = {}):
+    prefix = f"{where}: " if where else ""
+    check_keys(values, tuple(domain), [k for k in domain if k not in optional], where)
+    values = {**{k: v for k, v in optional.items() if k not in values}, **values}
+    try:
+        return cls(**values)
+    except ParameterError as exc:
+        raise ParameterError(f"{prefix}{exc}") from None
+
+
+def gain_array(name: str, value, label: str | None = None) -> np.ndarray:
+    """``value`` as a float array, checked against the rule of gain ``name``.
+
+    The one rule for the gain points of every analysis (CLI and API): ``P_gain`` >= 0 (Nm/rad)
+    and ``D_gain`` >= 0 (Nms/rad) of Eq. (8), ``beta`` > 0 and ``alpha`` >= 0 of Eq. (6)-(7),
+    all finite. Any other ``name`` (e.g. ``omega``) is only required to be finite.
+
+    Parameters
+    ----------
+    name : str
+        One of :data:`GAIN_KEYS`, or another array name.
+    value : array_like
+    label : str, optional
+        How the message names the value (e.g. ``--P-gain``); default ``name``.
+
+    Raises
+    ------
+    ParameterError
+        Naming the label, the first offending value and what is allowed.
+    """
+    label = label or name
+    domain = _GAIN_DOMAIN.get(name)
+    allowed = (_DOMAIN_TEXT[domain] + _GAIN_UNITS[name]) if domain else "finite numbers"
+    try:
+        arr = np.asarray(value, dtype=float)
+    except (TypeError, ValueError):
+        raise ParameterError(f"{label} = {value!r} is not a number; allowed: {allowed}") from None
+    with np.errstate(invalid="ignore"):
+        bad = ~np.isfinite(arr)
+        if domain == ">0":
+            bad |= ~(arr > 0)
+        elif domain == ">=0":
+            bad |= ~(arr >= 0)
+    if bad.any():
+        first = float(arr[bad].ravel()[0])
+        what = "is not finite" if not math.isfinite(first) else "is out of range"
+        where = f"{label} = {first!r}" if arr.ndim == 0 else f"{label} contains {first!r}, which"
+        raise ParameterError(f"{where} {what}; allowed: {allowed}")
+    return arr
+
+
+def gain_points(P_gain=0.0, D_gain=0.0, beta=None, alpha=None):
+    """Gain points checked by :func:`gain_array`: ``(P_gain, D_gain, beta, alpha)`` as arrays,
+    P_gain and D_gain broadcast together; a beta or alpha of None stays None (the controller's)."""
+    P, D = gain_array("P_gain", P_gain), gain_array("D_gain", D_gain)
+    try:
+        P, D = np.broadcast_arrays(P, D)
+    except ValueError:
+        raise ParameterError(f"P_gain has shape {P.shape} and D_gain {D.shape}; allowed: shapes that "
+                             "broadcast together (one value each per gain point)") from None
+    return (P, D, None if beta is None else gain_array("beta", beta),
+            None if alpha is None else gain_array("alpha", alpha))
+
+
+_FILE_SECTIONS = ACTUATOR_SECTIONS + ("controller", "configurations")
+_LEGACY_SECTIONS = ("about", "plant", "controller", "configurations")
+
+
+def parse_params(data: Mapping[str, object], source: str = "<memory>") -> Params:
+    """Validate the content of a parameter file already read into a mapping.
+
+    The actuator sections ([about], [motor], [bodies.*], [couplings.*], [sensors]; or the legacy
+    flat [plant]) are read by :func:`haa_sym.model.actuator.parse_actuator`; [controller] and
+    [configurations.*] here.
+    """
+    legacy = "plant" in data
+    allowed = _LEGACY_SECTIONS if legacy else _FILE_SECTIONS
+    top = sorted(set(data) - set(allowed))
+    if top:
+        hint = " (a file with [plant] is the legacy HyQ format: no [motor], [bodies], [couplings], " \
+               "[sensors])" if legacy else ""
+        raise ParameterError(f"{source}: unknown table(s) {top}; allowed: {list(allowed)}{hint}")
+    topology, raw, about = parse_actuator(data, source)
+    values = {}
+    for key, dom in topology.domain.items():
+        section, local = ("plant", key) if legacy else topology.section_of(key)
+        values[key] = _check_value(local, raw[key], dom, f"{source} [{section}]")
+    plant = Plant(topology, **values)
+    if not isinstance(data.get("controller"), Mapping):
+        raise ParameterError(f"{source}: missing table [controller]")
+    refs = about["references"]
+    controller = _validated(Controller, entry_values(data["controller"], f"{source} [controller]", refs),
+                            _CONTROLLER_DOMAIN, f"{source} [controller]", optional=_CONTROLLER_OPTIONAL)
+    raw_configs = data.get("configurations", {})
+    if not isinstance(raw_configs, Mapping):
+        raise ParameterError(f"{source}: [configurations] must be a table of tables")
+    configs = {}
+    for name, overrides in raw_configs.items():
+        where = f"{source} [configurations.{name}]"
+        if not isinstance(overrides, Mapping):
+            raise ParameterError(f"{where}: must be a table of plant keys")
+        configs[name] = entry_values(overrides, where, refs)
+    return Params(plant=plant, controller=controller, configurations=configs, source=source, about=about)
+
+
+def load_params(path: str | Path | None = None) -> Params:
+    """Read and validate a parameter file.
+
+    Parameters
+    ----------
+    path : str or Path, optional
+        TOML file; default the bundled ``model/hyq_haa.toml``.
+
+    Returns
+    -------
+    Params
+
+    Raises
+    ------
+    ParameterError
+        Naming the file, the key, the offending value and what is allowed.
+    """
+    p = Path(path) if path is not None else default_params_path()
+    try:
+        with open(p, "rb") as fh:
+            data = tomllib.load(fh)
+    except FileNotFoundError:
+        raise ParameterError(f"{p}: no such parameter file") from None
+    except tomllib.TOMLDecodeError as exc:
+        raise ParameterError(f"{p}: not valid TOML ({exc}); allowed: a TOML parameter file") from None
+    except UnicodeDecodeError as exc:
+        raise ParameterError(f"{p}: not a text file (byte 0x{exc.object[exc.start]:02x} at offset "
+                             f"{exc.start} is not UTF-8); allowed: a TOML parameter file") from None
+    except OSError as exc:
+        raise ParameterError(f"{p}: cannot read the parameter file ({exc.strerror or exc})") from None
+    return parse_params(data, source=str(p))
