@@ -172,7 +172,7 @@ def test_every_actuator_gives_a_map_and_passes_verify(user_file, capsys):
     from haa_sym.check import verify
     for path in all_files(user_file):
         params = load_params(path)
-        m = region_map(params, np.logspace(0, 3.3, 12), np.linspace(0.5, 30, 8), options=_options(params))
+        m = region_map(ClosedLoop(params, _options(params)), np.logspace(0, 3.3, 12), np.linspace(0.5, 30, 8))
         assert m.stable.shape == (12, 8) and m.stable.any(), path.name
         rows = verify.generic_rows(params)
         bad = [r for r in rows if r.applies and not r.ok]
@@ -272,7 +272,7 @@ def test_hyq_new_and_legacy_files_are_identical(params):
     for x, y in ((a.A, b.A), (a.B, b.B), (a.C, b.C)):
         np.testing.assert_array_equal(x, y)
     P, D = np.logspace(0, np.log10(20000), 40), np.linspace(1, 50, 20)
-    ma, mb = region_map(params, P, D), region_map(legacy, P, D)
+    ma, mb = region_map(ClosedLoop(params), P, D), region_map(ClosedLoop(legacy), P, D)
     for k in ("stable", "low_pm", "passive"):
         np.testing.assert_array_equal(getattr(ma, k), getattr(mb, k))
     assert params.to_dict()["topology"]["fingerprint"] == HYQ.fingerprint
@@ -306,7 +306,7 @@ def test_contact_needs_a_ground_stiffness_on_the_port(tmp_path):
     params = load_params_text(tmp_path, USER.replace('port = "C"', 'port = "B"'))
     with pytest.raises(ParameterError, match=r"act.toml \[bodies.B\]: the port body 'B' has no stiffness "
                                              r"to ground K \(K_B\)"):
-        contact_stability(params, [10.0, 100.0], options=LoopOptions(port="dtheta_B"))
+        contact_stability(ClosedLoop(params, LoopOptions(port="dtheta_B")), [10.0, 100.0])
 
 
 # --- bad input: one ParameterError naming file, section, key, value, allowed -----------------

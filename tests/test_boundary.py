@@ -6,8 +6,9 @@ import pytest
 
 from haa_sym import ClosedLoop, load_params
 from haa_sym.check import reference as ref
-from haa_sym.analysis.boundaries.stability import classify_grid, crossings, stability_boundary
-from haa_sym.analysis.regions import grid
+from haa_sym.analysis.boundaries.classify import classify_grid
+from haa_sym.analysis.boundaries.stability import crossings, stability_boundary
+from haa_sym.io.gridspec import grid
 
 from conftest import ROOT
 
@@ -24,7 +25,7 @@ CASES = {
 def case(request, params):
     p = load_params(ROOT / "model" / "sea.toml") if request.param == "sea" else CASES[request.param](params)
     loop = ClosedLoop(p)
-    return request.param, loop, stability_boundary(p, loop=loop)
+    return request.param, loop, stability_boundary(loop)
 
 
 def test_every_boundary_point_has_a_pole_on_the_unit_circle(case):
@@ -83,7 +84,7 @@ def test_cli_boundary_refuses_a_bad_output_and_writes_nothing(tmp_path, capsys):
 def test_phase_margin_curves_are_crossovers_with_exactly_that_margin(params):
     from haa_sym.analysis.boundaries.stability import phase_margin_curves
     loop = ClosedLoop(params)
-    curves = phase_margin_curves(params, loop=loop)
+    curves = phase_margin_curves(loop)
     assert curves
     for c in curves:
         idx = np.linspace(0, c.P_gain.size - 1, 12).astype(int)
@@ -95,13 +96,13 @@ def test_phase_margin_curves_are_crossovers_with_exactly_that_margin(params):
 @pytest.mark.parametrize("changes", [{}, {"alpha": 0.0}, {"beta": 6.0}, {"N_av": 50}, {"Ts": 1e-4},
                                      {"Ts": 1e-5}, {"Ts": 8e-3, "N_av": 1}])
 def test_regions_classified_from_the_curves_equal_the_map(params, changes):
-    from haa_sym.analysis.boundaries.stability import classify_regions
+    from haa_sym.analysis.boundaries.classify import classify_regions
     from haa_sym.analysis.regions import region_map
     p = params.with_values(**changes)
     loop = ClosedLoop(p)
     P, D = grid("log:1:20000:90"), grid("lin:1:50:60")
-    r = classify_regions(loop, stability_boundary(p, loop=loop), P, D)
-    m = region_map(p, P, D, loop=loop, progress=False, method="grid")
+    r = classify_regions(loop, stability_boundary(loop), P, D)
+    m = region_map(loop, P, D, progress=False, method="grid")
     assert (r.stable != m.stable).sum() == 0 and (r.low_pm != m.low_pm).sum() == 0
     assert (r.passive != m.passive).sum() == 0
     assert m.low_pm.any() or "Ts" in changes
@@ -114,8 +115,8 @@ def test_maps_of_the_other_actuators_from_the_curves_equal_the_grid(name):
     p = load_params(ROOT / "model" / f"{name}.toml")
     loop = ClosedLoop(p)
     P, D = grid("log:1:20000:70"), grid("lin:0:50:40")
-    a = region_map(p, P, D, loop=loop, progress=False)
-    b = region_map(p, P, D, loop=loop, progress=False, method="grid")
+    a = region_map(loop, P, D, progress=False)
+    b = region_map(loop, P, D, progress=False, method="grid")
     for key in ("stable", "low_pm", "passive"):
         np.testing.assert_array_equal(getattr(a, key), getattr(b, key), err_msg=f"{name} {key}")
     assert 0 < b.stable.mean() < 1 and b.low_pm.any()
@@ -189,8 +190,8 @@ def test_map_from_the_curves_on_unsorted_grids_equals_the_grid_method(params):
     from haa_sym.analysis.regions import region_map
     rng = np.random.default_rng(1)
     P, D = rng.permutation(grid("log:1:20000:50")), rng.permutation(grid("lin:1:50:30"))
-    a = region_map(params, P, D, progress=False)
-    b = region_map(params, P, D, progress=False, method="grid")
+    a = region_map(ClosedLoop(params), P, D, progress=False)
+    b = region_map(ClosedLoop(params), P, D, progress=False, method="grid")
     assert a.meta["method"] == "curves" and b.meta["method"] == "grid"
     for key in ("stable", "low_pm", "passive"):
         np.testing.assert_array_equal(getattr(a, key), getattr(b, key), err_msg=key)
@@ -200,10 +201,10 @@ def test_curves_reach_the_edge_of_the_box_and_small_boxes_are_drawn_finely(param
     """A curve leaving the box ends on its edge (located by bisection), and a small box gets as
     many points as a large one (the runs are resampled)."""
     loop = ClosedLoop(params)
-    b = stability_boundary(params, loop=loop)
+    b = stability_boundary(loop)
     ends = np.concatenate([[c.D_gain[0], c.D_gain[-1]] for c in b.curves if c.kind == "complex"])
     assert np.abs(ends).min() < 1e-6                     # the D_gain = 0 edge, to bisection accuracy
-    small = stability_boundary(params, loop=loop, P_range=(2000.0, 20000.0), D_range=(0.0, 2.0))
+    small = stability_boundary(loop, P_range=(2000.0, 20000.0), D_range=(0.0, 2.0))
     pts = sum(c.P_gain.size for c in small.curves if c.kind == "complex")
     assert pts >= 200
     P = np.concatenate([c.P_gain for c in small.curves if c.kind == "complex"])

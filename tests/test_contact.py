@@ -42,7 +42,7 @@ PASSIVITY_CASES = [("hyq_haa", 1000.0, 9.0, (1.0, 1e6), 6.35e5), ("harmonic_driv
 @pytest.mark.parametrize("name,P,D,K_range,end", PASSIVITY_CASES, ids=[c[0] for c in PASSIVITY_CASES])
 def test_not_passive_ends_against_state_space(name, P, D, K_range, end):
     params = load_params(ROOT / "model" / f"{name}.toml")
-    r = contact_intervals(params, K_range, n_scan=40, P_gain=P, D_gain=D, progress=False)
+    r = contact_intervals(ClosedLoop(params), K_range, n_scan=40, P_gain=P, D_gain=D, progress=False)
     stability_ends = {k for iv in r.unstable for k in iv}
     passivity_ends = []
     for lo, hi in r.not_passive:
@@ -72,14 +72,14 @@ def test_not_passive_ends_against_state_space(name, P, D, K_range, end):
 
 
 def test_passivity_can_be_skipped(params):
-    r = contact_intervals(params, n_scan=20, passivity=False, progress=False)
+    r = contact_intervals(ClosedLoop(params), n_scan=20, passivity=False, progress=False)
     assert r.not_passive is None and r.phase_excess_deg is None and r.unstable
 
 
 @pytest.mark.parametrize("name", ["hyq_haa", "harmonic_drive"])
 def test_interval_ends_are_exact_to_1e9(name):
     params = load_params(ROOT / "model" / f"{name}.toml")
-    r = contact_intervals(params, (1.0, 1e5), n_scan=60, passivity=False, progress=False)
+    r = contact_intervals(ClosedLoop(params), (1.0, 1e5), n_scan=60, passivity=False, progress=False)
     assert r.unstable, name
     for lo, hi in r.unstable:
         for K, inside in ((lo, 1 + 1e-9), (hi, 1 - 1e-9)):
@@ -90,7 +90,7 @@ def test_interval_ends_are_exact_to_1e9(name):
 
 
 def test_hyq_range_against_the_paper(params):
-    r = contact_intervals(params, n_scan=80, progress=False)
+    r = contact_intervals(ClosedLoop(params), n_scan=80, progress=False)
     (lo, hi), = r.unstable
     # the paper: 72-3500 Nm/rad (read off a plot); exact ends 71.84 and 3441.6
     assert abs(lo / 72.0 - 1) < 0.01 and abs(hi / 3500.0 - 1) < 0.03
@@ -100,8 +100,8 @@ def test_hyq_range_against_the_paper(params):
 
 
 def test_add_mode_adds_the_files_stiffness(params):
-    replace = contact_intervals(params, n_scan=80, passivity=False, progress=False).unstable[0]
-    add = contact_intervals(params, n_scan=80, mode="add", passivity=False, progress=False).unstable[0]
+    replace = contact_intervals(ClosedLoop(params), n_scan=80, passivity=False, progress=False).unstable[0]
+    add = contact_intervals(ClosedLoop(params), n_scan=80, mode="add", passivity=False, progress=False).unstable[0]
     np.testing.assert_allclose(np.array(add) + params.plant.K_L2, replace, rtol=1e-9)
 
 
@@ -113,7 +113,7 @@ def test_add_mode_adds_the_files_stiffness(params):
 ])
 def test_bad_contact_input(params, kwargs, message):
     with pytest.raises(ParameterError) as exc:
-        contact_intervals(params, **kwargs)
+        contact_intervals(ClosedLoop(params), **kwargs)
     assert message in str(exc.value)
 
 

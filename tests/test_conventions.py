@@ -11,7 +11,7 @@ import numpy as np
 import pytest
 
 import haa_sym
-from haa_sym import LoopOptions, RegionMap
+from haa_sym import ClosedLoop, LoopOptions, RegionMap
 from haa_sym.io import progress
 from haa_sym.cli import main
 from haa_sym.compiled.generated import evaluators
@@ -98,7 +98,7 @@ def test_progress_bar_appears_on_a_terminal(monkeypatch, capsys, reset_progress)
 def test_step_metrics_match_python_control_step_info(params, K_L2, alpha):
     control = pytest.importorskip("control")
     # 3 s: long enough for these steps to settle, so every step_info number is defined
-    s = step_response(params.with_values(K_L2=K_L2), duration=3.0, alpha=alpha)
+    s = step_response(ClosedLoop(params.with_values(K_L2=K_L2)), duration=3.0, alpha=alpha)
     ref = control.step_info(s.T, s.t, yfinal=s.final_value)
     ours = s.info
     assert np.isfinite(ours["SettlingTime"])
@@ -108,7 +108,7 @@ def test_step_metrics_match_python_control_step_info(params, K_L2, alpha):
 
 def test_step_info_with_the_last_sample_as_final_value_is_python_controls_default(params):
     control = pytest.importorskip("control")
-    s = step_response(params.with_values(K_L2=0.0), duration=0.3)
+    s = step_response(ClosedLoop(params.with_values(K_L2=0.0)), duration=0.3)
     ref = control.step_info(s.T, s.t)
     ours = step_info(s.t, s.T)
     for key, value in ref.items():
@@ -119,10 +119,10 @@ def test_unsettled_step_reports_nan_not_a_number(params):
     """Fig. 7's 0.3 s window: the free leg with alpha = 0.94 rises but has not settled within 2 %
     of its final value; with alpha = 0 it does not even reach 90 %."""
     p = params.with_values(K_L2=0.0)
-    on = step_response(p, duration=0.3, alpha=0.94)
-    off = step_response(p, duration=0.3, alpha=0.0)
+    on = step_response(ClosedLoop(p), duration=0.3, alpha=0.94)
+    off = step_response(ClosedLoop(p), duration=0.3, alpha=0.0)
     # the final value is where the step goes: the long response ends within 2 % of it
-    assert abs(step_response(p, duration=3.0).T[-1] / on.final_value - 1) < 0.02
+    assert abs(step_response(ClosedLoop(p), duration=3.0).T[-1] / on.final_value - 1) < 0.02
     assert np.isfinite(on.rise_time) and abs(on.T[-1] / on.final_value - 1) > 0.02
     assert np.isnan(on.settling_time) and np.isnan(on.overshoot_pct)
     assert off.T.max() < 0.9 * off.final_value and np.isnan(off.rise_time)
@@ -131,7 +131,7 @@ def test_unsettled_step_reports_nan_not_a_number(params):
 def test_step_cli_states_the_convention_and_never_a_negative_overshoot(capsys, params):
     assert main(["step", "--set", "K_L2=0"]) == 0
     out = capsys.readouterr().out
-    s = step_response(params.with_values(K_L2=0.0), duration=0.3)
+    s = step_response(ClosedLoop(params.with_values(K_L2=0.0)), duration=0.3)
     assert f"rise time (10-90 %) {s.rise_time * 1e3:.1f} ms" in out
     assert "settling time (2 %) not settled within 0.3 s" in out
     assert STEP_CONVENTION in out and "overshoot -" not in out
@@ -159,10 +159,10 @@ def test_readme_python_example(tmp_path, monkeypatch):
 
 # --- meta records the backend that ran ------------------------------------------------------------
 def test_meta_records_the_backend_that_ran(params):
-    auto = region_map(params, [200.0], [10.0], radius=False)
+    auto = region_map(ClosedLoop(params), [200.0], [10.0], radius=False)
     assert auto.meta["backend"] == evaluators("auto").backend
     assert auto.meta["backend"] in ("compiled", "vm")
-    vm = region_map(params, [200.0], [10.0], radius=False, backend="vm")
+    vm = region_map(ClosedLoop(params, backend="vm"), [200.0], [10.0], radius=False)
     assert vm.meta["backend"] == "vm"
     np.testing.assert_array_equal(vm.stable, auto.stable)
 
@@ -178,8 +178,8 @@ def test_blas_limits_and_same_map(params):
         assert blas_threads() and set(blas_threads()) == {1}
     assert blas_threads() == before
     P, D = np.logspace(0, 4.3, 20), np.linspace(1, 50, 10)
-    one = region_map(params, P, D, radius=False, blas_threads=1)
-    untouched = region_map(params, P, D, radius=False, blas_threads=None)
+    one = region_map(ClosedLoop(params), P, D, radius=False, blas_threads=1)
+    untouched = region_map(ClosedLoop(params), P, D, radius=False, blas_threads=None)
     for k in ("stable", "phase_margin_deg", "passive", "phase_excess_deg"):
         np.testing.assert_allclose(getattr(one, k), getattr(untouched, k), rtol=1e-12, err_msg=k)
 
@@ -188,10 +188,10 @@ def test_torque_bandwidth_map_matches_the_pointwise_bandwidth(params):
     from haa_sym.analysis.torque import torque_bandwidth, torque_bandwidth_map
     p = params.with_values(K_L2=0.0)
     B, A = np.array([0.5, 1.0, 3.0]), np.array([0.0, 0.94])
-    bw, stable = torque_bandwidth_map(p, B, A)
+    bw, stable = torque_bandwidth_map(ClosedLoop(p), B, A)
     assert stable.all()
     for i, b in enumerate(B):
         for j, a in enumerate(A):
-            assert bw[i, j] == torque_bandwidth(p, beta=b, alpha=a)
+            assert bw[i, j] == torque_bandwidth(ClosedLoop(p), beta=b, alpha=a)
     # more torque gain, more bandwidth (Sec. 3.3), with and without velocity compensation
     assert (np.diff(bw, axis=0) > 0).all()

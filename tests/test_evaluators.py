@@ -12,7 +12,7 @@ import pytest
 
 from haa_sym import ClosedLoop, LoopOptions
 from haa_sym.check import reference as ref
-from haa_sym.loop.closed_loop import FILTERS, PORTS
+from haa_sym.loop import FILTERS, PORTS
 
 N_AVS = (1, 4, 10, 20, 50)
 TSS = (0.5e-3, 1e-3, 2e-3, 4e-3, 6e-3, 8e-3)

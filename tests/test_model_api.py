@@ -14,6 +14,7 @@ from haa_sym import (ClosedLoop, Controller, LoopOptions, ParameterError, Params
                      region_map)
 from haa_sym.model.actuator import HYQ, Body, Coupling, Topology
 from haa_sym.loop.plant import continuous_plant
+from haa_sym.symbolic.chain import symbolic_model
 from haa_sym.symbolic.model import LinearActuatorModel, Parameter
 
 from conftest import ROOT, decisions_against_reference
@@ -49,7 +50,7 @@ def hyq_by_hand(**changes) -> LinearActuatorModel:
 
 def test_hyq_by_hand_gives_the_topology_plant_and_map(params, cache):
     model = hyq_by_hand()
-    assert model.fingerprint != HYQ.model().fingerprint           # other expressions, other code
+    assert model.fingerprint != symbolic_model(HYQ).fingerprint           # other expressions, other code
     mine = Params.from_model(model, params.plant.as_dict(), params.controller)
     a, b = continuous_plant(mine.plant), continuous_plant(params.plant)
     assert (a.state_names, a.input_names, a.output_names) == (b.state_names, b.input_names, b.output_names)
@@ -57,14 +58,14 @@ def test_hyq_by_hand_gives_the_topology_plant_and_map(params, cache):
         assert np.allclose(x, y, rtol=1e-14, atol=0), np.abs(x - y).max()
     assert a.VC0 == b.VC0
     P, D = np.logspace(0, 4, 30), np.linspace(0, 40, 20)
-    m1, m2 = region_map(mine, P, D, method="grid"), region_map(params, P, D, method="grid")
+    m1, m2 = region_map(ClosedLoop(mine), P, D, method="grid"), region_map(ClosedLoop(params), P, D, method="grid")
     assert m1.stable.any() and not m1.stable.all()
     np.testing.assert_array_equal(m1.stable, m2.stable)
     pm1, pm2 = m1.phase_margin_deg[m2.stable], m2.phase_margin_deg[m2.stable]
     assert np.isfinite(pm2).any()
     np.testing.assert_allclose(pm1, pm2, rtol=1e-9, atol=1e-9)
     # the chain topology's own model is a LinearActuatorModel too, with the generated code's name
-    assert isinstance(HYQ.model(), LinearActuatorModel) and HYQ.model().parameter_keys == HYQ.parameter_keys
+    assert isinstance(symbolic_model(HYQ), LinearActuatorModel) and symbolic_model(HYQ).parameter_keys == HYQ.parameter_keys
 
 
 # --- a two-mass joint as matrices, with its own parameter names -----------------------------
@@ -116,7 +117,7 @@ def test_two_mass_model_equals_its_topology(two_mass_params):
         assert (np.abs(x - y) <= 1e-14 * np.where(scale > 0, scale, 1)).all()
     assert abs(a.VC0 - b.VC0) <= 1e-15 * b.VC0
     P, D = np.logspace(0, 4, 25), np.linspace(0, 30, 15)
-    m1, m2 = region_map(two_mass_params, P, D), region_map(chain, P, D)
+    m1, m2 = region_map(ClosedLoop(two_mass_params), P, D), region_map(ClosedLoop(chain), P, D)
     assert m1.stable.any() and not m1.stable.all()
     np.testing.assert_array_equal(m1.stable, m2.stable)
 
@@ -144,10 +145,10 @@ def test_two_mass_closed_loop_agrees_with_reference(two_mass_params):
 def test_every_analysis_runs_on_a_model(two_mass_params):
     from haa_sym.check import verify
     from haa_sym.analysis.torque import step_response, torque_loop_margins
-    pa = passivity(two_mass_params, np.array([100.0, 300.0]), np.array([2.0, 5.0]))
+    pa = passivity(ClosedLoop(two_mass_params), np.array([100.0, 300.0]), np.array([2.0, 5.0]))
     assert pa.stable.shape == (2,)
-    assert np.isfinite(torque_loop_margins(two_mass_params).pm_deg)
-    st = step_response(two_mass_params, duration=0.05)
+    assert np.isfinite(torque_loop_margins(ClosedLoop(two_mass_params)).pm_deg)
+    st = step_response(ClosedLoop(two_mass_params), duration=0.05)
     assert np.isfinite(st.T).all() and st.T.shape == st.t.shape
     rows = verify.run(two_mass_params)
     assert all(r.ok for r in rows), [(r.claim, r.numbers) for r in rows]
@@ -293,4 +294,4 @@ def test_contact_needs_the_port_stiffness(two_mass_params):
     from haa_sym.analysis.contact import contact_stability
     with pytest.raises(ParameterError, match=r"<model two-mass joint>: the model has no parameter K_l \(the "
                                              r"port's stiffness to ground"):
-        contact_stability(two_mass_params, [100.0])
+        contact_stability(ClosedLoop(two_mass_params), [100.0])

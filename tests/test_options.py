@@ -38,7 +38,7 @@ def test_a_loop_depends_on_its_structure_only(params):
 
 @pytest.mark.parametrize("kwargs, message", [
     ({"delay": 2}, "delay = 2; allowed: 0 or 1 (samples)"),
-    ({"pm_rule": "best"}, "pm_rule = 'best'; allowed: ['min_abs', 'worst']"),
+    ({"pm_rule": "best"}, "pm_rule = 'best'; allowed: ['distance', 'min_abs', 'worst']"),
     ({"n_omega": 3}, "n_omega = 3; allowed: an integer >= 10"),
     ({"omega_min": 0.0}, "omega_min = 0.0; allowed: a finite number > 0 (rad/s)"),
     ({"passivity_tol": 1.0}, "unknown option(s) ['passivity_tol']; allowed: ['delay',"),

@@ -173,13 +173,13 @@ def test_a_failed_write_is_never_committed(tmp_path):
 
 def test_interrupt_is_one_line_and_writes_nothing(tmp_path, capsys, monkeypatch):
     """Ctrl-C during a command: exit 130, one line, no traceback, existing output untouched."""
-    import haa_sym.analysis.regions as regions
+    import haa_sym.cli as cli
     out = tmp_path / "old.npz"
     out.write_bytes(b"the user's file")
 
     def interrupted(*args, **kwargs):
         raise KeyboardInterrupt
-    monkeypatch.setattr(regions, "region_map", interrupted)
+    monkeypatch.setattr(cli, "region_map", interrupted)
     from haa_sym.cli import main
     assert main(["regions", "--P-gain", "1,2", "--D-gain", "1,2", "--out", str(out)]) == 130
     err = capsys.readouterr().err

@@ -11,7 +11,7 @@ from haa_sym import ClosedLoop, LoopOptions
 from haa_sym.analysis.contact import contact_stability, intervals
 from haa_sym.paper import paper_spec
 from haa_sym.analysis.passivity import bands_beyond, corrected_phase
-from haa_sym.analysis.regions import grid
+from haa_sym.io.gridspec import grid
 from haa_sym.paper.table2 import score_options, table2
 from haa_sym.analysis.torque import step_response
 
@@ -54,18 +54,18 @@ def test_z_band_torque_loop(params):
     claim = paper_spec()["claims"]
     loop = ClosedLoop(params)
     w = np.logspace(-1, np.log10(np.pi / params.controller.Ts * (1 - 1e-9)), 8000)
-    bands = bands_beyond(*corrected_phase(params, 0, 0, omega=w, loop=loop))
+    bands = bands_beyond(*corrected_phase(loop, 0, 0, omega=w))
     assert len(bands) == 1
     (lo, hi), (plo, phi) = bands[0], claim["z_band_rad_s"]
     # "about 10-50": our edges are 11.6 and 59.2 rad/s; within 25 % of the paper's
     assert abs(lo / plo - 1) < 0.25 and abs(hi / phi - 1) < 0.25
-    assert bands_beyond(*corrected_phase(params, *claim["fig12_gains"], omega=w, loop=loop)) == []
+    assert bands_beyond(*corrected_phase(loop, *claim["fig12_gains"], omega=w)) == []
 
 
 def test_contact_stiffness_range(params):
     claim = paper_spec()["claims"]
     K = grid("log:10:30000:120")
-    stable, _ = contact_stability(params, K, progress=False)
+    stable, _ = contact_stability(ClosedLoop(params), K, progress=False)
     (lo, hi), = intervals(K, ~stable)
     plo, phi = claim["contact_unstable_K_L2"]
     # paper: 72-3500 Nm/rad; exact ends 71.84-3441.6 (tests/test_contact.py); grid step here is 7 %
@@ -83,8 +83,8 @@ def test_beta_threshold(params):
 def test_velocity_compensation_speeds_up_torque_step(params):
     for K in (0.0, 11.2):
         p = params.with_values(K_L2=K)
-        on = step_response(p, duration=0.3, alpha=0.94)
-        off = step_response(p, duration=0.3, alpha=0.0)
+        on = step_response(ClosedLoop(p), duration=0.3, alpha=0.94)
+        off = step_response(ClosedLoop(p), duration=0.3, alpha=0.0)
         assert on.rise_time < 0.05
         assert np.isnan(off.rise_time) or off.rise_time > 3 * on.rise_time
         assert on.T[-1] > off.T[-1]

@@ -7,8 +7,11 @@ import pytest
 
 from haa_sym import ClosedLoop, LoopOptions, ParameterError
 from haa_sym.check import reference as ref
-from haa_sym.analysis.margins import stability_margins
-from haa_sym.analysis.regions import RegionMap, grid, region_map
+
+from haa_sym.analysis.regions import RegionMap, region_map
+from haa_sym.check.reference_margins import reference_crossovers
+from haa_sym.io.formats import result_arrays
+from haa_sym.io.gridspec import grid
 from haa_sym.analysis.sweep import colgate_factor
 
 P_GRID = "log:1:20000:24"
@@ -49,7 +52,7 @@ def _radius_tolerance(loop, m) -> np.ndarray:
 def test_map_agrees_with_eigvals(params, name, changes, extra, radius):
     p = _params(params, changes, extra)
     opts = extra if isinstance(extra, LoopOptions) else LoopOptions()
-    m = region_map(p, grid(P_GRID), grid(D_GRID), options=opts, radius=radius, progress=False)
+    m = region_map(ClosedLoop(p, opts), grid(P_GRID), grid(D_GRID), radius=radius, progress=False)
     loop = ClosedLoop(p, opts)
     rho = np.array([[ref.spectral_radius(loop, P, D) for D in m.D_gain] for P in m.P_gain])
     decided = np.abs(rho - 1) > 1e-6
@@ -69,15 +72,15 @@ def test_map_agrees_with_eigvals(params, name, changes, extra, radius):
 
 @pytest.mark.parametrize("Ts", [1e-3, 50e-6, 10e-6], ids=["1ms", "50us", "10us"])
 def test_phase_margin_and_passivity_match_state_space(params, Ts):
-    """PM (impedance loop at T_lref, and torque loop at the PI output) and the passivity excess
-    of the sweep against python-free state-space responses on the same frequency grid, at the
-    paper's Ts and at fast sampling."""
+    """PM (impedance loop at T_lref, and torque loop at the PI output: the exact margin of the
+    crossover nearest -1) against the independent exact-crossover reference, and the passivity
+    excess against state-space responses on the same frequency grid, at the paper's Ts and at
+    fast sampling."""
     params = params.with_values(Ts=Ts)
     rng = np.random.default_rng(7)
     for pm_loop, key in (("impedance", "L_imp"), ("torque", "L_t")):
         opts = LoopOptions(pm_loop=pm_loop)
-        m = region_map(params, grid("log:10:20000:9"), grid("lin:1:50:5"), options=opts, progress=False,
-                       method="grid")
+        m = region_map(ClosedLoop(params, opts), grid("log:10:20000:9"), grid("lin:1:50:5"), progress=False, method="grid")
         loop = ClosedLoop(params, opts)
         w = opts.omega(params.controller.Ts)
         checked = 0
@@ -86,12 +89,11 @@ def test_phase_margin_and_passivity_match_state_space(params, Ts):
                 continue
             P, D = m.P_gain[i], m.D_gain[j]
             r = ref.frequency_response(loop, w, P, D)
-            mg = stability_margins(r[key], w)
-            if mg.phase_margins_deg.size == 0:
+            (c,) = reference_crossovers(loop, P, D, cut="T_ref" if key == "L_imp" else "PI")
+            if c.pm_deg.size == 0:
                 assert np.isnan(m.phase_margin_deg[i, j])
             else:
-                pm = mg.phase_margins_deg[np.argmin(np.abs(mg.phase_margins_deg))]
-                assert m.phase_margin_deg[i, j] == pytest.approx(pm, abs=0.05)
+                assert m.phase_margin_deg[i, j] == pytest.approx(c.pm_at_min_deg, abs=1e-6)
             ph = np.degrees(np.angle(r["Z"] * colgate_factor(w, params.controller.Ts, "subtract")))
             assert m.phase_excess_deg[i, j] == pytest.approx(np.abs(ph).max() - 90, abs=1e-6)
             checked += 1
@@ -100,10 +102,8 @@ def test_phase_margin_and_passivity_match_state_space(params, Ts):
 
 def test_phase_margin_rule(params):
     """'worst' takes the smallest signed PM, 'min_abs' the smallest |PM|: worst <= min_abs."""
-    a = region_map(params, grid("log:100:20000:12"), grid("lin:1:50:6"), progress=False,
-                   options=LoopOptions(pm_rule="min_abs"), method="grid")
-    b = region_map(params, grid("log:100:20000:12"), grid("lin:1:50:6"), progress=False,
-                   options=LoopOptions(pm_rule="worst"), method="grid")
+    a = region_map(ClosedLoop(params, LoopOptions(pm_rule="min_abs")), grid("log:100:20000:12"), grid("lin:1:50:6"), progress=False, method="grid")
+    b = region_map(ClosedLoop(params, LoopOptions(pm_rule="worst")), grid("log:100:20000:12"), grid("lin:1:50:6"), progress=False, method="grid")
     both = ~np.isnan(a.phase_margin_deg)
     assert both.any()
     assert np.all(b.phase_margin_deg[both] <= a.phase_margin_deg[both] + 1e-12)
@@ -111,7 +111,7 @@ def test_phase_margin_rule(params):
 
 
 def test_npz_roundtrip(params, tmp_path):
-    m = region_map(params, [1, 200, 20000], [1, 10, 50], progress=False)
+    m = region_map(ClosedLoop(params), [1, 200, 20000], [1, 10, 50], progress=False)
     path = m.save(tmp_path / "map.npz")
     with np.load(path) as f:
         assert {"P_gain", "D_gain", "stable", "spectral_radius", "phase_margin_deg", "passive",
@@ -150,11 +150,11 @@ def test_bad_options():
 
 
 def test_threaded_sweep_gives_the_same_map(params, monkeypatch):
-    import haa_sym.analysis.regions as regions
+    import haa_sym.analysis.sweep as sweep
     P, D = grid("log:1:20000:40"), grid("lin:1:50:40")       # 1,600 points: four chunks
     maps = []
     for threads in (1, 2):
-        monkeypatch.setattr(regions, "SWEEP_THREADS", threads)
-        maps.append(region_map(params, P, D, progress=False, method="grid"))
-    for key, a in maps[0].arrays().items():
-        np.testing.assert_array_equal(a, maps[1].arrays()[key], err_msg=key)
+        monkeypatch.setattr(sweep, "SWEEP_THREADS", threads)
+        maps.append(region_map(ClosedLoop(params), P, D, progress=False, method="grid"))
+    for key, a in result_arrays(maps[0]).items():
+        np.testing.assert_array_equal(a, getattr(maps[1], key), err_msg=key)

@@ -20,13 +20,35 @@ Results go to stdout; progress bars (on a terminal, for work longer than 2 s) to
 from __future__ import annotations
 
 import argparse
+import json
 import os
 import sys
 from pathlib import Path
 
-from haa_sym.errors import ParameterError
-from haa_sym.model.params import STRING_KEYS, gain_array, load_params
+import numpy as np
+
+from haa_sym._version import __version__
+from haa_sym.analysis.boundaries.combined import boundaries
+from haa_sym.analysis.contact import contact_intervals
+from haa_sym.analysis.margins import margins
+from haa_sym.analysis.passivity import bands_beyond, corrected_phase, passivity
+from haa_sym.analysis.regions import region_map
+from haa_sym.analysis.robust import robust_region
+from haa_sym.analysis.torque import STEP_CONVENTION, describe_step, step_response, torque_bandwidth
+from haa_sym.check.verify import main as verify_main
+from haa_sym.compiled.generated import evaluators
+from haa_sym.compiled.plant_code import compile_topology
+from haa_sym.design.schedule import schedule
+from haa_sym.design.schedule_c import check_c_directory, write_c
+from haa_sym.errors import CompilerError, ParameterError, StaleGeneratedCode
+from haa_sym.io.budget import check_memory, sweep_bytes
+from haa_sym.io.formats import save_json, save_npz
+from haa_sym.io.gridspec import grid
+from haa_sym.io.outputs import Transaction, check_file, csv_text
 from haa_sym.io.progress import set_progress
+from haa_sym.loop import ClosedLoop, LoopOptions
+from haa_sym.model.params import CONTROLLER_KEYS, STRING_KEYS, gain_array, load_params
+from haa_sym.paper.reproduce import reproduce
 
 OUTPUT_SUFFIXES = {"regions": (".npz",), "passivity": (".csv", ".json"), "step": (".csv",),
                    "boundary": (".json",), "contact": (".json",), "schedule": (".csv",)}
@@ -55,7 +77,6 @@ def _parse_set(items: list[str], known: tuple[str, ...] | None = None) -> dict[s
 
 
 def _parse_options(items: list[str]):
-    from haa_sym.loop.closed_loop import LoopOptions
     fields = LoopOptions.field_names()
     out = {}
     for item in items:
@@ -110,7 +131,6 @@ def _params(args):
     params = load_params(args.params)
     if args.configuration:
         params = params.configuration(args.configuration)
-    from haa_sym.model.params import CONTROLLER_KEYS
     sets = _parse_set(args.set, tuple(params.plant.topology.parameter_keys) + CONTROLLER_KEYS)
     if not sets:
         return params
@@ -127,7 +147,6 @@ def _check_out(path: str | None, cmd: str, flag: str = "--out") -> Path | None:
     """Validate an output path before any computation: suffix, existing writable directory."""
     if path is None:
         return None
-    from haa_sym.io.outputs import check_file
     p = Path(path)
     allowed = OUTPUT_SUFFIXES[cmd] if flag == "--out" else (".png", ".pdf", ".svg")
     if p.suffix.lower() not in allowed:
@@ -145,10 +164,10 @@ def _gain(args, name: str, flag: str) -> float:
 
 
 def _setup(args, cmd: str):
-    """What every analysis command starts with: parameters, options and the output paths, all
-    checked before any computation."""
-    return (_params(args), _parse_options(args.option), _check_out(args.out, cmd),
-            _check_out(args.plot, cmd, "--plot"))
+    """What every analysis command starts with: the closed loop of the parameters and options,
+    and the output paths, all checked before any computation."""
+    params, options = _params(args), _parse_options(args.option)
+    return (ClosedLoop(params, options), _check_out(args.out, cmd), _check_out(args.plot, cmd, "--plot"))
 
 
 def _plots():
@@ -160,7 +179,6 @@ def _plots():
 def _write_outputs(out, plot, write_out, figure) -> None:
     """``--out`` through ``write_out(path, tx)`` and ``--plot`` from ``figure()``, all or nothing
     (:mod:`haa_sym.io.outputs`): a failure leaves both as they were."""
-    from haa_sym.io.outputs import Transaction
     with Transaction() as tx:
         if out:
             write_out(out, tx)
@@ -183,9 +201,7 @@ def _requirements(args):
 
 
 def _cmd_regions(args) -> int:
-    from haa_sym.loop.closed_loop import ClosedLoop
-    from haa_sym.analysis.regions import grid, region_map
-    params, options, out, plot = _setup(args, "regions")
+    loop, out, plot = _setup(args, "regions")
     P, D = grid(args.P_gain, "--P-gain"), grid(args.D_gain, "--D-gain")
     robust_only = [f for f, given in (("--require", args.require != "stable,pm"), ("--leg", args.leg is not None),
                                       ("--leg-mode", args.leg_mode != "segment")) if given]
@@ -197,29 +213,24 @@ def _cmd_regions(args) -> int:
         if plain_only:
             raise ParameterError(f"{plain_only[0]} with --robust: the robust map spans the leg range "
                                  "(decided from the curves); allowed: one of them")
-        return _robust_regions(args, params, options, out, plot, P, D)
-    loop = ClosedLoop(params, options)
-    m = region_map(params, P, D, options=options, radius=args.radius, loop=loop, method=args.method)
+        return _robust_regions(args, loop, out, plot, P, D)
+    m = region_map(loop, P, D, radius=args.radius, method=args.method)
 
     def figure():
-        from haa_sym.analysis.boundaries.stability import boundaries
-        from haa_sym.io.plots import plot_region
-        b = boundaries(params, options=options, P_range=(P.min(), P.max()), D_range=(D.min(), D.max()),
-                       loop=loop) if loop.options.conventions.pm_loop == "impedance" else None
-        return plot_region(m, title=args.title, boundary=b)
+        b = boundaries(loop, P_range=(P.min(), P.max()), D_range=(D.min(), D.max())) \
+            if loop.options.conventions.pm_loop == "impedance" else None
+        return _plots().plot_region(m, title=args.title, boundary=b)
     _write_outputs(out, plot, lambda path, tx: m.save(path, tx, "--out"), figure)
     print(f"{m.stable.size} points ({m.meta['method']}): {m.stable.sum()} stable, {m.low_pm.sum()} stable "
           f"with PM < 30 deg, {m.passive.sum()} passive" + _wrote(out))
     return 0
 
 
-def _robust_regions(args, params, options, out, plot, P, D) -> int:
-    from haa_sym.analysis.regions import run_meta, save_npz
-    from haa_sym.analysis.robust import robust_region
-    r = robust_region(params, P, D, requirements=_requirements(args), leg=_leg(args, params),
-                      leg_mode=args.leg_mode, options=options)
-    meta = run_meta(params, options, **r.meta, n_configurations=r.n_configurations, converged=r.converged,
-                    history=r.history, configurations=r.configurations)
+def _robust_regions(args, loop, out, plot, P, D) -> int:
+    r = robust_region(loop, P, D, requirements=_requirements(args), leg=_leg(args, loop.params),
+                      leg_mode=args.leg_mode)
+    meta = {**r.meta, "n_configurations": r.n_configurations, "converged": r.converged, "history": r.history,
+            "configurations": r.configurations}
     _write_outputs(out, plot,
                    lambda path, tx: save_npz(path, {"P_gain": r.P_gain, "D_gain": r.D_gain, "feasible": r.feasible},
                                              meta, tx, "--out"),
@@ -231,16 +242,13 @@ def _robust_regions(args, params, options, out, plot, P, D) -> int:
 
 
 def _cmd_boundary(args) -> int:
-    from haa_sym.analysis.boundaries.stability import boundaries
-    from haa_sym.analysis.regions import grid
-    params, options, out, plot = _setup(args, "boundary")
+    loop, out, plot = _setup(args, "boundary")
     P, D = grid(args.P_gain, "--P-gain"), grid(args.D_gain, "--D-gain")
-    if options.conventions.pm_loop != "impedance":
-        raise ParameterError(f"--option pm_loop={options.conventions.pm_loop}: the boundaries cover the "
+    if loop.options.conventions.pm_loop != "impedance":
+        raise ParameterError(f"--option pm_loop={loop.options.conventions.pm_loop}: the boundaries cover the "
                              "impedance loop's margin; allowed: pm_loop=impedance (the default)")
-    b = boundaries(params, options=options, P_range=(P.min(), P.max()), D_range=(D.min(), D.max()))
-    from haa_sym.analysis.regions import run_meta
-    b.stability.meta.update(run_meta(params, options), omega_unit="rad/s", P_gain_unit="Nm/rad",
+    b = boundaries(loop, P_range=(P.min(), P.max()), D_range=(D.min(), D.max()))
+    b.stability.meta.update(loop.provenance(), omega_unit="rad/s", P_gain_unit="Nm/rad",
                             D_gain_unit="Nms/rad")
     _write_outputs(out, plot, lambda path, tx: b.save(path, tx, "--out"),
                    lambda: _plots().plot_boundary(b, title=args.title))
@@ -254,11 +262,7 @@ def _cmd_boundary(args) -> int:
 
 
 def _cmd_contact(args) -> int:
-    import json
-    from haa_sym.analysis.contact import contact_intervals
-    from haa_sym.io.outputs import write_text
-    from haa_sym.analysis.regions import run_meta
-    params, options, out, plot = _setup(args, "contact")
+    loop, out, plot = _setup(args, "contact")
     lo, sep, hi = args.K_range.partition(":")
     try:
         K_range = (float(lo), float(hi)) if sep else None
@@ -266,8 +270,8 @@ def _cmd_contact(args) -> int:
         K_range = None
     if K_range is None:
         raise ParameterError(f"--K-range {args.K_range!r}; allowed: LO:HI in Nm/rad, 0 < LO < HI")
-    r = contact_intervals(params, K_range, n_scan=args.n_scan, P_gain=_gain(args, "P_gain", "--P-gain"),
-                          D_gain=_gain(args, "D_gain", "--D-gain"), options=options, mode=args.mode)
+    r = contact_intervals(loop, K_range, n_scan=args.n_scan, P_gain=_gain(args, "P_gain", "--P-gain"),
+                          D_gain=_gain(args, "D_gain", "--D-gain"), mode=args.mode)
     data = {"analysis": "contact stability", "environment": f"K_env {'replaces' if r.mode == 'replace' else 'adds to'} {r.key}",
             "mode": r.mode, "stiffness_key": r.key, "P_gain": args.P_gain, "D_gain": args.D_gain,
             "K_range": list(K_range), "n_scan": args.n_scan, "rtol": r.rtol,
@@ -277,8 +281,7 @@ def _cmd_contact(args) -> int:
                            "somewhere on the options' frequency grid (meta: n_omega, omega_min); the "
                            "ends are exact for that grid"}
     _write_outputs(out, plot,
-                   lambda path, tx: write_text(path, json.dumps({**data, "meta": run_meta(params, options)},
-                                                                indent=1) + "\n", tx, "--out"),
+                   lambda path, tx: save_json(path, {**data, "meta": loop.provenance()}, tx, "--out"),
                    lambda: _plots().plot_contact(r.K_env, r.spectral_radius, unstable=r.unstable, key=r.key,
                                                  excess=r.phase_excess_deg, not_passive=r.not_passive,
                                                  tol=r.passivity_tol_deg))
@@ -302,19 +305,15 @@ def _range(text: str, flag: str, what: str) -> tuple[float, float]:
 
 
 def _cmd_schedule(args) -> int:
-    from haa_sym.io.outputs import Transaction
-    from haa_sym.analysis.regions import grid
-    from haa_sym.design.schedule import schedule
-    from haa_sym.design.schedule_c import check_c_directory, write_c
-    params, options, out, plot = _setup(args, "schedule")
+    loop, out, plot = _setup(args, "schedule")
     if args.c_out is not None:
         check_c_directory(args.c_out)
     P, D = grid(args.P_gain, "--P-gain"), grid(args.D_gain, "--D-gain")
     beta_range = _range(args.beta_range, "--beta-range", "the torque-gain scale beta, Eq. 7")
     alphas = None if args.alpha_values is None else grid(args.alpha_values, "--alpha-values")
-    s = schedule(params, P, D, beta_range=beta_range, beta_tol=args.beta_tol, alpha_values=alphas,
-                 requirements=_requirements(args), leg=_leg(args, params), leg_mode=args.leg_mode,
-                 options=options, scheduler=args.scheduler)
+    s = schedule(loop, P, D, beta_range=beta_range, beta_tol=args.beta_tol, alpha_values=alphas,
+                 requirements=_requirements(args), leg=_leg(args, loop.params), leg_mode=args.leg_mode,
+                 scheduler=args.scheduler)
     if not s.feasible.any():
         with_alpha = f" with --alpha-values {args.alpha_values}" if args.alpha_values is not None else ""
         raise ParameterError(f"--beta-range {args.beta_range}{with_alpha}: no beta in the range meets "
@@ -338,17 +337,12 @@ def _cmd_schedule(args) -> int:
 
 
 def _cmd_passivity(args) -> int:
-    import json
-
-    import numpy as np
-    from haa_sym.analysis.passivity import bands_beyond, corrected_phase, passivity
-    from haa_sym.analysis.regions import grid
-    params, options, out, plot = _setup(args, "passivity")
+    loop, out, plot = _setup(args, "passivity")
     P, D = grid(args.P_gain, "--P-gain"), grid(args.D_gain, "--D-gain")
     if P.size != D.size:
         raise ParameterError(f"--P-gain has {P.size} values and --D-gain {D.size}; they pair up, "
                              "so give the same number")
-    r = passivity(params, P, D, options=options)
+    r = passivity(loop, P, D)
     rows = []
     for i in range(P.size):
         rows.append({"P_gain": float(P[i]), "D_gain": float(D[i]), "status": str(r.status[i]),
@@ -359,26 +353,22 @@ def _cmd_passivity(args) -> int:
     curves = []
     if plot:
         for i in range(P.size):
-            w, ph = corrected_phase(params, P[i], D[i], options=options)
+            w, ph = corrected_phase(loop, P[i], D[i])
             curves.append((w, ph, f"P_gain = {P[i]:g}, D_gain = {D[i]:g}"))
             print(f"  |phase| > 90 deg for P_gain {P[i]:g}, D_gain {D[i]:g}: "
                   + (", ".join(f"{a:.1f}-{b:.1f} rad/s" for a, b in bands_beyond(w, ph)) or "never"))
-    from haa_sym.io.outputs import csv_text
-    from haa_sym.analysis.regions import run_meta
 
     def write_out(path, tx):
-        tx.write_text(path, json.dumps({"cells": rows, "meta": run_meta(params, options)}, indent=1) + "\n"
+        tx.write_text(path, json.dumps({"cells": rows, "meta": loop.provenance()}, indent=1) + "\n"
                       if path.suffix == ".json" else csv_text(rows), "--out")
     _write_outputs(out, plot, write_out, lambda: _plots().plot_corrected_phase(curves, "corrected phase of Z(z)"))
     return 0
 
 
 def _cmd_step(args) -> int:
-    from haa_sym.io.outputs import csv_text
-    from haa_sym.analysis.torque import STEP_CONVENTION, describe_step, step_response, torque_bandwidth
-    params, options, out, plot = _setup(args, "step")
-    s = step_response(params, duration=args.duration, options=options)
-    print(f"{describe_step(s)}, -3 dB bandwidth {torque_bandwidth(params, options=options):.2f} rad/s")
+    loop, out, plot = _setup(args, "step")
+    s = step_response(loop, duration=args.duration)
+    print(f"{describe_step(s)}, -3 dB bandwidth {torque_bandwidth(loop):.2f} rad/s")
     print(f"({STEP_CONVENTION})")
     rows = [{"t_s": f"{t:.6g}", "T_Nm": f"{v:.9g}"} for t, v in zip(s.t, s.T)]
     # the measured torque: the sensed coupling's (T_l of Eq. 2 for HyQ)
@@ -388,28 +378,29 @@ def _cmd_step(args) -> int:
 
 
 def _cmd_margins(args) -> int:
-    from haa_sym.io.budget import check_memory, sweep_bytes
-    from haa_sym.loop.closed_loop import ClosedLoop
-    from haa_sym.analysis.margins import stability_margins
     params = _params(args)
-    options = _parse_options(args.option)
-    args.P_gain, args.D_gain = _gain(args, "P_gain", "--P-gain"), _gain(args, "D_gain", "--D-gain")
-    check_memory(sweep_bytes(1, options.numerics.n_omega), f"the loop gains on n_omega = {options.numerics.n_omega} frequencies")
-    loop = ClosedLoop(params, options)
-    coef = loop.loop_coefficients()
-    st = loop.stability(args.P_gain, args.D_gain, radius=True)
+    loop = ClosedLoop(params, _parse_options(args.option))
+    P, D = _gain(args, "P_gain", "--P-gain"), _gain(args, "D_gain", "--D-gain")
+    st = loop.stability(P, D, radius=True)
     print(f"closed loop: {'stable' if st.stable else 'UNSTABLE'}, spectral radius {float(st.spectral_radius):.9g}")
     for name, label in (("L_t", "torque loop (opened at the PI output)"),
                         ("L_imp", "impedance loop (opened at T_lref)")):
-        m = stability_margins(coef.evaluate(name, args.P_gain, args.D_gain), coef.omega)
-        pms = ", ".join(f"{pm:.2f} deg @ {w:.4g} rad/s" for pm, w in zip(m.phase_margins_deg, m.gain_crossovers))
-        gms = ", ".join(f"{g:.2f} dB @ {w:.4g} rad/s" for g, w in zip(m.gain_margins_db, m.phase_crossovers))
-        print(f"{label}: PM {pms or 'none (|L| does not cross 1)'}; GM {gms or 'none'}")
+        m = margins(loop, P, D, which=name)
+        pms = ", ".join(f"{pm:+.2f} deg @ {w:.6g} rad/s" for pm, w in zip(m.phase_margins_deg, m.gain_crossovers))
+        gms = ", ".join(f"{g:+.2f} dB @ {w:.6g} rad/s" for g, w in zip(m.gain_margins_db, m.phase_crossovers))
+        print(f"{label}:\n  PM {pms or 'none (|L| does not cross 1)'}"
+              + (f"; nearest -1: {m.distance_deg:.2f} deg" if m.phase_margins_deg.size else "")
+              + f"\n  GM {gms or 'none (arg L never reaches -180 deg)'}")
+        if (m.gain_margins_db < 0).any():
+            print("  (a negative GM is a gain-reduction margin: |L| > 1 where arg L = -180 deg, so "
+                  "lowering the loop gain by that much reaches instability there)")
+    print("(PM = 180 + arg L at |L| = 1, wrapped to (-180, 180]; the maps' rule: "
+          f"{loop.options.conventions.pm_rule}, see docs/model.md; crossovers located exactly "
+          f"from {loop.options.numerics.omega_min:g} rad/s to Nyquist)")
     return 0
 
 
 def _cmd_reproduce(args) -> int:
-    from haa_sym.paper.reproduce import reproduce
     params = _params(args)
     options = _parse_options(args.option)
     reproduce(args.out, params, options, quick=args.quick, field="--out")
@@ -417,8 +408,6 @@ def _cmd_reproduce(args) -> int:
 
 
 def _cmd_compile(args) -> int:
-    from haa_sym.compiled.generated import evaluators
-    from haa_sym.compiled.plant_code import compile_topology
     params = load_params(args.file)
     top = params.plant.topology
     entry = evaluators().code.manifest["topologies"].get(top.fingerprint)
@@ -460,7 +449,6 @@ def _leg_args(parser) -> None:
 
 
 def main(argv: list[str] | None = None) -> int:
-    from haa_sym._version import __version__
     ap = _Parser(prog="haa-sym", description=__doc__.splitlines()[0],
                                  formatter_class=argparse.RawDescriptionHelpFormatter, epilog=__doc__)
     ap.add_argument("--version", action="version", version=f"%(prog)s {__version__}")
@@ -540,10 +528,8 @@ def main(argv: list[str] | None = None) -> int:
     set_progress(False if args.quiet else True if args.progress else None)
     try:
         if args.cmd == "verify":
-            from haa_sym.check.verify import main as verify_main
             return verify_main(["--params", args.params] if args.params else [])
         if args.cmd == "stability":
-            from haa_sym.loop.closed_loop import ClosedLoop
             params = _params(args)
             args.P_gain, args.D_gain = _gain(args, "P_gain", "--P-gain"), _gain(args, "D_gain", "--D-gain")
             res = ClosedLoop(params, _parse_options(args.option)).stability(args.P_gain, args.D_gain,
@@ -569,7 +555,6 @@ def main(argv: list[str] | None = None) -> int:
         return 2
     except RuntimeError as exc:
         # generated/ stale or damaged, or the C compiler failing: a fault the user fixes, not a bug
-        from haa_sym.errors import CompilerError, StaleGeneratedCode
         if not isinstance(exc, (StaleGeneratedCode, CompilerError)):
             raise
         print(f"haa-sym: error: {exc}", file=sys.stderr)

@@ -18,10 +18,15 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from haa_sym.loop.closed_loop import ClosedLoop, LoopOptions
-from haa_sym.errors import ParameterError
-from haa_sym.model.params import Params, gain_array, gain_points
+from scipy.optimize import brentq
+from tqdm.auto import tqdm
+
 from haa_sym.analysis.sweep import BLAS_THREADS, blas_limits, gain_rows, phase_excess
+from haa_sym.errors import ParameterError
+from haa_sym.loop import ClosedLoop, loop_first
+from haa_sym.loop.statespace import closed_loop_batch
+from haa_sym.model.actuator import Topology
+from haa_sym.model.params import Params, gain_array
 
 __all__ = ["contact_stability", "contact_intervals", "ContactIntervals", "intervals", "CONTACT_MODES"]
 
@@ -29,7 +34,6 @@ CONTACT_MODES = ("replace", "add")
 
 
 def _port_key(params: Params) -> str:
-    from haa_sym.model.actuator import Topology
     top = params.plant.topology
     key = f"K_{top.port}"
     if key not in top.parameter_keys and not isinstance(top, Topology):
@@ -45,24 +49,22 @@ def _port_key(params: Params) -> str:
     return key
 
 
-def _point(P_gain, D_gain, beta, alpha):
+def _point(loop, P_gain, D_gain, beta, alpha):
     """One gain point as floats (beta, alpha None: the controller's); a contact scan has one."""
-    out = []
-    for name, v in zip(("P_gain", "D_gain", "beta", "alpha"), gain_points(P_gain, D_gain, beta, alpha)):
-        if v is not None and v.size != 1:
+    P, D, beta, alpha = loop.gain_points(P_gain, D_gain, beta, alpha)
+    for name, v in (("P_gain", P), ("D_gain", D)):
+        if v.size != 1:
             raise ParameterError(f"{name} = {v.tolist()!r}; allowed: one value (the contact scan "
                                  "varies the environment stiffness at one gain point)")
-        out.append(None if v is None else float(v.reshape(-1)[0]))
-    return out
+    return float(P[0]), float(D[0]), beta, alpha
 
 
-def _loop(params, key, K, options, base) -> ClosedLoop:
-    """The closed loop with the environment spring K (Nm/rad) on the port body."""
-    return ClosedLoop(params.with_values(**{key: float(K) + base}), options, basis=False)
+def _loop(loop, key, K, base) -> ClosedLoop:
+    """``loop`` with the environment spring K (Nm/rad) on the port body."""
+    return ClosedLoop(loop.params.with_values(**{key: float(K) + base}), loop.options, loop.backend, basis=False)
 
 
 def _radius(loop, P_gain, D_gain, beta, alpha) -> float:
-    from haa_sym.loop.statespace import closed_loop_batch
     return np.abs(np.linalg.eigvals(closed_loop_batch(loop, P_gain, D_gain, beta, alpha)[0][0])).max()
 
 
@@ -75,22 +77,21 @@ def _excess(loop, P_gain, D_gain, beta, alpha) -> float:
     return float(ex[0])
 
 
-def _scan(params, key, base, K_env, P_gain, D_gain, beta, alpha, options, progress, passivity):
+def _scan(loop, key, base, K_env, P_gain, D_gain, beta, alpha, progress, passivity):
     """Spectral radius and (where stable, if ``passivity``) phase excess at every stiffness."""
-    from tqdm.auto import tqdm
     rho = np.empty(K_env.size)
     excess = np.full(K_env.size, np.nan)
     for i, K in enumerate(tqdm(K_env, desc="contact stiffness", leave=False,
                                disable=None if progress is None else not progress)):
-        loop = _loop(params, key, K, options, base)
-        rho[i] = _radius(loop, P_gain, D_gain, beta, alpha)
+        lk = _loop(loop, key, K, base)
+        rho[i] = _radius(lk, P_gain, D_gain, beta, alpha)
         if passivity and rho[i] < 1:
-            excess[i] = _excess(loop, P_gain, D_gain, beta, alpha)
+            excess[i] = _excess(lk, P_gain, D_gain, beta, alpha)
     return rho, excess
 
 
-def contact_stability(params: Params, K_env, *, P_gain: float = 0.0, D_gain: float = 0.0,
-                      options: LoopOptions | None = None, beta: float | None = None,
+@loop_first
+def contact_stability(loop, K_env, *, P_gain: float = 0.0, D_gain: float = 0.0, beta: float | None = None,
                       alpha: float | None = None, progress: bool | None = None, mode: str = "replace",
                       blas_threads: int | None = BLAS_THREADS):
     """Stability decision and spectral radius for each environment stiffness ``K_env`` (Nm/rad).
@@ -102,16 +103,16 @@ def contact_stability(params: Params, K_env, *, P_gain: float = 0.0, D_gain: flo
     Example
     -------
     >>> K = np.logspace(0, 5, 400)
-    >>> stable, rho = contact_stability(load_params(), K)                   # doctest: +SKIP
+    >>> stable, rho = contact_stability(ClosedLoop(load_params()), K)       # doctest: +SKIP
     >>> intervals(K, ~stable)                                               # doctest: +SKIP
     [(73.6..., 3418.4...)]                  # the grid points; contact_intervals: 71.84-3441.6
     """
-    P_gain, D_gain, beta, alpha = _point(P_gain, D_gain, beta, alpha)
+    P_gain, D_gain, beta, alpha = _point(loop, P_gain, D_gain, beta, alpha)
     K_env = gain_array("K_env", K_env).ravel()
-    key = _port_key(params)
+    key = _port_key(loop.params)
     with blas_limits(blas_threads):
-        rho, _ = _scan(params, key, _base(params, key, mode), K_env, P_gain, D_gain, beta, alpha,
-                       options, progress, passivity=False)
+        rho, _ = _scan(loop, key, _base(loop.params, key, mode), K_env, P_gain, D_gain, beta, alpha,
+                       progress, passivity=False)
     return rho < 1, rho
 
 
@@ -151,8 +152,9 @@ class ContactIntervals:
     passivity_tol_deg: float | None = None
 
 
-def contact_intervals(params: Params, K_range=(1.0, 1e5), *, n_scan: int = 400, P_gain: float = 0.0,
-                      D_gain: float = 0.0, options: LoopOptions | None = None, beta: float | None = None,
+@loop_first
+def contact_intervals(loop, K_range=(1.0, 1e5), *, n_scan: int = 400, P_gain: float = 0.0,
+                      D_gain: float = 0.0, beta: float | None = None,
                       alpha: float | None = None, mode: str = "replace", rtol: float = 1e-12,
                       passivity: bool = True, progress: bool | None = None,
                       blas_threads: int | None = BLAS_THREADS) -> ContactIntervals:
@@ -203,7 +205,7 @@ def contact_intervals(params: Params, K_range=(1.0, 1e5), *, n_scan: int = 400, 
 
     Examples
     --------
-    >>> r = contact_intervals(load_params())                             # doctest: +SKIP
+    >>> r = contact_intervals(ClosedLoop(load_params()))                 # doctest: +SKIP
     >>> r.unstable, r.not_passive                                        # doctest: +SKIP
     """
     K_lo, K_hi = (float(v) for v in gain_array("K_env", K_range).ravel()[:2])
@@ -211,37 +213,34 @@ def contact_intervals(params: Params, K_range=(1.0, 1e5), *, n_scan: int = 400, 
         raise ParameterError(f"K_range = {tuple(K_range)!r}; allowed: 0 < K_lo < K_hi (Nm/rad)")
     if isinstance(n_scan, bool) or not isinstance(n_scan, int) or n_scan < 2:
         raise ParameterError(f"n_scan = {n_scan!r}; allowed: an integer >= 2")
-    P_gain, D_gain, beta, alpha = _point(P_gain, D_gain, beta, alpha)
-    key = _port_key(params)
-    base = _base(params, key, mode)
+    P_gain, D_gain, beta, alpha = _point(loop, P_gain, D_gain, beta, alpha)
+    key = _port_key(loop.params)
+    base = _base(loop.params, key, mode)
     K = np.logspace(np.log10(K_lo), np.log10(K_hi), n_scan)
     K[0], K[-1] = K_lo, K_hi                  # the range's edges exactly (they may be interval ends)
     with blas_limits(blas_threads):
-        return _locate(params, key, base, K, P_gain, D_gain, beta, alpha, options, mode, rtol,
-                       passivity, progress)
+        return _locate(loop, key, base, K, P_gain, D_gain, beta, alpha, mode, rtol, passivity, progress)
 
 
-def _locate(params, key, base, K, P_gain, D_gain, beta, alpha, options, mode, rtol, passivity,
-            progress) -> ContactIntervals:
+def _locate(loop, key, base, K, P_gain, D_gain, beta, alpha, mode, rtol, passivity, progress) -> ContactIntervals:
     """The scan on the stiffnesses ``K`` and Brent's method on every bracketed change."""
-    from scipy.optimize import brentq
-    rho, excess = _scan(params, key, base, K, P_gain, D_gain, beta, alpha, options, progress, passivity)
+    rho, excess = _scan(loop, key, base, K, P_gain, D_gain, beta, alpha, progress, passivity)
     stable = rho < 1
 
     def root(g, i):
         return float(np.exp(brentq(g, np.log(K[i]), np.log(K[i + 1]), xtol=1e-300, rtol=rtol)))
 
     def radius(logK):
-        return _radius(_loop(params, key, np.exp(logK), options, base), P_gain, D_gain, beta, alpha) - 1.0
+        return _radius(_loop(loop, key, np.exp(logK), base), P_gain, D_gain, beta, alpha) - 1.0
 
     ends = {i: root(radius, i) for i in np.flatnonzero(stable[1:] != stable[:-1])}
     unstable = _runs(float(K[0]), float(K[-1]), ~stable, ends)
     if not passivity:
         return ContactIntervals(unstable, key, mode, rtol, K, rho)
-    tol = (options or LoopOptions()).conventions.passivity_tol_deg
+    tol = loop.options.conventions.passivity_tol_deg
 
     def excess_minus_tol(logK):
-        return _excess(_loop(params, key, np.exp(logK), options, base), P_gain, D_gain, beta, alpha) - tol
+        return _excess(_loop(loop, key, np.exp(logK), base), P_gain, D_gain, beta, alpha) - tol
 
     with np.errstate(invalid="ignore"):
         not_passive = stable & (excess > tol)

@@ -8,9 +8,9 @@ impedance loop open, i.e. P_gain = D_gain = 0.
 
 Example
 -------
->>> from haa_sym import load_params
+>>> from haa_sym import ClosedLoop, load_params
 >>> from haa_sym.analysis.passivity import passivity
->>> r = passivity(load_params(), [0, 200], [0, 10])            # doctest: +SKIP
+>>> r = passivity(ClosedLoop(load_params()), [0, 200], [0, 10])   # doctest: +SKIP
 >>> r.status                                                    # doctest: +SKIP
 array(['No', 'Yes'], dtype='<U8')
 """
@@ -20,13 +20,12 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from haa_sym.analysis.sweep import BLAS_THREADS, CHUNK, colgate_factor, gain_rows, phase_excess, run_chunks
 from haa_sym.io.budget import check_memory, sweep_bytes
-from haa_sym.loop.closed_loop import ClosedLoop, LoopOptions
-from haa_sym.model.params import Params, gain_points
 from haa_sym.io.progress import progress as progress_bar
-from haa_sym.analysis.sweep import BLAS_THREADS, blas_limits, colgate_factor, gain_rows, phase_excess
+from haa_sym.loop import loop_first
 
-__all__ = ["PassivityResult", "passivity", "corrected_phase", "bands_beyond", "status"]
+__all__ = ["PassivityResult", "CorrectedPhase", "passivity", "corrected_phase", "bands_beyond", "status"]
 
 
 def status(stable, passive) -> np.ndarray:
@@ -50,21 +49,20 @@ class PassivityResult:
         return status(self.stable, self.passive)
 
 
-def passivity(params: Params, P_gain=0.0, D_gain=0.0, *, options: LoopOptions | None = None,
-              beta: float | None = None, alpha: float | None = None,
-              loop: ClosedLoop | None = None, backend: str = "auto",
+@loop_first
+def passivity(loop, P_gain=0.0, D_gain=0.0, *, beta: float | None = None, alpha: float | None = None,
               progress: bool | None = None, blas_threads: int | None = BLAS_THREADS) -> PassivityResult:
-    """Passivity of Z(z) at gain points (P_gain, D_gain broadcast together).
+    """Passivity of Z(z) of ``loop`` at gain points (P_gain, D_gain broadcast together).
 
     Parameters
     ----------
-    params : Params
+    loop : ClosedLoop
+        Plant, controller and options (port, Colgate correction, frequency grid, tolerance
+        ``passivity_tol_deg``).
     P_gain, D_gain : array_like
         Impedance gains, Nm/rad and Nms/rad (Eq. 8); 0, 0 is the torque loop alone.
-    options : LoopOptions, optional
-        Port, Colgate correction, frequency grid and tolerance (``passivity_tol_deg``).
     beta, alpha : float, optional
-        Torque-gain scale and velocity compensation; default from ``params``.
+        Torque-gain scale and velocity compensation; default the controller's.
     progress : bool or None
         Progress bar on stderr; None follows :func:`haa_sym.io.progress.set_progress`.
     blas_threads : int or None
@@ -74,27 +72,24 @@ def passivity(params: Params, P_gain=0.0, D_gain=0.0, *, options: LoopOptions | 
     -------
     PassivityResult
     """
-    from haa_sym.analysis.regions import CHUNK
-    P, D, beta, alpha = gain_points(P_gain, D_gain, beta, alpha)
-    loop = loop or ClosedLoop(params, options, backend)
+    shape = np.broadcast_shapes(np.shape(P_gain), np.shape(D_gain))
+    P, D, beta, alpha = loop.gain_points(P_gain, D_gain, beta, alpha)
     options = loop.options
     # chunked: one chunk's sweep at a time, plus the coefficients and the per-point results
     check_memory(sweep_bytes(P.size, options.numerics.n_omega, CHUNK),
                  f"passivity of {P.size} gain points on n_omega = {options.numerics.n_omega} frequencies")
-    shape = P.shape
-    P, D = P.ravel(), D.ravel()
     coef = loop.loop_coefficients(None, beta, alpha)
     n = P.size
     stable = np.empty(n, bool)
     ex = np.empty(n)
     ww = np.empty(n)
-    with blas_limits(blas_threads), progress_bar(n, "passivity", "pt", progress) as bar:
-        for s in range(0, n, CHUNK):
-            sl = slice(s, min(s + CHUNK, n))
-            stable[sl] = loop.stability(P[sl], D[sl], beta, alpha, radius=False).stable.ravel()
-            ex[sl], ww[sl] = phase_excess(gain_rows(P[sl], D[sl]), coef.Z_num, coef.Z_den,
-                                          coef.omega, params.controller.Ts, options.conventions.colgate)
-            bar.update(sl.stop - sl.start)
+
+    def work(sl):
+        stable[sl] = loop.stability(P[sl], D[sl], beta, alpha).stable.ravel()
+        ex[sl], ww[sl] = phase_excess(gain_rows(P[sl], D[sl]), coef.Z_num, coef.Z_den, coef.omega,
+                                      loop.params.controller.Ts, options.conventions.colgate)
+    with progress_bar(n, "passivity", "pt", progress) as bar:
+        run_chunks(work, n, blas_threads=blas_threads, bar=bar)
     ex = np.where(stable, ex, np.nan)
     ww = np.where(stable, ww, np.nan)
     with np.errstate(invalid="ignore"):
@@ -103,28 +98,39 @@ def passivity(params: Params, P_gain=0.0, D_gain=0.0, *, options: LoopOptions | 
                            ww.reshape(shape))
 
 
-def corrected_phase(params: Params, P_gain: float = 0.0, D_gain: float = 0.0, *,
-                    omega=None, options: LoopOptions | None = None, beta: float | None = None,
-                    alpha: float | None = None, loop: ClosedLoop | None = None):
-    """Phase of Z(z) with Colgate's correction, degrees in (-180, 180], on ``omega`` (rad/s).
+@dataclass(frozen=True)
+class CorrectedPhase:
+    """:func:`corrected_phase`: ``omega`` (rad/s) and ``phase_deg`` (deg, in (-180, 180],
+    point_shape + (n_omega,)); unpacks as ``omega, phase_deg = corrected_phase(...)``."""
 
-    Returns ``(omega, phase_deg)``; ``omega`` defaults to the options' grid (Fig. 12).
+    omega: np.ndarray
+    phase_deg: np.ndarray
+
+    def __iter__(self):
+        return iter((self.omega, self.phase_deg))
+
+
+@loop_first
+def corrected_phase(loop, P_gain=0.0, D_gain=0.0, *, omega=None, beta: float | None = None,
+                    alpha: float | None = None) -> CorrectedPhase:
+    """Phase of Z(z) of ``loop`` with Colgate's correction, degrees in (-180, 180], on ``omega``
+    (rad/s; default the options' grid) at gain points (Fig. 12).
 
     Example
     -------
-    >>> w, ph = corrected_phase(load_params(), 0.0, 0.0)      # torque loop alone  # doctest: +SKIP
+    >>> w, ph = corrected_phase(ClosedLoop(load_params()), 0.0, 0.0)   # torque loop alone  # doctest: +SKIP
     >>> bands_beyond(w, ph)                                                         # doctest: +SKIP
     [(11.57..., 59.17...)]
     """
-    P_gain, D_gain, beta, alpha = gain_points(P_gain, D_gain, beta, alpha)
-    loop = loop or ClosedLoop(params, options)
+    shape = np.broadcast_shapes(np.shape(P_gain), np.shape(D_gain))
+    P, D, beta, alpha = loop.gain_points(P_gain, D_gain, beta, alpha)
     n_omega = loop.options.numerics.n_omega if omega is None else np.size(omega)
-    check_memory(sweep_bytes(P_gain.size, n_omega),
-                 f"the phase of Z at {P_gain.size} gain points on {n_omega} frequencies")
+    check_memory(sweep_bytes(P.size, n_omega),
+                 f"the phase of Z at {P.size} gain points on {n_omega} frequencies")
     coef = loop.loop_coefficients(omega, beta, alpha)
-    Z = coef.evaluate("Z", P_gain, D_gain)
-    c = colgate_factor(coef.omega, params.controller.Ts, loop.options.conventions.colgate)
-    return coef.omega, np.degrees(np.angle(Z * c))
+    Z = coef.evaluate("Z", P, D)
+    c = colgate_factor(coef.omega, loop.params.controller.Ts, loop.options.conventions.colgate)
+    return CorrectedPhase(coef.omega, np.degrees(np.angle(Z * c)).reshape(shape + coef.omega.shape))
 
 
 def bands_beyond(omega, phase_deg, limit: float = 90.0) -> list[tuple[float, float]]:

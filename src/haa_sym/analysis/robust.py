@@ -15,9 +15,9 @@ exact boundaries (:func:`haa_sym.analysis.regions.region_map`).
 
 Example
 -------
->>> from haa_sym import load_params
+>>> from haa_sym import ClosedLoop, load_params
 >>> from haa_sym.analysis.robust import robust_region
->>> r = robust_region(load_params(), [100, 1000], [5, 20])                  # doctest: +SKIP
+>>> r = robust_region(ClosedLoop(load_params()), [100, 1000], [5, 20])      # doctest: +SKIP
 >>> r.feasible, r.n_configurations                                           # doctest: +SKIP
 """
 from __future__ import annotations
@@ -27,7 +27,8 @@ from itertools import product
 
 import numpy as np
 
-from haa_sym.loop.closed_loop import ClosedLoop, LoopOptions
+from haa_sym.analysis.regions import region_map
+from haa_sym.loop import ClosedLoop, loop_first
 from haa_sym.errors import ParameterError
 from haa_sym.model.params import Params, gain_array
 
@@ -100,15 +101,14 @@ def _check_requirements(requirements) -> tuple[str, ...]:
     return req
 
 
-def feasible_map(params: Params, P_gain, D_gain, beta: float, alpha: float, *,
-                 requirements=("stable", "pm"), options: LoopOptions | None = None,
-                 loop: ClosedLoop | None = None) -> np.ndarray:
-    """``(n_P, n_D)`` bool: the requirements hold at every grid point (one configuration),
-    decided from the exact boundaries."""
-    from haa_sym.analysis.regions import region_map
+@loop_first
+def feasible_map(loop, P_gain, D_gain, beta: float, alpha: float, *,
+                 requirements=("stable", "pm")) -> np.ndarray:
+    """``(n_P, n_D)`` bool: the requirements hold at every grid point of ``loop`` (one
+    configuration), decided from the exact boundaries."""
     req = _check_requirements(requirements)
-    m = region_map(params, P_gain, D_gain, options=options, beta=beta, alpha=alpha, loop=loop,
-                   passivity="passive" in req, progress=False, blas_threads=None)
+    m = region_map(loop, P_gain, D_gain, beta=beta, alpha=alpha, passivity="passive" in req, progress=False,
+                   blas_threads=None)
     ok = m.stable.copy()
     if "pm" in req:
         ok &= ~m.low_pm
@@ -139,14 +139,17 @@ def _doubling(n: int) -> int:
     return 2 * n - 1
 
 
-def robust_region(params: Params, P_gain, D_gain, *, beta: float | None = None, alpha: float | None = None,
+@loop_first
+def robust_region(loop, P_gain, D_gain, *, beta: float | None = None, alpha: float | None = None,
                   requirements=("stable", "pm"), leg=None, leg_mode: str = "segment",
-                  options: LoopOptions | None = None, max_per_axis: int = MAX_LEG_POINTS) -> RobustRegion:
+                  max_per_axis: int = MAX_LEG_POINTS) -> RobustRegion:
     """The gains meeting ``requirements`` for every leg configuration of the range.
 
     Parameters
     ----------
-    params : Params
+    loop : ClosedLoop
+        The loop whose parameters give the leg range (their configurations) and whose options
+        judge every configuration.
     P_gain, D_gain : array_like
         The grid (Nm/rad, Nms/rad).
     beta, alpha : float, optional
@@ -166,9 +169,8 @@ def robust_region(params: Params, P_gain, D_gain, *, beta: float | None = None, 
     """
     P = gain_array("P_gain", P_gain).ravel()
     D = gain_array("D_gain", D_gain).ravel()
-    ctrl = params.controller
-    beta = ctrl.beta if beta is None else float(beta)
-    alpha = ctrl.alpha if alpha is None else float(alpha)
+    params = loop.params
+    _, _, beta, alpha = loop.gain_points(0.0, 0.0, beta, alpha)
     req = _check_requirements(requirements)
     maps: dict = {}
 
@@ -177,8 +179,8 @@ def robust_region(params: Params, P_gain, D_gain, *, beta: float | None = None, 
         for c in configs:
             key = tuple(sorted(c.items()))
             if key not in maps:
-                maps[key] = feasible_map(params.with_values(**c), P, D, beta, alpha, requirements=req,
-                                         options=options)
+                maps[key] = feasible_map(ClosedLoop(params.with_values(**c), loop.options, loop.backend),
+                                         P, D, beta, alpha, requirements=req)
             out &= maps[key]
         return out
 
@@ -198,5 +200,5 @@ def robust_region(params: Params, P_gain, D_gain, *, beta: float | None = None, 
             converged = True
             break
     return RobustRegion(P, D, current, len(configs), n, converged, history, configs,
-                        {"leg": list(leg_ends(params, leg)), "leg_mode": leg_mode, "requirements": list(req),
-                         "beta": beta, "alpha": alpha})
+                        loop.provenance(leg=list(leg_ends(params, leg)), leg_mode=leg_mode,
+                                        requirements=list(req), beta=beta, alpha=alpha))

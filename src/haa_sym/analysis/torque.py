@@ -5,9 +5,9 @@ output, with the PI of Eq. (7) and the velocity compensation of Eq. (6) closed.
 
 Example
 -------
->>> from haa_sym import load_params
+>>> from haa_sym import ClosedLoop, load_params
 >>> from haa_sym.analysis.torque import step_response
->>> s = step_response(load_params(), duration=0.3)              # doctest: +SKIP
+>>> s = step_response(ClosedLoop(load_params()), duration=0.3)  # doctest: +SKIP
 >>> s.rise_time, s.settling_time, s.overshoot_pct                # doctest: +SKIP
 """
 from __future__ import annotations
@@ -16,10 +16,14 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from haa_sym.io.budget import check_memory, sweep_bytes
-from haa_sym.loop.closed_loop import ClosedLoop, LoopOptions
+from haa_sym.analysis.margins import Margins, margins
 from haa_sym.errors import ParameterError
-from haa_sym.model.params import Params, gain_array, gain_points
+from haa_sym.io.budget import check_memory, sweep_bytes
+from haa_sym.loop.exact import to_float, transfer_polynomials
+from haa_sym.loop.plant import continuous_plant
+from haa_sym.loop.statespace import closed_loop_batch
+from haa_sym.model.params import Params, gain_array
+from haa_sym.loop import loop_first
 
 __all__ = ["StepResponse", "step_response", "step_info", "dc_gain", "describe_step",
            "torque_bandwidth", "STEP_CONVENTION"]
@@ -144,15 +148,15 @@ def describe_step(s: StepResponse) -> str:
             + f"; T at {end} = {s.T[-1]:.4f}")
 
 
-def step_response(params: Params, *, duration: float = 0.3, options: LoopOptions | None = None,
-                  beta: float | None = None, alpha: float | None = None,
-                  loop: ClosedLoop | None = None) -> StepResponse:
+@loop_first
+def step_response(loop, *, duration: float = 0.3, beta: float | None = None,
+                  alpha: float | None = None) -> StepResponse:
     """Unit step of the torque reference with the impedance loop open (Fig. 7).
 
     Parameters
     ----------
-    params : Params
-        Plant and controller; K_L2 = 0 is the gravity-compensated free leg.
+    loop : ClosedLoop
+        Plant, controller and options; K_L2 = 0 is the gravity-compensated free leg.
     duration : float
         Simulated time, s.
     beta, alpha : float, optional
@@ -162,25 +166,23 @@ def step_response(params: Params, *, duration: float = 0.3, options: LoopOptions
     -------
     StepResponse
     """
-    from haa_sym.loop.statespace import closed_loop_batch
     if not np.isfinite(duration) or duration <= 0:
         raise ParameterError(f"duration = {duration!r}; allowed: a finite time > 0 (s)")
-    _, _, beta, alpha = gain_points(0.0, 0.0, beta, alpha)
-    Ts = params.controller.Ts
+    _, _, beta, alpha = loop.gain_points(0.0, 0.0, beta, alpha)
+    Ts = loop.params.controller.Ts
     n = int(round(duration / Ts)) + 1
     check_memory(16 * n, f"duration = {duration!r} s: a step response of {float(n):.4g} samples")
-    loop = loop or ClosedLoop(params, options)
     A, B, C, D = (m[0] for m in closed_loop_batch(loop, 0.0, 0.0, beta, alpha, cut="T_ref"))
     x = np.zeros(A.shape[0])
     T = np.empty(n)
     for k in range(n):
         T[k] = C[0] @ x + D[0, 1]
         x = A @ x + B[:, 1]
-    return StepResponse(np.arange(n) * Ts, T, dc_gain(params, loop=loop, beta=beta, alpha=alpha))
+    return StepResponse(np.arange(n) * Ts, T, dc_gain(loop, beta=beta, alpha=alpha))
 
 
-def dc_gain(params: Params, *, options: LoopOptions | None = None, beta: float | None = None,
-            alpha: float | None = None, loop: ClosedLoop | None = None) -> float:
+@loop_first
+def dc_gain(loop, *, beta: float | None = None, alpha: float | None = None) -> float:
     """Steady-state gain T_l / T_lref of the torque loop (impedance loop open), Nm/Nm.
 
     Evaluated on the generated frequency response at 1e-6 rad/s rather than as
@@ -188,26 +190,24 @@ def dc_gain(params: Params, *, options: LoopOptions | None = None, beta: float |
     the torque output does not see, and the matrix form is then singular (python-control's
     ``dcgain`` returns 1.22 for a loop whose step tends to 1).
     """
-    loop = loop or ClosedLoop(params, options)
+    _, _, beta, alpha = loop.gain_points(0.0, 0.0, beta, alpha)
     coef = loop.loop_coefficients(np.array([1e-6]), beta, alpha)
     return float(coef.H_T[0].real)
 
 
-def torque_bandwidth(params: Params, *, options: LoopOptions | None = None,
-                     beta: float | None = None, alpha: float | None = None,
-                     loop: ClosedLoop | None = None) -> float:
+@loop_first
+def torque_bandwidth(loop, *, beta: float | None = None, alpha: float | None = None) -> float:
     """Lowest frequency (rad/s) where |T/T_lref| falls 3 dB below its low-frequency value.
 
     The paper defines the torque bandwidth with the leg free to move in the air (Sec. 3.3);
-    pass K_L2 = 0 in ``params`` for that. NaN if |H_T| never drops 3 dB below Nyquist.
+    build the loop with K_L2 = 0 for that. NaN if |H_T| never drops 3 dB below Nyquist.
 
     Example
     -------
-    >>> torque_bandwidth(load_params().with_values(K_L2=0.0))             # doctest: +SKIP
+    >>> torque_bandwidth(ClosedLoop(load_params().with_values(K_L2=0.0)))   # doctest: +SKIP
     30.36...
     """
-    _, _, beta, alpha = gain_points(0.0, 0.0, beta, alpha)
-    loop = loop or ClosedLoop(params, options)
+    _, _, beta, alpha = loop.gain_points(0.0, 0.0, beta, alpha)
     check_memory(sweep_bytes(1, loop.options.numerics.n_omega), f"the torque loop on n_omega = {loop.options.numerics.n_omega} frequencies")
     coef = loop.loop_coefficients(None, beta, alpha)
     mag = np.abs(coef.H_T)
@@ -223,26 +223,25 @@ def torque_bandwidth(params: Params, *, options: LoopOptions | None = None,
     return float(np.exp(lw[k - 1] + t * (lw[k] - lw[k - 1])))
 
 
-def torque_bandwidth_map(params: Params, beta, alpha, *, options: LoopOptions | None = None,
-                         loop: ClosedLoop | None = None):
+@loop_first
+def torque_bandwidth_map(loop, beta, alpha):
     """Torque bandwidth (rad/s, :func:`torque_bandwidth`) and stability of the torque loop alone
     (impedance loop open) on the grid ``beta`` x ``alpha``: arrays of shape (n_beta, n_alpha).
 
     The trade the paper's Sec. 3 describes: higher torque gains (beta, Eq. 7) and more velocity
     compensation (alpha, Eq. 6) widen the bandwidth until the loop goes unstable. The bandwidth is
-    NaN where the torque loop is unstable. For the paper's definition (leg free in the air) pass
-    params with the port body's ground stiffness 0 (K_L2 = 0).
+    NaN where the torque loop is unstable. For the paper's definition (leg free in the air) build
+    the loop with the port body's ground stiffness 0 (K_L2 = 0).
     """
     B = gain_array("beta", beta).ravel()
     A = gain_array("alpha", alpha).ravel()
-    loop = loop or ClosedLoop(params, options)
     BB, AA = np.meshgrid(B, A, indexing="ij")
     # the free position mode of a free leg is not seen by the torque: stability without it
     res = loop.stability(np.zeros(BB.shape), np.zeros(BB.shape), BB, AA)
     stable = res.stable | res.marginal
     bw = np.full(BB.shape, np.nan)
     for i, j in zip(*np.nonzero(stable)):
-        bw[i, j] = torque_bandwidth(params, beta=B[i], alpha=A[j], loop=loop)
+        bw[i, j] = torque_bandwidth(loop, beta=B[i], alpha=A[j])
     return bw, stable
 
 
@@ -259,8 +258,6 @@ def p1_roots(params: Params) -> np.ndarray:
     >>> np.round(p1_roots(load_params().with_values(K_L2=0.0)).real, 3)    # doctest: +SKIP
     array([-7.53619948e+04, -2.55227e+02, -1.722e+00,  0.0])
     """
-    from haa_sym.loop.exact import to_float, transfer_polynomials
-    from haa_sym.loop.plant import continuous_plant
     cp = continuous_plant(params.plant)
     _, nums = transfer_polynomials(cp.A, cp.B[:, :1], cp.C)
     num = np.trim_zeros(to_float(nums[cp.output_names.index("T_sensor")][0]), "f")
@@ -274,18 +271,9 @@ def p1_roots(params: Params) -> np.ndarray:
     return np.sort_complex(roots)
 
 
-def torque_loop_margins(params: Params, *, options: LoopOptions | None = None,
-                        beta: float | None = None, alpha: float | None = None):
-    """Margins of the torque loop alone, opened at the PI output (Sec. 3.2 design targets:
-    PM > 30 deg, GM > 12 dB at the leg-inertia and stiffness bounds). Returns
-    :class:`haa_sym.analysis.margins.Margins`."""
-    from haa_sym.analysis.margins import stability_margins
-    _, _, beta, alpha = gain_points(0.0, 0.0, beta, alpha)
-    loop = ClosedLoop(params, options)
-    check_memory(sweep_bytes(1, 4 * loop.options.numerics.n_omega),
-                 f"the torque loop on 4 x n_omega = {4 * loop.options.numerics.n_omega} frequencies")
-    ctrl = params.controller
-    w = np.logspace(np.log10(loop.options.numerics.omega_min), np.log10(np.pi / ctrl.Ts * (1 - 1e-9)),
-                    4 * loop.options.numerics.n_omega)
-    coef = loop.loop_coefficients(w, beta, alpha)
-    return stability_margins(coef.evaluate("L_t", 0.0, 0.0), w)
+@loop_first
+def torque_loop_margins(loop, *, beta: float | None = None, alpha: float | None = None) -> Margins:
+    """Margins of the torque loop alone (impedance gains 0), opened at the PI output (Sec. 3.2
+    design targets: PM > 30 deg, GM > 12 dB at the leg-inertia and stiffness bounds), located
+    exactly (:func:`haa_sym.analysis.margins.margins`)."""
+    return margins(loop, 0.0, 0.0, beta, alpha, which="L_t")

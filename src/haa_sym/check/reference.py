@@ -31,11 +31,13 @@ import numpy as np
 import scipy.linalg
 import scipy.signal
 
+from haa_sym.loop.plant import continuous_plant
+from haa_sym.model.actuator import Topology
+
 __all__ = ["closed_loop_matrices", "closed_loop_eigenvalues", "spectral_radius", "frequency_response"]
 
 
 def _zoh_plant(params, outputs):
-    from haa_sym.loop.plant import continuous_plant
     cont = continuous_plant(params.plant)
     C = cont.C[[cont.output_names.index(o) for o in outputs]]
     B = cont.B[:, [0, 2]]                                # V_m, T_dist
@@ -48,10 +50,8 @@ def _vc0(plant) -> float:
     """Eq. (6) at alpha = 1, N/k_t (R B_m + k_t k_w), from the motor's parameters of a chain; an
     actuator written in code (haa_sym.symbolic.model) declares its own VC0, read from its plant
     function (the one number shared with the evaluators then, besides the plant)."""
-    from haa_sym.model.actuator import Topology
     if isinstance(plant.topology, Topology):
         return plant.N / plant.k_t * (plant.R * plant.B_m + plant.k_t * plant.k_w)
-    from haa_sym.loop.plant import continuous_plant
     return continuous_plant(plant).VC0
 
 

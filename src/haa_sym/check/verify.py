@@ -24,12 +24,14 @@ import sympy as sp
 
 from haa_sym.errors import CompilerError, StaleGeneratedCode
 from haa_sym.compiled.generated import evaluators
-from haa_sym.loop.closed_loop import ClosedLoop
-from haa_sym.analysis.margins import default_omega, stability_margins
+from haa_sym.loop import ClosedLoop
+from haa_sym.loop.plant import continuous_plant
+from haa_sym.analysis.torque import torque_loop_margins
 from haa_sym.model.actuator import HYQ, MOTOR_DOMAIN, Topology
 from haa_sym.errors import ParameterError
 from haa_sym.model.params import Params, load_params
 from haa_sym.symbolic import chain, eom, torque_tf as tt
+from haa_sym.symbolic.chain import symbolic_model
 
 LOAD_KEYS = ("J_L1", "B_L1", "J_L2", "B_L2", "K_L2", "K_p", "D_p")
 
@@ -167,15 +169,14 @@ def row_torque_margins(params: Params) -> list[Row]:
     rows = []
     for cfg, K, p in corners(params):
         loop = ClosedLoop(p)
-        w = default_omega(p.controller.Ts)
-        m = stability_margins(loop.frequency_response(w, 0.0, 0.0)["L_t"], w)
+        m = torque_loop_margins(loop)
         stable = bool(loop.stability(0.0, 0.0).stable)
-        ok = stable and m.pm_deg > 30 and m.gm_db > 12
+        ok = stable and m.distance_deg > 30 and abs(m.gm_db) > 12
         rows.append(Row(
             f"Sec. 3.2: torque loop (beta = {p.controller.beta:g}, alpha = {p.controller.alpha:g}) at "
             f"J_L2 = {p.plant.J_L2}, K_L2 = {K}: PM > 30 deg, GM > 12 dB", ok,
-            f"closed loop stable: {stable}; PM = {m.pm_deg:.2f} deg at "
-            f"{', '.join(f'{x:.2f}' for x in m.gain_crossovers)} rad/s; GM = {m.gm_db:.2f} dB at "
+            f"closed loop stable: {stable}; PM = {', '.join(f'{x:.2f}' for x in m.phase_margins_deg)} deg at "
+            f"{', '.join(f'{x:.2f}' for x in m.gain_crossovers)} rad/s; GM = {', '.join(f'{x:.2f}' for x in m.gain_margins_db)} dB at "
             f"{', '.join(f'{x:.1f}' for x in m.phase_crossovers)} rad/s",
             f"P_t = {p.controller.P_t0:g} beta, I_t = {p.controller.I_t0:g} beta (Eq. 7; Table 2's "
             "caption rounds P_t to 0.38); loop opened at the PI output, P_gain = D_gain = 0, "
@@ -252,11 +253,10 @@ def row_exact_vc_generalised(params: Params) -> Row:
 
 def row_plant_values(params: Params) -> Row:
     """The generated (or compiled) plant function == the actuator's sympy model
-    (``actuator.model()``: the chain's state space, or a model written in code) at the values."""
-    from haa_sym.loop.plant import continuous_plant
+    (``symbolic_model(actuator)``: the chain's state space, or a model written in code) at the values."""
     top = params.plant.topology
     cp = continuous_plant(params.plant)
-    m = top.model()
+    m = symbolic_model(top)
     syms = m.symbols
     sub = {syms[k]: sp.nsimplify(v, rational=True) for k, v in params.plant.as_dict().items()}
     rel = 0.0

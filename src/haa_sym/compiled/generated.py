@@ -27,7 +27,8 @@ from pathlib import Path
 import casadi as ca
 import numpy as np
 
-from haa_sym.errors import CompilerError, NoCompiler, StaleGeneratedCode
+from haa_sym.errors import CompilerError, NoCompiler, ParameterError, StaleGeneratedCode
+from haa_sym.model.params import builtin_actuators, load_params
 from haa_sym.model.resources import data_dir, remedy, source_root
 
 __all__ = ["StaleGeneratedCode", "CompilerError", "NoCompiler", "GeneratedCode", "Compiler",
@@ -137,8 +138,6 @@ class GeneratedCode:
     def _check_actuators(self) -> None:
         """The built-in actuator files' topologies must be the ones generated (their values may
         change freely: they are inputs of the generated functions)."""
-        from haa_sym.errors import ParameterError
-        from haa_sym.model.params import builtin_actuators, load_params
         have = {(name, fp) for fp, t in self.manifest["topologies"].items() for name in t["actuators"]}
         want = set()
         for path in builtin_actuators(self.root / "model"):

@@ -2,7 +2,7 @@
 
 An actuator is a :class:`~haa_sym.model.actuator.Topology` (a chain, from a file or code) or a
 :class:`~haa_sym.symbolic.model.LinearActuatorModel` (a sympy model written in code); both reach
-the code generator as the latter (``actuator.model()``). A built-in actuator's topology
+the code generator as the latter (``haa_sym.symbolic.chain.symbolic_model(actuator)``). A built-in actuator's topology
 (``model/*.toml``) has its function in ``generated/`` (listed under its fingerprint in
 ``MANIFEST.json``); it is loaded with the other generated evaluators and needs no sympy. Any
 other actuator is compiled once: CasADi writes the C of its model into the content-hash cache
@@ -94,8 +94,10 @@ def _generate(topology: Actuator, directory: Path, quiet: bool) -> tuple[Path, P
             f"the compiled-code cache {directory.parent.parent} (HAA_SYM_CACHE, default "
             f"~/.cache/haa_sym) cannot be created: {exc.strerror or exc}; allowed: a writable "
             "directory") from None
-    from haa_sym.symbolic.symbolic_to_casadi import plant_function as derive   # sympy: compile step only
-    f = derive(topology.model(), name)
+    # sympy: the compile step of a new actuator only, never the numeric runtime
+    from haa_sym.symbolic.chain import symbolic_model
+    from haa_sym.symbolic.symbolic_to_casadi import plant_function as derive
+    f = derive(symbolic_model(topology), name)
     with tempfile.TemporaryDirectory(dir=directory) as tmp:
         cg = ca.CodeGenerator(f"{name}.c", {"with_header": False})
         cg.add(f)

@@ -17,7 +17,9 @@ it. The answer is the largest feasible value found: feasible at every leg config
 the next grid value (1 + beta_tol higher) infeasible for at least one unless it is the range's
 end. A feasible island of beta narrower than one coarse step above an infeasible coarse value
 is not searched (documented limit). The leg configurations double (2, 3, 5, 9, ...) until the
-schedule no longer changes (``n_configurations`` says how many it took).
+schedule no longer changes (``n_configurations`` says how many it took). Every answer is then
+re-decided point by point at every leg configuration (the maps label segments of their rows from
+a few probes) and lowered until it holds.
 
 The torque bandwidth reported with each row is the paper's (Sec. 3.3): the -3 dB frequency of
 torque tracking with the leg free in the air (the port body's stiffness set to 0), at the
@@ -32,9 +34,9 @@ or a ``distributed.Client``). The result is the same, byte for byte.
 
 Example
 -------
->>> from haa_sym import load_params
+>>> from haa_sym import ClosedLoop, load_params
 >>> from haa_sym.design.schedule import schedule
->>> s = schedule(load_params(), [10.0, 300.0], [2.0, 20.0])                  # doctest: +SKIP
+>>> s = schedule(ClosedLoop(load_params()), [10.0, 300.0], [2.0, 20.0])      # doctest: +SKIP
 >>> s.beta                                                                   # doctest: +SKIP
 """
 from __future__ import annotations
@@ -43,10 +45,17 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from haa_sym.loop.closed_loop import LoopOptions
+from haa_sym._version import __version__
+from haa_sym.analysis.decide import decide_points
+from haa_sym.analysis.robust import MAX_LEG_POINTS, _check_requirements, feasible_map, leg_configurations, leg_ends
+from haa_sym.analysis.torque import torque_bandwidth
+from haa_sym.design.schedule_c import ScheduleTable
 from haa_sym.errors import ParameterError
+from haa_sym.io.gridspec import grid
+from haa_sym.io.outputs import write_text
+from haa_sym.io.progress import progress as progress_bar
+from haa_sym.loop import ClosedLoop, loop_first
 from haa_sym.model.params import Params, gain_array
-from haa_sym.analysis.robust import MAX_LEG_POINTS, _check_requirements, leg_configurations, leg_ends
 
 __all__ = ["Schedule", "schedule", "beta_grid", "CSV_COLUMNS", "DEFAULT_P_GAIN", "DEFAULT_D_GAIN"]
 
@@ -55,10 +64,6 @@ CSV_COLUMNS = ("P_gain", "D_gain", "beta", "alpha", "torque_bandwidth_rad_s", "f
 DEFAULT_P_GAIN = "log:1:2000:30"
 DEFAULT_D_GAIN = "lin:1:50:20"
 COARSE_RATIO = 1.25
-# |L|^2 of a grid sample next to a hidden peak: a peak reaching |L| = 1 between samples of the
-# default grid (1000 points, 0.1 rad/s to Nyquist) shows |L| > 0.1 on its neighbours down to a
-# damping ratio of about 3e-4
-PEAK_FLOOR = 1e-2
 
 
 def beta_grid(beta_range=(0.1, 8.0), beta_tol: float = 0.02) -> tuple[np.ndarray, np.ndarray]:
@@ -115,12 +120,10 @@ class Schedule:
 
     def save_csv(self, path, tx=None, field: str | None = None):
         """Write :meth:`csv_text` (all or nothing, :mod:`haa_sym.io.outputs`)."""
-        from haa_sym.io.outputs import write_text
         return write_text(path, self.csv_text(), tx, field)
 
     def table(self):
         """The schedule as a :class:`haa_sym.design.schedule_c.ScheduleTable` (for the embedded C)."""
-        from haa_sym.design.schedule_c import ScheduleTable
         if not self.feasible.any():
             raise ParameterError("the schedule has no feasible point, so there is no gain to emit; "
                                  "allowed: a beta range or requirements that some impedance meets")
@@ -137,100 +140,23 @@ class Schedule:
 # Module-level functions of plain data: what a dask worker runs (one map or one point set).
 
 def _task_map(params, config, P, D, beta, alpha, requirements, options):
-    from haa_sym.analysis.robust import feasible_map
-    return feasible_map(params.with_values(**config), P, D, beta, alpha, requirements=requirements,
-                        options=options)
+    return feasible_map(ClosedLoop(params.with_values(**config), options), P, D, beta, alpha,
+                        requirements=requirements)
 
 
-def _task_points(params, config, P, D, beta, alpha, requirements, options):
-    from haa_sym.loop.closed_loop import ClosedLoop
-    from haa_sym.analysis.regions import decide_points
-    loop = ClosedLoop(params.with_values(**config), options)
-    st, low, passive = decide_points(loop, P, D, beta, alpha, passivity="passive" in requirements)
-    ok = st.copy()
+def _meets(d, requirements) -> np.ndarray:
+    """The points of :class:`~haa_sym.analysis.decide.PointDecisions` ``d`` meeting ``requirements``."""
+    ok = d.stable.copy()
     if "pm" in requirements:
-        ok &= ~low
+        ok &= ~d.low_pm
     if "passive" in requirements:
-        ok &= passive
+        ok &= d.passive
     return ok
 
 
-def _golden(f, lo, hi, sign, steps: int = 40):
-    """Maximise sign * f(x) on every bracket [lo, hi] at once (golden sections)."""
-    g = 0.3819660112501051
-    a, b = lo.copy(), hi.copy()
-    x1, x2 = a + g * (b - a), b - g * (b - a)
-    f1, f2 = sign * f(x1), sign * f(x2)
-    for _ in range(steps):
-        left = f1 >= f2                                  # the maximum is in [a, x2]
-        b = np.where(left, x2, b)
-        a = np.where(left, a, x1)
-        x1n = np.where(left, a + g * (b - a), x2)
-        x2n = np.where(left, x1, b - g * (b - a))
-        fn = sign * f(np.where(left, x1n, x2n))
-        f1, f2 = np.where(left, fn, f2), np.where(left, f1, fn)
-        x1, x2 = x1n, x2n
-    x = np.where(f1 >= f2, x1, x2)
-    return x, sign * np.maximum(f1, f2)
-
-
-def exact_low_pm(loop, P, D, beta: float, alpha: float, pm_deg: float = 30.0) -> np.ndarray:
-    """Per gain point: the phase margin of the options' ``pm_loop`` (the impedance loop by
-    default), from crossovers located exactly, is below ``pm_deg`` (the options' rule chooses
-    the crossover, as in the maps).
-
-    The maps locate a crossover between two grid samples by interpolation and miss a pair that
-    a resonance narrower than the grid step hides; near a lightly damped mode both can be wrong
-    by tens of degrees (measured: the SEA's light link at beta 7.6, grid PM 124.9 deg, true
-    crossovers at 340 and 342 rad/s with -96 and 173 deg). Here every sign change of |L| - 1
-    on the grid, and every local extremum of |L| whose neighbours stay on one side of 1 but
-    which refined by golden sections reaches the other side, is located by the Illinois method
-    on the loop's exact frequency response, and the margin taken there.
-    """
-    from haa_sym.analysis.sweep import gain_rows, monomial_rows, product_form
-    X = gain_rows(P, D)
-    coef = loop.loop_coefficients(beta=beta, alpha=alpha)
-    which = "L_imp" if loop.options.conventions.pm_loop == "impedance" else "L_t"     # as the maps
-    lw = np.log(coef.omega)
-    L_grid = getattr(coef, which)
-    mag2 = monomial_rows(X) @ product_form(L_grid, L_grid).real      # (n, n_omega)
-
-    def L_at(rows, x):
-        return np.einsum("ij,ij->i", X[rows],
-                         getattr(loop.loop_coefficients(np.exp(x), beta, alpha, cached=False), which))
-
-    # brackets of |L|^2 - 1: sign changes on the grid ...
-    rows, i = np.nonzero((mag2[:, 1:] > 1) != (mag2[:, :-1] > 1))
-    br = [(rows, lw[i], lw[i + 1])]
-    # ... and hidden pairs around narrow peaks (below 1 on the grid) or notches (above)
-    up = np.diff(mag2, axis=1)
-    for mask, sign in (((up[:, :-1] > 0) & (up[:, 1:] < 0) & (mag2[:, 1:-1] < 1) & (mag2[:, 1:-1] > PEAK_FLOOR), 1.0),
-                       ((up[:, :-1] < 0) & (up[:, 1:] > 0) & (mag2[:, 1:-1] > 1) & (mag2[:, 1:-1] < 1 / PEAK_FLOOR), -1.0)):
-        r, k = np.nonzero(mask)
-        if not r.size:
-            continue
-        k = k + 1
-        xe, fe = _golden(lambda x: np.abs(L_at(r, x)) ** 2, lw[k - 1], lw[k + 1], sign)
-        hit = sign * (fe - 1.0) > 0
-        br += [(r[hit], lw[k - 1][hit], xe[hit]), (r[hit], xe[hit], lw[k + 1][hit])]
-    rows = np.concatenate([b[0] for b in br])
-    a = np.concatenate([b[1] for b in br])
-    b = np.concatenate([b[2] for b in br])
-    low = np.zeros(X.shape[0], bool)
-    if not rows.size:
-        return low
-    from haa_sym.analysis.rootfind import illinois
-    a, b = illinois(lambda x: np.abs(L_at(rows, x)) ** 2 - 1.0, a, b, xtol=1e-12)   # |L| = 1 in log omega
-    L = L_at(rows, 0.5 * (a + b))
-    margin = np.degrees(np.angle(L)) + 180.0
-    margin = (margin + 180.0) % 360.0 - 180.0
-    margin = np.where(margin == -180.0, 180.0, margin)
-    rule = loop.options.conventions.pm_rule
-    key = np.abs(margin) if rule == "min_abs" else margin
-    order = np.lexsort((key, rows))
-    first = order[np.unique(rows[order], return_index=True)[1]]
-    low[rows[first]] = margin[first] < pm_deg
-    return low
+def _task_points(params, config, P, D, beta, alpha, requirements, options):
+    loop = ClosedLoop(params.with_values(**config), options)
+    return _meets(decide_points(loop, P, D, beta, alpha, passivity="passive" in requirements), requirements)
 
 
 class _Runner:
@@ -262,7 +188,6 @@ class _Runner:
             self.client.close()
 
     def run(self, fn, args_list: list, label: str) -> list:
-        from haa_sym.io.progress import progress as progress_bar
         if not args_list:
             return []
         with progress_bar(len(args_list), label, "task", self.progress) as bar:
@@ -285,11 +210,10 @@ class _Runner:
 
 
 def _verify(params, configs, P, D, fine, alphas, best_k, req, options):
-    """Lower each point's beta until its phase margin from exactly located crossovers
-    (:func:`exact_low_pm`) is at least 30 deg at every leg configuration and the maps'
-    requirements still hold; returns the new indices and how many points were lowered."""
-    from haa_sym.loop.closed_loop import ClosedLoop
-    from haa_sym.analysis.regions import decide_points
+    """Re-decide every answer point by point (:func:`haa_sym.analysis.decide.decide_points`, the
+    maps' own rule with exactly located crossovers) at every leg configuration, and lower a
+    point's beta until it holds: the maps decide whole segments from a few probes. Returns the
+    new indices and how many points were lowered."""
     loops = [ClosedLoop(params.with_values(**c), options) for c in configs]
     PP, DD = np.meshgrid(P, D, indexing="ij")
     PP, DD = PP.ravel(), DD.ravel()
@@ -297,24 +221,18 @@ def _verify(params, configs, P, D, fine, alphas, best_k, req, options):
     lowered = set()
     for a in range(alphas.size):
         todo = np.flatnonzero(best_k[a] >= 0)
-        checked_maps = False                   # the first round's values passed the maps already
         while todo.size:
             bad = np.zeros(best_k.shape[1], bool)
             for k in np.unique(best_k[a, todo]):
                 pts = todo[best_k[a, todo] == k]
                 for loop in loops:
-                    fail = exact_low_pm(loop, PP[pts], DD[pts], float(fine[k]), float(alphas[a])) \
-                        if "pm" in req else np.zeros(pts.size, bool)
-                    if checked_maps:
-                        st, low, passive = decide_points(loop, PP[pts], DD[pts], float(fine[k]), float(alphas[a]),
-                                                         passivity="passive" in req)
-                        fail |= ~st | (low if "pm" in req else False) | (~passive if "passive" in req else False)
-                    bad[pts[fail]] = True
+                    d = decide_points(loop, PP[pts], DD[pts], float(fine[k]), float(alphas[a]),
+                                      passivity="passive" in req)
+                    bad[pts[~_meets(d, req)]] = True
             todo = np.flatnonzero(bad)
             lowered.update(todo.tolist())
             best_k[a, todo] -= 1                # -1: no beta of the range is left
             todo = todo[best_k[a, todo] >= 0]
-            checked_maps = True
     return best_k, len(lowered)
 
 
@@ -325,16 +243,18 @@ def _free_in_the_air(params: Params) -> Params:
     return params.with_values(**{key: 0.0}) if key in params.plant.topology.parameter_keys else params
 
 
-def schedule(params: Params, P_gain=None, D_gain=None, *, beta_range=(0.1, 8.0), beta_tol: float = 0.02,
+@loop_first
+def schedule(loop, P_gain=None, D_gain=None, *, beta_range=(0.1, 8.0), beta_tol: float = 0.02,
              alpha=None, alpha_values=None, requirements=("stable", "pm"), leg=None,
-             leg_mode: str = "segment", options: LoopOptions | None = None, scheduler=None,
-             progress: bool | None = None, max_per_axis: int = MAX_LEG_POINTS) -> Schedule:
+             leg_mode: str = "segment", scheduler=None, progress: bool | None = None,
+             max_per_axis: int = MAX_LEG_POINTS) -> Schedule:
     """The largest robust beta (and alpha) for every impedance of the grid.
 
     Parameters
     ----------
-    params : Params
-        The actuator and controller (``P_t0``, ``I_t0``, ``Ts``, ``N_av`` ... from here).
+    loop : ClosedLoop
+        The actuator, controller (``P_t0``, ``I_t0``, ``Ts``, ``N_av`` ...) and options; its
+        parameters' configurations give the leg range.
     P_gain, D_gain : array_like, optional
         The impedance grid, Nm/rad and Nms/rad (default log 1..2000 x lin 1..50, 30 x 20).
     beta_range : (float, float)
@@ -359,8 +279,7 @@ def schedule(params: Params, P_gain=None, D_gain=None, *, beta_range=(0.1, 8.0),
     -------
     Schedule
     """
-    from haa_sym._version import __version__
-    from haa_sym.analysis.regions import grid
+    params, options = loop.params, loop.options
     P = gain_array("P_gain", grid(DEFAULT_P_GAIN) if P_gain is None else P_gain).ravel()
     D = gain_array("D_gain", grid(DEFAULT_D_GAIN) if D_gain is None else D_gain).ravel()
     for name, arr in (("P_gain", P), ("D_gain", D)):
@@ -379,7 +298,6 @@ def schedule(params: Params, P_gain=None, D_gain=None, *, beta_range=(0.1, 8.0),
             raise ParameterError("alpha_values is empty; allowed: at least one value >= 0")
     ends = leg_ends(params, leg)
     leg_configurations(params, 2, leg=leg, leg_mode=leg_mode)        # checks the range now
-    options = options or LoopOptions()
     runner = _Runner(scheduler, progress)
     maps: dict = {}                     # (config key, beta index, alpha index) -> (n_P, n_D) bool
     points: dict = {}                   # (config key, beta index, alpha index) -> {flat index: bool}
@@ -456,13 +374,12 @@ def schedule(params: Params, P_gain=None, D_gain=None, *, beta_range=(0.1, 8.0),
         runner.close()
 
     # per point: the alpha with the largest beta, ties to the larger torque bandwidth
-    free = _free_in_the_air(params)
+    free = ClosedLoop(_free_in_the_air(params), options, loop.backend, basis=False)
     bw_cache: dict = {}
 
     def bandwidth(k, a):
         if (k, a) not in bw_cache:
-            from haa_sym.analysis.torque import torque_bandwidth
-            bw_cache[(k, a)] = torque_bandwidth(free, beta=float(fine[k]), alpha=float(alphas[a]), options=options)
+            bw_cache[(k, a)] = torque_bandwidth(free, beta=float(fine[k]), alpha=float(alphas[a]))
         return bw_cache[(k, a)]
     n_pts = P.size * D.size
     beta_out, alpha_out, bw_out = np.full(n_pts, np.nan), np.full(n_pts, np.nan), np.full(n_pts, np.nan)
@@ -473,16 +390,15 @@ def schedule(params: Params, P_gain=None, D_gain=None, *, beta_range=(0.1, 8.0),
         a = max(cand, key=lambda a: (bandwidth(kmax, a), -a)) if len(cand) > 1 else cand[0]
         beta_out[p], alpha_out[p], bw_out[p] = fine[kmax], alphas[a], bandwidth(kmax, a)
     shape = (P.size, D.size)
-    from haa_sym.analysis.torque import torque_bandwidth
-    bw_1 = torque_bandwidth(free, beta=1.0, alpha=float(ctrl.alpha if alpha is None else alpha), options=options)
+    bw_1 = torque_bandwidth(free, beta=1.0, alpha=float(ctrl.alpha if alpha is None else alpha))
     meta = {"actuator": str((getattr(params, "about", None) or {}).get("name", params.source)),
             "source": str(params.source), "requirements": list(req), "beta_range": [float(fine[0]), float(fine[-1])],
             "beta_tol": float(beta_tol), "beta_grid": int(fine.size), "coarse_values": int(coarse.size),
             "alpha_scheduled": alpha_values is not None, "alpha_values": alphas.tolist(),
             "leg": list(ends), "leg_mode": leg_mode, "haa_sym": __version__,
             "scheduler": "dask threads (in-process)" if scheduler is None else "dask.distributed",
-            "torque_bandwidth_beta_1_rad_s": bw_1, "lowered_by_exact_margins": lowered,
-            "options": options.resolved(params.plant.topology).to_dict()}
+            "torque_bandwidth_beta_1_rad_s": bw_1, "lowered_by_point_check": lowered,
+            "options": options.to_dict()}
     return Schedule(P, D, beta_out.reshape(shape), alpha_out.reshape(shape), bw_out.reshape(shape),
                     feasible.reshape(shape), len(configs), converged, history, meta,
                     fixed.reshape(shape))

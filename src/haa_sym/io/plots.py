@@ -12,6 +12,8 @@ import numpy as np  # noqa: E402
 from matplotlib.colors import ListedColormap  # noqa: E402
 from matplotlib.patches import Patch  # noqa: E402
 
+from haa_sym.io.outputs import transaction  # noqa: E402
+
 __all__ = ["plot_region", "plot_region_panels", "plot_corrected_phase", "plot_steps",
            "plot_contact", "save_figure"]
 
@@ -255,7 +257,6 @@ def save_figure(fig, path: str | Path, tx=None, field: str | None = None) -> Pat
     Written through the :class:`haa_sym.io.outputs.Transaction` ``tx`` (committed with the other
     outputs of its command), or on its own, atomically, when ``tx`` is None.
     """
-    from haa_sym.io.outputs import transaction
     path = Path(path)
     try:
         with transaction(tx) as t, t.open(path, "wb", field) as fh:

@@ -30,14 +30,13 @@ Example
 """
 from __future__ import annotations
 
-import dataclasses
 import functools
-import re
 from dataclasses import dataclass, field
 from fractions import Fraction
 
 import numpy as np
 
+from haa_sym._version import __version__
 from haa_sym.compiled.cache import BoundedCache, array_key
 from haa_sym.compiled.generated import evaluators
 from haa_sym.loop.exact import bilinear, polymul, polysub, to_float, transfer_polynomials
@@ -46,12 +45,12 @@ from haa_sym.model.params import Params, gain_array
 from haa_sym.loop.elements import backward_difference, common_denominator, delay, pi_integral, velocity_filter
 from haa_sym.compiled.layout import (COEF_FORMS, COEF_OUTPUTS, COEF_TERMS, FREQ_COLUMN, N_BASIS, TORQUE_GAINS,
                             gain_monomials)
+from haa_sym.loop.options import LoopOptions
 from haa_sym.loop.plant import DiscretePlant, continuous_plant, discretize
 from haa_sym.loop.statespace import closed_loop_eigenvalues, to_statespace
 
-__all__ = ["LoopOptions", "LoopStructure", "AnalysisConventions", "FrequencyGrid", "LoopCoefficients", "ClosedLoop", "StabilityResult", "PORTS", "FREQ_OUTPUTS"]
+__all__ = ["LoopCoefficients", "ClosedLoop", "StabilityResult", "FrequencyResponse", "FREQ_OUTPUTS", "loop_first"]
 
-PORTS = ("dtheta_L2", "dtheta_L1", "encoder_average")
 # A plant mode within this distance of z = 1 is a free rigid-body mode (the sampled plant cannot
 # place it more accurately): with P_gain = 0 the loop keeps it (StabilityResult.marginal).
 MARGINAL_TOL = 1e-9
@@ -68,229 +67,6 @@ def _transfer_polynomials(plant: DiscretePlant):
     """Exact d(z) and the V_m numerators of ``plant`` (Faddeev-LeVerrier in integers), memoised."""
     return _PLANT_POLYS.get(array_key(plant.Phi, plant.Gamma[:, :1], plant.C),
                             lambda: transfer_polynomials(plant.Phi, plant.Gamma[:, :1], plant.C))
-
-
-COLGATE = ("subtract", "add", "none")
-FILTERS = ("both", "impedance", "compensation")
-PM_LOOPS = ("impedance", "torque")
-PM_RULES = ("min_abs", "worst")
-
-
-def _choice(obj, name, allowed):
-    if getattr(obj, name) not in allowed:
-        raise ParameterError(f"{name} = {getattr(obj, name)!r}; allowed: {list(allowed)}")
-
-
-@dataclass(frozen=True)
-class LoopStructure:
-    """What the closed loop is: the structural choices the paper leaves open.
-
-    Parameters
-    ----------
-    delay : {0, 1}
-        Computation delay between sampling and the applied voltage, samples. Default 0.
-    torque_damping : bool or None
-        Whether the measured torque includes the damping term of the sensed coupling (D_hd of
-        Eq. 2). Default None: what the actuator file's ``[sensors] torque_damping`` says (True
-        for HyQ, Eq. 2 as printed).
-    filter : {"both", "impedance", "compensation"}
-        Where the velocity estimate (``velocity_filter`` of the controller) sits: on the velocity
-        feeding both the D term of Eq. (8) and the velocity compensation of Eq. (6) (default, the
-        paper's Sec. 3.4 and Fig. 6), on the D term only, or on the compensation only; the other
-        path then uses the one-sample backward difference (theta[k] - theta[k-1])/Ts.
-    port : "dtheta_<body>", "encoder_average" or None
-        Velocity of the passivity port Z = T_dist / velocity (Sec. 5): the velocity of a body of
-        the actuator file (ClosedLoop checks it against the plant's outputs) or the controller's
-        velocity estimate of the encoder angle. Default None: the body T_dist acts on (the
-        file's ``[sensors] port``; ``dtheta_L2`` for HyQ, whose alternatives are the sampled link
-        velocity ``dtheta_L1`` of the paper's wording and ``encoder_average``).
-
-    :meth:`resolved` fills the two file-backed defaults for one actuator.
-    """
-
-    delay: int = 0
-    torque_damping: bool | None = None
-    filter: str = "both"
-    port: str | None = None
-
-    def __post_init__(self):
-        if self.delay not in (0, 1) or isinstance(self.delay, bool):
-            raise ParameterError(f"delay = {self.delay!r}; allowed: 0 or 1 (samples)")
-        if not (self.torque_damping is None or isinstance(self.torque_damping, bool)):
-            raise ParameterError(f"torque_damping = {self.torque_damping!r}; allowed: True, False or "
-                                 "None (the actuator file's)")
-        if not (self.port is None or self.port == "encoder_average" or (isinstance(self.port, str)
-                                                    and re.fullmatch(r"dtheta_[A-Za-z][A-Za-z0-9]*", self.port))):
-            raise ParameterError(f"port = {self.port!r}; allowed: 'dtheta_<body>' (a body of the "
-                                 f"actuator file, e.g. {list(PORTS)[:2]}) or 'encoder_average'")
-        _choice(self, "filter", FILTERS)
-
-    def resolved(self, topology) -> "LoopStructure":
-        """This structure with the file-backed defaults of ``topology`` (an actuator) filled in."""
-        return dataclasses.replace(
-            self, torque_damping=topology.torque_damping if self.torque_damping is None else self.torque_damping,
-            port=f"dtheta_{topology.port}" if self.port is None else self.port)
-
-
-@dataclass(frozen=True)
-class AnalysisConventions:
-    """How the analyses judge a closed loop: the conventions the paper leaves open.
-
-    Parameters
-    ----------
-    colgate : {"subtract", "add", "none"}
-        Colgate's sampled-data correction of the phase of Z: subtract w Ts/2 (the paper's
-        wording, default), add it, or none.
-    pm_loop : {"impedance", "torque"}
-        Loop on which the phase margin of the region maps is measured: the impedance loop opened
-        at the torque reference T_lref (default) or the torque loop opened at the PI output with
-        the impedance loop closed.
-    pm_rule : {"min_abs", "worst"}
-        When |L| crosses 1 more than once: the crossover with the smallest |PM| (default; what
-        Matlab's ``margin`` reports) or the smallest signed PM.
-    passivity_tol_deg : float
-        A point is passive when the corrected phase of Z stays within 90 deg + this tolerance.
-        A spring (Z ~ K/(j w)) sits at -90 deg as w -> 0, so a zero tolerance would decide
-        such points by rounding. Default 1e-3.
-    """
-
-    colgate: str = "subtract"
-    pm_loop: str = "impedance"
-    pm_rule: str = "min_abs"
-    passivity_tol_deg: float = 1e-3
-
-    def __post_init__(self):
-        for name, allowed in (("colgate", COLGATE), ("pm_loop", PM_LOOPS), ("pm_rule", PM_RULES)):
-            _choice(self, name, allowed)
-        v = self.passivity_tol_deg
-        if isinstance(v, bool) or not isinstance(v, (int, float)) or not np.isfinite(v) or v < 0:
-            raise ParameterError(f"passivity_tol_deg = {v!r}; allowed: a finite number >= 0 (deg)")
-
-
-@dataclass(frozen=True)
-class FrequencyGrid:
-    """The numerics of the frequency-domain analyses: the log grid Z(z) and the loop gains are
-    sampled on, from ``omega_min`` to Nyquist pi/Ts.
-
-    Parameters
-    ----------
-    n_omega : int
-        Points of the grid. Default 1000 (the maps are unchanged up to 16000, see
-        ``haa_sym.analysis.regions``).
-    omega_min : float
-        Lowest frequency, rad/s. Default 0.1.
-    """
-
-    n_omega: int = 1000
-    omega_min: float = 0.1
-
-    def __post_init__(self):
-        if isinstance(self.n_omega, bool) or not isinstance(self.n_omega, int) or self.n_omega < 10:
-            raise ParameterError(f"n_omega = {self.n_omega!r}; allowed: an integer >= 10")
-        v = self.omega_min
-        if isinstance(v, bool) or not isinstance(v, (int, float)) or not np.isfinite(v) or v <= 0:
-            raise ParameterError(f"omega_min = {v!r}; allowed: a finite number > 0 (rad/s)")
-
-    def omega(self, Ts: float) -> np.ndarray:
-        """The frequency grid (rad/s) for sampling time ``Ts``."""
-        w_max = np.pi / Ts * (1 - 1e-9)
-        if self.omega_min >= w_max:
-            raise ParameterError(f"omega_min = {self.omega_min!r} is not below Nyquist pi/Ts = {w_max:.6g} rad/s")
-        return np.logspace(np.log10(self.omega_min), np.log10(w_max), self.n_omega)
-
-
-_PARTS = (("structure", LoopStructure), ("conventions", AnalysisConventions), ("numerics", FrequencyGrid))
-
-
-class LoopOptions:
-    """Every modelling choice the paper leaves open, in three parts; each is discussed in
-    ``docs/model.md``.
-
-    ``structure`` (:class:`LoopStructure`: delay, torque_damping, filter, port) defines the
-    closed loop; ``conventions`` (:class:`AnalysisConventions`: colgate, pm_loop, pm_rule,
-    passivity_tol_deg) how it is judged; ``numerics`` (:class:`FrequencyGrid`: n_omega,
-    omega_min) how finely. Build it from the parts or from any of their fields by name
-    (``LoopOptions(delay=1, colgate="none")``, what ``--option KEY=VALUE`` does); the fields read
-    through (``options.delay``). The defaults are the combination that reproduces the most
-    cells of Table 2 (``haa-sym reproduce`` re-scores all combinations and writes the count to
-    the report).
-    """
-
-    __slots__ = ("structure", "conventions", "numerics")
-
-    def __init__(self, structure: LoopStructure | None = None, conventions: AnalysisConventions | None = None,
-                 numerics: FrequencyGrid | None = None, **fields):
-        given = {"structure": structure, "conventions": conventions, "numerics": numerics}
-        for part, cls in _PARTS:
-            mine = {k: fields.pop(k) for k in list(fields) if k in cls.__dataclass_fields__}
-            base = given[part] if given[part] is not None else cls()
-            if not isinstance(base, cls):
-                raise ParameterError(f"{part} = {base!r}; allowed: a haa_sym.{cls.__name__}")
-            object.__setattr__(self, part, dataclasses.replace(base, **mine) if mine else base)
-        if fields:
-            raise ParameterError(f"unknown option(s) {sorted(fields)}; allowed: {list(self.field_names())}")
-
-    def __setattr__(self, name, value):
-        raise AttributeError("LoopOptions is immutable; use replace(**changes)")
-
-    def __reduce__(self):
-        # pickled by its parts (a dask worker rebuilds it; __setattr__ refuses the default way)
-        return (LoopOptions, self._parts())
-
-    def __getattr__(self, name):
-        for part, cls in _PARTS:
-            if name in cls.__dataclass_fields__:
-                return getattr(object.__getattribute__(self, part), name)
-        raise AttributeError(name)
-
-    def __eq__(self, other):
-        return isinstance(other, LoopOptions) and self._parts() == other._parts()
-
-    def __hash__(self):
-        return hash(self._parts())
-
-    def __repr__(self):
-        return f"LoopOptions({', '.join(f'{k}={v!r}' for k, v in self.to_dict().items())})"
-
-    def _parts(self):
-        return tuple(object.__getattribute__(self, part) for part, _ in _PARTS)
-
-    def replace(self, **changes) -> "LoopOptions":
-        """A copy with some fields (of any part) changed, validated."""
-        return LoopOptions(*self._parts(), **changes)
-
-    def to_dict(self) -> dict:
-        """Every field by name (flat: the names are unique across the parts)."""
-        return {f: getattr(self, f) for f in self.field_names()}
-
-    @classmethod
-    def field_names(cls) -> tuple[str, ...]:
-        return tuple(f for _, c in _PARTS for f in c.__dataclass_fields__)
-
-    @classmethod
-    def field_type(cls, name: str) -> tuple[type, bool]:
-        """(bool, int, float or str; whether None is allowed) of field ``name``, from its annotation."""
-        for _, c in _PARTS:
-            if name in c.__dataclass_fields__:
-                ann = str(c.__dataclass_fields__[name].type).replace(" ", "")
-                base = {"bool": bool, "int": int, "float": float}.get(ann.split("|")[0], str)
-                return base, "None" in ann.split("|")
-        raise KeyError(name)
-
-    @classmethod
-    def field_default(cls, name: str):
-        for _, c in _PARTS:
-            if name in c.__dataclass_fields__:
-                return c.__dataclass_fields__[name].default
-        raise KeyError(name)
-
-    def resolved(self, topology) -> "LoopOptions":
-        """These options with the structure's file-backed defaults filled in for ``topology``."""
-        return LoopOptions(self.structure.resolved(topology), self.conventions, self.numerics)
-
-    def omega(self, Ts: float) -> np.ndarray:
-        """The frequency grid (rad/s) of :attr:`numerics` for sampling time ``Ts``."""
-        return self.numerics.omega(Ts)
 
 
 @dataclass(frozen=True)
@@ -486,9 +262,15 @@ class ClosedLoop:
         ctrl = self.params.controller
         beta = ctrl.beta if beta is None else beta
         alpha = ctrl.alpha if alpha is None else alpha
-        arrs = np.broadcast_arrays(*(_finite_array(n, v) for n, v in
-                                     (("P_gain", P_gain), ("D_gain", D_gain), ("beta", beta), ("alpha", alpha))))
-        return np.stack([a.ravel() for a in arrs]), arrs[0].shape
+        named = [(n, _finite_array(n, v)) for n, v in
+                 (("P_gain", P_gain), ("D_gain", D_gain), ("beta", beta), ("alpha", alpha))]
+        try:
+            arrs = np.broadcast_arrays(*(v for _, v in named))
+        except ValueError:
+            shapes = ", ".join(f"{n} {v.shape}" for n, v in named)
+            raise ParameterError(f"gain arrays of shapes {shapes} do not broadcast together; allowed: "
+                                 "shapes that broadcast (one value each per gain point)") from None
+        return np.stack([a.ravel() for a in arrs]).reshape(4, -1), arrs[0].shape
 
     def characteristic_polynomial(self, P_gain, D_gain, beta=None, alpha=None) -> np.ndarray:
         """Descending coefficients of chi (monic up to the factor N_av Ts) for one point."""
@@ -613,14 +395,15 @@ class ClosedLoop:
         P, D, b, a = self._points(P_gain, D_gain, beta, alpha)[0][:, 0]
         return to_statespace(self, P, D, b, a, cut)
 
-    def frequency_response(self, omega, P_gain=0.0, D_gain=0.0, beta=None, alpha=None) -> dict:
+    def frequency_response(self, omega, P_gain=0.0, D_gain=0.0, beta=None, alpha=None) -> "FrequencyResponse":
         """Loop transfer functions at ``omega`` (rad/s) for gain points.
 
-        Returns a dict of complex arrays of shape ``point_shape + (len(omega),)`` with keys
-        ``L_t`` (torque loop opened at the PI output), ``L_imp`` (impedance loop opened at the
-        torque reference), ``Z`` (port impedance T_dist/velocity, every loop closed) and ``H_T``
-        (torque tracking T/T_ref, impedance loop open). Negative-feedback convention 1/(1+L).
-        ``beta`` and ``alpha`` may vary per point (one coefficient evaluation per distinct pair).
+        Returns a :class:`FrequencyResponse`: complex arrays of shape ``point_shape +
+        (len(omega),)``, ``L_t`` (torque loop opened at the PI output), ``L_imp`` (impedance loop
+        opened at the torque reference), ``Z`` (port impedance T_dist/velocity, every loop
+        closed) and ``H_T`` (torque tracking T/T_ref, impedance loop open). Negative-feedback
+        convention 1/(1+L). ``beta`` and ``alpha`` may vary per point (one coefficient
+        evaluation per distinct pair).
         """
         omega = _finite_array("omega", omega).ravel()
         pts, shape = self._points(P_gain, D_gain, beta, alpha)
@@ -631,4 +414,60 @@ class ClosedLoop:
             co = self.loop_coefficients(omega, b, a)
             for k in FREQ_OUTPUTS:
                 out[k][sel] = co.evaluate(k, pts[0, sel], pts[1, sel])
-        return {k: v.reshape(shape + (omega.size,)) for k, v in out.items()}
+        return FrequencyResponse(omega=omega, **{k: v.reshape(shape + (omega.size,)) for k, v in out.items()})
+
+    # --- what the analyses share ----------------------------------------------------------------
+    def gain_points(self, P_gain, D_gain, beta=None, alpha=None):
+        """``(P, D, beta, alpha)``: the gain points as flat arrays (P_gain and D_gain broadcast
+        together, C order) and one torque-loop pair (scalars; default the controller's), checked
+        by the one rule of :func:`haa_sym.model.params.gain_array`."""
+        P, D = _finite_array("P_gain", P_gain), _finite_array("D_gain", D_gain)
+        try:
+            P, D = np.broadcast_arrays(P, D)
+        except ValueError:
+            raise ParameterError(f"P_gain has shape {P.shape} and D_gain {D.shape}; allowed: shapes that "
+                                 "broadcast together (one value each per gain point)") from None
+        ctrl = self.params.controller
+        b = _finite_array("beta", ctrl.beta if beta is None else beta)
+        a = _finite_array("alpha", ctrl.alpha if alpha is None else alpha)
+        if b.size != 1 or a.size != 1:
+            raise ParameterError(f"beta has {b.size} and alpha {a.size} values; allowed: one value each "
+                                 "(the analysis holds the torque loop fixed)")
+        return P.ravel(), D.ravel(), float(b.ravel()[0]), float(a.ravel()[0])
+
+    def provenance(self, **extra) -> dict:
+        """What produced a result of this loop: parameters, options (file defaults resolved),
+        versions, the generated-code hash, the backend that evaluated it, and ``extra``."""
+        ev = evaluators(self.backend)
+        return {"params": self.params.to_dict(), "options": self.options.to_dict(), "haa_sym": __version__,
+                "generated_source_sha256": ev.code.manifest["source_sha256"], **extra, "backend": ev.backend}
+
+
+@dataclass(frozen=True)
+class FrequencyResponse:
+    """:meth:`ClosedLoop.frequency_response`: ``omega`` (rad/s) and the complex responses
+    ``L_t``, ``L_imp``, ``Z``, ``H_T`` (point_shape + (n_omega,)); ``fr["Z"]`` reads a field by name."""
+
+    omega: np.ndarray
+    L_t: np.ndarray
+    L_imp: np.ndarray
+    Z: np.ndarray
+    H_T: np.ndarray
+
+    def __getitem__(self, name: str) -> np.ndarray:
+        if name not in FREQ_OUTPUTS:
+            raise KeyError(name)
+        return getattr(self, name)
+
+
+def loop_first(fn):
+    """Mark an analysis that takes the closed loop first (``fn(loop, ...)``): anything else in
+    that place (a ``Params``, most often) is refused with a message saying what to pass."""
+    @functools.wraps(fn)
+    def wrapper(loop, *args, **kwargs):
+        if not isinstance(loop, ClosedLoop):
+            raise ParameterError(
+                f"{fn.__name__}: the first argument is a {type(loop).__name__}; allowed: a haa_sym.ClosedLoop "
+                f"(the analyses take the loop first: {fn.__name__}(ClosedLoop(params, options), ...))")
+        return fn(loop, *args, **kwargs)
+    return wrapper

@@ -15,7 +15,7 @@ import numpy as np
 import scipy.linalg
 
 from haa_sym.errors import ParameterError
-from haa_sym.model.params import Plant
+from haa_sym.model.params import Plant, load_params
 from haa_sym.compiled.plant_code import plant_function
 
 __all__ = ["ContinuousPlant", "DiscretePlant", "continuous_plant", "discretize"]
@@ -141,7 +141,6 @@ def _overflow(plant: Plant | None, Ts: float | None, backend: str = "auto") -> P
     if not keys:
         return ParameterError(f"{what} overflow to non-finite values; allowed: physically sized parameters")
     try:
-        from haa_sym.model.params import load_params
         ref = load_params().plant
         hint = " (the bundled HyQ file has " + ", ".join(f"{k} = {getattr(ref, k):g}" for k in keys) + ")" \
             if all(k in ref.keys for k in keys) else ""

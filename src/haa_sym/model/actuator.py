@@ -68,15 +68,12 @@ class Actuator:
     ``parameter_keys`` and ``domain`` (the plant vector and its rules), ``units``,
     ``state_names``, ``input_names`` and ``output_names`` (the plant's signals), ``port`` and
     ``torque_damping`` (the loop's defaults), ``fingerprint`` and ``function_name`` (the plant
-    function's identity), ``source``, :meth:`describe`, :meth:`structure` and :meth:`model`, the
-    :class:`~haa_sym.symbolic.model.LinearActuatorModel` the code generator compiles (sympy:
-    called only when code is generated).
+    function's identity), ``source``, :meth:`describe` and :meth:`structure`. The sympy model the
+    code generator compiles is :func:`haa_sym.symbolic.chain.symbolic_model` of it (the
+    symbolic layer sits above this one: only code generation imports sympy).
     """
 
     __slots__ = ()
-
-    def model(self):
-        raise NotImplementedError
 
 
 @dataclass(frozen=True)
@@ -223,12 +220,6 @@ class Topology(Actuator):
     def function_name(self) -> str:
         """Name of the generated plant function of this topology."""
         return f"haa_plant_{self.fingerprint[:12]}"
-
-    def model(self):
-        """The chain's :class:`~haa_sym.symbolic.model.LinearActuatorModel` (derived by sympy,
-        :func:`haa_sym.symbolic.chain.actuator_model`; what the code generator compiles)."""
-        from haa_sym.symbolic.chain import actuator_model      # sympy: the compile step only
-        return actuator_model(self)
 
     def describe(self) -> str:
         chain = ", ".join(f"{c.name}: {c.a}-{c.b}" for c in self.couplings)

@@ -4,7 +4,8 @@ from __future__ import annotations
 import math
 from pathlib import Path
 
-from haa_sym.loop.closed_loop import LoopOptions
+from haa_sym.io.outputs import write_text
+from haa_sym.loop import LoopOptions
 from haa_sym.analysis.torque import STEP_CONVENTION
 
 __all__ = ["write_report"]
@@ -56,7 +57,6 @@ def option_sensitivity_markdown(rows: list[dict]) -> str:
 
 
 def write_report(out: Path, r: dict, spec: dict, options: LoopOptions, verify_text: str) -> Path:
-    from haa_sym.io.outputs import write_text
     c = spec["claims"]
     meta = r["meta"]
     ctrl = meta["params"]["controller"]
@@ -255,7 +255,7 @@ def write_report(out: Path, r: dict, spec: dict, options: LoopOptions, verify_te
             f"{sc['beta_range'][1]:g} (relative tolerance {sc['beta_tol']:g}) that keeps the joint stable with "
             f"PM >= 30 deg for every leg configuration from {sc['leg'][0]} to {sc['leg'][1]} "
             f"({sc['leg_configurations']} configurations: the answer did not change when their number doubled); "
-            f"each answer re-checked with exactly located crossovers ({sc['lowered_by_exact_margins']} lowered). "
+            f"each answer re-decided point by point at every leg configuration ({sc['lowered_by_point_check']} lowered). "
             f"Data: `schedule.csv`.\n")
         add(_table(["", "impedances"],
                     [["with a robust beta", f"{sc['feasible']} of {sc['points']}"],

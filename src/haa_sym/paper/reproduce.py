@@ -23,6 +23,7 @@ outputs, so no other file is ever deleted.
 """
 from __future__ import annotations
 
+import dataclasses
 import json
 import re
 import subprocess
@@ -33,17 +34,24 @@ from pathlib import Path
 
 import numpy as np
 
+from haa_sym.analysis.boundaries.combined import boundaries
 from haa_sym.analysis.contact import contact_intervals, intervals
-from haa_sym.io.budget import check_memory, sweep_bytes
-from haa_sym.loop.closed_loop import ClosedLoop, LoopOptions
-from haa_sym.io.outputs import Transaction, check_directory, csv_text as _csv, write_text
-from haa_sym.paper import panel_params, paper_spec
-from haa_sym.model.params import Params, load_params
 from haa_sym.analysis.passivity import bands_beyond, corrected_phase
+from haa_sym.analysis.regions import region_map
+from haa_sym.analysis.sweep import CHUNK
+from haa_sym.analysis.torque import (p1_roots, step_response, torque_bandwidth, torque_bandwidth_map,
+                                     torque_loop_margins)
+from haa_sym.check.crosscheck import eigenvalue_crosscheck
+from haa_sym.design.schedule import schedule
+from haa_sym.io.budget import check_memory, sweep_bytes
+from haa_sym.io.gridspec import grid
+from haa_sym.io.outputs import Transaction, check_directory, csv_text as _csv, write_text
 from haa_sym.io.progress import message, progress as progress_bar
-from haa_sym.analysis.regions import CHUNK, eigenvalue_crosscheck, grid, region_map, run_meta
+from haa_sym.loop import ClosedLoop, LoopOptions
+from haa_sym.model.params import Params, load_params
+from haa_sym.paper import panel_params, paper_spec
+from haa_sym.paper.report import table2_markdown, write_report
 from haa_sym.paper.table2 import score_options, table2
-from haa_sym.analysis.torque import p1_roots, step_response, torque_bandwidth, torque_loop_margins
 
 __all__ = ["reproduce", "region_trends"]
 
@@ -222,7 +230,6 @@ def _variants(options: LoopOptions) -> list[tuple[str, dict]]:
 
 def _regions(job: _Job) -> dict:
     """Figs. 8-11: every panel's map (npz), its eigenvalue cross-check, the figures, the trends."""
-    from haa_sym.analysis.boundaries.stability import boundaries
     from haa_sym.io.plots import plot_region_panels, save_figure
     _log("regions: 16 maps (Figs. 8-11), decided from the exact curves, drawn with them")
     splits = quadrant_splits(job.spec, job.P_grid, job.D_grid)
@@ -231,18 +238,19 @@ def _regions(job: _Job) -> dict:
         pid = f"{entry['figure']}{entry['panel']}"
         p = panel_params(job.params, entry)
         loop = ClosedLoop(p, job.options)
-        m = region_map(p, job.P_grid, job.D_grid, options=job.options, loop=loop)
-        curves = boundaries(p, options=job.options, loop=loop, P_range=(job.P_grid.min(), job.P_grid.max()),
+        m = region_map(loop, job.P_grid, job.D_grid)
+        curves = boundaries(loop, P_range=(job.P_grid.min(), job.P_grid.max()),
                             D_range=(job.D_grid.min(), job.D_grid.max()), n_lines=31 if job.quick else 101) \
             if loop.options.conventions.pm_loop == "impedance" else None
         crosscheck[pid] = eigenvalue_crosscheck(m, loop, points="boundary")
         # the grid evaluators decide every point again (quick mode: the first panel of each figure)
         first = entry["figure"] not in panels_by_fig
         if m.meta["method"] == "curves" and (first or not job.quick):
-            g = region_map(p, job.P_grid, job.D_grid, options=job.options, loop=loop, method="grid")
+            g = region_map(loop, job.P_grid, job.D_grid, method="grid")
             crosscheck[pid]["grid_disagree"] = {k: int((getattr(m, k) != getattr(g, k)).sum())
                                                 for k in ("stable", "low_pm", "passive")}
-        m.meta.update(figure=entry["figure"], panel=entry["panel"], title=entry["title"])
+        m = dataclasses.replace(m, meta={**m.meta, "figure": entry["figure"], "panel": entry["panel"],
+                                         "title": entry["title"]})
         m.save(job.out / "regions" / f"fig{entry['figure']:02d}{entry['panel']}.npz")
         for split, (Ps, Ds) in splits.items():
             stats[split][pid] = _quadrants(m, Ps, Ds)
@@ -261,7 +269,7 @@ def _option_sensitivity(job: _Job) -> dict:
     _log("option sensitivity of the nominal map")
     sens = []
     for label, change in [("none (defaults)", {})] + _variants(job.options):
-        m = region_map(job.params, job.P_grid, job.D_grid, options=job.with_options(**change), radius=False)
+        m = region_map(ClosedLoop(job.params, job.with_options(**change)), job.P_grid, job.D_grid)
         sens.append({"change": label, "stable": int(m.stable.sum()), "low_pm": int(m.low_pm.sum()),
                      "passive": int(m.passive.sum()), "cells": int(m.stable.size)})
     return {"option_sensitivity": sens}
@@ -277,8 +285,7 @@ def _trend_alternatives(job: _Job, trends: list[dict], split: tuple[float, float
             continue                                       # passivity only: no effect on trends
         opt = job.with_options(**change)
         st = {f"{e['figure']}{e['panel']}": _quadrants(
-            region_map(panel_params(job.params, e), job.P_grid, job.D_grid, options=opt, radius=False,
-                       passivity=False), *split)
+            region_map(ClosedLoop(panel_params(job.params, e), opt), job.P_grid, job.D_grid, passivity=False), *split)
             for e in job.spec["regions"]["panel"]}
         tr = region_trends(st)
         alt[label] = {"holding": sum(t["holds"] for t in tr),
@@ -289,7 +296,6 @@ def _trend_alternatives(job: _Job, trends: list[dict], split: tuple[float, float
 
 def _table2(job: _Job) -> dict:
     """Table 2 (csv, md), the scores of every option combination, and what rescues each miss."""
-    from haa_sym.paper.report import table2_markdown
     _log("Table 2 and option scores")
     cells = table2(job.params, job.options, job.spec)
     rows = [{"row": c.row, "column": c.column, "P_gain": c.P_gain, "D_gain": c.D_gain,
@@ -322,11 +328,10 @@ def _fig12(job: _Job, loop: ClosedLoop) -> dict:
     """Fig. 12: corrected phase of Z, torque loop alone and impedance loop closed; the bands."""
     from haa_sym.io.plots import plot_corrected_phase, save_figure
     params, options = job.params, job.options
-    w_fine = np.logspace(np.log10(options.numerics.omega_min), np.log10(np.pi / params.controller.Ts * (1 - 1e-9)),
-                         4 * options.numerics.n_omega)
-    w, ph_t = corrected_phase(params, 0.0, 0.0, omega=w_fine, loop=loop)
+    w_fine = options.omega(params.controller.Ts, 4 * options.numerics.n_omega)
+    w, ph_t = corrected_phase(loop, 0.0, 0.0, omega=w_fine)
     P12, D12 = job.claims["fig12_gains"]
-    _, ph_i = corrected_phase(params, P12, D12, omega=w_fine, loop=loop)
+    _, ph_i = corrected_phase(loop, P12, D12, omega=w_fine)
     save_figure(plot_corrected_phase(
         [(w, ph_t, f"torque loop alone (beta = {params.controller.beta:g}, alpha = {params.controller.alpha:g})"),
          (w, ph_i, f"impedance loop closed (P_gain = {P12:g}, D_gain = {D12:g})")],
@@ -344,10 +349,10 @@ def _contact(job: _Job) -> dict:
     from haa_sym.io.plots import plot_contact, save_figure
     K = grid(job.claims["contact_K_L2_grid"] if not job.quick else "log:1:100000:80", "K_L2")
     # the scan brackets every change of stability and passivity; Brent's method locates each end
-    r = contact_intervals(job.params, (K.min(), K.max()), n_scan=K.size, options=job.options)
+    loop = ClosedLoop(job.params, job.options, basis=False)
+    r = contact_intervals(loop, (K.min(), K.max()), n_scan=K.size)
     P12, D12 = job.claims["fig12_gains"]
-    ri = contact_intervals(job.params, (K.min(), K.max()), n_scan=K.size, options=job.options,
-                           P_gain=P12, D_gain=D12)
+    ri = contact_intervals(loop, (K.min(), K.max()), n_scan=K.size, P_gain=P12, D_gain=D12)
 
     def num(v, fmt):
         return "" if np.isnan(v) else format(v, fmt)      # empty: unstable (NaN in genfromtxt)
@@ -387,16 +392,16 @@ def _fig7(job: _Job) -> dict:
     c = job.claims
     panels, steps = [], []
     for K_L2 in c["fig7_K_L2"]:
-        p7 = job.params.with_values(K_L2=K_L2)
+        p7 = ClosedLoop(job.params.with_values(K_L2=K_L2), job.options, basis=False)
         lines = []
         for a, ls in zip(c["fig7_alpha"], ("-", "--")):
-            s = step_response(p7, duration=c["fig7_duration_s"], options=job.options, alpha=a)
+            s = step_response(p7, duration=c["fig7_duration_s"], alpha=a)
             lines.append((s, f"alpha = {a:g}", ls))
             info = s.info
             steps.append({"K_L2": K_L2, "alpha": a, "final_value": s.final_value,
                           **{key: _finite_or_none(info[k]) for key, k in STEP_INFO_COLUMNS},
                           "T_at_end": float(s.T[-1]),
-                          "bandwidth_rad_s": torque_bandwidth(p7, options=job.options, alpha=a)})
+                          "bandwidth_rad_s": torque_bandwidth(p7, alpha=a)})
         panels.append((f"K_L2 = {K_L2:g} Nm/rad", lines))
     save_figure(plot_steps(panels, "Fig. 7: unit torque steps (extended leg)"), job.out / "fig07.png")
     # long format: one row per sample and curve, so the header names no parameter values
@@ -419,7 +424,7 @@ def _torque_loop_corners(job: _Job) -> dict:
         for K in sorted({0.0, *(p.get("K_L2") for p in params.configurations.values() if "K_L2" in p),
                          params.plant.K_L2}):
             pc = params.configuration(cfg).with_values(K_L2=K)
-            mg = torque_loop_margins(pc, options=job.options)
+            mg = torque_loop_margins(ClosedLoop(pc, job.options))
             corners.append({"configuration": cfg, "J_L2": pc.plant.J_L2, "K_L2": K,
                             "p1_roots": [complex(z) for z in p1_roots(pc)],
                             "pm_deg": mg.pm_deg if np.isfinite(mg.pm_deg) else None,
@@ -433,13 +438,12 @@ def _torque_bandwidth(job: _Job) -> dict:
     """Torque bandwidth (leg free in the air, K_L2 = 0, Sec. 3.3) over beta and alpha for both
     legs, next to the torque-loop stability it trades against."""
     from haa_sym.io.plots import plot_torque_bandwidth, save_figure
-    from haa_sym.analysis.torque import torque_bandwidth_map
     B = np.linspace(0.1, 8.0, 8 if job.quick else 25)
     A = np.linspace(0.0, 1.2, 5 if job.quick else 13)
     panels, rows, summary = [], [], {}
     for cfg in sorted(job.params.configurations):
         pc = job.params.configuration(cfg).with_values(K_L2=0.0)
-        bw, st = torque_bandwidth_map(pc, B, A, options=job.options)
+        bw, st = torque_bandwidth_map(ClosedLoop(pc, job.options), B, A)
         panels.append((f"{cfg} leg", B, A, bw, st))
         rows += [{"configuration": cfg, "beta": f"{b:.6g}", "alpha": f"{a:.6g}", "stable": bool(st[i, j]),
                   "torque_bandwidth_rad_s": f"{bw[i, j]:.6g}"} for i, b in enumerate(B) for j, a in enumerate(A)]
@@ -456,10 +460,9 @@ def _schedule(job: _Job) -> dict:
     """The paper's outlook (Sec. 6): the torque-gain schedule over the locomotion impedances,
     robust to the leg, against the fixed beta = 1 of the paper's tuning."""
     from haa_sym.io.plots import plot_schedule, save_figure
-    from haa_sym.design.schedule import schedule
     P = grid("log:5:2000:4" if job.quick else "log:1:2000:30", "P_gain")
     D = grid("lin:1:50:3" if job.quick else "lin:1:50:20", "D_gain")
-    s = schedule(job.params, P, D, options=job.options, beta_tol=0.1 if job.quick else 0.02)
+    s = schedule(ClosedLoop(job.params, job.options), P, D, beta_tol=0.1 if job.quick else 0.02)
     _write_text(job.out / "schedule.csv", s.csv_text())
     save_figure(plot_schedule(s, "Torque-gain schedule (stable, PM >= 30 deg for every leg configuration)"),
                 job.out / "schedule.png")
@@ -476,7 +479,7 @@ def _schedule(job: _Job) -> dict:
                          "bandwidth_gain_range": [float(gain.min()), float(gain.max())] if gain.size else None,
                          "beta_range": s.meta["beta_range"], "beta_tol": s.meta["beta_tol"],
                          "leg": s.meta["leg"], "leg_configurations": s.n_configurations,
-                         "lowered_by_exact_margins": s.meta["lowered_by_exact_margins"]}}
+                         "lowered_by_point_check": s.meta["lowered_by_point_check"]}}
 
 
 def _verify(job: _Job) -> tuple[dict, str]:
@@ -515,7 +518,8 @@ def reproduce(out: str | Path = "results", params: Params | None = None,
         (stage / "regions").mkdir()
         job = _Job(out=stage, params=params, options=options, spec=spec, quick=quick,
                    P_grid=P_grid, D_grid=D_grid)
-        result: dict = {"meta": run_meta(params, options, quick=quick)}
+        loop = ClosedLoop(params, options)
+        result: dict = {"meta": loop.provenance(quick=quick)}
         # one bar over the sections (stderr; shown on a terminal after 2 s, see haa_sym.io.progress)
         with progress_bar(12, "reproduce", "section") as bar:
             def run(section, *args):
@@ -527,7 +531,6 @@ def reproduce(out: str | Path = "results", params: Params | None = None,
                 result["region_splits"]["locomotion"])
             run(_table2)
             _log("Fig. 12, contact stiffness, beta threshold, Fig. 7, torque-loop bounds, verify")
-            loop = ClosedLoop(params, options)
             run(_fig12, loop)
             run(_contact)
             run(_beta_threshold, loop)
@@ -540,7 +543,6 @@ def reproduce(out: str | Path = "results", params: Params | None = None,
             bar.update(1)
         result["elapsed_s"] = round(time.time() - t_start, 1)
         _write_text(job.out / "claims.json", json.dumps(result, indent=1, default=_json_default) + "\n")
-        from haa_sym.paper.report import write_report
         write_report(job.out, result, spec, options, verify_text)
     _log(f"wrote {out}/REPORT.md in {result['elapsed_s']} s")
     return result

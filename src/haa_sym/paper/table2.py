@@ -11,7 +11,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from haa_sym.loop.closed_loop import COLGATE, FILTERS, PORTS, ClosedLoop, LoopOptions
+from haa_sym.loop import COLGATE, FILTERS, PORTS, ClosedLoop, LoopOptions
 from haa_sym.paper import panel_params, paper_spec
 from haa_sym.model.params import Params
 from haa_sym.analysis.passivity import passivity
@@ -56,7 +56,7 @@ def table2(params: Params, options: LoopOptions | None = None, spec: dict | None
     D = np.array([g[1] for g in t["gains"]])
     for row in t["row"]:
         p = panel_params(params, row)
-        r = passivity(p, P, D, loop=ClosedLoop(p, options))
+        r = passivity(ClosedLoop(p, options), P, D)
         for j, col in enumerate(t["columns"]):
             cells.append(Cell(row["label"], col, float(P[j]), float(D[j]), str(r.status[j]),
                               row["paper"][j], float(r.phase_excess_deg[j]), float(r.omega_worst[j])))

@@ -25,12 +25,13 @@ from dataclasses import dataclass
 import sympy as sp
 from sympy.polys.matrices import DomainMatrix
 
-from haa_sym.model.actuator import ROTOR, Topology
+from haa_sym.model.actuator import ROTOR, Actuator, Topology
+from haa_sym.symbolic.model import LinearActuatorModel, Parameter
 
 s = sp.Symbol("s")
 VC = sp.Symbol("VC_gain")
 
-__all__ = ["s", "VC", "ChainStateSpace", "symbols", "state_space", "actuator_model", "laplace_equations",
+__all__ = ["s", "VC", "ChainStateSpace", "symbols", "state_space", "actuator_model", "symbolic_model", "laplace_equations",
            "torque_tf_fraction", "exact_vc_condition", "load_free_g_tvc", "vc_gain_exact",
            "vc_gain_simplified"]
 
@@ -114,12 +115,17 @@ def state_space(top: Topology, p: dict | None = None) -> ChainStateSpace:
                            states=top.state_names, inputs=top.input_names, outputs=top.output_names)
 
 
+def symbolic_model(actuator: Actuator) -> LinearActuatorModel:
+    """The :class:`~haa_sym.symbolic.model.LinearActuatorModel` the code generator compiles for
+    ``actuator``: a chain's (:func:`actuator_model`), or a model written in code itself."""
+    return actuator if isinstance(actuator, LinearActuatorModel) else actuator_model(actuator)
+
+
 @functools.lru_cache(maxsize=None)
 def actuator_model(top: Topology):
     """The chain as a :class:`~haa_sym.symbolic.model.LinearActuatorModel`: :func:`state_space`,
     its parameters with domains and units, and VC0 = Eq. (6) at alpha = 1 (what the code
     generator compiles; the matrices are the same sympy objects, so the same generated code)."""
-    from haa_sym.symbolic.model import LinearActuatorModel, Parameter
     ss = state_space(top)
     units = top.units
     return LinearActuatorModel(

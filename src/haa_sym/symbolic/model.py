@@ -312,9 +312,6 @@ class LinearActuatorModel(Actuator):
         return (f"model {self.name!r}: {len(self.states)} states, outputs {list(self.outputs)}, "
                 f"{len(self.parameters)} parameters, port dtheta_{self.port}")
 
-    def model(self) -> "LinearActuatorModel":
-        return self
-
     def _identity(self):
         return (self.fingerprint, self.port, self.torque_damping,
                 tuple((p.name, p.unit) for p in self.parameters))

@@ -32,9 +32,10 @@ from __future__ import annotations
 
 import numpy as np
 
-from haa_sym.loop.closed_loop import ClosedLoop
+from haa_sym.loop import ClosedLoop, loop_first
 from haa_sym.errors import ParameterError
-from haa_sym.analysis.sweep import colgate_factor, product_form
+from haa_sym.analysis.boundaries.curves import BoundaryCurve
+from haa_sym.analysis.sweep import colgate_factor, gain_rows, phase_excess, product_form
 
 __all__ = ["passivity_boundary", "passivity_crossings", "NEUTRAL"]
 
@@ -218,7 +219,6 @@ def _refine(loop, on_P_line, t, branch, sign, lw, beta, alpha):
 
 def _worst_excess(loop, P, D, beta, alpha, omega):
     """max over ``omega`` of |corrected phase of Z| - 90 deg at the points (P, D)."""
-    from haa_sym.analysis.sweep import gain_rows, phase_excess
     coef = loop.loop_coefficients(omega, beta, alpha)
     return phase_excess(gain_rows(P, D), coef.Z_num, coef.Z_den, coef.omega, loop.params.controller.Ts,
                         loop.options.conventions.colgate)[0]
@@ -256,6 +256,7 @@ def _line_points(Q, omega, along, t):
     return [np.concatenate(v) for v in (line, root, w, kinds)], todo
 
 
+@loop_first
 def passivity_boundary(loop: ClosedLoop, beta: float | None = None, alpha: float | None = None, *,
                        P_range=(0.0, 2e4), D_range=(0.0, 50.0), n_lines: int = 101) -> list:
     """The passivity boundary in the box, as polylines.
@@ -282,7 +283,6 @@ def passivity_boundary(loop: ClosedLoop, beta: float | None = None, alpha: float
         ``kind`` is "passivity" (a tangency of the envelope), "passivity (omega_min)" or
         "passivity (Nyquist)" (the edge of the judged frequency range bounds the set).
     """
-    from haa_sym.analysis.boundaries.stability import BoundaryCurve
     ctrl = loop.params.controller
     beta = ctrl.beta if beta is None else float(beta)
     alpha = ctrl.alpha if alpha is None else float(alpha)

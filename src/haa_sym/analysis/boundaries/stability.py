@@ -28,69 +28,20 @@ Example
 """
 from __future__ import annotations
 
-from dataclasses import dataclass, field
-from typing import NamedTuple
-
 import numpy as np
 
+from haa_sym.analysis.margins import phase_margins
+from haa_sym.analysis.boundaries.curves import CURVE_POINTS, BoundaryCurve, StabilityBoundary
+from haa_sym.analysis.rootfind import illinois
 from haa_sym.compiled.layout import gain_monomials
-from haa_sym.loop.closed_loop import ClosedLoop, LoopOptions
 from haa_sym.errors import ParameterError
-from haa_sym.model.params import Params, gain_array
+from haa_sym.model.params import gain_array
+from haa_sym.loop import loop_first
 
-# points of a drawn curve at the least (each run of the nu grid inside the box is resampled)
-CURVE_POINTS = 200
-
-__all__ = ["BoundaryCurve", "StabilityBoundary", "Boundaries", "boundaries", "affine_polynomials", "stability_boundary",
-           "phase_margin_curves", "crossings", "classify_grid", "classify_regions",
-           "RegionDecisions"]
+__all__ = ["affine_polynomials", "stability_boundary", "phase_margin_curves", "crossings"]
 
 
-@dataclass(frozen=True)
-class BoundaryCurve:
-    """One branch of the stability boundary.
-
-    ``P_gain`` (Nm/rad), ``D_gain`` (Nms/rad) and ``omega`` (rad/s, the frequency of the
-    closed-loop pole on the unit circle: theta/Ts) per point; ``kind`` is "z=1" (a real pole at
-    z = 1, a straight line), "z=-1" (a real pole at z = -1, a straight line) or "complex" (a
-    complex pair at z = exp(+-j omega Ts)).
-    """
-
-    kind: str
-    P_gain: np.ndarray
-    D_gain: np.ndarray
-    omega: np.ndarray
-
-
-@dataclass(frozen=True)
-class StabilityBoundary:
-    """The stability boundary of one configuration (fixed beta, alpha) in the gain plane."""
-
-    curves: list
-    beta: float
-    alpha: float
-    Ts: float
-    meta: dict = field(default_factory=dict)
-    # A, B, C of q = A + P_gain B + D_gain C (ascending in s), for exact crossings
-    ABC: np.ndarray = field(default=None, repr=False)
-    nu: np.ndarray = field(default=None, repr=False)
-
-    def to_dict(self) -> dict:
-        """Plain JSON-able data: the curves (P_gain Nm/rad, D_gain Nms/rad, omega rad/s, kind)
-        and what produced them."""
-        return {"boundary": "stability", "beta": self.beta, "alpha": self.alpha, "Ts": self.Ts,
-                "meta": self.meta,
-                "curves": [{"kind": c.kind, "P_gain": c.P_gain.tolist(), "D_gain": c.D_gain.tolist(),
-                            "omega": c.omega.tolist()} for c in self.curves]}
-
-    def save(self, path, tx=None, field: str | None = None):
-        """Write :meth:`to_dict` as JSON (all or nothing, see :mod:`haa_sym.io.outputs`)."""
-        import json
-        from haa_sym.io.outputs import write_text
-        return write_text(path, json.dumps(self.to_dict(), indent=1) + "\n", tx, field)
-
-
-def affine_polynomials(loop: ClosedLoop, beta=None, alpha=None) -> np.ndarray:
+def affine_polynomials(loop, beta=None, alpha=None) -> np.ndarray:
     """``(3, cap + 1)``: ascending coefficients in s of A, B, C with q = A + P_gain B + D_gain C,
     the bilinear transform of chi (exact basis of ``loop``, rounded once) at fixed beta, alpha."""
     ctrl = loop.params.controller
@@ -169,36 +120,63 @@ def _rotated_branch(ABC: np.ndarray, nu: np.ndarray, phi_deg: float, with_det: b
     return (P, D, det) if with_det else (P, D)
 
 
-def phase_margin_curves(params: Params, beta=None, alpha=None, *, pm_deg: float = 30.0,
-                        options: LoopOptions | None = None, P_range=(0.0, 2e4), D_range=(0.0, 50.0),
-                        n_nu: int = 4000, loop: ClosedLoop | None = None) -> list:
-    """The gains where the impedance loop (opened at the torque reference) has a crossover with
-    phase margin exactly ``pm_deg``: polylines (kind "pm=<pm_deg>") in the box, with the
-    crossover frequency. Since 1 + L_imp = chi/a, L_imp = (P_gain b + D_gain c)/a and a crossover
-    with margin phi is a + exp(-j phi)(P_gain b + D_gain c) = 0 at z = exp(j theta): a real 2 x 2
-    solve per nu = tan(theta/2), as for the stability boundary (phi = 0)."""
-    loop = loop or ClosedLoop(params, options)
+@loop_first
+def phase_margin_curves(loop, beta=None, alpha=None, *, pm_deg: float = 30.0, P_range=(0.0, 2e4),
+                        D_range=(0.0, 50.0), n_nu: int = 4000, outline: bool = True) -> list:
+    """The outline of the low-phase-margin region of the impedance loop (opened at the torque
+    reference) in the box: polylines (kind "pm=+30" / "pm=-30") with the crossover frequency.
+
+    Since 1 + L_imp = chi/a, L_imp = (P_gain b + D_gain c)/a, and a crossover with margin phi
+    is a + exp(-j phi)(P_gain b + D_gain c) = 0 at z = exp(j theta): a real 2 x 2 solve per
+    nu = tan(theta/2), as for the stability boundary (phi = 0). The low-PM region of the
+    "distance" rule (:mod:`haa_sym.analysis.margins`) is bounded by the loci phi = +pm_deg and
+    phi = -pm_deg; with ``outline`` (default) only the parts that bound it are kept: a locus
+    point where the loop is unstable, or where another crossover passes nearer to -1, lies
+    inside the region's complement or its interior and is dropped (the polyline is split
+    there). ``outline=False`` returns the loci whole.
+    """
     if loop.options.conventions.pm_loop != "impedance":
         raise ParameterError("phase_margin_curves: pm_loop = 'torque' is not covered yet; allowed: "
                              "pm_loop = 'impedance' (the maps' default)")
-    ctrl = params.controller
+    ctrl = loop.params.controller
+    beta = ctrl.beta if beta is None else float(beta)
+    alpha = ctrl.alpha if alpha is None else float(alpha)
     ABC = affine_polynomials(loop, beta, alpha)
     nu = np.logspace(-10, 10, n_nu)
-    return _box_curves(lambda x: _rotated_branch(ABC, x, pm_deg), nu, ctrl.Ts, P_range, D_range,
-                       f"pm={pm_deg:g}")
+    out = []
+    for phi in (pm_deg, -pm_deg):
+        curves = _box_curves(lambda x: _rotated_branch(ABC, x, phi), nu, ctrl.Ts, P_range, D_range,
+                             f"pm={phi:+g}")
+        out += [p for c in curves for p in (_outline(loop, c, beta, alpha, pm_deg) if outline else [c])]
+    return out
 
 
-def stability_boundary(params: Params, beta=None, alpha=None, *, options: LoopOptions | None = None,
-                       P_range=(0.0, 2e4), D_range=(0.0, 50.0), n_nu: int = 4000,
-                       loop: ClosedLoop | None = None) -> StabilityBoundary:
+# A locus point bounds the low-PM region when its own crossover is the nearest to -1: no other
+# crossover nearer by more than this (deg; the located crossovers agree to ~1e-9 deg).
+_OUTLINE_TOL_DEG = 1e-6
+
+
+def _outline(loop, c: BoundaryCurve, beta: float, alpha: float, pm_deg: float) -> list:
+    """The runs of curve ``c`` (a +-pm_deg locus) where the loop is stable and no crossover is
+    nearer to -1 than pm_deg: the outline of the low-PM region."""
+    st = loop.stability(c.P_gain, c.D_gain, beta, alpha).stable
+    m = phase_margins(loop, c.P_gain, c.D_gain, beta, alpha, which="L_imp")
+    keep = st & (m.distance_deg >= pm_deg - _OUTLINE_TOL_DEG)
+    idx = np.flatnonzero(keep)
+    runs = np.split(idx, np.flatnonzero(np.diff(idx) > 1) + 1) if idx.size else []
+    return [BoundaryCurve(c.kind, c.P_gain[r], c.D_gain[r], c.omega[r]) for r in runs if r.size >= 2]
+
+
+@loop_first
+def stability_boundary(loop, beta=None, alpha=None, *, P_range=(0.0, 2e4), D_range=(0.0, 50.0),
+                       n_nu: int = 4000) -> StabilityBoundary:
     """The stability boundary in the box ``P_range`` x ``D_range`` for fixed beta and alpha.
 
     Parameters
     ----------
-    params : Params
+    loop : ClosedLoop
     beta, alpha : float, optional
         Torque-gain scale (Eq. 7) and velocity compensation (Eq. 6); default the controller's.
-    options : LoopOptions, optional
     P_range, D_range : (float, float)
         The box of impedance gains (Nm/rad, Nms/rad) in which the curves are kept.
     n_nu : int
@@ -209,8 +187,7 @@ def stability_boundary(params: Params, beta=None, alpha=None, *, options: LoopOp
     -------
     StabilityBoundary
     """
-    loop = loop or ClosedLoop(params, options)
-    ctrl = params.controller
+    ctrl = loop.params.controller
     Ts = ctrl.Ts
     beta = ctrl.beta if beta is None else float(beta)
     alpha = ctrl.alpha if alpha is None else float(alpha)
@@ -227,84 +204,6 @@ def stability_boundary(params: Params, beta=None, alpha=None, *, options: LoopOp
             curves.append(BoundaryCurve(kind, seg[0], seg[1], np.full(2, w)))
     return StabilityBoundary(curves, beta, alpha, Ts, {"n_nu": n_nu, "P_range": list(P_range),
                                                       "D_range": list(D_range)}, ABC, nu)
-
-
-@dataclass(frozen=True)
-class Boundaries:
-    """The three boundaries of one configuration (fixed beta, alpha) in the gain plane.
-
-    ``stability``: :class:`StabilityBoundary` (a closed-loop pole on the unit circle);
-    ``phase_margin``: curves where the impedance loop has a crossover with margin ``pm_deg``;
-    ``passivity``: curves where the corrected phase of Z reaches +-90 deg
-    (:func:`haa_sym.analysis.boundaries.passivity.passivity_boundary`). Every curve point carries its
-    critical frequency ``omega`` (rad/s) and every curve its ``kind``.
-    """
-
-    stability: StabilityBoundary
-    phase_margin: list
-    passivity: list
-    pm_deg: float
-
-    @property
-    def curves(self) -> list:
-        return list(self.stability.curves) + list(self.phase_margin) + list(self.passivity)
-
-    def to_dict(self) -> dict:
-        """Plain JSON-able data: per boundary its curves (P_gain Nm/rad, D_gain Nms/rad, omega
-        rad/s, kind) and what produced them."""
-        def curves(cs):
-            return [{"kind": c.kind, "P_gain": c.P_gain.tolist(), "D_gain": c.D_gain.tolist(),
-                     "omega": c.omega.tolist()} for c in cs]
-        b = self.stability
-        return {"beta": b.beta, "alpha": b.alpha, "Ts": b.Ts, "pm_deg": self.pm_deg, "meta": b.meta,
-                "stability": curves(b.curves), "phase_margin": curves(self.phase_margin),
-                "passivity": curves(self.passivity)}
-
-    def save(self, path, tx=None, field: str | None = None):
-        """Write :meth:`to_dict` as JSON (all or nothing, see :mod:`haa_sym.io.outputs`)."""
-        import json
-        from haa_sym.io.outputs import write_text
-        return write_text(path, json.dumps(self.to_dict(), indent=1) + "\n", tx, field)
-
-
-def boundaries(params: Params, beta=None, alpha=None, *, options: LoopOptions | None = None,
-               P_range=(0.0, 2e4), D_range=(0.0, 50.0), pm_deg: float = 30.0, n_nu: int = 4000,
-               n_lines: int = 101, passivity: bool = True, loop: ClosedLoop | None = None) -> Boundaries:
-    """Stability, phase-margin and passivity boundaries in the box ``P_range`` x ``D_range``.
-
-    Parameters
-    ----------
-    params : Params
-    beta, alpha : float, optional
-        Torque-gain scale (Eq. 7) and velocity compensation (Eq. 6); default the controller's.
-    options : LoopOptions, optional
-        ``pm_loop`` must be "impedance" for the phase-margin curves; the passivity boundary
-        follows ``port``, ``colgate`` and the frequency range (``omega_min`` to Nyquist).
-    P_range, D_range : (float, float)
-        The box, Nm/rad and Nms/rad.
-    pm_deg : float
-        Phase-margin threshold, deg (30: the paper's).
-    n_nu : int
-        Samples of nu = tan(theta/2) for the stability and phase-margin curves.
-    n_lines : int
-        Lines of each family on which the passivity boundary is located.
-    passivity : bool
-        Compute the passivity boundary (default).
-
-    Example
-    -------
-    >>> b = boundaries(load_params(), P_range=(1, 2e4), D_range=(1, 50))        # doctest: +SKIP
-    >>> sorted({c.kind for c in b.curves})                                     # doctest: +SKIP
-    """
-    from haa_sym.analysis.boundaries.passivity import passivity_boundary
-    loop = loop or ClosedLoop(params, options)
-    st = stability_boundary(params, beta, alpha, P_range=P_range, D_range=D_range, n_nu=n_nu, loop=loop)
-    pm = phase_margin_curves(params, st.beta, st.alpha, pm_deg=pm_deg, P_range=P_range, D_range=D_range,
-                             n_nu=n_nu, loop=loop)
-    ps = passivity_boundary(loop, st.beta, st.alpha, P_range=P_range, D_range=D_range,
-                            n_lines=n_lines) if passivity else []
-    st.meta.update(n_lines=n_lines)
-    return Boundaries(st, pm, ps, pm_deg)
 
 
 def _box_curves(branch, nu: np.ndarray, Ts: float, P_range, D_range, kind: str,
@@ -340,7 +239,6 @@ def _box_curves(branch, nu: np.ndarray, Ts: float, P_range, D_range, kind: str,
         Px, Dx = branch(np.exp(x))
         g = np.minimum(np.minimum(Px - P0, P1 - Px) / spanP, np.minimum(Dx - D0, D1 - Dx) / spanD)
         return np.where(np.isfinite(g), g, -1.0)
-    from haa_sym.analysis.rootfind import illinois
     a, _ = illinois(slack, np.log(nu[end]), np.log(nu[nb]))      # slack(a) >= 0 > slack(b)
     ends = np.where(valid, a, np.log(nu[end]))
     lo, hi = ends[:first.size], ends[first.size:]
@@ -439,114 +337,3 @@ def _branch_crossings(branch, nu: np.ndarray, d: np.ndarray, P_range=None) -> li
     for j, P in zip(rows[good], Pc[good]):
         cuts[j].append(P)
     return cuts
-
-
-def classify_grid(loop: ClosedLoop, boundary: StabilityBoundary, P_gain, D_gain) -> np.ndarray:
-    """Stability of every (P_gain, D_gain) grid point (shape (n_P, n_D)) from the boundary.
-
-    On every grid column (fixed D_gain) the exact crossings of the boundary split the P_gain
-    axis into segments whose points share their stability; one certified decision per segment
-    (:meth:`ClosedLoop.stability`, all segments of all columns in one call) labels them all.
-    """
-    P = gain_array("P_gain", P_gain).ravel()
-    D = gain_array("D_gain", D_gain).ravel()
-    segs, reps = [], []
-    for j, cuts in enumerate(crossings(boundary, D)):
-        seg = np.searchsorted(cuts, P)                     # segment of every grid point
-        labels, first = np.unique(seg, return_index=True)
-        segs.append((labels, seg))
-        reps.append(first)
-    n = [r.size for r in reps]
-    Pr = np.concatenate([P[r] for r in reps])
-    Dr = np.concatenate([np.full(k, D[j]) for j, k in enumerate(n)])
-    st = loop.stability(Pr, Dr, boundary.beta, boundary.alpha).stable
-    out = np.empty((P.size, D.size), bool)
-    start = 0
-    for j, (labels, seg) in enumerate(segs):
-        out[:, j] = st[start:start + n[j]][np.searchsorted(labels, seg)]
-        start += n[j]
-    return out
-
-
-class RegionDecisions(NamedTuple):
-    """Decisions of every grid point (arrays (n_P, n_D)): ``stable``, ``low_pm`` (stable with a
-    phase margin below the threshold) and ``passive`` (stable and the corrected phase of Z within
-    +-90 deg up to the options' tolerance; None when not asked for)."""
-
-    stable: np.ndarray
-    low_pm: np.ndarray
-    passive: np.ndarray | None
-
-
-def classify_regions(loop: ClosedLoop, boundary: StabilityBoundary, P_gain, D_gain, *,
-                     pm_deg: float = 30.0, passivity: bool = True) -> RegionDecisions:
-    """Stability, PM < ``pm_deg`` and passivity of every grid point from the exact curves.
-
-    On every D_gain row the crossings of the stability boundary, of the phase-margin curves
-    (margin ``pm_deg`` and the wrap of the margin at 180 deg) and of the passivity boundary
-    (:func:`haa_sym.analysis.boundaries.passivity.passivity_crossings`, on the options' frequency grid)
-    split the P_gain axis into segments; one point per segment is decided (certified
-    stability, the phase margin of the maps: ``haa_sym.analysis.sweep.phase_margins`` with the options'
-    rule, and the maps' passivity excess) and labels its segment. The margin can also change
-    where a pair of crossovers appears (|L| touches 1) or where the rule switches crossover
-    (``min_abs``: two with equal |PM|), and the passivity decision where the worst phase
-    crosses the options' tolerance rather than +-90 deg; those are not curves here, so each
-    segment's first, middle and last grid points are decided, and a segment whose points
-    disagree is decided point by point.
-    """
-    from haa_sym.analysis.boundaries.passivity import passivity_crossings
-    from haa_sym.analysis.regions import decide_points
-    P = gain_array("P_gain", P_gain).ravel()
-    D = gain_array("D_gain", D_gain).ravel()
-    ABC, nu = boundary.ABC, boundary.nu
-    beta, alpha = boundary.beta, boundary.alpha
-    cuts = crossings(boundary, D)
-    # the maps see crossovers on their frequency grid only (FrequencyGrid: omega_min to Nyquist)
-    w = loop.options.numerics.omega(boundary.Ts)
-    nu_w = np.tan(w * boundary.Ts / 2)
-    nu_pm = np.geomspace(nu_w[0], nu_w[-1], nu.size)
-    extra = [_branch_crossings(lambda x, *a: _rotated_branch(ABC, x, phi, *a), nu_pm, D, (P.min(), P.max()))
-             for phi in (pm_deg, 180.0)]
-    if passivity:
-        extra.append(passivity_crossings(loop, D, (P.min(), P.max()), beta, alpha))
-    for j in range(D.size):
-        cuts[j] = np.unique(np.concatenate([cuts[j]] + [np.asarray(e[j], float) for e in extra]))
-
-    def decide(Pq, Dq):
-        return decide_points(loop, Pq, Dq, beta, alpha, pm_deg=pm_deg, passivity=passivity)
-    # every segment of every row gets one id; with P sorted, a segment's points are consecutive
-    order = np.argsort(P, kind="stable")
-    Ps = P[order]
-    sizes = np.array([c.size + 1 for c in cuts])
-    offset = np.concatenate([[0], np.cumsum(sizes)[:-1]])
-    gid = np.stack([np.searchsorted(c, Ps) + o for c, o in zip(cuts, offset)], axis=1)   # (n_P, n_D)
-    flat = gid.T.ravel()                                   # column by column: non-decreasing ids
-    ids, first, count = np.unique(flat, return_index=True, return_counts=True)
-    # each segment's first, middle and last grid point
-    probe = np.stack([first, first + count // 2, first + count - 1], axis=1)        # (n_seg, 3)
-    cand = np.unique(probe)
-    rows, cols = cand % P.size, cand // P.size
-    dec = decide(Ps[rows], D[cols])
-    val = [np.empty(flat.size, bool) for _ in range(3)]
-    for v, d in zip(val, dec):
-        v[cand] = d
-    # a segment whose probes agree takes their label; one whose probes differ (the chosen
-    # crossover switched inside it, crossovers appeared, the excess crossed the tolerance) is
-    # decided point by point
-    agree = np.all([(v[probe] == v[probe[:, :1]]).all(axis=1) for v in val], axis=0)
-    seg_of = np.searchsorted(ids, flat)
-    known = np.zeros(flat.size, bool)
-    known[cand] = True
-    ok = agree[seg_of]
-    for v in val:
-        v[ok] = v[first[seg_of[ok]]]
-    todo = np.flatnonzero(~ok & ~known)
-    if todo.size:
-        for v, d in zip(val, decide(Ps[todo % P.size], D[todo // P.size])):
-            v[todo] = d
-    out = []
-    for v in val:
-        o = np.empty((P.size, D.size), bool)
-        o[order] = v.reshape(D.size, P.size).T
-        out.append(o)
-    return RegionDecisions(out[0], out[1], out[2] if passivity else None)

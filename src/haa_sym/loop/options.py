@@ -1,0 +1,255 @@
+"""Every modelling choice the paper leaves open, as data (docs/model.md, "Options").
+
+:class:`LoopStructure` says what the closed loop is (delay, sensor damping, where the velocity
+estimate sits, the passivity port), :class:`AnalysisConventions` how it is judged (Colgate's
+correction, the phase-margin loop and rule, the passivity tolerance) and :class:`FrequencyGrid`
+how finely (the one log frequency grid of every frequency-domain analysis, up to Nyquist).
+:class:`LoopOptions` holds the three.
+"""
+from __future__ import annotations
+
+import dataclasses
+import re
+from dataclasses import dataclass
+
+import numpy as np
+
+from haa_sym.errors import ParameterError
+from haa_sym.io.budget import check_memory, sweep_bytes
+
+__all__ = ["LoopOptions", "LoopStructure", "AnalysisConventions", "FrequencyGrid", "PORTS", "COLGATE",
+           "FILTERS", "PM_LOOPS", "PM_RULES"]
+
+PORTS = ("dtheta_L2", "dtheta_L1", "encoder_average")
+COLGATE = ("subtract", "add", "none")
+FILTERS = ("both", "impedance", "compensation")
+PM_LOOPS = ("impedance", "torque")
+# the phase-margin rules of haa_sym.analysis.margins ("distance": the angular distance of L from
+# -1 at any crossover)
+PM_RULES = ("distance", "min_abs", "worst")
+
+
+def _choice(obj, name, allowed):
+    if getattr(obj, name) not in allowed:
+        raise ParameterError(f"{name} = {getattr(obj, name)!r}; allowed: {list(allowed)}")
+
+
+@dataclass(frozen=True)
+class LoopStructure:
+    """What the closed loop is: the structural choices the paper leaves open.
+
+    Parameters
+    ----------
+    delay : {0, 1}
+        Computation delay between sampling and the applied voltage, samples. Default 0.
+    torque_damping : bool or None
+        Whether the measured torque includes the damping term of the sensed coupling (D_hd of
+        Eq. 2). Default None: what the actuator file's ``[sensors] torque_damping`` says (True
+        for HyQ, Eq. 2 as printed).
+    filter : {"both", "impedance", "compensation"}
+        Where the velocity estimate (``velocity_filter`` of the controller) sits: on the velocity
+        feeding both the D term of Eq. (8) and the velocity compensation of Eq. (6) (default, the
+        paper's Sec. 3.4 and Fig. 6), on the D term only, or on the compensation only; the other
+        path then uses the one-sample backward difference (theta[k] - theta[k-1])/Ts.
+    port : "dtheta_<body>", "encoder_average" or None
+        Velocity of the passivity port Z = T_dist / velocity (Sec. 5): the velocity of a body of
+        the actuator file (ClosedLoop checks it against the plant's outputs) or the controller's
+        velocity estimate of the encoder angle. Default None: the body T_dist acts on (the
+        file's ``[sensors] port``; ``dtheta_L2`` for HyQ, whose alternatives are the sampled link
+        velocity ``dtheta_L1`` of the paper's wording and ``encoder_average``).
+
+    :meth:`resolved` fills the two file-backed defaults for one actuator.
+    """
+
+    delay: int = 0
+    torque_damping: bool | None = None
+    filter: str = "both"
+    port: str | None = None
+
+    def __post_init__(self):
+        if self.delay not in (0, 1) or isinstance(self.delay, bool):
+            raise ParameterError(f"delay = {self.delay!r}; allowed: 0 or 1 (samples)")
+        if not (self.torque_damping is None or isinstance(self.torque_damping, bool)):
+            raise ParameterError(f"torque_damping = {self.torque_damping!r}; allowed: True, False or "
+                                 "None (the actuator file's)")
+        if not (self.port is None or self.port == "encoder_average" or (isinstance(self.port, str)
+                                                    and re.fullmatch(r"dtheta_[A-Za-z][A-Za-z0-9]*", self.port))):
+            raise ParameterError(f"port = {self.port!r}; allowed: 'dtheta_<body>' (a body of the "
+                                 f"actuator file, e.g. {list(PORTS)[:2]}) or 'encoder_average'")
+        _choice(self, "filter", FILTERS)
+
+    def resolved(self, topology) -> "LoopStructure":
+        """This structure with the file-backed defaults of ``topology`` (an actuator) filled in."""
+        return dataclasses.replace(
+            self, torque_damping=topology.torque_damping if self.torque_damping is None else self.torque_damping,
+            port=f"dtheta_{topology.port}" if self.port is None else self.port)
+
+
+@dataclass(frozen=True)
+class AnalysisConventions:
+    """How the analyses judge a closed loop: the conventions the paper leaves open.
+
+    Parameters
+    ----------
+    colgate : {"subtract", "add", "none"}
+        Colgate's sampled-data correction of the phase of Z: subtract w Ts/2 (the paper's
+        wording, default), add it, or none.
+    pm_loop : {"impedance", "torque"}
+        Loop on which the phase margin of the region maps is measured: the impedance loop opened
+        at the torque reference T_lref (default) or the torque loop opened at the PI output with
+        the impedance loop closed.
+    pm_rule : {"distance", "min_abs", "worst"}
+        When is a phase margin low (:mod:`haa_sym.analysis.margins`): "distance" (default) when L
+        passes closer than the threshold to -1 at any crossover (min over crossovers of |PM|);
+        "min_abs" when the signed margin of the crossover with the smallest |PM| is below the
+        threshold (the rule before issue 15: a crossover at -102 deg counted as low); "worst"
+        when the smallest signed margin is.
+    passivity_tol_deg : float
+        A point is passive when the corrected phase of Z stays within 90 deg + this tolerance.
+        A spring (Z ~ K/(j w)) sits at -90 deg as w -> 0, so a zero tolerance would decide
+        such points by rounding. Default 1e-3.
+    """
+
+    colgate: str = "subtract"
+    pm_loop: str = "impedance"
+    pm_rule: str = "distance"
+    passivity_tol_deg: float = 1e-3
+
+    def __post_init__(self):
+        for name, allowed in (("colgate", COLGATE), ("pm_loop", PM_LOOPS), ("pm_rule", PM_RULES)):
+            _choice(self, name, allowed)
+        v = self.passivity_tol_deg
+        if isinstance(v, bool) or not isinstance(v, (int, float)) or not np.isfinite(v) or v < 0:
+            raise ParameterError(f"passivity_tol_deg = {v!r}; allowed: a finite number >= 0 (deg)")
+
+
+@dataclass(frozen=True)
+class FrequencyGrid:
+    """The numerics of the frequency-domain analyses: the log grid Z(z) and the loop gains are
+    sampled on, from ``omega_min`` to Nyquist pi/Ts.
+
+    Parameters
+    ----------
+    n_omega : int
+        Points of the grid. Default 1000 (the maps are unchanged up to 16000, see
+        ``haa_sym.analysis.regions``).
+    omega_min : float
+        Lowest frequency, rad/s. Default 0.1.
+    """
+
+    n_omega: int = 1000
+    omega_min: float = 0.1
+
+    def __post_init__(self):
+        if isinstance(self.n_omega, bool) or not isinstance(self.n_omega, int) or self.n_omega < 10:
+            raise ParameterError(f"n_omega = {self.n_omega!r}; allowed: an integer >= 10")
+        v = self.omega_min
+        if isinstance(v, bool) or not isinstance(v, (int, float)) or not np.isfinite(v) or v <= 0:
+            raise ParameterError(f"omega_min = {v!r}; allowed: a finite number > 0 (rad/s)")
+
+    def omega(self, Ts: float, n: int | None = None) -> np.ndarray:
+        """The log frequency grid (rad/s) from ``omega_min`` to just below Nyquist pi/Ts for
+        sampling time ``Ts`` (s), with ``n`` points (default ``n_omega``): the one grid of every
+        frequency-domain analysis."""
+        w_max = np.pi / Ts * (1 - 1e-9)
+        if self.omega_min >= w_max:
+            raise ParameterError(f"omega_min = {self.omega_min!r} is not below Nyquist pi/Ts = {w_max:.6g} rad/s")
+        n = self.n_omega if n is None else int(n)
+        # every frequency-domain analysis sweeps this grid in chunks of points: the gate before
+        # anything of its size is allocated
+        check_memory(sweep_bytes(1, n), f"n_omega = {n}: a frequency grid of {n} points")
+        return np.logspace(np.log10(self.omega_min), np.log10(w_max), n)
+
+
+_PARTS = (("structure", LoopStructure), ("conventions", AnalysisConventions), ("numerics", FrequencyGrid))
+
+
+class LoopOptions:
+    """Every modelling choice the paper leaves open, in three parts; each is discussed in
+    ``docs/model.md``.
+
+    ``structure`` (:class:`LoopStructure`: delay, torque_damping, filter, port) defines the
+    closed loop; ``conventions`` (:class:`AnalysisConventions`: colgate, pm_loop, pm_rule,
+    passivity_tol_deg) how it is judged; ``numerics`` (:class:`FrequencyGrid`: n_omega,
+    omega_min) how finely. Build it from the parts or from any of their fields by name
+    (``LoopOptions(delay=1, colgate="none")``, what ``--option KEY=VALUE`` does); the fields read
+    through (``options.delay``). The defaults are the combination that reproduces the most
+    cells of Table 2 (``haa-sym reproduce`` re-scores all combinations and writes the count to
+    the report).
+    """
+
+    __slots__ = ("structure", "conventions", "numerics")
+
+    def __init__(self, structure: LoopStructure | None = None, conventions: AnalysisConventions | None = None,
+                 numerics: FrequencyGrid | None = None, **fields):
+        given = {"structure": structure, "conventions": conventions, "numerics": numerics}
+        for part, cls in _PARTS:
+            mine = {k: fields.pop(k) for k in list(fields) if k in cls.__dataclass_fields__}
+            base = given[part] if given[part] is not None else cls()
+            if not isinstance(base, cls):
+                raise ParameterError(f"{part} = {base!r}; allowed: a haa_sym.{cls.__name__}")
+            object.__setattr__(self, part, dataclasses.replace(base, **mine) if mine else base)
+        if fields:
+            raise ParameterError(f"unknown option(s) {sorted(fields)}; allowed: {list(self.field_names())}")
+
+    def __setattr__(self, name, value):
+        raise AttributeError("LoopOptions is immutable; use replace(**changes)")
+
+    def __reduce__(self):
+        # pickled by its parts (a dask worker rebuilds it; __setattr__ refuses the default way)
+        return (LoopOptions, self._parts())
+
+    def __getattr__(self, name):
+        for part, cls in _PARTS:
+            if name in cls.__dataclass_fields__:
+                return getattr(object.__getattribute__(self, part), name)
+        raise AttributeError(name)
+
+    def __eq__(self, other):
+        return isinstance(other, LoopOptions) and self._parts() == other._parts()
+
+    def __hash__(self):
+        return hash(self._parts())
+
+    def __repr__(self):
+        return f"LoopOptions({', '.join(f'{k}={v!r}' for k, v in self.to_dict().items())})"
+
+    def _parts(self):
+        return tuple(object.__getattribute__(self, part) for part, _ in _PARTS)
+
+    def replace(self, **changes) -> "LoopOptions":
+        """A copy with some fields (of any part) changed, validated."""
+        return LoopOptions(*self._parts(), **changes)
+
+    def to_dict(self) -> dict:
+        """Every field by name (flat: the names are unique across the parts)."""
+        return {f: getattr(self, f) for f in self.field_names()}
+
+    @classmethod
+    def field_names(cls) -> tuple[str, ...]:
+        return tuple(f for _, c in _PARTS for f in c.__dataclass_fields__)
+
+    @classmethod
+    def field_type(cls, name: str) -> tuple[type, bool]:
+        """(bool, int, float or str; whether None is allowed) of field ``name``, from its annotation."""
+        for _, c in _PARTS:
+            if name in c.__dataclass_fields__:
+                ann = str(c.__dataclass_fields__[name].type).replace(" ", "")
+                base = {"bool": bool, "int": int, "float": float}.get(ann.split("|")[0], str)
+                return base, "None" in ann.split("|")
+        raise KeyError(name)
+
+    @classmethod
+    def field_default(cls, name: str):
+        for _, c in _PARTS:
+            if name in c.__dataclass_fields__:
+                return c.__dataclass_fields__[name].default
+        raise KeyError(name)
+
+    def resolved(self, topology) -> "LoopOptions":
+        """These options with the structure's file-backed defaults filled in for ``topology``."""
+        return LoopOptions(self.structure.resolved(topology), self.conventions, self.numerics)
+
+    def omega(self, Ts: float, n: int | None = None) -> np.ndarray:
+        """The frequency grid (rad/s) of :attr:`numerics` for sampling time ``Ts``."""
+        return self.numerics.omega(Ts, n)
