@@ -24,6 +24,7 @@ import sympy
 
 from codegen.kernels import decision_function, loop_coefficient_function
 from haa_sym.model.params import builtin_actuators, load_params
+from haa_sym.symbolic.chain import symbolic_model
 from haa_sym.symbolic.symbolic_to_casadi import plant_function
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -61,7 +62,7 @@ def builtin_topologies() -> dict[str, dict]:
 
 def functions(topologies: dict[str, dict] | None = None) -> list[ca.Function]:
     topologies = builtin_topologies() if topologies is None else topologies
-    fns = [plant_function(t["topology"].model(), t["function"]) for _, t in sorted(topologies.items())]
+    fns = [plant_function(symbolic_model(t["topology"]), t["function"]) for _, t in sorted(topologies.items())]
     fns += [loop_coefficient_function()]
     fns += [decision_function(cap) for cap in CAPACITIES]
     return fns
