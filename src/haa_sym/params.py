@@ -32,6 +32,7 @@ import numpy as np
 
 from haa_sym.actuator import (ACTUATOR_SECTIONS, HYQ, Actuator, Topology, check_keys, entry_values,
                               parse_actuator)
+from haa_sym.errors import ParameterError      # re-exported: haa_sym.params.ParameterError
 from haa_sym.resources import data_dir
 
 __all__ = [
@@ -47,10 +48,6 @@ __all__ = [
     "default_params_path",
     "builtin_actuators",
 ]
-
-
-class ParameterError(ValueError):
-    """A parameter is missing, unknown or outside what the physics allows."""
 
 
 # Domain of every key: ">0" strictly positive, ">=0" non-negative, "int>=1" integer >= 1.
