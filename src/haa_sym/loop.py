@@ -42,7 +42,8 @@ from haa_sym.cache import BoundedCache, array_key
 from haa_sym.compiled import evaluators
 from haa_sym.exact import bilinear, polymul, polysub, to_float, transfer_polynomials
 from haa_sym.params import ParameterError, Params, gain_array
-from haa_sym.elements import backward_difference, common_denominator, delay, pi_integral, velocity_filter
+from haa_sym.elements import backward_difference, common_denominator, delay, pi_integral
+from haa_sym.filters import controller_filter
 from haa_sym.layout import (COEF_FORMS, COEF_OUTPUTS, COEF_TERMS, FREQ_COLUMN, N_BASIS, TORQUE_GAINS,
                             gain_monomials)
 from haa_sym.plant import DiscretePlant, continuous_plant, discretize
@@ -422,7 +423,7 @@ class ClosedLoop:
         ``I_z`` the integral part of the torque PI (Eq. 7) and ``z_delay`` the computation delay.
         """
         ctrl, f = self.params.controller, self.options.structure.filter
-        F = velocity_filter(ctrl.velocity_filter, ctrl.Ts, ctrl.N_av, ctrl.f_c)
+        F = controller_filter(ctrl)
         diff = backward_difference(ctrl.Ts)
         return {"F_d": F if f in ("both", "impedance") else diff,
                 "F_vc": F if f in ("both", "compensation") else diff,
