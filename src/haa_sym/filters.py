@@ -75,6 +75,13 @@ class FilterParameter:
     default: int | float | None = None
     below_nyquist: bool = False
 
+    @property
+    def rule(self) -> str:
+        """The allowed values in words, for the docs (``"integer >= 1"``, ``"0 < f_c < 1/(2 Ts)"``)."""
+        if self.below_nyquist:
+            return f"0 < {self.name} < 1/(2 Ts)"
+        return {"int>=1": "integer >= 1", ">0": "> 0"}[self.domain]
+
 
 @dataclass(frozen=True)
 class VelocityFilter:
@@ -211,7 +218,9 @@ def markdown_rows() -> str:
     rows = []
     for e in _REGISTRY.values():
         what = f"velocity estimate `\"{e.name}\"`" + (" (default, the paper's)" if e.name == DEFAULT else "")
-        keys = ", ".join(f"`{p.name}` ({p.units})" for p in e.parameters) or "none"
+        keys = ", ".join(f"`{p.name}` ({p.units}, {p.rule}"
+                         + (f", default {p.default!r}" if p.default is not None else "") + ")"
+                         for p in e.parameters) or "none"
         rows.append(f"| {what}: {e.description} | {e.equation} | {keys} |")
     return "\n".join(rows)
 
