@@ -9,7 +9,7 @@ polynomial is affine in the gain monomials of ``haa_sym.compiled.layout``:
              + I_t D_gain b6 - VC b7
 
 with basis polynomials b_j fixed per sampled plant and loop structure, built exactly from the
-controller's elements (``haa_sym.loop.elements``, ``haa_sym.loop.closed_loop``); b7 is the exact difference of
+controller's elements (``haa_sym.model.elements``, ``haa_sym.loop.closed_loop``); b7 is the exact difference of
 the compensation's and the D term's polynomials (zero when both use the same estimate). The
 stability kernel works on their bilinear transforms (z = (1 + s)/(1 - s), computed exactly),
 where the poles that crowd at z = 1 under fast sampling stay resolved: it returns the
@@ -148,7 +148,7 @@ def loop_coefficient_function() -> ca.Function:
     Inputs: ``Gw``: one column per frequency, the complex values (re, im) named by
     ``haa_sym.compiled.layout.FREQ_COLUMN``: the sampled plant's responses from V_m and T_dist to the
     measured torque T, the encoder angle theta and the port velocity p, and the controller
-    elements (``haa_sym.loop.elements``) at z = exp(j w Ts): the velocity estimates of the D term
+    elements (``haa_sym.model.elements``) at z = exp(j w Ts): the velocity estimates of the D term
     (F_d) and of the compensation (F_vc), the PI's integral part I_z = Ts z/(z - 1) and the
     delay z^-d. ``const`` (layout.CONST) and ``gains`` (layout.TORQUE_GAINS).
 

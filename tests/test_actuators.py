@@ -206,7 +206,7 @@ def test_port_option_is_checked_against_the_plant(user_file):
 
 
 # --- closed loop against the explicit reference, >= 1,000 points per new topology -----------
-# (Ts, N_av, delay, velocity estimate): the filter choices of haa_sym.loop.elements on the new plants too
+# (Ts, N_av, delay, velocity estimate): the filter choices of haa_sym.model.elements on the new plants too
 CASES = ((1e-3, 4, 0, {}), (5e-4, 10, 1, {"velocity_filter": "lowpass1", "f_c": 60.0}),
          (2e-3, 1, 0, {}), (1e-3, 20, 1, {"velocity_filter": "butterworth2", "f_c": 40.0}))
 

@@ -1,12 +1,15 @@
-"""The runnable examples in the docstrings (the ones not marked +SKIP) run and are right."""
+"""The runnable examples in the docstrings (the ones not marked +SKIP) of every module run and
+are right."""
 import doctest
 import importlib
+import pkgutil
 
 import pytest
 
-MODULES = ["haa_sym.analysis.regions", "haa_sym.analysis.passivity", "haa_sym.analysis.contact", "haa_sym.analysis.margins",
-           "haa_sym.analysis.sweep", "haa_sym.analysis.torque", "haa_sym.paper.table2", "haa_sym.model.actuator",
-           "haa_sym.symbolic.model", "haa_sym.design.schedule_c"]
+import haa_sym
+
+MODULES = sorted(m.name for m in pkgutil.walk_packages(haa_sym.__path__, "haa_sym.")
+                 if not m.name.startswith("haa_sym._"))
 
 
 @pytest.mark.parametrize("name", MODULES)

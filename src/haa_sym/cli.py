@@ -47,6 +47,7 @@ from haa_sym.io.gridspec import grid
 from haa_sym.io.outputs import Transaction, check_file, csv_text
 from haa_sym.io.progress import set_progress
 from haa_sym.loop import ClosedLoop, LoopOptions
+from haa_sym.model import filters
 from haa_sym.model.params import CONTROLLER_KEYS, STRING_KEYS, gain_array, load_params
 from haa_sym.paper.reproduce import reproduce
 
@@ -122,7 +123,7 @@ def _common(p: argparse.ArgumentParser) -> None:
     p.add_argument("--params", help="parameter file (TOML); default: bundled HyQ HAA")
     p.add_argument("--configuration", help="leg configuration of the parameter file, e.g. retracted")
     p.add_argument("--set", action="append", default=[], metavar="KEY=VALUE",
-                   help="override any parameter key (repeatable)")
+                   help="override any parameter key (repeatable); " + filters.help_text())
     p.add_argument("--option", action="append", default=[], metavar="KEY=VALUE",
                    help="modelling option of haa_sym.LoopOptions (repeatable)")
 
@@ -134,7 +135,7 @@ def _params(args):
     sets = _parse_set(args.set, tuple(params.plant.topology.parameter_keys) + CONTROLLER_KEYS)
     if not sets:
         return params
-    try:                  # all at once: velocity_filter and f_c are only valid together
+    try:                  # all at once: velocity_filter and its keys (f_c) are only valid together
         return params.with_values(**sets)
     except ParameterError as exc:
         msg = str(exc)

@@ -8,9 +8,11 @@ options alone, with its own algebra:
 * the plant: the continuous state space of the actuator (the generated or compiled plant function, the one
   thing it shares with the evaluators; the tests check that against an independent assembly of
   the equations of motion), sampled by ``scipy.signal.cont2discrete(..., "zoh")``;
-* the velocity estimate: the average as an FIR filter; the low-pass filters as the backward
-  difference followed by the analog prototype w_c/(s + w_c) or w_c^2/(s^2 + sqrt(2) w_c s + w_c^2)
-  realised in state space and mapped by ``scipy.signal.cont2discrete(..., "bilinear")``; the
+* the velocity estimate (its own table :data:`VELOCITY_ESTIMATES`, keyed by the names of the
+  registry :mod:`haa_sym.model.filters`): the average as an FIR filter; the low-pass filters as the
+  backward difference followed by the analog prototype w_c/(s + w_c) or
+  w_c^2/(s^2 + sqrt(2) w_c s + w_c^2) realised in state space and mapped by
+  ``scipy.signal.cont2discrete(..., "bilinear")``; the
   PI's integral Ts/(1 - z^-1) and the delay z^-d; transfer functions realised by
   ``scipy.signal.tf2ss``;
 * velocity compensation VC = alpha N/k_t (R B_m + k_t k_w) (Eq. 6) from the parameters (an
@@ -34,7 +36,8 @@ import scipy.signal
 from haa_sym.loop.plant import continuous_plant
 from haa_sym.model.actuator import Topology
 
-__all__ = ["closed_loop_matrices", "closed_loop_eigenvalues", "spectral_radius", "frequency_response"]
+__all__ = ["closed_loop_matrices", "closed_loop_eigenvalues", "spectral_radius", "frequency_response",
+           "VELOCITY_ESTIMATES", "register_velocity_estimate"]
 
 
 def _zoh_plant(params, outputs):
@@ -66,38 +69,77 @@ def _tf_block(b, a):
     return scipy.signal.tf2ss(b, a)
 
 
+def _average(ctrl):
+    """The average of N_av first differences as an FIR filter."""
+    N, Ts = ctrl.N_av, ctrl.Ts
+    b = np.zeros(N + 1)
+    b[0], b[N] = 1 / (N * Ts), -1 / (N * Ts)
+    return [_tf_block(b, np.r_[1.0, np.zeros(N)])]
+
+
+def _analog_lowpass(num, den):
+    """The backward difference followed by the analog prototype num(s)/den(s) (descending powers,
+    functions of w_c) mapped by the bilinear transform."""
+    def realise(ctrl):
+        Ts, w_c = ctrl.Ts, 2 * math.pi * ctrl.f_c
+        # the analog prototype in state space, then the bilinear map in state-space form (well
+        # conditioned at fast sampling, where the discrete polynomial's roots crowd at z = 1)
+        A, B, C, D = scipy.signal.tf2ss(num(w_c), den(w_c))
+        # scale the states (diagonal balancing of [[A, B], [C, D]]): the companion form's states
+        # differ by powers of w_c, which costs digits in the frequency responses near Nyquist
+        _, (scale, _) = scipy.linalg.matrix_balance(np.block([[A, B], [C, D]]), permute=False, separate=True)
+        s = scale[:A.shape[0]]
+        A, B, C = A * s[None, :] / s[:, None], B / s[:, None], C * s[None, :]
+        lowpass = scipy.signal.cont2discrete((A, B, C, D), Ts, method="bilinear")[:4]
+        return [_tf_block([1 / Ts, -1 / Ts], [1.0]), lowpass]
+    return realise
+
+
+# The reference's own realisation of every velocity filter of haa_sym.model.filters, by name: ctrl (a
+# haa_sym.model.params.Controller) -> SISO blocks (A, B, C, D) in series, theta -> v_F. Deliberately a
+# table of its own rather than a field of the registry's entries: the registry is what this
+# module checks, so its entries never carry (or call) the reference's algebra, and nothing here
+# reads their transfer functions; tests/test_filters.py checks that both tables have the same keys.
+VELOCITY_ESTIMATES = {
+    "average": _average,
+    "lowpass1": _analog_lowpass(lambda w_c: [w_c], lambda w_c: [1.0, w_c]),
+    "butterworth2": _analog_lowpass(lambda w_c: [w_c ** 2], lambda w_c: [1.0, math.sqrt(2) * w_c, w_c ** 2]),
+}
+
+
+def register_velocity_estimate(name: str, realise) -> None:
+    """Add the reference's realisation of a filter registered in :mod:`haa_sym.model.filters`:
+    ``realise(ctrl)`` -> list of SISO ``(A, B, C, D)`` in series, theta -> velocity."""
+    if name in VELOCITY_ESTIMATES:
+        raise ValueError(f"the reference already realises velocity_filter = {name!r}")
+    VELOCITY_ESTIMATES[name] = realise
+
+
 def _velocity_estimate_blocks(ctrl):
-    """The velocity estimate theta -> v_F as one or two blocks in series: (name, (A,B,C,D), y, u)."""
-    Ts = ctrl.Ts
-    if ctrl.velocity_filter == "average":
-        N = ctrl.N_av
-        b = np.zeros(N + 1)
-        b[0], b[N] = 1 / (N * Ts), -1 / (N * Ts)
-        return [("F", _tf_block(b, np.r_[1.0, np.zeros(N)]), ["v_F"], ["u_F"])]
-    # the analog prototype in state space, then the bilinear map in state-space form (well
-    # conditioned at fast sampling, where the discrete polynomial's roots crowd at z = 1)
-    w_c = 2 * math.pi * ctrl.f_c
-    num, den = {"lowpass1": ([w_c], [1.0, w_c]),
-                "butterworth2": ([w_c ** 2], [1.0, math.sqrt(2) * w_c, w_c ** 2])}[ctrl.velocity_filter]
-    A, B, C, D = scipy.signal.tf2ss(num, den)
-    # scale the states (diagonal balancing of [[A, B], [C, D]]): the companion form's states
-    # differ by powers of w_c, which costs digits in the frequency responses near Nyquist
-    _, (scale, _) = scipy.linalg.matrix_balance(np.block([[A, B], [C, D]]), permute=False, separate=True)
-    s = scale[:A.shape[0]]
-    A, B, C = A * s[None, :] / s[:, None], B / s[:, None], C * s[None, :]
-    lowpass = scipy.signal.cont2discrete((A, B, C, D), Ts, method="bilinear")[:4]
-    return [("bd", _tf_block([1 / Ts, -1 / Ts], [1.0]), ["v_raw"], ["u_F"]),
-            ("lowpass", lowpass, ["v_F"], ["u_lp"])]
+    """The velocity estimate theta -> v_F as blocks in series: [(name, (A,B,C,D), y, u)], and
+    the series links {input: output of the block before}."""
+    try:
+        realise = VELOCITY_ESTIMATES[ctrl.velocity_filter]
+    except KeyError:
+        raise LookupError(f"the reference has no realisation of velocity_filter = {ctrl.velocity_filter!r}; "
+                          "add one with haa_sym.reference.register_velocity_estimate") from None
+    parts = realise(ctrl)
+    n = len(parts)
+    blocks = [(f"F{i}", abcd, ["v_F" if i == n - 1 else f"v_F{i}"], ["u_F" if i == 0 else f"u_F{i}"])
+              for i, abcd in enumerate(parts)]
+    return blocks, {f"u_F{i}": f"v_F{i - 1}" for i in range(1, n)}
 
 
 def _blocks(params, options, torque_output):
-    """The dynamic blocks: (name, (A, B, C, D), output names, input names)."""
+    """The dynamic blocks: (name, (A, B, C, D), output names, input names), and the velocity
+    estimate's series links (input name: output name)."""
     ctrl = params.controller
     port_body = options.structure.port != "encoder_average"
     outs = [torque_output, "theta_encoder"] + ([options.structure.port] if port_body else [])
     blocks = [("plant", _zoh_plant(params, outs), [f"y_{o}" for o in ("T", "th", "p")[:len(outs)]],
                ["u_V", "u_Tdist"])]
-    blocks += _velocity_estimate_blocks(ctrl)
+    estimate, links = _velocity_estimate_blocks(ctrl)
+    blocks += estimate
     if options.structure.filter != "both":
         blocks.append(("diff", _tf_block([1 / ctrl.Ts, -1 / ctrl.Ts], [1.0]), ["v_diff"], ["u_diff"]))
     # backward Euler (Eq. 7) with the state in N s (the integral itself), so it is scaled like e
@@ -106,7 +148,7 @@ def _blocks(params, options, torque_output):
         d = options.structure.delay                                 # a shift register of d samples
         shift = (np.eye(d, k=-1), np.eye(d, 1), np.eye(1, d, d - 1), np.zeros((1, 1)))
         blocks.append(("delay", shift, ["y_del"], ["u_del"]))
-    return blocks
+    return blocks, links
 
 
 def _batch(loop, P_gain, D_gain, beta=None, alpha=None, cut=None):
@@ -121,7 +163,7 @@ def _batch(loop, P_gain, D_gain, beta=None, alpha=None, cut=None):
     P_t, I_t = beta * ctrl.P_t0, beta * ctrl.I_t0
     VC = alpha * _vc0(pl)
     damped = opt.structure.torque_damping
-    blocks = _blocks(params, opt, "T_sensor" if damped else "T_sensor_spring")
+    blocks, links = _blocks(params, opt, "T_sensor" if damped else "T_sensor_spring")
     ys = [y for _, _, yn, _ in blocks for y in yn]
     us = [u for _, _, _, un in blocks for u in un]
     ws = ["T_dist", "r"]
@@ -155,7 +197,7 @@ def _batch(loop, P_gain, D_gain, beta=None, alpha=None, cut=None):
     u_pi = P_t[:, None] * e + I_t[:, None] * sig("y_I")                       # Eq. (7)
     V_k = (sig("r") if cut == "PI" else u_pi) + VC[:, None] * v_vc
     inputs = {"u_V": sig("y_del") if opt.structure.delay else V_k, "u_Tdist": sig("T_dist"), "u_F": th,
-              "u_diff": th, "u_I": e, "u_del": V_k, "u_lp": sig("v_raw") if "v_raw" in ys else None}
+              "u_diff": th, "u_I": e, "u_del": V_k, **{u: sig(y) for u, y in links.items()}}
     KE = np.stack([inputs[u] for u in us], axis=1)                           # (k, nu, ny + nw)
     K, E = KE[:, :, :len(ys)], KE[:, :, len(ys):]
     port = v_F if opt.structure.port == "encoder_average" else sig("y_p")

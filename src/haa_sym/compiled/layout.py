@@ -95,7 +95,7 @@ def gain_monomial_bounds(point, const, absolute, one=1.0) -> list:
 # The loop-coefficient function takes one column per frequency: complex values (re, im) of
 # the sampled plant's responses (measured torque T, encoder angle theta and port velocity p,
 # each from V_m and from T_dist) and of the controller elements at z = exp(j w Ts)
-# (haa_sym.loop.elements): the velocity estimates feeding the D term and the compensation, the PI's
+# (haa_sym.model.elements): the velocity estimates feeding the D term and the compensation, the PI's
 # integral part Ts z/(z - 1) and the delay z^-d. (A port that reads the velocity estimate gets
 # its G_pV, G_pd from the estimate times the encoder's responses.)
 FREQ_COLUMN = ("G_TV", "G_Td", "G_thV", "G_thd", "G_pV", "G_pd",

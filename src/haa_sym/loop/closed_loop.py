@@ -42,7 +42,8 @@ from haa_sym.compiled.generated import evaluators
 from haa_sym.loop.exact import bilinear, polymul, polysub, to_float, transfer_polynomials
 from haa_sym.errors import ParameterError
 from haa_sym.model.params import Params, gain_array
-from haa_sym.loop.elements import backward_difference, common_denominator, delay, pi_integral, velocity_filter
+from haa_sym.model.elements import backward_difference, common_denominator, delay, pi_integral
+from haa_sym.model.filters import controller_filter
 from haa_sym.compiled.layout import (COEF_FORMS, COEF_OUTPUTS, COEF_TERMS, FREQ_COLUMN, N_BASIS, TORQUE_GAINS,
                             gain_monomials)
 from haa_sym.loop.options import LoopOptions
@@ -190,7 +191,7 @@ class ClosedLoop:
 
     @functools.cached_property
     def elements(self) -> dict:
-        """The controller's elements (:mod:`haa_sym.loop.elements`) in this loop, by role (built once
+        """The controller's elements (:mod:`haa_sym.model.elements`) in this loop, by role (built once
         per loop: their exact coefficients cost rational arithmetic).
 
         ``F_d`` the velocity estimate of the D term (Eq. 8), ``F_vc`` that of the velocity
@@ -199,7 +200,7 @@ class ClosedLoop:
         ``I_z`` the integral part of the torque PI (Eq. 7) and ``z_delay`` the computation delay.
         """
         ctrl, f = self.params.controller, self.options.structure.filter
-        F = velocity_filter(ctrl.velocity_filter, ctrl.Ts, ctrl.N_av, ctrl.f_c)
+        F = controller_filter(ctrl)
         diff = backward_difference(ctrl.Ts)
         return {"F_d": F if f in ("both", "impedance") else diff,
                 "F_vc": F if f in ("both", "compensation") else diff,

@@ -33,6 +33,8 @@ import numpy as np
 from haa_sym.errors import ParameterError
 from haa_sym.model.actuator import (ACTUATOR_SECTIONS, HYQ, Actuator, Topology, check_keys, entry_values,
                               parse_actuator)
+from haa_sym.model import filters
+from haa_sym.model.filters import PARAMETERS as FILTER_PARAMETERS
 from haa_sym.model.resources import data_dir
 
 __all__ = [
@@ -50,24 +52,24 @@ __all__ = [
 ]
 
 
-# Domain of every key: ">0" strictly positive, ">=0" non-negative, "int>=1" integer >= 1.
-# The plant's domains are per topology (haa_sym.model.actuator: inertias, couplings, L, R, k_t, N > 0;
-# frictions, dampings, k_w and stiffness to ground >= 0). Ts sets the sampling, N_av the state
-# dimension; alpha = 0 switches velocity compensation off (Fig. 9a).
+# Domain of every key: ">0" strictly positive, ">=0" non-negative, "int>=1" integer >= 1,
+# "filter" a registered velocity filter (haa_sym.model.filters). The plant's domains are per topology
+# (haa_sym.model.actuator: inertias, couplings, L, R, k_t, N > 0; frictions, dampings, k_w and stiffness
+# to ground >= 0). Ts sets the sampling, N_av the state dimension; alpha = 0 switches velocity
+# compensation off (Fig. 9a). The velocity filters' keys (N_av, f_c) take their domains from the
+# registry, which says which filter reads them (Controller checks).
 _CONTROLLER_DOMAIN: dict[str, str] = {
-    "Ts": ">0", "N_av": "int>=1", "alpha": ">=0", "beta": ">0", "P_t0": ">=0", "I_t0": ">=0",
-    "velocity_filter": "filter", "f_c": ">0",
+    "Ts": ">0", "N_av": FILTER_PARAMETERS["N_av"].domain, "alpha": ">=0", "beta": ">0", "P_t0": ">=0",
+    "I_t0": ">=0", "velocity_filter": "filter", "f_c": FILTER_PARAMETERS["f_c"].domain,
 }
-# The velocity estimate is a modelling choice with a stated default (the paper's average);
-# N_av is needed by "average" only and f_c (Hz) by the low-pass filters only (Controller checks).
-_CONTROLLER_OPTIONAL = {"velocity_filter": "average", "N_av": None, "f_c": None}
-_VELOCITY_FILTERS = ("average", "lowpass1", "butterworth2")   # haa_sym.loop.elements.VELOCITY_FILTERS
+# The velocity estimate is a modelling choice with a stated default (the paper's average); a
+# filter's keys are optional in a file unless the chosen filter reads them without a default.
+_CONTROLLER_OPTIONAL = {"velocity_filter": filters.DEFAULT, **{k: None for k in FILTER_PARAMETERS}}
 STRING_KEYS = ("velocity_filter",)   # keys whose value is a name, not a number
 _DOMAIN_TEXT = {
     ">0": "a finite number > 0",
     ">=0": "a finite number >= 0",
     "int>=1": "an integer >= 1",
-    "filter": f"one of {list(_VELOCITY_FILTERS)}",
 }
 # Gain points of every analysis: the impedance gains of Eq. (8) and the torque-loop gains, whose
 # rule is the controller file's (beta = 0 switches the torque PI off; negative gains are positive
@@ -164,9 +166,11 @@ class Controller:
 
     ``P_t = beta * P_t0`` and ``I_t = beta * I_t0`` (Eq. 7); the simplified velocity compensation
     gain is ``alpha * N / k_t * (R B_m + k_t k_w)`` (Eq. 6). The velocity estimate
-    ``velocity_filter`` (default ``"average"``, the paper's) is one of ``haa_sym.loop.elements``:
-    ``"average"`` of ``N_av`` samples, or the backward difference followed by a Tustin
-    ``"lowpass1"`` or ``"butterworth2"`` filter of cut-off ``f_c`` Hz (below Nyquist 1/(2 Ts)).
+    ``velocity_filter`` (default ``"average"``, the paper's) is one of the registry
+    :mod:`haa_sym.model.filters`: ``"average"`` of ``N_av`` samples, or the backward difference followed
+    by a Tustin ``"lowpass1"`` or ``"butterworth2"`` filter of cut-off ``f_c`` Hz (below Nyquist
+    1/(2 Ts)), or any filter registered there. The keys the chosen filter reads are required (or
+    take the registry's default); the others may be None.
     """
 
     Ts: float
@@ -175,24 +179,27 @@ class Controller:
     beta: float
     P_t0: float
     I_t0: float
-    velocity_filter: str = "average"
+    velocity_filter: str = filters.DEFAULT
     f_c: float | None = None
 
     def __post_init__(self):
         _check_fields(self, {k: d for k, d in _CONTROLLER_DOMAIN.items()
-                             if not (k in ("N_av", "f_c") and getattr(self, k) is None)})
+                             if not (k in FILTER_PARAMETERS and getattr(self, k) is None)})
         kind = self.velocity_filter
-        if kind == "average" and self.N_av is None:
-            raise ParameterError("N_av is missing; allowed: an integer >= 1, required by "
-                                 "velocity_filter = 'average'")
-        if kind != "average":
-            nyquist = 0.5 / self.Ts
-            if self.f_c is None:
-                raise ParameterError(f"f_c is missing; allowed: a cut-off frequency in Hz, 0 < f_c < "
-                                     f"{nyquist:g} (Nyquist), required by velocity_filter = {kind!r}")
-            if not self.f_c < nyquist:
-                raise ParameterError(f"f_c = {self.f_c!r} is at or above Nyquist 1/(2 Ts) = {nyquist:g} Hz; "
-                                     f"allowed: 0 < f_c < {nyquist:g} (Hz)")
+        nyquist = 0.5 / self.Ts
+        for p in filters.get(kind).parameters:          # the keys the chosen filter reads
+            value = getattr(self, p.name)
+            if value is None and p.default is not None:
+                value = _check_value(p.name, p.default, p.domain)
+                object.__setattr__(self, p.name, value)
+            if value is None:
+                allowed = (f"a {p.description} in {p.units}, 0 < {p.name} < {nyquist:g} (Nyquist)"
+                           if p.below_nyquist else _DOMAIN_TEXT[p.domain])
+                raise ParameterError(f"{p.name} is missing; allowed: {allowed}, required by "
+                                     f"velocity_filter = {kind!r}")
+            if p.below_nyquist and not value < nyquist:
+                raise ParameterError(f"{p.name} = {value!r} is at or above Nyquist 1/(2 Ts) = {nyquist:g} "
+                                     f"{p.units}; allowed: 0 < {p.name} < {nyquist:g} ({p.units})")
 
     @property
     def P_t(self) -> float:
@@ -341,12 +348,12 @@ def default_params_path() -> Path:
 
 def _check_value(key: str, value: object, domain: str, where: str | None = None) -> float | int:
     """``value`` of ``key`` checked against ``domain``; the message names where, key, value, allowed."""
-    allowed = _DOMAIN_TEXT[domain]
     prefix = f"{where}: " if where else ""
     if domain == "filter":
-        if value not in _VELOCITY_FILTERS:
-            raise ParameterError(f"{prefix}{key} = {value!r}; allowed: {allowed}")
+        if value not in filters.names():
+            raise ParameterError(f"{prefix}{key} = {value!r}; allowed: {filters.allowed_text()}")
         return value
+    allowed = _DOMAIN_TEXT[domain]
     if isinstance(value, bool) or not isinstance(value, (int, float)):
         raise ParameterError(f"{prefix}{key} = {value!r} is not a number; allowed: {allowed}")
     try:

@@ -12,26 +12,19 @@ Every view of it derives from that one definition:
 * its part of the explicit closed-loop state space (:meth:`Element.realization`, the observable
   canonical form; ``haa_sym.loop.statespace``).
 
-The velocity estimate (:func:`velocity_filter`) is the one modelling choice here:
-
-``"average"``       (theta[k] - theta[k - N_av]) / (N_av Ts), the paper's filter (Sec. 3.4);
-``"lowpass1"``      the backward difference (theta[k] - theta[k-1]) / Ts followed by
-                    w_c / (s + w_c), discretised by the Tustin transform without prewarping;
-``"butterworth2"``  the same with w_c^2 / (s^2 + sqrt(2) w_c s + w_c^2);
-
-with w_c = 2 pi f_c. The integral part of the torque PI (Eq. 7, backward Euler) is
-Ts z / (z - 1) and the computation delay is z^-d.
+The velocity estimates built from them (the average, backward difference and Tustin low-pass
+filters) are a registry of their own, :mod:`haa_sym.model.filters`. The integral part of the torque
+PI (Eq. 7, backward Euler) is Ts z / (z - 1) and the computation delay is z^-d.
 
 Example
 -------
->>> from haa_sym.loop.elements import velocity_filter
->>> F = velocity_filter("average", Ts=1e-3, N_av=4)
->>> [float(c) for c in F.numerator], [float(c) for c in F.denominator]
-([1.0, 0.0, 0.0, 0.0, -1.0], [0.004, 0.0, 0.0, 0.0, 0.0])
+>>> from haa_sym.model.elements import pi_integral
+>>> I = pi_integral(1e-3)
+>>> [float(c) for c in I.numerator], [float(c) for c in I.denominator]
+([0.001, 0.0], [1.0, -1.0])
 """
 from __future__ import annotations
 
-import math
 from dataclasses import dataclass
 from fractions import Fraction
 from functools import lru_cache
@@ -39,10 +32,7 @@ from typing import Sequence
 
 import numpy as np
 
-__all__ = ["Element", "VELOCITY_FILTERS", "velocity_filter", "backward_difference", "pi_integral",
-           "delay", "common_denominator"]
-
-VELOCITY_FILTERS = ("average", "lowpass1", "butterworth2")
+__all__ = ["Element", "backward_difference", "tustin", "pi_integral", "delay", "common_denominator"]
 
 
 def _trim(p: Sequence[Fraction]) -> tuple[Fraction, ...]:
@@ -208,12 +198,7 @@ def backward_difference(Ts: float) -> Element:
     return Element("backward_difference", (Fraction(1), Fraction(-1)), (_fraction(Ts), Fraction(0)))
 
 
-def _average(Ts: float, N: int) -> Element:
-    return Element(f"average{N}", (Fraction(1),) + (Fraction(0),) * (N - 1) + (Fraction(-1),),
-                   (N * _fraction(Ts),) + (Fraction(0),) * N)
-
-
-def _tustin(analog_den: Sequence[float], w_c: float, Ts: float, name: str) -> Element:
+def tustin(analog_den: Sequence[float], w_c: float, Ts: float, name: str) -> Element:
     """w_c^n / analog_den(s) with s = (2/Ts)(z - 1)/(z + 1) (Tustin, no prewarping), exact in
     the floats given; analog_den ascending in s is [w_c^n, ..., 1]."""
     n = len(analog_den) - 1
@@ -231,30 +216,6 @@ def _tustin(analog_den: Sequence[float], w_c: float, Ts: float, name: str) -> El
     for _ in range(n):
         num = _mul(num, zp1)
     return Element(name, num, den)
-
-
-def velocity_filter(kind: str, Ts: float, N_av: int | None = None, f_c: float | None = None) -> Element:
-    """The velocity estimate of the controller (module docstring), theta -> v in rad/s per rad.
-
-    Parameters
-    ----------
-    kind : {"average", "lowpass1", "butterworth2"}
-    Ts : float
-        Sampling time, s.
-    N_av : int, optional
-        Samples of the average (``"average"``).
-    f_c : float, optional
-        Cut-off frequency, Hz (``"lowpass1"``, ``"butterworth2"``); below Nyquist 1/(2 Ts).
-    """
-    if kind == "average":
-        return _average(Ts, int(N_av))
-    w_c = 2 * math.pi * float(f_c)
-    if kind == "lowpass1":
-        return backward_difference(Ts) * _tustin((w_c, 1.0), w_c, Ts, "lowpass1")
-    if kind == "butterworth2":
-        return backward_difference(Ts) * _tustin((w_c * w_c, math.sqrt(2) * w_c, 1.0), w_c, Ts,
-                                                 "butterworth2")
-    raise ValueError(f"velocity_filter = {kind!r}; allowed: {list(VELOCITY_FILTERS)}")
 
 
 def pi_integral(Ts: float) -> Element:
