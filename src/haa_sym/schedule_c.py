@@ -6,6 +6,10 @@ its validation, the lookup rule (repeated in the generated header) and the looku
 (:func:`lookup_beta`, :func:`lookup_alpha`, :func:`lookup_feasible`) are in
 :mod:`haa_sym.schedule_table`; this module re-exports their names.
 
+The C text is in the templates ``haa_sym/design/templates/haa_schedule.h.in`` and
+``haa_schedule.c.in`` (package data): readable C with ``string.Template`` placeholders
+(``$name``), filled in by :func:`c_code` (the rules are at ``_render``).
+
 Reproducibility: the same table gives the same bytes (numbers printed with ``%.17g``, which
 round-trips a double through a correctly rounding compiler such as gcc and clang; lines end in
 ``\\n``; meta in a fixed order). With floating-point contraction off (``-ffp-contract=off``,
@@ -29,9 +33,11 @@ Example
 """
 from __future__ import annotations
 
+import importlib.resources
 import numbers
 import os
 import re
+import string
 from pathlib import Path
 
 import numpy as np
@@ -91,13 +97,18 @@ def _spacing(x: np.ndarray, unit: str, log: bool) -> str:
     return f"{head}, not uniformly spaced (see the table in {SOURCE})"
 
 
+def _hang(line: str) -> int:
+    """Indentation of a comment line's continuation lines: under a numbered item's text, two
+    more than an indented line, none for a line at the margin."""
+    indent = len(line) - len(line.lstrip(" "))
+    return indent + (3 if re.match(r"\d+\. ", line[indent:]) else 2 if indent else 0)
+
+
 def _wrap(comment_lines: list[str], width: int = 96) -> list[str]:
     out = []
     for line in comment_lines:
-        indent = len(line) - len(line.lstrip(" "))
+        indent, hang = len(line) - len(line.lstrip(" ")), _hang(line)
         words, cur = line.split(" ")[indent:], " " * indent
-        # continuation lines align under a numbered item's text, or indent a listed line
-        hang = indent + (3 if re.match(r"\d+\. ", line[indent:]) else 2 if indent else 0)
         for w in words:
             if len(cur) + len(w) + 1 > width and cur.strip():
                 out.append(cur.rstrip())
@@ -107,18 +118,77 @@ def _wrap(comment_lines: list[str], width: int = 96) -> list[str]:
     return [(" * " + l).rstrip() for l in out]
 
 
-def _array(name: str, ctype: str, size: str, values: list[str], per_line: int,
-           row: int | None = None, row_label=None) -> list[str]:
-    lines = [f"static const {ctype} {name}[{size}] = {{"]
+def _unwrap(lines: list[str]) -> list[str]:
+    """The inverse of :func:`_wrap` on a template's comment (without its `` * ``): a line indented
+    exactly as the continuation of the line before it (:func:`_hang`) continues that line."""
+    out: list[str] = []
+    hang = None
+    for line in lines:
+        indent = len(line) - len(line.lstrip(" "))
+        if line and hang is not None and indent == hang:
+            out[-1] += " " + line[indent:]
+        else:
+            out.append(line)
+            hang = _hang(line) if line else None
+    return out
+
+
+# ------------------------------------------------------------------------------------ templates
+# haa_sym/design/templates/haa_schedule.{h,c}.in: the C text with string.Template placeholders.
+# ``$name`` inside a line takes a text value; a placeholder alone on its line (after spaces) takes
+# a list of lines, each emitted with the placeholder's indentation (none for an empty list: the
+# parts that exist only when alpha is scheduled). In the header, the comment from ``/*`` to
+# `` */`` is re-wrapped at 96 columns after the substitution (each paragraph or item, with its
+# continuation lines, is one line to wrap; see _unwrap), so values of any length wrap as before.
+
+def _template(name: str) -> str:
+    path = importlib.resources.files("haa_sym.design") / "templates" / f"{name}.in"
+    return path.read_text(encoding="ascii")
+
+
+def _fill(lines: list[str], values: dict) -> list[str]:
+    text = {k: v for k, v in values.items() if isinstance(v, str)}
+    out = []
+    for line in lines:
+        m = re.fullmatch(r"( *)\$([A-Za-z_][A-Za-z0-9_]*)", line)
+        if m and isinstance(values.get(m[2]), list):
+            out += [m[1] + item if item else "" for item in values[m[2]]]
+        else:
+            out.append(string.Template(line).substitute(text))
+    return out
+
+
+def _render(name: str, values: dict, wrap_comment: bool = False) -> str:
+    """The template ``name`` + ``.in`` with ``values`` substituted (every placeholder a value,
+    every value a placeholder: a template and this module cannot drift apart silently)."""
+    template = _template(name)
+    names = set(string.Template(template).get_identifiers())
+    if names != set(values):
+        raise RuntimeError(f"the template {name}.in and haa_sym.schedule_c disagree: placeholders "
+                           f"without a value {sorted(names - set(values))}, values without a "
+                           f"placeholder {sorted(set(values) - names)}")
+    lines = template.split("\n")
+    head: list[str] = []
+    if wrap_comment:
+        end = lines.index(" */")
+        comment = [line[3:] if line.startswith(" * ") else "" for line in lines[1:end]]
+        head = ["/*", *_wrap(_fill(_unwrap(comment), values)), " */"]
+        lines = lines[end + 1:]
+    return "\n".join(head + _fill(lines, values))
+
+
+def _rows(values: list[str], per_line: int, row: int | None = None, row_label=None) -> list[str]:
+    """An initializer's lines: ``per_line`` values a line, a comment line before each row of
+    ``row`` values when ``row_label`` is given, no comma after the last value."""
+    lines = []
     chunk = row or len(values)
     for r in range(0, len(values), chunk):
         seg = values[r:r + chunk]
         if row_label is not None:
-            lines.append(f"    /* {row_label(r // chunk)} */")
+            lines.append(f"/* {row_label(r // chunk)} */")
         for s in range(0, len(seg), per_line):
-            lines.append("    " + ", ".join(seg[s:s + per_line]) + ",")
+            lines.append(", ".join(seg[s:s + per_line]) + ",")
     lines[-1] = lines[-1].rstrip(",")
-    lines.append("};")
     return lines
 
 
@@ -128,217 +198,58 @@ def c_code(table: ScheduleTable) -> tuple[str, str]:
         raise ParameterError(f"table = {table!r}; allowed: a haa_sym.schedule_c.ScheduleTable")
     c, (nP, nD) = table._c, table.shape
     has_alpha = table.alpha is not None
-    fb_i, fb_j = divmod(table.fallback, nD)
+    fb, (fb_i, fb_j) = table.fallback, divmod(table.fallback, nD)
     meta = table.meta
     prov = [f"{k}: {_text(meta[k])}" for k in META_KEYS]
     prov += [f"{_text(k)}: {_text(meta[k])}" for k in sorted(k for k in meta if k not in META_KEYS)]
-    n_feas = int(table.feasible.sum())
     n_bytes = 8 * (2 * nP - 1 + nD + nP * nD * (2 if has_alpha else 1)) + nP * nD
-    ab = "beta and alpha" if has_alpha else "beta"
-    doc = [
-        f"{HEADER} -- torque-gain schedule of the inner torque loop: {ab} over the impedance "
-        f"(P_gain, D_gain). Generated by haa_sym {_text(meta['haa_sym_version'])} "
-        "(haa_sym.schedule_c); do not edit.",
-        "",
-        "Provenance",
-        *[f"  {p}" for p in prov],
-        "",
-        "Units",
-        "  P_gain: Nm/rad, D_gain: Nms/rad (the impedance gains of Eq. 8 of Focchi et al. 2016).",
-        "  beta: dimensionless, scales the file's torque PI gains: P_t = beta P_t0, I_t = beta I_t0 "
-        "(Eq. 7).",
-        *(["  alpha: dimensionless, scales the velocity compensation (Eq. 6); scheduled together "
-           "with beta (the pair at a grid point was checked together)."] if has_alpha else []),
-        "",
-        "Grid",
-        f"  P_gain: {_spacing(table.P_gain, 'Nm/rad', True)}.",
-        f"  D_gain: {_spacing(table.D_gain, 'Nms/rad', False)}.",
-        f"  Feasible points: {n_feas} of {nP * nD}. Tables: {n_bytes} bytes of static const data.",
-        f"  Fallback point (the feasible point with the smallest beta, first in row-major order): "
-        f"P_gain = {_text(c['P'][fb_i])}, D_gain = {_text(c['D'][fb_j])}, beta = "
-        f"{_text(c['beta'][table.fallback])}"
-        + (f", alpha = {_text(c['alpha'][table.fallback])}." if has_alpha else "."),
-        "  Infeasible grid points hold the fallback point's values; they are never interpolated.",
-        "",
-        "Lookup rule (haa_schedule_beta" + (", haa_schedule_alpha" if has_alpha else "")
-        + ", haa_schedule_feasible)",
-        "  1. P_gain and D_gain are clamped to the grid's rectangle (a clamped point takes the "
-        "edge's values). The cell has lower corner (i, j) with P[i] <= P_gain < P[i+1], D[j] <= "
-        "D_gain < D[j+1] (the last cell on the upper edges). Bilinear weights in (log P_gain, "
-        "D_gain): t = log(P_gain / P[i]) / log(P[i+1] / P[i]), u = (D_gain - D[j]) / (D[j+1] - "
-        "D[j]); weights (1-t)(1-u), t(1-u), (1-t)u, tu for corners (i,j), (i+1,j), (i,j+1), "
-        "(i+1,j+1). A corner is used when its weight is not zero (one at a grid point, two on a "
-        "grid line, four inside a cell).",
-        "  2. Every used corner feasible: bilinear interpolation (the table's value at a grid "
-        "point, exactly; between the corners' values elsewhere; continuous in the impedance).",
-        "  3. Some used corner infeasible: no interpolation; the entry of the used feasible corner "
-        "with the smallest beta" + (" (alpha: that corner's)" if has_alpha else "")
-        + ", or the fallback point's when no used corner is feasible. Near the edge of the "
-        "feasible set the largest safe beta falls, and each candidate is a gain the table found "
-        "safe at an adjacent impedance; interpolating towards a point where no gain qualifies "
-        "would blend a safe gain with a meaningless one.",
-        "  4. NaN in either argument: the fallback point's values (a gain must stay a finite "
-        "number the torque loop can run with; the flag says it is not backed by the table).",
-        "  5. haa_schedule_feasible returns 1 exactly when (P_gain, D_gain) is on the grid's "
-        "rectangle and every used corner is feasible; 0 in cases 3 and 4 and outside the grid.",
-        "  The table guarantees its grid points only: between them, bilinear interpolation of "
-        "safe gains is safe where the largest safe beta is concave over the cell (the table's "
-        "producer checks the cells or refines the grid).",
-        "",
-        "Build",
-        "  Plain C99, no allocation, no state (reentrant), libm only (log): cc -std=c99 -c "
-        f"{SOURCE}; link with -lm. Cost: two binary searches, one log, about 20 flops. With "
-        "floating-point contraction off (-ffp-contract=off, gcc's default with -std=c99) the "
-        "results are those of haa_sym.schedule_c.lookup_beta bit for bit (same libm log).",
-    ]
-    hdr = ["/*", *_wrap(doc), " */", "#ifndef HAA_SCHEDULE_H", "#define HAA_SCHEDULE_H", "",
-           f"#define HAA_SCHEDULE_N_P_GAIN {nP}",
-           f"#define HAA_SCHEDULE_N_D_GAIN {nD}",
-           f"#define HAA_SCHEDULE_P_GAIN_MIN {_num(c['P'][0])}  /* Nm/rad */",
-           f"#define HAA_SCHEDULE_P_GAIN_MAX {_num(c['P'][-1])}  /* Nm/rad */",
-           f"#define HAA_SCHEDULE_D_GAIN_MIN {_num(c['D'][0])}  /* Nms/rad */",
-           f"#define HAA_SCHEDULE_D_GAIN_MAX {_num(c['D'][-1])}  /* Nms/rad */",
-           f"#define HAA_SCHEDULE_BETA_FALLBACK {_num(c['beta'][table.fallback])}",
-           *([f"#define HAA_SCHEDULE_ALPHA_FALLBACK {_num(c['alpha'][table.fallback])}"]
-             if has_alpha else []),
-           f"#define HAA_SCHEDULE_HAS_ALPHA {int(has_alpha)}", "",
-           "#ifdef __cplusplus", 'extern "C" {', "#endif", "",
-           "/* beta at (P_gain Nm/rad, D_gain Nms/rad) by the lookup rule above. */",
-           "double haa_schedule_beta(double P_gain, double D_gain);",
-           *(["/* alpha at (P_gain, D_gain): the same weights, or the same corner, as beta. */",
-              "double haa_schedule_alpha(double P_gain, double D_gain);"] if has_alpha else []),
-           "/* 1 when (P_gain, D_gain) is on the grid and every corner used is feasible, else 0. */",
-           "int haa_schedule_feasible(double P_gain, double D_gain);", "",
-           "#ifdef __cplusplus", "}", "#endif", "", "#endif /* HAA_SCHEDULE_H */", ""]
+    version = _text(meta["haa_sym_version"])
+    header = _render(HEADER, {
+        "scheduled": "beta and alpha" if has_alpha else "beta", "version": version,
+        "provenance": prov,
+        "alpha_units": ["alpha: dimensionless, scales the velocity compensation (Eq. 6); "
+                        "scheduled together with beta (the pair at a grid point was checked "
+                        "together)."] if has_alpha else [],
+        "p_gain_grid": _spacing(table.P_gain, "Nm/rad", True),
+        "d_gain_grid": _spacing(table.D_gain, "Nms/rad", False),
+        "n_feasible": str(int(table.feasible.sum())), "n_points": str(nP * nD),
+        "n_bytes": str(n_bytes),
+        "fallback_p_gain": _text(c["P"][fb_i]), "fallback_d_gain": _text(c["D"][fb_j]),
+        "fallback_beta": _text(c["beta"][fb]),
+        "fallback_alpha": f", alpha = {_text(c['alpha'][fb])}" if has_alpha else "",
+        "alpha_lookup": ", haa_schedule_alpha" if has_alpha else "",
+        "rule3_alpha": " (alpha: that corner's)" if has_alpha else "",
+        "n_p_gain": str(nP), "n_d_gain": str(nD),
+        "p_gain_min": _num(c["P"][0]), "p_gain_max": _num(c["P"][-1]),
+        "d_gain_min": _num(c["D"][0]), "d_gain_max": _num(c["D"][-1]),
+        "beta_fallback": _num(c["beta"][fb]),
+        "alpha_fallback_define": [f"#define HAA_SCHEDULE_ALPHA_FALLBACK {_num(c['alpha'][fb])}"]
+                                 if has_alpha else [],
+        "has_alpha": str(int(has_alpha)),
+        "alpha_declaration": ["/* alpha at (P_gain, D_gain): the same weights, or the same corner, "
+                              "as beta. */",
+                              "double haa_schedule_alpha(double P_gain, double D_gain);"]
+                             if has_alpha else [],
+    }, wrap_comment=True)
 
     p_label = lambda i: f"P_gain = {_text(c['P'][i])} Nm/rad; D_gain index 0..{nD - 1}"
-    src = [f"/* {SOURCE} -- see {HEADER} for the units, the grid and the lookup rule.",
-           f" * Generated by haa_sym {_text(meta['haa_sym_version'])} (haa_sym.schedule_c); do not "
-           "edit. */",
-           "#include <math.h>", "", f'#include "{HEADER}"', "",
-           "/* Grid, Nm/rad and Nms/rad; log_step[i] = log(P_gain[i+1] / P_gain[i]). */",
-           *_array("haa_schedule_p_gain_", "double", "HAA_SCHEDULE_N_P_GAIN", [_num(v) for v in c["P"]], 4),
-           *_array("haa_schedule_log_step_", "double", "HAA_SCHEDULE_N_P_GAIN - 1", [_num(v) for v in c["log_step"]], 4),
-           *_array("haa_schedule_d_gain_", "double", "HAA_SCHEDULE_N_D_GAIN", [_num(v) for v in c["D"]], 4), "",
-           "/* Row-major [P_gain index][D_gain index]; infeasible points hold the fallback point's "
-           "values. */",
-           *_array("haa_schedule_beta_", "double", "HAA_SCHEDULE_N_P_GAIN * HAA_SCHEDULE_N_D_GAIN", [_num(v) for v in c["beta"]], 4,
-                   nD, p_label),
-           *(_array("haa_schedule_alpha_", "double", "HAA_SCHEDULE_N_P_GAIN * HAA_SCHEDULE_N_D_GAIN", [_num(v) for v in c["alpha"]],
-                    4, nD, p_label) if has_alpha else []),
-           *_array("haa_schedule_feasible_", "unsigned char", "HAA_SCHEDULE_N_P_GAIN * HAA_SCHEDULE_N_D_GAIN",
-                   [str(int(v)) for v in c["feasible"]], 16, nD, p_label), "",
-           f"#define HAA_SCHEDULE_FALLBACK_INDEX_ {table.fallback}  /* flat index of the fallback point */", "",
-           _C_BODY.strip("\n"),
-           *(["", "double haa_schedule_alpha(double P_gain, double D_gain)", "{",
-              "    return haa_schedule_value_(haa_schedule_alpha_, P_gain, D_gain);", "}"] if has_alpha else []),
-           ""]
-    return "\n".join(hdr), "\n".join(src)
-
-
-_C_BODY = r"""
-/* Largest k in [0, n-2] with x[k] <= v, for x[0] < v < x[n-1]. */
-static int haa_schedule_bracket_(const double *x, int n, double v)
-{
-    int lo = 0, hi = n - 1;
-    while (hi - lo > 1) {
-        int mid = lo + (hi - lo) / 2;
-        if (x[mid] <= v)
-            lo = mid;
-        else
-            hi = mid;
-    }
-    return lo;
-}
-
-/* Rule 1: flat index of the cell's lower corner, corner weights, on-grid flag; 0 for NaN. */
-static int haa_schedule_locate_(double P_gain, double D_gain, int *base, double w[4], int *inside)
-{
-    const double *P = haa_schedule_p_gain_, *D = haa_schedule_d_gain_;
-    const int nP = HAA_SCHEDULE_N_P_GAIN, nD = HAA_SCHEDULE_N_D_GAIN;
-    int i, j;
-    double t, u;
-    if (isnan(P_gain) || isnan(D_gain))
-        return 0;
-    if (!(P_gain > P[0])) {
-        i = 0;
-        t = 0.0;
-    } else if (!(P_gain < P[nP - 1])) {
-        i = nP - 2;
-        t = 1.0;
-    } else {
-        i = haa_schedule_bracket_(P, nP, P_gain);
-        t = log(P_gain / P[i]) / haa_schedule_log_step_[i];
-        t = t > 1.0 ? 1.0 : t < 0.0 ? 0.0 : t;
-    }
-    if (!(D_gain > D[0])) {
-        j = 0;
-        u = 0.0;
-    } else if (!(D_gain < D[nD - 1])) {
-        j = nD - 2;
-        u = 1.0;
-    } else {
-        j = haa_schedule_bracket_(D, nD, D_gain);
-        u = (D_gain - D[j]) / (D[j + 1] - D[j]);
-        u = u > 1.0 ? 1.0 : u < 0.0 ? 0.0 : u;
-    }
-    *inside = P_gain >= P[0] && P_gain <= P[nP - 1] && D_gain >= D[0] && D_gain <= D[nD - 1];
-    *base = i * nD + j;
-    w[0] = (1.0 - t) * (1.0 - u);
-    w[1] = t * (1.0 - u);
-    w[2] = (1.0 - t) * u;
-    w[3] = t * u;
-    return 1;
-}
-
-/* Rules 2-4: -1 to interpolate, else the flat index whose entries are returned. */
-static int haa_schedule_rule_(double P_gain, double D_gain, int *base, double w[4], int *inside)
-{
-    const int nD = HAA_SCHEDULE_N_D_GAIN;
-    const int offset[4] = {0, nD, 1, nD + 1};
-    int k, pick = -1, every = 1;
-    if (!haa_schedule_locate_(P_gain, D_gain, base, w, inside))
-        return HAA_SCHEDULE_FALLBACK_INDEX_;
-    for (k = 0; k < 4; ++k) {
-        int idx = *base + offset[k];
-        if (!(w[k] > 0.0))
-            continue;                            /* an unused corner */
-        if (!haa_schedule_feasible_[idx]) {
-            every = 0;
-            continue;
-        }
-        if (pick < 0 || haa_schedule_beta_[idx] < haa_schedule_beta_[pick])
-            pick = idx;
-    }
-    if (every)
-        return -1;
-    return pick >= 0 ? pick : HAA_SCHEDULE_FALLBACK_INDEX_;
-}
-
-static double haa_schedule_value_(const double *table, double P_gain, double D_gain)
-{
-    const int nD = HAA_SCHEDULE_N_D_GAIN;
-    int base = 0, inside = 0;
-    double w[4] = {0.0, 0.0, 0.0, 0.0};
-    int k = haa_schedule_rule_(P_gain, D_gain, &base, w, &inside);
-    if (k >= 0)
-        return table[k];
-    return w[0] * table[base] + w[1] * table[base + nD] + w[2] * table[base + 1]
-           + w[3] * table[base + nD + 1];
-}
-
-double haa_schedule_beta(double P_gain, double D_gain)
-{
-    return haa_schedule_value_(haa_schedule_beta_, P_gain, D_gain);
-}
-
-int haa_schedule_feasible(double P_gain, double D_gain)
-{
-    int base = 0, inside = 0;
-    double w[4] = {0.0, 0.0, 0.0, 0.0};
-    return haa_schedule_rule_(P_gain, D_gain, &base, w, &inside) < 0 && inside;
-}
-"""
+    table_rows = lambda key: _rows([_num(v) for v in c[key]], 4, nD, p_label)
+    size = "HAA_SCHEDULE_N_P_GAIN * HAA_SCHEDULE_N_D_GAIN"
+    source = _render(SOURCE, {
+        "version": version,
+        "p_gain": _rows([_num(v) for v in c["P"]], 4),
+        "log_step": _rows([_num(v) for v in c["log_step"]], 4),
+        "d_gain": _rows([_num(v) for v in c["D"]], 4),
+        "beta": table_rows("beta"),
+        "alpha_table": [f"static const double haa_schedule_alpha_[{size}] = {{",
+                        *("    " + line for line in table_rows("alpha")), "};"] if has_alpha else [],
+        "feasible": _rows([str(int(v)) for v in c["feasible"]], 16, nD, p_label),
+        "fallback_index": str(fb),
+        "alpha_function": ["", "double haa_schedule_alpha(double P_gain, double D_gain)", "{",
+                           "    return haa_schedule_value_(haa_schedule_alpha_, P_gain, D_gain);",
+                           "}"] if has_alpha else [],
+    })
+    return header, source
 
 
 def check_c_directory(directory: str | Path, field: str = "--c-out") -> Path:
