@@ -281,6 +281,28 @@ def test_emitted_c_equals_the_golden_files(update_golden):
                     "and commit them with the change (review with git diff tests/golden).", pytrace=False)
 
 
+def test_comments_show_no_absolute_path_and_no_float_noise():
+    """The header's comments round numbers to 12 digits and show an absolute path by its file
+    name; the tables and the #define values stay exact (%.17g)."""
+    t = golden_table()
+    paths = {"posix": "/home/user/haa_sym/model/hyq_haa.toml", "drive": "C:\\Users\\me\\sea.toml",
+             "home": "~/models/hd.toml", "in_text": "read from /opt/haa/model/x.toml, checked",
+             "kept": ["model/hyq_haa.toml", "Nm/rad", "a / b", "https://example.org/a/b"]}
+    odd = ScheduleTable(t.P_gain, t.D_gain, t.beta, t.feasible, {**t.meta, **paths}, alpha=t.alpha)
+    header, source = c_code(odd)
+    flat = re.sub(r"\n \*  +", " ", header)                   # the comment's lines joined
+    for text in ("source: hyq_haa.toml", "posix: hyq_haa.toml", "drive: sea.toml", "home: hd.toml",
+                 "in_text: read from x.toml, checked",
+                 "kept: model/hyq_haa.toml, Nm/rad, a / b, https://example.org/a/b",
+                 "torque_bandwidth_beta_1_rad_s: 0.3\n", "from 4.0 to 2048.0 Nm/rad", "P_gain = 2048.0, D_gain = 25.5, beta = 0.8, alpha = 0.5."):
+        assert text in flat
+    assert "/home/" not in header and "C:" not in header and "~" not in header
+    assert "/* P_gain = 256.0 Nm/rad; D_gain index 0..2 */" in source
+    assert not re.search(r"\d\.\d*0000000000\d", header.split(" */")[0])   # no noise in the comment
+    assert "#define HAA_SCHEDULE_P_GAIN_MAX 2048.0000000000005" in header    # exact where it is code
+    assert "256.00000000000006" in source
+
+
 def test_meta_text_cannot_break_the_comment(tmp_path):
     t = synthetic(alpha=False)
     odd = ScheduleTable(t.P_gain, t.D_gain, t.beta, t.feasible,

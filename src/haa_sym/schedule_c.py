@@ -10,9 +10,12 @@ The C text is in the templates ``haa_sym/design/templates/haa_schedule.h.in`` an
 ``haa_schedule.c.in`` (package data): readable C with ``string.Template`` placeholders
 (``$name``), filled in by :func:`c_code` (the rules are at ``_render``).
 
-Reproducibility: the same table gives the same bytes (numbers printed with ``%.17g``, which
-round-trips a double through a correctly rounding compiler such as gcc and clang; lines end in
-``\\n``; meta in a fixed order). With floating-point contraction off (``-ffp-contract=off``,
+Reproducibility: the same table gives the same bytes (the tables and the ``#define`` values
+printed with ``%.17g``, which round-trips a double through a correctly rounding compiler such as
+gcc and clang; lines end in ``\\n``; meta in a fixed order). The comments are for a reader and
+independent of where the table came from: their numbers are rounded to 12 significant digits
+(a computed grid's ``2000.0000000000002`` reads ``2000.0``, ``30.0`` stays ``30.0``) and an
+absolute path in the meta shows as its file name. With floating-point contraction off (``-ffp-contract=off``,
 gcc's default with ``-std=c99``) the C and the Python lookups perform the same IEEE operations
 and agree exactly on a machine whose libm ``log`` is the one Python uses.
 
@@ -64,8 +67,25 @@ def _num(x: float) -> str:
     return s if any(ch in s for ch in ".en") else s + ".0"
 
 
+# Significant digits of a number in a comment (as the schedule's CSV prints beta): enough for a
+# reader, and float noise (2000.0000000000002 from a computed grid) disappears.
+_COMMENT_DIGITS = 12
+_SEGMENT = r"""[^\s,;)\]}"'\\/]+"""
+# An absolute path in a meta text (a drive, home, POSIX or UNC path, at the start or after a space,
+# '=', ',', ';', '(', '[', '{' or a quote): the comment shows its file name, so the header does not
+# depend on where the source file was (nor on who built it).
+_ABSOLUTE_PATH = re.compile(rf"""(?<![^\s=,;(\[{{"'])(?:(?:[A-Za-z]:|~)[\\/]{_SEGMENT}(?:[\\/]{_SEGMENT})*"""
+                            rf"""|(?:/|\\\\){_SEGMENT}(?:[\\/]{_SEGMENT})+)[\\/]?""")
+
+
+def _file_name(match: re.Match) -> str:
+    return re.split(r"[\\/]", match[0].rstrip("\\/"))[-1]
+
+
 def _text(v) -> str:
-    """Meta value as comment text: printable ASCII, escaped (a path may hold anything)."""
+    """Meta value as comment text: printable ASCII, escaped (a path may hold anything); numbers
+    rounded to :data:`_COMMENT_DIGITS` digits, absolute paths as their file name. (The tables and
+    the ``#define`` values are :func:`_num`: exact.)"""
     if isinstance(v, dict):
         return ", ".join(f"{_text(k)} = {_text(x)}" for k, x in v.items())
     if isinstance(v, (list, tuple)):
@@ -75,8 +95,9 @@ def _text(v) -> str:
     if isinstance(v, numbers.Integral):
         return str(int(v))
     if isinstance(v, numbers.Real):
-        return repr(float(v))
-    s = str(v).encode("ascii", "backslashreplace").decode("ascii")
+        return repr(float(f"{float(v):.{_COMMENT_DIGITS}g}"))
+    s = _ABSOLUTE_PATH.sub(_file_name, str(v))
+    s = s.encode("ascii", "backslashreplace").decode("ascii")
     s = "".join(ch if " " <= ch <= "~" else f"\\x{ord(ch):02x}" for ch in s)
     # no comment delimiters (-Wcomment), no trigraph (??/ would splice lines)
     return s.replace("*/", "* /").replace("/*", "/ *").replace("??", "?\\?")

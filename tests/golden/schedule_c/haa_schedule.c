@@ -17,33 +17,33 @@ static const double haa_schedule_d_gain_[HAA_SCHEDULE_N_D_GAIN] = {
 
 /* Row-major [P_gain index][D_gain index]; infeasible points hold the fallback point's values. */
 static const double haa_schedule_beta_[HAA_SCHEDULE_N_P_GAIN * HAA_SCHEDULE_N_D_GAIN] = {
-    /* P_gain = 4.000000000000001 Nm/rad; D_gain index 0..2 */
+    /* P_gain = 4.0 Nm/rad; D_gain index 0..2 */
     7.5999999999999996, 7.9000000000000004, 8.0,
-    /* P_gain = 32.00000000000001 Nm/rad; D_gain index 0..2 */
+    /* P_gain = 32.0 Nm/rad; D_gain index 0..2 */
     4.2000000000000002, 5.5, 6.0999999999999996,
-    /* P_gain = 256.00000000000006 Nm/rad; D_gain index 0..2 */
+    /* P_gain = 256.0 Nm/rad; D_gain index 0..2 */
     1.3500000000000001, 2.6000000000000001, 3.2999999999999998,
-    /* P_gain = 2048.0000000000005 Nm/rad; D_gain index 0..2 */
+    /* P_gain = 2048.0 Nm/rad; D_gain index 0..2 */
     0.80000000000000004, 0.80000000000000004, 1.45
 };
 static const double haa_schedule_alpha_[HAA_SCHEDULE_N_P_GAIN * HAA_SCHEDULE_N_D_GAIN] = {
-    /* P_gain = 4.000000000000001 Nm/rad; D_gain index 0..2 */
+    /* P_gain = 4.0 Nm/rad; D_gain index 0..2 */
     0.5, 0.5, 1.0,
-    /* P_gain = 32.00000000000001 Nm/rad; D_gain index 0..2 */
+    /* P_gain = 32.0 Nm/rad; D_gain index 0..2 */
     0.5, 1.0, 1.0,
-    /* P_gain = 256.00000000000006 Nm/rad; D_gain index 0..2 */
+    /* P_gain = 256.0 Nm/rad; D_gain index 0..2 */
     1.0, 1.0, 1.0,
-    /* P_gain = 2048.0000000000005 Nm/rad; D_gain index 0..2 */
+    /* P_gain = 2048.0 Nm/rad; D_gain index 0..2 */
     0.5, 0.5, 1.0
 };
 static const unsigned char haa_schedule_feasible_[HAA_SCHEDULE_N_P_GAIN * HAA_SCHEDULE_N_D_GAIN] = {
-    /* P_gain = 4.000000000000001 Nm/rad; D_gain index 0..2 */
+    /* P_gain = 4.0 Nm/rad; D_gain index 0..2 */
     1, 1, 1,
-    /* P_gain = 32.00000000000001 Nm/rad; D_gain index 0..2 */
+    /* P_gain = 32.0 Nm/rad; D_gain index 0..2 */
     1, 1, 1,
-    /* P_gain = 256.00000000000006 Nm/rad; D_gain index 0..2 */
+    /* P_gain = 256.0 Nm/rad; D_gain index 0..2 */
     1, 1, 1,
-    /* P_gain = 2048.0000000000005 Nm/rad; D_gain index 0..2 */
+    /* P_gain = 2048.0 Nm/rad; D_gain index 0..2 */
     0, 1, 1
 };
 

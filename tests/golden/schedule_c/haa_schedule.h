@@ -4,14 +4,14 @@
  *
  * Provenance
  *   actuator: HyQ HAA joint
- *   source: /home/user/haa_sym/model/hyq_haa.toml
+ *   source: hyq_haa.toml
  *   requirements: stable, pm
  *   tolerances: beta_tol = 0.05, pm_deg = 30.0
  *   haa_sym_version: golden
  *   beta_range: 0.1, 8.0
  *   leg: retracted, extended
  *   leg_configurations: 3
- *   torque_bandwidth_beta_1_rad_s: 0.30000000000000004
+ *   torque_bandwidth_beta_1_rad_s: 0.3
  *
  * Units
  *   P_gain: Nm/rad, D_gain: Nms/rad (the impedance gains of Eq. 8 of Focchi et al. 2016).
@@ -21,12 +21,12 @@
  *     (the pair at a grid point was checked together).
  *
  * Grid
- *   P_gain: 4 values from 4.000000000000001 to 2048.0000000000005 Nm/rad, logarithmically spaced
- *     (ratio 8 between neighbours).
+ *   P_gain: 4 values from 4.0 to 2048.0 Nm/rad, logarithmically spaced (ratio 8 between
+ *     neighbours).
  *   D_gain: 3 values from 1.0 to 50.0 Nms/rad, uniformly spaced (step 24.5 Nms/rad).
  *   Feasible points: 11 of 12. Tables: 284 bytes of static const data.
  *   Fallback point (the feasible point with the smallest beta, first in row-major order): P_gain
- *     = 2048.0000000000005, D_gain = 25.5, beta = 0.8, alpha = 0.5.
+ *     = 2048.0, D_gain = 25.5, beta = 0.8, alpha = 0.5.
  *   Infeasible grid points hold the fallback point's values; they are never interpolated.
  *
  * Lookup rule (haa_schedule_beta, haa_schedule_alpha, haa_schedule_feasible)
