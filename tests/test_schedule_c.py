@@ -294,7 +294,8 @@ def test_comments_show_no_absolute_path_and_no_float_noise():
     for text in ("source: hyq_haa.toml", "posix: hyq_haa.toml", "drive: sea.toml", "home: hd.toml",
                  "in_text: read from x.toml, checked",
                  "kept: model/hyq_haa.toml, Nm/rad, a / b, https://example.org/a/b",
-                 "torque_bandwidth_beta_1_rad_s: 0.3\n", "from 4.0 to 2048.0 Nm/rad", "P_gain = 2048.0, D_gain = 25.5, beta = 0.8, alpha = 0.5."):
+                 "torque_bandwidth_beta_1_rad_s: 0.3\n", "from 4.0 to 2048.0 Nm/rad",
+                 "P_gain = 2048.0, D_gain = 25.5, beta = 0.8, alpha = 0.5."):
         assert text in flat
     assert "/home/" not in header and "C:" not in header and "~" not in header
     assert "/* P_gain = 256.0 Nm/rad; D_gain index 0..2 */" in source

@@ -15,9 +15,9 @@ printed with ``%.17g``, which round-trips a double through a correctly rounding 
 gcc and clang; lines end in ``\\n``; meta in a fixed order). The comments are for a reader and
 independent of where the table came from: their numbers are rounded to 12 significant digits
 (a computed grid's ``2000.0000000000002`` reads ``2000.0``, ``30.0`` stays ``30.0``) and an
-absolute path in the meta shows as its file name. With floating-point contraction off (``-ffp-contract=off``,
-gcc's default with ``-std=c99``) the C and the Python lookups perform the same IEEE operations
-and agree exactly on a machine whose libm ``log`` is the one Python uses.
+absolute path in the meta shows as its file name. With floating-point contraction off
+(``-ffp-contract=off``, gcc's default with ``-std=c99``) the C and the Python lookups perform the
+same IEEE operations and agree exactly on a machine whose libm ``log`` is the one Python uses.
 
 Example
 -------
@@ -193,6 +193,9 @@ def _render(name: str, values: dict, wrap_comment: bool = False) -> str:
     if wrap_comment:
         end = lines.index(" */")
         comment = [line[3:] if line.startswith(" * ") else "" for line in lines[1:end]]
+        if lines[0] != "/*" or any(not (line.startswith(" * ") or line == " *") for line in lines[1:end]):
+            raise RuntimeError(f"the template {name}.in: its comment must start with a line '/*' and "
+                               "continue with lines ' * TEXT' or ' *' up to ' */'")
         head = ["/*", *_wrap(_fill(_unwrap(comment), values)), " */"]
         lines = lines[end + 1:]
     return "\n".join(head + _fill(lines, values))
