@@ -7,6 +7,18 @@ from haa_sym.model.params import load_params
 ROOT = pathlib.Path(__file__).resolve().parents[1]
 
 
+def pytest_addoption(parser):
+    parser.addoption("--update-golden", action="store_true", default=False,
+                     help="rewrite the golden files (tests/golden/) with what the code emits now, "
+                          "instead of comparing with them; review the change with git diff")
+
+
+@pytest.fixture
+def update_golden(request) -> bool:
+    """True with ``--update-golden``: a golden-file test rewrites its files instead of comparing."""
+    return bool(request.config.getoption("--update-golden"))
+
+
 @pytest.fixture(scope="session")
 def params():
     return load_params(ROOT / "model" / "hyq_haa.toml")

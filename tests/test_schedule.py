@@ -87,6 +87,8 @@ def test_cli_csv_has_the_issue_columns_and_the_c_lookup_returns_it(tmp_path, cap
     assert "impedances" in capsys.readouterr().out
     rows = list(csv.reader(io.StringIO(out.read_text())))
     assert tuple(rows[0]) == CSV_COLUMNS and len(rows) == 1 + 5 * 4
+    header = (tmp_path / "haa_schedule.h").read_text()           # the bundled model, an absolute path
+    assert "source: hyq_haa.toml" in header and str(ROOT) not in header
     for r in rows[1:]:
         assert r[5] in ("true", "false")
         if r[5] == "true":

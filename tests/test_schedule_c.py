@@ -1,8 +1,10 @@
 """The embedded-C torque-gain schedule (haa_sym.design.schedule_c): the emitted C, compiled with the
 system compiler under strict C99 warnings, against the table and against the Python twin."""
 import ctypes
+import difflib
 import math
 import os
+import pathlib
 import re
 import subprocess
 import sys
@@ -23,6 +25,9 @@ STRICT = ("-std=c99", "-pedantic", "-Wall", "-Wextra", "-Werror", "-Wconversion"
 META = {"actuator": "hyq_haa.toml", "source": "model/hyq_haa.toml",
         "requirements": {"stable": True, "phase_margin_deg": 30.0, "passive": False},
         "tolerances": {"beta": 1e-3}, "haa_sym_version": "test"}
+
+
+GOLDEN = pathlib.Path(__file__).resolve().parent / "golden" / "schedule_c"
 
 
 def _compiler() -> list[str]:
@@ -225,6 +230,79 @@ def test_byte_reproducible(table, tmp_path):
     other = ScheduleTable(table.P_gain, table.D_gain, table.beta, table.feasible,
                           {**META, "source": "other.toml"}, alpha=table.alpha)
     assert c_code(other)[0] != c_code(table)[0]
+
+
+def golden_table() -> ScheduleTable:
+    """A small fixed table from literals (nothing computed whose last bit could change with a
+    numpy version): 4 x 3, one infeasible point (NaN there), alpha scheduled, the meta of a
+    schedule read from an absolute path. P_gain carries float noise, as a computed grid does
+    (``log:5:2000:4`` ends at 2000.0000000000002), but its ratios are exactly 8, so the emitted
+    ``log_step`` (``math.log(8.0)``) is the same with every libm."""
+    P = [4.000000000000001, 32.00000000000001, 256.00000000000006, 2048.0000000000005]
+    D = [1.0, 25.5, 50.0]
+    beta = [[7.6, 7.9, 8.0], [4.2, 5.5, 6.1], [1.35, 2.6, 3.3], [math.nan, 0.8, 1.45]]
+    alpha = [[0.5, 0.5, 1.0], [0.5, 1.0, 1.0], [1.0, 1.0, 1.0], [math.nan, 0.5, 1.0]]
+    feasible = [[True, True, True], [True, True, True], [True, True, True], [False, True, True]]
+    meta = {"actuator": "HyQ HAA joint", "source": "/home/user/haa_sym/model/hyq_haa.toml",
+            "requirements": ["stable", "pm"], "tolerances": {"beta_tol": 0.05, "pm_deg": 30.0},
+            "haa_sym_version": "golden", "beta_range": [0.1, 8.0], "leg": ["retracted", "extended"],
+            "leg_configurations": 3, "torque_bandwidth_beta_1_rad_s": 0.1 * 3}
+    return ScheduleTable(P, D, beta, feasible, meta, alpha=alpha)
+
+
+def test_emitted_c_equals_the_golden_files(update_golden):
+    """c_code(golden_table()) byte for byte against tests/golden/schedule_c/haa_schedule.{h,c};
+    ``pytest tests/test_schedule_c.py --update-golden`` rewrites them instead (then review the
+    change with git diff and commit it)."""
+    header, source = c_code(golden_table())
+    problems, rewritten = [], []
+    for name, text in ((HEADER, header), (SOURCE, source)):
+        path, new = GOLDEN / name, text.encode("ascii")
+        old = path.read_bytes() if path.exists() else None
+        if old == new:
+            continue
+        where = f"tests/golden/schedule_c/{name}"
+        if update_golden:
+            path.parent.mkdir(parents=True, exist_ok=True)
+            path.write_bytes(new)
+            rewritten.append(where)
+        elif old is None:
+            problems.append(f"{where} is missing")
+        else:
+            diff = list(difflib.unified_diff(old.decode("ascii", "replace").splitlines(), text.splitlines(),
+                                             f"{where} (golden)", f"{name} (emitted now)", lineterm=""))
+            more = f"\n... {len(diff) - 40} more diff lines" if len(diff) > 40 else ""
+            problems.append(f"{where} differs from what c_code(golden_table()) emits now:\n"
+                            + "\n".join(diff[:40]) + more)
+    if rewritten:
+        pytest.skip(f"--update-golden: rewrote {', '.join(rewritten)}; review with git diff tests/golden")
+    if problems:
+        pytest.fail("\n\n".join(problems) + "\n\nIf the change is intended, rewrite the golden files with\n"
+                    "    python -m pytest tests/test_schedule_c.py --update-golden\n"
+                    "and commit them with the change (review with git diff tests/golden).", pytrace=False)
+
+
+def test_comments_show_no_absolute_path_and_no_float_noise():
+    """The header's comments round numbers to 12 digits and show an absolute path by its file
+    name; the tables and the #define values stay exact (%.17g)."""
+    t = golden_table()
+    paths = {"posix": "/home/user/haa_sym/model/hyq_haa.toml", "drive": "C:\\Users\\me\\sea.toml",
+             "home": "~/models/hd.toml", "in_text": "read from /opt/haa/model/x.toml, checked",
+             "kept": ["model/hyq_haa.toml", "Nm/rad", "a / b", "https://example.org/a/b"]}
+    odd = ScheduleTable(t.P_gain, t.D_gain, t.beta, t.feasible, {**t.meta, **paths}, alpha=t.alpha)
+    header, source = c_code(odd)
+    flat = re.sub(r"\n \*  +", " ", header)                   # the comment's lines joined
+    for text in ("source: hyq_haa.toml", "posix: hyq_haa.toml", "drive: sea.toml", "home: hd.toml",
+                 "in_text: read from x.toml, checked",
+                 "kept: model/hyq_haa.toml, Nm/rad, a / b, https://example.org/a/b",
+                 "torque_bandwidth_beta_1_rad_s: 0.3\n", "from 4.0 to 2048.0 Nm/rad",
+                 "P_gain = 2048.0, D_gain = 25.5, beta = 0.8, alpha = 0.5."):
+        assert text in flat
+    assert "/home/" not in header and "C:" not in header and "~" not in header
+    assert "/* P_gain = 256.0 Nm/rad; D_gain index 0..2 */" in source
+    assert not re.search(r"\d\.\d*0000000000\d", header.split(" */")[0])   # no noise in the comment
+    assert "#define HAA_SCHEDULE_P_GAIN_MAX 2048.0000000000005" in header    # exact where it is code
+    assert "256.00000000000006" in source
 
 
 def test_meta_text_cannot_break_the_comment(tmp_path):

@@ -49,7 +49,7 @@ from haa_sym._version import __version__
 from haa_sym.analysis.decide import decide_points
 from haa_sym.analysis.robust import MAX_LEG_POINTS, _check_requirements, feasible_map, leg_configurations, leg_ends
 from haa_sym.analysis.torque import torque_bandwidth
-from haa_sym.design.schedule_c import ScheduleTable
+from haa_sym.design.schedule_table import ScheduleTable
 from haa_sym.errors import ParameterError
 from haa_sym.io.gridspec import grid
 from haa_sym.io.outputs import write_text

@@ -1,61 +1,23 @@
 """A torque-gain schedule as embedded C: ``haa_schedule.h`` and ``haa_schedule.c``.
 
-A :class:`ScheduleTable` holds, on a grid of impedances (P_gain, D_gain) of Eq. (8), the largest
-torque-loop gain scale beta (``P_t = beta P_t0``, ``I_t = beta I_t0``, Eq. 7), optionally the
-velocity-compensation scale alpha (Eq. 6), and which grid points meet the requirements at all.
-How the table is computed is not this module's business; :func:`write_c` turns it into plain
-C99 (``static const double`` tables, no allocation, only libm) for the joint's low-level
-controller, and :func:`lookup_beta`, :func:`lookup_alpha`, :func:`lookup_feasible` are the same
-lookup in Python, operation for operation.
+:func:`write_c` turns a :class:`~haa_sym.design.schedule_table.ScheduleTable` into plain C99 (``static
+const double`` tables, no allocation, only libm) for the joint's low-level controller. The table,
+its validation, the lookup rule (repeated in the generated header) and the lookup's Python twin
+(:func:`lookup_beta`, :func:`lookup_alpha`, :func:`lookup_feasible`) are in
+:mod:`haa_sym.design.schedule_table`; this module re-exports their names.
 
-The lookup rule (repeated in the generated header)
---------------------------------------------------
-1. **Cell.** ``P_gain`` and ``D_gain`` are clamped to the grid's rectangle; the cell is the one
-   whose lower corner ``(i, j)`` has ``P[i] <= P_gain < P[i+1]`` and ``D[j] <= D_gain < D[j+1]``
-   (the last cell on the upper edges). Bilinear weights in (log P_gain, D_gain):
-   ``t = log(P_gain / P[i]) / log(P[i+1] / P[i])``, ``u = (D_gain - D[j]) / (D[j+1] - D[j])``,
-   weights ``(1-t)(1-u), t(1-u), (1-t)u, tu`` for the corners ``(i,j), (i+1,j), (i,j+1),
-   (i+1,j+1)``. A corner is *used* when its weight is not zero: one corner at a grid point, two
-   on a grid line, four inside a cell. Clamped points take the edge's values.
-2. **Every used corner feasible:** the bilinear interpolation of beta (and alpha). At a grid
-   point this is the table's value, bit for bit; between grid points it lies between the
-   corners' values and is continuous in the impedance, so a user moving P_gain or D_gain online
-   moves beta smoothly.
-3. **Some used corner infeasible:** no interpolation. The result is the table entry of the used
-   feasible corner with the smallest beta (its alpha with it: the pair was checked together);
-   when no used corner is feasible, the *fallback point*, the feasible grid point with the
-   smallest beta of the whole table (first in row-major order on ties). ``haa_schedule_feasible``
-   returns 0.
-4. **NaN in either argument:** the fallback point's beta (and alpha); feasible 0.
-5. ``haa_schedule_feasible`` returns 1 exactly when the argument lies on the grid's rectangle
-   (clamping not needed, no NaN) and every used corner is feasible: 1 means "the value comes
-   from interpolating gains the table found safe at the surrounding impedances".
+The C text is in the templates ``haa_sym/design/templates/haa_schedule.h.in`` and
+``haa_schedule.c.in`` (package data): readable C with ``string.Template`` placeholders
+(``$name``), filled in by :func:`c_code` (the rules are at ``_render``).
 
-Why this rule, as a control engineer: the table gives, per grid point, the largest beta that
-meets every requirement there. Interpolating towards a neighbour where *no* beta qualifies would
-blend a safe gain with a number that means nothing, so an infeasible neighbour switches the
-interpolation off and the smallest safe beta of the used neighbours is returned: near the edge
-of the feasible set the largest safe beta falls (the torque bandwidth the impedance tolerates
-shrinks), and each candidate is a gain the table found safe at an adjacent impedance. A gain
-must stay a finite number the torque loop can run with (a NaN gain turns the motor voltage into
-NaN), hence the fallback point for NaN and for cells without any feasible corner, with the
-flag saying the value is not backed by the table. What no lookup rule can give: safety between
-grid points. Bilinear interpolation of safe gains is safe where the largest safe beta is
-concave over the cell; where it curves upwards the interpolation can exceed it by
-O(h^2 x curvature). The table's producer must check the cells (e.g. their centres) or refine
-the grid; the minimum over a cell's corners would be safe whenever the largest safe beta is
-monotonic in P_gain and D_gain over the cell, but it is a staircase that jumps at every grid
-line and does not return the table's values at the grid points.
-
-Values held at infeasible grid points: the input table may hold anything there (NaN, a range
-end); the emitted table holds the fallback point's beta and alpha. They are never interpolated
-(rule 3) and keep every weighted sum finite.
-
-Reproducibility: the same table gives the same bytes (numbers printed with ``%.17g``, which
-round-trips a double through a correctly rounding compiler such as gcc and clang; lines end in
-``\\n``; meta in a fixed order). With floating-point contraction off (``-ffp-contract=off``,
-gcc's default with ``-std=c99``) the C and the Python lookups perform the same IEEE operations
-and agree exactly on a machine whose libm ``log`` is the one Python uses.
+Reproducibility: the same table gives the same bytes (the tables and the ``#define`` values
+printed with ``%.17g``, which round-trips a double through a correctly rounding compiler such as
+gcc and clang; lines end in ``\\n``; meta in a fixed order). The comments are for a reader and
+independent of where the table came from: their numbers are rounded to 12 significant digits
+(a computed grid's ``2000.0000000000002`` reads ``2000.0``, ``30.0`` stays ``30.0``) and an
+absolute path in the meta shows as its file name. With floating-point contraction off
+(``-ffp-contract=off``, gcc's default with ``-std=c99``) the C and the Python lookups perform the
+same IEEE operations and agree exactly on a machine whose libm ``log`` is the one Python uses.
 
 Example
 -------
@@ -66,288 +28,35 @@ Example
 >>> meta = {"actuator": "hyq_haa.toml", "source": "model/hyq_haa.toml",
 ...         "requirements": "stable, phase margin >= 30 deg", "tolerances": "beta 1e-3",
 ...         "haa_sym_version": "0.1"}
->>> table = ScheduleTable(P, D, beta, feasible, meta)
->>> lookup_beta(table, float(P[1]), 25.0)            # a grid point: the table's value
-7.0
->>> lookup_beta(table, float(np.sqrt(P[1] * P[2])), 37.5)   # cell centre: mean of 4 corners
-6.0
->>> lookup_beta(table, 1500.0, 10.0), lookup_feasible(table, 1500.0, 10.0)  # rule 3
-(1.0, 0)
->>> write_c(table, "controller/")                       # doctest: +SKIP
+>>> header, source = c_code(ScheduleTable(P, D, beta, feasible, meta))
+>>> header.splitlines()[-1]
+'#endif /* HAA_SCHEDULE_H */'
+>>> write_c(ScheduleTable(P, D, beta, feasible, meta), "controller/")   # doctest: +SKIP
 (PosixPath('controller/haa_schedule.h'), PosixPath('controller/haa_schedule.c'))
 """
 from __future__ import annotations
 
-import bisect
-import math
+import importlib.resources
 import numbers
 import os
 import re
-from dataclasses import dataclass, field
+import string
 from pathlib import Path
 
 import numpy as np
 
-from haa_sym.errors import OutputError
+from haa_sym.errors import OutputError, ParameterError
 from haa_sym.io.outputs import Transaction, transaction
-from haa_sym.errors import ParameterError
+# the table and the lookup's Python twin, importable from here as before
+from haa_sym.design.schedule_table import (META_KEYS, ScheduleTable, lookup_alpha, lookup_beta,
+                                    lookup_feasible)
 
 __all__ = ["ScheduleTable", "META_KEYS", "HEADER", "SOURCE", "c_code", "write_c", "lookup_beta",
            "lookup_alpha", "lookup_feasible"]
 
 HEADER = "haa_schedule.h"
 SOURCE = "haa_schedule.c"
-# Provenance every emitted header states (values: text, numbers, booleans, or a flat list or
-# dict of these); other keys are printed after them, sorted.
-META_KEYS = ("actuator", "source", "requirements", "tolerances", "haa_sym_version")
 _SPACING_RTOL = 1e-9        # neighbour steps (or ratios) equal to this are "uniform" in the header
-
-
-@dataclass(frozen=True, eq=False)
-class ScheduleTable:
-    """A torque-gain schedule on an impedance grid, validated (see the module docstring).
-
-    Parameters
-    ----------
-    P_gain : array_like, shape (n_P,)
-        Stiffness grid of Eq. (8), Nm/rad: at least 2 finite values > 0, strictly increasing
-        (logarithmic spacing is usual but not required; interpolation is in log P_gain).
-    D_gain : array_like, shape (n_D,)
-        Damping grid, Nms/rad: at least 2 finite values >= 0, strictly increasing.
-    beta : array_like, shape (n_P, n_D)
-        Largest torque-loop gain scale per grid point (dimensionless, Eq. 7): finite and > 0 at
-        every feasible point; ignored (any value, NaN included) at infeasible ones.
-    feasible : array_like of bool, shape (n_P, n_D)
-        True where ``beta`` meets every requirement; at least one point.
-    meta : dict
-        Provenance printed in the header: every key of :data:`META_KEYS` (actuator, source
-        file, requirements, tolerances, haa_sym version), values text, numbers, booleans or a
-        flat list or dict of these; more keys allowed.
-    alpha : array_like, shape (n_P, n_D), optional
-        Velocity-compensation scale scheduled with beta (Eq. 6): finite and >= 0 at feasible
-        points. None (default): alpha is not scheduled and no ``haa_schedule_alpha`` is emitted.
-
-    Raises
-    ------
-    ParameterError
-        Naming the field, the value (and grid point) and what is allowed.
-    """
-
-    P_gain: np.ndarray
-    D_gain: np.ndarray
-    beta: np.ndarray
-    feasible: np.ndarray
-    meta: dict
-    alpha: np.ndarray | None = None
-    # Derived (the tables as emitted, see "Values held at infeasible grid points"):
-    fallback: int = field(init=False, repr=False)          # flat index of the fallback point
-    _c: dict = field(init=False, repr=False)
-
-    def __post_init__(self):
-        P = _grid("P_gain", self.P_gain, 0.0, strict=True, unit="Nm/rad")
-        D = _grid("D_gain", self.D_gain, 0.0, strict=False, unit="Nms/rad")
-        shape = (P.size, D.size)
-        feas = _mask(self.feasible, shape)
-        beta = _table("beta", self.beta, shape, feas, P, D, "a finite number > 0",
-                      lambda v: np.isfinite(v) & (v > 0))
-        alpha = None if self.alpha is None else _table(
-            "alpha", self.alpha, shape, feas, P, D, "a finite number >= 0",
-            lambda v: np.isfinite(v) & (v >= 0))
-        meta = _meta(self.meta)
-        for name, value in (("P_gain", P), ("D_gain", D), ("beta", beta), ("feasible", feas),
-                            ("alpha", alpha)):
-            if value is not None:
-                value.flags.writeable = False
-            object.__setattr__(self, name, value)
-        object.__setattr__(self, "meta", meta)
-        flat = np.where(feas, beta, np.inf).ravel()
-        fb = int(np.argmin(flat))                  # first smallest in row-major order
-        object.__setattr__(self, "fallback", fb)
-        # The emitted tables as Python floats: the lookup twin reads exactly these.
-        fill = lambda a: np.where(feas, a, a.ravel()[fb]).ravel().tolist()
-        object.__setattr__(self, "_c", {
-            "P": P.tolist(), "D": D.tolist(),
-            "log_step": [math.log(b / a) for a, b in zip(P.tolist(), P.tolist()[1:])],
-            "beta": fill(beta), "alpha": None if alpha is None else fill(alpha),
-            "feasible": feas.ravel().tolist(),
-        })
-
-    @property
-    def shape(self) -> tuple[int, int]:
-        """``(n_P, n_D)``."""
-        return (self.P_gain.size, self.D_gain.size)
-
-
-# ---------------------------------------------------------------------------------- validation
-
-def _where(P, D, i, j) -> str:
-    return f"(P_gain = {float(P[i])!r} Nm/rad, D_gain = {float(D[j])!r} Nms/rad)"
-
-
-def _grid(name: str, value, low: float, strict: bool, unit: str) -> np.ndarray:
-    allowed = (f"at least 2 finite values {'>' if strict else '>='} {low:g} {unit}, strictly "
-               "increasing")
-    try:
-        x = np.array(value, dtype=float)
-    except (TypeError, ValueError):
-        raise ParameterError(f"ScheduleTable.{name} = {value!r} is not an array of numbers; "
-                             f"allowed: {allowed}") from None
-    if x.ndim != 1 or x.size < 2:
-        raise ParameterError(f"ScheduleTable.{name} has shape {x.shape}; allowed: {allowed}")
-    bad = ~np.isfinite(x) | ((x <= low) if strict else (x < low))
-    if bad.any():
-        k = int(np.argmax(bad))
-        raise ParameterError(f"ScheduleTable.{name}[{k}] = {float(x[k])!r}; allowed: {allowed}")
-    down = np.diff(x) <= 0
-    if down.any():
-        k = int(np.argmax(down)) + 1
-        raise ParameterError(f"ScheduleTable.{name}[{k}] = {float(x[k])!r} is not greater than "
-                             f"{name}[{k - 1}] = {float(x[k - 1])!r}; allowed: {allowed}")
-    return x
-
-
-def _mask(value, shape) -> np.ndarray:
-    allowed = f"booleans (or 0/1) of shape {shape} (n_P, n_D), at least one true"
-    try:
-        m = np.array(value)
-    except (TypeError, ValueError):
-        m = np.array(None)
-    if m.shape != shape:
-        raise ParameterError(f"ScheduleTable.feasible has shape {m.shape}; allowed: {allowed}")
-    if m.dtype != bool:
-        ok = m.dtype.kind in "iuf" and bool(np.isin(m, (0, 1)).all())
-        if not ok:
-            bad = [v for v in m.ravel().tolist() if not (isinstance(v, numbers.Real) and v in (0, 1))]
-            raise ParameterError(f"ScheduleTable.feasible holds {bad[0]!r}; allowed: {allowed}")
-        m = m.astype(bool)
-    if not m.any():
-        raise ParameterError(f"ScheduleTable.feasible: no grid point is feasible (nothing to "
-                             f"schedule); allowed: {allowed}")
-    return m.copy()
-
-
-def _table(name, value, shape, feas, P, D, allowed, ok) -> np.ndarray:
-    try:
-        x = np.array(value, dtype=float)
-    except (TypeError, ValueError):
-        raise ParameterError(f"ScheduleTable.{name} is not an array of numbers; allowed: "
-                             f"shape {shape} (n_P, n_D), {allowed} at every feasible point") from None
-    if x.shape != shape:
-        raise ParameterError(f"ScheduleTable.{name} has shape {x.shape}; allowed: shape {shape} "
-                             "(n_P, n_D), like feasible")
-    with np.errstate(invalid="ignore"):
-        bad = feas & ~ok(x)
-    if bad.any():
-        i, j = (int(k) for k in np.argwhere(bad)[0])
-        raise ParameterError(f"ScheduleTable.{name}[{i}, {j}] = {float(x[i, j])!r} at the feasible point "
-                             f"{_where(P, D, i, j)}; allowed: {allowed} at every feasible point")
-    return x
-
-
-def _scalar_ok(v) -> bool:
-    return isinstance(v, (str, bool, numbers.Real))
-
-
-def _meta(value) -> dict:
-    allowed = (f"a dict with the keys {list(META_KEYS)} (more allowed), values text, numbers, "
-               "booleans, or a flat list or dict of these")
-    if not isinstance(value, dict):
-        raise ParameterError(f"ScheduleTable.meta = {value!r}; allowed: {allowed}")
-    missing = [k for k in META_KEYS if k not in value]
-    if missing:
-        raise ParameterError(f"ScheduleTable.meta lacks {missing}; allowed: {allowed}")
-    for k, v in value.items():
-        if not isinstance(k, str):
-            raise ParameterError(f"ScheduleTable.meta key {k!r} is not text; allowed: {allowed}")
-        inner = (list(v.keys()) + list(v.values()) if isinstance(v, dict)
-                 else list(v) if isinstance(v, (list, tuple)) else [v])
-        if not all(_scalar_ok(x) for x in inner):
-            raise ParameterError(f"ScheduleTable.meta[{k!r}] = {v!r}; allowed: {allowed}")
-    return dict(value)
-
-
-# --------------------------------------------------------------------- the lookup (Python twin)
-
-def _locate(c: dict, P_gain: float, D_gain: float):
-    """``(base, weights, inside)`` of rule 1, or None for NaN: exactly the C ``locate``."""
-    P, D = c["P"], c["D"]
-    if math.isnan(P_gain) or math.isnan(D_gain):
-        return None
-    nP, nD = len(P), len(D)
-    if not P_gain > P[0]:
-        i, t = 0, 0.0
-    elif not P_gain < P[nP - 1]:
-        i, t = nP - 2, 1.0
-    else:
-        i = bisect.bisect_right(P, P_gain) - 1
-        t = math.log(P_gain / P[i]) / c["log_step"][i]
-        t = 1.0 if t > 1.0 else 0.0 if t < 0.0 else t
-    if not D_gain > D[0]:
-        j, u = 0, 0.0
-    elif not D_gain < D[nD - 1]:
-        j, u = nD - 2, 1.0
-    else:
-        j = bisect.bisect_right(D, D_gain) - 1
-        u = (D_gain - D[j]) / (D[j + 1] - D[j])
-        u = 1.0 if u > 1.0 else 0.0 if u < 0.0 else u
-    inside = P[0] <= P_gain <= P[nP - 1] and D[0] <= D_gain <= D[nD - 1]
-    w = ((1.0 - t) * (1.0 - u), t * (1.0 - u), (1.0 - t) * u, t * u)
-    return i * nD + j, w, inside
-
-
-def _rule(table: ScheduleTable, P_gain: float, D_gain: float):
-    """``(k, cell)``: k = -1 to interpolate in ``cell``, else the flat index whose entries are
-    returned (rules 3 and 4); exactly the C ``rule``."""
-    c = table._c
-    cell = _locate(c, float(P_gain), float(D_gain))
-    if cell is None:
-        return table.fallback, None
-    base, w, _ = cell
-    nD = len(c["D"])
-    pick, every = -1, True
-    for k, off in enumerate((0, nD, 1, nD + 1)):
-        if not w[k] > 0.0:
-            continue                                  # an unused corner
-        idx = base + off
-        if not c["feasible"][idx]:
-            every = False
-            continue
-        if pick < 0 or c["beta"][idx] < c["beta"][pick]:
-            pick = idx
-    if every:
-        return -1, cell
-    return (pick if pick >= 0 else table.fallback), cell
-
-
-def _value(table: ScheduleTable, values: list, P_gain: float, D_gain: float) -> float:
-    k, cell = _rule(table, P_gain, D_gain)
-    if k >= 0:
-        return values[k]
-    base, w, _ = cell
-    nD = len(table._c["D"])
-    return (w[0] * values[base] + w[1] * values[base + nD] + w[2] * values[base + 1]
-            + w[3] * values[base + nD + 1])
-
-
-def lookup_beta(table: ScheduleTable, P_gain: float, D_gain: float) -> float:
-    """beta at (P_gain Nm/rad, D_gain Nms/rad) by the rule of the module docstring; the same
-    IEEE operations as the emitted ``haa_schedule_beta``."""
-    return _value(table, table._c["beta"], P_gain, D_gain)
-
-
-def lookup_alpha(table: ScheduleTable, P_gain: float, D_gain: float) -> float:
-    """alpha at (P_gain, D_gain), as ``haa_schedule_alpha`` (the table must schedule alpha)."""
-    if table.alpha is None:
-        raise ParameterError("lookup_alpha: this ScheduleTable has no alpha table; allowed: a "
-                             "table built with alpha")
-    return _value(table, table._c["alpha"], P_gain, D_gain)
-
-
-def lookup_feasible(table: ScheduleTable, P_gain: float, D_gain: float) -> int:
-    """1 when (P_gain, D_gain) is on the grid and every used corner is feasible, else 0
-    (rule 5), as ``haa_schedule_feasible``."""
-    k, cell = _rule(table, P_gain, D_gain)
-    return int(k < 0 and cell[2])
 
 
 # ------------------------------------------------------------------------------------ emission
@@ -358,8 +67,25 @@ def _num(x: float) -> str:
     return s if any(ch in s for ch in ".en") else s + ".0"
 
 
+# Significant digits of a number in a comment (as the schedule's CSV prints beta): enough for a
+# reader, and float noise (2000.0000000000002 from a computed grid) disappears.
+_COMMENT_DIGITS = 12
+_SEGMENT = r"""[^\s,;)\]}"'\\/]+"""
+# An absolute path in a meta text (a drive, home, POSIX or UNC path, at the start or after a space,
+# '=', ',', ';', '(', '[', '{' or a quote): the comment shows its file name, so the header does not
+# depend on where the source file was (nor on who built it).
+_ABSOLUTE_PATH = re.compile(rf"""(?<![^\s=,;(\[{{"'])(?:(?:[A-Za-z]:|~)[\\/]{_SEGMENT}(?:[\\/]{_SEGMENT})*"""
+                            rf"""|(?:/|\\\\){_SEGMENT}(?:[\\/]{_SEGMENT})+)[\\/]?""")
+
+
+def _file_name(match: re.Match) -> str:
+    return re.split(r"[\\/]", match[0].rstrip("\\/"))[-1]
+
+
 def _text(v) -> str:
-    """Meta value as comment text: printable ASCII, escaped (a path may hold anything)."""
+    """Meta value as comment text: printable ASCII, escaped (a path may hold anything); numbers
+    rounded to :data:`_COMMENT_DIGITS` digits, absolute paths as their file name. (The tables and
+    the ``#define`` values are :func:`_num`: exact.)"""
     if isinstance(v, dict):
         return ", ".join(f"{_text(k)} = {_text(x)}" for k, x in v.items())
     if isinstance(v, (list, tuple)):
@@ -369,8 +95,9 @@ def _text(v) -> str:
     if isinstance(v, numbers.Integral):
         return str(int(v))
     if isinstance(v, numbers.Real):
-        return repr(float(v))
-    s = str(v).encode("ascii", "backslashreplace").decode("ascii")
+        return repr(float(f"{float(v):.{_COMMENT_DIGITS}g}"))
+    s = _ABSOLUTE_PATH.sub(_file_name, str(v))
+    s = s.encode("ascii", "backslashreplace").decode("ascii")
     s = "".join(ch if " " <= ch <= "~" else f"\\x{ord(ch):02x}" for ch in s)
     # no comment delimiters (-Wcomment), no trigraph (??/ would splice lines)
     return s.replace("*/", "* /").replace("/*", "/ *").replace("??", "?\\?")
@@ -391,13 +118,18 @@ def _spacing(x: np.ndarray, unit: str, log: bool) -> str:
     return f"{head}, not uniformly spaced (see the table in {SOURCE})"
 
 
+def _hang(line: str) -> int:
+    """Indentation of a comment line's continuation lines: under a numbered item's text, two
+    more than an indented line, none for a line at the margin."""
+    indent = len(line) - len(line.lstrip(" "))
+    return indent + (3 if re.match(r"\d+\. ", line[indent:]) else 2 if indent else 0)
+
+
 def _wrap(comment_lines: list[str], width: int = 96) -> list[str]:
     out = []
     for line in comment_lines:
-        indent = len(line) - len(line.lstrip(" "))
+        indent, hang = len(line) - len(line.lstrip(" ")), _hang(line)
         words, cur = line.split(" ")[indent:], " " * indent
-        # continuation lines align under a numbered item's text, or indent a listed line
-        hang = indent + (3 if re.match(r"\d+\. ", line[indent:]) else 2 if indent else 0)
         for w in words:
             if len(cur) + len(w) + 1 > width and cur.strip():
                 out.append(cur.rstrip())
@@ -407,18 +139,80 @@ def _wrap(comment_lines: list[str], width: int = 96) -> list[str]:
     return [(" * " + l).rstrip() for l in out]
 
 
-def _array(name: str, ctype: str, size: str, values: list[str], per_line: int,
-           row: int | None = None, row_label=None) -> list[str]:
-    lines = [f"static const {ctype} {name}[{size}] = {{"]
+def _unwrap(lines: list[str]) -> list[str]:
+    """The inverse of :func:`_wrap` on a template's comment (without its `` * ``): a line indented
+    exactly as the continuation of the line before it (:func:`_hang`) continues that line."""
+    out: list[str] = []
+    hang = None
+    for line in lines:
+        indent = len(line) - len(line.lstrip(" "))
+        if line and hang is not None and indent == hang:
+            out[-1] += " " + line[indent:]
+        else:
+            out.append(line)
+            hang = _hang(line) if line else None
+    return out
+
+
+# ------------------------------------------------------------------------------------ templates
+# haa_sym/design/templates/haa_schedule.{h,c}.in: the C text with string.Template placeholders.
+# ``$name`` inside a line takes a text value; a placeholder alone on its line (after spaces) takes
+# a list of lines, each emitted with the placeholder's indentation (none for an empty list: the
+# parts that exist only when alpha is scheduled). In the header, the comment from ``/*`` to
+# `` */`` is re-wrapped at 96 columns after the substitution (each paragraph or item, with its
+# continuation lines, is one line to wrap; see _unwrap), so values of any length wrap as before.
+
+def _template(name: str) -> str:
+    path = importlib.resources.files("haa_sym.design") / "templates" / f"{name}.in"
+    return path.read_text(encoding="ascii")
+
+
+def _fill(lines: list[str], values: dict) -> list[str]:
+    text = {k: v for k, v in values.items() if isinstance(v, str)}
+    out = []
+    for line in lines:
+        m = re.fullmatch(r"( *)\$([A-Za-z_][A-Za-z0-9_]*)", line)
+        if m and isinstance(values.get(m[2]), list):
+            out += [m[1] + item if item else "" for item in values[m[2]]]
+        else:
+            out.append(string.Template(line).substitute(text))
+    return out
+
+
+def _render(name: str, values: dict, wrap_comment: bool = False) -> str:
+    """The template ``name`` + ``.in`` with ``values`` substituted (every placeholder a value,
+    every value a placeholder: a template and this module cannot drift apart silently)."""
+    template = _template(name)
+    names = set(string.Template(template).get_identifiers())
+    if names != set(values):
+        raise RuntimeError(f"the template {name}.in and haa_sym.design.schedule_c disagree: placeholders "
+                           f"without a value {sorted(names - set(values))}, values without a "
+                           f"placeholder {sorted(set(values) - names)}")
+    lines = template.split("\n")
+    head: list[str] = []
+    if wrap_comment:
+        end = lines.index(" */")
+        comment = [line[3:] if line.startswith(" * ") else "" for line in lines[1:end]]
+        if lines[0] != "/*" or any(not (line.startswith(" * ") or line == " *") for line in lines[1:end]):
+            raise RuntimeError(f"the template {name}.in: its comment must start with a line '/*' and "
+                               "continue with lines ' * TEXT' or ' *' up to ' */'")
+        head = ["/*", *_wrap(_fill(_unwrap(comment), values)), " */"]
+        lines = lines[end + 1:]
+    return "\n".join(head + _fill(lines, values))
+
+
+def _rows(values: list[str], per_line: int, row: int | None = None, row_label=None) -> list[str]:
+    """An initializer's lines: ``per_line`` values a line, a comment line before each row of
+    ``row`` values when ``row_label`` is given, no comma after the last value."""
+    lines = []
     chunk = row or len(values)
     for r in range(0, len(values), chunk):
         seg = values[r:r + chunk]
         if row_label is not None:
-            lines.append(f"    /* {row_label(r // chunk)} */")
+            lines.append(f"/* {row_label(r // chunk)} */")
         for s in range(0, len(seg), per_line):
-            lines.append("    " + ", ".join(seg[s:s + per_line]) + ",")
+            lines.append(", ".join(seg[s:s + per_line]) + ",")
     lines[-1] = lines[-1].rstrip(",")
-    lines.append("};")
     return lines
 
 
@@ -428,217 +222,58 @@ def c_code(table: ScheduleTable) -> tuple[str, str]:
         raise ParameterError(f"table = {table!r}; allowed: a haa_sym.design.schedule_c.ScheduleTable")
     c, (nP, nD) = table._c, table.shape
     has_alpha = table.alpha is not None
-    fb_i, fb_j = divmod(table.fallback, nD)
+    fb, (fb_i, fb_j) = table.fallback, divmod(table.fallback, nD)
     meta = table.meta
     prov = [f"{k}: {_text(meta[k])}" for k in META_KEYS]
     prov += [f"{_text(k)}: {_text(meta[k])}" for k in sorted(k for k in meta if k not in META_KEYS)]
-    n_feas = int(table.feasible.sum())
     n_bytes = 8 * (2 * nP - 1 + nD + nP * nD * (2 if has_alpha else 1)) + nP * nD
-    ab = "beta and alpha" if has_alpha else "beta"
-    doc = [
-        f"{HEADER} -- torque-gain schedule of the inner torque loop: {ab} over the impedance "
-        f"(P_gain, D_gain). Generated by haa_sym {_text(meta['haa_sym_version'])} "
-        "(haa_sym.design.schedule_c); do not edit.",
-        "",
-        "Provenance",
-        *[f"  {p}" for p in prov],
-        "",
-        "Units",
-        "  P_gain: Nm/rad, D_gain: Nms/rad (the impedance gains of Eq. 8 of Focchi et al. 2016).",
-        "  beta: dimensionless, scales the file's torque PI gains: P_t = beta P_t0, I_t = beta I_t0 "
-        "(Eq. 7).",
-        *(["  alpha: dimensionless, scales the velocity compensation (Eq. 6); scheduled together "
-           "with beta (the pair at a grid point was checked together)."] if has_alpha else []),
-        "",
-        "Grid",
-        f"  P_gain: {_spacing(table.P_gain, 'Nm/rad', True)}.",
-        f"  D_gain: {_spacing(table.D_gain, 'Nms/rad', False)}.",
-        f"  Feasible points: {n_feas} of {nP * nD}. Tables: {n_bytes} bytes of static const data.",
-        f"  Fallback point (the feasible point with the smallest beta, first in row-major order): "
-        f"P_gain = {_text(c['P'][fb_i])}, D_gain = {_text(c['D'][fb_j])}, beta = "
-        f"{_text(c['beta'][table.fallback])}"
-        + (f", alpha = {_text(c['alpha'][table.fallback])}." if has_alpha else "."),
-        "  Infeasible grid points hold the fallback point's values; they are never interpolated.",
-        "",
-        "Lookup rule (haa_schedule_beta" + (", haa_schedule_alpha" if has_alpha else "")
-        + ", haa_schedule_feasible)",
-        "  1. P_gain and D_gain are clamped to the grid's rectangle (a clamped point takes the "
-        "edge's values). The cell has lower corner (i, j) with P[i] <= P_gain < P[i+1], D[j] <= "
-        "D_gain < D[j+1] (the last cell on the upper edges). Bilinear weights in (log P_gain, "
-        "D_gain): t = log(P_gain / P[i]) / log(P[i+1] / P[i]), u = (D_gain - D[j]) / (D[j+1] - "
-        "D[j]); weights (1-t)(1-u), t(1-u), (1-t)u, tu for corners (i,j), (i+1,j), (i,j+1), "
-        "(i+1,j+1). A corner is used when its weight is not zero (one at a grid point, two on a "
-        "grid line, four inside a cell).",
-        "  2. Every used corner feasible: bilinear interpolation (the table's value at a grid "
-        "point, exactly; between the corners' values elsewhere; continuous in the impedance).",
-        "  3. Some used corner infeasible: no interpolation; the entry of the used feasible corner "
-        "with the smallest beta" + (" (alpha: that corner's)" if has_alpha else "")
-        + ", or the fallback point's when no used corner is feasible. Near the edge of the "
-        "feasible set the largest safe beta falls, and each candidate is a gain the table found "
-        "safe at an adjacent impedance; interpolating towards a point where no gain qualifies "
-        "would blend a safe gain with a meaningless one.",
-        "  4. NaN in either argument: the fallback point's values (a gain must stay a finite "
-        "number the torque loop can run with; the flag says it is not backed by the table).",
-        "  5. haa_schedule_feasible returns 1 exactly when (P_gain, D_gain) is on the grid's "
-        "rectangle and every used corner is feasible; 0 in cases 3 and 4 and outside the grid.",
-        "  The table guarantees its grid points only: between them, bilinear interpolation of "
-        "safe gains is safe where the largest safe beta is concave over the cell (the table's "
-        "producer checks the cells or refines the grid).",
-        "",
-        "Build",
-        "  Plain C99, no allocation, no state (reentrant), libm only (log): cc -std=c99 -c "
-        f"{SOURCE}; link with -lm. Cost: two binary searches, one log, about 20 flops. With "
-        "floating-point contraction off (-ffp-contract=off, gcc's default with -std=c99) the "
-        "results are those of haa_sym.design.schedule_c.lookup_beta bit for bit (same libm log).",
-    ]
-    hdr = ["/*", *_wrap(doc), " */", "#ifndef HAA_SCHEDULE_H", "#define HAA_SCHEDULE_H", "",
-           f"#define HAA_SCHEDULE_N_P_GAIN {nP}",
-           f"#define HAA_SCHEDULE_N_D_GAIN {nD}",
-           f"#define HAA_SCHEDULE_P_GAIN_MIN {_num(c['P'][0])}  /* Nm/rad */",
-           f"#define HAA_SCHEDULE_P_GAIN_MAX {_num(c['P'][-1])}  /* Nm/rad */",
-           f"#define HAA_SCHEDULE_D_GAIN_MIN {_num(c['D'][0])}  /* Nms/rad */",
-           f"#define HAA_SCHEDULE_D_GAIN_MAX {_num(c['D'][-1])}  /* Nms/rad */",
-           f"#define HAA_SCHEDULE_BETA_FALLBACK {_num(c['beta'][table.fallback])}",
-           *([f"#define HAA_SCHEDULE_ALPHA_FALLBACK {_num(c['alpha'][table.fallback])}"]
-             if has_alpha else []),
-           f"#define HAA_SCHEDULE_HAS_ALPHA {int(has_alpha)}", "",
-           "#ifdef __cplusplus", 'extern "C" {', "#endif", "",
-           "/* beta at (P_gain Nm/rad, D_gain Nms/rad) by the lookup rule above. */",
-           "double haa_schedule_beta(double P_gain, double D_gain);",
-           *(["/* alpha at (P_gain, D_gain): the same weights, or the same corner, as beta. */",
-              "double haa_schedule_alpha(double P_gain, double D_gain);"] if has_alpha else []),
-           "/* 1 when (P_gain, D_gain) is on the grid and every corner used is feasible, else 0. */",
-           "int haa_schedule_feasible(double P_gain, double D_gain);", "",
-           "#ifdef __cplusplus", "}", "#endif", "", "#endif /* HAA_SCHEDULE_H */", ""]
+    version = _text(meta["haa_sym_version"])
+    header = _render(HEADER, {
+        "scheduled": "beta and alpha" if has_alpha else "beta", "version": version,
+        "provenance": prov,
+        "alpha_units": ["alpha: dimensionless, scales the velocity compensation (Eq. 6); "
+                        "scheduled together with beta (the pair at a grid point was checked "
+                        "together)."] if has_alpha else [],
+        "p_gain_grid": _spacing(table.P_gain, "Nm/rad", True),
+        "d_gain_grid": _spacing(table.D_gain, "Nms/rad", False),
+        "n_feasible": str(int(table.feasible.sum())), "n_points": str(nP * nD),
+        "n_bytes": str(n_bytes),
+        "fallback_p_gain": _text(c["P"][fb_i]), "fallback_d_gain": _text(c["D"][fb_j]),
+        "fallback_beta": _text(c["beta"][fb]),
+        "fallback_alpha": f", alpha = {_text(c['alpha'][fb])}" if has_alpha else "",
+        "alpha_lookup": ", haa_schedule_alpha" if has_alpha else "",
+        "rule3_alpha": " (alpha: that corner's)" if has_alpha else "",
+        "n_p_gain": str(nP), "n_d_gain": str(nD),
+        "p_gain_min": _num(c["P"][0]), "p_gain_max": _num(c["P"][-1]),
+        "d_gain_min": _num(c["D"][0]), "d_gain_max": _num(c["D"][-1]),
+        "beta_fallback": _num(c["beta"][fb]),
+        "alpha_fallback_define": [f"#define HAA_SCHEDULE_ALPHA_FALLBACK {_num(c['alpha'][fb])}"]
+                                 if has_alpha else [],
+        "has_alpha": str(int(has_alpha)),
+        "alpha_declaration": ["/* alpha at (P_gain, D_gain): the same weights, or the same corner, "
+                              "as beta. */",
+                              "double haa_schedule_alpha(double P_gain, double D_gain);"]
+                             if has_alpha else [],
+    }, wrap_comment=True)
 
     p_label = lambda i: f"P_gain = {_text(c['P'][i])} Nm/rad; D_gain index 0..{nD - 1}"
-    src = [f"/* {SOURCE} -- see {HEADER} for the units, the grid and the lookup rule.",
-           f" * Generated by haa_sym {_text(meta['haa_sym_version'])} (haa_sym.design.schedule_c); do not "
-           "edit. */",
-           "#include <math.h>", "", f'#include "{HEADER}"', "",
-           "/* Grid, Nm/rad and Nms/rad; log_step[i] = log(P_gain[i+1] / P_gain[i]). */",
-           *_array("haa_schedule_p_gain_", "double", "HAA_SCHEDULE_N_P_GAIN", [_num(v) for v in c["P"]], 4),
-           *_array("haa_schedule_log_step_", "double", "HAA_SCHEDULE_N_P_GAIN - 1", [_num(v) for v in c["log_step"]], 4),
-           *_array("haa_schedule_d_gain_", "double", "HAA_SCHEDULE_N_D_GAIN", [_num(v) for v in c["D"]], 4), "",
-           "/* Row-major [P_gain index][D_gain index]; infeasible points hold the fallback point's "
-           "values. */",
-           *_array("haa_schedule_beta_", "double", "HAA_SCHEDULE_N_P_GAIN * HAA_SCHEDULE_N_D_GAIN", [_num(v) for v in c["beta"]], 4,
-                   nD, p_label),
-           *(_array("haa_schedule_alpha_", "double", "HAA_SCHEDULE_N_P_GAIN * HAA_SCHEDULE_N_D_GAIN", [_num(v) for v in c["alpha"]],
-                    4, nD, p_label) if has_alpha else []),
-           *_array("haa_schedule_feasible_", "unsigned char", "HAA_SCHEDULE_N_P_GAIN * HAA_SCHEDULE_N_D_GAIN",
-                   [str(int(v)) for v in c["feasible"]], 16, nD, p_label), "",
-           f"#define HAA_SCHEDULE_FALLBACK_INDEX_ {table.fallback}  /* flat index of the fallback point */", "",
-           _C_BODY.strip("\n"),
-           *(["", "double haa_schedule_alpha(double P_gain, double D_gain)", "{",
-              "    return haa_schedule_value_(haa_schedule_alpha_, P_gain, D_gain);", "}"] if has_alpha else []),
-           ""]
-    return "\n".join(hdr), "\n".join(src)
-
-
-_C_BODY = r"""
-/* Largest k in [0, n-2] with x[k] <= v, for x[0] < v < x[n-1]. */
-static int haa_schedule_bracket_(const double *x, int n, double v)
-{
-    int lo = 0, hi = n - 1;
-    while (hi - lo > 1) {
-        int mid = lo + (hi - lo) / 2;
-        if (x[mid] <= v)
-            lo = mid;
-        else
-            hi = mid;
-    }
-    return lo;
-}
-
-/* Rule 1: flat index of the cell's lower corner, corner weights, on-grid flag; 0 for NaN. */
-static int haa_schedule_locate_(double P_gain, double D_gain, int *base, double w[4], int *inside)
-{
-    const double *P = haa_schedule_p_gain_, *D = haa_schedule_d_gain_;
-    const int nP = HAA_SCHEDULE_N_P_GAIN, nD = HAA_SCHEDULE_N_D_GAIN;
-    int i, j;
-    double t, u;
-    if (isnan(P_gain) || isnan(D_gain))
-        return 0;
-    if (!(P_gain > P[0])) {
-        i = 0;
-        t = 0.0;
-    } else if (!(P_gain < P[nP - 1])) {
-        i = nP - 2;
-        t = 1.0;
-    } else {
-        i = haa_schedule_bracket_(P, nP, P_gain);
-        t = log(P_gain / P[i]) / haa_schedule_log_step_[i];
-        t = t > 1.0 ? 1.0 : t < 0.0 ? 0.0 : t;
-    }
-    if (!(D_gain > D[0])) {
-        j = 0;
-        u = 0.0;
-    } else if (!(D_gain < D[nD - 1])) {
-        j = nD - 2;
-        u = 1.0;
-    } else {
-        j = haa_schedule_bracket_(D, nD, D_gain);
-        u = (D_gain - D[j]) / (D[j + 1] - D[j]);
-        u = u > 1.0 ? 1.0 : u < 0.0 ? 0.0 : u;
-    }
-    *inside = P_gain >= P[0] && P_gain <= P[nP - 1] && D_gain >= D[0] && D_gain <= D[nD - 1];
-    *base = i * nD + j;
-    w[0] = (1.0 - t) * (1.0 - u);
-    w[1] = t * (1.0 - u);
-    w[2] = (1.0 - t) * u;
-    w[3] = t * u;
-    return 1;
-}
-
-/* Rules 2-4: -1 to interpolate, else the flat index whose entries are returned. */
-static int haa_schedule_rule_(double P_gain, double D_gain, int *base, double w[4], int *inside)
-{
-    const int nD = HAA_SCHEDULE_N_D_GAIN;
-    const int offset[4] = {0, nD, 1, nD + 1};
-    int k, pick = -1, every = 1;
-    if (!haa_schedule_locate_(P_gain, D_gain, base, w, inside))
-        return HAA_SCHEDULE_FALLBACK_INDEX_;
-    for (k = 0; k < 4; ++k) {
-        int idx = *base + offset[k];
-        if (!(w[k] > 0.0))
-            continue;                            /* an unused corner */
-        if (!haa_schedule_feasible_[idx]) {
-            every = 0;
-            continue;
-        }
-        if (pick < 0 || haa_schedule_beta_[idx] < haa_schedule_beta_[pick])
-            pick = idx;
-    }
-    if (every)
-        return -1;
-    return pick >= 0 ? pick : HAA_SCHEDULE_FALLBACK_INDEX_;
-}
-
-static double haa_schedule_value_(const double *table, double P_gain, double D_gain)
-{
-    const int nD = HAA_SCHEDULE_N_D_GAIN;
-    int base = 0, inside = 0;
-    double w[4] = {0.0, 0.0, 0.0, 0.0};
-    int k = haa_schedule_rule_(P_gain, D_gain, &base, w, &inside);
-    if (k >= 0)
-        return table[k];
-    return w[0] * table[base] + w[1] * table[base + nD] + w[2] * table[base + 1]
-           + w[3] * table[base + nD + 1];
-}
-
-double haa_schedule_beta(double P_gain, double D_gain)
-{
-    return haa_schedule_value_(haa_schedule_beta_, P_gain, D_gain);
-}
-
-int haa_schedule_feasible(double P_gain, double D_gain)
-{
-    int base = 0, inside = 0;
-    double w[4] = {0.0, 0.0, 0.0, 0.0};
-    return haa_schedule_rule_(P_gain, D_gain, &base, w, &inside) < 0 && inside;
-}
-"""
+    table_rows = lambda key: _rows([_num(v) for v in c[key]], 4, nD, p_label)
+    size = "HAA_SCHEDULE_N_P_GAIN * HAA_SCHEDULE_N_D_GAIN"
+    source = _render(SOURCE, {
+        "version": version,
+        "p_gain": _rows([_num(v) for v in c["P"]], 4),
+        "log_step": _rows([_num(v) for v in c["log_step"]], 4),
+        "d_gain": _rows([_num(v) for v in c["D"]], 4),
+        "beta": table_rows("beta"),
+        "alpha_table": [f"static const double haa_schedule_alpha_[{size}] = {{",
+                        *("    " + line for line in table_rows("alpha")), "};"] if has_alpha else [],
+        "feasible": _rows([str(int(v)) for v in c["feasible"]], 16, nD, p_label),
+        "fallback_index": str(fb),
+        "alpha_function": ["", "double haa_schedule_alpha(double P_gain, double D_gain)", "{",
+                           "    return haa_schedule_value_(haa_schedule_alpha_, P_gain, D_gain);",
+                           "}"] if has_alpha else [],
+    })
+    return header, source
 
 
 def check_c_directory(directory: str | Path, field: str = "--c-out") -> Path:
