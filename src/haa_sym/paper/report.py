@@ -192,6 +192,21 @@ def write_report(out: Path, r: dict, spec: dict, options: LoopOptions, verify_te
             if all(len(v["rescued"]) < sum(not t["holds"] for t in r["region_trends"]["locomotion"])
                    or v["lost"] for v in alt.values()) else
             "\nAt least one option change makes every trend hold without losing another; see the table.")
+    pr = r.get("region_pm_rules")
+    if pr:
+        add("\n## The phase-margin rule (light grey)\n")
+        add(f"The maps use `pm_rule = {next(iter(pr.values()))['rule']}`: a point is light grey when, "
+            "at some gain crossover, L passes within 30 deg of -1 (min over crossovers of |PM|; "
+            "crossovers located exactly, `haa_sym.analysis.margins`). The rule before issue 15 "
+            "(`min_abs`) compared the *signed* margin of the crossover nearest -1 with 30 deg, so a "
+            "crossover at -100 deg counted as low. Both rules on every map (points out of the "
+            f"{next(iter(r['region_crosscheck'].values()))['points']} of each map):\n")
+        add(_table(["panel", "stable", "PM < 30 (this rule)", "PM < 30 (min_abs)", "points that differ"],
+                   [[k, v["stable"], v["low_pm"], v["low_pm_min_abs"], v["differ"]] for k, v in pr.items()]))
+        add(f"\nIn all: {sum(v['low_pm'] for v in pr.values())} light-grey points with this rule, "
+            f"{sum(v['low_pm_min_abs'] for v in pr.values())} with `min_abs`; "
+            f"{sum(v['differ'] for v in pr.values())} points change. The Sec. 4 trends under `min_abs` are in "
+            "the option tables above (`pm_rule = min_abs`).")
     cc = r["region_crosscheck"]
     n_pts = sum(v["points"] for v in cc.values())
     n_dec = sum(v["decided"] for v in cc.values())

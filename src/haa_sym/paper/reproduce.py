@@ -234,6 +234,9 @@ def _regions(job: _Job) -> dict:
     _log("regions: 16 maps (Figs. 8-11), decided from the exact curves, drawn with them")
     splits = quadrant_splits(job.spec, job.P_grid, job.D_grid)
     stats, panels_by_fig, crosscheck = {k: {} for k in splits}, {}, {}
+    # how the phase-margin rule moves the light grey: every map again with the rule before
+    # issue 15 (the signed margin of the crossover nearest -1 below 30 deg), PM only
+    rules = {}
     for entry in job.spec["regions"]["panel"]:
         pid = f"{entry['figure']}{entry['panel']}"
         p = panel_params(job.params, entry)
@@ -243,6 +246,11 @@ def _regions(job: _Job) -> dict:
                             D_range=(job.D_grid.min(), job.D_grid.max()), n_lines=31 if job.quick else 101) \
             if loop.options.conventions.pm_loop == "impedance" else None
         crosscheck[pid] = eigenvalue_crosscheck(m, loop, points="boundary")
+        legacy = region_map(ClosedLoop(p, job.options.replace(pm_rule="min_abs")), job.P_grid, job.D_grid,
+                            passivity=False)
+        rules[pid] = {"rule": job.options.pm_rule, "low_pm": int(m.low_pm.sum()),
+                      "low_pm_min_abs": int(legacy.low_pm.sum()), "stable": int(m.stable.sum()),
+                      "differ": int((m.low_pm != legacy.low_pm).sum())}
         # the grid evaluators decide every point again (quick mode: the first panel of each figure)
         first = entry["figure"] not in panels_by_fig
         if m.meta["method"] == "curves" and (first or not job.quick):
@@ -260,7 +268,7 @@ def _regions(job: _Job) -> dict:
                                        f"Fig. {fig_no}: stability regions varying {REGION_CAPTIONS.get(fig_no, '')}",
                                        [c for _, _, c in items]),
                     job.out / f"fig{fig_no:02d}.png")
-    return {"region_crosscheck": crosscheck, "region_splits": splits, "region_stats": stats,
+    return {"region_crosscheck": crosscheck, "region_pm_rules": rules, "region_splits": splits, "region_stats": stats,
             "region_trends": {k: region_trends(v) for k, v in stats.items()}}
 
 
