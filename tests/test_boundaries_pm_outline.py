@@ -4,7 +4,7 @@ with the independent exact crossovers; the loci's other pieces are dropped."""
 import numpy as np
 import pytest
 
-from haa_sym import ClosedLoop, load_params
+from haa_sym import ClosedLoop, load_params, region_map
 from haa_sym.analysis.boundaries import phase_margin_curves
 from haa_sym.check.reference_margins import closed_loop_spectral_radius, reference_crossovers
 
@@ -48,3 +48,21 @@ def test_dropped_locus_points_are_inside_or_unstable(params):
     kept = {(p, d) for c in outline for p, d in zip(c.P_gain, c.D_gain)}
     for k in np.flatnonzero(inside):
         assert (P[sel][k], D[sel][k]) not in kept
+
+
+@pytest.mark.parametrize("name,changes,beta", [
+    ("hyq_haa", {"velocity_filter": "butterworth2", "f_c": 40.0}, 1.0),
+    ("hyq_haa", {"velocity_filter": "lowpass1", "f_c": 60.0, "Ts": 1e-5}, 1.0),
+    ("sea", {}, 7.6), ("harmonic_drive", {}, 7.6), ("sea", {"Ts": 8e-3, "N_av": 1}, 1.0)],
+    ids=["butterworth2", "lowpass1-Ts10us", "sea-7.6", "hd-7.6", "sea-Ts8ms"])
+def test_maps_from_the_curves_equal_the_grid_for_filters_and_light_modes(name, changes, beta):
+    """The curves' maps and the point-by-point maps agree on every point for the other velocity
+    filters, the fastest and slowest sampling, and the lightly damped modes of beta 7.6."""
+    loop = ClosedLoop(load_params(ROOT / "model" / f"{name}.toml").with_values(**changes))
+    P, D = np.geomspace(1.0, 20000.0, 50), np.linspace(0.0, 50.0, 30)
+    a = region_map(loop, P, D, beta=beta)
+    b = region_map(loop, P, D, beta=beta, method="grid")
+    for key in ("stable", "low_pm", "passive"):
+        np.testing.assert_array_equal(getattr(a, key), getattr(b, key), err_msg=key)
+    known = np.isfinite(a.phase_margin_deg)                   # the points the curves decided one by one
+    np.testing.assert_allclose(a.phase_margin_deg[known], b.phase_margin_deg[known], atol=1e-9)
