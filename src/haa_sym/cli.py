@@ -41,7 +41,6 @@ from haa_sym.compiled.plant_code import compile_topology
 from haa_sym.design.schedule import schedule
 from haa_sym.design.schedule_c import check_c_directory, write_c
 from haa_sym.errors import CompilerError, ParameterError, StaleGeneratedCode
-from haa_sym.io.budget import check_memory, sweep_bytes
 from haa_sym.io.formats import save_json, save_npz
 from haa_sym.io.gridspec import grid
 from haa_sym.io.outputs import Transaction, check_file, csv_text

@@ -29,7 +29,7 @@ import shutil
 from pathlib import Path
 from typing import Callable, Iterator
 
-from haa_sym.errors import OutputError, ParameterError
+from haa_sym.errors import OutputError
 
 __all__ = ["OutputError", "Transaction", "transaction", "check_file", "check_directory", "write_text",
            "csv_text"]

@@ -11,4 +11,4 @@ from haa_sym.loop.options import (COLGATE, FILTERS, PM_LOOPS, PM_RULES, PORTS, A
 
 __all__ = ["ClosedLoop", "LoopCoefficients", "StabilityResult", "FrequencyResponse", "FREQ_OUTPUTS", "MARGINAL_TOL",
            "LoopOptions", "LoopStructure", "AnalysisConventions", "FrequencyGrid", "PORTS", "COLGATE", "FILTERS",
-           "PM_LOOPS", "PM_RULES"]
+           "PM_LOOPS", "PM_RULES", "loop_first"]
