@@ -109,11 +109,17 @@ def feasible_map(loop, P_gain, D_gain, beta: float, alpha: float, *,
     req = _check_requirements(requirements)
     m = region_map(loop, P_gain, D_gain, beta=beta, alpha=alpha, passivity="passive" in req, progress=False,
                    blas_threads=None)
-    ok = m.stable.copy()
-    if "pm" in req:
-        ok &= ~m.low_pm
-    if "passive" in req:
-        ok &= m.passive
+    return meets(m, req)
+
+
+def meets(decisions, requirements) -> np.ndarray:
+    """Where ``decisions`` (anything with ``stable``, ``low_pm``, ``passive``: a region map or
+    point decisions) meet ``requirements``: stable, and PM >= 30 deg and passive if required."""
+    ok = decisions.stable.copy()
+    if "pm" in requirements:
+        ok &= ~decisions.low_pm
+    if "passive" in requirements:
+        ok &= decisions.passive
     return ok
 
 

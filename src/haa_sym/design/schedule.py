@@ -47,7 +47,8 @@ import numpy as np
 
 from haa_sym._version import __version__
 from haa_sym.analysis.decide import decide_points
-from haa_sym.analysis.robust import MAX_LEG_POINTS, _check_requirements, feasible_map, leg_configurations, leg_ends
+from haa_sym.analysis.robust import (MAX_LEG_POINTS, _check_requirements, feasible_map, leg_configurations, leg_ends,
+                                     meets)
 from haa_sym.analysis.torque import torque_bandwidth
 from haa_sym.design.schedule_table import ScheduleTable
 from haa_sym.errors import ParameterError
@@ -144,19 +145,9 @@ def _task_map(params, config, P, D, beta, alpha, requirements, options):
                         requirements=requirements)
 
 
-def _meets(d, requirements) -> np.ndarray:
-    """The points of :class:`~haa_sym.analysis.decide.PointDecisions` ``d`` meeting ``requirements``."""
-    ok = d.stable.copy()
-    if "pm" in requirements:
-        ok &= ~d.low_pm
-    if "passive" in requirements:
-        ok &= d.passive
-    return ok
-
-
 def _task_points(params, config, P, D, beta, alpha, requirements, options):
     loop = ClosedLoop(params.with_values(**config), options)
-    return _meets(decide_points(loop, P, D, beta, alpha, passivity="passive" in requirements), requirements)
+    return meets(decide_points(loop, P, D, beta, alpha, passivity="passive" in requirements), requirements)
 
 
 class _Runner:
@@ -228,7 +219,7 @@ def _verify(params, configs, P, D, fine, alphas, best_k, req, options):
                 for loop in loops:
                     d = decide_points(loop, PP[pts], DD[pts], float(fine[k]), float(alphas[a]),
                                       passivity="passive" in req)
-                    bad[pts[~_meets(d, req)]] = True
+                    bad[pts[~meets(d, req)]] = True
             todo = np.flatnonzero(bad)
             lowered.update(todo.tolist())
             best_k[a, todo] -= 1                # -1: no beta of the range is left

@@ -41,7 +41,7 @@ from haa_sym.compiled.cache import BoundedCache, array_key
 from haa_sym.compiled.generated import evaluators
 from haa_sym.loop.exact import bilinear, polymul, polysub, to_float, transfer_polynomials
 from haa_sym.errors import ParameterError
-from haa_sym.model.params import Params, gain_array
+from haa_sym.model.params import Params, gain_array, gain_points
 from haa_sym.model.elements import backward_difference, common_denominator, delay, pi_integral
 from haa_sym.model.filters import controller_filter
 from haa_sym.compiled.layout import (COEF_FORMS, COEF_OUTPUTS, COEF_TERMS, FREQ_COLUMN, N_BASIS, TORQUE_GAINS,
@@ -422,12 +422,7 @@ class ClosedLoop:
         """``(P, D, beta, alpha)``: the gain points as flat arrays (P_gain and D_gain broadcast
         together, C order) and one torque-loop pair (scalars; default the controller's), checked
         by the one rule of :func:`haa_sym.model.params.gain_array`."""
-        P, D = _finite_array("P_gain", P_gain), _finite_array("D_gain", D_gain)
-        try:
-            P, D = np.broadcast_arrays(P, D)
-        except ValueError:
-            raise ParameterError(f"P_gain has shape {P.shape} and D_gain {D.shape}; allowed: shapes that "
-                                 "broadcast together (one value each per gain point)") from None
+        P, D, _, _ = gain_points(P_gain, D_gain)
         ctrl = self.params.controller
         b = _finite_array("beta", ctrl.beta if beta is None else beta)
         a = _finite_array("alpha", ctrl.alpha if alpha is None else alpha)
