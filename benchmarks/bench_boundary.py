@@ -3,10 +3,15 @@
 For the nominal configuration (N_av = 4) and N_av = 50, on the box P_gain 1..20000 x D_gain 1..50:
 
 (1) the curves of one configuration: the stability boundary (``stability_boundary``) and the
-    30 deg phase-margin curves (``phase_margin_curves``);
+    30 deg phase-margin curves (``phase_margin_curves``: now the outline of the low-PM region
+    of the "distance" rule, the +-30 deg loci with the pieces where the loop is unstable or
+    another crossover is nearer to -1 dropped, which takes exact phase margins along the loci:
+    not comparable with numbers measured before);
 (2) a 200 x 200 map of stability and PM < 30 deg classified from the curves
-    (``classify_regions``) against the same map from the generated grid evaluators
-    (``region_map(passivity=False)``); the decisions are compared on every point.
+    (``classify_regions(passivity=False)``: segments of every row split by the stability and
+    +-30/180 deg loci, probes decided with exact phase margins) against the same map from the
+    generated grid evaluators (``region_map(method="grid", passivity=False)``, every point's
+    crossovers located exactly); the decisions are compared on every point.
 The full map (with passivity) from the curves against python-control and numpy (stacked eigvals)
 is measured in ``benchmarks/bench_baselines.py``, which also checks it against eigenvalues.
 
@@ -15,20 +20,13 @@ Usage: python benchmarks/bench_boundary.py
 """
 from __future__ import annotations
 
-import inspect
 import json
 import platform
 from pathlib import Path
 
 from timing import REPEATS, best
-from haa_sym import ClosedLoop, load_params
-from haa_sym.analysis.boundaries.stability import boundaries, classify_regions, phase_margin_curves, stability_boundary
-from haa_sym.analysis.regions import grid, region_map
-
-# the grid evaluators, named explicitly once region_map has a choice of method
-GRID = {"method": "grid"} if "method" in inspect.signature(region_map).parameters else {}
-# stability and PM < 30 only, like the grid map below, once classify_regions can do passivity too
-STAB_PM = {"passivity": False} if "passivity" in inspect.signature(classify_regions).parameters else {}
+from haa_sym import ClosedLoop, grid, load_params, region_map
+from haa_sym.analysis.boundaries import boundaries, classify_regions, phase_margin_curves, stability_boundary
 
 OUT = Path(__file__).with_name("results_boundary.json")
 
@@ -42,11 +40,12 @@ def main() -> int:
     for name, changes in (("nominal (N_av = 4)", {}), ("N_av = 50", {"N_av": 50})):
         p = load_params().with_values(**changes)
         loop = ClosedLoop(p)
-        t_st, b = best(lambda: stability_boundary(p, loop=loop))
-        t_pm, _ = best(lambda: phase_margin_curves(p, loop=loop))
-        t_all, _ = best(lambda: boundaries(p, loop=loop, P_range=(1.0, 2e4), D_range=(1.0, 50.0)))
-        t_cls, (st, low) = best(lambda: classify_regions(loop, b, P, D, **STAB_PM)[:2])
-        t_grid, m = best(lambda: region_map(p, P, D, loop=loop, passivity=False, progress=False, **GRID))
+        t_st, b = best(lambda: stability_boundary(loop))
+        t_pm, _ = best(lambda: phase_margin_curves(loop))
+        t_all, _ = best(lambda: boundaries(loop, P_range=(1.0, 2e4), D_range=(1.0, 50.0)))
+        t_cls, r = best(lambda: classify_regions(loop, b, P, D, passivity=False))
+        st, low = r.stable, r.low_pm
+        t_grid, m = best(lambda: region_map(loop, P, D, method="grid", passivity=False, progress=False))
         agree = {"stable_vs_grid": int((st == m.stable).sum()), "low_pm_vs_grid": int((low == m.low_pm).sum()),
                  "points": int(P.size * D.size)}
         row = {"stability_curves_s": t_st, "pm_curves_s": t_pm, "three_boundaries_s": t_all, "classify_map_s": t_cls,

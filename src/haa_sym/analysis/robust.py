@@ -32,7 +32,7 @@ from haa_sym.loop import ClosedLoop, loop_first
 from haa_sym.errors import ParameterError
 from haa_sym.model.params import Params, gain_array
 
-__all__ = ["LEG_MODES", "REQUIREMENTS", "leg_ends", "leg_configurations", "feasible_map",
+__all__ = ["LEG_MODES", "REQUIREMENTS", "meets", "leg_ends", "leg_configurations", "feasible_map",
            "RobustRegion", "robust_region"]
 
 LEG_MODES = ("segment", "box")
