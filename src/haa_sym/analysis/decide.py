@@ -9,7 +9,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from haa_sym.analysis.margins import PM_THRESHOLD_DEG, phase_margins
-from haa_sym.analysis.sweep import BLAS_THREADS, gain_rows, phase_excess, run_chunks
+from haa_sym.analysis.sweep import BLAS_THREADS, blas_limits, gain_rows, phase_excess, run_chunks
 from haa_sym.loop import loop_first
 
 __all__ = ["PointDecisions", "decide_points"]
@@ -53,19 +53,25 @@ def decide_points(loop, P_gain, D_gain, beta=None, alpha=None, *, passivity: boo
     low = np.zeros(n, bool)
     coef = loop.loop_coefficients(None, beta, alpha) if passivity else None
 
-    def work(sl):
+    def stability(sl):
         st = loop.stability(P[sl], D[sl], beta, alpha, radius=radius)
         stable[sl], rho[sl], refined[sl] = st.stable, st.spectral_radius, st.refined
-        # margins and the phase of Z mean something only for a stable loop
-        ok = np.flatnonzero(st.stable) + sl.start
-        if ok.size:
+    run_chunks(stability, n, blas_threads=blas_threads, bar=bar)
+    # margins and the phase of Z mean something only for a stable loop; the margins' search
+    # runs once over all of them (it chunks and threads itself: its golden-section and
+    # Illinois steps are array operations whose per-call cost a chunk of 512 would repeat)
+    ok = np.flatnonzero(stable)
+    if ok.size:
+        with blas_limits(blas_threads):
             m = phase_margins(loop, P[ok], D[ok], beta, alpha)
-            pm[ok] = m.pm_deg
-            low[ok] = m.low(conv.pm_rule, pm_threshold_deg)
-            if passivity:
-                ex[ok] = phase_excess(gain_rows(P[ok], D[ok]), coef.Z_num, coef.Z_den, coef.omega,
-                                      loop.params.controller.Ts, conv.colgate)[0]
-    run_chunks(work, n, blas_threads=blas_threads, bar=bar)
+        pm[ok] = m.pm_deg
+        low[ok] = m.low(conv.pm_rule, pm_threshold_deg)
+    if passivity and ok.size:
+        def excess(sl):
+            k = ok[sl]
+            ex[k] = phase_excess(gain_rows(P[k], D[k]), coef.Z_num, coef.Z_den, coef.omega,
+                                 loop.params.controller.Ts, conv.colgate)[0]
+        run_chunks(excess, ok.size, blas_threads=blas_threads)
     with np.errstate(invalid="ignore"):
         passive = stable & (ex <= conv.passivity_tol_deg)
     return PointDecisions(stable, low, passive, pm, ex, refined, rho)
