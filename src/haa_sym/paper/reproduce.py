@@ -506,7 +506,7 @@ def reproduce(out: str | Path = "results", params: Params | None = None,
     """Compute and write everything listed in the module docstring; returns the claims dict.
 
     ``out`` is replaced as a whole when everything is computed (see the module docstring); its
-    parent directory must exist. ``quick`` uses coarse grids (for tests); the report says so.
+    missing parent directories are created (and removed again on failure). ``quick`` uses coarse grids (for tests); the report says so.
     ``field`` names ``out`` in error messages (e.g. ``--out``).
     """
     t_start = time.time()
