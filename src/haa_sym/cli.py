@@ -48,7 +48,8 @@ from haa_sym.io.outputs import Transaction, check_file, csv_text
 from haa_sym.io.progress import set_progress
 from haa_sym.loop import ClosedLoop, LoopOptions
 from haa_sym.model import filters
-from haa_sym.model.params import CONTROLLER_KEYS, STRING_KEYS, gain_array, load_params
+from haa_sym.model.params import (ALIASES, CONTROLLER_KEYS, STRING_KEYS, actuator_path, bundled_actuators,
+                                  gain_array, load_params)
 from haa_sym.paper.reproduce import reproduce
 
 OUTPUT_SUFFIXES = {"regions": (".npz",), "passivity": (".csv", ".json"), "step": (".csv",),
@@ -119,8 +120,12 @@ class _Parser(argparse.ArgumentParser):
         self.exit(2, f"haa-sym: error: {message}; see `{self.prog} --help`\n")
 
 
+PARAMS_HELP = ("actuator: a TOML parameter file or a bundled name (hyq_haa or hyq, sea, harmonic_drive; "
+               "`haa-sym actuators` lists them with their files); default: hyq_haa")
+
+
 def _common(p: argparse.ArgumentParser) -> None:
-    p.add_argument("--params", help="parameter file (TOML); default: bundled HyQ HAA")
+    p.add_argument("--params", metavar="NAME|FILE", help=PARAMS_HELP)
     p.add_argument("--configuration", help="leg configuration of the parameter file, e.g. retracted")
     p.add_argument("--set", action="append", default=[], metavar="KEY=VALUE",
                    help="override any parameter key (repeatable); " + filters.help_text())
@@ -129,7 +134,7 @@ def _common(p: argparse.ArgumentParser) -> None:
 
 
 def _params(args):
-    params = load_params(args.params)
+    params = load_params(actuator_path(args.params, "--params"))
     if args.configuration:
         params = params.configuration(args.configuration)
     sets = _parse_set(args.set, tuple(params.plant.topology.parameter_keys) + CONTROLLER_KEYS)
@@ -408,7 +413,23 @@ def _cmd_reproduce(args) -> int:
     return 0
 
 
+def _cmd_actuators(args) -> int:
+    """The bundled actuators: name (and alias), what they are, their configurations and file."""
+    aliases = {n: a for a, n in ALIASES.items()}
+    for name, path in bundled_actuators().items():
+        params = load_params(path)
+        alias = f" (alias {aliases[name]})" if name in aliases else ""
+        print(f"{name}{alias}: {params.about.get('name', '')}\n"
+              f"  {params.about.get('description', '')}\n"
+              f"  configurations: {', '.join(params.configurations) or 'none'}\n"
+              f"  file: {path}")
+    print("(--params NAME or --params FILE anywhere; copy a file to describe another actuator, "
+          "docs/model.md \"Actuator files\")")
+    return 0
+
+
 def _cmd_compile(args) -> int:
+    args.file = str(actuator_path(args.file, "ACTUATOR"))
     params = load_params(args.file)
     top = params.plant.topology
     entry = evaluators().code.manifest["topologies"].get(top.fingerprint)
@@ -456,9 +477,10 @@ def main(argv: list[str] | None = None) -> int:
     _progress_flags(ap, False)
     sub = ap.add_subparsers(dest="cmd", required=True)
     v = sub.add_parser("verify", help="check the paper's equations")
-    v.add_argument("--params")
+    v.add_argument("--params", metavar="NAME|FILE", help=PARAMS_HELP)
     c = sub.add_parser("compile", help="compile the plant of an actuator file into the cache (ahead of first use)")
-    c.add_argument("file", help="actuator file (TOML)")
+    c.add_argument("file", metavar="ACTUATOR", help="actuator file (TOML) or bundled name (haa-sym actuators)")
+    sub.add_parser("actuators", help="the bundled actuators: name, description, configurations and file path")
     s = sub.add_parser("stability", help="stability of one gain point")
     _common(s)
     s.add_argument("--P-gain", type=float, required=True)
@@ -529,7 +551,7 @@ def main(argv: list[str] | None = None) -> int:
     set_progress(False if args.quiet else True if args.progress else None)
     try:
         if args.cmd == "verify":
-            return verify_main(["--params", args.params] if args.params else [])
+            return verify_main(["--params", str(actuator_path(args.params, "--params"))] if args.params else [])
         if args.cmd == "stability":
             params = _params(args)
             args.P_gain, args.D_gain = _gain(args, "P_gain", "--P-gain"), _gain(args, "D_gain", "--D-gain")
@@ -541,7 +563,8 @@ def main(argv: list[str] | None = None) -> int:
                      if bool(res.marginal) else ""))
             return 0
         return {"regions": _cmd_regions, "boundary": _cmd_boundary, "schedule": _cmd_schedule, "contact": _cmd_contact, "passivity": _cmd_passivity, "step": _cmd_step,
-                "margins": _cmd_margins, "reproduce": _cmd_reproduce, "compile": _cmd_compile}[args.cmd](args)
+                "margins": _cmd_margins, "reproduce": _cmd_reproduce, "compile": _cmd_compile,
+                "actuators": _cmd_actuators}[args.cmd](args)
     except ParameterError as exc:
         print(f"haa-sym: error: {exc}", file=sys.stderr)
         return 2

@@ -49,6 +49,9 @@ __all__ = [
     "load_params",
     "default_params_path",
     "builtin_actuators",
+    "bundled_actuators",
+    "actuator_path",
+    "ALIASES",
 ]
 
 
@@ -341,6 +344,42 @@ def builtin_actuators(directory: str | Path | None = None) -> list[Path]:
     return sorted(p for p in d.glob("*.toml") if p.name != "paper.toml")
 
 
+# Short names of bundled actuators (alias -> the file's stem). "hyq" is how the paper and the
+# README call the robot; the file is named after the joint (HAA) because other HyQ joints differ.
+ALIASES: dict[str, str] = {"hyq": "hyq_haa"}
+
+
+def bundled_actuators() -> dict[str, Path]:
+    """The bundled actuators by name: ``{stem: path}`` of :func:`builtin_actuators` (``hyq_haa``,
+    ``sea``, ``harmonic_drive``), in the source tree or inside the installed package."""
+    return {p.stem: p for p in builtin_actuators()}
+
+
+def actuator_path(name_or_path: str | Path | None = None, field: str | None = None) -> Path:
+    """The parameter file meant by ``name_or_path``: an existing path (a file always wins), else
+    a bundled actuator's name (:func:`bundled_actuators`) or alias (:data:`ALIASES`); None is
+    the bundled HyQ file.
+
+    Raises
+    ------
+    ParameterError
+        Naming ``field`` (e.g. ``--params``), the value and the bundled names, when it is neither.
+    """
+    if name_or_path is None:
+        return default_params_path()
+    p = Path(name_or_path)
+    if p.exists():
+        return p
+    bundled = bundled_actuators()
+    name = ALIASES.get(str(name_or_path), str(name_or_path))
+    if name in bundled:
+        return bundled[name]
+    label = f"{field} {str(name_or_path)!r}" if field else repr(str(name_or_path))
+    names = list(bundled) + [f"{a} (= {n})" for a, n in ALIASES.items()]
+    raise ParameterError(f"{label}: no such parameter file, nor a bundled actuator; allowed: a TOML "
+                         f"file or a bundled name: {', '.join(names)} (haa-sym actuators lists them)")
+
+
 def default_params_path() -> Path:
     """``model/hyq_haa.toml``, the bundled HyQ parameters (source tree or installed package)."""
     return data_dir("model") / "hyq_haa.toml"
@@ -491,7 +530,9 @@ def load_params(path: str | Path | None = None) -> Params:
     Parameters
     ----------
     path : str or Path, optional
-        TOML file; default the bundled ``model/hyq_haa.toml``.
+        TOML file, or the name of a bundled actuator (``"hyq_haa"`` or ``"hyq"``, ``"sea"``,
+        ``"harmonic_drive"``; :func:`actuator_path`: an existing file wins); default the bundled
+        ``model/hyq_haa.toml``.
 
     Returns
     -------
@@ -502,7 +543,7 @@ def load_params(path: str | Path | None = None) -> Params:
     ParameterError
         Naming the file, the key, the offending value and what is allowed.
     """
-    p = Path(path) if path is not None else default_params_path()
+    p = actuator_path(path)
     try:
         with open(p, "rb") as fh:
             data = tomllib.load(fh)
