@@ -43,6 +43,8 @@ __all__ = [
     "Controller",
     "Params",
     "CONTROLLER_KEYS",
+    "CONTROLLER_UNITS",
+    "set_keys",
     "GAIN_KEYS",
     "gain_array",
     "gain_points",
@@ -83,6 +85,27 @@ _GAIN_UNITS = {"P_gain": " (Nm/rad)", "D_gain": " (Nms/rad)", "beta": "", "alpha
 GAIN_KEYS: tuple[str, ...] = tuple(_GAIN_DOMAIN)
 
 CONTROLLER_KEYS: tuple[str, ...] = tuple(_CONTROLLER_DOMAIN)
+# Units of the controller keys (the plant's come from its topology, Topology.units); the filter
+# keys' from the registry.
+CONTROLLER_UNITS: dict[str, str] = {"Ts": "s", "alpha": "-", "beta": "-", "P_t0": "V/Nm", "I_t0": "V/(Nm s)",
+                                    "velocity_filter": "name",
+                                    **{k: p.units for k, p in FILTER_PARAMETERS.items()}}
+
+
+def domain_text(domain: str) -> str:
+    """What a key's ``domain`` (">0", ">=0", "int>=1", "filter") allows, in words."""
+    return filters.allowed_text() if domain == "filter" else _DOMAIN_TEXT[domain]
+
+
+def set_keys(params: "Params") -> list[tuple[str, str, str, object]]:
+    """Every key ``--set`` / :meth:`Params.with_values` accepts for ``params``:
+    ``(key, unit, allowed, current value)``, the plant's (its topology's order) then the
+    controller's."""
+    top = params.plant.topology
+    rows = [(k, top.units[k], domain_text(d), params.plant.as_dict()[k]) for k, d in top.domain.items()]
+    rows += [(k, CONTROLLER_UNITS[k], domain_text(d), getattr(params.controller, k))
+             for k, d in _CONTROLLER_DOMAIN.items()]
+    return rows
 
 
 class Plant:
