@@ -82,3 +82,19 @@ def test_actuators_lists_name_description_configurations_and_path(capsys):
         assert f"  file: {path}" in block
         assert path.is_file()
     assert "hyq_haa (alias hyq): HyQ HAA joint" in out
+
+
+def test_names_resolve_through_the_package_data_not_the_working_tree(tmp_path, monkeypatch, capsys):
+    # an installed package reads model/ from haa_sym/_model (haa_sym.model.resources.data_dir):
+    # point data_dir at a copy and run from elsewhere; the names follow it
+    import shutil
+
+    from haa_sym.model import params as params_module
+    copy = tmp_path / "_model"
+    shutil.copytree(bundled_actuators()["sea"].parent, copy)
+    monkeypatch.setattr(params_module, "data_dir", lambda name: copy)
+    monkeypatch.chdir(tmp_path)
+    assert bundled_actuators()["sea"] == copy / "sea.toml"
+    assert load_params("hyq").source == str(copy / "hyq_haa.toml")
+    assert main(["actuators"]) == 0
+    assert f"  file: {copy / 'harmonic_drive.toml'}" in capsys.readouterr().out

@@ -595,7 +595,7 @@ def main(argv: list[str] | None = None) -> int:
     op = sub.add_parser("options", help="every --set key of an actuator (unit, value, allowed) and every --option "
                         "(type, default, allowed)")
     _common(op)                          # the values shown are those after --configuration and --set
-    s = sub.add_parser("stability", help="stability of one gain point")
+    s = sub.add_parser("stability", help="stability of gain points, one line each")
     _common(s)
     _gain_flags(s, None, None, POINTS_ROLE + ", one line each")
     r = sub.add_parser("regions", help="stability / PM / passivity map on a gain grid (Figs. 8-11)")
@@ -647,7 +647,7 @@ def main(argv: list[str] | None = None) -> int:
     st.add_argument("--duration", type=float, default=0.3, help="seconds")
     st.add_argument("--out", help="output .csv")
     st.add_argument("--plot", help="figure file")
-    mg = sub.add_parser("margins", help="phase and gain margins of the torque and impedance loops")
+    mg = sub.add_parser("margins", help="phase and gain margins of the torque and impedance loops at gain points")
     _common(mg)
     _gain_flags(mg, "0", "0", POINTS_ROLE)
     rp = sub.add_parser("reproduce", help="every figure and table of the paper, and REPORT.md")
