@@ -68,13 +68,15 @@ def test_outputs_follow_the_umask(tmp_path, capsys):
 
 
 @pytest.mark.parametrize("cmd,name", [("step", "x.csv"), ("regions", "x.npz"), ("reproduce", "results")])
-def test_missing_parent_directory_is_an_error(tmp_path, capsys, cmd, name):
-    target = tmp_path / "missing" / name
+def test_parent_that_is_a_file_is_an_error(tmp_path, capsys, cmd, name):
+    # missing parents are created (tests/test_output_dirs.py); a file in the way is refused
+    (tmp_path / "afile").write_text("x")
+    target = tmp_path / "afile" / "sub" / name
     rc = main([cmd, *(SMALL if cmd == "regions" else []), "--out", str(target)])
     err = capsys.readouterr().err
     assert rc == 2
-    assert f"--out '{target}': directory '{tmp_path / 'missing'}' does not exist" in err
-    assert list(tmp_path.iterdir()) == []
+    assert f"--out '{target}': '{tmp_path / 'afile'}' is not a directory" in err
+    assert [p.name for p in tmp_path.iterdir()] == ["afile"]
 
 
 def test_commit_failure_puts_back_the_files_already_replaced(tmp_path, monkeypatch):

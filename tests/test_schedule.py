@@ -146,7 +146,7 @@ def test_distributed_cluster_gives_the_same_bytes():
     (["--leg", "retracted:flying"], "allowed: two different names of ['nominal', 'extended', 'retracted']"),
     (["--require", "pm"], "allowed: 'stable' and any of"),
     (["--scheduler", "tcp://127.0.0.1:9"], "no dask scheduler answers there"),
-    (["--c-out", "/nonexistent-dir"], "--c-out '/nonexistent-dir' does not exist"),
+    (["--c-out", "/proc/version/ctrl"], "--c-out '/proc/version/ctrl/haa_schedule.h': '/proc/version' is not a directory"),
 ])
 def test_bad_input_one_message_nothing_written(tmp_path, capsys, argv, message):
     out = tmp_path / "s.csv"

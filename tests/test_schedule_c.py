@@ -375,10 +375,11 @@ def test_feasible_as_zero_one_and_nan_at_infeasible_points_accepted():
 
 
 def test_c_out_not_a_writable_directory(table, tmp_path):
-    missing = tmp_path / "missing"
-    with pytest.raises(ParameterError, match=r"--c-out '.*missing' does not exist; allowed: an existing, writable"):
-        write_c(table, missing)
-    assert not missing.exists()
+    in_file = tmp_path / "in_file"
+    in_file.write_text("x")
+    with pytest.raises(ParameterError, match=r"--c-out '.*in_file/sub/haa_schedule.h': '.*in_file' is not a directory"):
+        write_c(table, in_file / "sub")
+    assert in_file.read_text() == "x"
     a_file = tmp_path / "file"
     a_file.write_text("x")
     with pytest.raises(ParameterError, match=r"--c-out '.*file' is not a directory"):

@@ -1,21 +1,38 @@
 """``haa-sym``: command line of haa_sym.
 
+Examples, one per command:
+  haa-sym regions --set beta=2 --P-gain log:1:20000:200 --D-gain lin:1:50:100 --out map.npz --plot map.png
+  haa-sym boundary --params sea --out boundary.json --plot boundary.png
+  haa-sym schedule --P-gain log:1:2000:30 --D-gain lin:1:50:20 --out schedule.csv --c-out ctrl/
+  haa-sym passivity --P-gain 0,200,20000 --D-gain 0,10,50 --out cells.csv   # Table 2's columns
+  haa-sym stability --P-gain 200,2000 --D-gain 10 --set N_av=10           # two points, one line each
+  haa-sym margins --P-gain 200 --D-gain 10
+  haa-sym contact --P-gain 200 --D-gain 10 --out contact.json
+  haa-sym step --set K_L2=0 --out step.csv --plot step.png                 # Fig. 7
   haa-sym reproduce --out results/            every figure and table of the paper + REPORT.md
-  haa-sym regions --out map.npz [--plot map.png] [--P-gain log:1:20000:200] [--D-gain lin:1:50:100]
-  haa-sym passivity [--P-gain 0,200,20000] [--D-gain 0,10,50] [--out cells.csv] [--plot phase.png]
-  haa-sym step [--duration 0.3] [--out step.csv] [--plot step.png]
-  haa-sym margins [--P-gain 0] [--D-gain 0]
-  haa-sym stability --P-gain 200 --D-gain 10
-  haa-sym verify [--params FILE]              check the paper's equations (any actuator: the generic rows)
-  haa-sym compile FILE                        compile an actuator file's plant ahead of time
+  haa-sym verify --params harmonic_drive      check the equations (any actuator: the generic rows)
+  haa-sym compile my_actuator.toml            compile an actuator file's plant ahead of time
+  haa-sym actuators                           the bundled actuators, their configurations and files
+  haa-sym options --params sea                every --set key (units, allowed) and --option value
 
-Every analysis command takes ``--params FILE`` (default: the bundled HyQ parameters),
-``--configuration NAME`` (e.g. retracted), ``--set KEY=VALUE`` for any key of the parameter file
-(``--set beta=2 --set N_av=10 --set J_L2=0.129 --set Ts=0.006``) and ``--option KEY=VALUE`` for
-the modelling options of ``haa_sym.LoopOptions`` (``--option port=dtheta_L1 --option delay=1``).
-Bad input exits with status 2 and a message naming the field; nothing partial is written.
-Results go to stdout; progress bars (on a terminal, for work longer than 2 s) to stderr;
-``--quiet`` silences them, ``--progress`` forces them. ``haa-sym --version`` prints the version.
+Gains: --P-gain (P_gain, Nm/rad) and --D-gain (D_gain, Nms/rad) take the same syntax in every
+command, a grid of values: 'log:START:STOP:N' (N log-spaced, 0 < START <= STOP),
+'lin:START:STOP:N' (N evenly spaced, 0 <= START <= STOP), 'V1,V2,...' or one value 'V', all
+>= 0. regions, boundary and schedule take the two as the axes of a map (every P_gain with every
+D_gain); passivity, stability, margins and contact take points: the i-th P_gain with the i-th
+D_gain (the same number of values, as the columns of Table 2), a single value pairing with every
+value of the other (contact: one point).
+
+Every analysis command takes ``--params NAME|FILE`` (a bundled actuator, ``haa-sym actuators``,
+or a TOML file; default hyq_haa), ``--configuration NAME`` (e.g. retracted), ``--set KEY=VALUE``
+for any key of the parameter file (``--set beta=2 --set N_av=10 --set J_L2=0.129 --set
+Ts=0.006``) and ``--option KEY=VALUE`` for the modelling options of ``haa_sym.LoopOptions``
+(``--option port=dtheta_L1 --option delay=1``); ``haa-sym options`` lists both with units,
+defaults and allowed values. Bad input exits with status 2 and a message naming the field;
+nothing partial is written, and missing directories of an output path are created (and removed
+again if the command fails). Results go to stdout; progress bars (on a terminal, for work longer
+than 2 s) to stderr; ``--quiet`` silences them, ``--progress`` forces them. ``haa-sym
+--version`` prints the version.
 """
 from __future__ import annotations
 
@@ -42,12 +59,14 @@ from haa_sym.design.schedule import schedule
 from haa_sym.design.schedule_c import check_c_directory, write_c
 from haa_sym.errors import CompilerError, ParameterError, StaleGeneratedCode
 from haa_sym.io.formats import save_json, save_npz
-from haa_sym.io.gridspec import grid
+from haa_sym.io.gridspec import GRID_SYNTAX, grid
 from haa_sym.io.outputs import Transaction, check_file, csv_text
 from haa_sym.io.progress import set_progress
 from haa_sym.loop import ClosedLoop, LoopOptions
+from haa_sym.loop.options import ALLOWED as OPTION_ALLOWED
 from haa_sym.model import filters
-from haa_sym.model.params import CONTROLLER_KEYS, STRING_KEYS, gain_array, load_params
+from haa_sym.model.params import (ALIASES, CONTROLLER_KEYS, STRING_KEYS, actuator_path, bundled_actuators,
+                                  gain_array, load_params, set_keys)
 from haa_sym.paper.reproduce import reproduce
 
 OUTPUT_SUFFIXES = {"regions": (".npz",), "passivity": (".csv", ".json"), "step": (".csv",),
@@ -118,17 +137,23 @@ class _Parser(argparse.ArgumentParser):
         self.exit(2, f"haa-sym: error: {message}; see `{self.prog} --help`\n")
 
 
+PARAMS_HELP = ("actuator: a TOML parameter file or a bundled name (hyq_haa or hyq, sea, harmonic_drive; "
+               "`haa-sym actuators` lists them with their files); default: hyq_haa")
+
+
 def _common(p: argparse.ArgumentParser) -> None:
-    p.add_argument("--params", help="parameter file (TOML); default: bundled HyQ HAA")
+    p.add_argument("--params", metavar="NAME|FILE", help=PARAMS_HELP)
     p.add_argument("--configuration", help="leg configuration of the parameter file, e.g. retracted")
     p.add_argument("--set", action="append", default=[], metavar="KEY=VALUE",
-                   help="override any parameter key (repeatable); " + filters.help_text())
+                   help="override any key of the parameter file, in its unit (repeatable; `haa-sym options "
+                        "--params NAME` lists the keys, units and allowed values); " + filters.help_text())
     p.add_argument("--option", action="append", default=[], metavar="KEY=VALUE",
-                   help="modelling option of haa_sym.LoopOptions (repeatable)")
+                   help="modelling option of haa_sym.LoopOptions (repeatable): " + ", ".join(LoopOptions.field_names())
+                        + " (`haa-sym options` lists types, defaults and allowed values)")
 
 
 def _params(args):
-    params = load_params(args.params)
+    params = load_params(actuator_path(args.params, "--params"))
     if args.configuration:
         params = params.configuration(args.configuration)
     sets = _parse_set(args.set, tuple(params.plant.topology.parameter_keys) + CONTROLLER_KEYS)
@@ -159,8 +184,47 @@ def _wrote(out) -> str:
     return f"; wrote {out}" if out else ""
 
 
-def _gain(args, name: str, flag: str) -> float:
-    return float(gain_array(name, getattr(args, name), flag))
+GAIN_FLAGS = {"P_gain": ("--P-gain", "impedance stiffness P_gain", "Nm/rad"),
+              "D_gain": ("--D-gain", "impedance damping D_gain", "Nms/rad")}
+GRID_SHORT = "log:START:STOP:N, lin:START:STOP:N, V1,V2,... or one value V (>= 0)"
+
+
+def _axis(args, name: str) -> np.ndarray:
+    """The values of ``--P-gain`` / ``--D-gain``: a grid spec, a list or one value (one syntax,
+    :mod:`haa_sym.io.gridspec`, in every command)."""
+    spec, flag = getattr(args, name), GAIN_FLAGS[name][0]
+    try:
+        value = float(spec)
+    except (TypeError, ValueError):
+        return grid(spec, flag)
+    # one value: the gain rule's own message, which names the unit (--P-gain = -200.0 is out of range)
+    return gain_array(name, value, flag).reshape(1)
+
+
+def _points(args, one: str | None = None) -> tuple[np.ndarray, np.ndarray]:
+    """The gain points of a point command: the i-th P_gain with the i-th D_gain, a single value
+    pairing with every value of the other (see the module docstring). ``one``: the command takes
+    exactly one point (its name, for the message)."""
+    P, D = _axis(args, "P_gain"), _axis(args, "D_gain")
+    if P.size != D.size and 1 not in (P.size, D.size):
+        raise ParameterError(f"--P-gain {args.P_gain!r} gives {P.size} values and --D-gain {args.D_gain!r} "
+                             f"{D.size}; they pair up (the i-th with the i-th), so give the same number; "
+                             "allowed: equal counts, or one value for either")
+    P, D = np.broadcast_arrays(P, D)
+    if one is not None and P.size != 1:
+        raise ParameterError(f"--P-gain {args.P_gain!r} --D-gain {args.D_gain!r} gives {P.size} points; "
+                             f"allowed: one point ({one})")
+    return P.copy(), D.copy()
+
+
+def _gain_flags(parser, P_default: str | None, D_default: str | None, role: str) -> None:
+    """``--P-gain`` and ``--D-gain`` with the one syntax, their units, ``role`` (what the command
+    makes of them) and their defaults in the help."""
+    for name, default in (("P_gain", P_default), ("D_gain", D_default)):
+        flag, what, unit = GAIN_FLAGS[name]
+        parser.add_argument(flag, default=default, required=default is None, metavar="GRID",
+                            help=f"{what}, {unit}: {GRID_SHORT}; {role}; "
+                                 + ("required" if default is None else f"default {default}"))
 
 
 def _setup(args, cmd: str):
@@ -202,7 +266,7 @@ def _requirements(args):
 
 def _cmd_regions(args) -> int:
     loop, out, plot = _setup(args, "regions")
-    P, D = grid(args.P_gain, "--P-gain"), grid(args.D_gain, "--D-gain")
+    P, D = _axis(args, "P_gain"), _axis(args, "D_gain")
     robust_only = [f for f, given in (("--require", args.require != "stable,pm"), ("--leg", args.leg is not None),
                                       ("--leg-mode", args.leg_mode != "segment")) if given]
     if robust_only and not args.robust:
@@ -243,7 +307,7 @@ def _robust_regions(args, loop, out, plot, P, D) -> int:
 
 def _cmd_boundary(args) -> int:
     loop, out, plot = _setup(args, "boundary")
-    P, D = grid(args.P_gain, "--P-gain"), grid(args.D_gain, "--D-gain")
+    P, D = _axis(args, "P_gain"), _axis(args, "D_gain")
     if loop.options.conventions.pm_loop != "impedance":
         raise ParameterError(f"--option pm_loop={loop.options.conventions.pm_loop}: the boundaries cover the "
                              "impedance loop's margin; allowed: pm_loop=impedance (the default)")
@@ -263,6 +327,7 @@ def _cmd_boundary(args) -> int:
 
 def _cmd_contact(args) -> int:
     loop, out, plot = _setup(args, "contact")
+    (P,), (D,) = _points(args, "contact scans the environment stiffness at one impedance")
     lo, sep, hi = args.K_range.partition(":")
     try:
         K_range = (float(lo), float(hi)) if sep else None
@@ -270,10 +335,9 @@ def _cmd_contact(args) -> int:
         K_range = None
     if K_range is None:
         raise ParameterError(f"--K-range {args.K_range!r}; allowed: LO:HI in Nm/rad, 0 < LO < HI")
-    r = contact_intervals(loop, K_range, n_scan=args.n_scan, P_gain=_gain(args, "P_gain", "--P-gain"),
-                          D_gain=_gain(args, "D_gain", "--D-gain"), mode=args.mode)
+    r = contact_intervals(loop, K_range, n_scan=args.n_scan, P_gain=float(P), D_gain=float(D), mode=args.mode)
     data = {"analysis": "contact stability", "environment": f"K_env {'replaces' if r.mode == 'replace' else 'adds to'} {r.key}",
-            "mode": r.mode, "stiffness_key": r.key, "P_gain": args.P_gain, "D_gain": args.D_gain,
+            "mode": r.mode, "stiffness_key": r.key, "P_gain": float(P), "D_gain": float(D),
             "K_range": list(K_range), "n_scan": args.n_scan, "rtol": r.rtol,
             "unstable_intervals": [list(i) for i in r.unstable],
             "not_passive_intervals": [list(i) for i in r.not_passive],
@@ -308,7 +372,7 @@ def _cmd_schedule(args) -> int:
     loop, out, plot = _setup(args, "schedule")
     if args.c_out is not None:
         check_c_directory(args.c_out)
-    P, D = grid(args.P_gain, "--P-gain"), grid(args.D_gain, "--D-gain")
+    P, D = _axis(args, "P_gain"), _axis(args, "D_gain")
     beta_range = _range(args.beta_range, "--beta-range", "the torque-gain scale beta, Eq. 7")
     alphas = None if args.alpha_values is None else grid(args.alpha_values, "--alpha-values")
     s = schedule(loop, P, D, beta_range=beta_range, beta_tol=args.beta_tol, alpha_values=alphas,
@@ -338,10 +402,7 @@ def _cmd_schedule(args) -> int:
 
 def _cmd_passivity(args) -> int:
     loop, out, plot = _setup(args, "passivity")
-    P, D = grid(args.P_gain, "--P-gain"), grid(args.D_gain, "--D-gain")
-    if P.size != D.size:
-        raise ParameterError(f"--P-gain has {P.size} values and --D-gain {D.size}; they pair up, "
-                             "so give the same number")
+    P, D = _points(args)
     r = passivity(loop, P, D)
     rows = []
     for i in range(P.size):
@@ -380,7 +441,18 @@ def _cmd_step(args) -> int:
 def _cmd_margins(args) -> int:
     params = _params(args)
     loop = ClosedLoop(params, _parse_options(args.option))
-    P, D = _gain(args, "P_gain", "--P-gain"), _gain(args, "D_gain", "--D-gain")
+    Ps, Ds = _points(args)
+    for P, D in zip(Ps, Ds):
+        if Ps.size > 1:
+            print(f"P_gain {P:g}  D_gain {D:g}:")
+        _margins_of_point(loop, float(P), float(D))
+    print("(PM = 180 + arg L at |L| = 1, wrapped to (-180, 180]; the maps' rule: "
+          f"{loop.options.conventions.pm_rule}, see docs/model.md; crossovers located exactly "
+          f"from {loop.options.numerics.omega_min:g} rad/s to Nyquist)")
+    return 0
+
+
+def _margins_of_point(loop, P: float, D: float) -> None:
     st = loop.stability(P, D, radius=True)
     print(f"closed loop: {'stable' if st.stable else 'UNSTABLE'}, spectral radius {float(st.spectral_radius):.9g}")
     for name, label in (("L_t", "torque loop (opened at the PI output)"),
@@ -394,9 +466,19 @@ def _cmd_margins(args) -> int:
         if (m.gain_margins_db < 0).any():
             print("  (a negative GM is a gain-reduction margin: |L| > 1 where arg L = -180 deg, so "
                   "lowering the loop gain by that much reaches instability there)")
-    print("(PM = 180 + arg L at |L| = 1, wrapped to (-180, 180]; the maps' rule: "
-          f"{loop.options.conventions.pm_rule}, see docs/model.md; crossovers located exactly "
-          f"from {loop.options.numerics.omega_min:g} rad/s to Nyquist)")
+
+
+def _cmd_stability(args) -> int:
+    """One line per point: the point (when there are several), stable, the spectral radius."""
+    params = _params(args)
+    P, D = _points(args)
+    res = ClosedLoop(params, _parse_options(args.option)).stability(P, D, radius=True)
+    for i in range(P.size):
+        print((f"P_gain {P[i]:g}  D_gain {D[i]:g}: " if P.size > 1 else "")
+              + f"stable: {bool(res.stable[i])}  spectral radius: {float(res.spectral_radius[i]):.12g}"
+              + ("  (marginal: a pole at z = 1, the free position mode of a link without stiffness"
+                 " to ground, which P_gain = 0 does not feed back; not asymptotically stable)"
+                 if bool(res.marginal[i]) else ""))
     return 0
 
 
@@ -407,7 +489,51 @@ def _cmd_reproduce(args) -> int:
     return 0
 
 
+def _cmd_actuators(args) -> int:
+    """The bundled actuators: name (and alias), what they are, their configurations and file."""
+    aliases = {n: a for a, n in ALIASES.items()}
+    for name, path in bundled_actuators().items():
+        params = load_params(path)
+        alias = f" (alias {aliases[name]})" if name in aliases else ""
+        print(f"{name}{alias}: {params.about.get('name', '')}\n"
+              f"  {params.about.get('description', '')}\n"
+              f"  configurations: {', '.join(params.configurations) or 'none'}\n"
+              f"  file: {path}")
+    print("(--params NAME or --params FILE anywhere; copy a file to describe another actuator, "
+          "docs/model.md \"Actuator files\")")
+    return 0
+
+
+def _table(rows: list[tuple], header: tuple[str, ...]) -> str:
+    rows = [header] + [tuple(str(c) for c in r) for r in rows]
+    widths = [max(len(r[i]) for r in rows) for i in range(len(header) - 1)]
+    return "\n".join("  " + "  ".join(c.ljust(w) for c, w in zip(r, widths)) + "  " + r[-1] for r in rows)
+
+
+def _cmd_options(args) -> int:
+    """What --set and --option accept: keys with units, allowed values and the current value."""
+    params = _params(args)
+    print(f"--set KEY=VALUE, keys of {params.source} ({params.about.get('name', '')}"
+          f"{', configuration ' + args.configuration if args.configuration else ''}):")
+    print(_table([(k, u, "-" if v is None else f"{v:g}" if isinstance(v, float) else v, allowed)
+                  for k, u, allowed, v in set_keys(params)], ("key", "unit", "value", "allowed")))
+    resolved = LoopOptions().resolved(params.plant.topology)
+    print("--option KEY=VALUE, fields of haa_sym.LoopOptions (docs/model.md, \"Options\"):")
+    rows = []
+    for name in LoopOptions.field_names():
+        kind, optional = LoopOptions.field_type(name)
+        default = LoopOptions.field_default(name)
+        shown = (f"none (here {getattr(resolved, name)})" if default is None
+                 else str(default).lower() if isinstance(default, bool) else str(default))
+        rows.append((name, kind.__name__ + (" or none" if optional else ""), shown, OPTION_ALLOWED[name]))
+    print(_table(rows, ("option", "type", "default", "allowed")))
+    print(f"--P-gain (Nm/rad) and --D-gain (Nms/rad): {GRID_SYNTAX} (haa-sym --help: which commands "
+          "take a map's axes and which take points)")
+    return 0
+
+
 def _cmd_compile(args) -> int:
+    args.file = str(actuator_path(args.file, "ACTUATOR"))
     params = load_params(args.file)
     top = params.plant.topology
     entry = evaluators().code.manifest["topologies"].get(top.fingerprint)
@@ -430,10 +556,16 @@ def _progress_flags(p: argparse.ArgumentParser, default) -> None:
                         "(default: on a terminal, for work longer than 2 s)")
 
 
+# The D_gain axis of the maps (regions, boundary): the paper's Figs. 8-11 and model/paper.toml
+# start at 1 Nms/rad, and one default for both means `boundary` finds the curves `regions --plot`
+# draws. (boundary used 0..50 before issue 16; D_gain = 0 remains reachable with --D-gain.)
+MAP_D_GAIN = "lin:1:50:100"
+POINTS_ROLE = "points: the i-th P_gain with the i-th D_gain, one value pairing with all"
+
+
 def _map_args(parser, D_default: str, what: str, suffix: str) -> None:
     """The gain-plane arguments of ``regions`` and ``boundary``."""
-    parser.add_argument("--P-gain", default="log:1:20000:200", help=f"{what} (default log:1:20000:200)")
-    parser.add_argument("--D-gain", default=D_default, help=f"{what} (default {D_default})")
+    _gain_flags(parser, "log:1:20000:200", D_default, what)
     parser.add_argument("--out", help=f"output {suffix}")
     parser.add_argument("--plot", help="output figure (.png/.pdf/.svg)")
     parser.add_argument("--title")
@@ -455,16 +587,19 @@ def main(argv: list[str] | None = None) -> int:
     _progress_flags(ap, False)
     sub = ap.add_subparsers(dest="cmd", required=True)
     v = sub.add_parser("verify", help="check the paper's equations")
-    v.add_argument("--params")
+    v.add_argument("--params", metavar="NAME|FILE", help=PARAMS_HELP)
     c = sub.add_parser("compile", help="compile the plant of an actuator file into the cache (ahead of first use)")
-    c.add_argument("file", help="actuator file (TOML)")
-    s = sub.add_parser("stability", help="stability of one gain point")
+    c.add_argument("file", metavar="ACTUATOR", help="actuator file (TOML) or bundled name (haa-sym actuators)")
+    sub.add_parser("actuators", help="the bundled actuators: name, description, configurations and file path")
+    op = sub.add_parser("options", help="every --set key of an actuator (unit, value, allowed) and every --option "
+                        "(type, default, allowed)")
+    _common(op)                          # the values shown are those after --configuration and --set
+    s = sub.add_parser("stability", help="stability of gain points, one line each")
     _common(s)
-    s.add_argument("--P-gain", type=float, required=True)
-    s.add_argument("--D-gain", type=float, required=True)
+    _gain_flags(s, None, None, POINTS_ROLE + ", one line each")
     r = sub.add_parser("regions", help="stability / PM / passivity map on a gain grid (Figs. 8-11)")
     _common(r)
-    _map_args(r, "lin:1:50:100", "grid spec", ".npz")
+    _map_args(r, MAP_D_GAIN, "an axis of the map (every P_gain with every D_gain)", ".npz")
     r.add_argument("--radius", action="store_true",
                    help="also compute the spectral radius from eigenvalues (slower)")
     r.add_argument("--robust", action="store_true",
@@ -476,12 +611,12 @@ def main(argv: list[str] | None = None) -> int:
     bd = sub.add_parser("boundary", help="exact stability, phase-margin and passivity boundaries in the "
                         "(P_gain, D_gain) plane (parameter-space method)")
     _common(bd)
-    _map_args(bd, "lin:0:50:100", "the box: grid spec whose range is used", ".json")
+    _map_args(bd, MAP_D_GAIN, "its range is the box searched", ".json")
     sc = sub.add_parser("schedule", help="torque-gain scheduler: the largest beta per impedance that keeps "
                         "the joint stable with PM >= 30 deg for every leg configuration (CSV, embedded C)")
     _common(sc)
-    sc.add_argument("--P-gain", default="log:1:2000:30", help="impedance stiffness grid (default log:1:2000:30)")
-    sc.add_argument("--D-gain", default="lin:1:50:20", help="impedance damping grid (default lin:1:50:20)")
+    _gain_flags(sc, "log:1:2000:30", "lin:1:50:20", "an axis of the schedule's table (at least 2 values, "
+                "P_gain > 0)")
     sc.add_argument("--beta-range", default="0.1:8", help="LO:HI of beta (default 0.1:8)")
     sc.add_argument("--beta-tol", type=float, default=0.02, help="relative step of the beta grid (default 0.02)")
     sc.add_argument("--alpha-values", help="schedule alpha too, from these values (grid spec, e.g. 0,0.5,0.94)")
@@ -498,14 +633,12 @@ def main(argv: list[str] | None = None) -> int:
     ct.add_argument("--n-scan", type=int, default=400, help="log-spaced stiffnesses that bracket the ends (default 400)")
     ct.add_argument("--mode", choices=("replace", "add"), default="replace",
                     help="K_env replaces the port body's ground stiffness (default, the paper's reading) or adds to it")
-    ct.add_argument("--P-gain", type=float, default=0.0, help="impedance gains (default 0: the torque loop alone)")
-    ct.add_argument("--D-gain", type=float, default=0.0)
+    _gain_flags(ct, "0", "0", "one point (0 and 0: the torque loop alone)")
     ct.add_argument("--out", help="output .json")
     ct.add_argument("--plot", help="output figure (.png/.pdf/.svg)")
     p = sub.add_parser("passivity", help="passivity of Z(z) at gain pairs (Table 2, Fig. 12)")
     _common(p)
-    p.add_argument("--P-gain", default="0,200,20000", help="values paired with --D-gain")
-    p.add_argument("--D-gain", default="0,10,50")
+    _gain_flags(p, "0,200,20000", "0,10,50", POINTS_ROLE + " (Table 2's columns)")
     p.add_argument("--out", help="output .csv or .json")
     p.add_argument("--plot", help="corrected phase of Z, figure file")
     st = sub.add_parser("step", help="unit torque step, impedance loop open (Fig. 7)")
@@ -513,10 +646,9 @@ def main(argv: list[str] | None = None) -> int:
     st.add_argument("--duration", type=float, default=0.3, help="seconds")
     st.add_argument("--out", help="output .csv")
     st.add_argument("--plot", help="figure file")
-    mg = sub.add_parser("margins", help="phase and gain margins of the torque and impedance loops")
+    mg = sub.add_parser("margins", help="phase and gain margins of the torque and impedance loops at gain points")
     _common(mg)
-    mg.add_argument("--P-gain", type=float, default=0.0)
-    mg.add_argument("--D-gain", type=float, default=0.0)
+    _gain_flags(mg, "0", "0", POINTS_ROLE)
     rp = sub.add_parser("reproduce", help="every figure and table of the paper, and REPORT.md")
     _common(rp)
     rp.add_argument("--out", default="results")
@@ -528,19 +660,12 @@ def main(argv: list[str] | None = None) -> int:
     set_progress(False if args.quiet else True if args.progress else None)
     try:
         if args.cmd == "verify":
-            return verify_main(["--params", args.params] if args.params else [])
+            return verify_main(["--params", str(actuator_path(args.params, "--params"))] if args.params else [])
         if args.cmd == "stability":
-            params = _params(args)
-            args.P_gain, args.D_gain = _gain(args, "P_gain", "--P-gain"), _gain(args, "D_gain", "--D-gain")
-            res = ClosedLoop(params, _parse_options(args.option)).stability(args.P_gain, args.D_gain,
-                                                                             radius=True)
-            print(f"stable: {bool(res.stable)}  spectral radius: {float(res.spectral_radius):.12g}"
-                  + ("  (marginal: a pole at z = 1, the free position mode of a link without stiffness"
-                     " to ground, which P_gain = 0 does not feed back; not asymptotically stable)"
-                     if bool(res.marginal) else ""))
-            return 0
+            return _cmd_stability(args)
         return {"regions": _cmd_regions, "boundary": _cmd_boundary, "schedule": _cmd_schedule, "contact": _cmd_contact, "passivity": _cmd_passivity, "step": _cmd_step,
-                "margins": _cmd_margins, "reproduce": _cmd_reproduce, "compile": _cmd_compile}[args.cmd](args)
+                "margins": _cmd_margins, "reproduce": _cmd_reproduce, "compile": _cmd_compile,
+                "actuators": _cmd_actuators, "options": _cmd_options}[args.cmd](args)
     except ParameterError as exc:
         print(f"haa-sym: error: {exc}", file=sys.stderr)
         return 2

@@ -46,7 +46,7 @@ from pathlib import Path
 import numpy as np
 
 from haa_sym.errors import OutputError, ParameterError
-from haa_sym.io.outputs import Transaction, transaction
+from haa_sym.io.outputs import Transaction, check_file, transaction
 # the table and the lookup's Python twin, importable from here as before
 from haa_sym.design.schedule_table import (META_KEYS, ScheduleTable, lookup_alpha, lookup_beta,
                                     lookup_feasible)
@@ -277,15 +277,15 @@ def c_code(table: ScheduleTable) -> tuple[str, str]:
 
 
 def check_c_directory(directory: str | Path, field: str = "--c-out") -> Path:
-    """``directory`` as a Path if it is an existing, writable directory; else an OutputError
-    naming ``field`` (a command checks this before computing anything)."""
+    """``directory`` as a Path if it is a writable directory or can be created (the rule of every
+    output path, :mod:`haa_sym.io.outputs`); else an OutputError naming ``field`` (a command
+    checks this before computing anything)."""
     d = Path(directory)
-    allowed = "allowed: an existing, writable directory (it is not created)"
-    if not d.is_dir():
-        what = "does not exist" if not d.exists() else "is not a directory"
-        raise OutputError(f"{field} {str(d)!r} {what}; {allowed}")
-    if not os.access(d, os.W_OK | os.X_OK):
-        raise OutputError(f"{field} {str(d)!r} is not writable; {allowed}")
+    if d.exists() and not d.is_dir():
+        raise OutputError(f"{field} {str(d)!r} is not a directory; allowed: a directory (created if missing)")
+    if d.is_dir() and not os.access(d, os.W_OK | os.X_OK):
+        raise OutputError(f"{field} {str(d)!r} is not writable; allowed: a writable directory")
+    check_file(d / HEADER, field)          # missing: its existing ancestors must allow creating it
     return d
 
 
@@ -301,7 +301,8 @@ def write_c(table: ScheduleTable, directory: str | Path, tx: Transaction | None 
     ----------
     table : ScheduleTable
     directory : str or Path
-        An existing, writable directory (it is not created).
+        A writable directory; created with any missing parents when the files are committed
+        (and removed again, if it was created, when the transaction rolls back).
     tx : haa_sym.io.outputs.Transaction, optional
     field : str, optional
         How messages name the directory (default ``--c-out``, the CLI option).
@@ -315,7 +316,7 @@ def write_c(table: ScheduleTable, directory: str | Path, tx: Transaction | None 
     ------
     ParameterError
         (an :class:`haa_sym.io.outputs.OutputError`) naming ``field`` when ``directory`` is not an
-        existing writable directory or a file cannot be written; nothing is written.
+        writable directory (nor can be created) or a file cannot be written; nothing is written.
     """
     d = check_c_directory(directory, field)
     header, source = c_code(table)                  # every check before the first byte

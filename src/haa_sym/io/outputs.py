@@ -7,9 +7,14 @@ including ``KeyboardInterrupt``, the temporaries are removed and the existing fi
 untouched. A whole directory (``haa-sym reproduce --out DIR``) is staged as a temporary sibling
 directory and swapped in at the end, so DIR is either the old one or the complete new one.
 
-Paths are checked before any work starts (:func:`check_file`, :func:`check_directory`): the
-parent directory must exist (nothing is created above the target) and a file target must not
-be a directory. Messages name the user's path, never a temporary one.
+Paths are checked before any work starts (:func:`check_file`, :func:`check_directory`): a file
+target must not be a directory, and the existing part of its path must be directories, the
+deepest of them writable. Missing parent directories are one rule for every output (``--out``,
+``--plot``, ``--c-out``, ``reproduce --out``): the transaction creates them when it stages the
+first output below them (mode 0777 minus the umask, like ``mkdir -p``) and, if it rolls back,
+removes again those it created that are still empty. So a failed or interrupted command leaves
+no new directory behind; the one exception is a directory another process put a file into
+meanwhile, which is not ours to delete. Messages name the user's path, never a temporary one.
 
 Example
 -------
@@ -39,20 +44,33 @@ def _label(path: Path, field: str | None) -> str:
     return f"{field} {str(path)!r}" if field else repr(str(path))
 
 
-def _check_parent(path: Path, field: str | None) -> None:
+def _missing_parents(path: Path) -> list[Path]:
+    """The ancestors of ``path`` that do not exist, outermost first (what ``mkdir -p`` creates)."""
+    missing = []
     parent = path.parent
-    if not parent.exists():
-        raise OutputError(f"{_label(path, field)}: directory {str(parent)!r} does not exist; allowed: "
-                          "a path in an existing directory (create it first)")
-    if not parent.is_dir():
-        raise OutputError(f"{_label(path, field)}: {str(parent)!r} is not a directory; allowed: a path "
-                          "in an existing directory")
-    if not os.access(parent, os.W_OK | os.X_OK):
-        raise OutputError(f"{_label(path, field)}: directory {str(parent)!r} is not writable")
+    # a dangling symbolic link "does not exist" but cannot be created over: it counts as existing
+    while not parent.exists() and not parent.is_symlink() and parent != parent.parent:
+        missing.append(parent)
+        parent = parent.parent
+    return missing[::-1]
+
+
+def _check_parent(path: Path, field: str | None) -> None:
+    """The parent of ``path`` exists as a writable directory, or can be created: its deepest
+    existing ancestor is a writable directory."""
+    missing = _missing_parents(path)
+    base = missing[0].parent if missing else path.parent
+    if not base.is_dir():
+        raise OutputError(f"{_label(path, field)}: {str(base)!r} is not a directory; allowed: a path "
+                          "whose existing part is directories (missing ones are created)")
+    if not os.access(base, os.W_OK | os.X_OK):
+        what = f"cannot create directory {str(missing[0])!r}: " if missing else ""
+        raise OutputError(f"{_label(path, field)}: {what}directory {str(base)!r} is not writable")
 
 
 def check_file(path: str | Path, field: str | None = None) -> Path:
-    """Check that ``path`` can be written as a file: existing, writable parent; not a directory.
+    """Check that ``path`` can be written as a file: not a directory; its parent a writable
+    directory, or missing below a writable directory (the transaction creates it).
 
     ``field`` (e.g. ``--out``) is how messages name the path.
     """
@@ -67,7 +85,7 @@ def check_directory(path: str | Path, field: str | None = None,
                     replaceable: Callable[[Path], str | None] | None = None) -> Path:
     """Check that ``path`` can be (re)placed as a whole directory.
 
-    The parent must exist (only ``path`` itself is created). An existing ``path`` must be a
+    Missing parents are allowed as for :func:`check_file`. An existing ``path`` must be a
     directory that ``replaceable`` accepts: it returns None, or why the directory must not be
     replaced (e.g. it holds files the command does not write). Returns the path with a final
     symbolic link resolved (the directory it points to is the one replaced).
@@ -123,6 +141,19 @@ class Transaction:
     def __init__(self) -> None:
         self._staged: list[tuple[Path, Path, bool]] = []   # (temporary, target, is_directory)
         self._dir_checks: dict[Path, tuple] = {}             # target -> (field, replaceable)
+        self._created: list[Path] = []                       # parent directories this one made
+
+    def _make_parents(self, target: Path, field: str | None) -> None:
+        """Create the missing parents of ``target``, remembering them for :meth:`rollback`."""
+        for d in _missing_parents(target):
+            try:
+                os.mkdir(d, 0o777)
+            except FileExistsError:
+                continue                         # made meanwhile by someone else: not ours
+            except OSError as exc:
+                raise OutputError(f"{_label(target, field)}: cannot create directory {str(d)!r} "
+                                  f"({exc.strerror})") from None
+            self._created.append(d)
 
     def __enter__(self) -> "Transaction":
         return self
@@ -138,6 +169,7 @@ class Transaction:
     def open(self, path: str | Path, mode: str = "wb", field: str | None = None) -> Iterator:
         """A file object writing the staged content of ``path`` (``mode`` "w" or "wb")."""
         target = check_file(path, field)
+        self._make_parents(target, field)
         # 0o666 & ~umask, as open() gives a new file (mkstemp would force 0600)
         flags = os.O_WRONLY | os.O_CREAT | os.O_EXCL | getattr(os, "O_CLOEXEC", 0)
         tmp, fd = _create_sibling(target, field, lambda t: os.open(t, flags, 0o666), "write",
@@ -165,6 +197,7 @@ class Transaction:
         :func:`check_directory`) is replaced by the staged one.
         """
         target = check_directory(path, field, replaceable)
+        self._make_parents(target, field)
         # 0o777 & ~umask, like mkdir (mkdtemp forces 0700)
         tmp, _ = _create_sibling(target, field, lambda t: os.mkdir(t, 0o777), "create",
                                  "a temporary directory")
@@ -216,15 +249,21 @@ class Transaction:
                 raise OutputError(f"{_label(target, None)}: cannot write ({exc.strerror or exc})") from None
             raise
         self._staged = []
+        self._created = []                       # they hold the outputs now: kept
         for _, backup, _ in done:
             if backup is not None:
                 _remove(backup)
 
     def rollback(self) -> None:
-        """Remove every staged temporary; the targets are untouched."""
+        """Remove every staged temporary and the parent directories this transaction created
+        (innermost first, each only if empty); the targets are untouched."""
         for tmp, _, _ in self._staged:
             _remove(tmp)
         self._staged = []
+        for d in reversed(self._created):
+            with contextlib.suppress(OSError):   # not empty: another writer's file is in it
+                os.rmdir(d)
+        self._created = []
 
 
 @contextlib.contextmanager

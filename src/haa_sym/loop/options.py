@@ -18,7 +18,7 @@ from haa_sym.errors import ParameterError
 from haa_sym.io.budget import check_memory, sweep_bytes
 
 __all__ = ["LoopOptions", "LoopStructure", "AnalysisConventions", "FrequencyGrid", "PORTS", "COLGATE",
-           "FILTERS", "PM_LOOPS", "PM_RULES"]
+           "FILTERS", "PM_LOOPS", "PM_RULES", "ALLOWED"]
 
 PORTS = ("dtheta_L2", "dtheta_L1", "encoder_average")
 COLGATE = ("subtract", "add", "none")
@@ -27,6 +27,22 @@ PM_LOOPS = ("impedance", "torque")
 # the phase-margin rules of haa_sym.analysis.margins ("distance": the angular distance of L from
 # -1 at any crossover)
 PM_RULES = ("distance", "min_abs", "worst")
+
+
+# What each option allows, in words (haa-sym options, the CLI's help); the checks are the
+# classes' own __post_init__ below, which these sentences restate.
+ALLOWED: dict[str, str] = {
+    "delay": "0 or 1 (samples of computation delay)",
+    "torque_damping": "true, false or none (none: the actuator file's [sensors] torque_damping)",
+    "filter": " | ".join(FILTERS) + " (where the velocity estimate sits)",
+    "port": "dtheta_<body> (a body of the actuator file) | encoder_average | none (the file's port)",
+    "colgate": " | ".join(COLGATE) + " (Colgate's w Ts/2 correction of the phase of Z)",
+    "pm_loop": " | ".join(PM_LOOPS) + " (the loop whose phase margin the maps judge)",
+    "pm_rule": " | ".join(PM_RULES) + " (when a phase margin is low)",
+    "passivity_tol_deg": "a finite number >= 0, deg",
+    "n_omega": "an integer >= 10 (points of the frequency grid)",
+    "omega_min": "a finite number > 0, rad/s (the grid's lowest frequency)",
+}
 
 
 def _choice(obj, name, allowed):

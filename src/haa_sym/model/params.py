@@ -43,12 +43,17 @@ __all__ = [
     "Controller",
     "Params",
     "CONTROLLER_KEYS",
+    "CONTROLLER_UNITS",
+    "set_keys",
     "GAIN_KEYS",
     "gain_array",
     "gain_points",
     "load_params",
     "default_params_path",
     "builtin_actuators",
+    "bundled_actuators",
+    "actuator_path",
+    "ALIASES",
 ]
 
 
@@ -80,6 +85,27 @@ _GAIN_UNITS = {"P_gain": " (Nm/rad)", "D_gain": " (Nms/rad)", "beta": "", "alpha
 GAIN_KEYS: tuple[str, ...] = tuple(_GAIN_DOMAIN)
 
 CONTROLLER_KEYS: tuple[str, ...] = tuple(_CONTROLLER_DOMAIN)
+# Units of the controller keys (the plant's come from its topology, Topology.units); the filter
+# keys' from the registry.
+CONTROLLER_UNITS: dict[str, str] = {"Ts": "s", "alpha": "-", "beta": "-", "P_t0": "V/Nm", "I_t0": "V/(Nm s)",
+                                    "velocity_filter": "name",
+                                    **{k: p.units for k, p in FILTER_PARAMETERS.items()}}
+
+
+def domain_text(domain: str) -> str:
+    """What a key's ``domain`` (">0", ">=0", "int>=1", "filter") allows, in words."""
+    return filters.allowed_text() if domain == "filter" else _DOMAIN_TEXT[domain]
+
+
+def set_keys(params: "Params") -> list[tuple[str, str, str, object]]:
+    """Every key ``--set`` / :meth:`Params.with_values` accepts for ``params``:
+    ``(key, unit, allowed, current value)``, the plant's (its topology's order) then the
+    controller's."""
+    top = params.plant.topology
+    rows = [(k, top.units[k], domain_text(d), params.plant.as_dict()[k]) for k, d in top.domain.items()]
+    rows += [(k, CONTROLLER_UNITS[k], domain_text(d), getattr(params.controller, k))
+             for k, d in _CONTROLLER_DOMAIN.items()]
+    return rows
 
 
 class Plant:
@@ -341,6 +367,42 @@ def builtin_actuators(directory: str | Path | None = None) -> list[Path]:
     return sorted(p for p in d.glob("*.toml") if p.name != "paper.toml")
 
 
+# Short names of bundled actuators (alias -> the file's stem). "hyq" is how the paper and the
+# README call the robot; the file is named after the joint (HAA) because other HyQ joints differ.
+ALIASES: dict[str, str] = {"hyq": "hyq_haa"}
+
+
+def bundled_actuators() -> dict[str, Path]:
+    """The bundled actuators by name: ``{stem: path}`` of :func:`builtin_actuators` (``hyq_haa``,
+    ``sea``, ``harmonic_drive``), in the source tree or inside the installed package."""
+    return {p.stem: p for p in builtin_actuators()}
+
+
+def actuator_path(name_or_path: str | Path | None = None, field: str | None = None) -> Path:
+    """The parameter file meant by ``name_or_path``: an existing path (a file always wins), else
+    a bundled actuator's name (:func:`bundled_actuators`) or alias (:data:`ALIASES`); None is
+    the bundled HyQ file.
+
+    Raises
+    ------
+    ParameterError
+        Naming ``field`` (e.g. ``--params``), the value and the bundled names, when it is neither.
+    """
+    if name_or_path is None:
+        return default_params_path()
+    p = Path(name_or_path)
+    if p.exists():
+        return p
+    bundled = bundled_actuators()
+    name = ALIASES.get(str(name_or_path), str(name_or_path))
+    if name in bundled:
+        return bundled[name]
+    label = f"{field} {str(name_or_path)!r}" if field else repr(str(name_or_path))
+    names = list(bundled) + [f"{a} (= {n})" for a, n in ALIASES.items()]
+    raise ParameterError(f"{label}: no such parameter file, nor a bundled actuator; allowed: a TOML "
+                         f"file or a bundled name: {', '.join(names)} (haa-sym actuators lists them)")
+
+
 def default_params_path() -> Path:
     """``model/hyq_haa.toml``, the bundled HyQ parameters (source tree or installed package)."""
     return data_dir("model") / "hyq_haa.toml"
@@ -491,7 +553,9 @@ def load_params(path: str | Path | None = None) -> Params:
     Parameters
     ----------
     path : str or Path, optional
-        TOML file; default the bundled ``model/hyq_haa.toml``.
+        TOML file, or the name of a bundled actuator (``"hyq_haa"`` or ``"hyq"``, ``"sea"``,
+        ``"harmonic_drive"``; :func:`actuator_path`: an existing file wins); default the bundled
+        ``model/hyq_haa.toml``.
 
     Returns
     -------
@@ -502,7 +566,7 @@ def load_params(path: str | Path | None = None) -> Params:
     ParameterError
         Naming the file, the key, the offending value and what is allowed.
     """
-    p = Path(path) if path is not None else default_params_path()
+    p = actuator_path(path)
     try:
         with open(p, "rb") as fh:
             data = tomllib.load(fh)

@@ -49,7 +49,7 @@ from haa_sym.io.outputs import Transaction, check_directory, csv_text as _csv, w
 from haa_sym.io.progress import message, progress as progress_bar
 from haa_sym.loop import ClosedLoop, LoopOptions
 from haa_sym.model.params import Params, load_params
-from haa_sym.paper import panel_params, paper_spec
+from haa_sym.paper import check_params, panel_params, paper_spec
 from haa_sym.paper.report import table2_markdown, write_report
 from haa_sym.paper.table2 import score_options, table2
 
@@ -506,13 +506,14 @@ def reproduce(out: str | Path = "results", params: Params | None = None,
     """Compute and write everything listed in the module docstring; returns the claims dict.
 
     ``out`` is replaced as a whole when everything is computed (see the module docstring); its
-    parent directory must exist. ``quick`` uses coarse grids (for tests); the report says so.
+    missing parent directories are created (and removed again on failure). ``quick`` uses coarse grids (for tests); the report says so.
     ``field`` names ``out`` in error messages (e.g. ``--out``).
     """
     t_start = time.time()
     params = params or load_params()
     options = (options or LoopOptions()).resolved(params.plant.topology)
     spec = spec or paper_spec()
+    check_params(params, spec)           # the paper's configurations and keys, before any work
     reg = spec["regions"]
     out = check_directory(out, field, _replaceable)
     P_grid = grid("log:1:20000:40" if quick else reg["P_gain"], "P_gain")
