@@ -85,9 +85,9 @@ DEFAULT_P_GAIN = "log:1:2000:30"
 DEFAULT_D_GAIN = "lin:1:50:20"
 COARSE_RATIO = 1.25
 # Sub-grid of the cell check: 4 subdivisions, 5 x 5 points a cell (corners and edges included).
-# Halving the spacing of a smooth function's sampling quarters the bilinear error it can miss;
-# 5 x 5 is where the 5-of-60 off-grid failures of the default HyQ schedule vanish
-# (docs/model.md, tests/test_schedule_safety.py) at about the cost of the schedule itself.
+# Halving the spacing quarters the bilinear error a smooth boundary can hide between samples;
+# at 5 x 5 the off-grid test (tests/test_schedule_safety.py) finds no unsafe beta, and the check
+# costs about half the schedule's own time on the default HyQ grid (docs/model.md).
 CELL_SUBDIVISIONS = 4
 
 
