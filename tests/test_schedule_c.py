@@ -16,8 +16,8 @@ from haa_sym.errors import NoCompiler
 from haa_sym.compiled.generated import Compiler
 from haa_sym.io.outputs import Transaction
 from haa_sym.errors import ParameterError
-from haa_sym.design.schedule_c import (HEADER, SOURCE, ScheduleTable, c_code, lookup_alpha, lookup_beta,
-                                lookup_feasible, write_c)
+from haa_sym.design.schedule_c import (HEADER, NAN, NO_SAFE_GAIN, OK, OUTSIDE, SOURCE, ScheduleTable, c_code,
+                                       lookup, write_c)
 
 STRICT = ("-std=c99", "-pedantic", "-Wall", "-Wextra", "-Werror", "-Wconversion", "-Wshadow",
           "-Wdouble-promotion", "-Wstrict-prototypes", "-Wmissing-prototypes", "-Wfloat-equal",
@@ -60,12 +60,21 @@ def build(table, directory, *, shared=True, extra=()) -> ctypes.CDLL | None:
     if not shared:
         return None
     c = ctypes.CDLL(str(lib))
-    for name in ("haa_schedule_beta", "haa_schedule_alpha", "haa_schedule_feasible"):
-        if hasattr(c, name):
-            f = getattr(c, name)
-            f.argtypes = [ctypes.c_double, ctypes.c_double]
-            f.restype = ctypes.c_int if name.endswith("feasible") else ctypes.c_double
+    f = c.haa_schedule_lookup
+    f.argtypes = [ctypes.c_double, ctypes.c_double, ctypes.POINTER(ctypes.c_double), ctypes.POINTER(ctypes.c_double)]
+    f.restype = ctypes.c_int
     return c
+
+
+SENTINEL = -7.0
+
+
+def clook(lib, P, D):
+    """The C lookup as the Python twin's ``(status, beta, alpha)``: None where nothing was
+    written (sentinels left alone)."""
+    b, a = ctypes.c_double(SENTINEL), ctypes.c_double(SENTINEL)
+    st = lib.haa_schedule_lookup(P, D, ctypes.byref(b), ctypes.byref(a))
+    return st, (None if b.value == SENTINEL else b.value), (None if a.value == SENTINEL else a.value)
 
 
 @pytest.fixture(scope="module")
@@ -78,11 +87,9 @@ def lib(table, tmp_path_factory):
     return build(table, tmp_path_factory.mktemp("c"))
 
 
-def _fallback(table):
-    """The feasible point with the smallest beta, found independently of the module."""
-    b = np.where(table.feasible, table.beta, np.inf)
-    i, j = np.unravel_index(np.argmin(b), b.shape)
-    return int(i), int(j)
+def _cell(table, i, j):
+    """The cell a grid point belongs to (rule 2: lower corner, the last cell on upper edges)."""
+    return min(i, table.shape[0] - 2), min(j, table.shape[1] - 2)
 
 
 def _random_points(table, n, seed):
@@ -93,16 +100,13 @@ def _random_points(table, n, seed):
 
 
 def test_grid_points_return_the_table(table, lib):
-    fi, fj = _fallback(table)
     for i, P in enumerate(table.P_gain):
         for j, D in enumerate(table.D_gain):
-            feas = bool(table.feasible[i, j])
-            b, a, f = lib.haa_schedule_beta(P, D), lib.haa_schedule_alpha(P, D), lib.haa_schedule_feasible(P, D)
-            assert f == int(feas)
-            if feas:                              # exactly the table, bit for bit
-                assert (b, a) == (table.beta[i, j], table.alpha[i, j])
-            else:                                 # rule 3 with no used feasible corner
-                assert (b, a) == (table.beta[fi, fj], table.alpha[fi, fj])
+            got = clook(lib, P, D)
+            if table.cell_safe[_cell(table, i, j)]:          # exactly the table, bit for bit
+                assert got == (OK, table.beta[i, j], table.alpha[i, j])
+            else:
+                assert got == (NO_SAFE_GAIN, None, None)
 
 
 def test_interpolation_equals_python_twin(table, lib):
@@ -112,16 +116,12 @@ def test_interpolation_equals_python_twin(table, lib):
     Dc = 0.5 * (table.D_gain[1:] + table.D_gain[:-1])
     P = np.concatenate([P, np.repeat(Pc, Dc.size), np.repeat(table.P_gain, Dc.size), np.tile(Pc, table.D_gain.size)])
     D = np.concatenate([D, np.tile(Dc, Pc.size), np.tile(Dc, table.P_gain.size), np.repeat(table.D_gain, Pc.size)])
-    c = np.array([(lib.haa_schedule_beta(p, d), lib.haa_schedule_alpha(p, d), lib.haa_schedule_feasible(p, d))
-                  for p, d in zip(P, D)])
-    py = np.array([(lookup_beta(table, p, d), lookup_alpha(table, p, d), lookup_feasible(table, p, d))
-                   for p, d in zip(P, D)])
-    assert np.array_equal(c[:, 2], py[:, 2])
-    rel = np.abs(c[:, :2] - py[:, :2]) / np.abs(py[:, :2])
-    assert rel.max() <= 1e-15
-    assert c[:, 2].sum() > 0.8 * len(P)             # mostly interpolated, not fallbacks
-    print(f"\nC vs Python twin, {len(P)} points: max relative difference {rel.max():.3g}, "
-          f"{int((c[:, :2] == py[:, :2]).all(axis=1).sum())} bit-identical")
+    c = [clook(lib, p, d) for p, d in zip(P, D)]
+    py = [lookup(table, p, d) for p, d in zip(P, D)]
+    assert c == py                                   # status and values bit for bit
+    n_ok = sum(st == OK for st, _, _ in c)
+    assert n_ok > 0.8 * len(P)                       # mostly interpolated
+    print(f"\nC vs Python twin, {len(P)} points: bit-identical, {n_ok} answered")
 
 
 def test_interpolation_is_bilinear_in_log_P_gain(tmp_path):
@@ -131,13 +131,11 @@ def test_interpolation_is_bilinear_in_log_P_gain(tmp_path):
     f = lambda p, d: 1.0 + 0.3 * np.log(p) + 0.05 * d + 0.01 * np.log(p) * d
     table = ScheduleTable(P, D, f(P[:, None], D[None, :]), np.ones((4, 3), bool), dict(META))
     lib = build(table, tmp_path)
-    assert not hasattr(lib, "haa_schedule_alpha")
     Pq, Dq = _random_points(table, 500, seed=2)
-    got = np.array([lib.haa_schedule_beta(p, d) for p, d in zip(Pq, Dq)])
-    assert np.allclose(got, f(Pq, Dq), rtol=1e-14, atol=0)
-    assert lib.haa_schedule_beta(math.sqrt(3.0 * 40.0), 2.0) == pytest.approx(
-        0.5 * (f(3.0, 2.0) + f(40.0, 2.0)), rel=1e-15)
-    assert all(lib.haa_schedule_feasible(p, d) == 1 for p, d in zip(Pq, Dq))
+    got = [clook(lib, p, d) for p, d in zip(Pq, Dq)]
+    assert all(st == OK and a is None for st, _, a in got)          # alpha not scheduled: not written
+    assert np.allclose([b for _, b, _ in got], f(Pq, Dq), rtol=1e-14, atol=0)
+    assert clook(lib, math.sqrt(3.0 * 40.0), 2.0)[1] == pytest.approx(0.5 * (f(3.0, 2.0) + f(40.0, 2.0)), rel=1e-15)
 
 
 def test_clamped_outside_the_grid_and_flagged(table, lib):
@@ -148,65 +146,49 @@ def test_clamped_outside_the_grid_and_flagged(table, lib):
              ((Pm, -3.0), (Pm, Dmin)), ((Pm, 80.0), (Pm, Dmax)), ((0.1, 1e6), (Pmin, Dmax)),
              ((1e9, 1e9), (Pmax, Dmax))]
     for (p, d), (pc, dc) in cases:
-        assert lib.haa_schedule_beta(p, d) == lib.haa_schedule_beta(pc, dc)
-        assert lib.haa_schedule_alpha(p, d) == lib.haa_schedule_alpha(pc, dc)
-        assert lib.haa_schedule_feasible(p, d) == 0          # outside: not backed by the table
-        assert lookup_beta(table, p, d) == lib.haa_schedule_beta(p, d)
-        assert lookup_feasible(table, p, d) == 0
-    assert lib.haa_schedule_feasible(Pmin, Dm) == 1 and lib.haa_schedule_feasible(Pmax, Dmax) == 1
+        st, b, a = clook(lib, p, d)
+        assert st == OUTSIDE and (OK, b, a) == clook(lib, pc, dc)    # the clamped point's values
+        assert lookup(table, p, d) == (st, b, a)
 
 
-def test_infeasible_corner_switches_interpolation_off(table, lib):
-    """Rule 3 at every cell centre, checked against the table itself: a cell with an infeasible
-    corner returns its feasible corner of smallest beta (with that corner's alpha), or the
-    fallback point; a cell without returns a value between its corners'."""
-    fi, fj = _fallback(table)
-    n_partial = n_none = 0
+def test_cells_without_a_safe_gain_write_nothing(table, lib):
+    """At every cell centre: four feasible corners give a value between the corners'; a cell with
+    an infeasible corner answers NO_SAFE_GAIN and writes nothing (no fallback gain)."""
+    n_none = 0
     for i in range(table.shape[0] - 1):
         for j in range(table.shape[1] - 1):
             p = math.sqrt(table.P_gain[i] * table.P_gain[i + 1])
             d = 0.5 * (table.D_gain[j] + table.D_gain[j + 1])
             corners = [(i, j), (i + 1, j), (i, j + 1), (i + 1, j + 1)]
-            ok = [k for k in corners if table.feasible[k]]
-            b, a, f = lib.haa_schedule_beta(p, d), lib.haa_schedule_alpha(p, d), lib.haa_schedule_feasible(p, d)
-            if len(ok) == 4:
+            st, b, a = clook(lib, p, d)
+            if all(table.feasible[k] for k in corners):
                 vals = [table.beta[k] for k in corners]
-                assert f == 1 and min(vals) <= b <= max(vals) and b not in vals
-                continue
-            assert f == 0
-            k = min(ok, key=lambda c: table.beta[c]) if ok else (fi, fj)
-            assert (b, a) == (table.beta[k], table.alpha[k])
-            n_partial += bool(ok)
-            n_none += not ok
-    assert n_partial >= 3 and n_none >= 1                # the synthetic table exercises both
+                assert st == OK and min(vals) <= b <= max(vals) and b not in vals and a is not None
+            else:
+                assert (st, b, a) == (NO_SAFE_GAIN, None, None)
+                n_none += 1
+    assert n_none >= 3                                   # the synthetic table exercises it
 
 
-def test_used_corners_only(table, lib):
-    """On a grid line only its two ends are used: next to the infeasible block, the line between
-    two feasible points still interpolates (flag 1), the cell beside it does not."""
-    i, j = 9, 2                       # (9, 2) and (9, 3) feasible, (10, 2) infeasible
-    assert table.feasible[i, j] and table.feasible[i, j + 1] and not table.feasible[i + 1, j]
-    p, d = table.P_gain[i], 0.5 * (table.D_gain[j] + table.D_gain[j + 1])
-    assert lib.haa_schedule_feasible(p, d) == 1
-    assert lib.haa_schedule_beta(p, d) == pytest.approx(0.5 * (table.beta[i, j] + table.beta[i, j + 1]),
-                                                        rel=1e-15)
-    p_in = p * 1.01                                      # inside the cell (9, 2): corner (10, 2) used
-    assert lib.haa_schedule_feasible(p_in, d) == 0
-    assert lib.haa_schedule_beta(p_in, d) == min(table.beta[i + 1, j + 1], table.beta[i, j],
-                                                 table.beta[i, j + 1])
+def test_cell_safe_given_by_the_producer(tmp_path):
+    """A producer's cell_safe switches cells off; a cell with an infeasible corner cannot be on."""
+    t = synthetic()
+    cells = t.cell_safe.copy()
+    cells[2, 3] = False
+    t2 = ScheduleTable(t.P_gain, t.D_gain, t.beta, t.feasible, {**META, "cell_check": "5 x 5 sub-grid"},
+                       alpha=t.alpha, cell_safe=cells)
+    p, d = math.sqrt(t.P_gain[2] * t.P_gain[3]), 0.5 * (t.D_gain[3] + t.D_gain[4])
+    assert lookup(t, p, d)[0] == OK and lookup(t2, p, d) == (NO_SAFE_GAIN, None, None)
+    assert "5 x 5 sub-grid" in c_code(t2)[0] and "Nothing: the table's producer did not state" in c_code(t)[0]
+    bad = t.cell_safe.copy() | True
+    with pytest.raises(ParameterError, match=r"ScheduleTable.cell_safe\[\d+, \d+\] = True at the cell .* "
+                                             "infeasible corner; allowed"):
+        ScheduleTable(t.P_gain, t.D_gain, t.beta, t.feasible, dict(META), cell_safe=bad)
 
 
-def test_nan_returns_the_fallback_point(table, lib, tmp_path):
-    fi, fj = _fallback(table)
+def test_nan_writes_nothing(table, lib):
     for p, d in ((math.nan, 10.0), (100.0, math.nan), (math.nan, math.nan)):
-        assert lib.haa_schedule_beta(p, d) == table.beta[fi, fj]
-        assert lib.haa_schedule_alpha(p, d) == table.alpha[fi, fj]
-        assert lib.haa_schedule_feasible(p, d) == 0
-        assert (lookup_beta(table, p, d), lookup_alpha(table, p, d), lookup_feasible(table, p, d)) == (
-            table.beta[fi, fj], table.alpha[fi, fj], 0)
-    header, _ = c_code(table)
-    macro = float(re.search(r"#define HAA_SCHEDULE_BETA_FALLBACK (\S+)", header).group(1))
-    assert macro == table.beta[fi, fj]
+        assert clook(lib, p, d) == (NAN, None, None) == lookup(table, p, d)
 
 
 def test_byte_reproducible(table, tmp_path):
@@ -225,7 +207,7 @@ def test_byte_reproducible(table, tmp_path):
     for text in ("Nm/rad", "Nms/rad", "13 values from 1.0 to 2000.0 Nm/rad, logarithmically spaced",
                  "8 values from 1.0 to 50.0 Nms/rad, uniformly spaced (step 7 Nms/rad)",
                  "actuator: hyq_haa.toml", "source: model/hyq_haa.toml", "phase_margin_deg = 30.0",
-                 "tolerances: beta = 0.001", "haa_sym_version: test", "Feasible points: 95 of 104"):
+                 "tolerances: beta = 0.001", "haa_sym_version: test", "Feasible grid points: 95 of 104"):
         assert text in header
     other = ScheduleTable(table.P_gain, table.D_gain, table.beta, table.feasible,
                           {**META, "source": "other.toml"}, alpha=table.alpha)
@@ -296,7 +278,7 @@ def test_comments_show_no_absolute_path_and_no_float_noise():
                  "in_text: read from x.toml, checked",
                  "kept: model/hyq_haa.toml, Nm/rad, a / b, https://example.org/a/b",
                  "torque_bandwidth_beta_1_rad_s: 0.3\n", "from 4.0 to 2048.0 Nm/rad",
-                 "P_gain = 2048.0, D_gain = 25.5, beta = 0.8, alpha = 0.5."):
+                 "Safe cells: 5 of 6."):
         assert text in flat
     assert "/home/" not in header and "C:" not in header and "~" not in header
     assert "/* P_gain = 256.0 Nm/rad; D_gain index 0..2 */" in source
@@ -368,8 +350,7 @@ def test_feasible_as_zero_one_and_nan_at_infeasible_points_accepted():
     t = synthetic()
     same = ScheduleTable(t.P_gain, t.D_gain, t.beta, t.feasible.astype(int), dict(META), alpha=t.alpha)
     assert c_code(same) == c_code(t)
-    with pytest.raises(ParameterError, match="lookup_alpha: this ScheduleTable has no alpha table"):
-        lookup_alpha(synthetic(alpha=False), 10.0, 10.0)
+    assert lookup(synthetic(alpha=False), 10.0, 10.0)[2] is None            # no alpha table: none
     with pytest.raises(ParameterError, match="table = 'x'; allowed: a haa_sym.design.schedule_c.ScheduleTable"):
         write_c("x", ".")
 
@@ -435,25 +416,20 @@ int main(void)
     const int n = 1000000;
     volatile double sink = 0.0;
     volatile int flags = 0;
-    double acc = 0.0, t0, t_beta, t_feasible;
+    double acc = 0.0, t0, t_lookup;
     int i, f = 0;
     t0 = now();
     for (i = 0; i < n; ++i) {   /* walks the whole grid: 997 x 613 is coprime with the loop */
         double P = 1.0 + 2100.0 * (double)(i % 997) / 997.0;
         double D = 0.5 + 52.0 * (double)(i % 613) / 613.0;
-        acc += haa_schedule_beta(P, D);
+        double beta = 0.0, alpha = 0.0;
+        f += haa_schedule_lookup(P, D, &beta, &alpha);
+        acc += beta + alpha;
     }
-    t_beta = now() - t0;
+    t_lookup = now() - t0;
     sink = acc;
-    t0 = now();
-    for (i = 0; i < n; ++i) {
-        double P = 1.0 + 2100.0 * (double)(i % 997) / 997.0;
-        double D = 0.5 + 52.0 * (double)(i % 613) / 613.0;
-        f += haa_schedule_feasible(P, D);
-    }
-    t_feasible = now() - t0;
     flags = f;
-    printf("%.3f %.3f %g %d\n", 1e9 * t_beta / n, 1e9 * t_feasible / n, sink, flags);
+    printf("%.3f %g %d\n", 1e9 * t_lookup / n, sink, flags);
     return 0;
 }
 """
@@ -469,12 +445,10 @@ def test_cost_of_one_call(tmp_path, record_property):
     proc = subprocess.run([*_compiler(), *STRICT, "-O2", str(tmp_path / "bench.c"),
                            str(tmp_path / SOURCE), "-o", str(exe), "-lm"], capture_output=True, text=True)
     assert proc.returncode == 0, proc.stderr
-    ns_beta, ns_feasible, *_ = map(float, subprocess.run([str(exe)], capture_output=True, text=True,
-                                                         check=True).stdout.split())
-    record_property("ns_per_beta_call", ns_beta)
-    print(f"\nhaa_schedule_beta: {ns_beta:.1f} ns per call, haa_schedule_feasible: {ns_feasible:.1f} ns "
-          f"(40 x 25 grid, -O2)")
-    assert 0 < ns_beta < 10_000 and 0 < ns_feasible < 10_000
+    ns, *_ = map(float, subprocess.run([str(exe)], capture_output=True, text=True, check=True).stdout.split())
+    record_property("ns_per_lookup_call", ns)
+    print(f"\nhaa_schedule_lookup: {ns:.1f} ns per call (40 x 25 grid, -O2)")
+    assert 0 < ns < 10_000
 
 
 def test_module_does_not_import_sympy():

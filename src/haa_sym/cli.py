@@ -392,11 +392,19 @@ def _cmd_schedule(args) -> int:
         if plot:
             _plots().save_figure(_plots().plot_schedule(s, title=args.title), plot, tx, "--plot")
     feas = int(s.feasible.sum())
+    at_limit = int(s.beta_at_limit.sum())
+    if at_limit:
+        # one line: the range, not the model, limits these rows (their bandwidth gain is the range's)
+        print(f"warning: {at_limit} of {feas} feasible impedances have beta at the top of --beta-range "
+              f"({beta_range[1]:g}): the range, not the model, limits them (CSV column beta_at_limit); raise "
+              "the range's top if the hardware takes more", file=sys.stderr)
     unsafe = int((~s.beta_fixed_feasible & s.feasible).sum())
     print(f"{s.feasible.size} impedances: {feas} with a robust beta in [{beta_range[0]:g}, {beta_range[1]:g}] "
           f"(tolerance {args.beta_tol:g}; leg {s.meta['leg'][0]}..{s.meta['leg'][1]}, {s.n_configurations} "
           f"configurations{'' if s.converged else ', NOT converged'}); beta = 1 fails for some leg at {unsafe} of "
-          f"them" + _wrote(out) + (f"; C in {args.c_out}" if args.c_out else ""))
+          f"them; lookup safe on {s.meta['cells_safe']} of {s.meta['cells']} cells ({s.meta['cell_subdivisions'] + 1}^2 "
+          f"sub-grid checked, {s.meta['grid_points_lowered_by_cell_check']} grid values lowered)"
+          + _wrote(out) + (f"; C in {args.c_out}" if args.c_out else ""))
     return 0
 
 

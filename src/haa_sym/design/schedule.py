@@ -21,6 +21,26 @@ schedule no longer changes (``n_configurations`` says how many it took). Every a
 re-decided point by point at every leg configuration (the maps label segments of their rows from
 a few probes) and lowered until it holds.
 
+Between grid points
+-------------------
+A controller evaluates the table between its grid points (bilinear in log P_gain, D_gain, see
+:mod:`haa_sym.design.schedule_table`), and bilinear interpolation of safe corner gains is not
+safe in general. Every cell with four feasible corners is therefore checked on a sub-grid of
+``(cell_subdivisions + 1)^2`` points (corners and edges included) at every leg configuration, at
+the interpolated alpha and at the two values of the beta grid that bracket the interpolated beta
+(both must meet the requirements: the check resolves beta to the stated tolerance, not finer).
+Where a cell fails, its four corner values are lowered one step of the beta grid (shared corners:
+the neighbouring cells are re-checked, and the lookup stays continuous) until it holds; a cell
+that still fails with a corner at the range's bottom, and every cell with an infeasible corner,
+has no safe gain (``cell_safe`` False; the C lookup answers ``HAA_SCHEDULE_NO_SAFE_GAIN``). This
+is sampling: points between the sub-grid's are not verified.
+
+At the range's limit
+--------------------
+``beta_at_limit`` marks the impedances whose answer is the range's top (``beta_range[1]``): there
+the range, not the model, limits beta (the HyQ model has no actuator limits and accepts beta = 8
+at low damping), and the torque bandwidth "gained" is the range's, not the drive's.
+
 The torque bandwidth reported with each row is the paper's (Sec. 3.3): the -3 dB frequency of
 torque tracking with the leg free in the air (the port body's stiffness set to 0), at the
 scheduled beta and alpha, the file's nominal plant otherwise.
@@ -60,11 +80,16 @@ from haa_sym.model.params import Params, gain_array
 
 __all__ = ["Schedule", "schedule", "beta_grid", "CSV_COLUMNS", "DEFAULT_P_GAIN", "DEFAULT_D_GAIN"]
 
-CSV_COLUMNS = ("P_gain", "D_gain", "beta", "alpha", "torque_bandwidth_rad_s", "feasible")
+CSV_COLUMNS = ("P_gain", "D_gain", "beta", "alpha", "torque_bandwidth_rad_s", "feasible", "beta_at_limit")
 # HyQ's locomotion range (the issue): P_gain log 1..2000 Nm/rad, D_gain 1..50 Nms/rad
 DEFAULT_P_GAIN = "log:1:2000:30"
 DEFAULT_D_GAIN = "lin:1:50:20"
 COARSE_RATIO = 1.25
+# Sub-grid of the cell check: 4 subdivisions, 5 x 5 points a cell (corners and edges included).
+# Halving the spacing quarters the bilinear error a smooth boundary can hide between samples;
+# at 5 x 5 the off-grid test (tests/test_schedule_safety.py) finds no unsafe beta, and the check
+# costs about half the schedule's own time on the default HyQ grid (docs/model.md).
+CELL_SUBDIVISIONS = 4
 
 
 def beta_grid(beta_range=(0.1, 8.0), beta_tol: float = 0.02) -> tuple[np.ndarray, np.ndarray]:
@@ -91,7 +116,10 @@ class Schedule:
     the leg free in the air, at the scheduled gains), ``feasible``; ``beta_fixed_feasible``:
     whether beta = 1 (the file's tuning) meets the requirements at every leg configuration;
     ``n_configurations``, ``converged`` and ``history`` of the leg doubling; ``meta``: what
-    produced it.
+    produced it. ``beta_at_limit``: feasible with beta at the range's top (the range, not the
+    model, limits it). ``table_beta`` (n_P, n_D): the corner values the lookup interpolates,
+    ``<= beta`` (lowered by the cell check; NaN where infeasible); ``cell_safe`` (n_P - 1,
+    n_D - 1): the cells whose interpolated gains passed the check.
     """
 
     P_gain: np.ndarray
@@ -105,6 +133,9 @@ class Schedule:
     history: list
     meta: dict = field(default_factory=dict)
     beta_fixed_feasible: np.ndarray = None
+    beta_at_limit: np.ndarray = None
+    table_beta: np.ndarray = None
+    cell_safe: np.ndarray = None
 
     def csv_text(self) -> str:
         """One row per grid point, columns :data:`CSV_COLUMNS` (empty numbers where infeasible)."""
@@ -116,7 +147,8 @@ class Schedule:
                 # the grid exactly (17 digits round-trip): fed back to the C lookup, a grid point
                 # must hit the table's grid point, not a neighbour's cell
                 lines.append(f"{P:.17g},{D:.17g},{num(self.beta[i, j])},{num(self.alpha[i, j])},"
-                             f"{num(self.torque_bandwidth_rad_s[i, j])},{'true' if ok else 'false'}")
+                             f"{num(self.torque_bandwidth_rad_s[i, j])},{'true' if ok else 'false'},"
+                             f"{'true' if self.beta_at_limit[i, j] else 'false'}")
         return "\n".join(lines) + "\n"
 
     def save_csv(self, path, tx=None, field: str | None = None):
@@ -132,9 +164,11 @@ class Schedule:
         meta = {"actuator": m["actuator"], "source": m["source"], "requirements": m["requirements"],
                 "tolerances": {"beta_tol": m["beta_tol"], "pm_deg": 30.0},
                 "haa_sym_version": m["haa_sym"], "leg": m["leg"], "leg_mode": m["leg_mode"],
-                "leg_configurations": self.n_configurations, "beta_range": m["beta_range"]}
+                "leg_configurations": self.n_configurations, "beta_range": m["beta_range"],
+                "cell_check": m["cell_check"]}
         alpha = self.alpha if m.get("alpha_scheduled") else None
-        return ScheduleTable(self.P_gain, self.D_gain, self.beta, self.feasible, meta, alpha=alpha)
+        return ScheduleTable(self.P_gain, self.D_gain, self.table_beta, self.feasible, meta, alpha=alpha,
+                             cell_safe=self.cell_safe)
 
 
 # ------------------------------------------------------------------------------ the tasks
@@ -227,6 +261,69 @@ def _verify(params, configs, P, D, fine, alphas, best_k, req, options):
     return best_k, len(lowered)
 
 
+def _check_cells(runner, params, configs, P, D, fine, K, alpha_pt, req, options, n_sub):
+    """The cell check (module docstring, "Between grid points"). ``K`` (n_P, n_D): beta-grid
+    index per grid point (-1 infeasible), ``alpha_pt`` its alpha. Returns the lowered indices,
+    the safe cells, how many cells failed the check at first, how many grid points were lowered,
+    and how many cells were given up."""
+    K = K.copy()
+    safe = (K[:-1, :-1] >= 0) & (K[1:, :-1] >= 0) & (K[:-1, 1:] >= 0) & (K[1:, 1:] >= 0)
+    s = np.arange(n_sub + 1) / n_sub
+    tt, uu = (x.ravel() for x in np.meshgrid(s, s, indexing="ij"))
+    W = np.stack([(1 - tt) * (1 - uu), tt * (1 - uu), (1 - tt) * uu, tt * uu], axis=1)
+    log_step = np.log(P[1:] / P[:-1])
+    decided: dict = {}                       # (k, alpha, P, D) -> meets at every configuration
+    failed_once, lowered_pts, given_up = set(), set(), 0
+    todo = {(int(i), int(j)) for i, j in np.argwhere(safe)}
+
+    def sub_points(i, j):
+        ci, cj = [i, i + 1, i, i + 1], [j, j, j + 1, j + 1]
+        b, a = W @ fine[K[ci, cj]], W @ alpha_pt[ci, cj]
+        if np.all(alpha_pt[ci, cj] == alpha_pt[i, j]):
+            a = np.full(tt.size, alpha_pt[i, j])   # one alpha exactly: one decision call per beta
+        # edges exactly the grid's, so neighbouring cells share their edge points' decisions
+        Ps = np.where(tt == 1, P[i + 1], P[i] * np.exp(tt * log_step[i]))
+        Ds = np.where(uu == 1, D[j + 1], D[j] + uu * (D[j + 1] - D[j]))
+        klo = np.clip(np.searchsorted(fine, b * (1 + 1e-12), side="right") - 1, 0, fine.size - 1)
+        on_grid = np.abs(fine[klo] - b) <= 1e-12 * b          # a corner: its own grid value
+        khi = np.where(on_grid, klo, np.minimum(klo + 1, fine.size - 1))
+        return [(int(k), float(x), float(p), float(d)) for kk in (klo, khi)
+                for k, x, p, d in zip(kk, a, Ps, Ds)]
+
+    while todo:
+        keys = {c: sub_points(*c) for c in sorted(todo)}
+        need: dict = {}
+        for pts in keys.values():
+            for key in pts:
+                if key not in decided:
+                    need.setdefault(key[:2], set()).add(key[2:])
+        groups = [(k, a, sorted(pd)) for (k, a), pd in sorted(need.items())]
+        tasks = [(params, c, np.array([p for p, _ in pd]), np.array([d for _, d in pd]), float(fine[k]), a, req,
+                  options) for k, a, pd in groups for c in configs]
+        res = runner.run(_task_points, tasks, "schedule: cells")
+        for g, (k, a, pd) in enumerate(groups):
+            ok = np.logical_and.reduce([np.asarray(r, bool) for r in res[g * len(configs):(g + 1) * len(configs)]])
+            decided.update({(k, a, p, d): bool(o) for (p, d), o in zip(pd, ok)})
+        lower = set()
+        for (i, j), pts in keys.items():
+            if all(decided[key] for key in pts):
+                continue
+            failed_once.add((i, j))
+            corners = [(i, j), (i + 1, j), (i, j + 1), (i + 1, j + 1)]
+            if min(K[c] for c in corners) == 0:     # nothing left to lower: no safe gain here
+                safe[i, j] = False
+                given_up += 1
+            else:
+                lower.update(corners)
+        todo = set()
+        for (i, j) in lower:
+            K[i, j] -= 1
+            lowered_pts.add((i, j))
+            todo.update((a, b) for a in (i - 1, i) for b in (j - 1, j)
+                        if 0 <= a < safe.shape[0] and 0 <= b < safe.shape[1] and safe[a, b])
+    return K, safe, len(failed_once), len(lowered_pts), given_up
+
+
 def _free_in_the_air(params: Params) -> Params:
     """The file's plant with the port body's stiffness to ground at 0 (Sec. 3.3: the torque
     bandwidth with the leg free to move in the air); unchanged if the port has none."""
@@ -238,7 +335,7 @@ def _free_in_the_air(params: Params) -> Params:
 def schedule(loop, P_gain=None, D_gain=None, *, beta_range=(0.1, 8.0), beta_tol: float = 0.02,
              alpha=None, alpha_values=None, requirements=("stable", "pm"), leg=None,
              leg_mode: str = "segment", scheduler=None, progress: bool | None = None,
-             max_per_axis: int = MAX_LEG_POINTS) -> Schedule:
+             max_per_axis: int = MAX_LEG_POINTS, cell_subdivisions: int = CELL_SUBDIVISIONS) -> Schedule:
     """The largest robust beta (and alpha) for every impedance of the grid.
 
     Parameters
@@ -265,6 +362,9 @@ def schedule(loop, P_gain=None, D_gain=None, *, beta_range=(0.1, 8.0), beta_tol:
         Client: that dask.distributed cluster.
     progress : bool or None
         Progress bars on stderr.
+    cell_subdivisions : int
+        Density of the cell check (module docstring, "Between grid points"): each cell is
+        checked on (cell_subdivisions + 1)^2 points; default :data:`CELL_SUBDIVISIONS` (5 x 5).
 
     Returns
     -------
@@ -279,6 +379,10 @@ def schedule(loop, P_gain=None, D_gain=None, *, beta_range=(0.1, 8.0), beta_tol:
     if P[0] <= 0:
         raise ParameterError(f"P_gain starts at {P[0]:g}; allowed: P_gain > 0 (the schedule interpolates in log P_gain)")
     req = _check_requirements(requirements)
+    if isinstance(cell_subdivisions, bool) or not isinstance(cell_subdivisions, (int, np.integer)) \
+            or not 1 <= cell_subdivisions <= 64:
+        raise ParameterError(f"cell_subdivisions = {cell_subdivisions!r}; allowed: an integer 1..64 (sub-grid "
+                             "intervals per cell side of the cell check)")
     fine, coarse = beta_grid(beta_range, beta_tol)
     ctrl = params.controller
     if alpha_values is None:
@@ -381,6 +485,18 @@ def schedule(loop, P_gain=None, D_gain=None, *, beta_range=(0.1, 8.0), beta_tol:
         a = max(cand, key=lambda a: (bandwidth(kmax, a), -a)) if len(cand) > 1 else cand[0]
         beta_out[p], alpha_out[p], bw_out[p] = fine[kmax], alphas[a], bandwidth(kmax, a)
     shape = (P.size, D.size)
+    K = np.full(n_pts, -1)
+    K[feasible] = current.max(axis=0)[feasible]
+    K = K.reshape(shape)
+    runner = _Runner(scheduler, progress)
+    try:
+        K_table, cell_safe, n_failed, n_lowered_pts, n_given_up = _check_cells(
+            runner, params, configs, P, D, fine, K, np.nan_to_num(alpha_out.reshape(shape)), req, options,
+            int(cell_subdivisions))
+    finally:
+        runner.close()
+    table_beta = np.where(K_table >= 0, fine[np.maximum(K_table, 0)], np.nan)
+    at_limit = feasible.reshape(shape) & (K == fine.size - 1)
     bw_1 = torque_bandwidth(free, beta=1.0, alpha=float(ctrl.alpha if alpha is None else alpha))
     meta = {"actuator": str((getattr(params, "about", None) or {}).get("name", params.source)),
             "source": str(params.source), "requirements": list(req), "beta_range": [float(fine[0]), float(fine[-1])],
@@ -389,7 +505,19 @@ def schedule(loop, P_gain=None, D_gain=None, *, beta_range=(0.1, 8.0), beta_tol:
             "leg": list(ends), "leg_mode": leg_mode, "haa_sym": __version__,
             "scheduler": "dask threads (in-process)" if scheduler is None else "dask.distributed",
             "torque_bandwidth_beta_1_rad_s": bw_1, "lowered_by_point_check": lowered,
+            "cell_subdivisions": int(cell_subdivisions), "cells_failed_check": n_failed,
+            "grid_points_lowered_by_cell_check": n_lowered_pts, "cells_given_up": n_given_up,
+            "cells_safe": int(cell_safe.sum()), "cells": int(cell_safe.size),
+            "beta_at_limit": int(at_limit.sum()),
+            "cell_check": f"Each cell with four feasible corners was checked on a {cell_subdivisions + 1} x "
+                          f"{cell_subdivisions + 1} sub-grid (corners and edges included) at {len(configs)} leg "
+                          f"configurations ({ends[0]}..{ends[1]}, {leg_mode}), at the interpolated alpha and "
+                          "at the two beta-grid values bracketing the interpolated beta (ratio "
+                          f"{fine[1] / fine[0]:.4g}), with the requirements {'+'.join(req)} decided exactly "
+                          "(haa_sym.analysis.decide.decide_points); failing cells had their corner values "
+                          "lowered until it held. Points between the sub-grid's are not verified: sampling "
+                          "cannot guarantee them.",
             "options": options.to_dict()}
     return Schedule(P, D, beta_out.reshape(shape), alpha_out.reshape(shape), bw_out.reshape(shape),
                     feasible.reshape(shape), len(configs), converged, history, meta,
-                    fixed.reshape(shape))
+                    fixed.reshape(shape), at_limit, table_beta, cell_safe)

@@ -3,7 +3,7 @@
 :func:`write_c` turns a :class:`~haa_sym.design.schedule_table.ScheduleTable` into plain C99 (``static
 const double`` tables, no allocation, only libm) for the joint's low-level controller. The table,
 its validation, the lookup rule (repeated in the generated header) and the lookup's Python twin
-(:func:`lookup_beta`, :func:`lookup_alpha`, :func:`lookup_feasible`) are in
+(:func:`lookup`) are in
 :mod:`haa_sym.design.schedule_table`; this module re-exports their names.
 
 The C text is in the templates ``haa_sym/design/templates/haa_schedule.h.in`` and
@@ -48,11 +48,10 @@ import numpy as np
 from haa_sym.errors import OutputError, ParameterError
 from haa_sym.io.outputs import Transaction, check_file, transaction
 # the table and the lookup's Python twin, importable from here as before
-from haa_sym.design.schedule_table import (META_KEYS, ScheduleTable, lookup_alpha, lookup_beta,
-                                    lookup_feasible)
+from haa_sym.design.schedule_table import META_KEYS, NAN, NO_SAFE_GAIN, OK, OUTSIDE, ScheduleTable, lookup
 
-__all__ = ["ScheduleTable", "META_KEYS", "HEADER", "SOURCE", "c_code", "write_c", "lookup_beta",
-           "lookup_alpha", "lookup_feasible"]
+__all__ = ["ScheduleTable", "META_KEYS", "HEADER", "SOURCE", "c_code", "write_c", "lookup", "OK", "OUTSIDE",
+           "NO_SAFE_GAIN", "NAN"]
 
 HEADER = "haa_schedule.h"
 SOURCE = "haa_schedule.c"
@@ -222,41 +221,37 @@ def c_code(table: ScheduleTable) -> tuple[str, str]:
         raise ParameterError(f"table = {table!r}; allowed: a haa_sym.design.schedule_c.ScheduleTable")
     c, (nP, nD) = table._c, table.shape
     has_alpha = table.alpha is not None
-    fb, (fb_i, fb_j) = table.fallback, divmod(table.fallback, nD)
     meta = table.meta
     prov = [f"{k}: {_text(meta[k])}" for k in META_KEYS]
-    prov += [f"{_text(k)}: {_text(meta[k])}" for k in sorted(k for k in meta if k not in META_KEYS)]
-    n_bytes = 8 * (2 * nP - 1 + nD + nP * nD * (2 if has_alpha else 1)) + nP * nD
+    prov += [f"{_text(k)}: {_text(meta[k])}" for k in sorted(k for k in meta if k not in META_KEYS
+                                                                     and k != "cell_check")]
+    n_cells = (nP - 1) * (nD - 1)
+    n_bytes = 8 * (2 * nP - 1 + nD + nP * nD * (2 if has_alpha else 1)) + n_cells
     version = _text(meta["haa_sym_version"])
+    # what the producer verified between grid points (its own words), or that nothing was
+    check = meta.get("cell_check")
+    cell_check = _text(check) if check is not None else (
+        "Nothing: the table's producer did not state a check of the cells; a cell is marked safe "
+        "when its four corners are feasible, and the interpolated gains between them are not verified.")
     header = _render(HEADER, {
         "scheduled": "beta and alpha" if has_alpha else "beta", "version": version,
         "provenance": prov,
         "alpha_units": ["alpha: dimensionless, scales the velocity compensation (Eq. 6); "
-                        "scheduled together with beta (the pair at a grid point was checked "
-                        "together)."] if has_alpha else [],
+                        "scheduled together with beta and interpolated with the same weights."]
+                       if has_alpha else [],
         "p_gain_grid": _spacing(table.P_gain, "Nm/rad", True),
         "d_gain_grid": _spacing(table.D_gain, "Nms/rad", False),
         "n_feasible": str(int(table.feasible.sum())), "n_points": str(nP * nD),
-        "n_bytes": str(n_bytes),
-        "fallback_p_gain": _text(c["P"][fb_i]), "fallback_d_gain": _text(c["D"][fb_j]),
-        "fallback_beta": _text(c["beta"][fb]),
-        "fallback_alpha": f", alpha = {_text(c['alpha'][fb])}" if has_alpha else "",
-        "alpha_lookup": ", haa_schedule_alpha" if has_alpha else "",
-        "rule3_alpha": " (alpha: that corner's)" if has_alpha else "",
+        "n_safe": str(int(table.cell_safe.sum())), "n_cells": str(n_cells),
+        "n_bytes": str(n_bytes), "cell_check": cell_check,
         "n_p_gain": str(nP), "n_d_gain": str(nD),
         "p_gain_min": _num(c["P"][0]), "p_gain_max": _num(c["P"][-1]),
         "d_gain_min": _num(c["D"][0]), "d_gain_max": _num(c["D"][-1]),
-        "beta_fallback": _num(c["beta"][fb]),
-        "alpha_fallback_define": [f"#define HAA_SCHEDULE_ALPHA_FALLBACK {_num(c['alpha'][fb])}"]
-                                 if has_alpha else [],
         "has_alpha": str(int(has_alpha)),
-        "alpha_declaration": ["/* alpha at (P_gain, D_gain): the same weights, or the same corner, "
-                              "as beta. */",
-                              "double haa_schedule_alpha(double P_gain, double D_gain);"]
-                             if has_alpha else [],
     }, wrap_comment=True)
 
     p_label = lambda i: f"P_gain = {_text(c['P'][i])} Nm/rad; D_gain index 0..{nD - 1}"
+    cell_label = lambda i: f"cells from P_gain = {_text(c['P'][i])} Nm/rad; D_gain cell 0..{nD - 2}"
     table_rows = lambda key: _rows([_num(v) for v in c[key]], 4, nD, p_label)
     size = "HAA_SCHEDULE_N_P_GAIN * HAA_SCHEDULE_N_D_GAIN"
     source = _render(SOURCE, {
@@ -267,11 +262,9 @@ def c_code(table: ScheduleTable) -> tuple[str, str]:
         "beta": table_rows("beta"),
         "alpha_table": [f"static const double haa_schedule_alpha_[{size}] = {{",
                         *("    " + line for line in table_rows("alpha")), "};"] if has_alpha else [],
-        "feasible": _rows([str(int(v)) for v in c["feasible"]], 16, nD, p_label),
-        "fallback_index": str(fb),
-        "alpha_function": ["", "double haa_schedule_alpha(double P_gain, double D_gain)", "{",
-                           "    return haa_schedule_value_(haa_schedule_alpha_, P_gain, D_gain);",
-                           "}"] if has_alpha else [],
+        "cell_safe": _rows([str(int(v)) for v in c["cell_safe"]], 16, nD - 1, cell_label),
+        "alpha_write": ["if (alpha)", "    *alpha = haa_schedule_interpolate_(haa_schedule_alpha_, base, w);"]
+                       if has_alpha else ["(void)alpha;                            /* alpha is not scheduled */"],
     })
     return header, source
 

@@ -5,51 +5,43 @@ torque-loop gain scale beta (``P_t = beta P_t0``, ``I_t = beta I_t0``, Eq. 7), o
 velocity-compensation scale alpha (Eq. 6), and which grid points meet the requirements at all.
 How the table is computed is not this module's business; :func:`haa_sym.design.schedule_c.write_c`
 turns it into plain C99 (``static const double`` tables, no allocation, only libm) for the
-joint's low-level controller, and :func:`lookup_beta`, :func:`lookup_alpha`,
-:func:`lookup_feasible` are the same lookup in Python, operation for operation.
+joint's low-level controller, and :func:`lookup` is the same lookup in Python, operation for
+operation.
 
 The lookup rule (repeated in the generated header)
 --------------------------------------------------
+The table is read per *cell* (the rectangle between four neighbouring grid points), and a cell
+is either *safe* (its producer verified the interpolated gains on it, see ``cell_safe`` and the
+``cell_check`` meta text) or has *no safe gain*. The lookup returns a status the caller must read:
+
+0. ``NAN`` (3): NaN in either argument. Nothing is written.
 1. **Cell.** ``P_gain`` and ``D_gain`` are clamped to the grid's rectangle; the cell is the one
    whose lower corner ``(i, j)`` has ``P[i] <= P_gain < P[i+1]`` and ``D[j] <= D_gain < D[j+1]``
    (the last cell on the upper edges). Bilinear weights in (log P_gain, D_gain):
    ``t = log(P_gain / P[i]) / log(P[i+1] / P[i])``, ``u = (D_gain - D[j]) / (D[j+1] - D[j])``,
    weights ``(1-t)(1-u), t(1-u), (1-t)u, tu`` for the corners ``(i,j), (i+1,j), (i,j+1),
-   (i+1,j+1)``. A corner is *used* when its weight is not zero: one corner at a grid point, two
-   on a grid line, four inside a cell. Clamped points take the edge's values.
-2. **Every used corner feasible:** the bilinear interpolation of beta (and alpha). At a grid
-   point this is the table's value, bit for bit; between grid points it lies between the
-   corners' values and is continuous in the impedance, so a user moving P_gain or D_gain online
-   moves beta smoothly.
-3. **Some used corner infeasible:** no interpolation. The result is the table entry of the used
-   feasible corner with the smallest beta (its alpha with it: the pair was checked together);
-   when no used corner is feasible, the *fallback point*, the feasible grid point with the
-   smallest beta of the whole table (first in row-major order on ties). ``haa_schedule_feasible``
-   returns 0.
-4. **NaN in either argument:** the fallback point's beta (and alpha); feasible 0.
-5. ``haa_schedule_feasible`` returns 1 exactly when the argument lies on the grid's rectangle
-   (clamping not needed, no NaN) and every used corner is feasible: 1 means "the value comes
-   from interpolating gains the table found safe at the surrounding impedances".
+   (i+1,j+1)``.
+2. ``NO_SAFE_GAIN`` (2): the cell is not safe. Nothing is written: the caller keeps the gains
+   it runs with (if they were safe for the previous impedance, keep the previous impedance too)
+   or stops the joint; there is no fallback gain, because no number is safe there.
+3. Otherwise beta (and alpha) is the bilinear interpolation of the cell's four corner values
+   (continuous over the safe cells; at a grid point the table's value, bit for bit), and the
+   status is ``OK`` (0), or ``OUTSIDE`` (1) when the argument was clamped: the value is the one
+   at the nearest point of the rectangle, verified there, not at the requested impedance.
 
-Why this rule, as a control engineer: the table gives, per grid point, the largest beta that
-meets every requirement there. Interpolating towards a neighbour where *no* beta qualifies would
-blend a safe gain with a number that means nothing, so an infeasible neighbour switches the
-interpolation off and the smallest safe beta of the used neighbours is returned: near the edge
-of the feasible set the largest safe beta falls (the torque bandwidth the impedance tolerates
-shrinks), and each candidate is a gain the table found safe at an adjacent impedance. A gain
-must stay a finite number the torque loop can run with (a NaN gain turns the motor voltage into
-NaN), hence the fallback point for NaN and for cells without any feasible corner, with the
-flag saying the value is not backed by the table. What no lookup rule can give: safety between
-grid points. Bilinear interpolation of safe gains is safe where the largest safe beta is
-concave over the cell; where it curves upwards the interpolation can exceed it by
-O(h^2 x curvature). The table's producer must check the cells (e.g. their centres) or refine
-the grid; the minimum over a cell's corners would be safe whenever the largest safe beta is
-monotonic in P_gain and D_gain over the cell, but it is a staircase that jumps at every grid
-line and does not return the table's values at the grid points.
+Why this rule, as a control engineer: a controller evaluates the table between its grid points,
+so a value is only handed out where the producer checked the interpolated gain itself, not only
+the corners. Bilinear interpolation of safe corner gains is not safe in general: where the
+largest safe beta curves upwards over a cell, or an unsafe pocket lies inside it, the
+interpolation exceeds it. :func:`haa_sym.design.schedule.schedule` checks each cell on a dense
+sub-grid and lowers the corner values until the check holds (the header states the density:
+sampling verifies the sub-grid points, not the points between them). Next to a grid point where
+no beta qualifies, no value of the cell is safe at that corner, so the whole cell has no safe
+gain. A grid point belongs to one cell (rule 1): a feasible grid point whose cell is not safe
+answers ``NO_SAFE_GAIN`` although the table holds a value for it.
 
-Values held at infeasible grid points: the input table may hold anything there (NaN, a range
-end); the emitted table holds the fallback point's beta and alpha. They are never interpolated
-(rule 3) and keep every weighted sum finite.
+Values held at grid points used by no safe cell: the input may hold anything there (NaN, a range
+end); the emitted table holds 0.0. They are never read.
 
 Example
 -------
@@ -61,12 +53,12 @@ Example
 ...         "requirements": "stable, phase margin >= 30 deg", "tolerances": "beta 1e-3",
 ...         "haa_sym_version": "0.1"}
 >>> table = ScheduleTable(P, D, beta, feasible, meta)
->>> lookup_beta(table, float(P[1]), 25.0)            # a grid point: the table's value
-7.0
->>> lookup_beta(table, float(np.sqrt(P[1] * P[2])), 37.5)   # cell centre: mean of 4 corners
-6.0
->>> lookup_beta(table, 1500.0, 10.0), lookup_feasible(table, 1500.0, 10.0)  # rule 3
-(1.0, 0)
+>>> lookup(table, float(P[1]), 25.0)               # a grid point: the table's value
+(0, 7.0, None)
+>>> lookup(table, float(np.sqrt(P[1] * P[2])), 37.5)   # cell centre: mean of 4 corners
+(0, 6.0, None)
+>>> lookup(table, 1500.0, 10.0)                    # a cell with an infeasible corner
+(2, None, None)
 """
 from __future__ import annotations
 
@@ -79,7 +71,12 @@ import numpy as np
 
 from haa_sym.errors import ParameterError
 
-__all__ = ["ScheduleTable", "META_KEYS", "lookup_beta", "lookup_alpha", "lookup_feasible"]
+__all__ = ["ScheduleTable", "META_KEYS", "lookup", "STATUS", "OK", "OUTSIDE", "NO_SAFE_GAIN", "NAN"]
+
+# The lookup's status (the C enum haa_schedule_status has the same numbers and names).
+OK, OUTSIDE, NO_SAFE_GAIN, NAN = 0, 1, 2, 3
+STATUS = {OK: "HAA_SCHEDULE_OK", OUTSIDE: "HAA_SCHEDULE_OUTSIDE", NO_SAFE_GAIN: "HAA_SCHEDULE_NO_SAFE_GAIN",
+          NAN: "HAA_SCHEDULE_NAN"}
 
 # Provenance every emitted header states (values: text, numbers, booleans, or a flat list or
 # dict of these); other keys are printed after them, sorted.
@@ -108,7 +105,12 @@ class ScheduleTable:
         flat list or dict of these; more keys allowed.
     alpha : array_like, shape (n_P, n_D), optional
         Velocity-compensation scale scheduled with beta (Eq. 6): finite and >= 0 at feasible
-        points. None (default): alpha is not scheduled and no ``haa_schedule_alpha`` is emitted.
+        points. None (default): alpha is not scheduled and the lookup writes no alpha.
+    cell_safe : array_like of bool, shape (n_P - 1, n_D - 1), optional
+        Per cell (lower corner ``(i, j)``): True where the producer verified the interpolated
+        gains over the cell (state how in ``meta["cell_check"]``); only cells whose four corners
+        are feasible may be True. None (default): every cell with four feasible corners, and
+        the header says the cells were not checked unless ``meta["cell_check"]`` says otherwise.
 
     Raises
     ------
@@ -122,8 +124,8 @@ class ScheduleTable:
     feasible: np.ndarray
     meta: dict
     alpha: np.ndarray | None = None
-    # Derived (the tables as emitted, see "Values held at infeasible grid points"):
-    fallback: int = field(init=False, repr=False)          # flat index of the fallback point
+    cell_safe: np.ndarray | None = None
+    # Derived (the tables as emitted, see "Values held at grid points used by no safe cell"):
     _c: dict = field(init=False, repr=False)
 
     def __post_init__(self):
@@ -137,22 +139,25 @@ class ScheduleTable:
             "alpha", self.alpha, shape, feas, P, D, "a finite number >= 0",
             lambda v: np.isfinite(v) & (v >= 0))
         meta = _meta(self.meta)
+        corners = feas[:-1, :-1] & feas[1:, :-1] & feas[:-1, 1:] & feas[1:, 1:]
+        cells = corners.copy() if self.cell_safe is None else _cells(self.cell_safe, corners, P, D)
         for name, value in (("P_gain", P), ("D_gain", D), ("beta", beta), ("feasible", feas),
-                            ("alpha", alpha)):
+                            ("alpha", alpha), ("cell_safe", cells)):
             if value is not None:
                 value.flags.writeable = False
             object.__setattr__(self, name, value)
         object.__setattr__(self, "meta", meta)
-        flat = np.where(feas, beta, np.inf).ravel()
-        fb = int(np.argmin(flat))                  # first smallest in row-major order
-        object.__setattr__(self, "fallback", fb)
+        used = np.zeros(shape, bool)               # grid points read by some safe cell
+        for di in (0, 1):
+            for dj in (0, 1):
+                used[di:di + cells.shape[0], dj:dj + cells.shape[1]] |= cells
         # The emitted tables as Python floats: the lookup twin reads exactly these.
-        fill = lambda a: np.where(feas, a, a.ravel()[fb]).ravel().tolist()
+        fill = lambda a: np.where(used, a, 0.0).ravel().tolist()
         object.__setattr__(self, "_c", {
             "P": P.tolist(), "D": D.tolist(),
             "log_step": [math.log(b / a) for a, b in zip(P.tolist(), P.tolist()[1:])],
             "beta": fill(beta), "alpha": None if alpha is None else fill(alpha),
-            "feasible": feas.ravel().tolist(),
+            "cell_safe": cells.ravel().tolist(),
         })
 
     @property
@@ -209,6 +214,22 @@ def _mask(value, shape) -> np.ndarray:
     return m.copy()
 
 
+def _cells(value, corners, P, D) -> np.ndarray:
+    shape = corners.shape
+    allowed = (f"booleans (or 0/1) of shape {shape} (n_P - 1, n_D - 1), True only where the cell's "
+               "four corners are feasible")
+    m = np.array(value)
+    if m.shape != shape or not (m.dtype == bool or (m.dtype.kind in "iuf" and bool(np.isin(m, (0, 1)).all()))):
+        raise ParameterError(f"ScheduleTable.cell_safe has shape {m.shape} and type {m.dtype}; allowed: {allowed}")
+    m = m.astype(bool)
+    bad = m & ~corners
+    if bad.any():
+        i, j = (int(k) for k in np.argwhere(bad)[0])
+        raise ParameterError(f"ScheduleTable.cell_safe[{i}, {j}] = True at the cell with lower corner "
+                             f"{_where(P, D, i, j)}, which has an infeasible corner; allowed: {allowed}")
+    return m.copy()
+
+
 def _table(name, value, shape, feas, P, D, allowed, ok) -> np.ndarray:
     try:
         x = np.array(value, dtype=float)
@@ -252,10 +273,8 @@ def _meta(value) -> dict:
 # --------------------------------------------------------------------- the lookup (Python twin)
 
 def _locate(c: dict, P_gain: float, D_gain: float):
-    """``(base, weights, inside)`` of rule 1, or None for NaN: exactly the C ``locate``."""
+    """``(i, j, weights, inside)`` of rule 1: exactly the C ``locate``."""
     P, D = c["P"], c["D"]
-    if math.isnan(P_gain) or math.isnan(D_gain):
-        return None
     nP, nD = len(P), len(D)
     if not P_gain > P[0]:
         i, t = 0, 0.0
@@ -275,59 +294,29 @@ def _locate(c: dict, P_gain: float, D_gain: float):
         u = 1.0 if u > 1.0 else 0.0 if u < 0.0 else u
     inside = P[0] <= P_gain <= P[nP - 1] and D[0] <= D_gain <= D[nD - 1]
     w = ((1.0 - t) * (1.0 - u), t * (1.0 - u), (1.0 - t) * u, t * u)
-    return i * nD + j, w, inside
+    return i, j, w, inside
 
 
-def _rule(table: ScheduleTable, P_gain: float, D_gain: float):
-    """``(k, cell)``: k = -1 to interpolate in ``cell``, else the flat index whose entries are
-    returned (rules 3 and 4); exactly the C ``rule``."""
-    c = table._c
-    cell = _locate(c, float(P_gain), float(D_gain))
-    if cell is None:
-        return table.fallback, None
-    base, w, _ = cell
-    nD = len(c["D"])
-    pick, every = -1, True
-    for k, off in enumerate((0, nD, 1, nD + 1)):
-        if not w[k] > 0.0:
-            continue                                  # an unused corner
-        idx = base + off
-        if not c["feasible"][idx]:
-            every = False
-            continue
-        if pick < 0 or c["beta"][idx] < c["beta"][pick]:
-            pick = idx
-    if every:
-        return -1, cell
-    return (pick if pick >= 0 else table.fallback), cell
-
-
-def _value(table: ScheduleTable, values: list, P_gain: float, D_gain: float) -> float:
-    k, cell = _rule(table, P_gain, D_gain)
-    if k >= 0:
-        return values[k]
-    base, w, _ = cell
-    nD = len(table._c["D"])
+def _interpolate(values: list, base: int, nD: int, w) -> float:
     return (w[0] * values[base] + w[1] * values[base + nD] + w[2] * values[base + 1]
             + w[3] * values[base + nD + 1])
 
 
-def lookup_beta(table: ScheduleTable, P_gain: float, D_gain: float) -> float:
-    """beta at (P_gain Nm/rad, D_gain Nms/rad) by the rule of the module docstring; the same
-    IEEE operations as the emitted ``haa_schedule_beta``."""
-    return _value(table, table._c["beta"], P_gain, D_gain)
-
-
-def lookup_alpha(table: ScheduleTable, P_gain: float, D_gain: float) -> float:
-    """alpha at (P_gain, D_gain), as ``haa_schedule_alpha`` (the table must schedule alpha)."""
-    if table.alpha is None:
-        raise ParameterError("lookup_alpha: this ScheduleTable has no alpha table; allowed: a "
-                             "table built with alpha")
-    return _value(table, table._c["alpha"], P_gain, D_gain)
-
-
-def lookup_feasible(table: ScheduleTable, P_gain: float, D_gain: float) -> int:
-    """1 when (P_gain, D_gain) is on the grid and every used corner is feasible, else 0
-    (rule 5), as ``haa_schedule_feasible``."""
-    k, cell = _rule(table, P_gain, D_gain)
-    return int(k < 0 and cell[2])
+def lookup(table: ScheduleTable, P_gain: float, D_gain: float):
+    """``(status, beta, alpha)`` at (P_gain Nm/rad, D_gain Nms/rad) by the rule of the module
+    docstring, the same IEEE operations as the emitted ``haa_schedule_lookup``. ``beta`` and
+    ``alpha`` are None where the C writes nothing (``NO_SAFE_GAIN``, ``NAN``; alpha also when
+    it is not scheduled); status one of :data:`OK`, :data:`OUTSIDE`, :data:`NO_SAFE_GAIN`,
+    :data:`NAN`."""
+    c = table._c
+    P_gain, D_gain = float(P_gain), float(D_gain)
+    if math.isnan(P_gain) or math.isnan(D_gain):
+        return NAN, None, None
+    i, j, w, inside = _locate(c, P_gain, D_gain)
+    nD = len(c["D"])
+    if not c["cell_safe"][i * (nD - 1) + j]:
+        return NO_SAFE_GAIN, None, None
+    base = i * nD + j
+    beta = _interpolate(c["beta"], base, nD, w)
+    alpha = None if c["alpha"] is None else _interpolate(c["alpha"], base, nD, w)
+    return (OK if inside else OUTSIDE), beta, alpha

@@ -269,8 +269,9 @@ def save_figure(fig, path: str | Path, tx=None, field: str | None = None) -> Pat
 
 def plot_schedule(s, title: str = ""):
     """A :class:`haa_sym.design.schedule.Schedule`: the scheduled beta over the impedance grid (no
-    robust gain: grey) and the torque bandwidth it gains over fixed beta = 1 (impedances where
-    beta = 1 fails for some leg configuration marked)."""
+    robust gain: grey; beta at the range's top, limited by the range and not the model: red
+    triangles) and the torque bandwidth it gains over fixed beta = 1 (impedances where beta = 1
+    fails for some leg configuration marked)."""
     from matplotlib.colors import LogNorm
     fig, axes = plt.subplots(1, 2, figsize=(10.0, 4.2), layout="constrained")
     logP = bool(np.all(s.P_gain > 0))
@@ -282,6 +283,13 @@ def plot_schedule(s, title: str = ""):
     pc = ax.pcolormesh(Pe, De, b.T, cmap="viridis", norm=LogNorm(vmin=np.nanmin(s.beta), vmax=np.nanmax(s.beta))
                        if s.feasible.any() else None, shading="flat")
     fig.colorbar(pc, ax=ax, label="scheduled beta (Eq. 7)")
+    lim = getattr(s, "beta_at_limit", None)
+    if lim is not None and lim.any():
+        # the range, not the model, sets these values: say so where they are drawn
+        PP, DD = np.meshgrid(s.P_gain, s.D_gain, indexing="ij")
+        ax.plot(PP[lim], DD[lim], "^", mfc="none", color="tab:red", ms=4,
+                label=f"beta at the range's top ({int(lim.sum())}): limited by the range")
+        ax.legend(fontsize=7, loc="upper left")
     ax.set_title("largest robust beta (grey: none)", fontsize=10)
     ax = axes[1]
     bw1 = s.meta.get("torque_bandwidth_beta_1_rad_s")

@@ -15,7 +15,7 @@ static const double haa_schedule_d_gain_[HAA_SCHEDULE_N_D_GAIN] = {
     1.0, 25.5, 50.0
 };
 
-/* Row-major [P_gain index][D_gain index]; infeasible points hold the fallback point's values. */
+/* Row-major [P_gain index][D_gain index]; points used by no safe cell hold 0.0 (never read). */
 static const double haa_schedule_beta_[HAA_SCHEDULE_N_P_GAIN * HAA_SCHEDULE_N_D_GAIN] = {
     /* P_gain = 4.0 Nm/rad; D_gain index 0..2 */
     7.5999999999999996, 7.9000000000000004, 8.0,
@@ -24,7 +24,7 @@ static const double haa_schedule_beta_[HAA_SCHEDULE_N_P_GAIN * HAA_SCHEDULE_N_D_
     /* P_gain = 256.0 Nm/rad; D_gain index 0..2 */
     1.3500000000000001, 2.6000000000000001, 3.2999999999999998,
     /* P_gain = 2048.0 Nm/rad; D_gain index 0..2 */
-    0.80000000000000004, 0.80000000000000004, 1.45
+    0.0, 0.80000000000000004, 1.45
 };
 static const double haa_schedule_alpha_[HAA_SCHEDULE_N_P_GAIN * HAA_SCHEDULE_N_D_GAIN] = {
     /* P_gain = 4.0 Nm/rad; D_gain index 0..2 */
@@ -34,20 +34,17 @@ static const double haa_schedule_alpha_[HAA_SCHEDULE_N_P_GAIN * HAA_SCHEDULE_N_D
     /* P_gain = 256.0 Nm/rad; D_gain index 0..2 */
     1.0, 1.0, 1.0,
     /* P_gain = 2048.0 Nm/rad; D_gain index 0..2 */
-    0.5, 0.5, 1.0
+    0.0, 0.5, 1.0
 };
-static const unsigned char haa_schedule_feasible_[HAA_SCHEDULE_N_P_GAIN * HAA_SCHEDULE_N_D_GAIN] = {
-    /* P_gain = 4.0 Nm/rad; D_gain index 0..2 */
-    1, 1, 1,
-    /* P_gain = 32.0 Nm/rad; D_gain index 0..2 */
-    1, 1, 1,
-    /* P_gain = 256.0 Nm/rad; D_gain index 0..2 */
-    1, 1, 1,
-    /* P_gain = 2048.0 Nm/rad; D_gain index 0..2 */
-    0, 1, 1
+/* Row-major [P_gain cell][D_gain cell]: 1 where the cell is safe (the header says how it was checked). */
+static const unsigned char haa_schedule_cell_safe_[(HAA_SCHEDULE_N_P_GAIN - 1) * (HAA_SCHEDULE_N_D_GAIN - 1)] = {
+    /* cells from P_gain = 4.0 Nm/rad; D_gain cell 0..1 */
+    1, 1,
+    /* cells from P_gain = 32.0 Nm/rad; D_gain cell 0..1 */
+    1, 1,
+    /* cells from P_gain = 256.0 Nm/rad; D_gain cell 0..1 */
+    0, 1
 };
-
-#define HAA_SCHEDULE_FALLBACK_INDEX_ 10  /* flat index of the fallback point */
 
 /* Largest k in [0, n-2] with x[k] <= v, for x[0] < v < x[n-1]. */
 static int haa_schedule_bracket_(const double *x, int n, double v)
@@ -63,15 +60,13 @@ static int haa_schedule_bracket_(const double *x, int n, double v)
     return lo;
 }
 
-/* Rule 1: flat index of the cell's lower corner, corner weights, on-grid flag; 0 for NaN. */
-static int haa_schedule_locate_(double P_gain, double D_gain, int *base, double w[4], int *inside)
+/* Rule 2: lower corner (i, j), corner weights; returns 1 when the point was inside the rectangle. */
+static int haa_schedule_locate_(double P_gain, double D_gain, int *ci, int *cj, double w[4])
 {
     const double *P = haa_schedule_p_gain_, *D = haa_schedule_d_gain_;
     const int nP = HAA_SCHEDULE_N_P_GAIN, nD = HAA_SCHEDULE_N_D_GAIN;
     int i, j;
     double t, u;
-    if (isnan(P_gain) || isnan(D_gain))
-        return 0;
     if (!(P_gain > P[0])) {
         i = 0;
         t = 0.0;
@@ -94,64 +89,35 @@ static int haa_schedule_locate_(double P_gain, double D_gain, int *base, double 
         u = (D_gain - D[j]) / (D[j + 1] - D[j]);
         u = u > 1.0 ? 1.0 : u < 0.0 ? 0.0 : u;
     }
-    *inside = P_gain >= P[0] && P_gain <= P[nP - 1] && D_gain >= D[0] && D_gain <= D[nD - 1];
-    *base = i * nD + j;
+    *ci = i;
+    *cj = j;
     w[0] = (1.0 - t) * (1.0 - u);
     w[1] = t * (1.0 - u);
     w[2] = (1.0 - t) * u;
     w[3] = t * u;
-    return 1;
+    return P_gain >= P[0] && P_gain <= P[nP - 1] && D_gain >= D[0] && D_gain <= D[nD - 1];
 }
 
-/* Rules 2-4: -1 to interpolate, else the flat index whose entries are returned. */
-static int haa_schedule_rule_(double P_gain, double D_gain, int *base, double w[4], int *inside)
+static double haa_schedule_interpolate_(const double *table, int base, const double w[4])
 {
     const int nD = HAA_SCHEDULE_N_D_GAIN;
-    const int offset[4] = {0, nD, 1, nD + 1};
-    int k, pick = -1, every = 1;
-    if (!haa_schedule_locate_(P_gain, D_gain, base, w, inside))
-        return HAA_SCHEDULE_FALLBACK_INDEX_;
-    for (k = 0; k < 4; ++k) {
-        int idx = *base + offset[k];
-        if (!(w[k] > 0.0))
-            continue;                            /* an unused corner */
-        if (!haa_schedule_feasible_[idx]) {
-            every = 0;
-            continue;
-        }
-        if (pick < 0 || haa_schedule_beta_[idx] < haa_schedule_beta_[pick])
-            pick = idx;
-    }
-    if (every)
-        return -1;
-    return pick >= 0 ? pick : HAA_SCHEDULE_FALLBACK_INDEX_;
-}
-
-static double haa_schedule_value_(const double *table, double P_gain, double D_gain)
-{
-    const int nD = HAA_SCHEDULE_N_D_GAIN;
-    int base = 0, inside = 0;
-    double w[4] = {0.0, 0.0, 0.0, 0.0};
-    int k = haa_schedule_rule_(P_gain, D_gain, &base, w, &inside);
-    if (k >= 0)
-        return table[k];
     return w[0] * table[base] + w[1] * table[base + nD] + w[2] * table[base + 1]
            + w[3] * table[base + nD + 1];
 }
 
-double haa_schedule_beta(double P_gain, double D_gain)
+int haa_schedule_lookup(double P_gain, double D_gain, double *beta, double *alpha)
 {
-    return haa_schedule_value_(haa_schedule_beta_, P_gain, D_gain);
-}
-
-int haa_schedule_feasible(double P_gain, double D_gain)
-{
-    int base = 0, inside = 0;
+    const int nD = HAA_SCHEDULE_N_D_GAIN;
+    int i = 0, j = 0, inside, base;
     double w[4] = {0.0, 0.0, 0.0, 0.0};
-    return haa_schedule_rule_(P_gain, D_gain, &base, w, &inside) < 0 && inside;
-}
-
-double haa_schedule_alpha(double P_gain, double D_gain)
-{
-    return haa_schedule_value_(haa_schedule_alpha_, P_gain, D_gain);
+    if (isnan(P_gain) || isnan(D_gain))
+        return HAA_SCHEDULE_NAN;
+    inside = haa_schedule_locate_(P_gain, D_gain, &i, &j, w);
+    if (!haa_schedule_cell_safe_[i * (nD - 1) + j])
+        return HAA_SCHEDULE_NO_SAFE_GAIN;       /* nothing written: no gain is safe here */
+    base = i * nD + j;
+    *beta = haa_schedule_interpolate_(haa_schedule_beta_, base, w);
+    if (alpha)
+        *alpha = haa_schedule_interpolate_(haa_schedule_alpha_, base, w);
+    return inside ? HAA_SCHEDULE_OK : HAA_SCHEDULE_OUTSIDE;
 }

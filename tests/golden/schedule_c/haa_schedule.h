@@ -19,45 +19,41 @@
  *   beta: dimensionless, scales the file's torque PI gains: P_t = beta P_t0, I_t = beta I_t0 (Eq.
  *     7).
  *   alpha: dimensionless, scales the velocity compensation (Eq. 6); scheduled together with beta
- *     (the pair at a grid point was checked together).
+ *     and interpolated with the same weights.
  *
  * Grid
  *   P_gain: 4 values from 4.0 to 2048.0 Nm/rad, logarithmically spaced (ratio 8 between
  *     neighbours).
  *   D_gain: 3 values from 1.0 to 50.0 Nms/rad, uniformly spaced (step 24.5 Nms/rad).
- *   Feasible points: 11 of 12. Tables: 284 bytes of static const data.
- *   Fallback point (the feasible point with the smallest beta, first in row-major order): P_gain
- *     = 2048.0, D_gain = 25.5, beta = 0.8, alpha = 0.5.
- *   Infeasible grid points hold the fallback point's values; they are never interpolated.
+ *   Feasible grid points: 11 of 12. Safe cells: 5 of 6. Tables: 278 bytes of static const data.
  *
- * Lookup rule (haa_schedule_beta, haa_schedule_alpha, haa_schedule_feasible)
- *   1. P_gain and D_gain are clamped to the grid's rectangle (a clamped point takes the edge's
- *      values). The cell has lower corner (i, j) with P[i] <= P_gain < P[i+1], D[j] <= D_gain <
- *      D[j+1] (the last cell on the upper edges). Bilinear weights in (log P_gain, D_gain): t =
- *      log(P_gain / P[i]) / log(P[i+1] / P[i]), u = (D_gain - D[j]) / (D[j+1] - D[j]); weights
- *      (1-t)(1-u), t(1-u), (1-t)u, tu for corners (i,j), (i+1,j), (i,j+1), (i+1,j+1). A corner is
- *      used when its weight is not zero (one at a grid point, two on a grid line, four inside a
- *      cell).
- *   2. Every used corner feasible: bilinear interpolation (the table's value at a grid point,
- *      exactly; between the corners' values elsewhere; continuous in the impedance).
- *   3. Some used corner infeasible: no interpolation; the entry of the used feasible corner with
- *      the smallest beta (alpha: that corner's), or the fallback point's when no used corner is
- *      feasible. Near the edge of the feasible set the largest safe beta falls, and each
- *      candidate is a gain the table found safe at an adjacent impedance; interpolating towards a
- *      point where no gain qualifies would blend a safe gain with a meaningless one.
- *   4. NaN in either argument: the fallback point's values (a gain must stay a finite number the
- *      torque loop can run with; the flag says it is not backed by the table).
- *   5. haa_schedule_feasible returns 1 exactly when (P_gain, D_gain) is on the grid's rectangle
- *      and every used corner is feasible; 0 in cases 3 and 4 and outside the grid.
- *   The table guarantees its grid points only: between them, bilinear interpolation of safe gains
- *     is safe where the largest safe beta is concave over the cell (the table's producer checks
- *     the cells or refines the grid).
+ * What is verified between grid points
+ *   Nothing: the table's producer did not state a check of the cells; a cell is marked safe when
+ *     its four corners are feasible, and the interpolated gains between them are not verified.
+ *
+ * Lookup rule (haa_schedule_lookup; read the status, it is the answer)
+ *   1. NaN in either argument: HAA_SCHEDULE_NAN, nothing written.
+ *   2. P_gain and D_gain are clamped to the grid's rectangle. The cell has lower corner (i, j)
+ *      with P[i] <= P_gain < P[i+1], D[j] <= D_gain < D[j+1] (the last cell on the upper edges).
+ *   3. A cell without a safe gain (a corner where no beta qualifies, or a cell the check could
+ *      not make safe): HAA_SCHEDULE_NO_SAFE_GAIN, nothing written. There is no fallback gain: no
+ *      number is safe there. Keep the gains you run with and the impedance they were valid for,
+ *      or stop the joint.
+ *   4. Otherwise bilinear interpolation of the cell's four corner values in (log P_gain, D_gain):
+ *      t = log(P_gain / P[i]) / log(P[i+1] / P[i]), u = (D_gain - D[j]) / (D[j+1] - D[j]);
+ *      weights (1-t)(1-u), t(1-u), (1-t)u, tu for corners (i,j), (i+1,j), (i,j+1), (i+1,j+1) (the
+ *      table's value at a grid point, exactly; continuous over the safe cells). Status
+ *      HAA_SCHEDULE_OK, or HAA_SCHEDULE_OUTSIDE when the argument was clamped: the value is the
+ *      one verified at the nearest point of the rectangle, not at the requested impedance.
+ *   A feasible grid point whose cell (rule 2) is not safe answers HAA_SCHEDULE_NO_SAFE_GAIN. The
+ *     corner values may be lower than the largest robust beta of each grid point: the producer
+ *     lowers them until the interpolated gains pass the check above.
  *
  * Build
  *   Plain C99, no allocation, no state (reentrant), libm only (log): cc -std=c99 -c
  *     haa_schedule.c; link with -lm. Cost: two binary searches, one log, about 20 flops. With
  *     floating-point contraction off (-ffp-contract=off, gcc's default with -std=c99) the results
- *     are those of haa_sym.design.schedule_table.lookup_beta bit for bit (same libm log).
+ *     are those of haa_sym.design.schedule_table.lookup bit for bit (same libm log).
  */
 #ifndef HAA_SCHEDULE_H
 #define HAA_SCHEDULE_H
@@ -68,20 +64,23 @@
 #define HAA_SCHEDULE_P_GAIN_MAX 2048.0000000000005  /* Nm/rad */
 #define HAA_SCHEDULE_D_GAIN_MIN 1.0  /* Nms/rad */
 #define HAA_SCHEDULE_D_GAIN_MAX 50.0  /* Nms/rad */
-#define HAA_SCHEDULE_BETA_FALLBACK 0.80000000000000004
-#define HAA_SCHEDULE_ALPHA_FALLBACK 0.5
 #define HAA_SCHEDULE_HAS_ALPHA 1
 
 #ifdef __cplusplus
 extern "C" {
 #endif
 
-/* beta at (P_gain Nm/rad, D_gain Nms/rad) by the lookup rule above. */
-double haa_schedule_beta(double P_gain, double D_gain);
-/* alpha at (P_gain, D_gain): the same weights, or the same corner, as beta. */
-double haa_schedule_alpha(double P_gain, double D_gain);
-/* 1 when (P_gain, D_gain) is on the grid and every corner used is feasible, else 0. */
-int haa_schedule_feasible(double P_gain, double D_gain);
+enum haa_schedule_status {
+    HAA_SCHEDULE_OK = 0,           /* *beta (and *alpha) written: the cell passed the check above */
+    HAA_SCHEDULE_OUTSIDE = 1,      /* written, for the nearest point of the grid's rectangle */
+    HAA_SCHEDULE_NO_SAFE_GAIN = 2, /* nothing written: keep the previous gains and impedance, or stop */
+    HAA_SCHEDULE_NAN = 3           /* nothing written: an argument is NaN */
+};
+
+/* The gains at (P_gain Nm/rad, D_gain Nms/rad) by the lookup rule above; returns an enum
+ * haa_schedule_status. beta must not be NULL; alpha may be NULL, and is written only when
+ * HAA_SCHEDULE_HAS_ALPHA is 1. */
+int haa_schedule_lookup(double P_gain, double D_gain, double *beta, double *alpha);
 
 #ifdef __cplusplus
 }
