@@ -314,12 +314,15 @@ def load_params_text(directory, text, name="act.toml"):
     return load_params(p)
 
 
-def test_contact_needs_a_ground_stiffness_on_the_port(tmp_path):
-    from haa_sym.analysis.contact import contact_stability
+def test_contact_adds_a_ground_stiffness_to_a_port_without_one(tmp_path, cache):
+    # issue 16 item 8 (was refused): the plant variant with K_B = 0; tests/test_sensors.py checks
+    # the scan against the reference's eigenvalues
+    from haa_sym.analysis.contact import contact_params, contact_stability
     params = load_params_text(tmp_path, USER.replace('port = "C"', 'port = "B"'))
-    with pytest.raises(ParameterError, match=r"act.toml \[bodies.B\]: the port body 'B' has no stiffness "
-                                             r"to ground K \(K_B\)"):
-        contact_stability(ClosedLoop(params, LoopOptions(port="dtheta_B")), [10.0, 100.0])
+    variant, key, added = contact_params(params)
+    assert (key, added) == ("K_B", True) and variant.plant.K_B == 0.0
+    stable, rho = contact_stability(ClosedLoop(params, LoopOptions(port="dtheta_B")), [10.0, 100.0])
+    assert stable.shape == rho.shape == (2,)
 
 
 # --- bad input: one ParameterError naming file, section, key, value, allowed -----------------

@@ -273,7 +273,9 @@ def _cmd_contact(args) -> int:
         raise ParameterError(f"--K-range {args.K_range!r}; allowed: LO:HI in Nm/rad, 0 < LO < HI")
     r = contact_intervals(loop, K_range, n_scan=args.n_scan, P_gain=_gain(args, "P_gain", "--P-gain"),
                           D_gain=_gain(args, "D_gain", "--D-gain"), mode=args.mode)
-    data = {"analysis": "contact stability", "environment": f"K_env {'replaces' if r.mode == 'replace' else 'adds to'} {r.key}",
+    env = (f"K_env is a new stiffness to ground {r.key} of the port body (the file has none)" if r.ground_added
+           else f"K_env {'replaces' if r.mode == 'replace' else 'adds to'} {r.key}")
+    data = {"analysis": "contact stability", "environment": env, "ground_added": r.ground_added,
             "mode": r.mode, "stiffness_key": r.key, "P_gain": args.P_gain, "D_gain": args.D_gain,
             "K_range": list(K_range), "n_scan": args.n_scan, "rtol": r.rtol,
             "unstable_intervals": [list(i) for i in r.unstable],
