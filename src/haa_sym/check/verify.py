@@ -256,7 +256,7 @@ def row_exact_vc_generalised(params: Params) -> Row:
     spring = top.sensor != CURRENT and not top.torque_damping
     return Row(claim, same and not loads,
                f"{why}; derived == expected exactly in Q[params, s, V]: {same}; parameters after "
-               f"the gearbox in it: {loads or 'none'}"
+               f"the {'rotor' if rotor_side else 'gearbox'} in it: {loads or 'none'}"
                + ("; the sensor reads the spring alone: times K/(K + s D)" if spring else "")
                + f" ({time.time() - t:.1f} s)")
 
