@@ -45,6 +45,7 @@ extern "C" {
 #define casadi_copy CASADI_PREFIX(copy)
 #define casadi_f0 CASADI_PREFIX(f0)
 #define casadi_f1 CASADI_PREFIX(f1)
+#define casadi_f10 CASADI_PREFIX(f10)
 #define casadi_f2 CASADI_PREFIX(f2)
 #define casadi_f3 CASADI_PREFIX(f3)
 #define casadi_f4 CASADI_PREFIX(f4)
@@ -1006,8 +1007,207 @@ CASADI_SYMBOL_EXPORT int haa_plant_b107ac0be577_work_bytes(casadi_int *sz_arg, c
   return 0;
 }
 
-/* haa_loopcoef:(Gw[20],const[3],gains[2])->(coef[26]) */
+/* haa_plant_cc30ca5c5149:(p[12])->(A[5x5],B[5x3],C[4x5],VC0) */
 static int casadi_f3(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
+  casadi_real a00, a01, a02, a03, a04, a05, a06, a07, a08, a09, a10, a11;
+  casadi_real a12, a13, a14;
+  a00=arg[0]? arg[0][1] : 0;
+  a01=arg[0]? arg[0][0] : 0;
+  a02=(a00/a01);
+  a02=(-a02);
+  if (res[0]!=0) res[0][0]=a02;
+  a02=0.;
+  if (res[0]!=0) res[0][1]=a02;
+  a03=arg[0]? arg[0][2] : 0;
+  a04=arg[0]? arg[0][4] : 0;
+  a05=(a03/a04);
+  if (res[0]!=0) res[0][2]=a05;
+  if (res[0]!=0) res[0][3]=a02;
+  if (res[0]!=0) res[0][4]=a02;
+  if (res[0]!=0) res[0][5]=a02;
+  if (res[0]!=0) res[0][6]=a02;
+  a05=arg[0]? arg[0][10] : 0;
+  a06=(a05/a04);
+  a07=arg[0]? arg[0][6] : 0;
+  a08=casadi_sq(a07);
+  a06=(a06/a08);
+  a06=(-a06);
+  if (res[0]!=0) res[0][7]=a06;
+  if (res[0]!=0) res[0][8]=a02;
+  a06=arg[0]? arg[0][7] : 0;
+  a08=(a05/a06);
+  a08=(a08/a07);
+  if (res[0]!=0) res[0][9]=a08;
+  a08=arg[0]? arg[0][3] : 0;
+  a09=(a08/a01);
+  a09=(-a09);
+  if (res[0]!=0) res[0][10]=a09;
+  a09=1.;
+  if (res[0]!=0) res[0][11]=a09;
+  a10=arg[0]? arg[0][5] : 0;
+  a11=(a10/a04);
+  a12=arg[0]? arg[0][11] : 0;
+  a13=(a12/a04);
+  a14=casadi_sq(a07);
+  a13=(a13/a14);
+  a11=(a11+a13);
+  a11=(-a11);
+  if (res[0]!=0) res[0][12]=a11;
+  if (res[0]!=0) res[0][13]=a02;
+  a11=(a12/a06);
+  a11=(a11/a07);
+  if (res[0]!=0) res[0][14]=a11;
+  if (res[0]!=0) res[0][15]=a02;
+  if (res[0]!=0) res[0][16]=a02;
+  a11=(a05/a04);
+  a11=(a11/a07);
+  if (res[0]!=0) res[0][17]=a11;
+  if (res[0]!=0) res[0][18]=a02;
+  a11=arg[0]? arg[0][9] : 0;
+  a11=(a11+a05);
+  a11=(a11/a06);
+  a11=(-a11);
+  if (res[0]!=0) res[0][19]=a11;
+  if (res[0]!=0) res[0][20]=a02;
+  if (res[0]!=0) res[0][21]=a02;
+  a11=(a12/a04);
+  a11=(a11/a07);
+  if (res[0]!=0) res[0][22]=a11;
+  if (res[0]!=0) res[0][23]=a09;
+  a11=arg[0]? arg[0][8] : 0;
+  a11=(a11+a12);
+  a11=(a11/a06);
+  a11=(-a11);
+  if (res[0]!=0) res[0][24]=a11;
+  a01=(1./a01);
+  if (res[1]!=0) res[1][0]=a01;
+  if (res[1]!=0) res[1][1]=a02;
+  if (res[1]!=0) res[1][2]=a02;
+  if (res[1]!=0) res[1][3]=a02;
+  if (res[1]!=0) res[1][4]=a02;
+  if (res[1]!=0) res[1][5]=a02;
+  if (res[1]!=0) res[1][6]=a02;
+  a04=(1./a04);
+  if (res[1]!=0) res[1][7]=a04;
+  if (res[1]!=0) res[1][8]=a02;
+  if (res[1]!=0) res[1][9]=a02;
+  if (res[1]!=0) res[1][10]=a02;
+  if (res[1]!=0) res[1][11]=a02;
+  if (res[1]!=0) res[1][12]=a02;
+  if (res[1]!=0) res[1][13]=a02;
+  a06=(1./a06);
+  if (res[1]!=0) res[1][14]=a06;
+  a06=(a07*a03);
+  if (res[2]!=0) res[2][0]=a06;
+  a06=(a07*a03);
+  if (res[2]!=0) res[2][1]=a06;
+  if (res[2]!=0) res[2][2]=a02;
+  if (res[2]!=0) res[2][3]=a02;
+  if (res[2]!=0) res[2][4]=a02;
+  if (res[2]!=0) res[2][5]=a02;
+  a06=(1./a07);
+  if (res[2]!=0) res[2][6]=a06;
+  if (res[2]!=0) res[2][7]=a02;
+  if (res[2]!=0) res[2][8]=a02;
+  if (res[2]!=0) res[2][9]=a02;
+  if (res[2]!=0) res[2][10]=a02;
+  if (res[2]!=0) res[2][11]=a02;
+  if (res[2]!=0) res[2][12]=a02;
+  if (res[2]!=0) res[2][13]=a02;
+  if (res[2]!=0) res[2][14]=a02;
+  if (res[2]!=0) res[2][15]=a02;
+  if (res[2]!=0) res[2][16]=a02;
+  if (res[2]!=0) res[2][17]=a02;
+  if (res[2]!=0) res[2][18]=a02;
+  if (res[2]!=0) res[2][19]=a09;
+  a07=(a07/a03);
+  a10=(a10*a00);
+  a08=(a08*a03);
+  a10=(a10+a08);
+  a07=(a07*a10);
+  if (res[3]!=0) res[3][0]=a07;
+  return 0;
+}
+
+CASADI_SYMBOL_EXPORT int haa_plant_cc30ca5c5149(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem){
+  return casadi_f3(arg, res, iw, w, mem);
+}
+
+CASADI_SYMBOL_EXPORT int haa_plant_cc30ca5c5149_checkout(void) {
+  return 0;
+}
+
+CASADI_SYMBOL_EXPORT void haa_plant_cc30ca5c5149_release(int mem) {
+}
+
+CASADI_SYMBOL_EXPORT void haa_plant_cc30ca5c5149_incref(void) {
+}
+
+CASADI_SYMBOL_EXPORT void haa_plant_cc30ca5c5149_decref(void) {
+}
+
+CASADI_SYMBOL_EXPORT casadi_int haa_plant_cc30ca5c5149_n_in(void) { return 1;}
+
+CASADI_SYMBOL_EXPORT casadi_int haa_plant_cc30ca5c5149_n_out(void) { return 4;}
+
+CASADI_SYMBOL_EXPORT casadi_real haa_plant_cc30ca5c5149_default_in(casadi_int i) {
+  switch (i) {
+    default: return 0;
+  }
+}
+
+CASADI_SYMBOL_EXPORT const char* haa_plant_cc30ca5c5149_name_in(casadi_int i) {
+  switch (i) {
+    case 0: return "p";
+    default: return 0;
+  }
+}
+
+CASADI_SYMBOL_EXPORT const char* haa_plant_cc30ca5c5149_name_out(casadi_int i) {
+  switch (i) {
+    case 0: return "A";
+    case 1: return "B";
+    case 2: return "C";
+    case 3: return "VC0";
+    default: return 0;
+  }
+}
+
+CASADI_SYMBOL_EXPORT const casadi_int* haa_plant_cc30ca5c5149_sparsity_in(casadi_int i) {
+  switch (i) {
+    case 0: return casadi_s0;
+    default: return 0;
+  }
+}
+
+CASADI_SYMBOL_EXPORT const casadi_int* haa_plant_cc30ca5c5149_sparsity_out(casadi_int i) {
+  switch (i) {
+    case 0: return casadi_s1;
+    case 1: return casadi_s2;
+    case 2: return casadi_s3;
+    case 3: return casadi_s4;
+    default: return 0;
+  }
+}
+
+CASADI_SYMBOL_EXPORT int haa_plant_cc30ca5c5149_work(casadi_int *sz_arg, casadi_int* sz_res, casadi_int *sz_iw, casadi_int *sz_w) {
+  if (sz_arg) *sz_arg = 1;
+  if (sz_res) *sz_res = 4;
+  if (sz_iw) *sz_iw = 0;
+  if (sz_w) *sz_w = 0;
+  return 0;
+}
+
+CASADI_SYMBOL_EXPORT int haa_plant_cc30ca5c5149_work_bytes(casadi_int *sz_arg, casadi_int* sz_res, casadi_int *sz_iw, casadi_int *sz_w) {
+  if (sz_arg) *sz_arg = 1*sizeof(const casadi_real*);
+  if (sz_res) *sz_res = 4*sizeof(casadi_real*);
+  if (sz_iw) *sz_iw = 0*sizeof(casadi_int);
+  if (sz_w) *sz_w = 0*sizeof(casadi_real);
+  return 0;
+}
+
+/* haa_loopcoef:(Gw[20],const[3],gains[2])->(coef[26]) */
+static int casadi_f4(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
   casadi_real a00, a01, a02, a03, a04, a05, a06, a07, a08, a09, a10, a11;
   casadi_real a12, a13, a14, a15, a16, a17, a18, a19, a20, a21, a22, a23;
   casadi_real a24;
@@ -1292,7 +1492,7 @@ static int casadi_f3(const casadi_real** arg, casadi_real** res, casadi_int* iw,
 }
 
 CASADI_SYMBOL_EXPORT int haa_loopcoef(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem){
-  return casadi_f3(arg, res, iw, w, mem);
+  return casadi_f4(arg, res, iw, w, mem);
 }
 
 CASADI_SYMBOL_EXPORT int haa_loopcoef_checkout(void) {
@@ -1367,7 +1567,7 @@ CASADI_SYMBOL_EXPORT int haa_loopcoef_work_bytes(casadi_int *sz_arg, casadi_int*
 }
 
 /* haa_routh16:(a[17])->(changes,regular) */
-static int casadi_f5(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
+static int casadi_f6(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
   casadi_real a00, a01, a02, a03, a04, a05, a06, a07, a08, a09, a10, a11;
   casadi_real a12, a13, a14, a15, a16, a17, a18, a19, a20, a21, a22, a23;
   casadi_real a24, a25, a26;
@@ -1702,7 +1902,7 @@ static int casadi_f5(const casadi_real** arg, casadi_real** res, casadi_int* iw,
 }
 
 /* haa_decide16:(basis[17x8],const[3],point[4])->(n_unstable,certified) */
-static int casadi_f4(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
+static int casadi_f5(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
   casadi_int i;
   casadi_real **res1=res+2, *rr, *w00=w+27, *w01=w+44, w02, *w03=w+180, w04, *w05=w+184, w06, w07, w08, w09;
   casadi_real w10, w11, w12, *w13=w+187, *w14=w+195, w15, w16, w17, w18, *w19=w+212;
@@ -1777,7 +1977,7 @@ static int casadi_f4(const casadi_real** arg, casadi_real** res, casadi_int* iw,
   arg1[0]=w00;
   res1[0]=(&w06);
   res1[1]=(&w04);
-  if (casadi_f5(arg1, res1, iw, w, 0)) return 1;
+  if (casadi_f6(arg1, res1, iw, w, 0)) return 1;
   /* #30: output[0][0] = @6 */
   if (res[0]) res[0][0] = w06;
   /* #31: @8 = 3.55271e-15 */
@@ -1864,7 +2064,7 @@ static int casadi_f4(const casadi_real** arg, casadi_real** res, casadi_int* iw,
   arg1[0]=w19;
   res1[0]=(&w02);
   res1[1]=(&w08);
-  if (casadi_f5(arg1, res1, iw, w, 0)) return 1;
+  if (casadi_f6(arg1, res1, iw, w, 0)) return 1;
   /* #68: @4 = (@4*@8) */
   w04 *= w08;
   /* #69: @8 = 0.5 */
@@ -1889,7 +2089,7 @@ static int casadi_f4(const casadi_real** arg, casadi_real** res, casadi_int* iw,
   arg1[0]=w19;
   res1[0]=(&w02);
   res1[1]=(&w08);
-  if (casadi_f5(arg1, res1, iw, w, 0)) return 1;
+  if (casadi_f6(arg1, res1, iw, w, 0)) return 1;
   /* #79: @4 = (@4*@8) */
   w04 *= w08;
   /* #80: @8 = 0.5 */
@@ -1910,7 +2110,7 @@ static int casadi_f4(const casadi_real** arg, casadi_real** res, casadi_int* iw,
   arg1[0]=w19;
   res1[0]=(&w02);
   res1[1]=(&w08);
-  if (casadi_f5(arg1, res1, iw, w, 0)) return 1;
+  if (casadi_f6(arg1, res1, iw, w, 0)) return 1;
   /* #88: @4 = (@4*@8) */
   w04 *= w08;
   /* #89: @8 = 0.5 */
@@ -1931,7 +2131,7 @@ static int casadi_f4(const casadi_real** arg, casadi_real** res, casadi_int* iw,
   arg1[0]=w00;
   res1[0]=(&w02);
   res1[1]=(&w08);
-  if (casadi_f5(arg1, res1, iw, w, 0)) return 1;
+  if (casadi_f6(arg1, res1, iw, w, 0)) return 1;
   /* #97: @4 = (@4*@8) */
   w04 *= w08;
   /* #98: @8 = 0.5 */
@@ -1948,7 +2148,7 @@ static int casadi_f4(const casadi_real** arg, casadi_real** res, casadi_int* iw,
 }
 
 CASADI_SYMBOL_EXPORT int haa_decide16(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem){
-  return casadi_f4(arg, res, iw, w, mem);
+  return casadi_f5(arg, res, iw, w, mem);
 }
 
 CASADI_SYMBOL_EXPORT int haa_decide16_checkout(void) {
@@ -2025,7 +2225,7 @@ CASADI_SYMBOL_EXPORT int haa_decide16_work_bytes(casadi_int *sz_arg, casadi_int*
 }
 
 /* haa_routh32:(a[33])->(changes,regular) */
-static int casadi_f7(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
+static int casadi_f8(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
   casadi_real a00, a01, a02, a03, a04, a05, a06, a07, a08, a09, a10, a11;
   casadi_real a12, a13, a14, a15, a16, a17, a18, a19, a20, a21, a22, a23;
   casadi_real a24, a25, a26, a27, a28, a29, a30, a31, a32, a33, a34, a35;
@@ -2938,7 +3138,7 @@ static int casadi_f7(const casadi_real** arg, casadi_real** res, casadi_int* iw,
 }
 
 /* haa_decide32:(basis[33x8],const[3],point[4])->(n_unstable,certified) */
-static int casadi_f6(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
+static int casadi_f7(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
   casadi_int i;
   casadi_real **res1=res+2, *rr, *w00=w+51, *w01=w+84, w02, *w03=w+348, w04, *w05=w+352, w06, w07, w08, w09;
   casadi_real w10, w11, w12, *w13=w+355, *w14=w+363, w15, w16, w17, w18, *w19=w+396;
@@ -3013,7 +3213,7 @@ static int casadi_f6(const casadi_real** arg, casadi_real** res, casadi_int* iw,
   arg1[0]=w00;
   res1[0]=(&w06);
   res1[1]=(&w04);
-  if (casadi_f7(arg1, res1, iw, w, 0)) return 1;
+  if (casadi_f8(arg1, res1, iw, w, 0)) return 1;
   /* #30: output[0][0] = @6 */
   if (res[0]) res[0][0] = w06;
   /* #31: @8 = 3.55271e-15 */
@@ -3100,7 +3300,7 @@ static int casadi_f6(const casadi_real** arg, casadi_real** res, casadi_int* iw,
   arg1[0]=w19;
   res1[0]=(&w02);
   res1[1]=(&w08);
-  if (casadi_f7(arg1, res1, iw, w, 0)) return 1;
+  if (casadi_f8(arg1, res1, iw, w, 0)) return 1;
   /* #68: @4 = (@4*@8) */
   w04 *= w08;
   /* #69: @8 = 0.5 */
@@ -3125,7 +3325,7 @@ static int casadi_f6(const casadi_real** arg, casadi_real** res, casadi_int* iw,
   arg1[0]=w19;
   res1[0]=(&w02);
   res1[1]=(&w08);
-  if (casadi_f7(arg1, res1, iw, w, 0)) return 1;
+  if (casadi_f8(arg1, res1, iw, w, 0)) return 1;
   /* #79: @4 = (@4*@8) */
   w04 *= w08;
   /* #80: @8 = 0.5 */
@@ -3146,7 +3346,7 @@ static int casadi_f6(const casadi_real** arg, casadi_real** res, casadi_int* iw,
   arg1[0]=w19;
   res1[0]=(&w02);
   res1[1]=(&w08);
-  if (casadi_f7(arg1, res1, iw, w, 0)) return 1;
+  if (casadi_f8(arg1, res1, iw, w, 0)) return 1;
   /* #88: @4 = (@4*@8) */
   w04 *= w08;
   /* #89: @8 = 0.5 */
@@ -3167,7 +3367,7 @@ static int casadi_f6(const casadi_real** arg, casadi_real** res, casadi_int* iw,
   arg1[0]=w00;
   res1[0]=(&w02);
   res1[1]=(&w08);
-  if (casadi_f7(arg1, res1, iw, w, 0)) return 1;
+  if (casadi_f8(arg1, res1, iw, w, 0)) return 1;
   /* #97: @4 = (@4*@8) */
   w04 *= w08;
   /* #98: @8 = 0.5 */
@@ -3184,7 +3384,7 @@ static int casadi_f6(const casadi_real** arg, casadi_real** res, casadi_int* iw,
 }
 
 CASADI_SYMBOL_EXPORT int haa_decide32(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem){
-  return casadi_f6(arg, res, iw, w, mem);
+  return casadi_f7(arg, res, iw, w, mem);
 }
 
 CASADI_SYMBOL_EXPORT int haa_decide32_checkout(void) {
@@ -3261,7 +3461,7 @@ CASADI_SYMBOL_EXPORT int haa_decide32_work_bytes(casadi_int *sz_arg, casadi_int*
 }
 
 /* haa_routh64:(a[65])->(changes,regular) */
-static int casadi_f9(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
+static int casadi_f10(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
   casadi_real a00, a01, a02, a03, a04, a05, a06, a07, a08, a09, a10, a11;
   casadi_real a12, a13, a14, a15, a16, a17, a18, a19, a20, a21, a22, a23;
   casadi_real a24, a25, a26, a27, a28, a29, a30, a31, a32, a33, a34, a35;
@@ -6098,7 +6298,7 @@ static int casadi_f9(const casadi_real** arg, casadi_real** res, casadi_int* iw,
 }
 
 /* haa_decide64:(basis[65x8],const[3],point[4])->(n_unstable,certified) */
-static int casadi_f8(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
+static int casadi_f9(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
   casadi_int i;
   casadi_real **res1=res+2, *rr, *w00=w+99, *w01=w+164, w02, *w03=w+684, w04, *w05=w+688, w06, w07, w08, w09;
   casadi_real w10, w11, w12, *w13=w+691, *w14=w+699, w15, w16, w17, w18, *w19=w+764;
@@ -6173,7 +6373,7 @@ static int casadi_f8(const casadi_real** arg, casadi_real** res, casadi_int* iw,
   arg1[0]=w00;
   res1[0]=(&w06);
   res1[1]=(&w04);
-  if (casadi_f9(arg1, res1, iw, w, 0)) return 1;
+  if (casadi_f10(arg1, res1, iw, w, 0)) return 1;
   /* #30: output[0][0] = @6 */
   if (res[0]) res[0][0] = w06;
   /* #31: @8 = 3.55271e-15 */
@@ -6260,7 +6460,7 @@ static int casadi_f8(const casadi_real** arg, casadi_real** res, casadi_int* iw,
   arg1[0]=w19;
   res1[0]=(&w02);
   res1[1]=(&w08);
-  if (casadi_f9(arg1, res1, iw, w, 0)) return 1;
+  if (casadi_f10(arg1, res1, iw, w, 0)) return 1;
   /* #68: @4 = (@4*@8) */
   w04 *= w08;
   /* #69: @8 = 0.5 */
@@ -6285,7 +6485,7 @@ static int casadi_f8(const casadi_real** arg, casadi_real** res, casadi_int* iw,
   arg1[0]=w19;
   res1[0]=(&w02);
   res1[1]=(&w08);
-  if (casadi_f9(arg1, res1, iw, w, 0)) return 1;
+  if (casadi_f10(arg1, res1, iw, w, 0)) return 1;
   /* #79: @4 = (@4*@8) */
   w04 *= w08;
   /* #80: @8 = 0.5 */
@@ -6306,7 +6506,7 @@ static int casadi_f8(const casadi_real** arg, casadi_real** res, casadi_int* iw,
   arg1[0]=w19;
   res1[0]=(&w02);
   res1[1]=(&w08);
-  if (casadi_f9(arg1, res1, iw, w, 0)) return 1;
+  if (casadi_f10(arg1, res1, iw, w, 0)) return 1;
   /* #88: @4 = (@4*@8) */
   w04 *= w08;
   /* #89: @8 = 0.5 */
@@ -6327,7 +6527,7 @@ static int casadi_f8(const casadi_real** arg, casadi_real** res, casadi_int* iw,
   arg1[0]=w00;
   res1[0]=(&w02);
   res1[1]=(&w08);
-  if (casadi_f9(arg1, res1, iw, w, 0)) return 1;
+  if (casadi_f10(arg1, res1, iw, w, 0)) return 1;
   /* #97: @4 = (@4*@8) */
   w04 *= w08;
   /* #98: @8 = 0.5 */
@@ -6344,7 +6544,7 @@ static int casadi_f8(const casadi_real** arg, casadi_real** res, casadi_int* iw,
 }
 
 CASADI_SYMBOL_EXPORT int haa_decide64(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem){
-  return casadi_f8(arg, res, iw, w, mem);
+  return casadi_f9(arg, res, iw, w, mem);
 }
 
 CASADI_SYMBOL_EXPORT int haa_decide64_checkout(void) {

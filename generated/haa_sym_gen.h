@@ -71,6 +71,24 @@ int haa_plant_b107ac0be577_work_bytes(casadi_int *sz_arg, casadi_int* sz_res, ca
 #define haa_plant_b107ac0be577_SZ_RES 4
 #define haa_plant_b107ac0be577_SZ_IW 0
 #define haa_plant_b107ac0be577_SZ_W 0
+int haa_plant_cc30ca5c5149(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem);
+int haa_plant_cc30ca5c5149_checkout(void);
+void haa_plant_cc30ca5c5149_release(int mem);
+void haa_plant_cc30ca5c5149_incref(void);
+void haa_plant_cc30ca5c5149_decref(void);
+casadi_int haa_plant_cc30ca5c5149_n_in(void);
+casadi_int haa_plant_cc30ca5c5149_n_out(void);
+casadi_real haa_plant_cc30ca5c5149_default_in(casadi_int i);
+const char* haa_plant_cc30ca5c5149_name_in(casadi_int i);
+const char* haa_plant_cc30ca5c5149_name_out(casadi_int i);
+const casadi_int* haa_plant_cc30ca5c5149_sparsity_in(casadi_int i);
+const casadi_int* haa_plant_cc30ca5c5149_sparsity_out(casadi_int i);
+int haa_plant_cc30ca5c5149_work(casadi_int *sz_arg, casadi_int* sz_res, casadi_int *sz_iw, casadi_int *sz_w);
+int haa_plant_cc30ca5c5149_work_bytes(casadi_int *sz_arg, casadi_int* sz_res, casadi_int *sz_iw, casadi_int *sz_w);
+#define haa_plant_cc30ca5c5149_SZ_ARG 1
+#define haa_plant_cc30ca5c5149_SZ_RES 4
+#define haa_plant_cc30ca5c5149_SZ_IW 0
+#define haa_plant_cc30ca5c5149_SZ_W 0
 int haa_loopcoef(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem);
 int haa_loopcoef_checkout(void);
 void haa_loopcoef_release(int mem);

@@ -336,7 +336,9 @@ def _cmd_contact(args) -> int:
     if K_range is None:
         raise ParameterError(f"--K-range {args.K_range!r}; allowed: LO:HI in Nm/rad, 0 < LO < HI")
     r = contact_intervals(loop, K_range, n_scan=args.n_scan, P_gain=float(P), D_gain=float(D), mode=args.mode)
-    data = {"analysis": "contact stability", "environment": f"K_env {'replaces' if r.mode == 'replace' else 'adds to'} {r.key}",
+    env = (f"K_env is a new stiffness to ground {r.key} of the port body (the file has none)" if r.ground_added
+           else f"K_env {'replaces' if r.mode == 'replace' else 'adds to'} {r.key}")
+    data = {"analysis": "contact stability", "environment": env, "ground_added": r.ground_added,
             "mode": r.mode, "stiffness_key": r.key, "P_gain": float(P), "D_gain": float(D),
             "K_range": list(K_range), "n_scan": args.n_scan, "rtol": r.rtol,
             "unstable_intervals": [list(i) for i in r.unstable],

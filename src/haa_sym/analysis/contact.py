@@ -5,7 +5,9 @@ spring at a distance from the HAA axis); the scan replaces K_L2 by each environm
 decides closed-loop stability, by default with the impedance loop open (the torque loop alone),
 and, where the loop is stable, passivity of the port impedance Z(z) of that loop (as
 :func:`haa_sym.analysis.passivity.passivity`). For any actuator file the spring replaces the ground
-stiffness K_<port> of the port body ([sensors] port), which the file must therefore give.
+stiffness K_<port> of the port body ([sensors] port); a port body without one gets it as a new
+stiffness to ground (:func:`contact_params`: the file's topology with K_<port> = 0, its own plant
+function).
 
 The paper's argument (Sec. 5): the torque loop alone is not passive at the port, so coupling it
 to a passive environment (a spring) is not guaranteed to be stable, and a range of stiffnesses
@@ -14,7 +16,7 @@ non-passive stiffnesses, with exact ends.
 """
 from __future__ import annotations
 
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 
@@ -25,28 +27,40 @@ from haa_sym.analysis.sweep import BLAS_THREADS, blas_limits, gain_rows, phase_e
 from haa_sym.errors import ParameterError
 from haa_sym.loop import ClosedLoop, loop_first
 from haa_sym.loop.statespace import closed_loop_batch
-from haa_sym.model.actuator import Topology
-from haa_sym.model.params import Params, gain_array
+from haa_sym.model.actuator import Body, Topology
+from haa_sym.model.params import Params, Plant, gain_array
 
-__all__ = ["contact_stability", "contact_intervals", "ContactIntervals", "intervals", "CONTACT_MODES"]
+__all__ = ["contact_stability", "contact_intervals", "contact_params", "ContactIntervals", "intervals",
+           "CONTACT_MODES"]
 
 CONTACT_MODES = ("replace", "add")
 
 
-def _port_key(params: Params) -> str:
+def contact_params(params: Params) -> tuple[Params, str, bool]:
+    """The parameters the contact scan varies, the name of the stiffness it sets, and whether
+    that stiffness was added (``(params, "K_<port>", added)``).
+
+    The environment spring acts on the port body ([sensors] port) as a stiffness to ground. When
+    the port body has one (``K`` in its ``[bodies.<port>]`` table) the scan sets it. When it has
+    none, the plant variant of the file's topology with a stiffness to ground K_<port> on the
+    port body, at 0, is scanned (its own plant function: generated if bundled, else compiled on
+    first use): the variant at K_<port> = 0 is the file's plant, so the "replace" and "add" modes
+    coincide there. A sympy model written in code (no topology to vary) must declare the
+    parameter itself.
+    """
     top = params.plant.topology
     key = f"K_{top.port}"
-    if key not in top.parameter_keys and not isinstance(top, Topology):
+    if key in top.parameter_keys:
+        return params, key, False
+    if not isinstance(top, Topology):
         raise ParameterError(
             f"{params.source}: the model has no parameter {key} (the port's stiffness to ground, "
             f"which the contact scan replaces by the environment's); allowed: a model whose "
             f"parameter {key} (Nm/rad) is the stiffness acting on the port")
-    if key not in top.parameter_keys:
-        raise ParameterError(
-            f"{params.source} [bodies.{top.port}]: the port body {top.port!r} has no stiffness to "
-            f"ground K ({key}), which the contact scan replaces by the environment's; allowed: an "
-            f"actuator whose port body has K (e.g. K = {{ value = 0.0 }} for none)")
-    return key
+    bodies = tuple(Body(b.name, ground=True) if b.name == top.port else b for b in top.bodies)
+    variant = replace(top, bodies=bodies)
+    plant = Plant(variant, **params.plant.as_dict(), **{key: 0.0})
+    return replace(params, plant=plant), key, True
 
 
 def _point(loop, P_gain, D_gain, beta, alpha):
@@ -62,6 +76,13 @@ def _point(loop, P_gain, D_gain, beta, alpha):
 def _loop(loop, key, K, base) -> ClosedLoop:
     """``loop`` with the environment spring K (Nm/rad) on the port body."""
     return ClosedLoop(loop.params.with_values(**{key: float(K) + base}), loop.options, loop.backend, basis=False)
+
+
+def _scanned(loop) -> tuple[ClosedLoop, str, bool]:
+    """The loop whose port stiffness the scan sets (the plant variant of :func:`contact_params`
+    when the port body has no stiffness to ground), the key and whether it was added."""
+    params, key, added = contact_params(loop.params)
+    return (ClosedLoop(params, loop.options, loop.backend, basis=False) if added else loop), key, added
 
 
 def _radius(loop, P_gain, D_gain, beta, alpha) -> float:
@@ -109,7 +130,7 @@ def contact_stability(loop, K_env, *, P_gain: float = 0.0, D_gain: float = 0.0, 
     """
     P_gain, D_gain, beta, alpha = _point(loop, P_gain, D_gain, beta, alpha)
     K_env = gain_array("K_env", K_env).ravel()
-    key = _port_key(loop.params)
+    loop, key, _ = _scanned(loop)
     with blas_limits(blas_threads):
         rho, _ = _scan(loop, key, _base(loop.params, key, mode), K_env, P_gain, D_gain, beta, alpha,
                        progress, passivity=False)
@@ -138,7 +159,9 @@ class ContactIntervals:
     ``mode`` says whether K_env replaced the port body's ground stiffness (the paper's reading)
     or was added to it; ``K_env``, ``spectral_radius``, ``phase_excess_deg`` (deg beyond +-90,
     NaN where unstable; None when skipped): the scan that bracketed the ends;
-    ``passivity_tol_deg``: the options' tolerance the excess was compared with.
+    ``passivity_tol_deg``: the options' tolerance the excess was compared with;
+    ``ground_added``: the port body of the file has no stiffness to ground, so ``key`` is a new
+    one on it (:func:`contact_params`; both modes then scan the same stiffnesses).
     """
 
     unstable: list
@@ -150,6 +173,7 @@ class ContactIntervals:
     not_passive: list | None = None
     phase_excess_deg: np.ndarray | None = field(default=None, repr=False)
     passivity_tol_deg: float | None = None
+    ground_added: bool = False
 
 
 @loop_first
@@ -214,12 +238,13 @@ def contact_intervals(loop, K_range=(1.0, 1e5), *, n_scan: int = 400, P_gain: fl
     if isinstance(n_scan, bool) or not isinstance(n_scan, int) or n_scan < 2:
         raise ParameterError(f"n_scan = {n_scan!r}; allowed: an integer >= 2")
     P_gain, D_gain, beta, alpha = _point(loop, P_gain, D_gain, beta, alpha)
-    key = _port_key(loop.params)
+    loop, key, added = _scanned(loop)
     base = _base(loop.params, key, mode)
     K = np.logspace(np.log10(K_lo), np.log10(K_hi), n_scan)
     K[0], K[-1] = K_lo, K_hi                  # the range's edges exactly (they may be interval ends)
     with blas_limits(blas_threads):
-        return _locate(loop, key, base, K, P_gain, D_gain, beta, alpha, mode, rtol, passivity, progress)
+        r = _locate(loop, key, base, K, P_gain, D_gain, beta, alpha, mode, rtol, passivity, progress)
+    return replace(r, ground_added=added)
 
 
 def _locate(loop, key, base, K, P_gain, D_gain, beta, alpha, mode, rtol, passivity, progress) -> ContactIntervals:

@@ -251,7 +251,8 @@ def p1_roots(params: Params) -> np.ndarray:
     The zeros of V_m -> T_l (Eq. 2) are those of (K_hd + D_hd s) p1(s) (the velocity
     compensation does not move them); the root at -K_hd/D_hd is removed. An independent check of
     the symbolic rows of ``python -m haa_sym.check.verify``. For another topology: the zeros of
-    V_m -> T_sensor without the sensor coupling's own zero -K/D (p1 is the paper's, HyQ's, name).
+    V_m -> T_sensor without the sensor coupling's own zero -K/D (p1 is the paper's, HyQ's, name;
+    with the torque from the current, ``[sensors] torque = "current"``, all zeros of V_m -> T_sensor).
 
     Example
     -------
@@ -263,7 +264,7 @@ def p1_roots(params: Params) -> np.ndarray:
     num = np.trim_zeros(to_float(nums[cp.output_names.index("T_sensor")][0]), "f")
     roots = np.roots(num)
     sensor = params.plant.topology.sensor
-    D = getattr(params.plant, f"D_{sensor}")
+    D = getattr(params.plant, f"D_{sensor}", 0.0)       # 0: the current estimate, no coupling
     if D > 0:                       # the sensor coupling's own zero (K + D s)
         spring_zero = -getattr(params.plant, f"K_{sensor}") / D
         roots = np.delete(roots, np.argmin(np.abs(roots - spring_zero)))

@@ -7,7 +7,9 @@ options alone, with its own algebra:
 
 * the plant: the continuous state space of the actuator (the generated or compiled plant function, the one
   thing it shares with the evaluators; the tests check that against an independent assembly of
-  the equations of motion), sampled by ``scipy.signal.cont2discrete(..., "zoh")``;
+  the equations of motion), sampled by ``scipy.signal.cont2discrete(..., "zoh")``; the rows of
+  the rotor-side sensors of a chain (the current estimate k_t N I_m, the motor-side encoder
+  theta_m / N) are assembled here from the state names, not read from the plant function;
 * the velocity estimate (its own table :data:`VELOCITY_ESTIMATES`, keyed by the names of the
   registry :mod:`haa_sym.model.filters`): the average as an FIR filter; the low-pass filters as the
   backward difference followed by the analog prototype w_c/(s + w_c) or
@@ -34,15 +36,34 @@ import scipy.linalg
 import scipy.signal
 
 from haa_sym.loop.plant import continuous_plant
-from haa_sym.model.actuator import Topology
+from haa_sym.model.actuator import CURRENT, ROTOR, Topology
 
 __all__ = ["closed_loop_matrices", "closed_loop_eigenvalues", "spectral_radius", "frequency_response",
            "VELOCITY_ESTIMATES", "register_velocity_estimate"]
 
 
+def _own_output_row(plant, cont, name):
+    """The reference's own row of a rotor-side sensor of a chain, assembled from the state
+    names and the motor's parameters (not read from the plant function): the current estimate
+    k_t N I_m (``[sensors] torque = "current"``, both torque outputs) and the motor-side encoder
+    theta_m / N (``encoder = "rotor"``). None for every other output."""
+    top = plant.topology
+    if not isinstance(top, Topology):
+        return None
+    row = np.zeros(len(cont.state_names))
+    if name in ("T_sensor", "T_sensor_spring") and top.sensor == CURRENT:
+        row[cont.state_names.index("I_m")] = plant.k_t * plant.N
+    elif name == "theta_encoder" and top.encoder == ROTOR:
+        row[cont.state_names.index("theta_m")] = 1.0 / plant.N
+    else:
+        return None
+    return row
+
+
 def _zoh_plant(params, outputs):
     cont = continuous_plant(params.plant)
-    C = cont.C[[cont.output_names.index(o) for o in outputs]]
+    C = np.array([cont.C[cont.output_names.index(o)] if (own := _own_output_row(params.plant, cont, o)) is None
+                  else own for o in outputs])
     B = cont.B[:, [0, 2]]                                # V_m, T_dist
     Ad, Bd, Cd, Dd, _ = scipy.signal.cont2discrete((cont.A, B, C, np.zeros((len(outputs), 2))),
                                                    params.controller.Ts, method="zoh")

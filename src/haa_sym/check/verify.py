@@ -27,7 +27,7 @@ from haa_sym.compiled.generated import evaluators
 from haa_sym.loop import ClosedLoop
 from haa_sym.loop.plant import continuous_plant
 from haa_sym.analysis.torque import torque_loop_margins
-from haa_sym.model.actuator import HYQ, MOTOR_DOMAIN, Topology
+from haa_sym.model.actuator import CURRENT, HYQ, MOTOR_DOMAIN, Topology
 from haa_sym.errors import ParameterError
 from haa_sym.model.params import Params, load_params
 from haa_sym.symbolic import chain, eom, torque_tf as tt
@@ -227,27 +227,37 @@ def row_chain_state_space(params: Params, n_points: int = 3) -> Row:
 
 
 def row_exact_vc_generalised(params: Params) -> Row:
-    """Eq. (3)-(5) for any chain: with VC_gain = N/k_t (L s + R)(J_m s + B_m) + N k_w, the
-    measured torque / V is k_t (K + s D)/(N q1) of the gearbox alone, when it applies."""
+    """Eq. (3)-(5) for any chain: with the exact compensation (Eq. 5, or N k_w for the current
+    estimate), the measured torque / V depends on the motor and the gearbox alone, when it
+    applies (:func:`haa_sym.symbolic.chain.exact_vc_condition`)."""
     top = params.plant.topology
-    claim = ("Eq. (3)-(5) generalised: with the exact VC_gain of Eq. (5), G_tVC = k_t (K + s D)/(N q1) "
-             "of the gearbox alone (no parameter of the bodies after it)")
+    rotor_side = top.encoder == "rotor" or top.sensor == CURRENT
+    if top.sensor == CURRENT:
+        claim = ("Eq. (3)-(5) generalised, torque from the current: with VC_gain = N k_w, "
+                 "G_tVC = k_t N I_m / V = N k_t/(L s + R) (no parameter after the rotor)")
+    elif rotor_side:
+        claim = ("Eq. (3)-(5) generalised, motor-side encoder: with the exact VC_gain of Eq. (5), "
+                 "G_tVC = N k_t/(L s + R) (no parameter after the rotor)")
+    else:
+        claim = ("Eq. (3)-(5) generalised: with the exact VC_gain of Eq. (5), G_tVC = k_t (K + s D)/(N q1) "
+                 "of the gearbox alone (no parameter of the bodies after it)")
     applies, why = chain.exact_vc_condition(top)
     if not applies:
         return Row(claim, True, f"does not apply: {why}", applies=False)
     t = time.time()
     syms = chain.symbols(top)
-    vc = chain.vc_gain_exact(syms)
+    vc = chain.exact_vc_gain(top, syms)
     num, den, ring = chain.torque_tf_fraction(top, syms, vc=vc)
     expected = chain.load_free_g_tvc(top, syms)
     same = tt.same_rational(num, den, expected, ring)
     g = top.gearbox
     motor = set(MOTOR_DOMAIN) | {f"K_{g.name}", f"D_{g.name}"}
     loads = sorted(str(x) for x in expected.free_symbols if str(x) not in motor and str(x) != "s")
+    spring = top.sensor != CURRENT and not top.torque_damping
     return Row(claim, same and not loads,
                f"{why}; derived == expected exactly in Q[params, s, V]: {same}; parameters after "
-               f"the gearbox in it: {loads or 'none'}"
-               + ("" if top.torque_damping else "; the sensor reads the spring alone: times K/(K + s D)")
+               f"the {'rotor' if rotor_side else 'gearbox'} in it: {loads or 'none'}"
+               + ("; the sensor reads the spring alone: times K/(K + s D)" if spring else "")
                + f" ({time.time() - t:.1f} s)")
 
 

@@ -31,7 +31,7 @@ from typing import Mapping
 
 from haa_sym.errors import ParameterError
 
-__all__ = ["Actuator", "Body", "Coupling", "Topology", "HYQ", "MOTOR_DOMAIN", "ROTOR", "ACTUATOR_SECTIONS",
+__all__ = ["Actuator", "Body", "Coupling", "Topology", "HYQ", "MOTOR_DOMAIN", "ROTOR", "CURRENT", "ACTUATOR_SECTIONS",
            "parse_actuator", "legacy_plant"]
 
 ROTOR = "rotor"
@@ -48,6 +48,10 @@ MOTOR_UNITS: dict[str, str] = {"L": "H", "R": "Ohm", "k_t": "Nm/A", "k_w": "V s/
 BODY_UNITS: dict[str, str] = {"J": "kg m^2", "B": "Nm s/rad", "K": "Nm/rad"}
 COUPLING_UNITS: dict[str, str] = {"K": "Nm/rad", "D": "Nm s/rad"}
 SENSOR_KEYS = ("torque", "torque_damping", "encoder", "port")
+# [sensors] torque = CURRENT: the torque estimated from the motor current, k_t N I_m (no torque
+# sensor; the loop closes on the estimate); encoder = ROTOR: the rotor angle referred to the
+# output, theta_m / N (a motor-side encoder). Neither names a coupling or a body.
+CURRENT = "current"
 ACTUATOR_SECTIONS = ("about", "motor", "bodies", "couplings", "sensors")
 INPUT_NAMES = ("V_m", "T_fr", "T_dist")
 SOURCE_LETTERS = ("D", "I", "C", "-")          # Table 1: datasheet, identified, computed, none
@@ -106,11 +110,15 @@ class Topology(Actuator):
     couplings : tuple of Coupling
         In file order; exactly one touches ``"rotor"`` (the gearbox).
     sensor : str
-        The coupling whose transmitted torque the torque sensor measures.
+        The coupling whose transmitted torque the torque sensor measures, or ``"current"``: no
+        torque sensor, the torque k_t N I_m (Nm at the output) estimated from the motor current.
     torque_damping : bool
         Whether the sensor sees the coupling's damping term (Eq. 2) or the spring deflection alone.
+        Does not apply to ``sensor = "current"`` (stored as False there: both torque outputs are
+        the same estimate, so the loop option ``torque_damping`` changes nothing).
     encoder : str
-        The body whose angle the encoder reads.
+        The body whose angle the encoder reads, or ``"rotor"``: a motor-side encoder, theta_m / N
+        (rad at the output).
     port : str
         The body the external torque T_dist acts on (passivity port, contact).
     source : str
@@ -130,6 +138,8 @@ class Topology(Actuator):
         object.__setattr__(self, "couplings", tuple(self.couplings))
         _check_structure(self)
         object.__setattr__(self, "couplings", _oriented(self.couplings))
+        if self.sensor == CURRENT:            # no coupling term to include or leave out
+            object.__setattr__(self, "torque_damping", False)
 
     # --- names -----------------------------------------------------------------------------
     @property
@@ -142,8 +152,9 @@ class Topology(Actuator):
         return next(c for c in self.couplings if ROTOR in (c.a, c.b))
 
     @property
-    def sensor_coupling(self) -> Coupling:
-        return next(c for c in self.couplings if c.name == self.sensor)
+    def sensor_coupling(self) -> Coupling | None:
+        """The coupling the torque sensor is on; None for the current estimate."""
+        return next((c for c in self.couplings if c.name == self.sensor), None)
 
     @property
     def domain(self) -> dict[str, str]:
@@ -196,7 +207,9 @@ class Topology(Actuator):
     @property
     def output_names(self) -> tuple[str, ...]:
         """The torque sensor with and without its damping term, the encoder angle, then every
-        body's velocity (the candidate port velocities)."""
+        body's velocity (the candidate port velocities). The names are the roles the loop reads
+        whatever the sensors are: with ``torque = "current"`` both torque outputs are the
+        estimate k_t N I_m, with ``encoder = "rotor"`` ``theta_encoder`` is theta_m / N."""
         return ("T_sensor", "T_sensor_spring", "theta_encoder") + tuple(
             f"dtheta_{b.name}" for b in self.bodies)
 
@@ -223,8 +236,10 @@ class Topology(Actuator):
 
     def describe(self) -> str:
         chain = ", ".join(f"{c.name}: {c.a}-{c.b}" for c in self.couplings)
-        return (f"bodies {list(self.body_names)}, couplings ({chain}), torque sensor on "
-                f"{self.sensor}, encoder on {self.encoder}, port on {self.port}")
+        torque = "torque from the motor current (k_t N I_m)" if self.sensor == CURRENT else \
+            f"torque sensor on {self.sensor}"
+        return (f"bodies {list(self.body_names)}, couplings ({chain}), {torque}, encoder on "
+                f"{self.encoder}, port on {self.port}")
 
 
 # The HyQ HAA joint of the paper (Fig. 5): rotor, harmonic drive hd, J_L1, leg spring p, J_L2.
@@ -314,14 +329,19 @@ def _check_structure(t: Topology) -> None:
                              f"{k}; allowed: body and coupling names whose parameter names are "
                              "distinct")
             owner[k] = sec
+    if CURRENT in cnames:
+        raise _error(f"{src} [couplings.{CURRENT}]: name {CURRENT!r} is not allowed for a coupling; "
+                     f"allowed: another name ([sensors] torque = {CURRENT!r} is the current estimate)")
     if not isinstance(t.torque_damping, bool):
         raise _error(f"{src} [sensors]: torque_damping = {t.torque_damping!r}; allowed: true or false")
-    if t.sensor not in cnames:
-        raise _error(f"{src} [sensors]: torque = {t.sensor!r} is not a coupling; allowed: {cnames}")
-    for key in ("encoder", "port"):
-        if getattr(t, key) not in names:
-            raise _error(f"{src} [sensors]: {key} = {getattr(t, key)!r} is not a body; "
-                         f"allowed: {names}")
+    if t.sensor not in cnames and t.sensor != CURRENT:
+        raise _error(f"{src} [sensors]: torque = {t.sensor!r} is not a coupling; allowed: {cnames} "
+                     f"or {CURRENT!r} (the estimate k_t N I_m from the motor current)")
+    if t.encoder not in names and t.encoder != ROTOR:
+        raise _error(f"{src} [sensors]: encoder = {t.encoder!r} is not a body; allowed: {names} "
+                     f"or {ROTOR!r} (a motor-side encoder: theta_m / N)")
+    if t.port not in names:
+        raise _error(f"{src} [sensors]: port = {t.port!r} is not a body; allowed: {names}")
 
 
 HYQ = _hyq()
@@ -446,11 +466,15 @@ def parse_actuator(data: Mapping, source: str = "<memory>") -> tuple[Topology, d
         couplings.append(Coupling(name, ends[0], ends[1]))
         values.update({f"{k}_{name}": v for k, v in vals.items()})
     sensors = _table(data, "sensors", source)
-    check_keys(sensors, SENSOR_KEYS, SENSOR_KEYS, f"{source} [sensors]")
+    # torque_damping is required with a torque sensor and optional (ignored) with the current
+    # estimate, which has no coupling damping term to include or leave out
+    current = sensors.get("torque") == CURRENT
+    required = tuple(k for k in SENSOR_KEYS if not (current and k == "torque_damping"))
+    check_keys(sensors, SENSOR_KEYS, required, f"{source} [sensors]")
     for k in ("torque", "encoder", "port"):
         if not isinstance(sensors[k], str):
             raise _error(f"{source} [sensors]: {k} = {sensors[k]!r}; allowed: a name (string)")
-    top = Topology(tuple(bodies), tuple(couplings), sensors["torque"], sensors["torque_damping"],
+    top = Topology(tuple(bodies), tuple(couplings), sensors["torque"], sensors.get("torque_damping", False),
                    sensors["encoder"], sensors["port"], source=source)
     return top, values, about
 

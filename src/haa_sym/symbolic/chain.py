@@ -25,14 +25,15 @@ from dataclasses import dataclass
 import sympy as sp
 from sympy.polys.matrices import DomainMatrix
 
-from haa_sym.model.actuator import ROTOR, Actuator, Topology
+from haa_sym.model.actuator import CURRENT, ROTOR, Actuator, Topology
 from haa_sym.symbolic.model import LinearActuatorModel, Parameter
 
 s = sp.Symbol("s")
 VC = sp.Symbol("VC_gain")
 
 __all__ = ["s", "VC", "ChainStateSpace", "symbols", "state_space", "actuator_model", "symbolic_model", "laplace_equations",
-           "torque_tf_fraction", "exact_vc_condition", "load_free_g_tvc", "vc_gain_exact",
+           "torque_tf_fraction", "exact_vc_condition", "exact_vc_gain", "load_free_g_tvc", "vc_gain_exact",
+           "sensor_outputs",
            "vc_gain_simplified"]
 
 
@@ -65,6 +66,25 @@ def coupling_torque(c, p: dict, th: dict, dth: dict, *, damping: bool = True):
     if damping:
         T += p[f"D_{c.name}"] * (_angle(c.a, dth, p) - _angle(c.b, dth, p))
     return T
+
+
+def sensor_outputs(top: Topology, p: dict, I_m, th: dict, dth: dict) -> list:
+    """The loop's role outputs ``[T_sensor, T_sensor_spring, theta_encoder]`` (docs/model.md,
+    "Actuator files", sensors table).
+
+    A torque sensor on a coupling measures its transmitted torque with and without the damping
+    term (Eq. 2); ``torque = "current"`` estimates the output torque from the motor current,
+    k_t N I_m (Nm at the output; both outputs, there is no damping term). The encoder reads a
+    body's angle, or with ``encoder = "rotor"`` the rotor angle referred to the output,
+    theta_m / N (rad).
+    """
+    if top.sensor == CURRENT:
+        T = T_spring = p["k_t"] * p["N"] * I_m
+    else:
+        sc = top.sensor_coupling
+        T = coupling_torque(sc, p, th, dth, damping=True)
+        T_spring = coupling_torque(sc, p, th, dth, damping=False)
+    return [T, T_spring, _angle(top.encoder, th, p)]
 
 
 def _net_torques(top: Topology, p: dict, th: dict, dth: dict) -> dict:
@@ -106,10 +126,7 @@ def state_space(top: Topology, p: dict | None = None) -> ChainStateSpace:
     f = sp.Matrix(xdot)
     A = f.jacobian(xv)
     B = f.jacobian(uv)
-    sc = top.sensor_coupling
-    y = sp.Matrix([coupling_torque(sc, p, th, dth, damping=True),
-                   coupling_torque(sc, p, th, dth, damping=False),
-                   th[top.encoder]] + [dth[b.name] for b in top.bodies])
+    y = sp.Matrix(sensor_outputs(top, p, x[0], th, dth) + [dth[b.name] for b in top.bodies])
     C = y.jacobian(xv)
     return ChainStateSpace(A=sp.simplify(A), B=sp.simplify(B), C=C, symbols=p,
                            states=top.state_names, inputs=top.input_names, outputs=top.output_names)
@@ -158,10 +175,7 @@ def laplace_equations(top: Topology, p: dict | None = None):
         if b.ground:
             rhs -= p[f"K_{b.name}"] * th[b.name]
         eqs.append(th[b.name] - rhs / Jx)
-    sc = top.sensor_coupling
-    outputs = [coupling_torque(sc, p, th, dth, damping=True),
-               coupling_torque(sc, p, th, dth, damping=False), th[top.encoder]]
-    outputs += [dth[b.name] for b in top.bodies]
+    outputs = sensor_outputs(top, p, I_m, th, dth) + [dth[b.name] for b in top.bodies]
     unknowns = (I_m, th_m) + tuple(th[b.name] for b in top.bodies)
     return p, unknowns, eqs, outputs
 
@@ -175,7 +189,7 @@ def torque_tf_fraction(top: Topology, p: dict | None = None, vc=VC):
     """
     p, unknowns, eqs, outputs = laplace_equations(top, p)
     V = sp.Symbol("V")
-    enc = unknowns[2 + top.body_names.index(top.encoder)]
+    enc = outputs[2]                                        # theta_X, or theta_m / N
     subs = {sp.Symbol("V_m"): V + vc * s * enc, sp.Symbol("T_fr"): 0, sp.Symbol("T_dist"): 0}
     sol, det, ring = cramer_solve([e.subs(subs) for e in eqs], unknowns, {V})   # sol times det
     # the measured torque is linear in the unknowns: substitute each by its Cramer numerator
@@ -225,30 +239,63 @@ def vc_gain_simplified(p: dict, a=1) -> sp.Expr:
 def exact_vc_condition(top: Topology) -> tuple[bool, str]:
     """Whether the generalised Eq. (3)-(5) applies, and why (not).
 
-    It needs the torque sensor on the gearbox and the encoder on the gearbox's output body: the
-    motor equation then reads V_m = N q1 T_c / (k_t (K + s D)) + q2 theta_1, and VC_gain s = q2
-    leaves T_c / V = k_t (K + s D) / (N q1), whatever follows the gearbox.
+    Three placements make the measured torque / V independent of every body after the gearbox
+    (:func:`load_free_g_tvc`, with the compensation :func:`exact_vc_gain`):
+
+    * the torque sensor on the gearbox and the encoder on the gearbox's output body: the motor
+      equation reads V_m = N q1 T_c / (k_t (K + s D)) + q2 theta_1, and VC_gain s = q2 (Eq. 5)
+      leaves T_c / V = k_t (K + s D) / (N q1);
+    * the torque sensor on the gearbox and a motor-side encoder (theta_m / N): Eq. (5) cancels
+      the rotor's own dynamics, (J_m s + B_m) s theta_m = k_t I_m - T_c / N, and the back-EMF,
+      so T_c / V = N k_t / (L s + R);
+    * the torque from the current (k_t N I_m) and a motor-side encoder: VC_gain = N k_w cancels
+      the back-EMF alone and k_t N I_m / V = N k_t / (L s + R).
     """
     g = top.gearbox
     out = g.b if g.a == ROTOR else g.a
+    if top.sensor == CURRENT:
+        if top.encoder == ROTOR:
+            return True, ("torque from the motor current (k_t N I_m), encoder on the rotor: "
+                          "VC_gain = N k_w cancels the back-EMF")
+        return False, (f"the torque is the current estimate but the encoder reads body "
+                       f"{top.encoder!r}, not the rotor: the compensation feeds back that body's "
+                       "velocity, not the back-EMF's")
     if top.sensor != g.name:
         return False, (f"the torque sensor is on coupling {top.sensor!r}, not on the gearbox "
                        f"{g.name!r}: the measured torque depends on the bodies between them")
+    if top.encoder == ROTOR:
+        return True, (f"torque sensor on the gearbox {g.name!r}, encoder on the rotor: Eq. (5) "
+                      "cancels the rotor's dynamics and the back-EMF")
     if top.encoder != out:
         return False, (f"the encoder reads body {top.encoder!r}, not the gearbox's output body "
                        f"{out!r}: q2 theta_{out} is not what the compensation feeds back")
     return True, f"torque sensor on the gearbox {g.name!r}, encoder on its output body {out!r}"
 
 
+def exact_vc_gain(top: Topology, p: dict) -> sp.Expr:
+    """The compensation gain of :func:`exact_vc_condition`: N k_w for the current estimate (the
+    back-EMF alone), else Eq. (5) (:func:`vc_gain_exact`)."""
+    return p["N"] * p["k_w"] if top.sensor == CURRENT else vc_gain_exact(p)
+
+
 def load_free_g_tvc(top: Topology, p: dict) -> sp.Expr:
-    """The generalised Eq. (3) with Eq. (5): k_t (K + s D) / (N q1), with
-    q1 = (L s + R)(J_m s^2 + B_m s + (K + s D)/N^2) + k_t k_w s of the gearbox's K, D; times
-    K/(K + s D) when the sensor reads the spring alone; negated when the gearbox is written
-    [body, "rotor"] (its torque is then counted the other way)."""
+    """The generalised Eq. (3) with the compensation of :func:`exact_vc_gain`, where
+    :func:`exact_vc_condition` applies.
+
+    Encoder on the gearbox's output body: k_t (K + s D) / (N q1), with
+    q1 = (L s + R)(J_m s^2 + B_m s + (K + s D)/N^2) + k_t k_w s of the gearbox's K, D. Encoder on
+    the rotor (or the current estimate): N k_t / (L s + R). Times K/(K + s D) when a gearbox
+    sensor reads the spring alone; negated when the gearbox is written [body, "rotor"] (its
+    torque is then counted the other way)."""
+    if top.sensor == CURRENT:
+        return p["N"] * p["k_t"] / (p["L"] * s + p["R"])
     g = top.gearbox
     K, D = p[f"K_{g.name}"], p[f"D_{g.name}"]
+    sign = 1 if g.a == ROTOR else -1
+    spring = 1 if top.torque_damping else K / (K + s * D)
+    if top.encoder == ROTOR:
+        return sign * p["N"] * p["k_t"] / (p["L"] * s + p["R"]) * spring
     q1 = (p["L"] * s + p["R"]) * (p["J_m"] * s**2 + p["B_m"] * s + (K + s * D) / p["N"]**2) \
         + p["k_t"] * p["k_w"] * s
-    sign = 1 if g.a == ROTOR else -1
     meas = (K + s * D) if top.torque_damping else K
     return sign * p["k_t"] * meas / (p["N"] * q1)
