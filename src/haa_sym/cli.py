@@ -10,8 +10,8 @@
   haa-sym compile FILE                        compile an actuator file's plant ahead of time
 
 Every analysis command takes ``--params FILE`` (default: the bundled HyQ parameters),
-``--configuration NAME`` (e.g. retracted), ``--set KEY=VALUE`` for any key of the parameter file
-(``--set beta=2 --set N_av=10 --set J_L2=0.129 --set Ts=0.006``) and ``--option KEY=VALUE`` for
+``--configuration NAME`` (e.g. retracted), ``--set KEY=VALUE`` for any key of the parameter file,
+in SI units (``--set beta=2 --set N_av=10 --set J_L2=0.129 --set Ts=0.006``) and ``--option KEY=VALUE`` for
 the modelling options of ``haa_sym.LoopOptions`` (``--option port=dtheta_L1 --option delay=1``).
 Bad input exits with status 2 and a message naming the field; nothing partial is written.
 Results go to stdout; progress bars (on a terminal, for work longer than 2 s) to stderr;
@@ -123,7 +123,9 @@ def _common(p: argparse.ArgumentParser) -> None:
     p.add_argument("--params", help="parameter file (TOML); default: bundled HyQ HAA")
     p.add_argument("--configuration", help="leg configuration of the parameter file, e.g. retracted")
     p.add_argument("--set", action="append", default=[], metavar="KEY=VALUE",
-                   help="override any parameter key (repeatable); " + filters.help_text())
+                   help="override any parameter key (repeatable), the value in SI units whatever unit the "
+                        "file gives (kg m^2, Nm/rad, Nms/rad, H, Ohm, Nm/A, V s/rad, Ts in s, f_c in Hz; "
+                        "docs/model.md, \"Units\"); " + filters.help_text())
     p.add_argument("--option", action="append", default=[], metavar="KEY=VALUE",
                    help="modelling option of haa_sym.LoopOptions (repeatable)")
 

@@ -36,6 +36,7 @@ from haa_sym.model.actuator import (ACTUATOR_SECTIONS, HYQ, Actuator, Topology, 
 from haa_sym.model import filters
 from haa_sym.model.filters import PARAMETERS as FILTER_PARAMETERS
 from haa_sym.model.resources import data_dir
+from haa_sym.model.units import CONTROLLER_UNITS
 
 __all__ = [
     "ParameterError",
@@ -471,7 +472,8 @@ def parse_params(data: Mapping[str, object], source: str = "<memory>") -> Params
     if not isinstance(data.get("controller"), Mapping):
         raise ParameterError(f"{source}: missing table [controller]")
     refs = about["references"]
-    controller = _validated(Controller, entry_values(data["controller"], f"{source} [controller]", refs),
+    controller = _validated(Controller, entry_values(data["controller"], f"{source} [controller]", refs,
+                                                     {**CONTROLLER_UNITS, "velocity_filter": None}),
                             _CONTROLLER_DOMAIN, f"{source} [controller]", optional=_CONTROLLER_OPTIONAL)
     raw_configs = data.get("configurations", {})
     if not isinstance(raw_configs, Mapping):
@@ -481,7 +483,7 @@ def parse_params(data: Mapping[str, object], source: str = "<memory>") -> Params
         where = f"{source} [configurations.{name}]"
         if not isinstance(overrides, Mapping):
             raise ParameterError(f"{where}: must be a table of plant keys")
-        configs[name] = entry_values(overrides, where, refs)
+        configs[name] = entry_values(overrides, where, refs, topology.units)
     return Params(plant=plant, controller=controller, configurations=configs, source=source, about=about)
 
 
