@@ -33,7 +33,7 @@ from haa_sym.analysis.contact import contact_intervals
 from haa_sym.analysis.margins import margins
 from haa_sym.analysis.passivity import bands_beyond, corrected_phase, passivity
 from haa_sym.analysis.regions import region_map
-from haa_sym.analysis.robust import robust_region
+from haa_sym.analysis.robust import leg_text, leg_values, robust_region
 from haa_sym.analysis.torque import STEP_CONVENTION, describe_step, step_response, torque_bandwidth
 from haa_sym.check.verify import main as verify_main
 from haa_sym.compiled.generated import evaluators
@@ -45,7 +45,7 @@ from haa_sym.io.budget import check_memory, sweep_bytes
 from haa_sym.io.formats import save_json, save_npz
 from haa_sym.io.gridspec import grid
 from haa_sym.io.outputs import Transaction, check_file, csv_text
-from haa_sym.io.progress import set_progress
+from haa_sym.io.progress import message, set_progress
 from haa_sym.loop import ClosedLoop, LoopOptions
 from haa_sym.model import filters
 from haa_sym.model.params import CONTROLLER_KEYS, STRING_KEYS, gain_array, load_params
@@ -199,6 +199,16 @@ def _leg(args, params):
     return (a.strip(), b.strip())
 
 
+def _say_leg(params, leg, leg_mode) -> None:
+    """Before a leg-range analysis: which configurations and values it analyses (a progress
+    message), and a warning, shown even with --quiet, when the parameters' own values (a file's
+    body tables, --set) lie outside the range, which replaces them."""
+    line, warning = leg_text(leg_values(params, leg, leg_mode))
+    message(line)
+    if warning:
+        print(f"haa-sym: warning: {warning}", file=sys.stderr)
+
+
 def _requirements(args):
     return tuple(r.strip() for r in args.require.split(",") if r.strip())
 
@@ -230,6 +240,7 @@ def _cmd_regions(args) -> int:
 
 
 def _robust_regions(args, loop, out, plot, P, D) -> int:
+    _say_leg(loop.params, _leg(args, loop.params), args.leg_mode)
     r = robust_region(loop, P, D, requirements=_requirements(args), leg=_leg(args, loop.params),
                       leg_mode=args.leg_mode)
     meta = {**r.meta, "n_configurations": r.n_configurations, "converged": r.converged, "history": r.history,
@@ -314,6 +325,7 @@ def _cmd_schedule(args) -> int:
     P, D = grid(args.P_gain, "--P-gain"), grid(args.D_gain, "--D-gain")
     beta_range = _range(args.beta_range, "--beta-range", "the torque-gain scale beta, Eq. 7")
     alphas = None if args.alpha_values is None else grid(args.alpha_values, "--alpha-values")
+    _say_leg(loop.params, _leg(args, loop.params), args.leg_mode)
     s = schedule(loop, P, D, beta_range=beta_range, beta_tol=args.beta_tol, alpha_values=alphas,
                  requirements=_requirements(args), leg=_leg(args, loop.params), leg_mode=args.leg_mode,
                  scheduler=args.scheduler)
