@@ -25,8 +25,10 @@ LAYERS = (
 )
 # what a function may import lazily: dependencies that are heavy to import and needed by few
 # calls, the sympy layer (the numeric runtime never imports sympy) and the plotting module (it
-# imports matplotlib: a command that draws nothing does not pay for it)
-LAZY_ALLOWED = ("sympy", "dask", "distributed", "control", "matplotlib", "haa_sym.symbolic", "haa_sym.io.plots")
+# imports matplotlib: a command that draws nothing does not pay for it); pint (0.75 s to import
+# and build its registry) only for a file written in units other than SI (haa_sym.model.units)
+LAZY_ALLOWED = ("sympy", "dask", "distributed", "control", "matplotlib", "pint", "haa_sym.symbolic",
+                "haa_sym.io.plots")
 
 
 def _modules():

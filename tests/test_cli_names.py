@@ -6,7 +6,7 @@ from haa_sym.cli import main
 from haa_sym.errors import ParameterError
 from haa_sym.model.params import ALIASES, actuator_path, builtin_actuators, bundled_actuators
 
-NAMES = ["harmonic_drive", "hyq_haa", "sea"]
+NAMES = ["harmonic_drive", "hyq_haa", "qdd_leg", "sea"]
 
 
 def test_the_bundled_names_are_the_bundled_files():

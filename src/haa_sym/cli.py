@@ -25,7 +25,8 @@ value of the other (contact: one point).
 
 Every analysis command takes ``--params NAME|FILE`` (a bundled actuator, ``haa-sym actuators``,
 or a TOML file; default hyq_haa), ``--configuration NAME`` (e.g. retracted), ``--set KEY=VALUE``
-for any key of the parameter file (``--set beta=2 --set N_av=10 --set J_L2=0.129 --set
+for any key of the parameter file,
+in SI units (``--set beta=2 --set N_av=10 --set J_L2=0.129 --set
 Ts=0.006``) and ``--option KEY=VALUE`` for the modelling options of ``haa_sym.LoopOptions``
 (``--option port=dtheta_L1 --option delay=1``); ``haa-sym options`` lists both with units,
 defaults and allowed values. Bad input exits with status 2 and a message naming the field;
@@ -50,7 +51,7 @@ from haa_sym.analysis.contact import contact_intervals
 from haa_sym.analysis.margins import margins
 from haa_sym.analysis.passivity import bands_beyond, corrected_phase, passivity
 from haa_sym.analysis.regions import region_map
-from haa_sym.analysis.robust import robust_region
+from haa_sym.analysis.robust import leg_text, leg_values, robust_region
 from haa_sym.analysis.torque import STEP_CONVENTION, describe_step, step_response, torque_bandwidth
 from haa_sym.check.verify import main as verify_main
 from haa_sym.compiled.generated import evaluators
@@ -61,7 +62,7 @@ from haa_sym.errors import CompilerError, ParameterError, StaleGeneratedCode
 from haa_sym.io.formats import save_json, save_npz
 from haa_sym.io.gridspec import GRID_SYNTAX, grid
 from haa_sym.io.outputs import Transaction, check_file, csv_text
-from haa_sym.io.progress import set_progress
+from haa_sym.io.progress import message, set_progress
 from haa_sym.loop import ClosedLoop, LoopOptions
 from haa_sym.loop.options import ALLOWED as OPTION_ALLOWED
 from haa_sym.model import filters
@@ -145,8 +146,10 @@ def _common(p: argparse.ArgumentParser) -> None:
     p.add_argument("--params", metavar="NAME|FILE", help=PARAMS_HELP)
     p.add_argument("--configuration", help="leg configuration of the parameter file, e.g. retracted")
     p.add_argument("--set", action="append", default=[], metavar="KEY=VALUE",
-                   help="override any key of the parameter file, in its unit (repeatable; `haa-sym options "
-                        "--params NAME` lists the keys, units and allowed values); " + filters.help_text())
+                   help="override any key of the parameter file (repeatable), the value in SI units whatever "
+                        "unit the file gives (kg m^2, Nm/rad, Nms/rad, H, Ohm, Nm/A, V s/rad, Ts in s, f_c in Hz; "
+                        "docs/model.md, \"Units\"; `haa-sym options --params NAME` lists the keys, units and "
+                        "allowed values); " + filters.help_text())
     p.add_argument("--option", action="append", default=[], metavar="KEY=VALUE",
                    help="modelling option of haa_sym.LoopOptions (repeatable): " + ", ".join(LoopOptions.field_names())
                         + " (`haa-sym options` lists types, defaults and allowed values)")
@@ -260,6 +263,16 @@ def _leg(args, params):
     return (a.strip(), b.strip())
 
 
+def _say_leg(params, leg, leg_mode) -> None:
+    """Before a leg-range analysis: which configurations and values it analyses (a progress
+    message), and a warning, shown even with --quiet, when the parameters' own values (a file's
+    body tables, --set) lie outside the range, which replaces them."""
+    line, warning = leg_text(leg_values(params, leg, leg_mode))
+    message(line)
+    if warning:
+        print(f"haa-sym: warning: {warning}", file=sys.stderr)
+
+
 def _requirements(args):
     return tuple(r.strip() for r in args.require.split(",") if r.strip())
 
@@ -291,6 +304,7 @@ def _cmd_regions(args) -> int:
 
 
 def _robust_regions(args, loop, out, plot, P, D) -> int:
+    _say_leg(loop.params, _leg(args, loop.params), args.leg_mode)
     r = robust_region(loop, P, D, requirements=_requirements(args), leg=_leg(args, loop.params),
                       leg_mode=args.leg_mode)
     meta = {**r.meta, "n_configurations": r.n_configurations, "converged": r.converged, "history": r.history,
@@ -377,6 +391,7 @@ def _cmd_schedule(args) -> int:
     P, D = _axis(args, "P_gain"), _axis(args, "D_gain")
     beta_range = _range(args.beta_range, "--beta-range", "the torque-gain scale beta, Eq. 7")
     alphas = None if args.alpha_values is None else grid(args.alpha_values, "--alpha-values")
+    _say_leg(loop.params, _leg(args, loop.params), args.leg_mode)
     s = schedule(loop, P, D, beta_range=beta_range, beta_tol=args.beta_tol, alpha_values=alphas,
                  requirements=_requirements(args), leg=_leg(args, loop.params), leg_mode=args.leg_mode,
                  scheduler=args.scheduler)

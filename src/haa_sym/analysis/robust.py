@@ -32,7 +32,7 @@ from haa_sym.loop import ClosedLoop, loop_first
 from haa_sym.errors import ParameterError
 from haa_sym.model.params import Params, gain_array
 
-__all__ = ["LEG_MODES", "REQUIREMENTS", "meets", "leg_ends", "leg_configurations", "feasible_map",
+__all__ = ["LEG_MODES", "REQUIREMENTS", "meets", "leg_ends", "leg_values", "leg_text", "leg_configurations", "feasible_map",
            "RobustRegion", "robust_region"]
 
 LEG_MODES = ("segment", "box")
@@ -68,6 +68,50 @@ def leg_ends(params: Params, leg: tuple[str, str] | None = None) -> tuple[str, s
 
 def _end_values(params: Params, name: str) -> dict:
     return {} if name == NOMINAL else dict(params.configurations[name])
+
+
+def leg_values(params: Params, leg=None, leg_mode: str = "segment") -> dict:
+    """What a leg range analyses, as plain data (``meta["leg_values"]``, messages, plot titles).
+
+    The configurations of the range replace the parameters' own values of the keys they set: a
+    value edited in the file's body tables or by ``--set`` is not analysed unless it is one of
+    the ends (or "nominal" is). This says so.
+
+    Returns
+    -------
+    dict
+        ``leg`` (the two end names), ``leg_mode``, ``ends`` (end name -> {key: value}, SI units),
+        ``own`` ({key: the parameters' own value}, which the range replaces) and ``outside``
+        ({key: own value} of the keys whose own value lies outside the interval the ends span;
+        empty when every own value is analysed or lies between the ends, key by key).
+    """
+    a, b = leg_ends(params, leg)
+    va, vb = _end_values(params, a), _end_values(params, b)
+    keys = sorted(set(va) | set(vb))
+    own = {k: float(getattr(params.plant, k)) for k in keys}
+    lo = {k: float(va.get(k, own[k])) for k in keys}
+    hi = {k: float(vb.get(k, own[k])) for k in keys}
+    outside = {k: own[k] for k in keys if not min(lo[k], hi[k]) <= own[k] <= max(lo[k], hi[k])}
+    return {"leg": [a, b], "leg_mode": leg_mode, "ends": {a: lo, b: hi}, "own": own, "outside": outside}
+
+
+def _values_text(values: dict) -> str:
+    return ", ".join(f"{k} = {v:.6g}" for k, v in values.items())
+
+
+def leg_text(lv: dict) -> tuple[str, str | None]:
+    """One line saying which configurations and values a leg range analyses, and a warning line
+    (or None) when the parameters' own values lie outside it."""
+    (a, va), (b, vb) = lv["ends"].items()
+    line = (f"leg range {a} ({_values_text(va)}) .. {b} ({_values_text(vb)}), {lv['leg_mode']}; it replaces "
+            f"the parameters' own {_values_text(lv['own'])}")
+    if not lv["outside"]:
+        return line, None
+    spans = ", ".join(f"{k} = {v:.6g} (range {min(va[k], vb[k]):.6g}..{max(va[k], vb[k]):.6g})"
+                      for k, v in lv["outside"].items())
+    return line, (f"the parameters' own {spans} lie outside the leg range analysed, so they are not "
+                  f"analysed; to include them, give the range with --leg (\"nominal\" names the "
+                  f"parameters' own values, e.g. --leg nominal:{b}) or edit [configurations]")
 
 
 def leg_configurations(params: Params, n: int, *, leg=None, leg_mode: str = "segment") -> list[dict]:
@@ -207,4 +251,5 @@ def robust_region(loop, P_gain, D_gain, *, beta: float | None = None, alpha: flo
             break
     return RobustRegion(P, D, current, len(configs), n, converged, history, configs,
                         loop.provenance(leg=list(leg_ends(params, leg)), leg_mode=leg_mode,
+                                        leg_values=leg_values(params, leg, leg_mode),
                                         requirements=list(req), beta=beta, alpha=alpha))

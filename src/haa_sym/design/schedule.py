@@ -68,7 +68,7 @@ import numpy as np
 from haa_sym._version import __version__
 from haa_sym.analysis.decide import decide_points
 from haa_sym.analysis.robust import (MAX_LEG_POINTS, _check_requirements, feasible_map, leg_configurations, leg_ends,
-                                     meets)
+                                     leg_values, meets)
 from haa_sym.analysis.torque import torque_bandwidth
 from haa_sym.design.schedule_table import ScheduleTable
 from haa_sym.errors import ParameterError
@@ -502,7 +502,8 @@ def schedule(loop, P_gain=None, D_gain=None, *, beta_range=(0.1, 8.0), beta_tol:
             "source": str(params.source), "requirements": list(req), "beta_range": [float(fine[0]), float(fine[-1])],
             "beta_tol": float(beta_tol), "beta_grid": int(fine.size), "coarse_values": int(coarse.size),
             "alpha_scheduled": alpha_values is not None, "alpha_values": alphas.tolist(),
-            "leg": list(ends), "leg_mode": leg_mode, "haa_sym": __version__,
+            "leg": list(ends), "leg_mode": leg_mode, "leg_values": leg_values(params, leg, leg_mode),
+            "haa_sym": __version__,
             "scheduler": "dask threads (in-process)" if scheduler is None else "dask.distributed",
             "torque_bandwidth_beta_1_rad_s": bw_1, "lowered_by_point_check": lowered,
             "cell_subdivisions": int(cell_subdivisions), "cells_failed_check": n_failed,

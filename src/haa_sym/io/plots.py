@@ -304,9 +304,23 @@ def plot_schedule(s, title: str = ""):
     ax.set_title("bandwidth gained by the schedule", fontsize=10)
     for ax in axes:
         _gain_axes(ax, logP)
-    if title:
-        fig.suptitle(title, fontsize=11)
+    # the values analysed are always said: the range replaces values edited in the file
+    head = "\n".join(t for t in (title, _leg_line(s.meta)) if t)
+    if head:
+        fig.suptitle(head, fontsize=11 if not _leg_line(s.meta) else 9)
     return fig
+
+
+def _leg_line(meta: dict) -> str:
+    """The leg range's ends and their values (``meta["leg_values"]``), two lines for a title; ""
+    without."""
+    lv = meta.get("leg_values")
+    if not lv:
+        return ""
+    ends = " .. ".join(f"{name} (" + ", ".join(f"{k} {v:.4g}" for k, v in vals.items()) + ")"
+                       for name, vals in lv["ends"].items())
+    own = ", ".join(f"{k} {v:.4g}" for k, v in lv["own"].items())
+    return f"{ends}\nanalysed instead of the parameters' {own}" + (" (outside the range)" if lv["outside"] else "")
 
 
 def plot_robust(r, title: str = ""):
@@ -318,7 +332,8 @@ def plot_robust(r, title: str = ""):
                   cmap=ListedColormap(["#ffffff", "#3a3a3a"]), vmin=0, vmax=1, shading="flat")
     _gain_axes(ax, logP)
     leg = r.meta["leg"]
-    ax.set_title(title or f"{'+'.join(r.meta['requirements'])} for every leg configuration\n"
-                 f"{leg[0]}..{leg[1]} ({r.meta['leg_mode']}, {r.n_configurations} configurations; dark: fails)",
-                 fontsize=9)
+    # the values analysed are always said: the range replaces values edited in the file
+    ax.set_title((title or f"{'+'.join(r.meta['requirements'])} for every leg configuration\n"
+                  f"{leg[0]}..{leg[1]} ({r.meta['leg_mode']}, {r.n_configurations} configurations; dark: fails)")
+                 + (f"\n{_leg_line(r.meta)}" if _leg_line(r.meta) else ""), fontsize=7)
     return fig

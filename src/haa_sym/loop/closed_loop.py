@@ -320,6 +320,11 @@ class ClosedLoop:
         if self.basis is None:
             raise ValueError("this ClosedLoop was built with basis=False: no stability evaluator")
         pts, shape = self._points(P_gain, D_gain, beta, alpha)
+        if pts.shape[1] == 0:
+            # no points: an empty result of their shape (the generated driver cannot be called
+            # with zero columns)
+            none = np.zeros(shape, bool)
+            return StabilityResult(none, np.full(shape, np.nan), none.copy(), np.zeros(shape, int), none.copy())
         ev = evaluators(self.backend)
         n_unstable, certified = (v.ravel() for v in ev.call_columns(
             f"haa_decide{self.capacity}", [self.basis, self.const, pts], 2))

@@ -30,6 +30,7 @@ from dataclasses import dataclass, field
 from typing import Mapping
 
 from haa_sym.errors import ParameterError
+from haa_sym.model.units import to_si
 
 __all__ = ["Actuator", "Body", "Coupling", "Topology", "HYQ", "MOTOR_DOMAIN", "ROTOR", "CURRENT", "ACTUATOR_SECTIONS",
            "parse_actuator", "legacy_plant"]
@@ -352,8 +353,11 @@ def _sources_allowed(references: Mapping[str, str]) -> list[str]:
     return list(SOURCE_LETTERS) + sorted(references)
 
 
-def _entry(value: object, where: str, key: str, references: Mapping[str, str]) -> object:
-    """Unwrap a ``{value, unit, source, description}`` entry (a bare number is accepted too)."""
+def _entry(value: object, where: str, key: str, references: Mapping[str, str],
+           units: Mapping[str, str | None] | None = None) -> object:
+    """Unwrap a ``{value, unit, source, description}`` entry (a bare number is accepted too), its
+    value converted from ``unit`` to the key's SI unit ``units[key]`` (:func:`haa_sym.model.units.to_si`;
+    a bare number or no ``unit`` is SI; a key not in ``units`` is left for the key check)."""
     if not isinstance(value, Mapping):
         return value
     extra = sorted(set(value) - set(_ENTRY_FIELDS))
@@ -369,14 +373,18 @@ def _entry(value: object, where: str, key: str, references: Mapping[str, str]) -
     for f in ("unit", "description"):
         if f in value and not isinstance(value[f], str):
             raise _error(f"{where}: {key}: {f} = {value[f]!r}; allowed: a string")
+    if units is not None and key in units:
+        return to_si(value["value"], value.get("unit"), units[key], where, key)
     return value["value"]
 
 
 def entry_values(table: Mapping[str, object], where: str,
-                 references: Mapping[str, str] | None = None) -> dict[str, object]:
-    """The values of a table of entries (``where`` names file and section for messages)."""
+                 references: Mapping[str, str] | None = None,
+                 units: Mapping[str, str | None] | None = None) -> dict[str, object]:
+    """The values of a table of entries (``where`` names file and section for messages), in SI:
+    ``units`` maps a key to its SI unit (None: a name, no unit), see :func:`_entry`."""
     refs = references or {}
-    return {k: _entry(v, where, k, refs) for k, v in table.items()}
+    return {k: _entry(v, where, k, refs, units) for k, v in table.items()}
 
 
 def _table(data: Mapping, key: str, where: str) -> Mapping:
@@ -448,11 +456,11 @@ def parse_actuator(data: Mapping, source: str = "<memory>") -> tuple[Topology, d
     motor = _table(data, "motor", source)
     where = f"{source} [motor]"
     check_keys(motor, tuple(MOTOR_DOMAIN), tuple(MOTOR_DOMAIN), where)
-    values = {k: v for k, v in entry_values(motor, where, refs).items()}
+    values = {k: v for k, v in entry_values(motor, where, refs, MOTOR_UNITS).items()}
     bodies = []
     for name, tab, w in _named_tables(data, "bodies", source, "J, B and optional K"):
         check_keys(tab, tuple(BODY_DOMAIN), ("J", "B"), w)
-        vals = entry_values(tab, w, refs)
+        vals = entry_values(tab, w, refs, BODY_UNITS)
         bodies.append(Body(name, ground="K" in tab))
         values.update({f"{k}_{name}": v for k, v in vals.items()})
     couplings = []
@@ -462,7 +470,7 @@ def parse_actuator(data: Mapping, source: str = "<memory>") -> tuple[Topology, d
         if not (isinstance(ends, list) and len(ends) == 2 and all(isinstance(e, str) for e in ends)):
             raise _error(f"{w}: between = {ends!r}; allowed: two body names [a, b] ('rotor' for "
                          "the gearbox's input)")
-        vals = entry_values({k: tab[k] for k in ("K", "D")}, w, refs)
+        vals = entry_values({k: tab[k] for k in ("K", "D")}, w, refs, COUPLING_UNITS)
         couplings.append(Coupling(name, ends[0], ends[1]))
         values.update({f"{k}_{name}": v for k, v in vals.items()})
     sensors = _table(data, "sensors", source)
@@ -483,7 +491,7 @@ def legacy_plant(data: Mapping, source: str, references: Mapping[str, str] | Non
     """The old flat ``[plant]`` table (every HyQ key), read as the HyQ topology."""
     plant = _table(data, "plant", source)
     where = f"{source} [plant]"
-    values = entry_values(plant, where, references)
+    values = entry_values(plant, where, references, HYQ.units)
     top = Topology(HYQ.bodies, HYQ.couplings, HYQ.sensor, HYQ.torque_damping, HYQ.encoder,
                    HYQ.port, source=source)
     check_keys(values, top.parameter_keys, top.parameter_keys, where)

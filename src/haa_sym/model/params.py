@@ -23,6 +23,7 @@ Example
 from __future__ import annotations
 
 import math
+import os
 import tomllib
 from dataclasses import dataclass, field, replace
 from pathlib import Path
@@ -36,6 +37,7 @@ from haa_sym.model.actuator import (ACTUATOR_SECTIONS, HYQ, Actuator, Topology, 
 from haa_sym.model import filters
 from haa_sym.model.filters import PARAMETERS as FILTER_PARAMETERS
 from haa_sym.model.resources import data_dir
+from haa_sym.model.units import CONTROLLER_UNITS
 
 __all__ = [
     "ParameterError",
@@ -76,6 +78,11 @@ _DOMAIN_TEXT = {
     ">=0": "a finite number >= 0",
     "int>=1": "an integer >= 1",
 }
+# The largest integer a count (N_av) may take. The averaging filter is built as an exact
+# polynomial of N_av + 1 coefficients before the loop checks its order against the generated
+# capacity (N_av <= 56 with the bundled code), so an absurd N_av would first fill the memory;
+# 10000 samples (10 s at 1 kHz) is far above any generated capacity and costs milliseconds.
+INT_MAX = 10_000
 # Gain points of every analysis: the impedance gains of Eq. (8) and the torque-loop gains, whose
 # rule is the controller file's (beta = 0 switches the torque PI off; negative gains are positive
 # feedback, which the analysis, the paper and the generated sign conventions do not cover).
@@ -416,8 +423,17 @@ def _check_value(key: str, value: object, domain: str, where: str | None = None)
             raise ParameterError(f"{prefix}{key} = {value!r}; allowed: {filters.allowed_text()}")
         return value
     allowed = _DOMAIN_TEXT[domain]
+    if value is None:
+        raise ParameterError(f"{prefix}{key} = None is missing; allowed: {allowed}")
     if isinstance(value, bool) or not isinstance(value, (int, float)):
         raise ParameterError(f"{prefix}{key} = {value!r} is not a number; allowed: {allowed}")
+    if domain == "int>=1" and isinstance(value, int):
+        # a Python int is exact at any size: a huge one is out of range, not "not finite" or
+        # "not an integer" (its float would be)
+        if not 1 <= value <= INT_MAX:
+            raise ParameterError(f"{prefix}{key} = {value!r} is out of range; allowed: {allowed}"
+                                 + (f" and <= {INT_MAX}" if value > INT_MAX else ""))
+        return value
     try:
         finite = math.isfinite(value)
     except OverflowError:                      # an integer beyond the float range (TOML allows it)
@@ -425,10 +441,11 @@ def _check_value(key: str, value: object, domain: str, where: str | None = None)
     if not finite:
         raise ParameterError(f"{prefix}{key} = {value!r} is not finite; allowed: {allowed}")
     if domain == "int>=1":
-        if float(value) != int(value):
+        if not float(value).is_integer():
             raise ParameterError(f"{prefix}{key} = {value!r} is not an integer; allowed: {allowed}")
-        if value < 1:
-            raise ParameterError(f"{prefix}{key} = {value!r} is out of range; allowed: {allowed}")
+        if not 1 <= value <= INT_MAX:
+            raise ParameterError(f"{prefix}{key} = {value!r} is out of range; allowed: {allowed}"
+                                 + (f" and <= {INT_MAX}" if value > INT_MAX else ""))
         return int(value)
     if (domain == ">0" and not value > 0) or (domain == ">=0" and not value >= 0):
         raise ParameterError(f"{prefix}{key} = {value!r} is out of range; allowed: {allowed}")
@@ -476,7 +493,22 @@ def gain_array(name: str, value, label: str | None = None) -> np.ndarray:
     domain = _GAIN_DOMAIN.get(name)
     allowed = (_DOMAIN_TEXT[domain] + _GAIN_UNITS[name]) if domain else "finite numbers"
     try:
-        arr = np.asarray(value, dtype=float)
+        raw = np.asarray(value)
+    except (TypeError, ValueError):                 # e.g. ragged nested lists
+        raise ParameterError(f"{label} = {value!r} is not a number; allowed: {allowed}") from None
+    items = raw.ravel().tolist() if raw.dtype == object else []
+    if any(v is None for v in items):
+        # a float conversion would turn None into nan and report "nan is not finite"
+        where = f"{label} = None" if raw.ndim == 0 else f"{label} contains None, which"
+        raise ParameterError(f"{where} is missing; allowed: {allowed}")
+    if np.iscomplexobj(raw) or any(isinstance(v, complex) for v in items):
+        # numpy would drop the imaginary part with a ComplexWarning; a gain is real
+        cands = [complex(v) for v in raw.ravel().tolist() if isinstance(v, complex)]
+        first = next((c for c in cands if c.imag), cands[0])
+        where = f"{label} = {first!r}" if raw.ndim == 0 else f"{label} contains {first!r}, which"
+        raise ParameterError(f"{where} is complex; allowed: real values, {allowed}")
+    try:
+        arr = np.asarray(raw, dtype=float)
     except (TypeError, ValueError):
         raise ParameterError(f"{label} = {value!r} is not a number; allowed: {allowed}") from None
     with np.errstate(invalid="ignore"):
@@ -533,7 +565,8 @@ def parse_params(data: Mapping[str, object], source: str = "<memory>") -> Params
     if not isinstance(data.get("controller"), Mapping):
         raise ParameterError(f"{source}: missing table [controller]")
     refs = about["references"]
-    controller = _validated(Controller, entry_values(data["controller"], f"{source} [controller]", refs),
+    controller = _validated(Controller, entry_values(data["controller"], f"{source} [controller]", refs,
+                                                     {**CONTROLLER_UNITS, "velocity_filter": None}),
                             _CONTROLLER_DOMAIN, f"{source} [controller]", optional=_CONTROLLER_OPTIONAL)
     raw_configs = data.get("configurations", {})
     if not isinstance(raw_configs, Mapping):
@@ -543,7 +576,7 @@ def parse_params(data: Mapping[str, object], source: str = "<memory>") -> Params
         where = f"{source} [configurations.{name}]"
         if not isinstance(overrides, Mapping):
             raise ParameterError(f"{where}: must be a table of plant keys")
-        configs[name] = entry_values(overrides, where, refs)
+        configs[name] = entry_values(overrides, where, refs, topology.units)
     return Params(plant=plant, controller=controller, configurations=configs, source=source, about=about)
 
 
@@ -552,10 +585,10 @@ def load_params(path: str | Path | None = None) -> Params:
 
     Parameters
     ----------
-    path : str or Path, optional
+    path : str, os.PathLike or None
         TOML file, or the name of a bundled actuator (``"hyq_haa"`` or ``"hyq"``, ``"sea"``,
-        ``"harmonic_drive"``; :func:`actuator_path`: an existing file wins); default the bundled
-        ``model/hyq_haa.toml``.
+        ``"harmonic_drive"``, ``"qdd_leg"``; :func:`actuator_path`: an existing file wins);
+        default the bundled ``model/hyq_haa.toml``. Anything else is a :class:`ParameterError`.
 
     Returns
     -------
@@ -566,6 +599,10 @@ def load_params(path: str | Path | None = None) -> Params:
     ParameterError
         Naming the file, the key, the offending value and what is allowed.
     """
+    if path is not None and not isinstance(path, (str, os.PathLike)):
+        raise ParameterError(f"load_params: path = {path!r} ({type(path).__name__}); allowed: a file path "
+                             "(str or os.PathLike), a bundled actuator's name or None (the bundled "
+                             "model/hyq_haa.toml)")
     p = actuator_path(path)
     try:
         with open(p, "rb") as fh:
