@@ -46,7 +46,7 @@ def test_unknown_name_exits_2_listing_the_names(argv, capsys):
     err = capsys.readouterr().err
     assert err.count("\n") == 1 and "Traceback" not in err
     assert "'seaa': no such parameter file, nor a bundled actuator" in err
-    assert "harmonic_drive, hyq_haa, sea, hyq (= hyq_haa)" in err
+    assert "harmonic_drive, hyq_haa, qdd_leg, sea, hyq (= hyq_haa)" in err
 
 
 def test_unknown_name_in_the_api_names_the_value():

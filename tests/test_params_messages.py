@@ -41,7 +41,8 @@ def test_load_params_of_a_non_path(path):
     with pytest.raises(ParameterError) as exc:
         load_params(path)
     assert str(exc.value) == (f"load_params: path = {path!r} ({type(path).__name__}); allowed: a file path "
-                              "(str or os.PathLike) or None (the bundled model/hyq_haa.toml)")
+                              "(str or os.PathLike), a bundled actuator's name or None (the bundled "
+                              "model/hyq_haa.toml)")
 
 
 def test_none_is_missing_not_nan(params):
