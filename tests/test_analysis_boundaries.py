@@ -212,16 +212,3 @@ def test_curves_reach_the_edge_of_the_box_and_small_boxes_are_drawn_finely(param
     rho = np.abs(ref.closed_loop_eigenvalues(loop, np.vstack([P[::20], D[::20], np.full(P[::20].size, small.beta),
                                                               np.full(P[::20].size, small.alpha)]))).max(axis=1)
     assert np.abs(rho - 1).max() < 1e-9
-
-
-@pytest.mark.parametrize("argv, message", [
-    (["regions", "--leg", "retracted:extended"], "--leg applies to the leg range; allowed: with --robust"),
-    (["regions", "--require", "stable"], "--require applies to the leg range"),
-    (["regions", "--robust", "--radius"], "--radius with --robust"),
-    (["regions", "--robust", "--method", "grid"], "--method grid with --robust"),
-])
-def test_robust_only_and_plain_only_arguments_are_not_silently_ignored(tmp_path, capsys, argv, message):
-    from haa_sym.cli import main
-    out = tmp_path / "m.npz"
-    assert main(argv + ["--P-gain", "log:1:100:3", "--D-gain", "lin:1:5:2", "--out", str(out), "-q"]) == 2
-    assert message in capsys.readouterr().err and not out.exists()

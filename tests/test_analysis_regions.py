@@ -10,6 +10,7 @@ from haa_sym.check import reference as ref
 
 from haa_sym.analysis.regions import RegionMap, region_map
 from haa_sym.check.reference_margins import reference_crossovers
+from haa_sym.compiled.generated import evaluators
 from haa_sym.io.formats import result_arrays
 from haa_sym.io.gridspec import grid
 from haa_sym.analysis.sweep import colgate_factor
@@ -158,3 +159,13 @@ def test_threaded_sweep_gives_the_same_map(params, monkeypatch):
         maps.append(region_map(ClosedLoop(params), P, D, progress=False, method="grid"))
     for key, a in result_arrays(maps[0]).items():
         np.testing.assert_array_equal(a, getattr(maps[1], key), err_msg=key)
+
+
+# --- meta records the backend that ran ------------------------------------------------------------
+def test_meta_records_the_backend_that_ran(params):
+    auto = region_map(ClosedLoop(params), [200.0], [10.0], radius=False)
+    assert auto.meta["backend"] == evaluators("auto").backend
+    assert auto.meta["backend"] in ("compiled", "vm")
+    vm = region_map(ClosedLoop(params, backend="vm"), [200.0], [10.0], radius=False)
+    assert vm.meta["backend"] == "vm"
+    np.testing.assert_array_equal(vm.stable, auto.stable)

@@ -1,4 +1,12 @@
-"""haa-sym command line: one point, and clear errors for bad --set input."""
+"""haa_sym.cli: the commands' output, their options and arguments, and clear errors for bad
+--set input (the one-error contract for every user-caused condition is test_cli_errors.py)."""
+import json
+import subprocess
+import sys
+
+import numpy as np
+import pytest
+
 from haa_sym.cli import main
 
 
@@ -18,11 +26,6 @@ def test_bad_set_key_and_value(capsys):
 
 
 # --- haa-sym regions and friends (issue 3) -------------------------------------------------------
-import json  # noqa: E402
-
-import numpy as np  # noqa: E402
-import pytest  # noqa: E402
-
 
 def test_regions_writes_npz_and_plot(tmp_path, capsys):
     out, png = tmp_path / "map.npz", tmp_path / "map.png"
@@ -100,3 +103,38 @@ def test_argument_errors_are_one_line(capsys, argv, msg):
         rc = exc.code
     err = capsys.readouterr().err
     assert rc == 2 and err.count("\n") == 1 and err.startswith("haa-sym: error: ") and msg in err, err
+
+
+@pytest.mark.parametrize("value, expected", [("false", False), ("True", True), ("none", None)])
+def test_torque_damping_option_from_the_command_line(value, expected, capsys):
+    from haa_sym.cli import _parse_options
+    assert _parse_options([f"torque_damping={value}"]).structure.torque_damping is expected
+    assert main(["stability", "--P-gain", "200", "--D-gain", "10", "--option", f"torque_damping={value}"]) == 0
+
+
+def test_unknown_set_key_is_named_before_its_value(capsys):
+    assert main(["stability", "--P-gain", "1", "--D-gain", "1", "--set", "port=L1"]) == 2
+    assert "unknown parameter key(s) ['port']" in capsys.readouterr().err
+
+
+def test_a_closed_pipe_is_not_an_error():
+    cmd = [sys.executable, "-c", "from haa_sym.cli import main; import sys; sys.exit(main(['passivity', "
+           "'--P-gain', '0,200,20000,1,2,3', '--D-gain', '0,10,50,1,2,3']))"]
+    proc = subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=subprocess.PIPE)
+    proc.stdout.read(1)
+    proc.stdout.close()                                # the reader goes away, as `| head -c1`
+    err = proc.stderr.read().decode()
+    assert proc.wait(timeout=120) in (0, 1) and "Traceback" not in err and "error" not in err
+
+
+@pytest.mark.parametrize("argv, message", [
+    (["regions", "--leg", "retracted:extended"], "--leg applies to the leg range; allowed: with --robust"),
+    (["regions", "--require", "stable"], "--require applies to the leg range"),
+    (["regions", "--robust", "--radius"], "--radius with --robust"),
+    (["regions", "--robust", "--method", "grid"], "--method grid with --robust"),
+])
+def test_robust_only_and_plain_only_arguments_are_not_silently_ignored(tmp_path, capsys, argv, message):
+    from haa_sym.cli import main
+    out = tmp_path / "m.npz"
+    assert main(argv + ["--P-gain", "log:1:100:3", "--D-gain", "lin:1:5:2", "--out", str(out), "-q"]) == 2
+    assert message in capsys.readouterr().err and not out.exists()

@@ -1,4 +1,5 @@
-"""The generated evaluators against an independent state-space construction (haa_sym.check.reference).
+"""haa_sym.loop.closed_loop: ClosedLoop's decisions and frequency responses (the generated
+evaluators) against an independent state-space construction (haa_sym.check.reference).
 
 Issue 2's acceptance: >= 1,000 random points across beta in [0.5, 6], alpha in [0, 1.2],
 N_av in {1, 4, 10, 20, 50}, Ts in {0.5, 1, 2, 4, 6, 8} ms and both leg configurations; the
@@ -10,7 +11,9 @@ import itertools
 import numpy as np
 import pytest
 
-from haa_sym import ClosedLoop, LoopOptions
+from haa_sym import ClosedLoop, LoopOptions, ParameterError, passivity, region_map
+from haa_sym.analysis.contact import contact_stability
+from haa_sym.analysis.torque import step_response, torque_bandwidth
 from haa_sym.check import reference as ref
 from haa_sym.loop import FILTERS, PORTS
 
@@ -108,7 +111,6 @@ def test_broadcasting_and_shapes(params):
 
 
 def test_bad_gain_input(params):
-    from haa_sym import ParameterError
     loop = ClosedLoop(params)
     with pytest.raises(ParameterError, match="P_gain contains nan"):
         loop.stability([1.0, float("nan")], 1.0)
@@ -118,3 +120,36 @@ def test_bad_gain_input(params):
         LoopOptions(delay=2)
     with pytest.raises(ParameterError, match="N_av = 200 gives a closed loop of order 208.*allowed: N_av <= 56"):
         ClosedLoop(params.with_values(N_av=200))
+
+
+@pytest.mark.parametrize("changes", [{}, {"Ts": 2e-4}, {"Ts": 1e-4}])
+@pytest.mark.parametrize("cfg", ["extended", "retracted"])
+def test_free_link_position_mode_is_marginal_not_stable(params, cfg, changes):
+    # K_L2 = 0 and P_gain = 0: nothing holds the leg's position, a pole sits exactly at z = 1;
+    # the rounding of the sampled plant put it either side of the circle before
+    p = params.configuration(cfg).with_values(K_L2=0.0, **changes)
+    res = ClosedLoop(p).stability([0.0, 10.0], [0.0, 0.0])
+    assert list(res.stable) == [False, True] and list(res.marginal) == [True, False]
+
+
+@pytest.fixture(scope="module")
+def loop(params):
+    return ClosedLoop(params)
+
+
+@pytest.mark.parametrize("call,msg", [
+    (lambda p, lp: lp.stability(-1.0, 0.0), r"P_gain = -1.0 is out of range"),
+    (lambda p, lp: lp.stability([1.0, 2.0], [0.0, -3.0]), r"D_gain contains -3.0, which is out of range"),
+    (lambda p, lp: lp.stability(1.0, 1.0, beta=0.0), r"beta = 0.0 is out of range; allowed: a finite number > 0"),
+    (lambda p, lp: lp.loop_coefficients(beta=0.0), r"beta = 0.0 is out of range"),
+    (lambda p, lp: lp.loop_coefficients(alpha=-0.5), r"alpha = -0.5 is out of range"),
+    (lambda p, lp: lp.frequency_response([1.0], -1.0), r"P_gain = -1.0 is out of range"),
+    (lambda p, lp: region_map(lp, [1.0], [1.0], beta=0.0), r"beta = 0.0 is out of range"),
+    (lambda p, lp: passivity(lp, -1.0, 0.0), r"P_gain = -1.0 is out of range"),
+    (lambda p, lp: step_response(lp, alpha=-1.0), r"alpha = -1.0 is out of range"),
+    (lambda p, lp: torque_bandwidth(lp, beta=0.0), r"beta = 0.0 is out of range"),
+    (lambda p, lp: contact_stability(ClosedLoop(p), [1.0], D_gain=-1.0), r"D_gain = -1.0 is out of range"),
+])
+def test_api_applies_the_same_gain_rule(params, loop, call, msg):
+    with pytest.raises(ParameterError, match=msg):
+        call(params, loop)

@@ -508,3 +508,16 @@ def test_malformed_topologies_in_manifest_are_refused(tmp_path):
     (gen / "MANIFEST.json").write_text(json.dumps(m))
     with pytest.raises(StaleGeneratedCode, match=r"missing or malformed: topologies\['" + HYQ.fingerprint):
         GeneratedCode(gen)
+
+
+def test_coupling_order_in_the_file_does_not_flip_the_torque_sign(tmp_path, params):
+    text = (ROOT / "model" / "hyq_haa.toml").read_text()
+    rev = text.replace('between = ["rotor", "L1"]', 'between = ["L1", "rotor"]') \
+              .replace('between = ["L1", "L2"]', 'between = ["L2", "L1"]')
+    assert rev != text
+    f = tmp_path / "rev.toml"
+    f.write_text(rev)
+    p = load_params(f)
+    assert p.plant.topology == params.plant.topology
+    P, D = np.meshgrid(np.logspace(0, 4.3, 12), np.linspace(0, 50, 6), indexing="ij")
+    np.testing.assert_array_equal(ClosedLoop(p).stability(P, D).stable, ClosedLoop(params).stability(P, D).stable)

@@ -68,7 +68,7 @@ def test_contact_stiffness_range(params):
     stable, _ = contact_stability(ClosedLoop(params), K, progress=False)
     (lo, hi), = intervals(K, ~stable)
     plo, phi = claim["contact_unstable_K_L2"]
-    # paper: 72-3500 Nm/rad; exact ends 71.84-3441.6 (tests/test_contact.py); grid step here is 7 %
+    # paper: 72-3500 Nm/rad; exact ends 71.84-3441.6 (tests/test_analysis_contact.py); grid step here is 7 %
     assert abs(lo / plo - 1) < 0.1 and abs(hi / phi - 1) < 0.1
 
 
