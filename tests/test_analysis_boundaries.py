@@ -75,10 +75,9 @@ def test_cli_boundary_writes_json_and_plot(tmp_path, capsys):
     assert "passivity" in capsys.readouterr().out
 
 
-def test_cli_boundary_refuses_a_bad_output_and_writes_nothing(tmp_path, capsys):
-    from haa_sym.cli import main
-    assert main(["boundary", "--out", str(tmp_path / "b.csv")]) == 2
-    assert "--out" in capsys.readouterr().err and not list(tmp_path.iterdir())
+def test_cli_boundary_refuses_a_bad_output_and_writes_nothing(tmp_path, assert_refused):
+    assert_refused(["boundary", "--out", str(tmp_path / "b.csv")], "--out")
+    assert not list(tmp_path.iterdir())
 
 
 def test_phase_margin_curves_are_crossovers_with_exactly_that_margin(params):
