@@ -157,3 +157,56 @@ def loop(params):
 def test_api_applies_the_same_gain_rule(params, loop, call, msg):
     with pytest.raises(ParameterError, match=msg):
         call(params, loop)
+
+
+# --- the API the analyses share ---------------------------------------------------------------------
+def test_gain_points_broadcast_and_refuse_what_cannot(params, loop):
+    P, D, b, a = loop.gain_points([[1.0], [2.0]], [3.0, 4.0, 5.0])
+    assert P.tolist() == [1.0, 1.0, 1.0, 2.0, 2.0, 2.0] and D.tolist() == [3.0, 4.0, 5.0] * 2    # C order
+    assert (b, a) == (params.controller.beta, params.controller.alpha)
+    assert loop.gain_points(1.0, 2.0, 3.0, 0.5)[2:] == (3.0, 0.5)
+    with pytest.raises(ParameterError, match=r"P_gain has shape \(2,\) and D_gain \(3,\); allowed: shapes that broadcast"):
+        loop.gain_points([1.0, 2.0], [1.0, 2.0, 3.0])
+    with pytest.raises(ParameterError, match=r"beta has 2 and alpha 1 values; allowed: one value each"):
+        loop.gain_points(1.0, 1.0, [1.0, 2.0])
+
+
+def test_analyses_take_the_loop_first(params):
+    from haa_sym.loop import loop_first
+
+    @loop_first
+    def analysis(loop, x):
+        return x
+    assert analysis(ClosedLoop(params, basis=False), 3) == 3
+    with pytest.raises(ParameterError, match=r"analysis: the first argument is a Params; allowed: a haa_sym.ClosedLoop "
+                                             r"\(the analyses take the loop first: analysis\(ClosedLoop\(params, options\), \.\.\.\)\)"):
+        analysis(params, 3)
+
+
+def test_loop_coefficients_give_the_frequency_response(loop):
+    w = np.logspace(0, 3, 9)
+    P, D = np.array([0.0, 200.0, 3000.0]), np.array([0.0, 10.0, 40.0])
+    fr = loop.frequency_response(w, P, D)
+    co = loop.loop_coefficients(w)
+    assert co.L_t.shape == co.L_imp.shape == co.Z_num.shape == (9, 3) and co.H_T.shape == (9,)
+    for k in ("L_t", "L_imp", "Z", "H_T"):
+        np.testing.assert_allclose(co.evaluate(k, P, D), fr[k], rtol=1e-13, err_msg=k)
+        assert fr[k] is getattr(fr, k)
+    with pytest.raises(KeyError):
+        fr["L_x"]
+    np.testing.assert_array_equal(fr.omega, w)
+
+
+def test_stability_result_shapes_and_the_radius_only_when_asked(loop):
+    res = loop.stability([[1.0, 200.0], [2000.0, 20000.0]], 10.0)
+    for a in (res.stable, res.spectral_radius, res.refined, res.n_unstable):
+        assert a.shape == (2, 2)
+    assert np.isnan(res.spectral_radius[~res.refined]).all()
+    assert np.isfinite(loop.stability(200.0, 10.0, radius=True).spectral_radius).all()
+
+
+def test_provenance_names_what_produced_a_result(params, loop):
+    prov = loop.provenance(method="test")
+    assert prov["params"] == params.to_dict() and prov["options"] == loop.options.to_dict()
+    assert prov["method"] == "test" and prov["backend"] in ("compiled", "vm")
+    assert len(prov["generated_source_sha256"]) == 64 and prov["haa_sym"]
