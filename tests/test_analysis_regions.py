@@ -98,7 +98,8 @@ def test_map_agrees_with_eigvals(params, reference_radius, name, changes, extra,
     assert m.stable.any()
 
 
-@pytest.mark.parametrize("Ts", [1e-3, 50e-6, 10e-6], ids=["1ms", "50us", "10us"])
+@pytest.mark.parametrize("Ts", [1e-3, pytest.param(50e-6, marks=pytest.mark.slow),     # ~3 s each
+                                pytest.param(10e-6, marks=pytest.mark.slow)], ids=["1ms", "50us", "10us"])
 def test_phase_margin_and_passivity_match_state_space(params, Ts):
     """PM (impedance loop at T_lref, and torque loop at the PI output: the exact margin of the
     crossover nearest -1) against the independent exact-crossover reference, and the passivity

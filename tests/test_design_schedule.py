@@ -114,6 +114,7 @@ def test_cli_csv_has_the_issue_columns_and_the_c_lookup_returns_it(tmp_path, cap
             assert c.haa_schedule_beta(P, D) == pytest.approx(float(r["beta"]), rel=1e-11)
 
 
+@pytest.mark.slow                     # starts a two-process dask cluster (~8 s)
 def test_distributed_cluster_gives_the_same_bytes():
     distributed = pytest.importorskip("distributed")
     p = load_params()

@@ -168,6 +168,7 @@ def test_plant_equals_independent_assembly(user_file):
 
 
 # --- every actuator: compile, map, verify --------------------------------------------------
+@pytest.mark.slow                     # verify's rows for four actuators (~4 s)
 def test_every_actuator_gives_a_map_and_passes_verify(user_file, capsys):
     from haa_sym.check import verify
     for path in all_files(user_file):

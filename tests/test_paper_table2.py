@@ -39,6 +39,7 @@ def test_table2_cell_by_cell(cells):
             assert np.isnan(c.phase_excess_deg)
 
 
+@pytest.mark.slow                     # Table 2 for every option combination (~5 s)
 def test_defaults_are_best_option_combination(params, cells):
     scores = score_options(params)
     best = scores[0][1]
