@@ -4,7 +4,7 @@ VENV   := .venv
 PY     := $(VENV)/bin/python
 STAMP  := $(VENV)/.installed
 
-.PHONY: all venv derive verify test check-generated paper bench clean
+.PHONY: all venv derive verify test test-slow check-generated paper bench clean
 
 all: verify
 
@@ -36,9 +36,13 @@ bench: $(STAMP)
 	$(PY) benchmarks/bench_boundary.py
 	$(PY) benchmarks/bench_schedule.py
 
-## The whole test suite.
+## The test suite without the tests marked slow (under 2 min); `make test-slow` runs those.
 test: $(STAMP)
-	$(PY) -m pytest -q
+	$(PY) -m pytest -q -m "not slow" $(PYTEST_ARGS)
+
+## The tests marked slow (a wheel, C libraries, a dask cluster, the quick reproduction, ...).
+test-slow: $(STAMP)
+	$(PY) -m pytest -q -m slow $(PYTEST_ARGS)
 
 ## Fail if `make derive` would change generated/.
 check-generated: $(STAMP)

@@ -47,7 +47,7 @@ Checked against an independent dense computation (the explicit closed loop of
 :mod:`haa_sym.check.reference` on 200,000 frequencies plus its own poles, brentq): no crossover
 missed on 1,853 points (3,219 crossovers) of the bundled actuators at beta 1, 3 and 7.6, Ts 10
 us to 8 ms, N_av 50, both low-pass filters, a damping ratio of 1e-6, both loops
-(tests/test_margins.py repeats a sample of it). Limits (not a certificate): a notch of L_t that
+(tests/test_analysis_margins.py repeats a sample of it). Limits (not a certificate): a notch of L_t that
 moves with the gains is not sampled; an extremum within ~1e-12 of |L|^2 = 1 may count as 0 or
 2 crossovers.
 """

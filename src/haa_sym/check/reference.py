@@ -120,7 +120,7 @@ def _analog_lowpass(num, den):
 # haa_sym.model.params.Controller) -> SISO blocks (A, B, C, D) in series, theta -> v_F. Deliberately a
 # table of its own rather than a field of the registry's entries: the registry is what this
 # module checks, so its entries never carry (or call) the reference's algebra, and nothing here
-# reads their transfer functions; tests/test_filters.py checks that both tables have the same keys.
+# reads their transfer functions; tests/test_model_filters.py checks that both tables have the same keys.
 VELOCITY_ESTIMATES = {
     "average": _average,
     "lowpass1": _analog_lowpass(lambda w_c: [w_c], lambda w_c: [1.0, w_c]),

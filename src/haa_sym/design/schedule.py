@@ -87,7 +87,7 @@ DEFAULT_D_GAIN = "lin:1:50:20"
 COARSE_RATIO = 1.25
 # Sub-grid of the cell check: 4 subdivisions, 5 x 5 points a cell (corners and edges included).
 # Halving the spacing quarters the bilinear error a smooth boundary can hide between samples;
-# at 5 x 5 the off-grid test (tests/test_schedule_safety.py) finds no unsafe beta, and the check
+# at 5 x 5 the off-grid test (tests/test_design_schedule_safety.py) finds no unsafe beta, and the check
 # costs about half the schedule's own time on the default HyQ grid (docs/model.md).
 CELL_SUBDIVISIONS = 4
 

@@ -21,7 +21,7 @@ angle is missing or extra. A unit of the reciprocal dimension (a motor speed con
 Compact engineering spellings are defined for pint: ``Nm`` (newton metre; pint alone reads
 ``Nm`` as "number meter"), ``Nms``, ``Vs``, ``Ohm``, and ``samples`` (a count, dimensionless);
 ``-`` (or an empty unit) is dimensionless. The SI spellings in :data:`KINDS` are read without
-pint (``tests/test_units.py`` checks that pint gives each of them factor 1 and the key's
+pint (``tests/test_model_units.py`` checks that pint gives each of them factor 1 and the key's
 dimension); any other spelling imports pint and builds its registry once per process (about
 0.7 s, measured on the project's 2-core machine), so the bundled files, which are written in SI,
 do not pay for it.

@@ -10,30 +10,17 @@ from haa_sym.cli import main
 from haa_sym.errors import OutputError
 from haa_sym.io.outputs import Transaction
 
+from conftest import snapshot
+
 SMALL = ["--P-gain", "log:1:100:3", "--D-gain", "1,2"]
 
 
-def snapshot(directory):
-    """Every entry under ``directory`` (hidden ones too) with its bytes and mtime."""
-    out = {}
-    for root, dirs, files in os.walk(directory):
-        for name in dirs + files:
-            p = os.path.join(root, name)
-            st = os.stat(p)
-            out[os.path.relpath(p, directory)] = (
-                None if os.path.isdir(p) else open(p, "rb").read(), st.st_mtime_ns)
-    return out
-
-
-def test_regions_keeps_old_out_when_plot_is_a_directory(tmp_path, capsys):
+def test_regions_keeps_old_out_when_plot_is_a_directory(tmp_path, assert_refused):
     (tmp_path / "old.npz").write_bytes(b"the user's old map")
     (tmp_path / "dir.png").mkdir()
-    before = snapshot(tmp_path)
-    rc = main(["regions", *SMALL, "--out", str(tmp_path / "old.npz"), "--plot", str(tmp_path / "dir.png")])
-    err = capsys.readouterr().err
-    assert rc == 2
-    assert err.startswith("haa-sym: error: --plot ") and "dir.png' is a directory; allowed: a file path" in err
-    assert snapshot(tmp_path) == before
+    err = assert_refused(["regions", *SMALL, "--out", str(tmp_path / "old.npz"), "--plot", str(tmp_path / "dir.png")],
+                         "dir.png' is a directory; allowed: a file path")
+    assert err.startswith("haa-sym: error: --plot ")
 
 
 @pytest.mark.parametrize("cmd,out,args", [
@@ -41,7 +28,7 @@ def test_regions_keeps_old_out_when_plot_is_a_directory(tmp_path, capsys):
     ("passivity", "old.csv", ["--P-gain", "200", "--D-gain", "10"]),
     ("step", "old.csv", ["--duration", "0.05"]),
 ])
-def test_late_plot_failure_keeps_old_out(tmp_path, capsys, monkeypatch, cmd, out, args):
+def test_late_plot_failure_keeps_old_out(tmp_path, assert_refused, monkeypatch, cmd, out, args):
     """The disk fills up while the figure is written: --out keeps its old bytes, no temporaries."""
     def full(self, fh, **kw):
         fh.write(b"partial")
@@ -49,12 +36,9 @@ def test_late_plot_failure_keeps_old_out(tmp_path, capsys, monkeypatch, cmd, out
     monkeypatch.setattr(matplotlib.figure.Figure, "savefig", full)
     (tmp_path / out).write_bytes(b"the user's old result")
     (tmp_path / "fig.png").write_bytes(b"the user's old figure")
-    before = snapshot(tmp_path)
-    rc = main([cmd, *args, "--out", str(tmp_path / out), "--plot", str(tmp_path / "fig.png")])
-    err = capsys.readouterr().err
-    assert rc == 2
+    err = assert_refused([cmd, *args, "--out", str(tmp_path / out), "--plot", str(tmp_path / "fig.png")],
+                         "cannot write (No space left on device)", printed=cmd != "regions")
     assert err == f"haa-sym: error: --plot '{tmp_path / 'fig.png'}': cannot write (No space left on device)\n"
-    assert snapshot(tmp_path) == before
 
 
 def test_outputs_follow_the_umask(tmp_path, capsys):
@@ -68,14 +52,12 @@ def test_outputs_follow_the_umask(tmp_path, capsys):
 
 
 @pytest.mark.parametrize("cmd,name", [("step", "x.csv"), ("regions", "x.npz"), ("reproduce", "results")])
-def test_parent_that_is_a_file_is_an_error(tmp_path, capsys, cmd, name):
-    # missing parents are created (tests/test_output_dirs.py); a file in the way is refused
+def test_parent_that_is_a_file_is_an_error(tmp_path, assert_refused, cmd, name):
+    # missing parents are created (tests/test_io_outputs_dirs.py); a file in the way is refused
     (tmp_path / "afile").write_text("x")
     target = tmp_path / "afile" / "sub" / name
-    rc = main([cmd, *(SMALL if cmd == "regions" else []), "--out", str(target)])
-    err = capsys.readouterr().err
-    assert rc == 2
-    assert f"--out '{target}': '{tmp_path / 'afile'}' is not a directory" in err
+    assert_refused([cmd, *(SMALL if cmd == "regions" else []), "--out", str(target)],
+                   f"--out '{target}': '{tmp_path / 'afile'}' is not a directory")
     assert [p.name for p in tmp_path.iterdir()] == ["afile"]
 
 
@@ -135,18 +117,14 @@ def test_interrupted_reproduce_keeps_the_old_results(tmp_path, capsys, monkeypat
     assert snapshot(tmp_path) == before
 
 
-def test_reproduce_refuses_a_directory_with_other_files(tmp_path, capsys):
+def test_reproduce_refuses_a_directory_with_other_files(tmp_path, assert_refused):
     old_results(tmp_path / "results")
     (tmp_path / "results" / "notes.txt").write_text("mine")
-    before = snapshot(tmp_path)
-    assert main(["reproduce", "--quick", "--out", str(tmp_path / "results")]) == 2
-    err = capsys.readouterr().err
+    err = assert_refused(["reproduce", "--quick", "--out", str(tmp_path / "results")], "(notes.txt)")
     assert err.startswith(f"haa-sym: error: --out '{tmp_path / 'results'}': holds files reproduce does "
                           "not write (notes.txt)")
-    assert snapshot(tmp_path) == before
     (tmp_path / "file").write_text("a file")
-    assert main(["reproduce", "--quick", "--out", str(tmp_path / "file")]) == 2
-    assert "file' is not a directory" in capsys.readouterr().err
+    assert_refused(["reproduce", "--quick", "--out", str(tmp_path / "file")], "file' is not a directory")
 
 
 def test_directory_swap(tmp_path):

@@ -234,7 +234,7 @@ def golden_table() -> ScheduleTable:
 
 def test_emitted_c_equals_the_golden_files(update_golden):
     """c_code(golden_table()) byte for byte against tests/golden/schedule_c/haa_schedule.{h,c};
-    ``pytest tests/test_schedule_c.py --update-golden`` rewrites them instead (then review the
+    ``pytest tests/test_design_schedule_c.py --update-golden`` rewrites them instead (then review the
     change with git diff and commit it)."""
     header, source = c_code(golden_table())
     problems, rewritten = [], []
@@ -260,7 +260,7 @@ def test_emitted_c_equals_the_golden_files(update_golden):
         pytest.skip(f"--update-golden: rewrote {', '.join(rewritten)}; review with git diff tests/golden")
     if problems:
         pytest.fail("\n\n".join(problems) + "\n\nIf the change is intended, rewrite the golden files with\n"
-                    "    python -m pytest tests/test_schedule_c.py --update-golden\n"
+                    "    python -m pytest tests/test_design_schedule_c.py --update-golden\n"
                     "and commit them with the change (review with git diff tests/golden).", pytrace=False)
 
 

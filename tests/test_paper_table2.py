@@ -39,6 +39,7 @@ def test_table2_cell_by_cell(cells):
             assert np.isnan(c.phase_excess_deg)
 
 
+@pytest.mark.slow                     # Table 2 for every option combination (~5 s)
 def test_defaults_are_best_option_combination(params, cells):
     scores = score_options(params)
     best = scores[0][1]
@@ -68,7 +69,7 @@ def test_contact_stiffness_range(params):
     stable, _ = contact_stability(ClosedLoop(params), K, progress=False)
     (lo, hi), = intervals(K, ~stable)
     plo, phi = claim["contact_unstable_K_L2"]
-    # paper: 72-3500 Nm/rad; exact ends 71.84-3441.6 (tests/test_contact.py); grid step here is 7 %
+    # paper: 72-3500 Nm/rad; exact ends 71.84-3441.6 (tests/test_analysis_contact.py); grid step here is 7 %
     assert abs(lo / plo - 1) < 0.1 and abs(hi / phi - 1) < 0.1
 
 

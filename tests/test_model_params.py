@@ -1,14 +1,16 @@
-"""Every bad-input case of a parameter file gives one clear error naming file, key, value, allowed.
+"""haa_sym.model.params: every bad-input case of a parameter file gives one clear error naming
+file, key, value, allowed; Plant, Controller and Params validate themselves.
 
 These use the legacy flat-[plant] HyQ file (tests/data/hyq_haa_legacy.toml, read as the HyQ
-topology); the actuator format's own cases are in test_actuators.py."""
-import re
+topology); the actuator format's own cases are in test_model_actuator.py."""
+import dataclasses
 import math
+import re
 
 import pytest
 
 from haa_sym.errors import ParameterError
-from haa_sym.model.params import load_params, CONTROLLER_KEYS
+from haa_sym.model.params import CONTROLLER_KEYS, Controller, Params, load_params
 
 from conftest import ROOT
 
@@ -128,3 +130,24 @@ def test_missing_N_av_for_the_average_is_one_clear_error(tmp_path):
     with pytest.raises(ParameterError, match=r"\[controller\]: N_av is missing; allowed: an integer >= 1, "
                                              "required by velocity_filter = 'average'"):
         load_params(f)
+
+
+def test_params_file_integer_beyond_float(tmp_path):
+    text = (ROOT / "model" / "hyq_haa.toml").read_text().replace("K = { value = 8.077e3", "K = { value = 1" + "0" * 400, 1)
+    (tmp_path / "big.toml").write_text(text)
+    with pytest.raises(ParameterError, match=r"big.toml \[couplings.hd\]: K = 10{400} is not finite"):
+        load_params(tmp_path / "big.toml")
+
+
+def test_dataclasses_validate_themselves(params):
+    with pytest.raises(ParameterError, match=r"J_m = -1.0 is out of range; allowed: a finite number > 0"):
+        params.plant.replace(J_m=-1.0)            # Plant validates itself (not a dataclass)
+    with pytest.raises(ParameterError, match=r"beta = 0.0 is out of range"):
+        dataclasses.replace(params.controller, beta=0.0)
+    with pytest.raises(ParameterError, match=r"N_av = 2.5 is not an integer"):
+        Controller(Ts=1e-3, N_av=2.5, alpha=0.9, beta=1.0, P_t0=0.4, I_t0=18.0)
+    with pytest.raises(ParameterError, match=r"<memory> \[configurations.folded\]: J_L2 = -1 is out of range"):
+        Params(params.plant, params.controller, {"folded": {"J_L2": -1}})
+    with pytest.raises(ParameterError, match=r"plant = None; allowed: a haa_sym.Plant"):
+        dataclasses.replace(params, plant=None)
+    assert dataclasses.replace(params.controller, N_av=10.0).N_av == 10      # normalised to int

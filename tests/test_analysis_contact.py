@@ -117,7 +117,7 @@ def test_bad_contact_input(params, kwargs, message):
     assert message in str(exc.value)
 
 
-def test_cli_contact_json(tmp_path, capsys):
+def test_cli_contact_json(tmp_path, capsys, assert_refused):
     out = tmp_path / "c.json"
     assert main(["contact", "--n-scan", "40", "--out", str(out), "--plot", str(tmp_path / "c.png"), "-q"]) == 0
     data = json.loads(out.read_text())
@@ -128,4 +128,4 @@ def test_cli_contact_json(tmp_path, capsys):
     assert data["meta"]["options"]["passivity_tol_deg"] == TOL and data["meta"]["options"]["n_omega"] == 1000
     line = capsys.readouterr().out
     assert "71.837305" in line and f"stable but not passive: 1-{lo:.10g}, {hi:.10g}-100000 Nm/rad" in line
-    assert main(["contact", "--K-range", "5"]) == 2
+    assert_refused(["contact", "--K-range", "5"], "--K-range '5'; allowed: LO:HI in Nm/rad, 0 < LO < HI")

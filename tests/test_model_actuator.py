@@ -174,6 +174,7 @@ def test_plant_equals_independent_assembly(user_file):
 
 
 # --- every actuator: compile, map, verify --------------------------------------------------
+@pytest.mark.slow                     # verify's rows for four actuators (~4 s)
 def test_every_actuator_gives_a_map_and_passes_verify(user_file, capsys):
     from haa_sym.check import verify
     for path in all_files(user_file):
@@ -315,7 +316,7 @@ def load_params_text(directory, text, name="act.toml"):
 
 
 def test_contact_adds_a_ground_stiffness_to_a_port_without_one(tmp_path, cache):
-    # issue 16 item 8 (was refused): the plant variant with K_B = 0; tests/test_sensors.py checks
+    # issue 16 item 8 (was refused): the plant variant with K_B = 0; tests/test_symbolic_chain_sensors.py checks
     # the scan against the reference's eigenvalues
     from haa_sym.analysis.contact import contact_params, contact_stability
     params = load_params_text(tmp_path, USER.replace('port = "C"', 'port = "B"'))
@@ -398,13 +399,10 @@ def test_bad_input(tmp_path, case, edit, msg):
     assert "\n" not in str(exc.value)
 
 
-def test_bad_input_in_the_cli_exits_2(tmp_path, capsys):
-    from haa_sym.cli import main
+def test_bad_input_in_the_cli_exits_2(tmp_path, assert_refused):
     p = tmp_path / "act.toml"
     p.write_text(USER.replace('torque = "s1"', 'torque = "s9"'))
-    assert main(["compile", str(p)]) == 2
-    err = capsys.readouterr().err
-    assert err.startswith("haa-sym: error: ") and "is not a coupling" in err and "Traceback" not in err
+    assert_refused(["compile", str(p)], "is not a coupling")
 
 
 # --- the compile step of a user's topology --------------------------------------------------
@@ -524,3 +522,16 @@ def test_malformed_topologies_in_manifest_are_refused(tmp_path):
     (gen / "MANIFEST.json").write_text(json.dumps(m))
     with pytest.raises(StaleGeneratedCode, match=r"missing or malformed: topologies\['" + HYQ.fingerprint):
         GeneratedCode(gen)
+
+
+def test_coupling_order_in_the_file_does_not_flip_the_torque_sign(tmp_path, params):
+    text = (ROOT / "model" / "hyq_haa.toml").read_text()
+    rev = text.replace('between = ["rotor", "L1"]', 'between = ["L1", "rotor"]') \
+              .replace('between = ["L1", "L2"]', 'between = ["L2", "L1"]')
+    assert rev != text
+    f = tmp_path / "rev.toml"
+    f.write_text(rev)
+    p = load_params(f)
+    assert p.plant.topology == params.plant.topology
+    P, D = np.meshgrid(np.logspace(0, 4.3, 12), np.linspace(0, 50, 6), indexing="ij")
+    np.testing.assert_array_equal(ClosedLoop(p).stability(P, D).stable, ClosedLoop(params).stability(P, D).stable)

@@ -5,11 +5,14 @@ import math
 import re
 
 import numpy as np
+import pytest
 
 from haa_sym.cli import main
 from haa_sym.io.progress import set_progress
 from haa_sym.paper.reproduce import foreign_entries
 from haa_sym.analysis.torque import STEP_CONVENTION
+
+pytestmark = pytest.mark.slow          # the whole quick reproduction (~25 s)
 
 
 def test_reproduce_quick(tmp_path, capsys):

@@ -1,8 +1,10 @@
-"""The grid reductions of haa_sym.analysis.sweep on loops with known answers."""
+"""The grid reductions of haa_sym.analysis.sweep on loops with known answers; BLAS threads."""
 import numpy as np
 import pytest
 
-from haa_sym.analysis.sweep import gain_rows, monomial_rows, phase_excess, product_form
+from haa_sym import ClosedLoop
+from haa_sym.analysis.regions import region_map
+from haa_sym.analysis.sweep import blas_limits, gain_rows, monomial_rows, phase_excess, product_form
 
 
 def test_product_form_is_the_product():
@@ -27,3 +29,20 @@ def test_phase_excess_of_known_impedances():
     # phase of 10/(jw) - 2 tends to -180 deg at high frequency: excess -> 90 deg
     assert ex[0] == pytest.approx(np.degrees(np.arctan2(2, 10 / w[-1])), abs=1e-9)
     assert ww[0] == w[-1]
+
+
+# --- BLAS threads ---------------------------------------------------------------------------------
+def test_blas_limits_and_same_map(params):
+    from threadpoolctl import threadpool_info
+
+    def blas_threads():
+        return [p["num_threads"] for p in threadpool_info() if p["user_api"] == "blas"]
+    before = blas_threads()
+    with blas_limits(1):
+        assert blas_threads() and set(blas_threads()) == {1}
+    assert blas_threads() == before
+    P, D = np.logspace(0, 4.3, 20), np.linspace(1, 50, 10)
+    one = region_map(ClosedLoop(params), P, D, radius=False, blas_threads=1)
+    untouched = region_map(ClosedLoop(params), P, D, radius=False, blas_threads=None)
+    for k in ("stable", "phase_margin_deg", "passive", "phase_excess_deg"):
+        np.testing.assert_allclose(getattr(one, k), getattr(untouched, k), rtol=1e-12, err_msg=k)

@@ -10,6 +10,7 @@ from haa_sym.check import reference as ref
 
 from haa_sym.analysis.regions import RegionMap, region_map
 from haa_sym.check.reference_margins import reference_crossovers
+from haa_sym.compiled.generated import evaluators
 from haa_sym.io.formats import result_arrays
 from haa_sym.io.gridspec import grid
 from haa_sym.analysis.sweep import colgate_factor
@@ -32,14 +33,22 @@ def _params(params, changes, cfg):
     return p.with_values(**changes)
 
 
-def _radius_tolerance(loop, m) -> np.ndarray:
+def _points(loop, P, D) -> np.ndarray:
+    """The grid's points (4, len(P) * len(D)) in C order, at the controller's beta and alpha."""
+    PP, DD = np.meshgrid(P, D, indexing="ij")
+    c = loop.params.controller
+    return np.stack([PP.ravel(), DD.ravel(), np.full(PP.size, c.beta), np.full(PP.size, c.alpha)])
+
+
+def _radius_tolerance(loop, P, D) -> np.ndarray:
     """1e-12 + eps ||A||_2 kappa per point: the first-order bound on the error of the largest
     eigenvalue of A computed in floating point, kappa its condition number (left and right
-    eigenvectors)."""
+    eigenvectors). The matrices of all points are assembled at once by the reference (the same
+    arrays, bit for bit, as ref.closed_loop_matrices point by point)."""
     import scipy.linalg
-    tol = np.empty(m.spectral_radius.shape)
-    for idx in np.ndindex(tol.shape):
-        A = ref.closed_loop_matrices(loop, m.P_gain[idx[0]], m.D_gain[idx[1]])[0]
+    As = ref._batch(loop, *_points(loop, P, D))[0]
+    tol = np.empty((len(P), len(D)))
+    for idx, A in zip(np.ndindex(tol.shape), As):
         w, vl, vr = scipy.linalg.eig(A, left=True, right=True)
         k = np.argmax(np.abs(w))
         kappa = np.linalg.norm(vl[:, k]) * np.linalg.norm(vr[:, k]) / abs(np.vdot(vl[:, k], vr[:, k]))
@@ -47,14 +56,33 @@ def _radius_tolerance(loop, m) -> np.ndarray:
     return tol
 
 
+@pytest.fixture(scope="module")
+def reference_radius(params):
+    """``reference_radius(name)``: the loop of case ``name`` and the spectral radius of the
+    reference closed loop at every grid point, computed once for both variants of the map (the
+    eigenvalues of all points at once: the same matrices and LAPACK call as ref.spectral_radius
+    point by point, bit for bit)."""
+    memo = {}
+
+    def get(name):
+        if name not in memo:
+            _, changes, extra = next(c for c in CASES if c[0] == name)
+            opts = extra if isinstance(extra, LoopOptions) else LoopOptions()
+            loop = ClosedLoop(_params(params, changes, extra), opts)
+            P, D = grid(P_GRID), grid(D_GRID)
+            rho = np.abs(ref.closed_loop_eigenvalues(loop, _points(loop, P, D))).max(axis=1)
+            memo[name] = loop, rho.reshape(len(P), len(D))
+        return memo[name]
+    return get
+
+
 @pytest.mark.parametrize("name,changes,extra", CASES, ids=[c[0] for c in CASES])
 @pytest.mark.parametrize("radius", [True, False], ids=["radius", "decision"])
-def test_map_agrees_with_eigvals(params, name, changes, extra, radius):
+def test_map_agrees_with_eigvals(params, reference_radius, name, changes, extra, radius):
     p = _params(params, changes, extra)
     opts = extra if isinstance(extra, LoopOptions) else LoopOptions()
     m = region_map(ClosedLoop(p, opts), grid(P_GRID), grid(D_GRID), radius=radius, progress=False)
-    loop = ClosedLoop(p, opts)
-    rho = np.array([[ref.spectral_radius(loop, P, D) for D in m.D_gain] for P in m.P_gain])
+    loop, rho = reference_radius(name)
     decided = np.abs(rho - 1) > 1e-6
     assert decided.sum() > 0.95 * rho.size
     np.testing.assert_array_equal(m.stable[decided], (rho < 1)[decided])
@@ -63,14 +91,15 @@ def test_map_agrees_with_eigvals(params, name, changes, extra, radius):
         # two assemblies of one matrix: their eigenvalues differ by up to eps ||A|| kappa, kappa
         # the condition number of the largest eigenvalue (~1e3 at Ts = 20 us, where the poles
         # crowd at z = 1: 1.6e-12 measured there with numpy 2.4, bound 3.6e-10)
-        np.testing.assert_array_less(np.abs(m.spectral_radius - rho), _radius_tolerance(loop, m))
+        np.testing.assert_array_less(np.abs(m.spectral_radius - rho), _radius_tolerance(loop, m.P_gain, m.D_gain))
     else:
         assert np.isnan(m.spectral_radius[~m.refined]).all()
     # the maps are not trivial: both decisions occur somewhere in these cases
     assert m.stable.any()
 
 
-@pytest.mark.parametrize("Ts", [1e-3, 50e-6, 10e-6], ids=["1ms", "50us", "10us"])
+@pytest.mark.parametrize("Ts", [1e-3, pytest.param(50e-6, marks=pytest.mark.slow),     # ~3 s each
+                                pytest.param(10e-6, marks=pytest.mark.slow)], ids=["1ms", "50us", "10us"])
 def test_phase_margin_and_passivity_match_state_space(params, Ts):
     """PM (impedance loop at T_lref, and torque loop at the PI output: the exact margin of the
     crossover nearest -1) against the independent exact-crossover reference, and the passivity
@@ -158,3 +187,13 @@ def test_threaded_sweep_gives_the_same_map(params, monkeypatch):
         maps.append(region_map(ClosedLoop(params), P, D, progress=False, method="grid"))
     for key, a in result_arrays(maps[0]).items():
         np.testing.assert_array_equal(a, getattr(maps[1], key), err_msg=key)
+
+
+# --- meta records the backend that ran ------------------------------------------------------------
+def test_meta_records_the_backend_that_ran(params):
+    auto = region_map(ClosedLoop(params), [200.0], [10.0], radius=False)
+    assert auto.meta["backend"] == evaluators("auto").backend
+    assert auto.meta["backend"] in ("compiled", "vm")
+    vm = region_map(ClosedLoop(params, backend="vm"), [200.0], [10.0], radius=False)
+    assert vm.meta["backend"] == "vm"
+    np.testing.assert_array_equal(vm.stable, auto.stable)

@@ -52,7 +52,8 @@ def test_crossovers_of_the_bundled_actuators_equal_the_reference(name, beta):
     assert _agree(loop, P, D, beta) >= 24
 
 
-@pytest.mark.parametrize("changes", [{"Ts": 10e-6}, {"Ts": 8e-3}, {"N_av": 50},
+@pytest.mark.parametrize("changes", [{"Ts": 10e-6}, {"Ts": 8e-3},
+                                     pytest.param({"N_av": 50}, marks=pytest.mark.slow),      # order 58: ~10 s
                                      {"velocity_filter": "butterworth2", "f_c": 40.0}],
                          ids=["Ts=10us", "Ts=8ms", "N_av=50", "butterworth2"])
 def test_crossovers_across_sampling_times_and_filters_equal_the_reference(params, changes):
