@@ -94,7 +94,7 @@ def test_cli_failure_leaves_no_new_directory(tmp_path, capsys):
 
 
 def test_write_c_creates_the_directory_and_rolls_it_back(tmp_path):
-    from tests.test_schedule_c import synthetic
+    from test_design_schedule_c import synthetic
     d = tmp_path / "ctrl" / "gen"
     write_c(synthetic(), d)
     assert sorted(p.name for p in d.iterdir()) == [SOURCE, HEADER]
