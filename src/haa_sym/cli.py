@@ -106,9 +106,12 @@ def _parse_options(items: list[str]):
             raise ParameterError(f"--option {item!r}: {value!r} is not a valid {kind.__name__}; "
                                  f"allowed: {allowed}{' or none' if optional else ''}") from None
     try:
-        return LoopOptions(**out)
+        options = LoopOptions(**out)
+        # the one budget gate of the frequency grid, before any command builds or prints anything
+        options.numerics.check_budget()
     except ParameterError as exc:
         raise ParameterError(f"--option {exc}") from None
+    return options
 
 
 class _Parser(argparse.ArgumentParser):
