@@ -41,6 +41,7 @@ from haa_sym.compiled.cache import BoundedCache, array_key
 from haa_sym.compiled.generated import evaluators
 from haa_sym.loop.exact import bilinear, polymul, polysub, to_float, transfer_polynomials
 from haa_sym.errors import ParameterError
+from haa_sym.io.progress import message
 from haa_sym.model.params import Params, gain_array
 from haa_sym.model.elements import backward_difference, common_denominator, delay, pi_integral
 from haa_sym.model import filters
@@ -65,10 +66,29 @@ _BASES = BoundedCache()
 _COEFFICIENTS = BoundedCache(64)
 
 
-def _transfer_polynomials(plant: DiscretePlant):
+# The exact characteristic polynomial (Faddeev-LeVerrier in integers) costs about n^4 products
+# of numbers growing to n x ~260 bits: measured on this 2-core machine 0.03 s at 13 states (a
+# 5-body chain), 4 s at 35 (16 bodies), 100 s at 59 (28 bodies, the largest chain the generated
+# capacity takes with N_av = 4): about 100 s x (n/59)^6. Above SLOW_EXACT_STATES a message says so
+# before the work starts (--quiet silences it).
+SLOW_EXACT_STATES = 30
+
+
+def _exact_seconds(n_states: int) -> float:
+    """Rough seconds of the exact step for a plant of ``n_states`` (see SLOW_EXACT_STATES)."""
+    return 100.0 * (n_states / 59) ** 6
+
+
+def _transfer_polynomials(plant: DiscretePlant, source: str = "the plant"):
     """Exact d(z) and the V_m numerators of ``plant`` (Faddeev-LeVerrier in integers), memoised."""
-    return _PLANT_POLYS.get(array_key(plant.Phi, plant.Gamma[:, :1], plant.C),
-                            lambda: transfer_polynomials(plant.Phi, plant.Gamma[:, :1], plant.C))
+    def build():
+        n = plant.Phi.shape[0]
+        if n >= SLOW_EXACT_STATES:
+            message(f"haa_sym: exact characteristic polynomial of the {n}-state plant of {source}: about "
+                    f"{_exact_seconds(n):.0f} s (exact integer arithmetic, growing as states^6; once per "
+                    "plant and sampling time in a process)")
+        return transfer_polynomials(plant.Phi, plant.Gamma[:, :1], plant.C)
+    return _PLANT_POLYS.get(array_key(plant.Phi, plant.Gamma[:, :1], plant.C), build)
 
 
 @dataclass(frozen=True)
@@ -261,7 +281,7 @@ class ClosedLoop:
         difference exact (zero for filter = "both").
         """
         el = self.elements
-        d, nums = _transfer_polynomials(self.plant)
+        d, nums = _transfer_polynomials(self.plant, self.params.source)
         n_T = nums[self.plant_output(self.torque_output)][0]
         n_th = nums[self.plant_output("theta_encoder")][0]
         D, (A_d, A_vc) = common_denominator(el["F_d"], el["F_vc"])

@@ -510,6 +510,11 @@ def load_params(path: str | Path | None = None) -> Params:
         raise ParameterError(f"{p}: no such parameter file") from None
     except tomllib.TOMLDecodeError as exc:
         raise ParameterError(f"{p}: not valid TOML ({exc}); allowed: a TOML parameter file") from None
+    except RecursionError:
+        # tomllib parses nested arrays and inline tables recursively: thousands of levels
+        # exhaust Python's stack
+        raise ParameterError(f"{p}: not a parameter file (arrays or tables nested too deeply for the "
+                             "TOML parser); allowed: a TOML parameter file") from None
     except UnicodeDecodeError as exc:
         raise ParameterError(f"{p}: not a text file (byte 0x{exc.object[exc.start]:02x} at offset "
                              f"{exc.start} is not UTF-8); allowed: a TOML parameter file") from None
