@@ -72,8 +72,8 @@ def _check_writable(path: Path, shown: Path, field: str | None, what: str) -> No
     """Refuse an existing read-only target (see the module docstring)."""
     try:
         mode = path.stat().st_mode
-    except FileNotFoundError:
-        return
+    except (FileNotFoundError, NotADirectoryError):
+        return                                   # a new file; _check_parent judges the directory
     if not (mode & 0o222) or not os.access(path, os.W_OK):
         raise OutputError(f"{_label(shown, field)}: the existing {what} is read-only (mode "
                           f"{stat.S_IMODE(mode):04o}); allowed: a writable {what} (chmod u+w it) or a new path")
@@ -148,7 +148,7 @@ def _keep_mode(target: Path, *, fd: int | None = None, path: Path | None = None)
     bits, so that replacing a file never widens (or narrows) who may read it."""
     try:
         mode = stat.S_IMODE(target.stat().st_mode)
-    except FileNotFoundError:
+    except (FileNotFoundError, NotADirectoryError):
         return                                   # a new target: the umask's default
     if fd is not None:
         os.fchmod(fd, mode)
