@@ -38,9 +38,12 @@ than 2 s) to stderr; ``--quiet`` silences them, ``--progress`` forces them. ``ha
 from __future__ import annotations
 
 import argparse
+import contextlib
 import json
 import os
+import signal
 import sys
+import threading
 from pathlib import Path
 
 import numpy as np
@@ -58,7 +61,7 @@ from haa_sym.compiled.generated import evaluators
 from haa_sym.compiled.plant_code import compile_topology
 from haa_sym.design.schedule import schedule
 from haa_sym.design.schedule_c import check_c_directory, write_c
-from haa_sym.errors import CompilerError, ParameterError, StaleGeneratedCode
+from haa_sym.errors import CompilerError, ParameterError, StaleGeneratedCode, Terminated
 from haa_sym.io.formats import save_json, save_npz
 from haa_sym.io.gridspec import GRID_SYNTAX, grid
 from haa_sym.io.outputs import Transaction, check_file, csv_text
@@ -125,9 +128,12 @@ def _parse_options(items: list[str]):
             raise ParameterError(f"--option {item!r}: {value!r} is not a valid {kind.__name__}; "
                                  f"allowed: {allowed}{' or none' if optional else ''}") from None
     try:
-        return LoopOptions(**out)
+        options = LoopOptions(**out)
+        # the one budget gate of the frequency grid, before any command builds or prints anything
+        options.numerics.check_budget()
     except ParameterError as exc:
         raise ParameterError(f"--option {exc}") from None
+    return options
 
 
 class _Parser(argparse.ArgumentParser):
@@ -234,7 +240,10 @@ def _setup(args, cmd: str):
     """What every analysis command starts with: the closed loop of the parameters and options,
     and the output paths, all checked before any computation."""
     params, options = _params(args), _parse_options(args.option)
-    return (ClosedLoop(params, options), _check_out(args.out, cmd), _check_out(args.plot, cmd, "--plot"))
+    out, plot = _check_out(args.out, cmd), _check_out(args.plot, cmd, "--plot")
+    if plot and getattr(args, "title", None):
+        _plots().check_title(args.title, "--title")
+    return ClosedLoop(params, options), out, plot
 
 
 def _plots():
@@ -683,6 +692,31 @@ def main(argv: list[str] | None = None) -> int:
         _progress_flags(command, argparse.SUPPRESS)
     args = ap.parse_args(argv)
     set_progress(False if args.quiet else True if args.progress else None)
+    with _sigterm_unwinds():
+        return _run(args)
+
+
+@contextlib.contextmanager
+def _sigterm_unwinds():
+    """SIGTERM raises :class:`Terminated` in the main thread while a command runs, so that it
+    unwinds like SIGINT: without this, the default action kills the process mid-write and the
+    outputs' temporaries (``.DIR.XXXX.tmp/``, ``.fig.png.XXXX.tmp``) stay behind. The previous
+    handler is restored (main() is also called in-process, e.g. by the tests)."""
+    if threading.current_thread() is not threading.main_thread():
+        yield
+        return
+
+    def terminate(signum, frame):
+        raise Terminated()
+    previous = signal.signal(signal.SIGTERM, terminate)
+    try:
+        yield
+    finally:
+        signal.signal(signal.SIGTERM, previous)
+
+
+def _run(args) -> int:
+    """Run the parsed command; the errors a user can fix become one line and exit status 2."""
     try:
         if args.cmd == "verify":
             return verify_main(["--params", str(actuator_path(args.params, "--params"))] if args.params else [])
@@ -709,6 +743,10 @@ def main(argv: list[str] | None = None) -> int:
             raise
         print(f"haa-sym: error: {exc}", file=sys.stderr)
         return 2
+    except Terminated:
+        # as SIGINT below: every staged output was rolled back; 128 + SIGTERM
+        print("haa-sym: terminated (SIGTERM); no output written", file=sys.stderr)
+        return 143
     except KeyboardInterrupt:
         # outputs are staged (haa_sym.io.outputs): an interrupted command leaves existing files as
         # they were; 128 + SIGINT, the shell's convention

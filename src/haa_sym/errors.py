@@ -5,7 +5,7 @@ status 2 with its message, which names the field, the value and what is allowed;
 :class:`StaleGeneratedCode` and :class:`CompilerError` say what to run.
 """
 
-__all__ = ["ParameterError", "OutputError", "StaleGeneratedCode", "CompilerError", "NoCompiler"]
+__all__ = ["ParameterError", "OutputError", "StaleGeneratedCode", "CompilerError", "NoCompiler", "Terminated"]
 
 
 class ParameterError(ValueError):
@@ -26,3 +26,9 @@ class CompilerError(RuntimeError):
 
 class NoCompiler(CompilerError):
     """No C compiler could be found."""
+
+
+class Terminated(KeyboardInterrupt):
+    """The process received SIGTERM (``kill``, a job scheduler's time limit). Raised by the
+    command line's handler so that it unwinds like Ctrl-C (SIGINT): every staged output is
+    rolled back (:mod:`haa_sym.io.outputs`) and the command exits with 128 + 15 = 143."""

@@ -25,6 +25,7 @@ from tqdm.auto import tqdm
 
 from haa_sym.analysis.sweep import BLAS_THREADS, blas_limits, gain_rows, phase_excess
 from haa_sym.errors import ParameterError
+from haa_sym.io.budget import check_memory, sweep_bytes
 from haa_sym.loop import ClosedLoop, loop_first
 from haa_sym.loop.statespace import closed_loop_batch
 from haa_sym.model.actuator import Body, Topology
@@ -237,6 +238,10 @@ def contact_intervals(loop, K_range=(1.0, 1e5), *, n_scan: int = 400, P_gain: fl
         raise ParameterError(f"K_range = {tuple(K_range)!r}; allowed: 0 < K_lo < K_hi (Nm/rad)")
     if isinstance(n_scan, bool) or not isinstance(n_scan, int) or n_scan < 2:
         raise ParameterError(f"n_scan = {n_scan!r}; allowed: an integer >= 2")
+    # the scan keeps the stiffness, the radius and the excess of every point (24 B each) and
+    # sweeps the frequency grid at one point at a time
+    check_memory(24 * n_scan + sweep_bytes(1, loop.options.numerics.n_omega),
+                 f"n_scan = {n_scan}: a contact scan of {n_scan} stiffnesses")
     P_gain, D_gain, beta, alpha = _point(loop, P_gain, D_gain, beta, alpha)
     loop, key, added = _scanned(loop)
     base = _base(loop.params, key, mode)

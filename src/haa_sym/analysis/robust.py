@@ -27,9 +27,10 @@ from itertools import product
 
 import numpy as np
 
-from haa_sym.analysis.regions import region_map
+from haa_sym.analysis.regions import CHUNK, region_map
 from haa_sym.loop import ClosedLoop, loop_first
 from haa_sym.errors import ParameterError
+from haa_sym.io.budget import check_memory, sweep_bytes
 from haa_sym.model.params import Params, gain_array
 
 __all__ = ["LEG_MODES", "REQUIREMENTS", "meets", "leg_ends", "leg_values", "leg_text", "leg_configurations", "feasible_map",
@@ -223,8 +224,16 @@ def robust_region(loop, P_gain, D_gain, *, beta: float | None = None, alpha: flo
     _, _, beta, alpha = loop.gain_points(0.0, 0.0, beta, alpha)
     req = _check_requirements(requirements)
     maps: dict = {}
+    n_omega = loop.options.numerics.n_omega
+
+    def check(n_maps: int) -> None:
+        # one region map at a time, plus the kept (n_P, n_D) bool maps and the running result
+        check_memory(sweep_bytes(P.size * D.size, n_omega, CHUNK) + P.size * D.size * (n_maps + 1),
+                     f"a robust region of {P.size} x {D.size} (P_gain x D_gain) points over {n_maps} leg "
+                     f"configurations on n_omega = {n_omega} frequencies")
 
     def region(configs):
+        check(len(set(maps) | {tuple(sorted(c.items())) for c in configs}))
         out = np.ones((P.size, D.size), bool)
         for c in configs:
             key = tuple(sorted(c.items()))

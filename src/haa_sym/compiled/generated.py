@@ -205,14 +205,32 @@ class Compiler:
         except OSError:
             return False
 
-    def build(self, c_file: Path) -> Path:
-        """The verified shared library built from ``c_file``; (re)built if absent or damaged."""
+    @staticmethod
+    def _load_error(library: Path | str, symbols) -> str | None:
+        """None if ``library`` loads as a shared library exporting every name of ``symbols``,
+        else why not. A compiler command that exits 0 without linking (``CC=true``,
+        ``CC="gcc -c"``) leaves an empty file or an object file: recorded, it would make every
+        later run fail inside CasADi."""
+        try:
+            lib = ctypes.CDLL(str(library))
+        except OSError as exc:
+            return f"it is not a loadable shared library ({str(exc).splitlines()[0]})"
+        missing = [s for s in symbols if not hasattr(lib, s)]
+        return f"it does not export {missing}" if missing else None
+
+    def build(self, c_file: Path, symbols: tuple[str, ...] = ()) -> Path:
+        """The verified shared library built from ``c_file``; (re)built if absent, damaged or
+        not loadable with every function of ``symbols`` (checked before its digest is
+        recorded, and again when a recorded one is used)."""
         src = c_file.read_bytes()
         key = hashlib.sha256(src + "\0".join((self._version(), *self.argv) + CFLAGS).encode()
                              ).hexdigest()[:24]
         target = self.cache / key / (c_file.stem + ".so")
-        if self.verified(target):
+        if self.verified(target) and self._load_error(target, symbols) is None:
             return target
+        if target.is_dir() and not target.is_symlink():
+            # something else took the library's name in our cache: the cache is ours to repair
+            shutil.rmtree(target, ignore_errors=True)
         try:
             target.parent.mkdir(parents=True, exist_ok=True)
         except OSError as exc:
@@ -237,6 +255,12 @@ class Compiler:
                     f"compiling {c_file} with CC = {self.cc!r} failed (exit status "
                     f"{proc.returncode}); set CC to a working C compiler. Compiler output:\n"
                     f"{tail or '(none)'}")
+            why = self._load_error(Path(tmp).resolve(), symbols)
+            if why is not None:
+                raise CompilerError(
+                    f"compiling {c_file} with CC = {self.cc!r} exited 0 but {why}; allowed: a CC that "
+                    "compiles and links a shared library (e.g. CC=gcc; the flags "
+                    f"{' '.join(CFLAGS)} are added)")
             digest = _sha256(tmp)
             os.replace(tmp, target)
         finally:
@@ -276,7 +300,7 @@ class Evaluators:
                               stacklevel=2)
                 backend = "vm"
             else:
-                self.library = comp.build(self.code.c_file)
+                self.library = comp.build(self.code.c_file, tuple(self.code.function_names))
                 backend = "compiled"
         self.backend = backend
 

@@ -147,7 +147,7 @@ def compile_actuator(topology: Actuator, backend: str = "auto", *, cache_dir: st
             warnings.warn(f"haa_sym: {exc}; evaluating the plant of {topology.source} in CasADi's "
                           "virtual machine (slower, same numbers)", RuntimeWarning, stacklevel=2)
         else:
-            library = comp.build(c_file)
+            library = comp.build(c_file, (topology.function_name,))
     return CompiledTopology(topology, c_file, cas_file, library)
 
 

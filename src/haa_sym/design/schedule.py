@@ -61,6 +61,7 @@ Example
 """
 from __future__ import annotations
 
+import threading
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -184,6 +185,43 @@ def _task_points(params, config, P, D, beta, alpha, requirements, options):
     return meets(decide_points(loop, P, D, beta, alpha, passivity="passive" in requirements), requirements)
 
 
+#: Seconds to connect to a --scheduler and finish dask's handshake.
+CONNECT_TIMEOUT = 5.0
+
+
+def _connect(Client, address: str):
+    """A dask.distributed Client of ``address``, or one ParameterError within CONNECT_TIMEOUT.
+
+    Client's own ``timeout`` bounds the TCP connection only: a service that accepts and never
+    answers (an HTTP server waiting for a request) blocks the handshake for ever, and one that
+    greets first has its greeting read as a frame length (an allocation of exabytes). So the
+    client is made in a daemon thread, waited for with a deadline, and any failure it raises
+    (MemoryError included) is the address's fault.
+    """
+    out: dict = {}
+
+    def make():
+        try:
+            out["client"] = Client(address, timeout=f"{CONNECT_TIMEOUT:g}s")
+        except BaseException as exc:       # noqa: BLE001 - reported below, in the caller's thread
+            out["error"] = exc
+    worker = threading.Thread(target=make, name="haa_sym-scheduler-connect", daemon=True)
+    worker.start()
+    worker.join(CONNECT_TIMEOUT + 1)
+    allowed = "allowed: the address of a running dask.distributed scheduler, e.g. tcp://127.0.0.1:8786"
+    if "client" in out:
+        return out["client"]
+    if worker.is_alive():
+        why = f"no dask handshake within {CONNECT_TIMEOUT:g} s (a service that is not a dask scheduler?)"
+    else:
+        e = out.get("error")
+        first = str(e).splitlines()[0] if e is not None and str(e) else "no answer"
+        if isinstance(e, MemoryError):
+            first = "its answer is not dask's protocol"
+        why = f"no dask scheduler answers there ({type(e).__name__}: {first})"
+    raise ParameterError(f"--scheduler {address!r}: {why}; {allowed}")
+
+
 class _Runner:
     """Runs task lists on dask (threaded, in-process) or on a dask.distributed cluster."""
 
@@ -200,12 +238,7 @@ class _Runner:
             self.client = scheduler
             return
         address = str(scheduler)
-        try:
-            self.client = Client(address, timeout="2s")
-        except (OSError, TimeoutError, ValueError) as e:
-            raise ParameterError(f"--scheduler {address!r}: no dask scheduler answers there ({type(e).__name__}: "
-                                 f"{str(e).splitlines()[0] if str(e) else 'timed out'}); allowed: the address of "
-                                 "a running dask.distributed scheduler, e.g. tcp://127.0.0.1:8786") from None
+        self.client = _connect(Client, address)
         self.own = True
 
     def close(self):

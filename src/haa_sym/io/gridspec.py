@@ -2,6 +2,8 @@
 :func:`grid` (``log:START:STOP:N``, ``lin:START:STOP:N`` or a comma-separated list)."""
 from __future__ import annotations
 
+import re
+
 import numpy as np
 
 from haa_sym.errors import ParameterError
@@ -40,7 +42,8 @@ def grid(spec: str, name: str = "grid") -> np.ndarray:
         if len(parts) != 3:
             raise bad(f"expected 3 fields after '{kind}:' (START:STOP:N), got {len(parts)}")
         a, b = number(parts[0], "START = "), number(parts[1], "STOP = ")
-        if not parts[2].strip().isdigit() or int(parts[2]) < 1:
+        # ASCII digits only: str.isdigit also accepts "²", which int() then refuses
+        if not re.fullmatch(r"[0-9]+", parts[2].strip()) or int(parts[2]) < 1:
             raise bad(f"N = {parts[2].strip()!r} is not an integer >= 1")
         n = int(parts[2])
         if a > b:

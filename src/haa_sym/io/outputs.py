@@ -16,6 +16,16 @@ removes again those it created that are still empty. So a failed or interrupted 
 no new directory behind; the one exception is a directory another process put a file into
 meanwhile, which is not ours to delete. Messages name the user's path, never a temporary one.
 
+Replacing an existing target keeps what the user set on it:
+
+* its permission bits: the new file (or directory) gets the old one's mode (a 0600 file stays
+  0600, a 0700 directory 0700), not the umask's default;
+* a symbolic link is followed: the file (or directory) it points to is written and the link
+  stays a link (a dangling link creates its target, whose directory must exist);
+* a read-only target (no write permission bit for anyone, e.g. 0444, or not writable by the
+  user) is refused before any work, with the path and what is allowed: the user made it
+  read-only, so it is not replaced behind their back (``chmod u+w`` it, or write elsewhere).
+
 Example
 -------
 >>> with Transaction() as tx:                                   # doctest: +SKIP
@@ -31,6 +41,7 @@ import os
 import re
 import secrets
 import shutil
+import stat
 from pathlib import Path
 from typing import Callable, Iterator
 
@@ -68,15 +79,35 @@ def _check_parent(path: Path, field: str | None) -> None:
         raise OutputError(f"{_label(path, field)}: {what}directory {str(base)!r} is not writable")
 
 
+def _follow(path: Path) -> Path:
+    """``path`` with its symbolic links resolved: the file the user's link points to is the one
+    written (the link stays a link)."""
+    return path.resolve() if path.is_symlink() else path
+
+
+def _check_writable(path: Path, shown: Path, field: str | None, what: str) -> None:
+    """Refuse an existing read-only target (see the module docstring)."""
+    try:
+        mode = path.stat().st_mode
+    except (FileNotFoundError, NotADirectoryError):
+        return                                   # a new file; _check_parent judges the directory
+    if not (mode & 0o222) or not os.access(path, os.W_OK):
+        raise OutputError(f"{_label(shown, field)}: the existing {what} is read-only (mode "
+                          f"{stat.S_IMODE(mode):04o}); allowed: a writable {what} (chmod u+w it) or a new path")
+
+
 def check_file(path: str | Path, field: str | None = None) -> Path:
-    """Check that ``path`` can be written as a file: not a directory; its parent a writable
-    directory, or missing below a writable directory (the transaction creates it).
+    """Check that ``path`` can be written as a file: not a directory, not a read-only file; its
+    parent a writable directory, or missing below a writable directory (the transaction creates
+    it). Returns the path to write: a symbolic link resolved to its target.
 
     ``field`` (e.g. ``--out``) is how messages name the path.
     """
-    path = Path(path)
+    shown = Path(path)
+    path = _follow(shown)
     if path.is_dir():
-        raise OutputError(f"{_label(path, field)} is a directory; allowed: a file path")
+        raise OutputError(f"{_label(shown, field)} is a directory; allowed: a file path")
+    _check_writable(path, shown, field, "file")
     _check_parent(path, field)
     return path
 
@@ -90,13 +121,12 @@ def check_directory(path: str | Path, field: str | None = None,
     replaced (e.g. it holds files the command does not write). Returns the path with a final
     symbolic link resolved (the directory it points to is the one replaced).
     """
-    path = Path(path)
-    if path.is_symlink():
-        path = path.resolve()
+    path = _follow(Path(path))
     if path.exists():
         if not path.is_dir():
             raise OutputError(f"{_label(path, field)} is not a directory; allowed: a new or existing "
                               "directory")
+        _check_writable(path, path, field, "directory")
         why = replaceable(path) if replaceable else None
         if why:
             raise OutputError(f"{_label(path, field)}: {why}")
@@ -129,6 +159,19 @@ def _remove(path: Path) -> None:
     else:
         with contextlib.suppress(FileNotFoundError):
             path.unlink()
+
+
+def _keep_mode(target: Path, *, fd: int | None = None, path: Path | None = None) -> None:
+    """Give the staged temporary (an open ``fd`` or a ``path``) the existing target's permission
+    bits, so that replacing a file never widens (or narrows) who may read it."""
+    try:
+        mode = stat.S_IMODE(target.stat().st_mode)
+    except (FileNotFoundError, NotADirectoryError):
+        return                                   # a new target: the umask's default
+    if fd is not None:
+        os.fchmod(fd, mode)
+    else:
+        os.chmod(path, mode)
 
 
 class Transaction:
@@ -175,6 +218,7 @@ class Transaction:
         tmp, fd = _create_sibling(target, field, lambda t: os.open(t, flags, 0o666), "write",
                                   "a temporary file")
         try:
+            _keep_mode(target, fd=fd)
             with os.fdopen(fd, mode) as fh:
                 yield fh
         except BaseException as exc:
@@ -201,6 +245,11 @@ class Transaction:
         # 0o777 & ~umask, like mkdir (mkdtemp forces 0700)
         tmp, _ = _create_sibling(target, field, lambda t: os.mkdir(t, 0o777), "create",
                                  "a temporary directory")
+        try:
+            _keep_mode(target, path=tmp)
+        except OSError as exc:
+            _remove(tmp)
+            raise OutputError(f"{_label(target, field)}: cannot write ({exc.strerror or exc})") from None
         self._staged.append((tmp, target, True))
         self._dir_checks[target] = (field, replaceable)
         return tmp

@@ -12,10 +12,11 @@ import numpy as np  # noqa: E402
 from matplotlib.colors import ListedColormap  # noqa: E402
 from matplotlib.patches import Patch  # noqa: E402
 
+from haa_sym.errors import ParameterError  # noqa: E402
 from haa_sym.io.outputs import transaction  # noqa: E402
 
 __all__ = ["plot_region", "plot_region_panels", "plot_corrected_phase", "plot_steps",
-           "plot_contact", "save_figure"]
+           "plot_contact", "save_figure", "check_title"]
 
 # Figs. 8-11: white stable, light grey stable with PM < 30 deg, dark unstable.
 REGION_COLORS = ListedColormap(["#ffffff", "#c8c8c8", "#3a3a3a"])
@@ -249,6 +250,28 @@ def plot_torque_bandwidth(panels, title: str = ""):
     if title:
         fig.suptitle(title, fontsize=10)
     return fig
+
+
+def check_title(title: str, field: str = "--title") -> None:
+    """Refuse a title matplotlib cannot draw, before any work: text between ``$`` signs is
+    parsed as mathtext, and a parse error would otherwise surface only when the figure is saved.
+
+    >>> check_title("HyQ, $N_{av} = 10$")        # passes; "$\\frac{$" raises ParameterError
+    """
+    from matplotlib.backends.backend_agg import FigureCanvasAgg
+    from matplotlib.figure import Figure
+
+    fig = Figure()
+    FigureCanvasAgg(fig)
+    fig.suptitle(title)
+    try:
+        fig.canvas.draw()
+    except ValueError as exc:
+        # mathtext's message is the text, a caret line and the parser's complaint: keep the last
+        lines = [line.strip() for line in str(exc).splitlines() if line.strip()]
+        why = lines[-1][:200] if lines else type(exc).__name__
+        raise ParameterError(f"{field} {title!r}: matplotlib cannot draw it ({why}); allowed: text, math "
+                             "between $ signs that matplotlib's mathtext parses, \\$ for a dollar sign") from None
 
 
 def save_figure(fig, path: str | Path, tx=None, field: str | None = None) -> Path:

@@ -41,8 +41,10 @@ from haa_sym.compiled.cache import BoundedCache, array_key
 from haa_sym.compiled.generated import evaluators
 from haa_sym.loop.exact import bilinear, polymul, polysub, to_float, transfer_polynomials
 from haa_sym.errors import ParameterError
+from haa_sym.io.progress import message
 from haa_sym.model.params import Params, gain_array, gain_points
 from haa_sym.model.elements import backward_difference, common_denominator, delay, pi_integral
+from haa_sym.model import filters
 from haa_sym.model.filters import controller_filter
 from haa_sym.compiled.layout import (COEF_FORMS, COEF_OUTPUTS, COEF_TERMS, FREQ_COLUMN, N_BASIS, TORQUE_GAINS,
                             gain_monomials)
@@ -64,10 +66,29 @@ _BASES = BoundedCache()
 _COEFFICIENTS = BoundedCache(64)
 
 
-def _transfer_polynomials(plant: DiscretePlant):
+# The exact characteristic polynomial (Faddeev-LeVerrier in integers) costs about n^4 products
+# of numbers growing to n x ~260 bits: measured on this 2-core machine 0.03 s at 13 states (a
+# 5-body chain), 4 s at 35 (16 bodies), 100 s at 59 (28 bodies, the largest chain the generated
+# capacity takes with N_av = 4): about 100 s x (n/59)^6. Above SLOW_EXACT_STATES a message says so
+# before the work starts (--quiet silences it).
+SLOW_EXACT_STATES = 30
+
+
+def _exact_seconds(n_states: int) -> float:
+    """Rough seconds of the exact step for a plant of ``n_states`` (see SLOW_EXACT_STATES)."""
+    return 100.0 * (n_states / 59) ** 6
+
+
+def _transfer_polynomials(plant: DiscretePlant, source: str = "the plant"):
     """Exact d(z) and the V_m numerators of ``plant`` (Faddeev-LeVerrier in integers), memoised."""
-    return _PLANT_POLYS.get(array_key(plant.Phi, plant.Gamma[:, :1], plant.C),
-                            lambda: transfer_polynomials(plant.Phi, plant.Gamma[:, :1], plant.C))
+    def build():
+        n = plant.Phi.shape[0]
+        if n >= SLOW_EXACT_STATES:
+            message(f"haa_sym: exact characteristic polynomial of the {n}-state plant of {source}: about "
+                    f"{_exact_seconds(n):.0f} s (exact integer arithmetic, growing as states^6; once per "
+                    "plant and sampling time in a process)")
+        return transfer_polynomials(plant.Phi, plant.Gamma[:, :1], plant.C)
+    return _PLANT_POLYS.get(array_key(plant.Phi, plant.Gamma[:, :1], plant.C), build)
 
 
 @dataclass(frozen=True)
@@ -149,6 +170,10 @@ class ClosedLoop:
         self.options = (options or LoopOptions()).resolved(params.plant.topology)
         self.backend = backend
         ctrl = params.controller
+        # before the plant is compiled and sampled and the elements are built: a chain or a
+        # filter beyond every generated capacity would cost minutes of symbolic and exact
+        # arithmetic (N_av = 10**6, a 50-body chain) only to be refused at the end
+        self._check_reach(params, evaluators(backend).capacities)
         self.plant: DiscretePlant = _PLANTS.get(
             (params.plant, ctrl.Ts, backend),
             lambda: discretize(continuous_plant(params.plant, backend), ctrl.Ts))
@@ -179,6 +204,38 @@ class ClosedLoop:
         self.free_mode = bool(np.min(np.abs(np.linalg.eigvals(self.plant.Phi) - 1)) < MARGINAL_TOL)
         # basis=False: a loop used only for frequency responses or the explicit state space
         self.basis, self._z_basis = self._basis() if basis else (None, None)
+
+    def _check_reach(self, params: Params, capacities) -> None:
+        """Refuse a loop whose order exceeds the largest generated capacity, from counts alone.
+
+        The order is at least the plant's states (3 for the motor and 2 per body of the chain)
+        + 1 (the PI's integrator) + ``delay`` + the velocity filter's order; the exact order
+        (after the filters' common denominator) is checked again once they are built.
+        """
+        top, ctrl, d = params.plant.topology, params.controller, self.options.structure.delay
+        cap = max(capacities)
+        n_x = len(top.state_names)
+        n_f = filters.controller_filter_order(ctrl)
+        if n_x + 1 + d + 1 > cap:       # even the smallest filter (order 1) does not fit
+            bodies = (cap - 1 - d - 1 - 3) // 2
+            raise ParameterError(
+                f"{params.source}: the chain has too many states for the generated code: "
+                f"{len(top.bodies)} bodies give {n_x} plant states (3 of the motor, 2 per body), a "
+                f"closed loop of order >= {n_x + 2 + d}, above the largest generated capacity {cap}; "
+                f"allowed: at most {bodies} bodies (with delay = {d} and a first-order filter; a larger "
+                "capacity needs CAPACITIES in codegen/generate.py of a source tree and `make derive`)")
+        if n_x + 1 + d + n_f > cap:
+            room = cap - n_x - 1 - d
+            if ctrl.velocity_filter == "average":
+                what, allowed = f"N_av = {ctrl.N_av}", f"N_av <= {room}"
+            else:
+                what, allowed = (f"velocity_filter = {ctrl.velocity_filter!r} (order {n_f})",
+                                 f"a velocity filter of order <= {room}")
+            raise ParameterError(
+                f"{what} gives a closed loop of order {n_x + 1 + d + n_f} with the {n_x} plant states "
+                f"of {params.source}, above the largest generated capacity {cap}; allowed: {allowed} "
+                f"(with delay = {d}; a larger capacity needs CAPACITIES in codegen/generate.py of a "
+                "source tree and `make derive`)")
 
     # --- the characteristic polynomial -------------------------------------------------------
     def plant_output(self, name: str) -> int:
@@ -224,7 +281,7 @@ class ClosedLoop:
         difference exact (zero for filter = "both").
         """
         el = self.elements
-        d, nums = _transfer_polynomials(self.plant)
+        d, nums = _transfer_polynomials(self.plant, self.params.source)
         n_T = nums[self.plant_output(self.torque_output)][0]
         n_th = nums[self.plant_output("theta_encoder")][0]
         D, (A_d, A_vc) = common_denominator(el["F_d"], el["F_vc"])

@@ -163,6 +163,16 @@ class FrequencyGrid:
         if isinstance(v, bool) or not isinstance(v, (int, float)) or not np.isfinite(v) or v <= 0:
             raise ParameterError(f"omega_min = {v!r}; allowed: a finite number > 0 (rad/s)")
 
+    def check_budget(self, n: int | None = None) -> int:
+        """Refuse a grid of ``n`` points (default ``n_omega``) whose sweep would exceed the
+        memory budget (:mod:`haa_sym.io.budget`); returns ``n``. Commands call it as soon as the
+        options are read, before any loop is built or any result printed."""
+        n = self.n_omega if n is None else int(n)
+        # every frequency-domain analysis sweeps this grid in chunks of points: the gate before
+        # anything of its size is allocated
+        check_memory(sweep_bytes(1, n), f"n_omega = {n}: a frequency grid of {n} points")
+        return n
+
     def omega(self, Ts: float, n: int | None = None) -> np.ndarray:
         """The log frequency grid (rad/s) from ``omega_min`` to just below Nyquist pi/Ts for
         sampling time ``Ts`` (s), with ``n`` points (default ``n_omega``): the one grid of every
@@ -170,10 +180,7 @@ class FrequencyGrid:
         w_max = np.pi / Ts * (1 - 1e-9)
         if self.omega_min >= w_max:
             raise ParameterError(f"omega_min = {self.omega_min!r} is not below Nyquist pi/Ts = {w_max:.6g} rad/s")
-        n = self.n_omega if n is None else int(n)
-        # every frequency-domain analysis sweeps this grid in chunks of points: the gate before
-        # anything of its size is allocated
-        check_memory(sweep_bytes(1, n), f"n_omega = {n}: a frequency grid of {n} points")
+        n = self.check_budget(n)
         return np.logspace(np.log10(self.omega_min), np.log10(w_max), n)
 
 
@@ -265,6 +272,16 @@ class LoopOptions:
     def resolved(self, topology) -> "LoopOptions":
         """These options with the structure's file-backed defaults filled in for ``topology``."""
         return LoopOptions(self.structure.resolved(topology), self.conventions, self.numerics)
+
+    def check_budget(self, n: int | None = None) -> int:
+        """Refuse a grid of ``n`` points (default ``n_omega``) whose sweep would exceed the
+        memory budget (:mod:`haa_sym.io.budget`); returns ``n``. Commands call it as soon as the
+        options are read, before any loop is built or any result printed."""
+        n = self.n_omega if n is None else int(n)
+        # every frequency-domain analysis sweeps this grid in chunks of points: the gate before
+        # anything of its size is allocated
+        check_memory(sweep_bytes(1, n), f"n_omega = {n}: a frequency grid of {n} points")
+        return n
 
     def omega(self, Ts: float, n: int | None = None) -> np.ndarray:
         """The frequency grid (rad/s) of :attr:`numerics` for sampling time ``Ts``."""

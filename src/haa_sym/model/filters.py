@@ -100,6 +100,12 @@ class VelocityFilter:
     build : callable
         ``build(Ts, **{p.name: value for p in parameters}) -> Element``: the exact transfer
         function (Fraction coefficients) for sampling time ``Ts`` (s).
+    order : callable, optional
+        ``order(**{p.name: value ...}) -> int``: the number of states of ``build``'s result
+        (its denominator's degree) without building it. A closed loop checks the generated
+        capacity with it first, because building an element of a huge order (``N_av = 10**6``)
+        and combining it with the others costs minutes of exact arithmetic. None: the order is
+        read from the built element.
     """
 
     name: str
@@ -107,6 +113,7 @@ class VelocityFilter:
     equation: str
     parameters: tuple[FilterParameter, ...]
     build: Callable[..., Element]
+    order: Callable[..., int] | None = None
 
     @property
     def keys(self) -> tuple[str, ...]:
@@ -184,6 +191,12 @@ def velocity_filter(kind: str, Ts: float, **values) -> Element:
     given: :class:`haa_sym.model.params.Controller` is where they are validated.
     """
     entry = get(kind)
+    return entry.build(Ts, **_arguments(entry, values))
+
+
+def _arguments(entry: VelocityFilter, values: dict) -> dict:
+    """The values of ``entry``'s parameters out of ``values`` (defaults filled in)."""
+    kind = entry.name
     unknown = sorted(set(values) - set(PARAMETERS))
     if unknown:
         raise TypeError(f"velocity_filter(): unknown parameter(s) {unknown}; allowed: {list(PARAMETERS)}")
@@ -195,12 +208,27 @@ def velocity_filter(kind: str, Ts: float, **values) -> Element:
         if value is None:
             raise ParameterError(f"{p.name} is missing, required by velocity_filter = {kind!r}")
         args[p.name] = value
-    return entry.build(Ts, **args)
+    return args
 
 
 def controller_filter(ctrl) -> Element:
     """The velocity estimate of a :class:`haa_sym.model.params.Controller`."""
     return velocity_filter(ctrl.velocity_filter, ctrl.Ts, **{k: getattr(ctrl, k) for k in PARAMETERS})
+
+
+def controller_filter_order(ctrl) -> int:
+    """The order (states) of :func:`controller_filter`'s element, without building it when
+    the registry entry states its ``order``.
+
+    >>> from types import SimpleNamespace
+    >>> controller_filter_order(SimpleNamespace(velocity_filter="average", Ts=1e-3, N_av=10**6, f_c=None))
+    1000000
+    """
+    entry = get(ctrl.velocity_filter)
+    values = {k: getattr(ctrl, k) for k in PARAMETERS}
+    if entry.order is not None:
+        return int(entry.order(**_arguments(entry, values)))
+    return controller_filter(ctrl).order
 
 
 def help_text() -> str:
@@ -248,10 +276,14 @@ def _butterworth2(Ts: float, f_c: float) -> Element:
 
 
 register(VelocityFilter(
-    "average", "the average of N_av first differences", "(1 - z^-N_av)/(N_av Ts)", (N_AV,), _average))
+    "average", "the average of N_av first differences", "(1 - z^-N_av)/(N_av Ts)", (N_AV,), _average,
+    # z^N_av - 1 over N_av Ts z^N_av: coprime (no root of z^N - 1 at 0), so no state cancels
+    order=lambda N_av: int(N_av)))
 register(VelocityFilter(
     "lowpass1", "backward difference and a first-order Tustin low-pass",
-    "(1 - z^-1)/Ts * w_c/(s + w_c), s = (2/Ts)(z - 1)/(z + 1), w_c = 2 pi f_c", (F_C,), _lowpass1))
+    "(1 - z^-1)/Ts * w_c/(s + w_c), s = (2/Ts)(z - 1)/(z + 1), w_c = 2 pi f_c", (F_C,), _lowpass1,
+    order=lambda f_c: 2))
 register(VelocityFilter(
     "butterworth2", "backward difference and a second-order Butterworth Tustin low-pass",
-    "(1 - z^-1)/Ts * w_c^2/(s^2 + sqrt(2) w_c s + w_c^2), same s", (F_C,), _butterworth2))
+    "(1 - z^-1)/Ts * w_c^2/(s^2 + sqrt(2) w_c s + w_c^2), same s", (F_C,), _butterworth2,
+    order=lambda f_c: 3))

@@ -92,11 +92,6 @@ _GAIN_UNITS = {"P_gain": " (Nm/rad)", "D_gain": " (Nms/rad)", "beta": "", "alpha
 GAIN_KEYS: tuple[str, ...] = tuple(_GAIN_DOMAIN)
 
 CONTROLLER_KEYS: tuple[str, ...] = tuple(_CONTROLLER_DOMAIN)
-# Units of the controller keys (the plant's come from its topology, Topology.units); the filter
-# keys' from the registry.
-CONTROLLER_UNITS: dict[str, str] = {"Ts": "s", "alpha": "-", "beta": "-", "P_t0": "V/Nm", "I_t0": "V/(Nm s)",
-                                    "velocity_filter": "name",
-                                    **{k: p.units for k, p in FILTER_PARAMETERS.items()}}
 
 
 def domain_text(domain: str) -> str:
@@ -110,7 +105,7 @@ def set_keys(params: "Params") -> list[tuple[str, str, str, object]]:
     controller's."""
     top = params.plant.topology
     rows = [(k, top.units[k], domain_text(d), params.plant.as_dict()[k]) for k, d in top.domain.items()]
-    rows += [(k, CONTROLLER_UNITS[k], domain_text(d), getattr(params.controller, k))
+    rows += [(k, CONTROLLER_UNITS.get(k, "name"), domain_text(d), getattr(params.controller, k))
              for k, d in _CONTROLLER_DOMAIN.items()]
     return rows
 
@@ -611,6 +606,11 @@ def load_params(path: str | Path | None = None) -> Params:
         raise ParameterError(f"{p}: no such parameter file") from None
     except tomllib.TOMLDecodeError as exc:
         raise ParameterError(f"{p}: not valid TOML ({exc}); allowed: a TOML parameter file") from None
+    except RecursionError:
+        # tomllib parses nested arrays and inline tables recursively: thousands of levels
+        # exhaust Python's stack
+        raise ParameterError(f"{p}: not a parameter file (arrays or tables nested too deeply for the "
+                             "TOML parser); allowed: a TOML parameter file") from None
     except UnicodeDecodeError as exc:
         raise ParameterError(f"{p}: not a text file (byte 0x{exc.object[exc.start]:02x} at offset "
                              f"{exc.start} is not UTF-8); allowed: a TOML parameter file") from None
