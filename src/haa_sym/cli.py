@@ -272,14 +272,15 @@ def _leg(args, params):
     return (a.strip(), b.strip())
 
 
-def _say_leg(params, leg, leg_mode) -> None:
-    """Before a leg-range analysis: which configurations and values it analyses (a progress
-    message), and a warning, shown even with --quiet, when the parameters' own values (a file's
-    body tables, --set) lie outside the range, which replaces them."""
+def _say_leg(params, leg, leg_mode) -> str:
+    """Before a leg-range analysis: a warning, shown even with --quiet, when the parameters' own
+    values (a file's body tables, --set) lie outside the range, which replaces them. Returns the
+    line saying which configurations and values it analyses, a progress message the command
+    shows once its input has passed every check (a refused command prints one line only)."""
     line, warning = leg_text(leg_values(params, leg, leg_mode))
-    message(line)
     if warning:
         print(f"haa-sym: warning: {warning}", file=sys.stderr)
+    return line
 
 
 def _requirements(args):
@@ -313,9 +314,10 @@ def _cmd_regions(args) -> int:
 
 
 def _robust_regions(args, loop, out, plot, P, D) -> int:
-    _say_leg(loop.params, _leg(args, loop.params), args.leg_mode)
+    leg_line = _say_leg(loop.params, _leg(args, loop.params), args.leg_mode)
     r = robust_region(loop, P, D, requirements=_requirements(args), leg=_leg(args, loop.params),
                       leg_mode=args.leg_mode)
+    message(leg_line)
     meta = {**r.meta, "n_configurations": r.n_configurations, "converged": r.converged, "history": r.history,
             "configurations": r.configurations}
     _write_outputs(out, plot,
@@ -400,10 +402,11 @@ def _cmd_schedule(args) -> int:
     P, D = _axis(args, "P_gain"), _axis(args, "D_gain")
     beta_range = _range(args.beta_range, "--beta-range", "the torque-gain scale beta, Eq. 7")
     alphas = None if args.alpha_values is None else grid(args.alpha_values, "--alpha-values")
-    _say_leg(loop.params, _leg(args, loop.params), args.leg_mode)
+    leg_line = _say_leg(loop.params, _leg(args, loop.params), args.leg_mode)
     s = schedule(loop, P, D, beta_range=beta_range, beta_tol=args.beta_tol, alpha_values=alphas,
                  requirements=_requirements(args), leg=_leg(args, loop.params), leg_mode=args.leg_mode,
                  scheduler=args.scheduler)
+    message(leg_line)
     if not s.feasible.any():
         with_alpha = f" with --alpha-values {args.alpha_values}" if args.alpha_values is not None else ""
         raise ParameterError(f"--beta-range {args.beta_range}{with_alpha}: no beta in the range meets "
