@@ -285,6 +285,7 @@ def test_title_that_mathtext_cannot_parse(tmp_path, capsys):
                  str(tmp_path / "m.png"), "--title", "HyQ, $N_{av} = 4$, cost \\$5"]) == 0
 
 
+@pytest.mark.slow
 def test_sigterm_rolls_back_like_sigint(tmp_path):
     out = tmp_path / "res"
     p = subprocess.Popen([PY, "-m", "haa_sym.cli", "reproduce", "--quick", "--out", str(out)],

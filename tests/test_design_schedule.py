@@ -68,6 +68,7 @@ def test_infeasible_points_have_no_robust_beta_on_the_coarse_grid(hyq_schedule):
                        for c in leg_configurations(params, 2))
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("name", ["sea", "harmonic_drive"])
 def test_runs_on_the_other_built_in_actuators(name):
     p = load_params(ROOT / "model" / f"{name}.toml")
@@ -78,6 +79,7 @@ def test_runs_on_the_other_built_in_actuators(name):
                for c in leg_configurations(p, 3))
 
 
+@pytest.mark.slow
 def test_cli_csv_has_the_issue_columns_and_the_c_lookup_returns_it(tmp_path, capsys):
     from haa_sym.errors import NoCompiler
     from haa_sym.compiled.generated import Compiler
@@ -141,7 +143,8 @@ def test_distributed_cluster_gives_the_same_bytes():
     (["--P-gain", "5"], "P_gain: 1 value(s); allowed: at least 2"),
     (["--leg", "retracted:flying"], "allowed: two different names of ['nominal', 'extended', 'retracted']"),
     (["--require", "pm"], "allowed: 'stable' and any of"),
-    (["--scheduler", "tcp://127.0.0.1:9"], "no dask scheduler answers there"),
+    pytest.param(["--scheduler", "tcp://127.0.0.1:9"], "no dask scheduler answers there",
+                 marks=pytest.mark.slow),                    # the connect time-out: 5 s
     (["--c-out", "/proc/version/ctrl"], "--c-out '/proc/version/ctrl/haa_schedule.h': '/proc/version' is not a directory"),
 ])
 def test_bad_input_one_message_nothing_written(tmp_path, assert_refused, argv, message):

@@ -75,6 +75,7 @@ def test_cells_with_an_infeasible_corner_have_no_safe_gain_and_values_only_fall(
         assert lookup(table, P, D) == (NO_SAFE_GAIN, None, None)
 
 
+@pytest.mark.slow
 def test_off_grid_betas_are_safe_at_three_leg_configurations(hyq):
     """Every OK answer at >= 100 random off-grid points meets stable + PM >= 30 deg at both leg
     ends and the middle by the independent reference. The same points evaluated with the
