@@ -211,10 +211,20 @@ class Compiler:
         else why not. A compiler command that exits 0 without linking (``CC=true``,
         ``CC="gcc -c"``) leaves an empty file or an object file: recorded, it would make every
         later run fail inside CasADi."""
+        # the check loads a private copy: a library mapped into this process must never be the
+        # file the cache later replaces or a damaged file is rewritten over (a mapped file
+        # changed in place faults with SIGBUS when its pages are next touched, e.g. at exit);
+        # the copy is unlinked at once, which leaves the mapping valid
+        fd, copy = tempfile.mkstemp(suffix=".so", prefix=".haa_check_")
         try:
-            lib = ctypes.CDLL(str(library))
-        except OSError as exc:
-            return f"it is not a loadable shared library ({str(exc).splitlines()[0]})"
+            with os.fdopen(fd, "wb") as fh:
+                fh.write(Path(library).read_bytes())
+            try:
+                lib = ctypes.CDLL(copy)
+            except OSError as exc:
+                return f"it is not a loadable shared library ({str(exc).splitlines()[0].replace(copy, str(library))})"
+        finally:
+            os.unlink(copy)
         missing = [s for s in symbols if not hasattr(lib, s)]
         return f"it does not export {missing}" if missing else None
 
