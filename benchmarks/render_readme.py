@@ -109,8 +109,8 @@ def _blas(run) -> str:
 
 
 def machine_sentence(data) -> str:
-    runs = [(FILES[k][:-5].replace("results_", "bench_") + ".py", d["run"])
-            for k, d in data.items() if d is not None]
+    runs = sorted(((d["run"].get("script") or f"bench_{k}.py", d["run"]) for k, d in data.items() if d is not None),
+                  key=lambda sr: sr[1]["date"])
     if not runs:
         return "Not measured yet: run `make bench`, then `make bench-readme`."
     machines = {(r["cpu_model"], r["cpu_count"], r["platform"]) for _, r in runs}
