@@ -4,7 +4,7 @@ VENV   := .venv
 PY     := $(VENV)/bin/python
 STAMP  := $(VENV)/.installed
 
-.PHONY: all venv derive verify test test-slow check-generated paper bench clean
+.PHONY: all venv derive verify test test-slow check-generated paper bench bench-readme clean
 
 all: verify
 
@@ -29,12 +29,19 @@ paper: derive
 	$(PY) -m haa_sym.cli reproduce --out results
 
 ## Speed: the full map against python-control and numpy baselines, haa_sym's own timings and the
-## whole-process targets, the exact curves (prints tables, writes benchmarks/results*.json; ~5 min).
+## whole-process targets, the exact curves (prints tables; ~6 min). One JSON per script, with the
+## machine, its load and the date, into $(BENCH_DIR) (default bench-results/, git-ignored).
+BENCH_DIR ?= $(if $(HAA_SYM_BENCH_DIR),$(HAA_SYM_BENCH_DIR),bench-results)
 bench: $(STAMP)
-	$(PY) benchmarks/bench_baselines.py
-	$(PY) benchmarks/bench_regions.py
-	$(PY) benchmarks/bench_boundary.py
-	$(PY) benchmarks/bench_schedule.py
+	HAA_SYM_BENCH_DIR=$(BENCH_DIR) $(PY) benchmarks/bench_baselines.py
+	HAA_SYM_BENCH_DIR=$(BENCH_DIR) $(PY) benchmarks/bench_regions.py
+	HAA_SYM_BENCH_DIR=$(BENCH_DIR) $(PY) benchmarks/bench_boundary.py
+	HAA_SYM_BENCH_DIR=$(BENCH_DIR) $(PY) benchmarks/bench_schedule.py
+
+## Rewrite the README's benchmark block (between <!-- bench:start --> and <!-- bench:end -->)
+## from the JSON of `make bench`; `make bench-readme BENCH_ARGS=--check` only compares.
+bench-readme:
+	$(PYTHON) benchmarks/render_readme.py --results $(BENCH_DIR) $(BENCH_ARGS)
 
 ## The test suite without the tests marked slow (under 2 min); `make test-slow` runs those.
 test: $(STAMP)

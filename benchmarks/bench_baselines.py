@@ -70,22 +70,19 @@ Every ratio printed names its baseline. Decisions of every path are compared wit
 on every point they share, and disagreements are printed, not dropped. In-process timings are
 the best of ``REPEATS`` except where one run already takes tens of seconds (numpy at N_av = 50:
 one run; python-control: one timing per point). Prints a table, writes
-``benchmarks/results_baselines.json``. Usage: python benchmarks/bench_baselines.py
+``results_baselines.json`` into ``$HAA_SYM_BENCH_DIR`` (default ``bench-results/``, git-ignored). Usage: python benchmarks/bench_baselines.py
 """
 from __future__ import annotations
 
-import json
-import platform
 import sys
 import time
 import warnings
 from concurrent.futures import ThreadPoolExecutor
-from pathlib import Path
 
 import control as ct
 import numpy as np
 
-from timing import REPEATS, best
+from timing import REPEATS, Run, best
 from haa_sym import ClosedLoop, grid, load_params, region_map
 from haa_sym.analysis.margins import PM_THRESHOLD_DEG
 from haa_sym.analysis.sweep import BLAS_THREADS, CHUNK, SWEEP_THREADS, blas_limits, colgate_factor
@@ -94,7 +91,6 @@ from haa_sym.check.reference import closed_loop_matrices
 N_SAMPLE = 20                      # python-control points per configuration (5 x 4 lattice)
 BAND = 1e-6                        # |rho - 1| below this: a pole on the circle, not compared
 CONFIGS = (("nominal (N_av = 4)", {}), ("N_av = 50", {"N_av": 50}))
-OUT = Path(__file__).with_name("results_baselines.json")
 XTOL = 1e-12                       # Illinois stops at this bracket width in ln omega
 # offsets (multiples of the bandwidth sigma) sampled around each lightly damped pole of L_imp
 POLE_OFFSETS = np.array([0.0, 0.25, 0.5, 1.0, 2.0, 4.0])
@@ -458,15 +454,15 @@ def print_row(r):
 
 
 def main() -> int:
+    run = Run("bench_baselines.py")
     P_grid, D_grid = grid("log:1:20000:200"), grid("lin:1:50:200")
     rows = []
     for label, changes in CONFIGS:
         rows.append(run_config(label, changes, P_grid, D_grid))
         print_row(rows[-1])
-    OUT.write_text(json.dumps({"machine": platform.platform(), "python": platform.python_version(),
-                               "grid": "200 x 200, P_gain log 1..20000, D_gain lin 1..50",
-                               "rows": rows}, indent=1) + "\n")
-    print(f"\nwrote {OUT}")
+    out = run.write("results_baselines.json",
+                    {"grid": "200 x 200, P_gain log 1..20000, D_gain lin 1..50", "rows": rows})
+    print(f"\nwrote {out}")
     return 0
 
 

@@ -15,27 +15,25 @@ For the nominal configuration (N_av = 4) and N_av = 50, on the box P_gain 1..200
 The full map (with passivity) from the curves against python-control and numpy (stacked eigvals)
 is measured in ``benchmarks/bench_baselines.py``, which also checks it against eigenvalues.
 
-Best of ``REPEATS`` runs. Prints a table and writes ``benchmarks/results_boundary.json``.
+Best of ``REPEATS`` runs. Prints a table and writes ``results_boundary.json`` into
+``$HAA_SYM_BENCH_DIR`` (default ``bench-results/``, git-ignored).
 Usage: python benchmarks/bench_boundary.py
 """
 from __future__ import annotations
 
-import json
-import platform
-from pathlib import Path
 
-from timing import REPEATS, best
+from timing import REPEATS, Run, best
 from haa_sym import ClosedLoop, grid, load_params, region_map
 from haa_sym.analysis.boundaries import boundaries, classify_regions, phase_margin_curves, stability_boundary
 
-OUT = Path(__file__).with_name("results_boundary.json")
 
 
 
 
 def main() -> int:
+    run = Run("bench_boundary.py")
     P, D = grid("log:1:20000:200"), grid("lin:1:50:200")
-    results = {"machine": platform.machine(), "python": platform.python_version(), "grid": "200 x 200",
+    results = {"grid": "200 x 200",
                "repeats": REPEATS, "cases": {}}
     for name, changes in (("nominal (N_av = 4)", {}), ("N_av = 50", {"N_av": 50})):
         p = load_params().with_values(**changes)
@@ -58,8 +56,7 @@ def main() -> int:
         print(f"  map from the curves (stab, PM < 30)   {t_cls:8.3f} s")
         print(f"  map from the grid evaluators          {t_grid:8.3f} s  (curves / grid: {t_cls / t_grid:.2f})")
         print(f"  agreement: {agree}")
-    OUT.write_text(json.dumps(results, indent=1) + "\n")
-    print(f"wrote {OUT}")
+    print(f"wrote {run.write('results_boundary.json', results)}")
     return 0
 
 

@@ -27,12 +27,12 @@ sizes of the issue's targets:
     1000 x 1000 at N_av = 4 (target: at least 20x) and 250 x 250 at N_av = 50 (target: 50x);
 (3) ``haa-sym reproduce --out DIR``, what ``make paper`` runs after ``make derive``.
 
-Prints the timings and writes ``benchmarks/results.json``. In-process timings are the best of
+Prints the timings and writes ``results_regions.json`` into ``$HAA_SYM_BENCH_DIR`` (default
+``bench-results/``, git-ignored). In-process timings are the best of
 ``REPEATS`` runs (the radius map one run), every whole-process timing one run.
 """
 from __future__ import annotations
 
-import json
 import os
 import platform
 import subprocess
@@ -43,7 +43,7 @@ from pathlib import Path
 
 import numpy as np
 
-from timing import REPEATS, best
+from timing import REPEATS, Run, best
 from haa_sym import ClosedLoop, grid, load_params, region_map
 
 BAND = 1e-6
@@ -138,6 +138,7 @@ def paper_run() -> float:
 
 
 def main() -> int:
+    bench = Run("bench_regions.py")
     rows = run()
     print(f"200 x 200 region map on {platform.processor() or platform.machine()}, "
           f"python {platform.python_version()} (best of {REPEATS}; the radius map one run)")
@@ -161,9 +162,7 @@ def main() -> int:
               f"decisions agreeing {100 * r['decisions_agreeing_fraction']:.3f} %")
     t_paper = paper_run()
     print(f"\nhaa-sym reproduce (make paper after make derive): {t_paper:.1f} s")
-    out = HERE / "results.json"
-    out.write_text(json.dumps({"machine": platform.platform(), "rows": rows, "whole_process": procs,
-                               "reproduce_s": t_paper}, indent=1) + "\n")
+    out = bench.write("results_regions.json", {"rows": rows, "whole_process": procs, "reproduce_s": t_paper})
     print(f"\nwrote {out}")
     return 0
 

@@ -11,29 +11,28 @@ point at every leg configuration (``lowered_by_point_check``: points whose beta 
 it was ``lowered_by_exact_margins``, the separate exact-margin pass the maps no longer need):
 times are not comparable with numbers measured before.
 
-Prints a table and writes ``benchmarks/results_schedule.json``.
+Prints a table and writes ``results_schedule.json`` into
+``$HAA_SYM_BENCH_DIR`` (default ``bench-results/``, git-ignored).
 Usage: python benchmarks/bench_schedule.py
 """
 from __future__ import annotations
 
-import json
-import platform
 import time
-from pathlib import Path
 
 import numpy as np
 
+from timing import Run
 from haa_sym import ClosedLoop, load_params
 from haa_sym.design.schedule import schedule
 
-OUT = Path(__file__).with_name("results_schedule.json")
 GRIDS = ((10, 10), (20, 15), (40, 25))
 
 
 def main() -> int:
     import distributed
+    run = Run("bench_schedule.py")
     loop = ClosedLoop(load_params())
-    results = {"machine": platform.machine(), "python": platform.python_version(), "rows": []}
+    results = {"rows": []}
     with distributed.LocalCluster(n_workers=2, threads_per_worker=1, processes=True,
                                   dashboard_address=None) as cluster, distributed.Client(cluster) as client:
         client.run(lambda: __import__("haa_sym.design.schedule"))          # warm the workers' imports
@@ -55,8 +54,7 @@ def main() -> int:
     r = results["rows"]
     print(f"time per point in-process: {r[0]['local_s'] / r[0]['points'] * 1e3:.1f} ms ({r[0]['grid']}) -> "
           f"{r[-1]['local_s'] / r[-1]['points'] * 1e3:.1f} ms ({r[-1]['grid']})")
-    OUT.write_text(json.dumps(results, indent=1) + "\n")
-    print(f"wrote {OUT}")
+    print(f"wrote {run.write('results_schedule.json', results)}")
     return 0
 
 

@@ -1,0 +1,342 @@
+"""Render the README's benchmark block from the JSON files of ``make bench``.
+
+The block is everything between ``<!-- bench:start -->`` and ``<!-- bench:end -->`` in README.md:
+the sentence naming the machine, the date and the load of the run, the table, and the paragraph
+on agreement and targets. Every number in it comes from the JSON files (``results_baselines.json``,
+``results_regions.json``, ``results_boundary.json``, ``results_schedule.json`` in
+``$HAA_SYM_BENCH_DIR``, default ``bench-results/``); a file that is missing leaves its cells as
+"not measured". Nothing outside the markers is touched.
+
+Usage: python benchmarks/render_readme.py [--results DIR] [--readme README.md] [--check]
+``--check`` writes nothing and exits 1 if the README's block differs from what the JSON gives.
+Standard library only (``make bench-readme`` runs it with the system python).
+"""
+from __future__ import annotations
+
+import argparse
+import difflib
+import json
+import os
+import sys
+from pathlib import Path
+
+ROOT = Path(__file__).resolve().parent.parent
+START, END = "<!-- bench:start -->", "<!-- bench:end -->"
+FILES = {"baselines": "results_baselines.json", "regions": "results_regions.json",
+         "boundary": "results_boundary.json", "schedule": "results_schedule.json"}
+CONFIGS = ("nominal (N_av = 4)", "N_av = 50")
+NM = "not measured"
+TARGET_MAP_S = 0.100          # a full 200 x 200 map (stability + PM + passivity)
+TARGET_BOUNDARIES_S = 0.030   # the three exact boundaries of one configuration
+
+
+# --- number formats ------------------------------------------------------------------------------
+
+def _sig(x: float, n: int = 3) -> float:
+    return float(f"{x:.{n}g}")
+
+
+def sec(x) -> str:
+    """Seconds: two significant figures below 1 s, three above, thousands separated."""
+    if x is None:
+        return NM
+    if x < 1:
+        return f"{x:#.2g} s"
+    if x < 10:
+        return f"{x:.2f} s"
+    if x < 100:
+        return f"{x:.1f} s"
+    return f"{_sig(x):,.0f} s"
+
+
+def ms(x) -> str:
+    if x is None:
+        return NM
+    v = x * 1e3
+    return f"{v:.1f} ms" if v < 10 else f"{v:.0f} ms"
+
+
+def ratio(x) -> str:
+    if x is None:
+        return "?"
+    if x < 10:
+        return f"{x:.1f}x"
+    if x < 1000:
+        return f"{x:.0f}x"
+    return f"{_sig(x):,.0f}x"
+
+
+def met(ok: bool) -> str:
+    return "met" if ok else "NOT met"
+
+
+def count(n: int) -> str:
+    return f"{n:,}"
+
+
+# --- reading ---------------------------------------------------------------------------------------
+
+def load(results: Path) -> dict:
+    out = {}
+    for key, name in FILES.items():
+        f = results / name
+        out[key] = json.loads(f.read_text()) if f.is_file() else None
+    return out
+
+
+def baseline_row(data, config):
+    if data["baselines"] is None:
+        return None
+    return next((r for r in data["baselines"]["rows"] if r["config"] == config), None)
+
+
+def regions_row(data, config):
+    if data["regions"] is None:
+        return None
+    return next((r for r in data["regions"]["rows"] if r["config"] == config), None)
+
+
+def get(row, key):
+    return None if row is None else row.get(key)
+
+
+# --- the block -------------------------------------------------------------------------------------
+
+def _blas(run) -> str:
+    libs = dict.fromkeys(f"{b['internal_api']} {b['version']} ({b['num_threads']} threads)"
+                         for b in run.get("blas", []) if b.get("user_api") == "blas")
+    return "BLAS " + (" and ".join(libs) or "unknown (no threadpoolctl)")
+
+
+def machine_sentence(data) -> str:
+    runs = sorted(((d["run"].get("script") or f"bench_{k}.py", d["run"]) for k, d in data.items() if d is not None),
+                  key=lambda sr: sr[1]["date"])
+    if not runs:
+        return "Not measured yet: run `make bench`, then `make bench-readme`."
+    machines = {(r["cpu_model"], r["cpu_count"], r["platform"]) for _, r in runs}
+    lines = []
+    for cpu, n, plat in sorted(machines, key=str):
+        r0 = next(r for _, r in runs if (r["cpu_model"], r["cpu_count"], r["platform"]) == (cpu, n, plat))
+        lines.append(f"{cpu}, {n} cores, {plat}; python {r0['python']}, numpy {r0['numpy']}, {_blas(r0)}")
+    dates = sorted({r["date"][:10] for _, r in runs})
+    loads = "; ".join(
+        f"`{s}` {r['date'][11:16]} UTC, load {_load(r.get('load_average_start'))} -> "
+        f"{_load(r.get('load_average_end'))}" for s, r in runs)
+    missing = [FILES[k] for k, d in data.items() if d is None]
+    text = (f"Measured by `make bench` on {' / '.join(lines)}, "
+            f"{' to '.join([dates[0], dates[-1]] if len(dates) > 1 else dates)} (one run per script; "
+            f"1-minute load average at its start -> end: {loads}).")
+    if missing:
+        text += f" Not measured in this run (no {', '.join(f'`{m}`' for m in missing)}): those cells say so."
+    return text
+
+
+def _load(la) -> str:
+    return "?" if not la else f"{la[0]:.2f}"
+
+
+def table(data) -> list[str]:
+    b = [baseline_row(data, c) for c in CONFIGS]
+    rg = [regions_row(data, c) for c in CONFIGS]
+    bd = [None if data["boundary"] is None else data["boundary"]["cases"].get(c) for c in CONFIGS]
+
+    def cells(fn):
+        return [fn(i) for i in range(2)]
+
+    def curves(i):
+        t = get(b[i], "haa_sym_full_map_curves_s")
+        return NM if t is None else f"{sec(t)} (target {TARGET_MAP_S * 1e3:.0f} ms: {met(t <= TARGET_MAP_S)})"
+
+    def numpy(i):
+        t = get(b[i], "numpy_full_map_s")
+        if t is None:
+            return NM
+        r = ratio(b[i]["ratios"]["curves map vs numpy stacked eigvals + batched freq responses"])
+        g = ratio(b[i]["ratios"]["grid map vs numpy stacked eigvals + batched freq responses"])
+        return f"{sec(t)} (curves **{r}** faster, grid {g})"
+
+    def pc(i):
+        t = get(b[i], "python_control_full_map_extrapolated_s")
+        if t is None:
+            return NM
+        r = ratio(b[i]["ratios"]["curves map vs python-control per point (extrapolated)"])
+        return f"{sec(t)} (curves **{r}** faster)"
+
+    def stab(i):
+        t, e = get(b[i], "haa_sym_stability_map_s"), get(b[i], "numpy_eigvals_stability_s")
+        if t is None:
+            return NM
+        return f"{sec(t)} vs {sec(e)} (**{ratio(e / t)}**)"
+
+    def radius(i):
+        t = get(rg[i], "generated_full_map_with_radius_s")
+        return sec(t) if t is not None else (NM if rg[i] is None or i == 0 else "not timed (stacked eigvals)")
+
+    wp = {} if data["regions"] is None else {w["N_av"]: w for w in data["regions"]["whole_process"]}
+
+    def whole(i):
+        w = wp.get((4, 50)[i])
+        if w is None:
+            return NM
+        return (f"{w['grid']}: {sec(w['cli_regions_full_map_s'])} vs {sec(w['eigvals_script_stability_only_s'])} "
+                f"(**{ratio(w['ratio'])}**; target {w['target_ratio']:.0f}x: {met(w['target_met'])})")
+
+    def bounds(i):
+        c = bd[i]
+        if c is None:
+            return NM
+        return (f"{ms(c['stability_curves_s'])} / {ms(c['pm_curves_s'])} / {ms(c['three_boundaries_s'])} "
+                f"(target {TARGET_BOUNDARIES_S * 1e3:.0f} ms: {met(c['three_boundaries_s'] <= TARGET_BOUNDARIES_S)})")
+
+    def classify(i):
+        c = bd[i]
+        if c is None:
+            return NM
+        return f"{sec(c['classify_map_s'])} vs {sec(c['grid_map_s'])}"
+
+    reproduce = NM if data["regions"] is None else sec(data["regions"]["reproduce_s"])
+    if data["schedule"] is None:
+        sched_label, sched = "10 x 10 / 20 x 15 / 40 x 25", NM
+    else:
+        rows = data["schedule"]["rows"]
+        sched_label = " / ".join(r["grid"] for r in rows)
+        same = all(r["same_bytes"] for r in rows)
+        sched = (" / ".join(f"{r['local_s']:.1f}" for r in rows) + " s vs "
+                 + " / ".join(f"{r['cluster_s']:.1f}" for r in rows) + " s"
+                 + (" (same bytes)" if same else " (**bytes differ**)"))
+
+    n_pc = get(b[0], "python_control_sample_points") or get(b[1], "python_control_sample_points")
+    rows = [
+        ("full map (stability + exact PM + passivity) from the exact curves, the default "
+         "(`bench_baselines.py`)", cells(curves)),
+        ("full map from the generated grid evaluators, point by point (`--method grid`)",
+         cells(lambda i: sec(get(b[i], "haa_sym_full_map_grid_s")))),
+        ("numpy: stacked `eigvals` + batched frequency responses, crossovers located exactly (the whole map)",
+         cells(numpy)),
+        ("python-control point by point (`StateSpace`, `poles`, `stability_margins`, `frequency_response`), "
+         f"extrapolated from {n_pc or 20} points", cells(pc)),
+        ("stability map only, generated certified Routh-Hurwitz vs stacked numpy `eigvals` (same run)",
+         cells(stab)),
+        ("full map with the spectral radius (`--radius`, eigenvalues; `bench_regions.py`)", cells(radius)),
+        ("whole process: `haa-sym regions` (full map, npz) vs a stacked-`eigvals` script (stability only)",
+         cells(whole)),
+        ("the three exact boundaries of one configuration (`bench_boundary.py`): stability / 30 deg PM / "
+         "all three with passivity", cells(bounds)),
+        ("map of stability and PM < 30 deg from the curves vs from the grid evaluators (`bench_boundary.py`)",
+         cells(classify)),
+        ("`haa-sym reproduce` (what `make paper` runs after `make derive`)", [reproduce, ""]),
+        (f"`haa-sym schedule` (HyQ, tolerance 0.02) on {sched_label} impedances (`bench_schedule.py`), "
+         "in-process vs a two-worker LocalCluster", [sched, ""]),
+    ]
+    def order(i):
+        o = get(b[i], "closed_loop_order") or get(rg[i], "closed_loop_order")
+        return f"order {o}" if o else "order not measured"
+    out = [f"| | nominal (N_av = 4, {order(0)}) | N_av = 50 ({order(1)}) |", "|---|---|---|"]
+    out += [f"| {label} | {a} | {c} |" for label, (a, c) in rows]
+    return out
+
+
+def agreement(data) -> str:
+    parts = []
+    if data["baselines"] is not None:
+        worst = {}
+        for r in data["baselines"]["rows"]:
+            for a in r["agreement_with_grid_map"]:
+                w = worst.setdefault(a["path"], {"dis": 0, "n": 0, "pm": 0.0, "ex": 0.0})
+                w["dis"] = max(w["dis"], a["stable_disagree"] + a["low_pm_disagree"] + a["passive_disagree"])
+                w["n"] = max(w["n"], a["compared"])
+                w["pm"] = max(w["pm"], a["max_abs_pm_diff_deg"] or 0.0)
+                w["ex"] = max(w["ex"], a["max_abs_excess_diff_deg"] or 0.0)
+        eig = max(r["curves_map_vs_numpy_eigvals_stable_disagree"] for r in data["baselines"]["rows"])
+        desc = "; ".join(f"{p}: {w['dis']} of {count(w['n'])} points differ, margins to {w['pm']:.1g} deg, "
+                         f"passivity excess to {w['ex']:.1g} deg" for p, w in worst.items())
+        parts.append(f"Against the grid map (worst configuration, decisions stable / PM < 30 / passive): {desc}. "
+                     f"The curves map's stability differs from numpy's eigenvalues on {eig} points "
+                     "(points within 1e-6 of |z| = 1 not compared).")
+    rg = None if data["regions"] is None else data["regions"]["rows"]
+    if rg:
+        chk = [r for r in rg if r.get("decided_points_vs_eigenvalues") is not None]
+        if chk:
+            parts.append("With `--radius`, the certified decisions differ from the eigenvalues on "
+                         + ", ".join(f"{r['decisions_disagreeing_with_eigenvalues']} of "
+                                     f"{count(r['decided_points_vs_eigenvalues'])} points ({r['config']})"
+                                     for r in chk) + ".")
+        wp = data["regions"]["whole_process"]
+        parts.append("The whole-process runs agree on " + ", ".join(
+            f"{100 * w['decisions_agreeing_fraction']:.3f} % ({w['grid']})" for w in wp) + " of the stability decisions.")
+    if data["boundary"] is not None:
+        parts.append("The maps from the curves and from the grid evaluators agree on " + ", ".join(
+            f"{count(c['agree']['stable_vs_grid'])} / {count(c['agree']['low_pm_vs_grid'])} of "
+            f"{count(c['agree']['points'])} points ({k}; stable / PM < 30)" for k, c in data["boundary"]["cases"].items())
+            + ".")
+    # targets, every one named met / NOT met or not measured
+    t = []
+    for i, c in enumerate(CONFIGS):
+        v = get(baseline_row(data, c), "haa_sym_full_map_curves_s")
+        t.append(f"100 ms for a full map at {c}: " + (NM if v is None else f"{met(v <= TARGET_MAP_S)} ({sec(v)})"))
+    wp = {} if data["regions"] is None else {w["N_av"]: w for w in data["regions"]["whole_process"]}
+    for n_av, target in ((4, 20), (50, 50)):
+        w = wp.get(n_av)
+        t.append(f"{target}x for the whole process at N_av = {n_av}: "
+                 + (NM if w is None else f"{met(w['target_met'])} ({ratio(w['ratio'])})"))
+    for c in CONFIGS:
+        v = None if data["boundary"] is None else data["boundary"]["cases"].get(c, {}).get("three_boundaries_s")
+        t.append(f"30 ms for the three boundaries at {c}: "
+                 + (NM if v is None else f"{met(v <= TARGET_BOUNDARIES_S)} ({ms(v)})"))
+    parts.append("Targets: " + "; ".join(t) + ".")
+    return " ".join(parts)
+
+
+def setup(data) -> str:
+    """What the maps were: grid, frequencies, PM rule and repeats, from the JSON."""
+    if data["baselines"] is not None:
+        r0 = data["baselines"]["rows"]
+        rep = ", ".join(f"{r['config']}: haa_sym best of {r['repeats']['haa_sym']}, numpy "
+                        f"{r['repeats']['numpy']}, python-control {r['repeats']['python_control']} per point"
+                        for r in r0)
+        what = (f"Maps of {data['baselines']['grid']}, {r0[0]['n_omega']} frequencies, PM < 30 deg by the rule "
+                f"\"{r0[0]['pm_rule']}\" on exact crossovers (haa_sym and the numpy baseline alike); runs: {rep}.")
+    else:
+        what = "The map baselines (`bench_baselines.py`) were not measured in this run."
+    return what + " Whole processes are one run each. Each ratio names its baseline."
+
+
+def render(data) -> str:
+    lines = [START, machine_sentence(data), setup(data), "", *table(data), "", agreement(data), END]
+    return "\n".join(lines) + "\n"
+
+
+def splice(readme: str, block: str) -> str:
+    i, j = readme.find(START), readme.find(END)
+    if i < 0 or j < i:
+        raise SystemExit(f"README has no {START} ... {END} block")
+    return readme[:i] + block.rstrip("\n") + readme[j + len(END):]
+
+
+def main(argv=None) -> int:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--results", type=Path,
+                    default=Path(os.environ.get("HAA_SYM_BENCH_DIR") or ROOT / "bench-results"))
+    ap.add_argument("--readme", type=Path, default=ROOT / "README.md")
+    ap.add_argument("--check", action="store_true", help="exit 1 if the README's block is not what the JSON gives")
+    args = ap.parse_args(argv)
+    old = args.readme.read_text()
+    new = splice(old, render(load(args.results)))
+    if args.check:
+        if new != old:
+            sys.stdout.writelines(difflib.unified_diff(old.splitlines(True), new.splitlines(True),
+                                                       str(args.readme), "rendered from " + str(args.results)))
+            print(f"{args.readme}: the benchmark block differs from {args.results} (run `make bench-readme`)")
+            return 1
+        print(f"{args.readme}: the benchmark block matches {args.results}")
+        return 0
+    if new != old:
+        args.readme.write_text(new)
+        print(f"rewrote the benchmark block of {args.readme} from {args.results}")
+    else:
+        print(f"{args.readme}: the benchmark block is already up to date")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
