@@ -1,15 +1,22 @@
 """haa_sym.io.plots: every plot function draws a figure whose title and axis labels say what is
-drawn, and save_figure writes it (a PNG here) and closes it. Small data, so this stays fast:
-a real region map and step response on coarse grids, plain stand-ins for the slower results."""
+drawn (every axis label and colour bar with its unit), and save_figure writes it (a PNG here) and
+closes it; the CLI's figures are titled with the actuator and what differs from its file. Small
+data, so this stays fast: a real region map and step response on coarse grids, plain stand-ins
+for the slower results."""
+import re
 from types import SimpleNamespace
 
 import matplotlib.pyplot as plt
 import numpy as np
 import pytest
+from matplotlib.collections import QuadMesh
+from matplotlib.colors import to_hex
 
-from haa_sym import ClosedLoop, region_map
+from haa_sym import ClosedLoop, LoopOptions, region_map
 from haa_sym.analysis.torque import step_response
+from haa_sym.cli import differences, figure_title, main, measured_torque
 from haa_sym.io import plots
+from haa_sym.model.params import actuator_path, load_params
 
 P, D = np.geomspace(1.0, 20000.0, 8), np.linspace(1.0, 50.0, 6)
 
@@ -33,7 +40,20 @@ def _labels(ax):
     return ax.get_title(), ax.get_xlabel(), ax.get_ylabel()
 
 
+UNIT = re.compile(r"[(\[][^()\[\]]+[)\]]")
+
+
+def _check_units(fig):
+    """Every axis label of every axes (colour bars included) names a unit in brackets or
+    parentheses: the generic check over every figure these tests draw."""
+    labels = [lab for ax in fig.axes for lab in (ax.get_xlabel(), ax.get_ylabel()) if lab]
+    assert labels
+    for lab in labels:
+        assert UNIT.search(lab), f"axis label without a unit: {lab!r}"
+
+
 def _saved(fig, tmp_path, name="fig.png"):
+    _check_units(fig)
     path = plots.save_figure(fig, tmp_path / name)
     assert path.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n" and path.stat().st_size > 1000
     assert fig.number not in plt.get_fignums()                  # closed after saving
@@ -95,13 +115,13 @@ def test_plot_contact(tmp_path):
     rho = 1 + 0.1 * np.sin(np.log(K))
     fig = plots.plot_contact(K, rho, paper_range=(72, 3500), unstable=[(70.0, 3400.0)])
     (ax,) = fig.axes
-    assert ax.get_ylabel() == "spectral radius" and ax.get_xlabel() == "environment stiffness K_L2 (Nm/rad)"
+    assert ax.get_ylabel() == "spectral radius (-)" and ax.get_xlabel() == "environment stiffness K_L2 (Nm/rad)"
     _saved(fig, tmp_path)
     excess = np.where(rho < 1, -0.5, np.nan)
     fig = plots.plot_contact(K, rho, unstable=[(70.0, 3400.0)], key="K_C", excess=excess,
                              not_passive=[(1.0, 70.0)], tol=0.01)
     top, bottom = fig.axes
-    assert top.get_ylabel() == "spectral radius" and bottom.get_ylabel() == "phase excess of Z (deg)"
+    assert top.get_ylabel() == "spectral radius (-)" and bottom.get_ylabel() == "phase excess of Z (deg)"
     assert bottom.get_xlabel() == "environment stiffness K_C (Nm/rad)" and bottom.get_yscale() == "symlog"
     _saved(fig, tmp_path, "excess.png")
 
@@ -111,8 +131,15 @@ def test_plot_torque_bandwidth(tmp_path):
     bw = 20.0 * B[:, None] * (1 + A[None, :])
     fig = plots.plot_torque_bandwidth([("free leg", B, A, bw, bw < 60)], title="torque bandwidth")
     ax = fig.axes[0]
-    assert _labels(ax) == ("free leg (dark: torque loop unstable)", "beta", "alpha")
-    assert fig.axes[1].get_ylabel() == "log10 torque bandwidth (rad/s)"          # the colour bar
+    assert _labels(ax) == ("free leg", "beta, torque-gain scale (-)", "alpha, velocity compensation (-)")
+    assert fig.axes[1].get_ylabel() == "torque bandwidth (rad/s, log scale)"          # the colour bar
+    fig.canvas.draw()
+    ticks = [t.get_text() for t in fig.axes[1].get_yticklabels() if t.get_text()]
+    assert ticks and all(re.fullmatch(r"[0-9.]+", t) for t in ticks)                # bandwidths, not log10
+    # dark is low bandwidth; the unstable cells are hatched and the legend says so
+    texts = [t.get_text() for t in fig.legends[0].get_texts()]
+    assert texts == ["torque loop unstable", "dark: low bandwidth", "bright: high bandwidth"]
+    assert any(list(getattr(c, "hatches", None) or []) == ["xxx"] for c in ax.collections)
     assert fig._suptitle.get_text() == "torque bandwidth"
     _saved(fig, tmp_path)
 
@@ -123,12 +150,28 @@ def test_plot_schedule(tmp_path):
     beta = np.where(feasible, 1.0 + np.arange(8)[:, None] * 0.1 + np.zeros(6), np.nan)
     s = SimpleNamespace(P_gain=P, D_gain=D, feasible=feasible, beta=beta, beta_fixed_feasible=feasible & (beta < 1.5),
                         torque_bandwidth_rad_s=30 * beta, meta={"torque_bandwidth_beta_1_rad_s": 30.0})
+    s.beta[0, 0] = 8.0                       # a log colour bar spanning 1..8: plain tick labels
     fig = plots.plot_schedule(s, title="schedule")
     left, right = fig.axes[:2]
-    assert _labels(left) == ("largest robust beta (grey: none)", "P_gain (Nm/rad)", "D_gain (Nms/rad)")
+    assert _labels(left) == ("largest robust beta", "P_gain (Nm/rad)", "D_gain (Nms/rad)")
     assert _labels(right) == ("bandwidth gained by the schedule", "P_gain (Nm/rad)", "D_gain (Nms/rad)")
     assert "beta = 1 unsafe for some leg" in [t.get_text() for t in right.get_legend().get_texts()]
     assert fig._suptitle.get_text() == "schedule"
+    # one colour for "no robust beta": the same drawn colour at an infeasible cell of both panels
+    # (the data layers above are masked there), and the same in both legends
+    cell = 0 * P.size + (P.size - 1)                         # D index 0, P index -1 (C order of .T)
+    shown = []
+    for ax in (left, right):
+        base, data = [c for c in ax.collections if isinstance(c, QuadMesh)][:2]
+        base.update_scalarmappable()
+        assert np.ma.getmaskarray(data.get_array()).ravel()[cell]
+        shown.append(to_hex(base.get_facecolor()[cell]))
+        (patch,) = [h for h in ax.get_legend().legend_handles if h.get_label() == "no robust beta in the range"]
+        shown.append(to_hex(patch.get_facecolor()))
+    assert shown == [plots.INFEASIBLE_COLOR] * 4
+    fig.canvas.draw()
+    ticks = [t.get_text() for cb in fig.axes[2:] for t in cb.get_yticklabels(which="both") if t.get_text()]
+    assert ticks and not any("times" in t or "^" in t for t in ticks)                  # no 8x10^0
     _saved(fig, tmp_path)
 
 

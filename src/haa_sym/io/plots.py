@@ -273,7 +273,8 @@ def plot_torque_bandwidth(panels, title: str = ""):
     for ax, (label, B, A, bw, stable) in zip(axes[0], panels):
         with np.errstate(divide="ignore", invalid="ignore"):
             cs = ax.contourf(B, A, np.log10(bw).T, levels=20, cmap="viridis")
-        ax.contour(B, A, bw.T, levels=[10, 20, 30, 50, 100, 200], colors="w", linewidths=0.6)
+        cl = ax.contour(B, A, bw.T, levels=[10, 20, 30, 50, 100, 200], colors="w", linewidths=0.6)
+        ax.clabel(cl, fmt="%g rad/s", fontsize=6)
         if (~stable).any():
             hs = ax.contourf(B, A, (~stable).T.astype(float), levels=[0.5, 1.5], colors="none", hatches=["xxx"])
             hs.set_edgecolor("tab:red")
