@@ -184,3 +184,77 @@ def test_plot_robust(tmp_path):
     assert title.startswith("stable+pm for every leg configuration\nretracted..extended (segment, 5 configurations")
     assert (xl, yl) == ("P_gain (Nm/rad)", "D_gain (Nms/rad)")
     _saved(fig, tmp_path)
+
+
+# --- the CLI's figures: titled with the actuator and what differs from its file ---------------
+
+@pytest.fixture
+def drawn(monkeypatch):
+    """The figures the CLI saves (checked for units, then saved as usual): their titles."""
+    seen = []
+    save = plots.save_figure
+
+    def capture(fig, path, *args, **kwargs):
+        _check_units(fig)
+        seen.append({"title": "\n".join([fig._suptitle.get_text() if fig._suptitle else ""]
+                                        + [ax.get_title() for ax in fig.axes]),
+                     "ylabels": [ax.get_ylabel() for ax in fig.axes], "legends": [
+                         t.get_text() for ax in fig.axes if ax.get_legend() for t in ax.get_legend().get_texts()]})
+        return save(fig, path, *args, **kwargs)
+    monkeypatch.setattr(plots, "save_figure", capture)
+    return seen
+
+
+SMALL = ["--P-gain", "lin:1:200:3", "--D-gain", "lin:1:5:2"]
+CLI_PLOTS = {
+    "regions": (["regions", *SMALL, "--set", "beta=2"], "HyQ HAA joint", "beta = 2"),
+    "boundary": (["boundary", "--params", "sea", *SMALL, "--set", "N_av=10", "--option", "delay=1"],
+                 "WALK-MAN big series elastic actuator", "N_av = 10; option delay = 1"),
+    "contact": (["contact", "--K-range", "10:10000", "--n-scan", "20", "--set", "K_hd=9000"],
+                "HyQ HAA joint", "K_hd = 9000 Nm/rad"),
+    "step": (["step", "--duration", "0.05", "--set", "K_L2=0"], "HyQ HAA joint", "K_L2 = 0 Nm/rad"),
+    "passivity": (["passivity", "--P-gain", "200", "--D-gain", "10", "--set", "Ts=0.002"], "HyQ HAA joint",
+                  "Ts = 0.002 s"),
+}
+
+
+@pytest.mark.parametrize("cmd", sorted(CLI_PLOTS))
+def test_cli_plot_title_names_actuator_and_set_values(cmd, drawn, tmp_path, capsys):
+    argv, name, differs = CLI_PLOTS[cmd]
+    assert main(["--quiet", *argv, "--plot", str(tmp_path / "f.png")]) == 0
+    (fig,) = drawn
+    assert name in fig["title"] and differs in fig["title"], fig["title"]
+
+
+def test_cli_user_title_goes_above_the_automatic_one(drawn, tmp_path, capsys):
+    assert main(["--quiet", "regions", *SMALL, "--set", "alpha=0.5", "--title", "my run",
+                 "--plot", str(tmp_path / "f.png")]) == 0
+    assert drawn[0]["title"].startswith("\nmy run\nHyQ HAA joint\nalpha = 0.5")        # no suptitle: ""
+
+
+def test_cli_schedule_plot_title(drawn, tmp_path, capsys):
+    assert main(["--quiet", "schedule", "--set", "beta=2", "--P-gain", "10,100", "--D-gain", "5,10",
+                 "--beta-range", "0.5:2", "--beta-tol", "0.25", "--plot", str(tmp_path / "s.png")]) == 0
+    assert drawn[0]["title"].startswith("HyQ HAA joint\nbeta = 2\n")
+
+
+def test_cli_step_axis_names_the_measured_torque(drawn, tmp_path, capsys):
+    assert main(["--quiet", "step", "--duration", "0.05", "--plot", str(tmp_path / "s.png")]) == 0
+    assert drawn[0]["ylabels"] == ["sensed torque T_hd (Nm)"]
+    assert drawn[0]["legends"] == ["T_hd: torque sensor on coupling hd (spring and damper)"]
+
+
+@pytest.mark.parametrize("name, label", [("hyq_haa", "sensed torque T_hd (Nm)"), ("sea", "sensed torque T_bar (Nm)"),
+                                         ("qdd_leg", "torque estimate k_t N I_m (Nm)")])
+def test_measured_torque_follows_the_sensors_table(name, label):
+    assert measured_torque(load_params(actuator_path(name, "--params")).plant.topology)[0] == label
+
+
+def test_figure_title_says_what_differs(params):
+    assert differences({"a": 1, "b": 2, "c": 3}, {"a": 1, "b": 5}) == {"b": 2, "c": 3}
+    loop = ClosedLoop(params.with_values(J_L2=0.2, N_av=10), LoopOptions(delay=1, pm_rule="min_abs"))
+    assert figure_title(loop, params) == ("HyQ HAA joint\nJ_L2 = 0.2 kg m^2, N_av = 10; "
+                                          "options delay = 1, pm_rule = min_abs")
+    # the file's own options (port, torque_damping resolved from [sensors]) are not differences
+    assert figure_title(ClosedLoop(params, LoopOptions(port="dtheta_L2")), params, "retracted") == \
+        "HyQ HAA joint, retracted configuration\nthe file's values, default options"
