@@ -69,8 +69,8 @@ from haa_sym.io.progress import message, set_progress
 from haa_sym.loop import ClosedLoop, LoopOptions
 from haa_sym.loop.options import ALLOWED as OPTION_ALLOWED
 from haa_sym.model import filters
-from haa_sym.model.params import (ALIASES, CONTROLLER_KEYS, CONTROLLER_UNITS, STRING_KEYS, actuator_path, bundled_actuators,
-                                  gain_array, load_params, set_keys)
+from haa_sym.model.params import (ALIASES, CONTROLLER_KEYS, CONTROLLER_UNITS, STRING_KEYS, actuator_path,
+                                  bundled_actuators, gain_array, load_params, set_keys)
 from haa_sym.paper.reproduce import reproduce
 
 OUTPUT_SUFFIXES = {"regions": (".npz",), "passivity": (".csv", ".json"), "step": (".csv",),
@@ -267,11 +267,12 @@ def figure_title(loop, file_params, configuration: str | None = None, user_title
     units = {**params.plant.topology.units, **CONTROLLER_UNITS}
     sets = {**differences(now["plant"], base["plant"]), **differences(now["controller"], base["controller"])}
     opts = differences(loop.options.to_dict(), LoopOptions().resolved(params.plant.topology).to_dict())
-    diff = "; ".join(part for part in (
-        ", ".join(_value(k, v, units) for k, v in sets.items()),
-        ("option" + "s" * (len(opts) > 1) + " " + ", ".join(_value(k, v, {}) for k, v in opts.items())) if opts else "") if part)
+    said = ", ".join(_value(k, v, units) for k, v in sets.items())
+    if opts:
+        said += ("; " if said else "") + "option" + "s" * (len(opts) > 1) + " " + ", ".join(
+            _value(k, v, {}) for k, v in opts.items())
     lines = [user_title] if user_title else []
-    return "\n".join(lines + [head, diff or "the file's values, default options"])
+    return "\n".join(lines + [head, said or "the file's values, default options"])
 
 
 def _setup(args, cmd: str):
