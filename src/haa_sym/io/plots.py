@@ -287,7 +287,9 @@ def plot_torque_bandwidth(panels, title: str = ""):
         ax.set_xlabel("beta, torque-gain scale (-)")
         ax.set_ylabel("alpha, velocity compensation (-)")
         ax.set_title(label, fontsize=9)
-    fig.legend(handles=[Patch(facecolor="none", edgecolor="tab:red", hatch="xxx", label="torque loop unstable"),
+    unstable = any((~p[4]).any() for p in panels)
+    fig.legend(handles=[Patch(facecolor="none", edgecolor="tab:red", hatch="xxx" if unstable else "",
+                              label="torque loop unstable" if unstable else "torque loop stable everywhere"),
                         plt.Line2D([], [], color="w", marker="s", mfc="#440154", mec="#440154", ls="",
                                    label="dark: low bandwidth"),
                         plt.Line2D([], [], color="w", marker="s", mfc="#fde725", mec="#fde725", ls="",
