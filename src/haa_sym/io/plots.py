@@ -27,10 +27,10 @@ REGION_COLORS = ListedColormap(["#ffffff", "#c8c8c8", "#3a3a3a"])
 INFEASIBLE_COLOR = "#9a9a9a"
 
 
-def _wrap(title: str, width_in: float) -> str:
-    """``title`` with each line wrapped to the width of a figure ``width_in`` inches wide (about
-    12 characters an inch at the titles' font sizes); lines already short are kept as given."""
-    n = max(30, int(width_in * 12))
+def _wrap(title: str, width_in: float, size: float = 10) -> str:
+    """``title`` with each line wrapped to the width of a figure ``width_in`` inches wide at font
+    size ``size`` (about 12 characters an inch at 10 pt); lines already short are kept as given."""
+    n = max(30, int(width_in * 120 / size))
     return "\n".join(textwrap.fill(line, n) if len(line) > n else line for line in title.split("\n"))
 
 
@@ -411,5 +411,5 @@ def plot_robust(r, title: str = ""):
     auto = (f"{'+'.join(r.meta['requirements'])} for every leg configuration\n"
             f"{leg[0]}..{leg[1]} ({r.meta['leg_mode']}, {r.n_configurations} configurations; dark: fails)")
     text = "\n".join(t for t in (title, auto, _leg_line(r.meta)) if t)
-    ax.set_title(_wrap(text, 4.8 * 1.2), fontsize=7)
+    ax.set_title(_wrap(text, 4.8, 7), fontsize=7)
     return fig
