@@ -1,15 +1,22 @@
 """haa_sym.io.plots: every plot function draws a figure whose title and axis labels say what is
-drawn, and save_figure writes it (a PNG here) and closes it. Small data, so this stays fast:
-a real region map and step response on coarse grids, plain stand-ins for the slower results."""
+drawn (every axis label and colour bar with its unit), and save_figure writes it (a PNG here) and
+closes it; the CLI's figures are titled with the actuator and what differs from its file. Small
+data, so this stays fast: a real region map and step response on coarse grids, plain stand-ins
+for the slower results."""
+import re
 from types import SimpleNamespace
 
 import matplotlib.pyplot as plt
 import numpy as np
 import pytest
+from matplotlib.collections import QuadMesh
+from matplotlib.colors import to_hex
 
-from haa_sym import ClosedLoop, region_map
+from haa_sym import ClosedLoop, LoopOptions, region_map
 from haa_sym.analysis.torque import step_response
+from haa_sym.cli import differences, figure_title, main, measured_torque
 from haa_sym.io import plots
+from haa_sym.model.params import actuator_path, load_params
 
 P, D = np.geomspace(1.0, 20000.0, 8), np.linspace(1.0, 50.0, 6)
 
@@ -33,7 +40,20 @@ def _labels(ax):
     return ax.get_title(), ax.get_xlabel(), ax.get_ylabel()
 
 
+UNIT = re.compile(r"[(\[][^()\[\]]+[)\]]")
+
+
+def _check_units(fig):
+    """Every axis label of every axes (colour bars included) names a unit in brackets or
+    parentheses: the generic check over every figure these tests draw."""
+    labels = [lab for ax in fig.axes for lab in (ax.get_xlabel(), ax.get_ylabel()) if lab]
+    assert labels
+    for lab in labels:
+        assert UNIT.search(lab), f"axis label without a unit: {lab!r}"
+
+
 def _saved(fig, tmp_path, name="fig.png"):
+    _check_units(fig)
     path = plots.save_figure(fig, tmp_path / name)
     assert path.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n" and path.stat().st_size > 1000
     assert fig.number not in plt.get_fignums()                  # closed after saving
@@ -95,13 +115,13 @@ def test_plot_contact(tmp_path):
     rho = 1 + 0.1 * np.sin(np.log(K))
     fig = plots.plot_contact(K, rho, paper_range=(72, 3500), unstable=[(70.0, 3400.0)])
     (ax,) = fig.axes
-    assert ax.get_ylabel() == "spectral radius" and ax.get_xlabel() == "environment stiffness K_L2 (Nm/rad)"
+    assert ax.get_ylabel() == "spectral radius (-)" and ax.get_xlabel() == "environment stiffness K_L2 (Nm/rad)"
     _saved(fig, tmp_path)
     excess = np.where(rho < 1, -0.5, np.nan)
     fig = plots.plot_contact(K, rho, unstable=[(70.0, 3400.0)], key="K_C", excess=excess,
                              not_passive=[(1.0, 70.0)], tol=0.01)
     top, bottom = fig.axes
-    assert top.get_ylabel() == "spectral radius" and bottom.get_ylabel() == "phase excess of Z (deg)"
+    assert top.get_ylabel() == "spectral radius (-)" and bottom.get_ylabel() == "phase excess of Z (deg)"
     assert bottom.get_xlabel() == "environment stiffness K_C (Nm/rad)" and bottom.get_yscale() == "symlog"
     _saved(fig, tmp_path, "excess.png")
 
@@ -111,8 +131,15 @@ def test_plot_torque_bandwidth(tmp_path):
     bw = 20.0 * B[:, None] * (1 + A[None, :])
     fig = plots.plot_torque_bandwidth([("free leg", B, A, bw, bw < 60)], title="torque bandwidth")
     ax = fig.axes[0]
-    assert _labels(ax) == ("free leg (dark: torque loop unstable)", "beta", "alpha")
-    assert fig.axes[1].get_ylabel() == "log10 torque bandwidth (rad/s)"          # the colour bar
+    assert _labels(ax) == ("free leg", "beta, torque-gain scale (-)", "alpha, velocity compensation (-)")
+    assert fig.axes[1].get_ylabel() == "torque bandwidth (rad/s, log scale)"          # the colour bar
+    fig.canvas.draw()
+    ticks = [t.get_text() for t in fig.axes[1].get_yticklabels() if t.get_text()]
+    assert ticks and all(re.fullmatch(r"[0-9.]+", t) for t in ticks)                # bandwidths, not log10
+    # dark is low bandwidth; the unstable cells are hatched and the legend says so
+    texts = [t.get_text() for t in fig.legends[0].get_texts()]
+    assert texts == ["torque loop unstable", "dark: low bandwidth", "bright: high bandwidth"]
+    assert any(list(getattr(c, "hatches", None) or []) == ["xxx"] for c in ax.collections)
     assert fig._suptitle.get_text() == "torque bandwidth"
     _saved(fig, tmp_path)
 
@@ -123,12 +150,28 @@ def test_plot_schedule(tmp_path):
     beta = np.where(feasible, 1.0 + np.arange(8)[:, None] * 0.1 + np.zeros(6), np.nan)
     s = SimpleNamespace(P_gain=P, D_gain=D, feasible=feasible, beta=beta, beta_fixed_feasible=feasible & (beta < 1.5),
                         torque_bandwidth_rad_s=30 * beta, meta={"torque_bandwidth_beta_1_rad_s": 30.0})
+    s.beta[0, 0] = 8.0                       # a log colour bar spanning 1..8: plain tick labels
     fig = plots.plot_schedule(s, title="schedule")
     left, right = fig.axes[:2]
-    assert _labels(left) == ("largest robust beta (grey: none)", "P_gain (Nm/rad)", "D_gain (Nms/rad)")
+    assert _labels(left) == ("largest robust beta", "P_gain (Nm/rad)", "D_gain (Nms/rad)")
     assert _labels(right) == ("bandwidth gained by the schedule", "P_gain (Nm/rad)", "D_gain (Nms/rad)")
     assert "beta = 1 unsafe for some leg" in [t.get_text() for t in right.get_legend().get_texts()]
     assert fig._suptitle.get_text() == "schedule"
+    # one colour for "no robust beta": the same drawn colour at an infeasible cell of both panels
+    # (the data layers above are masked there), and the same in both legends
+    cell = 0 * P.size + (P.size - 1)                         # D index 0, P index -1 (C order of .T)
+    shown = []
+    for ax in (left, right):
+        base, data = [c for c in ax.collections if isinstance(c, QuadMesh)][:2]
+        base.update_scalarmappable()
+        assert np.ma.getmaskarray(data.get_array()).ravel()[cell]
+        shown.append(to_hex(base.get_facecolor()[cell]))
+        (patch,) = [h for h in ax.get_legend().legend_handles if h.get_label() == "no robust beta in the range"]
+        shown.append(to_hex(patch.get_facecolor()))
+    assert shown == [plots.INFEASIBLE_COLOR] * 4
+    fig.canvas.draw()
+    ticks = [t.get_text() for cb in fig.axes[2:] for t in cb.get_yticklabels(which="both") if t.get_text()]
+    assert ticks and not any("times" in t or "^" in t for t in ticks)                  # no 8x10^0
     _saved(fig, tmp_path)
 
 
@@ -141,3 +184,77 @@ def test_plot_robust(tmp_path):
     assert title.startswith("stable+pm for every leg configuration\nretracted..extended (segment, 5 configurations")
     assert (xl, yl) == ("P_gain (Nm/rad)", "D_gain (Nms/rad)")
     _saved(fig, tmp_path)
+
+
+# --- the CLI's figures: titled with the actuator and what differs from its file ---------------
+
+@pytest.fixture
+def drawn(monkeypatch):
+    """The figures the CLI saves (checked for units, then saved as usual): their titles."""
+    seen = []
+    save = plots.save_figure
+
+    def capture(fig, path, *args, **kwargs):
+        _check_units(fig)
+        seen.append({"title": "\n".join([fig._suptitle.get_text() if fig._suptitle else ""]
+                                        + [ax.get_title() for ax in fig.axes]),
+                     "ylabels": [ax.get_ylabel() for ax in fig.axes], "legends": [
+                         t.get_text() for ax in fig.axes if ax.get_legend() for t in ax.get_legend().get_texts()]})
+        return save(fig, path, *args, **kwargs)
+    monkeypatch.setattr(plots, "save_figure", capture)
+    return seen
+
+
+SMALL = ["--P-gain", "lin:1:200:3", "--D-gain", "lin:1:5:2"]
+CLI_PLOTS = {
+    "regions": (["regions", *SMALL, "--set", "beta=2"], "HyQ HAA joint", "beta = 2"),
+    "boundary": (["boundary", "--params", "sea", *SMALL, "--set", "N_av=10", "--option", "delay=1"],
+                 "WALK-MAN big series elastic actuator", "N_av = 10; option delay = 1"),
+    "contact": (["contact", "--K-range", "10:10000", "--n-scan", "20", "--set", "K_hd=9000"],
+                "HyQ HAA joint", "K_hd = 9000 Nm/rad"),
+    "step": (["step", "--duration", "0.05", "--set", "K_L2=0"], "HyQ HAA joint", "K_L2 = 0 Nm/rad"),
+    "passivity": (["passivity", "--P-gain", "200", "--D-gain", "10", "--set", "Ts=0.002"], "HyQ HAA joint",
+                  "Ts = 0.002 s"),
+}
+
+
+@pytest.mark.parametrize("cmd", sorted(CLI_PLOTS))
+def test_cli_plot_title_names_actuator_and_set_values(cmd, drawn, tmp_path, capsys):
+    argv, name, differs = CLI_PLOTS[cmd]
+    assert main(["--quiet", *argv, "--plot", str(tmp_path / "f.png")]) == 0
+    (fig,) = drawn
+    assert name in fig["title"] and differs in fig["title"], fig["title"]
+
+
+def test_cli_user_title_goes_above_the_automatic_one(drawn, tmp_path, capsys):
+    assert main(["--quiet", "regions", *SMALL, "--set", "alpha=0.5", "--title", "my run",
+                 "--plot", str(tmp_path / "f.png")]) == 0
+    assert drawn[0]["title"].startswith("\nmy run\nHyQ HAA joint\nalpha = 0.5")        # no suptitle: ""
+
+
+def test_cli_schedule_plot_title(drawn, tmp_path, capsys):
+    assert main(["--quiet", "schedule", "--set", "beta=2", "--P-gain", "10,100", "--D-gain", "5,10",
+                 "--beta-range", "0.5:2", "--beta-tol", "0.25", "--plot", str(tmp_path / "s.png")]) == 0
+    assert drawn[0]["title"].startswith("HyQ HAA joint\nbeta = 2\n")
+
+
+def test_cli_step_axis_names_the_measured_torque(drawn, tmp_path, capsys):
+    assert main(["--quiet", "step", "--duration", "0.05", "--plot", str(tmp_path / "s.png")]) == 0
+    assert drawn[0]["ylabels"] == ["sensed torque T_hd (Nm)"]
+    assert drawn[0]["legends"] == ["T_hd: torque sensor on coupling hd (spring and damper)"]
+
+
+@pytest.mark.parametrize("name, label", [("hyq_haa", "sensed torque T_hd (Nm)"), ("sea", "sensed torque T_bar (Nm)"),
+                                         ("qdd_leg", "torque estimate k_t N I_m (Nm)")])
+def test_measured_torque_follows_the_sensors_table(name, label):
+    assert measured_torque(load_params(actuator_path(name, "--params")).plant.topology)[0] == label
+
+
+def test_figure_title_says_what_differs(params):
+    assert differences({"a": 1, "b": 2, "c": 3}, {"a": 1, "b": 5}) == {"b": 2, "c": 3}
+    loop = ClosedLoop(params.with_values(J_L2=0.2, N_av=10), LoopOptions(delay=1, pm_rule="min_abs"))
+    assert figure_title(loop, params) == ("HyQ HAA joint\nJ_L2 = 0.2 kg m^2, N_av = 10; "
+                                          "options delay = 1, pm_rule = min_abs")
+    # the file's own options (port, torque_damping resolved from [sensors]) are not differences
+    assert figure_title(ClosedLoop(params, LoopOptions(port="dtheta_L2")), params, "retracted") == \
+        "HyQ HAA joint, retracted configuration\nthe file's values, default options"

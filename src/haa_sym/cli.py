@@ -69,8 +69,8 @@ from haa_sym.io.progress import message, set_progress
 from haa_sym.loop import ClosedLoop, LoopOptions
 from haa_sym.loop.options import ALLOWED as OPTION_ALLOWED
 from haa_sym.model import filters
-from haa_sym.model.params import (ALIASES, CONTROLLER_KEYS, STRING_KEYS, actuator_path, bundled_actuators,
-                                  gain_array, load_params, set_keys)
+from haa_sym.model.params import (ALIASES, CONTROLLER_KEYS, CONTROLLER_UNITS, STRING_KEYS, actuator_path,
+                                  bundled_actuators, gain_array, load_params, set_keys)
 from haa_sym.paper.reproduce import reproduce
 
 OUTPUT_SUFFIXES = {"regions": (".npz",), "passivity": (".csv", ".json"), "step": (".csv",),
@@ -161,10 +161,16 @@ def _common(p: argparse.ArgumentParser) -> None:
                         + " (`haa-sym options` lists types, defaults and allowed values)")
 
 
-def _params(args):
+def _loaded(args):
+    """The parameters as the file gives them (with ``--configuration``), before any ``--set``."""
     params = load_params(actuator_path(args.params, "--params"))
-    if args.configuration:
-        params = params.configuration(args.configuration)
+    return params.configuration(args.configuration) if args.configuration else params
+
+
+def _params(args, params=None):
+    """The parameters of the command: the file's (``params``, default :func:`_loaded`) with
+    ``--set`` applied."""
+    params = _loaded(args) if params is None else params
     sets = _parse_set(args.set, tuple(params.plant.topology.parameter_keys) + CONTROLLER_KEYS)
     if not sets:
         return params
@@ -236,14 +242,62 @@ def _gain_flags(parser, P_default: str | None, D_default: str | None, role: str)
                                  + ("required" if default is None else f"default {default}"))
 
 
+def differences(now: dict, base: dict) -> dict:
+    """The entries of ``now`` whose value differs from ``base``'s, or that ``base`` lacks (what a
+    figure's title says of its parameters and options)."""
+    return {k: v for k, v in now.items() if k not in base or base[k] != v}
+
+
+def _value(key: str, value, units: dict) -> str:
+    unit = units.get(key, "")
+    text = f"{value:g}" if isinstance(value, (int, float)) and not isinstance(value, bool) else str(value)
+    return f"{key} = {text}" + (f" {unit}" if unit and unit not in ("-", "samples") else "")
+
+
+def figure_title(loop, file_params, configuration: str | None = None, user_title: str | None = None) -> str:
+    """A figure's title: the actuator (its file's [about] name, else the file's name), the
+    configuration, then what differs from the file: the ``--set`` values (the loop's parameters
+    against the file's) and the options that are not LoopOptions' defaults. The user's
+    ``--title`` comes first, on a line of its own (prepended, not replacing: a figure always
+    says what it shows)."""
+    params = loop.params
+    name = str(params.about.get("name") or Path(params.source).stem)
+    head = name + (f", {configuration} configuration" if configuration else "")
+    now, base = params.to_dict(), file_params.to_dict()
+    units = {**params.plant.topology.units, **CONTROLLER_UNITS}
+    sets = {**differences(now["plant"], base["plant"]), **differences(now["controller"], base["controller"])}
+    opts = differences(loop.options.to_dict(), LoopOptions().resolved(params.plant.topology).to_dict())
+    said = ", ".join(_value(k, v, units) for k, v in sets.items())
+    if opts:
+        said += ("; " if said else "") + "option" + "s" * (len(opts) > 1) + " " + ", ".join(
+            _value(k, v, {}) for k, v in opts.items())
+    lines = [user_title] if user_title else []
+    return "\n".join(lines + [head, said or "the file's values, default options"])
+
+
 def _setup(args, cmd: str):
     """What every analysis command starts with: the closed loop of the parameters and options,
-    and the output paths, all checked before any computation."""
-    params, options = _params(args), _parse_options(args.option)
+    and the output paths, all checked before any computation; sets ``args.figure_title`` (what
+    the figure of ``--plot`` is titled, :func:`figure_title`)."""
+    file_params = _loaded(args)
+    params, options = _params(args, file_params), _parse_options(args.option)
     out, plot = _check_out(args.out, cmd), _check_out(args.plot, cmd, "--plot")
     if plot and getattr(args, "title", None):
         _plots().check_title(args.title, "--title")
-    return ClosedLoop(params, options), out, plot
+    loop = ClosedLoop(params, options)
+    args.figure_title = figure_title(loop, file_params, args.configuration, getattr(args, "title", None))
+    return loop, out, plot
+
+
+def measured_torque(topology) -> tuple[str, str]:
+    """(axis label with its unit, legend) of the torque the torque loop measures: the sensed
+    coupling's transmitted torque, or the estimate k_t N I_m of a current-sensing drive
+    (``[sensors] torque``)."""
+    if topology.sensor == "current":
+        return "torque estimate k_t N I_m (Nm)", "torque from the motor current, k_t N I_m"
+    damping = "spring and damper" if topology.torque_damping else "spring only"
+    return (f"sensed torque T_{topology.sensor} (Nm)",
+            f"T_{topology.sensor}: torque sensor on coupling {topology.sensor} ({damping})")
 
 
 def _plots():
@@ -306,7 +360,7 @@ def _cmd_regions(args) -> int:
     def figure():
         b = boundaries(loop, P_range=(P.min(), P.max()), D_range=(D.min(), D.max())) \
             if loop.options.conventions.pm_loop == "impedance" else None
-        return _plots().plot_region(m, title=args.title, boundary=b)
+        return _plots().plot_region(m, title=args.figure_title, boundary=b)
     _write_outputs(out, plot, lambda path, tx: m.save(path, tx, "--out"), figure)
     print(f"{m.stable.size} points ({m.meta['method']}): {m.stable.sum()} stable, {m.low_pm.sum()} stable "
           f"with PM < 30 deg, {m.passive.sum()} passive" + _wrote(out))
@@ -323,7 +377,7 @@ def _robust_regions(args, loop, out, plot, P, D) -> int:
     _write_outputs(out, plot,
                    lambda path, tx: save_npz(path, {"P_gain": r.P_gain, "D_gain": r.D_gain, "feasible": r.feasible},
                                              meta, tx, "--out"),
-                   lambda: _plots().plot_robust(r, title=args.title))
+                   lambda: _plots().plot_robust(r, title=args.figure_title))
     print(f"{r.feasible.size} points: {int(r.feasible.sum())} meet {'+'.join(r.meta['requirements'])} for every leg "
           f"configuration ({r.meta['leg'][0]}..{r.meta['leg'][1]}, {r.meta['leg_mode']}, {r.n_configurations} "
           f"configurations{'' if r.converged else ', NOT converged'})" + _wrote(out))
@@ -340,7 +394,7 @@ def _cmd_boundary(args) -> int:
     b.stability.meta.update(loop.provenance(), omega_unit="rad/s", P_gain_unit="Nm/rad",
                             D_gain_unit="Nms/rad")
     _write_outputs(out, plot, lambda path, tx: b.save(path, tx, "--out"),
-                   lambda: _plots().plot_boundary(b, title=args.title))
+                   lambda: _plots().plot_boundary(b, title=args.figure_title))
 
     def summary(curves):
         return f"{len(curves)} curve(s), {sum(c.P_gain.size for c in curves)} points" if curves else "none in the box"
@@ -375,7 +429,7 @@ def _cmd_contact(args) -> int:
                    lambda path, tx: save_json(path, {**data, "meta": loop.provenance()}, tx, "--out"),
                    lambda: _plots().plot_contact(r.K_env, r.spectral_radius, unstable=r.unstable, key=r.key,
                                                  excess=r.phase_excess_deg, not_passive=r.not_passive,
-                                                 tol=r.passivity_tol_deg))
+                                                 tol=r.passivity_tol_deg, title=args.figure_title))
 
     def ends(iv):
         return ", ".join(f"{a:.10g}-{b:.10g}" for a, b in iv) + " Nm/rad" if iv else "none"
@@ -419,7 +473,7 @@ def _cmd_schedule(args) -> int:
         if table is not None:
             write_c(table, args.c_out, tx)
         if plot:
-            _plots().save_figure(_plots().plot_schedule(s, title=args.title), plot, tx, "--plot")
+            _plots().save_figure(_plots().plot_schedule(s, title=args.figure_title), plot, tx, "--plot")
     feas = int(s.feasible.sum())
     at_limit = int(s.beta_at_limit.sum())
     if at_limit:
@@ -459,7 +513,8 @@ def _cmd_passivity(args) -> int:
     def write_out(path, tx):
         tx.write_text(path, json.dumps({"cells": rows, "meta": loop.provenance()}, indent=1) + "\n"
                       if path.suffix == ".json" else csv_text(rows), "--out")
-    _write_outputs(out, plot, write_out, lambda: _plots().plot_corrected_phase(curves, "corrected phase of Z(z)"))
+    _write_outputs(out, plot, write_out, lambda: _plots().plot_corrected_phase(
+        curves, f"corrected phase of Z(z)\n{args.figure_title}"))
     return 0
 
 
@@ -469,9 +524,11 @@ def _cmd_step(args) -> int:
     print(f"{describe_step(s)}, -3 dB bandwidth {torque_bandwidth(loop):.2f} rad/s")
     print(f"({STEP_CONVENTION})")
     rows = [{"t_s": f"{t:.6g}", "T_Nm": f"{v:.9g}"} for t, v in zip(s.t, s.T)]
-    # the measured torque: the sensed coupling's (T_l of Eq. 2 for HyQ)
+    # the measured torque: the sensed coupling's (T_l of Eq. 2 for HyQ), or the current estimate
+    ylabel, legend = measured_torque(loop.params.plant.topology)
     _write_outputs(out, plot, lambda path, tx: tx.write_text(path, csv_text(rows), "--out"),
-                   lambda: _plots().plot_steps([("unit torque step", [(s, "T_sensor", "-")])]))
+                   lambda: _plots().plot_steps([("unit torque step, impedance loop open", [(s, legend, "-")])],
+                                               args.figure_title, ylabel=ylabel))
     return 0
 
 
@@ -603,6 +660,8 @@ def _progress_flags(p: argparse.ArgumentParser, default) -> None:
 # start at 1 Nms/rad, and one default for both means `boundary` finds the curves `regions --plot`
 # draws. (boundary used 0..50 before issue 16; D_gain = 0 remains reachable with --D-gain.)
 MAP_D_GAIN = "lin:1:50:100"
+TITLE_HELP = ("text above the figure's automatic title (the actuator, then what differs from its file: --set values "
+              "and non-default --option values), on a line of its own")
 POINTS_ROLE = "points: the i-th P_gain with the i-th D_gain, one value pairing with all"
 
 
@@ -611,7 +670,7 @@ def _map_args(parser, D_default: str, what: str, suffix: str) -> None:
     _gain_flags(parser, "log:1:20000:200", D_default, what)
     parser.add_argument("--out", help=f"output {suffix}")
     parser.add_argument("--plot", help="output figure (.png/.pdf/.svg)")
-    parser.add_argument("--title")
+    parser.add_argument("--title", help=TITLE_HELP)
 
 
 def _leg_args(parser) -> None:
@@ -668,7 +727,7 @@ def main(argv: list[str] | None = None) -> int:
     sc.add_argument("--out", help="output .csv")
     sc.add_argument("--c-out", help="directory for haa_schedule.h and haa_schedule.c")
     sc.add_argument("--plot", help="output figure (.png/.pdf/.svg)")
-    sc.add_argument("--title")
+    sc.add_argument("--title", help=TITLE_HELP)
     ct = sub.add_parser("contact", help="environment stiffnesses where the loop is unstable, or stable but not "
                         "passive (exact ends)")
     _common(ct)
@@ -679,16 +738,19 @@ def main(argv: list[str] | None = None) -> int:
     _gain_flags(ct, "0", "0", "one point (0 and 0: the torque loop alone)")
     ct.add_argument("--out", help="output .json")
     ct.add_argument("--plot", help="output figure (.png/.pdf/.svg)")
+    ct.add_argument("--title", help=TITLE_HELP)
     p = sub.add_parser("passivity", help="passivity of Z(z) at gain pairs (Table 2, Fig. 12)")
     _common(p)
     _gain_flags(p, "0,200,20000", "0,10,50", POINTS_ROLE + " (Table 2's columns)")
     p.add_argument("--out", help="output .csv or .json")
     p.add_argument("--plot", help="corrected phase of Z, figure file")
+    p.add_argument("--title", help=TITLE_HELP)
     st = sub.add_parser("step", help="unit torque step, impedance loop open (Fig. 7)")
     _common(st)
     st.add_argument("--duration", type=float, default=0.3, help="seconds")
     st.add_argument("--out", help="output .csv")
     st.add_argument("--plot", help="figure file")
+    st.add_argument("--title", help=TITLE_HELP)
     mg = sub.add_parser("margins", help="phase and gain margins of the torque and impedance loops at gain points")
     _common(mg)
     _gain_flags(mg, "0", "0", POINTS_ROLE)

@@ -2,6 +2,7 @@
 torque steps as in Fig. 7. Every function takes computed data and returns the Figure."""
 from __future__ import annotations
 
+import textwrap
 from pathlib import Path
 
 import matplotlib
@@ -20,6 +21,31 @@ __all__ = ["plot_region", "plot_region_panels", "plot_corrected_phase", "plot_st
 
 # Figs. 8-11: white stable, light grey stable with PM < 30 deg, dark unstable.
 REGION_COLORS = ListedColormap(["#ffffff", "#c8c8c8", "#3a3a3a"])
+
+
+# Where a result is infeasible (no robust gain, fails a requirement): one colour in every panel.
+INFEASIBLE_COLOR = "#9a9a9a"
+
+
+def _wrap(title: str, width_in: float, size: float = 10) -> str:
+    """``title`` with each line wrapped to the width of a figure ``width_in`` inches wide at font
+    size ``size`` (about 12 characters an inch at 10 pt); lines already short are kept as given."""
+    n = max(30, int(width_in * 120 / size))
+    return "\n".join(textwrap.fill(line, n) if len(line) > n else line for line in title.split("\n"))
+
+
+def _title_size(title: str, size: float) -> float:
+    """A smaller font for a title of several lines (a name and what differs from the file)."""
+    return size - 2 if "\n" in title else size
+
+
+def _plain_ticks(cbar) -> None:
+    """Colour-bar tick labels as plain numbers (2, 5, 8 rather than 2x10^0 on a log scale)."""
+    from matplotlib.ticker import FuncFormatter
+    fmt = FuncFormatter(lambda v, _: f"{v:g}")
+    for axis in (cbar.ax.yaxis, cbar.ax.xaxis):
+        axis.set_major_formatter(fmt)
+        axis.set_minor_formatter(fmt)
 
 
 def _edges(x: np.ndarray, log: bool) -> np.ndarray:
@@ -65,7 +91,8 @@ def plot_region(m, ax=None, title: str | None = None, passivity: bool = True, bo
         ax.set_ylim(_edges(m.D_gain, False)[[0, -1]])
     _gain_axes(ax, logP)
     if title:
-        ax.set_title(title, fontsize=10)
+        w = ax.figure.get_figwidth() / (len(ax.figure.axes) or 1)
+        ax.set_title(_wrap(title, w), fontsize=_title_size(title, 10))
     if fig is not None:
         extra = curve_legend(boundary) if boundary is not None else []
         fig.legend(handles=_region_legend(boundary is None) + extra, loc="outside lower center", ncol=2,
@@ -108,7 +135,7 @@ def plot_boundary(boundary, ax=None, title: str | None = None):
         ax.plot(c.P_gain, c.D_gain, label=None if label in seen else label, **_CURVE_STYLES[key])
         seen.add(label)
     if title:
-        ax.set_title(title, fontsize=10)
+        ax.set_title(_wrap(title, ax.figure.get_figwidth()), fontsize=_title_size(title, 10))
     if fig is not None and seen:
         ax.legend(fontsize=7)
     return fig or ax.figure
@@ -150,7 +177,7 @@ def plot_region_panels(maps, titles, suptitle: str = "", boundaries=None):
     fig.legend(handles=_region_legend(not extra) + extra, loc="outside lower center",
                ncol=5 if len(maps) >= 3 else 3, fontsize=8)
     if suptitle:
-        fig.suptitle(suptitle, fontsize=11)
+        fig.suptitle(_wrap(suptitle, 3.6 * len(maps)), fontsize=_title_size(suptitle, 11))
     return fig
 
 
@@ -168,30 +195,31 @@ def plot_corrected_phase(curves, title: str = ""):
     ax.grid(True, which="both", alpha=0.3)
     ax.legend(fontsize=8)
     if title:
-        ax.set_title(title, fontsize=10)
+        ax.set_title(_wrap(title, 6.4), fontsize=_title_size(title, 10))
     return fig
 
 
-def plot_steps(panels, title: str = ""):
-    """Torque steps (Fig. 7): ``panels`` = [(panel_title, [(StepResponse, label, linestyle)])]."""
-    fig, axes = plt.subplots(len(panels), 1, figsize=(6.4, 2.8 * len(panels)), sharex=True,
-                             constrained_layout=True, squeeze=False)
+def plot_steps(panels, title: str = "", ylabel: str = "T_l (Nm)"):
+    """Torque steps (Fig. 7): ``panels`` = [(panel_title, [(StepResponse, label, linestyle)])];
+    ``ylabel`` names the torque the loop measures, with its unit (the paper's T_l by default)."""
+    fig, axes = plt.subplots(len(panels), 1, figsize=(6.4, 2.8 * len(panels) + (0.6 if title else 0)),
+                             sharex=True, constrained_layout=True, squeeze=False)
     for ax, (ptitle, lines) in zip(axes[:, 0], panels):
         for s, label, ls in lines:
             ax.plot(s.t, s.T, ls, color="k", label=label)
         ax.axhline(1.0, color="0.6", lw=0.8)
-        ax.set_ylabel("T_l (Nm)")
+        ax.set_ylabel(ylabel)
         ax.set_title(ptitle, fontsize=10)
         ax.legend(fontsize=8)
         ax.grid(True, alpha=0.3)
     axes[-1, 0].set_xlabel("t (s)")
     if title:
-        fig.suptitle(title, fontsize=11)
+        fig.suptitle(_wrap(title, 6.4), fontsize=_title_size(title, 11))
     return fig
 
 
 def plot_contact(K, rho, paper_range=None, unstable=(), key: str = "K_L2", excess=None,
-                 not_passive=(), tol: float | None = None):
+                 not_passive=(), tol: float | None = None, title: str = ""):
     """Spectral radius of the loop against the environment stiffness, with the exact ends of the
     unstable intervals (:func:`haa_sym.analysis.contact.contact_intervals`) and the paper's range; with
     ``excess`` (deg, NaN where unstable) a second panel: the phase excess of Z beyond +-90 deg,
@@ -207,7 +235,7 @@ def plot_contact(K, rho, paper_range=None, unstable=(), key: str = "K_L2", exces
     for i, (lo, hi) in enumerate(unstable):
         for k in (lo, hi):
             ax.axvline(k, color="tab:blue", lw=0.8, ls="--", label=None if i or k == hi else "computed: interval ends")
-    ax.set_ylabel("spectral radius")
+    ax.set_ylabel("spectral radius (-)")
     ax.legend(fontsize=8)
     ax.grid(True, which="both", alpha=0.3)
     if two:
@@ -230,25 +258,45 @@ def plot_contact(K, rho, paper_range=None, unstable=(), key: str = "K_L2", exces
         ax.legend(fontsize=8)
         ax.grid(True, which="both", alpha=0.3)
     axes[-1, 0].set_xlabel(f"environment stiffness {key} (Nm/rad)")
+    if title:
+        fig.suptitle(_wrap(title, 6.4), fontsize=_title_size(title, 11))
     return fig
 
 
 def plot_torque_bandwidth(panels, title: str = ""):
-    """Torque bandwidth over (beta, alpha) with the unstable torque loop shaded, one panel per
-    ``(label, beta, alpha, bandwidth, stable)``."""
-    fig, axes = plt.subplots(1, len(panels), figsize=(4.4 * len(panels), 3.6), squeeze=False,
+    """Torque bandwidth over (beta, alpha), one panel per ``(label, beta, alpha, bandwidth,
+    stable)``: colour the bandwidth on a log scale (dark: low, bright: high; white contours at
+    10-200 rad/s), cells whose torque loop is unstable hatched red (their bandwidth means nothing)."""
+    from matplotlib.ticker import FuncFormatter
+    fig, axes = plt.subplots(1, len(panels), figsize=(4.4 * len(panels), 3.9), squeeze=False,
                              constrained_layout=True)
     for ax, (label, B, A, bw, stable) in zip(axes[0], panels):
-        cs = ax.contourf(B, A, np.log10(bw).T, levels=20, cmap="viridis")
-        ax.contour(B, A, bw.T, levels=[10, 20, 30, 50, 100, 200], colors="w", linewidths=0.6)
+        with np.errstate(divide="ignore", invalid="ignore"):
+            cs = ax.contourf(B, A, np.log10(bw).T, levels=20, cmap="viridis")
+        cl = ax.contour(B, A, bw.T, levels=[10, 20, 30, 50, 100, 200], colors="w", linewidths=0.6)
+        ax.clabel(cl, fmt="%g rad/s", fontsize=6)
         if (~stable).any():
-            ax.contourf(B, A, (~stable).T.astype(float), levels=[0.5, 1.5], colors=["#3a3a3a"])
-        fig.colorbar(cs, ax=ax, label="log10 torque bandwidth (rad/s)")
-        ax.set_xlabel("beta")
-        ax.set_ylabel("alpha")
-        ax.set_title(f"{label} (dark: torque loop unstable)", fontsize=9)
+            hs = ax.contourf(B, A, (~stable).T.astype(float), levels=[0.5, 1.5], colors="none", hatches=["xxx"])
+            hs.set_edgecolor("tab:red")
+            hs.set_linewidth(0)
+        cb = fig.colorbar(cs, ax=ax, label="torque bandwidth (rad/s, log scale)")
+        lo, hi = cs.get_clim()
+        nice = [np.log10(m * 10.0 ** k) for k in range(-3, 6) for m in (1, 2, 5)]
+        cb.set_ticks([v for v in nice if lo - 1e-9 <= v <= hi + 1e-9] or [lo, hi])
+        cb.ax.yaxis.set_major_formatter(FuncFormatter(lambda v, _: f"{10 ** v:.3g}"))
+        ax.set_xlabel("beta, torque-gain scale (-)")
+        ax.set_ylabel("alpha, velocity compensation (-)")
+        ax.set_title(label, fontsize=9)
+    unstable = any((~p[4]).any() for p in panels)
+    fig.legend(handles=[Patch(facecolor="none", edgecolor="tab:red", hatch="xxx" if unstable else "",
+                              label="torque loop unstable" if unstable else "torque loop stable everywhere"),
+                        plt.Line2D([], [], color="w", marker="s", mfc="#440154", mec="#440154", ls="",
+                                   label="dark: low bandwidth"),
+                        plt.Line2D([], [], color="w", marker="s", mfc="#fde725", mec="#fde725", ls="",
+                                   label="bright: high bandwidth")],
+               loc="outside lower center", ncol=3, fontsize=8)
     if title:
-        fig.suptitle(title, fontsize=10)
+        fig.suptitle(_wrap(title, 4.4 * len(panels)), fontsize=_title_size(title, 10))
     return fig
 
 
@@ -294,43 +342,47 @@ def plot_schedule(s, title: str = ""):
     """A :class:`haa_sym.design.schedule.Schedule`: the scheduled beta over the impedance grid (no
     robust gain: grey; beta at the range's top, limited by the range and not the model: red
     triangles) and the torque bandwidth it gains over fixed beta = 1 (impedances where beta = 1
-    fails for some leg configuration marked)."""
+    fails for some leg configuration marked); no robust beta is the same grey in both panels."""
     from matplotlib.colors import LogNorm
-    fig, axes = plt.subplots(1, 2, figsize=(10.0, 4.2), layout="constrained")
+    fig, axes = plt.subplots(1, 2, figsize=(10.0, 4.6), layout="constrained")
     logP = bool(np.all(s.P_gain > 0))
     Pe, De = _edges(s.P_gain, logP), _edges(s.D_gain, False)
+    PP, DD = np.meshgrid(s.P_gain, s.D_gain, indexing="ij")
+    infeasible = ListedColormap(["#ffffff", INFEASIBLE_COLOR])
+    for ax in axes:                          # the same colour for "no robust beta" in both panels
+        ax.pcolormesh(Pe, De, (~s.feasible).T.astype(float), cmap=infeasible, vmin=0, vmax=1, shading="flat")
+    no_beta = Patch(facecolor=INFEASIBLE_COLOR, edgecolor="k", label="no robust beta in the range")
     ax = axes[0]
-    ax.pcolormesh(Pe, De, (~s.feasible).T.astype(float), cmap=ListedColormap(["white", "#9a9a9a"]),
-                  vmin=0, vmax=1, shading="flat")
     b = np.ma.masked_invalid(s.beta)
     pc = ax.pcolormesh(Pe, De, b.T, cmap="viridis", norm=LogNorm(vmin=np.nanmin(s.beta), vmax=np.nanmax(s.beta))
                        if s.feasible.any() else None, shading="flat")
-    fig.colorbar(pc, ax=ax, label="scheduled beta (Eq. 7)")
+    _plain_ticks(fig.colorbar(pc, ax=ax, label="scheduled beta, Eq. 7 (-)"))
+    handles = [no_beta]
     lim = getattr(s, "beta_at_limit", None)
     if lim is not None and lim.any():
         # the range, not the model, sets these values: say so where they are drawn
-        PP, DD = np.meshgrid(s.P_gain, s.D_gain, indexing="ij")
-        ax.plot(PP[lim], DD[lim], "^", mfc="none", color="tab:red", ms=4,
-                label=f"beta at the range's top ({int(lim.sum())}): limited by the range")
-        ax.legend(fontsize=7, loc="upper left")
-    ax.set_title("largest robust beta (grey: none)", fontsize=10)
+        handles += ax.plot(PP[lim], DD[lim], "^", mfc="none", color="tab:red", ms=4,
+                           label=f"beta at the range's top ({int(lim.sum())}): limited by the range")
+    ax.legend(handles=handles, fontsize=7, loc="upper left")
+    ax.set_title("largest robust beta", fontsize=10)
     ax = axes[1]
     bw1 = s.meta.get("torque_bandwidth_beta_1_rad_s")
     gain = np.ma.masked_invalid(s.torque_bandwidth_rad_s / bw1) if bw1 else np.ma.masked_all(s.beta.shape)
+    gain = np.ma.masked_where(~s.feasible, gain)
     pc = ax.pcolormesh(Pe, De, gain.T, cmap="magma", shading="flat")
-    fig.colorbar(pc, ax=ax, label="torque bandwidth / that of beta = 1")
+    _plain_ticks(fig.colorbar(pc, ax=ax, label="torque bandwidth / that of beta = 1 (-)"))
+    handles = [no_beta]
     bad = s.feasible & ~s.beta_fixed_feasible
     if bad.any():
-        PP, DD = np.meshgrid(s.P_gain, s.D_gain, indexing="ij")
-        ax.plot(PP[bad], DD[bad], "x", color="tab:cyan", ms=4, label="beta = 1 unsafe for some leg")
-        ax.legend(fontsize=7, loc="upper left")
+        handles += ax.plot(PP[bad], DD[bad], "x", color="tab:cyan", ms=4, label="beta = 1 unsafe for some leg")
+    ax.legend(handles=handles, fontsize=7, loc="upper left")
     ax.set_title("bandwidth gained by the schedule", fontsize=10)
     for ax in axes:
         _gain_axes(ax, logP)
     # the values analysed are always said: the range replaces values edited in the file
     head = "\n".join(t for t in (title, _leg_line(s.meta)) if t)
     if head:
-        fig.suptitle(head, fontsize=11 if not _leg_line(s.meta) else 9)
+        fig.suptitle(_wrap(head, 10.0), fontsize=_title_size(head, 11))
     return fig
 
 
@@ -348,7 +400,7 @@ def _leg_line(meta: dict) -> str:
 
 def plot_robust(r, title: str = ""):
     """A :class:`haa_sym.analysis.robust.RobustRegion`: the gains meeting the requirements for every leg
-    configuration of the range."""
+    configuration of the range; ``title`` goes above the description of the range."""
     fig, ax = plt.subplots(figsize=(4.8, 4.2), layout="constrained")
     logP = bool(np.all(r.P_gain > 0))
     ax.pcolormesh(_edges(r.P_gain, logP), _edges(r.D_gain, False), (~r.feasible).T.astype(float),
@@ -356,7 +408,8 @@ def plot_robust(r, title: str = ""):
     _gain_axes(ax, logP)
     leg = r.meta["leg"]
     # the values analysed are always said: the range replaces values edited in the file
-    ax.set_title((title or f"{'+'.join(r.meta['requirements'])} for every leg configuration\n"
-                  f"{leg[0]}..{leg[1]} ({r.meta['leg_mode']}, {r.n_configurations} configurations; dark: fails)")
-                 + (f"\n{_leg_line(r.meta)}" if _leg_line(r.meta) else ""), fontsize=7)
+    auto = (f"{'+'.join(r.meta['requirements'])} for every leg configuration\n"
+            f"{leg[0]}..{leg[1]} ({r.meta['leg_mode']}, {r.n_configurations} configurations; dark: fails)")
+    text = "\n".join(t for t in (title, auto, _leg_line(r.meta)) if t)
+    ax.set_title(_wrap(text, 4.8, 7), fontsize=7)
     return fig
