@@ -4,7 +4,6 @@ said on stderr, in meta and in the plot title, with a warning when the own value
 import json
 
 import numpy as np
-import pytest
 
 from haa_sym import ClosedLoop, load_params
 from haa_sym.analysis.robust import leg_text, leg_values, robust_region

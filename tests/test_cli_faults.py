@@ -24,7 +24,6 @@ from haa_sym.io.gridspec import grid
 from haa_sym.io.outputs import Transaction, check_file
 from haa_sym.loop import closed_loop as closed_loop_module
 from haa_sym.loop.exact import charpoly_adjugate, transfer_polynomials
-from haa_sym.model.params import load_params
 
 from conftest import ROOT
 

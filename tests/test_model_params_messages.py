@@ -1,7 +1,6 @@
 """Model-side messages (issue 20): each bad input is one ParameterError that names the field, the
 value and what is allowed, in words that fit the mistake (out of range, missing, complex), and an
 empty set of gain points is an empty result, not an internal error."""
-import re
 import warnings
 
 import numpy as np

@@ -274,14 +274,8 @@ class LoopOptions:
         return LoopOptions(self.structure.resolved(topology), self.conventions, self.numerics)
 
     def check_budget(self, n: int | None = None) -> int:
-        """Refuse a grid of ``n`` points (default ``n_omega``) whose sweep would exceed the
-        memory budget (:mod:`haa_sym.io.budget`); returns ``n``. Commands call it as soon as the
-        options are read, before any loop is built or any result printed."""
-        n = self.n_omega if n is None else int(n)
-        # every frequency-domain analysis sweeps this grid in chunks of points: the gate before
-        # anything of its size is allocated
-        check_memory(sweep_bytes(1, n), f"n_omega = {n}: a frequency grid of {n} points")
-        return n
+        """:meth:`FrequencyGrid.check_budget` of :attr:`numerics`."""
+        return self.numerics.check_budget(n)
 
     def omega(self, Ts: float, n: int | None = None) -> np.ndarray:
         """The frequency grid (rad/s) of :attr:`numerics` for sampling time ``Ts``."""
