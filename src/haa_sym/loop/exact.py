@@ -36,35 +36,20 @@ def charpoly_adjugate(Phi: np.ndarray):
     if not np.all(np.isfinite(Phi)):
         raise ValueError("Phi has non-finite entries")
     K, E = _dyadic_scale(Phi)
-    n = len(K)
-    Mk = [[int(i == j) for j in range(n)] for i in range(n)]
-    cs = [1]           # integer char poly of K, descending
-    Ms_int = [Mk]
-    for k in range(1, n + 1):
-        AM = [[sum(K[i][l] * Mk[l][j] for l in range(n)) for j in range(n)] for i in range(n)]
-        tr = sum(AM[i][i] for i in range(n))
-        if tr % k:
-            raise ArithmeticError("Faddeev-LeVerrier: inexact division")  # cannot happen
-        c = -tr // k
-        cs.append(c)
-        Mk = [[AM[i][j] + (c if i == j else 0) for j in range(n)] for i in range(n)]
-        if k < n:
-            Ms_int.append(Mk)
-    if any(any(v for v in row) for row in Mk):
-        raise ArithmeticError("Cayley-Hamilton check failed")  # cannot happen in exact arithmetic
+    cs, Ms_int = _faddeev_leverrier(K, keep=True)
     # det(zI - K/2^E) = sum_j cs[j] 2^(-E j) z^(n-j); adj coefficient of z^(n-1-k) is Ms[k] 2^(-E k)
     c = [Fraction(cj, 1 << (E * j)) for j, cj in enumerate(cs)]
     Ms = [[[Fraction(v, 1 << (E * k)) for v in row] for row in Mi] for k, Mi in enumerate(Ms_int)]
     return c, Ms
 
 
-def _charpoly_int(K: list[list[int]]) -> list[int]:
+def _faddeev_leverrier(K: list[list[int]], keep: bool = False):
     """Integer characteristic polynomial of the integer matrix ``K`` (descending, c[0] = 1) by
-    Faddeev-LeVerrier, keeping only the current M_k (the adjugate is not stored)."""
+    Faddeev-LeVerrier, and with ``keep`` the integer matrices M_0..M_(n-1) of its adjugate
+    (otherwise only the current M_k is held). Returns ``(cs, Ms)`` (``Ms`` None without keep)."""
     n = len(K)
     Mk = [[int(i == j) for j in range(n)] for i in range(n)]
-    cs = [1]
-    cols = None
+    cs, Ms = [1], ([Mk] if keep else None)
     for k in range(1, n + 1):
         cols = list(zip(*Mk))
         AM = [[sum(a * b for a, b in zip(K[i], cols[j])) for j in range(n)] for i in range(n)]
@@ -74,9 +59,11 @@ def _charpoly_int(K: list[list[int]]) -> list[int]:
         c = -tr // k
         cs.append(c)
         Mk = [[AM[i][j] + (c if i == j else 0) for j in range(n)] for i in range(n)]
+        if keep and k < n:
+            Ms.append(Mk)
     if any(any(v for v in row) for row in Mk):
         raise ArithmeticError("Cayley-Hamilton check failed")  # cannot happen in exact arithmetic
-    return cs
+    return cs, Ms
 
 
 def transfer_polynomials(Phi: np.ndarray, Gamma: np.ndarray, C: np.ndarray):
@@ -96,7 +83,7 @@ def transfer_polynomials(Phi: np.ndarray, Gamma: np.ndarray, C: np.ndarray):
     Gi, Eg = _dyadic_scale(np.asarray(Gamma, dtype=float).T)     # rows: the inputs
     Ci, Ec = _dyadic_scale(np.asarray(C, dtype=float))
     n = len(K)
-    cs = _charpoly_int(K)
+    cs, _ = _faddeev_leverrier(K)
     d = [Fraction(cj, 1 << (E * j)) for j, cj in enumerate(cs)]
     cols = []                   # cols[i][k]: M_k g_i (integers)
     for g in Gi:
