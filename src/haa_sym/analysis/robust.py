@@ -71,6 +71,19 @@ def _end_values(params: Params, name: str) -> dict:
     return {} if name == NOMINAL else dict(params.configurations[name])
 
 
+def _span(params: Params, leg=None):
+    """``(a, b, keys, own, lo, hi)``: the two ends' names, the plant keys either end sets, the
+    parameters' own values of those keys, and their values at each end (a key one end leaves
+    unset keeps the parameters' own value there)."""
+    a, b = leg_ends(params, leg)
+    va, vb = _end_values(params, a), _end_values(params, b)
+    keys = sorted(set(va) | set(vb))
+    own = {k: float(getattr(params.plant, k)) for k in keys}
+    lo = {k: float(va.get(k, own[k])) for k in keys}
+    hi = {k: float(vb.get(k, own[k])) for k in keys}
+    return a, b, keys, own, lo, hi
+
+
 def leg_values(params: Params, leg=None, leg_mode: str = "segment") -> dict:
     """What a leg range analyses, as plain data (``meta["leg_values"]``, messages, plot titles).
 
@@ -86,12 +99,7 @@ def leg_values(params: Params, leg=None, leg_mode: str = "segment") -> dict:
         ({key: own value} of the keys whose own value lies outside the interval the ends span;
         empty when every own value is analysed or lies between the ends, key by key).
     """
-    a, b = leg_ends(params, leg)
-    va, vb = _end_values(params, a), _end_values(params, b)
-    keys = sorted(set(va) | set(vb))
-    own = {k: float(getattr(params.plant, k)) for k in keys}
-    lo = {k: float(va.get(k, own[k])) for k in keys}
-    hi = {k: float(vb.get(k, own[k])) for k in keys}
+    a, b, keys, own, lo, hi = _span(params, leg)
     outside = {k: own[k] for k in keys if not min(lo[k], hi[k]) <= own[k] <= max(lo[k], hi[k])}
     return {"leg": [a, b], "leg_mode": leg_mode, "ends": {a: lo, b: hi}, "own": own, "outside": outside}
 
@@ -121,12 +129,7 @@ def leg_configurations(params: Params, n: int, *, leg=None, leg_mode: str = "seg
     interpolated together; "box": one axis per key, the product (n^keys configurations)."""
     if leg_mode not in LEG_MODES:
         raise ParameterError(f"leg_mode = {leg_mode!r}; allowed: {list(LEG_MODES)}")
-    a, b = leg_ends(params, leg)
-    va, vb = _end_values(params, a), _end_values(params, b)
-    keys = sorted(set(va) | set(vb))
-    base = {k: float(getattr(params.plant, k)) for k in keys}
-    lo = {k: float(va.get(k, base[k])) for k in keys}
-    hi = {k: float(vb.get(k, base[k])) for k in keys}
+    a, b, keys, base, lo, hi = _span(params, leg)
     keys = [k for k in keys if lo[k] != hi[k]]
     if not keys:
         raise ParameterError(f"leg = {a}:{b}: the two configurations do not differ; allowed: two "
