@@ -96,7 +96,7 @@ def test_argument_errors_are_one_line(assert_refused, argv, msg):
 
 @pytest.mark.parametrize("value, expected", [("false", False), ("True", True), ("none", None)])
 def test_torque_damping_option_from_the_command_line(value, expected, capsys):
-    from haa_sym.cli import _parse_options
+    from haa_sym.cli.common import _parse_options
     assert _parse_options([f"torque_damping={value}"]).structure.torque_damping is expected
     assert main(["stability", "--P-gain", "200", "--D-gain", "10", "--option", f"torque_damping={value}"]) == 0
 

@@ -6,7 +6,8 @@ import time
 
 import pytest
 
-from haa_sym.cli import MAP_D_GAIN, main
+from haa_sym.cli import main
+from haa_sym.cli.common import MAP_D_GAIN
 from haa_sym.loop import LoopOptions
 from haa_sym.model.params import CONTROLLER_KEYS, bundled_actuators, load_params
 

@@ -153,7 +153,7 @@ def test_a_failed_write_is_never_committed(tmp_path):
 
 def test_interrupt_is_one_line_and_writes_nothing(tmp_path, capsys, monkeypatch):
     """Ctrl-C during a command: exit 130, one line, no traceback, existing output untouched."""
-    import haa_sym.cli as cli
+    import haa_sym.cli.analyses as cli
     out = tmp_path / "old.npz"
     out.write_bytes(b"the user's file")
 

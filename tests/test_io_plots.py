@@ -14,7 +14,8 @@ from matplotlib.colors import to_hex
 
 from haa_sym import ClosedLoop, LoopOptions, region_map
 from haa_sym.analysis.torque import step_response
-from haa_sym.cli import differences, figure_title, main, measured_torque
+from haa_sym.cli import main
+from haa_sym.cli.common import differences, figure_title, measured_torque
 from haa_sym.io import plots
 from haa_sym.model.params import actuator_path, load_params
 

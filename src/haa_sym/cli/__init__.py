@@ -1,0 +1,129 @@
+"""``haa-sym``: command line of haa_sym.
+
+Examples, one per command:
+  haa-sym regions --set beta=2 --P-gain log:1:20000:200 --D-gain lin:1:50:100 --out map.npz --plot map.png
+  haa-sym boundary --params sea --out boundary.json --plot boundary.png
+  haa-sym schedule --P-gain log:1:2000:30 --D-gain lin:1:50:20 --out schedule.csv --c-out ctrl/
+  haa-sym passivity --P-gain 0,200,20000 --D-gain 0,10,50 --out cells.csv   # Table 2's columns
+  haa-sym stability --P-gain 200,2000 --D-gain 10 --set N_av=10           # two points, one line each
+  haa-sym margins --P-gain 200 --D-gain 10
+  haa-sym contact --P-gain 200 --D-gain 10 --out contact.json
+  haa-sym step --set K_L2=0 --out step.csv --plot step.png                 # Fig. 7
+  haa-sym reproduce --out results/            every figure and table of the paper + REPORT.md
+  haa-sym verify --params harmonic_drive      check the equations (any actuator: the generic rows)
+  haa-sym compile my_actuator.toml            compile an actuator file's plant ahead of time
+  haa-sym actuators                           the bundled actuators, their configurations and files
+  haa-sym options --params sea                every --set key (units, allowed) and --option value
+
+Gains: --P-gain (P_gain, Nm/rad) and --D-gain (D_gain, Nms/rad) take the same syntax in every
+command, a grid of values: 'log:START:STOP:N' (N log-spaced, 0 < START <= STOP),
+'lin:START:STOP:N' (N evenly spaced, 0 <= START <= STOP), 'V1,V2,...' or one value 'V', all
+>= 0. regions, boundary and schedule take the two as the axes of a map (every P_gain with every
+D_gain); passivity, stability, margins and contact take points: the i-th P_gain with the i-th
+D_gain (the same number of values, as the columns of Table 2), a single value pairing with every
+value of the other (contact: one point).
+
+Every analysis command takes ``--params NAME|FILE`` (a bundled actuator, ``haa-sym actuators``,
+or a TOML file; default hyq_haa), ``--configuration NAME`` (e.g. retracted), ``--set KEY=VALUE``
+for any key of the parameter file,
+in SI units (``--set beta=2 --set N_av=10 --set J_L2=0.129 --set
+Ts=0.006``) and ``--option KEY=VALUE`` for the modelling options of ``haa_sym.LoopOptions``
+(``--option port=dtheta_L1 --option delay=1``); ``haa-sym options`` lists both with units,
+defaults and allowed values. Bad input exits with status 2 and a message naming the field;
+nothing partial is written, and missing directories of an output path are created (and removed
+again if the command fails). Results go to stdout; progress bars (on a terminal, for work longer
+than 2 s) to stderr; ``--quiet`` silences them, ``--progress`` forces them. ``haa-sym
+--version`` prints the version.
+"""
+from __future__ import annotations
+
+import argparse
+import contextlib
+import os
+import signal
+import sys
+import threading
+
+from haa_sym._version import __version__
+from haa_sym.errors import CompilerError, ParameterError, StaleGeneratedCode, Terminated
+from haa_sym.io.progress import set_progress
+
+from haa_sym.cli import analyses
+from haa_sym.cli.common import _Parser, _progress_flags
+
+# every module adding commands: register(sub) -> {command: run(args) -> exit status}
+COMMAND_MODULES = (analyses,)
+
+
+def main(argv: list[str] | None = None) -> int:
+    ap = _Parser(prog="haa-sym", description=__doc__.splitlines()[0],
+                 formatter_class=argparse.RawDescriptionHelpFormatter, epilog=__doc__)
+    ap.add_argument("--version", action="version", version=f"%(prog)s {__version__}")
+    _progress_flags(ap, False)
+    sub = ap.add_subparsers(dest="cmd", required=True)
+    runs = {}
+    for module in COMMAND_MODULES:
+        runs.update(module.register(sub))
+    for command in sub.choices.values():
+        # also after the command (haa-sym reproduce --quiet); SUPPRESS keeps the global value
+        _progress_flags(command, argparse.SUPPRESS)
+    args = ap.parse_args(argv)
+    set_progress(False if args.quiet else True if args.progress else None)
+    with _sigterm_unwinds():
+        return _run(args, runs)
+
+
+@contextlib.contextmanager
+def _sigterm_unwinds():
+    """SIGTERM raises :class:`Terminated` in the main thread while a command runs, so that it
+    unwinds like SIGINT: without this, the default action kills the process mid-write and the
+    outputs' temporaries (``.DIR.XXXX.tmp/``, ``.fig.png.XXXX.tmp``) stay behind. The previous
+    handler is restored (main() is also called in-process, e.g. by the tests)."""
+    if threading.current_thread() is not threading.main_thread():
+        yield
+        return
+
+    def terminate(signum, frame):
+        raise Terminated()
+    previous = signal.signal(signal.SIGTERM, terminate)
+    try:
+        yield
+    finally:
+        signal.signal(signal.SIGTERM, previous)
+
+
+def _run(args, runs) -> int:
+    """Run the parsed command; the errors a user can fix become one line and exit status 2."""
+    try:
+        return runs[args.cmd](args)
+    except ParameterError as exc:
+        print(f"haa-sym: error: {exc}", file=sys.stderr)
+        return 2
+    except BrokenPipeError:
+        # the reader of stdout went away (haa-sym ... | head): not an error of the command; the
+        # recipe of the Python docs (signal module, "Note on SIGPIPE")
+        devnull = os.open(os.devnull, os.O_WRONLY)
+        os.dup2(devnull, sys.stdout.fileno())
+        return 1
+    except OSError as exc:
+        print(f"haa-sym: error: {exc.strerror or exc}: {exc.filename or ''}", file=sys.stderr)
+        return 2
+    except RuntimeError as exc:
+        # generated/ stale or damaged, or the C compiler failing: a fault the user fixes, not a bug
+        if not isinstance(exc, (StaleGeneratedCode, CompilerError)):
+            raise
+        print(f"haa-sym: error: {exc}", file=sys.stderr)
+        return 2
+    except Terminated:
+        # as SIGINT below: every staged output was rolled back; 128 + SIGTERM
+        print("haa-sym: terminated (SIGTERM); no output written", file=sys.stderr)
+        return 143
+    except KeyboardInterrupt:
+        # outputs are staged (haa_sym.io.outputs): an interrupted command leaves existing files as
+        # they were; 128 + SIGINT, the shell's convention
+        print("haa-sym: interrupted; no output written", file=sys.stderr)
+        return 130
+
+
+if __name__ == "__main__":
+    sys.exit(main())

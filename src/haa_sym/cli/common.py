@@ -1,0 +1,326 @@
+"""What every command of ``haa-sym`` shares: the common flags (--params, --configuration, --set,
+--option), the gain flags and their one syntax, output checks, figure titles and the
+all-or-nothing writing of a command's outputs."""
+from __future__ import annotations
+
+import argparse
+import sys
+from pathlib import Path
+
+import numpy as np
+
+from haa_sym.analysis.robust import leg_text, leg_values
+from haa_sym.errors import ParameterError
+from haa_sym.io.gridspec import grid
+from haa_sym.io.outputs import Transaction, check_file
+from haa_sym.loop import ClosedLoop, LoopOptions
+from haa_sym.model import filters
+from haa_sym.model.params import (CONTROLLER_KEYS, CONTROLLER_UNITS, STRING_KEYS, actuator_path, gain_array,
+                                  load_params)
+
+
+OUTPUT_SUFFIXES = {"regions": (".npz",), "passivity": (".csv", ".json"), "step": (".csv",),
+                   "boundary": (".json",), "contact": (".json",), "schedule": (".csv",)}
+
+
+def _parse_set(items: list[str], known: tuple[str, ...] | None = None) -> dict[str, float]:
+    out = {}
+    for item in items:
+        key, sep, value = item.partition("=")
+        if not sep:
+            raise ParameterError(f"--set {item!r}: expected KEY=VALUE")
+        key, value = key.strip(), value.strip()
+        if key in STRING_KEYS:          # a choice by name (velocity_filter), checked by Controller
+            out[key] = value
+            continue
+        try:
+            # an integer stays one, so that messages show the value as typed (N_av = 0, not 0.0)
+            out[key] = int(value) if value.lstrip("+-").isdigit() else float(value)
+        except ValueError:
+            if known is not None and key not in known:    # the key is the mistake, not the value
+                raise ParameterError(f"--set {key}={value}: unknown parameter key(s) {[key]}; "
+                                     f"allowed: {list(known)}") from None
+            raise ParameterError(f"--set {key}={value}: {value!r} is not a number; allowed: a finite "
+                                 "number") from None
+    return out
+
+
+def _parse_options(items: list[str]):
+    fields = LoopOptions.field_names()
+    out = {}
+    for item in items:
+        key, sep, value = item.partition("=")
+        key, value = key.strip(), value.strip()
+        if not sep:
+            raise ParameterError(f"--option {item!r}: expected KEY=VALUE")
+        if key not in fields:
+            raise ParameterError(f"--option {item!r}: unknown option {key!r}; allowed: {list(fields)}")
+        kind, optional = LoopOptions.field_type(key)
+        try:
+            if optional and value.lower() == "none":        # the actuator file's default
+                out[key] = None
+            elif kind is bool:
+                if value.lower() not in ("true", "false", "1", "0"):
+                    raise ValueError
+                out[key] = value.lower() in ("true", "1")
+            elif kind is int:
+                out[key] = int(value)
+            elif kind is float:
+                out[key] = float(value)
+            else:
+                out[key] = value
+        except ValueError:
+            allowed = {bool: "true or false", int: "an integer", float: "a number"}.get(kind, "text")
+            raise ParameterError(f"--option {item!r}: {value!r} is not a valid {kind.__name__}; "
+                                 f"allowed: {allowed}{' or none' if optional else ''}") from None
+    try:
+        options = LoopOptions(**out)
+        # the one budget gate of the frequency grid, before any command builds or prints anything
+        options.numerics.check_budget()
+    except ParameterError as exc:
+        raise ParameterError(f"--option {exc}") from None
+    return options
+
+
+class _Parser(argparse.ArgumentParser):
+    """argparse with the project's error form: one line, exit status 2 (argparse's own usage
+    block is what ``--help`` is for)."""
+
+    def error(self, message: str):
+        self.exit(2, f"haa-sym: error: {message}; see `{self.prog} --help`\n")
+
+
+PARAMS_HELP = ("actuator: a TOML parameter file or a bundled name (hyq_haa or hyq, sea, harmonic_drive; "
+               "`haa-sym actuators` lists them with their files); default: hyq_haa")
+
+
+def _common(p: argparse.ArgumentParser) -> None:
+    p.add_argument("--params", metavar="NAME|FILE", help=PARAMS_HELP)
+    p.add_argument("--configuration", help="leg configuration of the parameter file, e.g. retracted")
+    p.add_argument("--set", action="append", default=[], metavar="KEY=VALUE",
+                   help="override any key of the parameter file (repeatable), the value in SI units whatever "
+                        "unit the file gives (kg m^2, Nm/rad, Nms/rad, H, Ohm, Nm/A, V s/rad, Ts in s, f_c in Hz; "
+                        "docs/model.md, \"Units\"; `haa-sym options --params NAME` lists the keys, units and "
+                        "allowed values); " + filters.help_text())
+    p.add_argument("--option", action="append", default=[], metavar="KEY=VALUE",
+                   help="modelling option of haa_sym.LoopOptions (repeatable): " + ", ".join(LoopOptions.field_names())
+                        + " (`haa-sym options` lists types, defaults and allowed values)")
+
+
+def _loaded(args):
+    """The parameters as the file gives them (with ``--configuration``), before any ``--set``."""
+    params = load_params(actuator_path(args.params, "--params"))
+    return params.configuration(args.configuration) if args.configuration else params
+
+
+def _params(args, params=None):
+    """The parameters of the command: the file's (``params``, default :func:`_loaded`) with
+    ``--set`` applied."""
+    params = _loaded(args) if params is None else params
+    sets = _parse_set(args.set, tuple(params.plant.topology.parameter_keys) + CONTROLLER_KEYS)
+    if not sets:
+        return params
+    try:                  # all at once: velocity_filter and its keys (f_c) are only valid together
+        return params.with_values(**sets)
+    except ParameterError as exc:
+        msg = str(exc)
+        named = [k for k in sets if msg.startswith((f"{k} ", f"unknown parameter key(s) ['{k}'"))]
+        given = " ".join(f"--set {k}={v}" for k, v in sets.items() if not named or k in named)
+        raise ParameterError(f"{given}: {msg}") from None
+
+
+def _check_out(path: str | None, cmd: str, flag: str = "--out", suffixes: tuple[str, ...] | None = None) -> Path | None:
+    """Validate an output path before any computation: suffix (``suffixes``, default the command's
+    ``--out`` types of OUTPUT_SUFFIXES, or a figure's), existing writable directory."""
+    if path is None:
+        return None
+    p = Path(path)
+    allowed = suffixes or (OUTPUT_SUFFIXES[cmd] if flag == "--out" else (".png", ".pdf", ".svg"))
+    if p.suffix.lower() not in allowed:
+        raise ParameterError(f"{flag} {path!r}: unsupported file type; allowed: {list(allowed)}")
+    return check_file(p, flag)
+
+
+def _wrote(out) -> str:
+    """The end of a command's summary line: which file it wrote, if any."""
+    return f"; wrote {out}" if out else ""
+
+
+GAIN_FLAGS = {"P_gain": ("--P-gain", "impedance stiffness P_gain", "Nm/rad"),
+              "D_gain": ("--D-gain", "impedance damping D_gain", "Nms/rad")}
+GRID_SHORT = "log:START:STOP:N, lin:START:STOP:N, V1,V2,... or one value V (>= 0)"
+
+
+def _axis(args, name: str) -> np.ndarray:
+    """The values of ``--P-gain`` / ``--D-gain``: a grid spec, a list or one value (one syntax,
+    :mod:`haa_sym.io.gridspec`, in every command)."""
+    spec, flag = getattr(args, name), GAIN_FLAGS[name][0]
+    try:
+        value = float(spec)
+    except (TypeError, ValueError):
+        return grid(spec, flag)
+    # one value: the gain rule's own message, which names the unit (--P-gain = -200.0 is out of range)
+    return gain_array(name, value, flag).reshape(1)
+
+
+def _points(args, one: str | None = None) -> tuple[np.ndarray, np.ndarray]:
+    """The gain points of a point command: the i-th P_gain with the i-th D_gain, a single value
+    pairing with every value of the other (see the module docstring). ``one``: the command takes
+    exactly one point (its name, for the message)."""
+    P, D = _axis(args, "P_gain"), _axis(args, "D_gain")
+    if P.size != D.size and 1 not in (P.size, D.size):
+        raise ParameterError(f"--P-gain {args.P_gain!r} gives {P.size} values and --D-gain {args.D_gain!r} "
+                             f"{D.size}; they pair up (the i-th with the i-th), so give the same number; "
+                             "allowed: equal counts, or one value for either")
+    P, D = np.broadcast_arrays(P, D)
+    if one is not None and P.size != 1:
+        raise ParameterError(f"--P-gain {args.P_gain!r} --D-gain {args.D_gain!r} gives {P.size} points; "
+                             f"allowed: one point ({one})")
+    return P.copy(), D.copy()
+
+
+def _gain_flags(parser, P_default: str | None, D_default: str | None, role: str) -> None:
+    """``--P-gain`` and ``--D-gain`` with the one syntax, their units, ``role`` (what the command
+    makes of them) and their defaults in the help."""
+    for name, default in (("P_gain", P_default), ("D_gain", D_default)):
+        flag, what, unit = GAIN_FLAGS[name]
+        parser.add_argument(flag, default=default, required=default is None, metavar="GRID",
+                            help=f"{what}, {unit}: {GRID_SHORT}; {role}; "
+                                 + ("required" if default is None else f"default {default}"))
+
+
+def differences(now: dict, base: dict) -> dict:
+    """The entries of ``now`` whose value differs from ``base``'s, or that ``base`` lacks (what a
+    figure's title says of its parameters and options)."""
+    return {k: v for k, v in now.items() if k not in base or base[k] != v}
+
+
+def _value(key: str, value, units: dict) -> str:
+    unit = units.get(key, "")
+    text = f"{value:g}" if isinstance(value, (int, float)) and not isinstance(value, bool) else str(value)
+    return f"{key} = {text}" + (f" {unit}" if unit and unit not in ("-", "samples") else "")
+
+
+def figure_title(loop, file_params, configuration: str | None = None, user_title: str | None = None) -> str:
+    """A figure's title: the actuator (its file's [about] name, else the file's name), the
+    configuration, then what differs from the file: the ``--set`` values (the loop's parameters
+    against the file's) and the options that are not LoopOptions' defaults. The user's
+    ``--title`` comes first, on a line of its own (prepended, not replacing: a figure always
+    says what it shows)."""
+    params = loop.params
+    name = str(params.about.get("name") or Path(params.source).stem)
+    head = name + (f", {configuration} configuration" if configuration else "")
+    now, base = params.to_dict(), file_params.to_dict()
+    units = {**params.plant.topology.units, **CONTROLLER_UNITS}
+    sets = {**differences(now["plant"], base["plant"]), **differences(now["controller"], base["controller"])}
+    opts = differences(loop.options.to_dict(), LoopOptions().resolved(params.plant.topology).to_dict())
+    said = ", ".join(_value(k, v, units) for k, v in sets.items())
+    if opts:
+        said += ("; " if said else "") + "option" + "s" * (len(opts) > 1) + " " + ", ".join(
+            _value(k, v, {}) for k, v in opts.items())
+    lines = [user_title] if user_title else []
+    return "\n".join(lines + [head, said or "the file's values, default options"])
+
+
+def _setup(args, cmd: str):
+    """What every analysis command starts with: the closed loop of the parameters and options,
+    and the output paths, all checked before any computation; sets ``args.figure_title`` (what
+    the figure of ``--plot`` is titled, :func:`figure_title`)."""
+    file_params = _loaded(args)
+    params, options = _params(args, file_params), _parse_options(args.option)
+    out, plot = _check_out(args.out, cmd), _check_out(args.plot, cmd, "--plot")
+    if plot and getattr(args, "title", None):
+        _plots().check_title(args.title, "--title")
+    loop = ClosedLoop(params, options)
+    args.figure_title = figure_title(loop, file_params, args.configuration, getattr(args, "title", None))
+    return loop, out, plot
+
+
+def measured_torque(topology) -> tuple[str, str]:
+    """(axis label with its unit, legend) of the torque the torque loop measures: the sensed
+    coupling's transmitted torque, or the estimate k_t N I_m of a current-sensing drive
+    (``[sensors] torque``)."""
+    if topology.sensor == "current":
+        return "torque estimate k_t N I_m (Nm)", "torque from the motor current, k_t N I_m"
+    damping = "spring and damper" if topology.torque_damping else "spring only"
+    return (f"sensed torque T_{topology.sensor} (Nm)",
+            f"T_{topology.sensor}: torque sensor on coupling {topology.sensor} ({damping})")
+
+
+def _plots():
+    """haa_sym.io.plots, imported only when a figure is asked for (matplotlib is slow to import)."""
+    from haa_sym.io import plots
+    return plots
+
+
+def _write_outputs(out, plot, write_out, figure) -> None:
+    """``--out`` through ``write_out(path, tx)`` and ``--plot`` from ``figure()``, all or nothing
+    (:mod:`haa_sym.io.outputs`): a failure leaves both as they were."""
+    with Transaction() as tx:
+        if out:
+            write_out(out, tx)
+        if plot:
+            _plots().save_figure(figure(), plot, tx, "--plot")
+
+
+def _leg(args, params):
+    if args.leg is None:
+        return None
+    a, sep, b = args.leg.partition(":")
+    if not sep:
+        raise ParameterError(f"--leg {args.leg!r}; allowed: FROM:TO, two configuration names of the file "
+                             f"(or 'nominal'): {['nominal'] + list(params.configurations)}")
+    return (a.strip(), b.strip())
+
+
+def _say_leg(params, leg, leg_mode) -> str:
+    """Before a leg-range analysis: a warning, shown even with --quiet, when the parameters' own
+    values (a file's body tables, --set) lie outside the range, which replaces them. Returns the
+    line saying which configurations and values it analyses, a progress message the command
+    shows once its input has passed every check (a refused command prints one line only)."""
+    line, warning = leg_text(leg_values(params, leg, leg_mode))
+    if warning:
+        print(f"haa-sym: warning: {warning}", file=sys.stderr)
+    return line
+
+
+def _requirements(args):
+    return tuple(r.strip() for r in args.require.split(",") if r.strip())
+
+
+
+def _progress_flags(p: argparse.ArgumentParser, default) -> None:
+    g = p.add_mutually_exclusive_group()
+    g.add_argument("-q", "--quiet", action="store_true", default=default,
+                   help="no progress bars or progress messages on stderr")
+    g.add_argument("--progress", action="store_true", default=default,
+                   help="progress bars on stderr from the start, also when it is not a terminal "
+                        "(default: on a terminal, for work longer than 2 s)")
+
+
+# The D_gain axis of the maps (regions, boundary): the paper's Figs. 8-11 and model/paper.toml
+# start at 1 Nms/rad, and one default for both means `boundary` finds the curves `regions --plot`
+# draws. (boundary used 0..50 before issue 16; D_gain = 0 remains reachable with --D-gain.)
+MAP_D_GAIN = "lin:1:50:100"
+TITLE_HELP = ("text above the figure's automatic title (the actuator, then what differs from its file: --set values "
+              "and non-default --option values), on a line of its own")
+POINTS_ROLE = "points: the i-th P_gain with the i-th D_gain, one value pairing with all"
+
+
+def _map_args(parser, D_default: str, what: str, suffix: str) -> None:
+    """The gain-plane arguments of ``regions`` and ``boundary``."""
+    _gain_flags(parser, "log:1:20000:200", D_default, what)
+    parser.add_argument("--out", help=f"output {suffix}")
+    parser.add_argument("--plot", help="output figure (.png/.pdf/.svg)")
+    parser.add_argument("--title", help=TITLE_HELP)
+
+
+def _leg_args(parser) -> None:
+    """The leg range and the requirements of ``regions --robust`` and ``schedule``."""
+    parser.add_argument("--require", default="stable,pm", help="stable[,pm][,passive] (default stable,pm)")
+    parser.add_argument("--leg", help="FROM:TO configurations bounding the leg range (default "
+                        "retracted:extended, or the file's first two)")
+    parser.add_argument("--leg-mode", choices=("segment", "box"), default="segment",
+                        help="the leg range: the segment between the two (default) or the box of every pair")
+
+
