@@ -10,6 +10,7 @@ import matplotlib
 matplotlib.use("Agg")
 import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
+from matplotlib import patheffects  # noqa: E402
 from matplotlib.colors import ListedColormap  # noqa: E402
 from matplotlib.patches import Patch  # noqa: E402
 
@@ -65,9 +66,10 @@ def _gain_axes(ax, logP: bool) -> None:
     ax.set_ylabel("D_gain (Nms/rad)")
 
 
-def plot_region(m, ax=None, title: str | None = None, passivity: bool = True, boundary=None):
+def plot_region(m, ax=None, title: str | None = None, passivity: bool = True, boundary=None, measured=None):
     """Draw one :class:`haa_sym.analysis.regions.RegionMap` on ``ax`` (log P_gain, linear D_gain), with
-    the exact curves (:func:`haa_sym.analysis.boundaries.stability.boundaries`) over it when given."""
+    the exact curves (:func:`haa_sym.analysis.boundaries.stability.boundaries`) over it when given,
+    and measured points (``measured``, see :func:`draw_measured`) over both."""
     fig = None
     if ax is None:
         fig, ax = plt.subplots(figsize=(4.6, 4.4), layout="constrained")
@@ -89,13 +91,14 @@ def plot_region(m, ax=None, title: str | None = None, passivity: bool = True, bo
         plot_boundary(boundary, ax)
         ax.set_xlim(_edges(m.P_gain, logP)[[0, -1]])
         ax.set_ylim(_edges(m.D_gain, False)[[0, -1]])
+    points = draw_measured(ax, measured, _edges(m.P_gain, logP)[[0, -1]], _edges(m.D_gain, False)[[0, -1]])
     _gain_axes(ax, logP)
     if title:
         w = ax.figure.get_figwidth() / (len(ax.figure.axes) or 1)
         ax.set_title(_wrap(title, w), fontsize=_title_size(title, 10))
     if fig is not None:
         extra = curve_legend(boundary) if boundary is not None else []
-        fig.legend(handles=_region_legend(boundary is None) + extra, loc="outside lower center", ncol=2,
+        fig.legend(handles=_region_legend(boundary is None) + extra + points, loc="outside lower center", ncol=2,
                    fontsize=7)
     return fig or ax.figure
 
@@ -150,6 +153,41 @@ def curve_legend(boundary) -> list:
             seen.add(label)
             out.append(plt.Line2D([], [], label=label, **_CURVE_STYLES[key]))
     return out
+
+
+# The paper's Figs. 8-11 mark experiments with crosses (unstable) and squares (stable); it has no
+# limit cycles, so an open triangle marks those. The colour says whether the model agrees
+# (haa_sym.analysis.measured's rule); a white outline keeps a marker visible on the dark region.
+MEASURED_MARKERS = {"stable": ("s", "stable (measured, square)"), "unstable": ("x", "unstable (measured, cross)"),
+                    "limit_cycle": ("^", "limit cycle (measured, triangle)")}
+MEASURED_COLORS = {True: ("#0060ff", "agrees with the model"), False: ("#e00000", "disagrees with the model")}
+
+
+def draw_measured(ax, measured, P_lim, D_lim) -> list:
+    """Measured points on ``ax`` with the paper's symbols (:data:`MEASURED_MARKERS`), coloured by
+    agreement (:data:`MEASURED_COLORS`); ``measured``: plain data ``{"P_gain", "D_gain",
+    "outcome", "agrees"}`` (flat arrays) or None. Points outside ``P_lim`` x ``D_lim`` are not
+    drawn (the axes keep the map's extent). Returns the legend handles (empty without points)."""
+    if measured is None:
+        return []
+    P, D = np.asarray(measured["P_gain"], float), np.asarray(measured["D_gain"], float)
+    out, agrees = np.asarray(measured["outcome"]).astype(str), np.asarray(measured["agrees"], bool)
+    inside = (P >= P_lim[0]) & (P <= P_lim[1]) & (D >= D_lim[0]) & (D <= D_lim[1])
+    halo = [patheffects.withStroke(linewidth=3.0, foreground="white")]
+    handles = []
+    for o, (marker, label) in MEASURED_MARKERS.items():
+        for ok, (color, _) in MEASURED_COLORS.items():
+            sel = inside & (out == o) & (agrees == ok)
+            if sel.any():
+                ax.plot(P[sel], D[sel], ls="none", marker=marker, ms=6, mfc="none", mec=color, mew=1.6,
+                        path_effects=halo, zorder=5)
+        if (out == o).any():
+            handles.append(plt.Line2D([], [], ls="none", marker=marker, ms=6, mfc="none", mec="k", mew=1.4,
+                                      label=label))
+    for ok, (color, label) in MEASURED_COLORS.items():
+        if (agrees == ok).any():
+            handles.append(Patch(facecolor=color, edgecolor=color, label=f"{label} (marker colour)"))
+    return handles
 
 
 def _region_legend(grid_contour: bool = True):
@@ -387,20 +425,25 @@ def plot_schedule(s, title: str = ""):
 
 
 def _leg_line(meta: dict) -> str:
-    """The leg range's ends and their values (``meta["leg_values"]``), two lines for a title; ""
-    without."""
+    """The leg range's ends and their values (``meta["leg_values"]``), two lines for a title, and
+    the uncertainty box (its keys and ranges) on a third when there is one; "" without."""
     lv = meta.get("leg_values")
     if not lv:
         return ""
     ends = " .. ".join(f"{name} (" + ", ".join(f"{k} {v:.4g}" for k, v in vals.items()) + ")"
                        for name, vals in lv["ends"].items())
     own = ", ".join(f"{k} {v:.4g}" for k, v in lv["own"].items())
-    return f"{ends}\nanalysed instead of the parameters' {own}" + (" (outside the range)" if lv["outside"] else "")
+    text = f"{ends}\nanalysed instead of the parameters' {own}" + (" (outside the range)" if lv["outside"] else "")
+    if lv.get("uncertainty"):
+        text += "\nand every value of the uncertainty box " + ", ".join(
+            f"{k} {lo:.4g}..{hi:.4g}" for k, (lo, hi) in lv["uncertainty"].items())
+    return text
 
 
-def plot_robust(r, title: str = ""):
+def plot_robust(r, title: str = "", measured=None):
     """A :class:`haa_sym.analysis.robust.RobustRegion`: the gains meeting the requirements for every leg
-    configuration of the range; ``title`` goes above the description of the range."""
+    configuration of the range; ``title`` goes above the description of the range; measured
+    points over it (``measured``, see :func:`draw_measured`)."""
     fig, ax = plt.subplots(figsize=(4.8, 4.2), layout="constrained")
     logP = bool(np.all(r.P_gain > 0))
     ax.pcolormesh(_edges(r.P_gain, logP), _edges(r.D_gain, False), (~r.feasible).T.astype(float),
@@ -412,4 +455,7 @@ def plot_robust(r, title: str = ""):
             f"{leg[0]}..{leg[1]} ({r.meta['leg_mode']}, {r.n_configurations} configurations; dark: fails)")
     text = "\n".join(t for t in (title, auto, _leg_line(r.meta)) if t)
     ax.set_title(_wrap(text, 4.8, 7), fontsize=7)
+    handles = draw_measured(ax, measured, _edges(r.P_gain, logP)[[0, -1]], _edges(r.D_gain, False)[[0, -1]])
+    if handles:
+        fig.legend(handles=handles, loc="outside lower center", ncol=2, fontsize=7)
     return fig
