@@ -86,7 +86,7 @@ def agreement(loop, P_gain, D_gain, outcome, *, beta=None, alpha=None, configura
         raise ParameterError(f"outcome: {out.size} values for {P.size} points; allowed: one outcome per point")
     bad = sorted(set(out) - set(OUTCOMES))
     if bad:
-        raise ParameterError(f"outcome {bad[0]!r}; allowed: one of {list(OUTCOMES)}")
+        raise ParameterError(f"outcome {str(bad[0])!r}; allowed: one of {list(OUTCOMES)}")
     loops = [loop] if not configurations else \
         [ClosedLoop(loop.params.with_values(**c), loop.options, loop.backend) for c in configurations]
     n = P.size
