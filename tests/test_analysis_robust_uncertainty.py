@@ -42,6 +42,7 @@ def test_configurations_are_the_leg_times_the_box():
 def test_robust_map_is_the_intersection_of_independent_maps():
     p = load_params()
     box = _box(p, 0.3, ("R", "K_hd"))         # the coil resistance matters on this grid, K_hd a little
+    P, D = np.geomspace(5.0, 5000.0, 8), np.linspace(1.0, 50.0, 5)
     r = robust_region(ClosedLoop(p), P, D, beta=BETA, uncertainty=box)
     assert r.converged and r.meta["uncertainty"] == {k: list(v) for k, v in sorted(box.items())}
     assert r.meta["leg_values"]["uncertainty"] == r.meta["uncertainty"]
