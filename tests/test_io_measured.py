@@ -118,3 +118,8 @@ def test_figures_draw_the_papers_symbols():
     r = robust_region(loop, P, D, max_per_axis=2)
     fig = plot_robust(r, measured=drawn)
     assert "cross" in " ".join(t.get_text() for t in fig.legends[0].get_texts())
+
+
+def test_agreement_takes_the_loop_first():
+    with pytest.raises(ParameterError, match="ClosedLoop"):
+        agreement(load_params(), [1.0], [1.0], ["stable"])
