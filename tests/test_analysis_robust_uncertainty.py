@@ -116,8 +116,10 @@ def test_bad_uncertainty_is_one_line():
         assert msg in str(e.value) and "\n" not in str(e.value)
     with pytest.raises(ParameterError, match="is not a plant key"):
         robust_region(ClosedLoop(p), P[:2], D[:2], uncertainty={"nope": (1, 2)})
-    # "nominal" as an end sets nothing the other end does not: K_L2 may then vary freely
+    # with "nominal" as an end, the keys the other end sets are still the range's
     assert check_uncertainty(p, {"K_hd": (7000, 9000)}, ("nominal", "retracted")) == {"K_hd": (7000.0, 9000.0)}
+    with pytest.raises(ParameterError, match="set by the leg range nominal..retracted"):
+        check_uncertainty(p, {"J_L2": (0.1, 0.2)}, ("nominal", "retracted"))
 
 
 def test_the_centre_is_the_fits_value_and_a_difference_is_said():

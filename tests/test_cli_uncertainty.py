@@ -101,7 +101,7 @@ def test_bad_inputs_are_refused(tmp_path, files, assert_refused):
 
 @pytest.mark.slow
 def test_schedule_with_uncertainty_is_below_the_plain_schedule_and_holds_in_the_box(tmp_path, files, capsys):
-    """Slow (about 8 s): two schedules. beta with the box <= beta without, and each scheduled beta
+    """Slow (8-12 s): two schedules. beta with the box <= beta without, and each scheduled beta
     meets the requirements (explicit eigenvalues) at the box's ends and middle and both leg ends."""
     from haa_sym.check import reference as ref
     p = load_params()
