@@ -121,5 +121,6 @@ def test_schedule_with_uncertainty_is_below_the_plain_schedule_and_holds_in_the_
     csv = tmp_path / "s.csv"
     assert main(["schedule", "--uncertainty", str(files[0]), "--P-gain", "1000,3000", "--D-gain", "20,45",
                  "--beta-range", "0.5:6", "--beta-tol", "0.1", "--require", "stable", "--out", str(csv), "-q"]) == 0
+    assert "leg retracted..extended, R 2.3..4.3, 9 configurations" in capsys.readouterr().out
     rows = csv.read_text().splitlines()[1:]
     assert [float(r.split(",")[2]) for r in rows] == pytest.approx(s.beta.ravel().tolist(), rel=1e-11)
