@@ -156,9 +156,9 @@ def describing_function(kind: str, value: float, A) -> tuple[np.ndarray, np.ndar
     return N, dN
 
 
-def df_harmonics(kind: str, value: float, A: float, n: int = 4096) -> tuple[float, float]:
+def df_harmonics(kind: str, value: float, A: float, n: int = 65536) -> tuple[float, float]:
     """``(|b1|, |b3|)``: the first and third harmonic amplitudes of ``n(A sin t)`` (FFT over one
-    period of ``n`` points; ``b1 = N(A) A`` up to the sampling of the period)."""
+    period of ``n`` points, midpoints: about 1e-4 relative where the nonlinearity jumps)."""
     t = 2 * np.pi * (np.arange(n) + 0.5) / n
     c = np.fft.rfft(nonlinearity_output(kind, value, A * np.sin(t))) * 2 / n
     return float(abs(c[1])), float(abs(c[3]))

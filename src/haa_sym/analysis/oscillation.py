@@ -7,6 +7,7 @@ grows or is sustained. Every threshold is a named argument with a stated default
 """
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 
 import numpy as np
@@ -35,7 +36,8 @@ class Oscillation:
         Amplitude of the least-squares sinusoid at the detected frequency over the whole cycles
         of the tail (what a describing function predicts); NaN for "none".
     frequency_hz, omega, period : float
-        Hz, rad/s and s, from the median time between upward crossings; NaN for "none".
+        Hz, rad/s and s, from the mean time between upward crossings (first to last over the
+        number of cycles); NaN for "none".
     growth_per_cycle : float
         Relative change of the cycle amplitude per cycle (Theil-Sen slope of log amplitude).
     n_cycles : int
@@ -62,13 +64,21 @@ class Oscillation:
     noise: float
 
 
+# order of the differences the noise is estimated from: white noise's k-th difference has
+# variance C(2k, k) sigma^2 (924 sigma^2 for k = 6), a sinusoid's is (2 sin(omega Ts / 2))^k times
+# its amplitude, which for k = 6 keeps oscillations up to about a sixth of the sampling rate
+# from passing for noise (docs/describing.md)
+NOISE_DIFFERENCE_ORDER = 6
+
+
 def _noise_rms(y: np.ndarray) -> float:
-    """rms of white noise on a smooth signal: the MAD of second differences (whose variance is
-    6 sigma^2 for white noise; a smooth signal's second differences are far smaller)."""
-    d2 = np.diff(y, 2)
-    if d2.size == 0:
+    """rms of white noise on a smooth signal, from the median absolute deviation of its
+    differences of order NOISE_DIFFERENCE_ORDER."""
+    k = NOISE_DIFFERENCE_ORDER
+    d = np.diff(y, k)
+    if d.size == 0:
         return 0.0
-    return float(1.4826 * np.median(np.abs(d2 - np.median(d2))) / np.sqrt(6))
+    return float(1.4826 * np.median(np.abs(d - np.median(d))) / np.sqrt(math.comb(2 * k, k)))
 
 
 def limit_cycle(t, y, *, settle: float = 0.5, min_cycles: int = 3, growth_tol: float = 0.01,
@@ -90,7 +100,7 @@ def limit_cycle(t, y, *, settle: float = 0.5, min_cycles: int = 3, growth_tol: f
     hysteresis : float, optional
         Band (trace unit) around the tail's mean that a crossing has to pass; default
         ``max(noise_factor * noise, resolution, 1e-9 * max|y|)`` where ``noise`` is the rms
-        estimated from the second differences.
+        estimated from the sixth differences (white noise assumed).
     noise_factor : float
         Multiple of the noise rms used for the default hysteresis; default 4.
     resolution : float
@@ -139,7 +149,9 @@ def limit_cycle(t, y, *, settle: float = 0.5, min_cycles: int = 3, growth_tol: f
         x0, x1 = x[j - 1], x[j]
         times.append(tt[j - 1] + (tt[j] - tt[j - 1]) * (-x0 / (x1 - x0) if x1 != x0 else 0.0))
     times = np.array(times)
-    period = float(np.median(np.diff(times)))
+    # the mean period over every whole cycle: a cycle of a few samples has crossings that jitter
+    # by a sample, whose median would be biased
+    period = float((times[-1] - times[0]) / (times.size - 1))
     amps = np.array([0.5 * np.ptp(yy[a:b]) for a, b in zip(ups[:-1], ups[1:])])
     if np.any(amps <= 0):
         return none

@@ -1,0 +1,131 @@
+"""Describing-function predictions (haa_sym.analysis.describing) against independent computations:
+the closed forms against the harmonics of the nonlinearity itself, the linear part against the
+reference's loop transfer (haa_sym.check.reference), and the predicted limit cycle against a
+simulation of the sampled loop written here (the continuous plant sampled by scipy, the
+controller of Eq. 6-8 by hand, the saturation at the sample instants).
+
+Tolerance of the prediction (docs/describing.md, "How good is the prediction"): the harmonic
+balance drops the harmonics; the relative third harmonic returning to the nonlinearity's input,
+``distortion`` = |G(3w)| |b3| / (|G(w)| |b1|), is the size of the first neglected term, so the
+amplitude and frequency of the simulated cycle must agree with the prediction within it.
+"""
+import numpy as np
+import pytest
+import scipy.signal
+
+from haa_sym import ClosedLoop, LoopOptions, load_params
+from haa_sym.analysis.describing import (describing_function, df_harmonics, limit_cycles, linear_part,
+                                         nonlinearity_output)
+from haa_sym.analysis.oscillation import limit_cycle
+from haa_sym.check import reference
+from haa_sym.errors import ParameterError
+from haa_sym.loop.plant import continuous_plant
+
+PARAMS = load_params()
+
+
+@pytest.mark.parametrize("kind,value,A", [("saturation", 24.0, 30.0), ("saturation", 24.0, 200.0),
+                                          ("relay", 0.05, 0.3), ("quantiser", 0.1, 0.08),
+                                          ("quantiser", 0.1, 0.37), ("quantiser", 0.1, 2.04)])
+def test_closed_forms_are_the_first_harmonic(kind, value, A):
+    # the first harmonic of n(A sin t) by quadrature of the nonlinearity itself (not the FFT of
+    # df_harmonics): b1 = (1/pi) int n(A sin t) sin t dt
+    th = np.linspace(0, 2 * np.pi, 2_000_001)
+    b1 = np.trapezoid(nonlinearity_output(kind, value, A * np.sin(th)) * np.sin(th), th) / np.pi
+    N, dN = describing_function(kind, value, np.array([A, A * (1 + 1e-6), A * (1 - 1e-6)]))
+    assert N[0] * A == pytest.approx(b1, rel=1e-5)
+    assert df_harmonics(kind, value, A)[0] == pytest.approx(b1, rel=1e-4)
+    assert dN[0] == pytest.approx((N[1] - N[2]) / (2e-6 * A), rel=1e-5)
+
+
+def test_saturation_is_linear_below_the_limit():
+    N, dN = describing_function("saturation", 24.0, np.array([1.0, 24.0]))
+    assert np.all(N == 1) and np.all(dN == 0)
+
+
+@pytest.mark.parametrize("delay", [0, 1])
+@pytest.mark.parametrize("P,D", [(0.0, 0.0), (3000.0, 1.0), (200.0, 10.0)])
+def test_voltage_linear_part_is_the_reference_loop_without_compensation(delay, P, D):
+    # with alpha = 0 the saturated voltage is the PI output, where the reference cuts L_t
+    loop = ClosedLoop(PARAMS.with_values(alpha=0.0, beta=1.7), LoopOptions(delay=delay))
+    w = np.geomspace(0.5, 3000, 200)
+    G = linear_part(loop, P, D, "V_max", w)
+    ref = reference.frequency_response(loop, w, P, D, which=("L_t",))["L_t"]
+    np.testing.assert_allclose(G, ref, rtol=1e-8, atol=1e-12 * np.abs(ref).max())
+
+
+def test_torque_quantiser_linear_part_torque_loop_alone():
+    # P = D = 0 and alpha = 0: the only path from the read torque back to the torque is the PI
+    loop = ClosedLoop(PARAMS.with_values(alpha=0.0))
+    w = np.geomspace(0.5, 3000, 100)
+    ref = reference.frequency_response(loop, w, 0.0, 0.0, which=("L_t",))["L_t"]
+    np.testing.assert_allclose(linear_part(loop, 0.0, 0.0, "T_res", w), ref, rtol=1e-8)
+
+
+def test_harmonic_balance_holds_at_the_prediction():
+    # a high torque gain with a computation delay: the torque loop alone is unstable
+    loop = ClosedLoop(PARAMS.with_values(alpha=0.0, beta=50.0), LoopOptions(delay=1))
+    r = limit_cycles(loop, 0.0, 0.0, nonlinearity={"V_max": 24.0})
+    assert r.amplitude.size >= 1
+    ref = reference.frequency_response(loop, r.omega, 0.0, 0.0, which=("L_t",))["L_t"]
+    N = describing_function("saturation", 24.0, r.amplitude)[0]
+    np.testing.assert_allclose(1 + N * ref, 0, atol=1e-8)
+
+
+def _sampled_loop(params, P, D, V_max, n, delay=0, x0_key="theta_L2", x0=0.01):
+    """The sampled loop with the voltage saturated at the sample instants, written out here:
+    the continuous plant sampled by scipy's ZOH, the average of N_av differences, the impedance
+    law (Eq. 8), the backward-Euler PI (Eq. 7), velocity compensation (Eq. 6) and ``delay``
+    samples between the command and the applied voltage.
+    Returns the voltage command V_k (before the saturation) per sample."""
+    pl, c = params.plant, params.controller
+    cont = continuous_plant(pl)
+    Ts, Nav = c.Ts, c.N_av
+    C = cont.C[[cont.output_names.index("T_sensor"), cont.output_names.index("theta_encoder")]]
+    Ad, Bd, *_ = scipy.signal.cont2discrete((cont.A, cont.B[:, [0]], C, np.zeros((2, 1))), Ts, "zoh")
+    P_t, I_t = c.beta * c.P_t0, c.beta * c.I_t0
+    VC = c.alpha * pl.N / pl.k_t * (pl.R * pl.B_m + pl.k_t * pl.k_w)
+    x = np.zeros(Ad.shape[0])
+    x[cont.state_names.index(x0_key)] = x0
+    theta = np.zeros(n + Nav)              # theta before t = 0: at rest at 0
+    integral, u = 0.0, np.zeros(n + delay)
+    for k in range(n):
+        T, theta[k + Nav] = C @ x
+        v = (theta[k + Nav] - theta[k]) / (Nav * Ts)
+        e = -(P * theta[k + Nav] + D * v) - T
+        integral += Ts * e
+        u[k + delay] = P_t * e + I_t * integral + VC * v
+        x = Ad @ x + Bd[:, 0] * np.clip(u[k], -V_max, V_max)
+    return np.arange(n) * Ts, u[delay:]
+
+
+@pytest.mark.parametrize("beta,delay,P,D", [(1.0, 0, 3000.0, 1.0), (1.0, 0, 20000.0, 0.0), (50.0, 1, 0.0, 0.0)])
+def test_saturation_limit_cycle_against_the_sampled_loop(beta, delay, P, D):
+    # linearly unstable points (the impedance loop's stiffness; a high torque gain with a delay)
+    V_max, params = 24.0, PARAMS.with_values(beta=beta)
+    r = limit_cycles(ClosedLoop(params, LoopOptions(delay=delay)), P, D, nonlinearity={"V_max": V_max})
+    assert r.amplitude.size == 1 and bool(r.stable[0])          # one stable cycle (Loeb)
+    t, u = _sampled_loop(params, P, D, V_max, 6000, delay)
+    osc = limit_cycle(t, u)
+    assert osc.kind == "sustained"
+    eps = float(r.distortion[0])
+    print(f"beta={beta} delay={delay} P={P} D={D}: DF {r.amplitude[0]:.4g} V at {r.omega[0]:.5g} rad/s, simulated {osc.fundamental:.4g} V at "
+          f"{osc.omega:.5g} rad/s (distortion {eps:.3g})")
+    assert abs(osc.fundamental / r.amplitude[0] - 1) <= eps
+    assert abs(osc.omega / r.omega[0] - 1) <= eps
+
+
+def test_no_cycle_where_the_loop_is_stable_and_saturation_only_lowers_the_gain():
+    # the torque loop alone at the file's gains: |G| < 1 at every phase crossover
+    r = limit_cycles(ClosedLoop(PARAMS), 0.0, 0.0, nonlinearity={"V_max": 24.0})
+    assert r.amplitude.size == 0
+    assert np.all(r.G_curve[np.abs(np.sin(np.angle(r.G_curve))) < 1e-3].real > -1)
+
+
+@pytest.mark.parametrize("bad,match", [({"V_max": -1}, "V_max = -1"), ({"V_max": "x"}, "V_max = 'x'"),
+                                       ({"I_max": 3}, "I_max"), ({"Fc_L7": 1.0}, "no body 'L7'"),
+                                       ({"V_max": 24, "Fc_m": 1}, "one entry")])
+def test_bad_nonlinearity_is_one_line(bad, match):
+    with pytest.raises(ParameterError, match=match) as e:
+        limit_cycles(ClosedLoop(PARAMS), 0.0, 0.0, nonlinearity=bad)
+    assert "\n" not in str(e.value)
