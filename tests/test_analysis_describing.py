@@ -11,6 +11,7 @@ amplitude and frequency of the simulated cycle must agree with the prediction wi
 """
 import numpy as np
 import pytest
+import scipy.linalg
 import scipy.signal
 
 from haa_sym import ClosedLoop, LoopOptions, load_params
@@ -129,3 +130,52 @@ def test_bad_nonlinearity_is_one_line(bad, match):
     with pytest.raises(ParameterError, match=match) as e:
         limit_cycles(ClosedLoop(PARAMS), 0.0, 0.0, nonlinearity=bad)
     assert "\n" not in str(e.value)
+
+
+def _fundamental_response(params, P, D, body, omega_samples, n_periods=40, M=16):
+    """Velocity of ``body`` per unit torque cos(omega t) on it, at omega = 2 pi / (omega_samples Ts),
+    from a simulation of the linear sampled-data loop written here: the continuous plant with an
+    oscillator for the torque, exact (expm) between the sample instants with the voltage held,
+    the controller of Eq. 6-8 by hand; the velocity read M times per sample and projected on
+    exp(-j omega t) over whole periods after ``n_periods`` periods of transient."""
+    pl, c = params.plant, params.controller
+    cont = continuous_plant(pl)
+    Ts, Nav, n = c.Ts, c.N_av, cont.A.shape[0]
+    w = 2 * np.pi / (omega_samples * Ts)
+    i_v = cont.state_names.index(f"dtheta_{body}")
+    col = cont.B[:, 1] if body == "m" else np.eye(n)[i_v] / getattr(pl, f"J_{body}")
+    A = np.zeros((n + 3, n + 3))                  # [x, cos, sin, V held]
+    A[:n, :n], A[:n, n], A[:n, n + 2] = cont.A, col, cont.B[:, 0]
+    A[n, n + 1], A[n + 1, n] = -w, w
+    E = [scipy.linalg.expm(A * Ts * j / M) for j in range(M + 1)]
+    C = cont.C[[cont.output_names.index("T_sensor"), cont.output_names.index("theta_encoder")]]
+    P_t, I_t = c.beta * c.P_t0, c.beta * c.I_t0
+    VC = c.alpha * pl.N / pl.k_t * (pl.R * pl.B_m + pl.k_t * pl.k_w)
+    K = 2 * n_periods * omega_samples
+    z = np.zeros(n + 3)
+    z[n] = 1.0
+    theta = np.zeros(K + Nav)
+    integral, Z = 0.0, np.empty((K, n + 3))
+    for k in range(K):
+        T, theta[k + Nav] = C @ z[:n]
+        v = (theta[k + Nav] - theta[k]) / (Nav * Ts)
+        e = -(P * theta[k + Nav] + D * v) - T
+        integral += Ts * e
+        z[n + 2] = P_t * e + I_t * integral + VC * v
+        Z[k] = z
+        z = E[M] @ z
+    tail = Z[K // 2:]
+    v = np.stack([tail @ E[j][i_v] for j in range(M)], axis=1).ravel()     # M points per sample
+    t = (np.arange(v.size) + K // 2 * M) * Ts / M
+    return w, 2 * np.mean(v * np.exp(-1j * w * t))
+
+
+@pytest.mark.parametrize("body,P,D,omega_samples", [("m", 200.0, 10.0, 40), ("m", 0.0, 0.0, 400),
+                                                     ("L2", 200.0, 10.0, 25), ("L1", 1000.0, 30.0, 60)])
+def test_friction_linear_part_is_the_fundamental_of_the_sampled_data_loop(body, P, D, omega_samples):
+    w, sim = _fundamental_response(PARAMS, P, D, body, omega_samples)
+    G = linear_part(ClosedLoop(PARAMS), P, D, f"Fc_{body}", np.array([w]))[0]
+    # the simulation's only approximation: the images of the held voltage at omega + k M 2 pi/Ts
+    # alias onto omega on the M-point grid; the plant attenuates them far below 1e-4
+    print(f"Fc_{body} at P={P} D={D}, omega={w:.5g} rad/s: |sim - G|/|G| = {abs(sim - G) / abs(G):.2e}")
+    assert abs(sim - G) <= 1e-4 * abs(G)
