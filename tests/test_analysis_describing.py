@@ -5,9 +5,10 @@ simulation of the sampled loop written here (the continuous plant sampled by sci
 controller of Eq. 6-8 by hand, the saturation at the sample instants).
 
 Tolerance of the prediction (docs/describing.md, "How good is the prediction"): the harmonic
-balance drops the harmonics; the relative third harmonic returning to the nonlinearity's input,
-``distortion`` = |G(3w)| |b3| / (|G(w)| |b1|), is the size of the first neglected term, so the
-amplitude and frequency of the simulated cycle must agree with the prediction within it.
+balance drops the harmonics; the harmonic content returning to the nonlinearity's input relative
+to the fundamental, ``distortion`` = sum_k |G(k w)| |b_k| / (|G(w)| |b_1|) over the odd k >= 3, is
+the size of the neglected terms, so the amplitude and frequency of the simulated cycle must agree
+with the prediction within it.
 """
 import numpy as np
 import pytest
@@ -36,6 +37,8 @@ def test_closed_forms_are_the_first_harmonic(kind, value, A):
     N, dN = describing_function(kind, value, np.array([A, A * (1 + 1e-6), A * (1 - 1e-6)]))
     assert N[0] * A == pytest.approx(b1, rel=1e-5)
     assert df_harmonics(kind, value, A)[0] == pytest.approx(b1, rel=1e-4)
+    b3 = np.trapezoid(nonlinearity_output(kind, value, A * np.sin(th)) * np.sin(3 * th), th) / np.pi
+    assert df_harmonics(kind, value, A)[1] == pytest.approx(abs(b3), rel=1e-3, abs=1e-6 * abs(b1))
     assert dN[0] == pytest.approx((N[1] - N[2]) / (2e-6 * A), rel=1e-5)
 
 

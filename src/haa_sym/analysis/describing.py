@@ -75,9 +75,10 @@ class LimitCycles:
     G_crossing : ndarray
         ``Re G`` at the phase crossover (``-1/N(A)``; dimensionless).
     distortion : ndarray
-        Filtering check: ``|G(3 omega)| |b3(A)| / (|G(omega)| |b1(A)|)``, the relative third
-        harmonic that returns to the nonlinearity's input (b_k: the harmonics of the
-        nonlinearity's output); the prediction is trustworthy when it is small (docs/describing.md).
+        Filtering check: ``sum_k |G(k omega)| |b_k(A)| / (|G(omega)| |b_1(A)|)`` over the odd
+        harmonics k = 3 .. ``k_max`` (b_k: the harmonics of the nonlinearity's output), the
+        harmonic content that returns to the nonlinearity's input relative to the fundamental,
+        added in magnitude; the prediction is trustworthy when it is small (docs/describing.md).
     omega_curve, G_curve : ndarray
         The loop's ``G`` on the frequency grid (rad/s; complex), for the Nyquist-type figure.
     amplitude_curve, minus_inv_N : ndarray
@@ -156,12 +157,12 @@ def describing_function(kind: str, value: float, A) -> tuple[np.ndarray, np.ndar
     return N, dN
 
 
-def df_harmonics(kind: str, value: float, A: float, n: int = 65536) -> tuple[float, float]:
-    """``(|b1|, |b3|)``: the first and third harmonic amplitudes of ``n(A sin t)`` (FFT over one
-    period of ``n`` points, midpoints: about 1e-4 relative where the nonlinearity jumps)."""
+def df_harmonics(kind: str, value: float, A: float, k_max: int = 39, n: int = 65536) -> np.ndarray:
+    """Amplitudes ``|b_k|`` of the odd harmonics k = 1, 3, ..., ``k_max`` of ``n(A sin t)`` (FFT over
+    one period of ``n`` points, midpoints: about 1e-4 relative where the nonlinearity jumps)."""
     t = 2 * np.pi * (np.arange(n) + 0.5) / n
     c = np.fft.rfft(nonlinearity_output(kind, value, A * np.sin(t))) * 2 / n
-    return float(abs(c[1])), float(abs(c[3]))
+    return np.abs(c[1:k_max + 1:2])
 
 
 # --- the linear part ------------------------------------------------------------------------------
@@ -276,7 +277,7 @@ def _amplitudes(kind: str, value: float, N_target: float, A_max: float) -> list[
 
 @loop_first
 def limit_cycles(loop: ClosedLoop, P_gain: float, D_gain: float, *, nonlinearity: dict,
-                 n_omega: int = 4000, amplitude_max: float = 200.0) -> LimitCycles:
+                 n_omega: int = 4000, amplitude_max: float = 200.0, k_max: int = 39) -> LimitCycles:
     """Describing-function prediction of the limit cycles of one nonlinearity at one gain point.
 
     Parameters
@@ -295,6 +296,8 @@ def limit_cycles(loop: ClosedLoop, P_gain: float, D_gain: float, *, nonlinearity
         Default 4000.
     amplitude_max : float
         Quantiser only: amplitudes searched up to ``amplitude_max`` steps. Default 200.
+    k_max : int
+        The highest odd harmonic in ``distortion``. Default 39.
 
     Returns
     -------
@@ -307,6 +310,8 @@ def limit_cycles(loop: ClosedLoop, P_gain: float, D_gain: float, *, nonlinearity
     D = float(gain_array("D_gain", D_gain, "D_gain").ravel()[0])
     if not (isinstance(n_omega, int) and n_omega >= 10):
         raise ParameterError(f"n_omega = {n_omega!r}; allowed: an integer >= 10")
+    if not (isinstance(k_max, int) and k_max >= 3 and k_max % 2):
+        raise ParameterError(f"k_max = {k_max!r}; allowed: an odd integer >= 3")
     Ts = loop.params.controller.Ts
     w_nyq = math.pi / Ts
     grid = np.append(loop.options.numerics.omega(Ts, n_omega), w_nyq)
@@ -335,9 +340,9 @@ def limit_cycles(loop: ClosedLoop, P_gain: float, D_gain: float, *, nonlinearity
             N, dN = (float(v) for v in describing_function(kind, value, np.array(A)))
             # Loeb: N' N (Re G Im G' - Re G' Im G), with Im G = 0 at the crossing
             loeb = dN * N * g * dG.imag
-            b1, b3 = df_harmonics(kind, value, A)
-            G3 = G(3 * w)[0]
-            rows.append((A, w, loeb, g, abs(G3) * b3 / (abs(g) * b1) if b1 > 0 else np.inf))
+            b = df_harmonics(kind, value, A, k_max)
+            Gk = np.abs(G(w * np.arange(3, k_max + 1, 2)))
+            rows.append((A, w, loeb, g, float((Gk * b[1:]).sum() / (abs(g) * b[0])) if b[0] > 0 else np.inf))
     rows.sort(key=lambda r: (r[1], r[0]))
     cols = [np.array(c, float) for c in zip(*rows)] if rows else [np.empty(0)] * 5
     A, w, loeb, g, dist = cols
@@ -346,7 +351,7 @@ def limit_cycles(loop: ClosedLoop, P_gain: float, D_gain: float, *, nonlinearity
     with np.errstate(divide="ignore"):
         minus_inv_N = np.where(N_curve > 0, -1.0 / N_curve, -np.inf)
     meta = loop.provenance(analysis="limit_cycles", P_gain=P, D_gain=D, nonlinearity={key: value},
-                           describing_function=kind, n_omega=n_omega)
+                           describing_function=kind, n_omega=n_omega, k_max=k_max)
     info = NONLINEARITIES.get(key, NONLINEARITIES["Fc_<body>"])
     signal = info[0].replace("<body>", key[3:]) if key.startswith("Fc_") and key != "Fc_m" else info[0]
     return LimitCycles(key, value, signal, info[1], A, w, w / (2 * np.pi), loeb > 0, loeb, g, dist,

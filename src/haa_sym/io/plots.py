@@ -18,7 +18,7 @@ from haa_sym.errors import ParameterError  # noqa: E402
 from haa_sym.io.outputs import transaction  # noqa: E402
 
 __all__ = ["plot_region", "plot_region_panels", "plot_corrected_phase", "plot_steps",
-           "plot_contact", "save_figure", "check_title"]
+           "plot_contact", "plot_describing", "save_figure", "check_title"]
 
 # Figs. 8-11: white stable, light grey stable with PM < 30 deg, dark unstable.
 REGION_COLORS = ListedColormap(["#ffffff", "#c8c8c8", "#3a3a3a"])
@@ -458,4 +458,46 @@ def plot_robust(r, title: str = "", measured=None):
     handles = draw_measured(ax, measured, _edges(r.P_gain, logP)[[0, -1]], _edges(r.D_gain, False)[[0, -1]])
     if handles:
         fig.legend(handles=handles, loc="outside lower center", ncol=2, fontsize=7)
+    return fig
+
+
+def plot_describing(panels, title: str = ""):
+    """Nyquist-type figures of describing-function predictions, one panel per nonlinearity.
+
+    ``panels`` = [dict(label=str, G=complex array (the loop's linear part on its frequency
+    grid), minus_inv_N=real array (-1/N(A) on a grid of amplitudes), points=[(G_crossing,
+    amplitude, omega, stable)], unit=str)]: G as a curve, -1/N(A) along the negative real axis,
+    each predicted limit cycle marked (filled: stable by the Loeb criterion, open: unstable) and
+    labelled with its amplitude (in ``unit``) and frequency. The view spans -1 and every
+    predicted point (G leaves it where it is larger)."""
+    fig, axes = plt.subplots(1, len(panels), figsize=(5.2 * len(panels), 4.6 + (0.4 if title else 0)),
+                             constrained_layout=True, squeeze=False)
+    for ax, p in zip(axes[0], panels):
+        G = np.asarray(p["G"])
+        pts = p["points"]
+        span = 1.6 * max([1.0] + [abs(g) for g, *_ in pts])
+        ax.plot(G.real, G.imag, color="k", lw=1.0, label="G(j omega), omega > 0")
+        ax.plot(G.real, -G.imag, color="0.6", lw=0.6, ls="--", label="G(-j omega)")
+        locus = np.asarray(p["minus_inv_N"], float)
+        locus = locus[np.isfinite(locus) & (locus >= -span)]
+        if locus.size:
+            ax.plot(locus, np.zeros_like(locus), color="tab:red", lw=3, alpha=0.5, solid_capstyle="butt",
+                    label="-1/N(A)")
+        ax.plot([-1], [0], "+", color="tab:red", ms=10)
+        for g, A, w, stable in pts:
+            ax.plot([g], [0], "o", ms=8, color="tab:blue", mfc="tab:blue" if stable else "white")
+            ax.annotate(f"A = {A:.4g} {p['unit']}\n{w:.4g} rad/s ({w / (2 * np.pi):.4g} Hz)\n"
+                        f"{'stable' if stable else 'unstable'}", (g, 0), textcoords="offset points",
+                        xytext=(6, 10), fontsize=8)
+        ax.set_xlim(-span, 0.5 * span)
+        ax.set_ylim(-0.8 * span, 0.8 * span)
+        ax.axhline(0, color="0.8", lw=0.6)
+        ax.axvline(0, color="0.8", lw=0.6)
+        ax.set_xlabel("Re")
+        ax.set_ylabel("Im")
+        ax.set_title(_wrap(p["label"], 5.2, 9), fontsize=9)
+        ax.grid(True, alpha=0.3)
+        ax.legend(fontsize=7, loc="lower left")
+    if title:
+        fig.suptitle(_wrap(title, 5.2 * len(panels)), fontsize=_title_size(title, 10))
     return fig
