@@ -61,7 +61,8 @@ class LimitCycles:
     Attributes
     ----------
     nonlinearity : str
-        The key (``V_max``, ``T_res``, ``Fc_m``, ``Fc_<body>``); ``value`` its parameter (V or Nm).
+        The key (``V_max``, ``T_res``, ``Fc_m``, ``Fc_<body>``); ``value`` its parameter, in
+        ``value_unit`` (V or Nm).
     signal, unit : str
         What the nonlinearity sees and its unit (the unit of ``amplitude``).
     amplitude : ndarray
@@ -89,6 +90,7 @@ class LimitCycles:
 
     nonlinearity: str
     value: float
+    value_unit: str
     signal: str
     unit: str
     amplitude: np.ndarray
@@ -110,7 +112,8 @@ class LimitCycles:
                    "stable": bool(s), "loeb": float(lb), "G_crossing": float(g), "distortion": float(d)}
                   for a, w, f, s, lb, g, d in zip(self.amplitude, self.omega, self.frequency_hz, self.stable,
                                                   self.loeb, self.G_crossing, self.distortion)]
-        return {"nonlinearity": self.nonlinearity, "value": self.value, "signal": self.signal,
+        return {"nonlinearity": self.nonlinearity, "value": self.value, "value_unit": self.value_unit,
+                "signal": self.signal,
                 "unit": self.unit, "limit_cycles": cycles, "meta": self.meta}
 
 
@@ -354,5 +357,5 @@ def limit_cycles(loop: ClosedLoop, P_gain: float, D_gain: float, *, nonlinearity
                            describing_function=kind, n_omega=n_omega, k_max=k_max)
     info = NONLINEARITIES.get(key, NONLINEARITIES["Fc_<body>"])
     signal = info[0].replace("<body>", key[3:]) if key.startswith("Fc_") and key != "Fc_m" else info[0]
-    return LimitCycles(key, value, signal, info[1], A, w, w / (2 * np.pi), loeb > 0, loeb, g, dist,
+    return LimitCycles(key, value, info[2], signal, info[1], A, w, w / (2 * np.pi), loeb > 0, loeb, g, dist,
                        grid, Gg, amp_curve, minus_inv_N, meta)

@@ -48,11 +48,11 @@ from haa_sym._version import __version__
 from haa_sym.errors import CompilerError, ParameterError, StaleGeneratedCode, Terminated
 from haa_sym.io.progress import set_progress
 
-from haa_sym.cli import analyses
+from haa_sym.cli import analyses, describe
 from haa_sym.cli.common import _Parser, _progress_flags
 
 # every module adding commands: register(sub) -> {command: run(args) -> exit status}
-COMMAND_MODULES = (analyses,)
+COMMAND_MODULES = (analyses, describe)
 
 
 def main(argv: list[str] | None = None) -> int:
