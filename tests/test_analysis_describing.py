@@ -137,6 +137,11 @@ def test_bad_nonlinearity_is_one_line(bad, match):
     assert "\n" not in str(e.value)
 
 
+def test_one_gain_point_only():
+    with pytest.raises(ParameterError, match="one gain point"):
+        limit_cycles(ClosedLoop(PARAMS), [1.0, 2.0], 0.0, nonlinearity={"V_max": 24.0})
+
+
 def _fundamental_response(params, P, D, body, omega_samples, n_periods=40, M=16):
     """Velocity of ``body`` per unit torque cos(omega t) on it, at omega = 2 pi / (omega_samples Ts),
     from a simulation of the linear sampled-data loop written here: the continuous plant with an
@@ -355,3 +360,33 @@ def test_event_simulation_matches_solve_ivp():
     scale = np.abs(v_exact).max()
     assert ref.events > 2                            # the trace passes through events
     np.testing.assert_allclose(v_ivp, v_exact, rtol=0, atol=1e-6 * scale)
+
+
+@pytest.mark.slow
+def test_sampled_saturation_loop_matches_solve_ivp():
+    # the exactly ZOH-sampled loop above against scipy's solve_ivp (LSODA) restarted at every
+    # sample instant with the held, saturated voltage: 300 samples of the first case, through the
+    # saturation (the trace leaves +-V_max), within the integrator's tolerance
+    params, P, D, V_max, n = PARAMS, 3000.0, 1.0, 24.0, 300
+    t, u_exact = _sampled_loop(params, P, D, V_max, n, x0=0.05)
+    pl, c = params.plant, params.controller
+    cont = continuous_plant(pl)
+    Ts, Nav = c.Ts, c.N_av
+    C = cont.C[[cont.output_names.index("T_sensor"), cont.output_names.index("theta_encoder")]]
+    P_t, I_t = c.beta * c.P_t0, c.beta * c.I_t0
+    VC = c.alpha * pl.N / pl.k_t * (pl.R * pl.B_m + pl.k_t * pl.k_w)
+    A, B = cont.A, cont.B[:, 0]
+    x = np.zeros(A.shape[0])
+    x[cont.state_names.index("theta_L2")] = 0.05
+    theta, integral, u = np.zeros(n + Nav), 0.0, np.empty(n)
+    for k in range(n):
+        T, theta[k + Nav] = C @ x
+        v = (theta[k + Nav] - theta[k]) / (Nav * Ts)
+        e = -(P * theta[k + Nav] + D * v) - T
+        integral += Ts * e
+        u[k] = P_t * e + I_t * integral + VC * v
+        V = np.clip(u[k], -V_max, V_max)
+        x = solve_ivp(lambda _, y: A @ y + B * V, (k * Ts, (k + 1) * Ts), x, method="LSODA", rtol=1e-10,
+                      atol=1e-14, jac=lambda _, y: A).y[:, -1]
+    assert np.abs(u_exact).max() > 2 * V_max
+    np.testing.assert_allclose(u, u_exact, rtol=0, atol=1e-6 * np.abs(u_exact).max())

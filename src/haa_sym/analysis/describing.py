@@ -196,7 +196,11 @@ def _friction_input(loop: ClosedLoop, key: str):
         col = cont.B[:, cont.input_names.index("T_fr")]
     else:
         col = np.zeros(len(names))
-        col[names.index(f"dtheta_{body}")] = 1.0 / getattr(loop.params.plant, f"J_{body}")
+        J = getattr(loop.params.plant, f"J_{body}", None)
+        if J is None:
+            raise ParameterError(f"{key}: the body {body!r} has no inertia J_{body} in this model; allowed: "
+                                 "friction on a body of the chain (docs/describing.md)")
+        col[names.index(f"dtheta_{body}")] = 1.0 / J
     return cont, col, row
 
 
@@ -309,8 +313,11 @@ def limit_cycles(loop: ClosedLoop, P_gain: float, D_gain: float, *, nonlinearity
     """
     key, value = _check(nonlinearity)
     kind = _kind(key)
-    P = float(gain_array("P_gain", P_gain, "P_gain").ravel()[0])
-    D = float(gain_array("D_gain", D_gain, "D_gain").ravel()[0])
+    P, D = (gain_array(n, v, n).ravel() for n, v in (("P_gain", P_gain), ("D_gain", D_gain)))
+    if P.size != 1 or D.size != 1:
+        raise ParameterError(f"P_gain has {P.size} and D_gain {D.size} values; allowed: one gain point "
+                             "(one value each)")
+    P, D = float(P[0]), float(D[0])
     if not (isinstance(n_omega, int) and n_omega >= 10):
         raise ParameterError(f"n_omega = {n_omega!r}; allowed: an integer >= 10")
     if not (isinstance(k_max, int) and k_max >= 3 and k_max % 2):
@@ -333,7 +340,9 @@ def limit_cycles(loop: ClosedLoop, P_gain: float, D_gain: float, *, nonlinearity
         g = G(w)[0]
         if g.real < 0 and abs(g.imag) <= 1e-6 * abs(g):
             found.append((w, g.real))
-    if kind != "relay" and s[-1] == 0 and Gg[-1].real < 0 and not any(w == w_nyq for w, _ in found):
+    # a sampled loop is real at Nyquist (up to rounding): a negative G there is a crossover
+    if kind != "relay" and abs(Gg[-1].imag) <= 1e-9 * abs(Gg[-1]) and Gg[-1].real < 0 \
+            and not any(abs(w - w_nyq) <= 1e-9 * w_nyq for w, _ in found):
         found.append((w_nyq, Gg[-1].real))
     rows = []
     for w, g in found:
