@@ -21,11 +21,20 @@ from haa_sym import ClosedLoop, LoopOptions, load_params
 from haa_sym.analysis.describing import (describing_function, df_harmonics, limit_cycles, linear_part,
                                          nonlinearity_output)
 from haa_sym.analysis.oscillation import limit_cycle
+from haa_sym.analysis.sweep import blas_limits
 from haa_sym.check import reference
 from haa_sym.errors import ParameterError
 from haa_sym.loop.plant import continuous_plant
 
 PARAMS = load_params()
+
+
+@pytest.fixture(autouse=True)
+def _one_blas_thread():
+    # the simulations multiply small matrices thousands of times: threaded BLAS on a loaded
+    # 2-core machine made them 20x slower (measured)
+    with blas_limits(1):
+        yield
 
 
 @pytest.mark.parametrize("kind,value,A", [("saturation", 24.0, 30.0), ("saturation", 24.0, 200.0),
@@ -191,7 +200,7 @@ def test_friction_linear_part_is_the_fundamental_of_the_sampled_data_loop(body, 
     assert abs(sim - G) <= 1e-4 * abs(G)
 
 
-# --- Coulomb friction: a simulation with events (slow) ------------------------------------------
+# --- Coulomb friction: a simulation with events ------------------------------------------------
 class _FrictionLoop:
     """The sampled loop with Coulomb friction on one body, written here. Three modes of the body:
     slipping forwards or backwards (friction -s Fc) and stuck (the friction holds it at rest while
@@ -288,7 +297,6 @@ def _run_friction(params, P, D, body, Fc, duration, M=10):
 FRICTION_CASE = dict(values=dict(alpha=1.2, beta=3.0), P=5000.0, D=0.0, body="L2", Fc=0.1)
 
 
-@pytest.mark.slow
 def test_friction_limit_cycle_against_a_simulation_with_events():
     cs = FRICTION_CASE
     params = PARAMS.with_values(**cs["values"])

@@ -36,6 +36,7 @@ from dataclasses import dataclass, field
 import numpy as np
 from scipy.optimize import brentq
 
+from haa_sym.analysis.sweep import BLAS_THREADS, blas_limits
 from haa_sym.errors import ParameterError
 from haa_sym.loop import ClosedLoop, loop_first
 from haa_sym.loop.plant import continuous_plant
@@ -312,6 +313,12 @@ def limit_cycles(loop: ClosedLoop, P_gain: float, D_gain: float, *, nonlinearity
         Every (A, omega) of the harmonic balance, the crossings in increasing frequency.
     """
     key, value = _check(nonlinearity)
+    # many small stacked solves: threaded BLAS only contends for the cores (as in the sweeps)
+    with blas_limits(BLAS_THREADS):
+        return _limit_cycles(loop, P_gain, D_gain, key, value, n_omega, amplitude_max, k_max)
+
+
+def _limit_cycles(loop, P_gain, D_gain, key, value, n_omega, amplitude_max, k_max) -> LimitCycles:
     kind = _kind(key)
     P, D = (gain_array(n, v, n).ravel() for n, v in (("P_gain", P_gain), ("D_gain", D_gain)))
     if P.size != 1 or D.size != 1:
