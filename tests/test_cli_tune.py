@@ -29,6 +29,10 @@ SMALL = ["--n-lead", "2", "--n-integral", "3", "--rtol", "0.2", "--step-duration
     (["--out", "x.toml", "--objective", "best"], ("--objective", "invalid choice")),
     (["--out", "x.toml", "--option", "delay=x"], ("--option",)),
     (["--out", "x.toml", "--params", "no_such_actuator"], ("no_such_actuator",)),
+    (["--out", "x.toml", "--passive-at", "100"], ("--passive-at '100'", "P_GAIN:D_GAIN")),
+    (["--out", "x.toml", "--passive-at", "100:-1"], ("--passive-at: passive_at",)),
+    (["--out", "x.toml", "--params", "harmonic_drive", "--passive-configurations", "nominal,retracted"],
+     ("--passive-configurations", "['retracted']", "low_damping")),
 ])
 def test_bad_input_is_one_line_exit_2_nothing_written(assert_refused, argv, match):
     assert_refused(["tune", *argv], match)

@@ -13,7 +13,8 @@ import numpy as np
 import pytest
 import scipy.optimize
 
-from haa_sym import ClosedLoop, ParameterError, load_params
+from haa_sym import ClosedLoop, LoopOptions, ParameterError, load_params
+from haa_sym.analysis.sweep import colgate_factor
 from haa_sym.check import reference
 from haa_sym.check.reference_margins import reference_crossovers
 from haa_sym.design.tune import TuneOptions, TuneResult, evaluate_gains, tune, tuned_text
@@ -195,7 +196,8 @@ def test_a_file_whose_gains_are_not_one_line_entries_is_refused(made):
 @pytest.mark.parametrize("field, value, match", [
     ("pm_deg", -1.0, "pm_deg"), ("gm_db", float("nan"), "gm_db"), ("objective", "best", "objective"),
     ("lead_range", (1.0, 0.5), "lead_range"), ("n_integral", 2, "n_integral"), ("rtol", 0.0, "rtol"),
-    ("stable_alpha", (1.0, 0.0), "stable_alpha")])
+    ("stable_alpha", (1.0, 0.0), "stable_alpha"), ("passive_at", ((1.0, -2.0),), "passive_at"),
+    ("passive_at", [(1.0, 2.0)], "passive_at"), ("passive_configurations", (), "passive_configurations")])
 def test_bad_options_one_line_naming_the_field(field, value, match):
     with pytest.raises(ParameterError, match=match) as e:
         TuneOptions(**{field: value})
@@ -266,3 +268,36 @@ def test_no_feasible_point_near_the_optimum_is_wider(full):
         for I in gains:
             bw = worst_bw(tau * I, I)
             assert bw is None or bw <= best * (1 + 2 * r.options.rtol), (tau, I, bw, best)
+
+
+def _reference_passive(params, P_t0, I_t0, P, D) -> bool:
+    """Z passive at the impedance gains (P, D) by the reference's state space: stable, and the
+    worst Colgate-corrected phase of Z = T_dist / port velocity within 90 deg + the tolerance on
+    the options' frequency grid."""
+    loop = ClosedLoop(params.with_values(P_t0=P_t0, I_t0=I_t0), basis=False)
+    if reference.spectral_radius(loop, P, D) >= 1:
+        return False
+    A, B, C, Dm = reference.closed_loop_matrices(loop, P, D)
+    Ts = params.controller.Ts
+    w = LoopOptions().omega(Ts)
+    Z = 1 / _solve(A, B[:, 0], C[2], Dm[2, 0], w, Ts)
+    excess = np.abs(np.degrees(np.angle(Z * colgate_factor(w, Ts, "subtract")))).max() - 90
+    return bool(excess <= LoopOptions().passivity_tol_deg)
+
+
+def test_the_passivity_requirement_is_the_references():
+    """The harmonic drive's two tunings of docs/tune.md: the passivity-keeping PI is passive at
+    both impedances at nominal and heavy (required there), the pure integrator nowhere; the
+    verdicts per configuration are the reference's, and 'meets' asks passivity only where required."""
+    params = load_params(HD)
+    pts = ((100.0, 10.0), (1000.0, 50.0))
+    opts = TuneOptions(passive_at=pts, passive_configurations=("nominal", "heavy"), step_duration=0.2)
+    names = ("nominal", *params.configurations)
+    for P_t0, I_t0 in ((0.00894481, 0.985103), (0.0, 3.84839)):
+        g = evaluate_gains(params, P_t0, I_t0, tune_options=opts)
+        for i, p in enumerate(_all_configurations(params)):
+            want = all(_reference_passive(p, P_t0, I_t0, P, D) for P, D in pts)
+            assert bool(g.passive[i]) == want, (P_t0, I_t0, names[i])
+            if names[i] in ("nominal", "heavy") and not want:
+                assert not g.meets[i]
+        assert g.passive[names.index("nominal")] == (P_t0 > 0)

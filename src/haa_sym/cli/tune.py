@@ -33,7 +33,25 @@ def _range(text: str, flag: str):
 # TuneOptions' field -> the flag that sets it (its messages name the flag)
 FLAGS = {"pm_deg": "--pm", "gm_db": "--gm", "objective": "--objective", "stable_alpha": "--stable-alpha",
          "lead_range": "--lead-range", "integral_range": "--integral-range", "n_lead": "--n-lead",
-         "n_integral": "--n-integral", "rtol": "--rtol", "step_duration": "--step-duration"}
+         "n_integral": "--n-integral", "rtol": "--rtol", "step_duration": "--step-duration",
+         "passive_at": "--passive-at", "passive_configurations": "--passive-configurations"}
+
+
+def _points(text: str | None) -> tuple:
+    """'P:D[,P:D...]' impedance gains (Nm/rad, Nms/rad) -> ((P, D), ...)."""
+    if not text:
+        return ()
+    out = []
+    for item in text.split(","):
+        P, sep, D = item.partition(":")
+        try:
+            if not sep:
+                raise ValueError
+            out.append((float(P), float(D)))
+        except ValueError:
+            raise ParameterError(f"--passive-at {text!r}: {item!r} is not P_GAIN:D_GAIN; allowed: "
+                                 "P:D[,P:D...] in Nm/rad and Nms/rad") from None
+    return tuple(out)
 
 
 def _tune_options(args) -> TuneOptions:
@@ -42,7 +60,8 @@ def _tune_options(args) -> TuneOptions:
               "lead_range": _range(args.lead_range, "--lead-range"),
               "integral_range": _range(args.integral_range, "--integral-range"),
               "n_lead": args.n_lead, "n_integral": args.n_integral, "rtol": args.rtol,
-              "step_duration": args.step_duration}
+              "step_duration": args.step_duration, "passive_at": _points(args.passive_at),
+              "passive_configurations": tuple(c.strip() for c in args.passive_configurations.split(",") if c.strip())}
     try:
         return TuneOptions(**values)
     except ParameterError as exc:
@@ -56,6 +75,11 @@ def _cmd_tune(args) -> int:
     params = load_params(src)
     options = _parse_options(args.option)
     opts = _tune_options(args)
+    names = ["nominal", *params.configurations]
+    unknown = [c for c in opts.passive_configurations if c not in names]
+    if unknown:
+        raise ParameterError(f"--passive-configurations {args.passive_configurations!r}: {unknown} not in {src}; "
+                             f"allowed: {names}")
     out = _check_out(args.out, "tune", "--out", (".toml",))
     report = _check_out(args.report, "tune", "--report", (".json",))
     plot = _check_out(args.plot, "tune", "--plot")
@@ -67,6 +91,8 @@ def _cmd_tune(args) -> int:
     b, a = r.before, r.after
     print(f"{params.about.get('name') or Path(src).stem}: targets PM >= {opts.pm_deg:g} deg, GM >= {opts.gm_db:g} dB"
           + ("" if opts.stable_alpha is None else f", stable for alpha {opts.stable_alpha[0]:g}..{opts.stable_alpha[1]:g}")
+          + ("" if not opts.passive_at else ", passive at (P_gain, D_gain) " + " ".join(
+              f"({p:g}, {d:g})" for p, d in opts.passive_at) + " at " + ", ".join(opts.passive_configurations))
           + f"; objective: {opts.objective} bandwidth; {r.evaluations} PIs decided")
 
     def fmt(x, unit, spec=".4g"):
@@ -136,4 +162,9 @@ def register(sub) -> dict:
     t.add_argument("--rtol", type=float, default=d.rtol, help=f"relative tolerance of the refinement (default {d.rtol:g})")
     t.add_argument("--step-duration", type=float, default=d.step_duration,
                    help=f"window of the reported torque steps, s (default {d.step_duration:g})")
+    t.add_argument("--passive-at", metavar="P:D[,P:D...]",
+                   help="impedance gains (P_gain Nm/rad : D_gain Nms/rad) where the port must also be passive at "
+                        "configuration of --passive-configurations (default: none, as Sec. 3.2)")
+    t.add_argument("--passive-configurations", default="nominal", metavar="NAME[,NAME...]",
+                   help="where --passive-at is required: nominal and/or the file's configurations (default nominal)")
     return {"tune": _cmd_tune}

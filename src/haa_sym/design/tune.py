@@ -18,7 +18,15 @@ configuration of the actuator file and at its nominal values:
   and, as the paper also required, stable for every velocity-compensation gain alpha in
   ``stable_alpha`` (default 0 to 1, sampled at 11 values; margins are not required there);
 * the -3 dB bandwidth of T / T_ref (:func:`haa_sym.analysis.torque.torque_bandwidth`) exists
-  below Nyquist.
+  below Nyquist;
+* optionally (``passive_at``, default none: Sec. 3.2 has no such target) the port impedance Z is
+  passive (:func:`haa_sym.analysis.passivity.passivity`: stable, corrected phase within +-90 deg)
+  at the given impedance gains (P_gain, D_gain), at the configurations ``passive_configurations``
+  (default the nominal values only: a drive may be passive nowhere in some configuration, the
+  bundled harmonic drive with its gearbox damping 0.5 Nms/rad for one). The widest bandwidth
+  can cost the outer loop its passivity (the paper: "it is not obvious that maximizing the
+  bandwidth of the torque loop is always consistent with the specifications for the outer
+  impedance loop"); docs/tune.md shows it on the bundled harmonic drive.
 
 The objective (``objective``) is the smallest bandwidth over the configurations (``"worst"``,
 default: the guaranteed bandwidth) or the nominal one (``"nominal"``). beta and alpha stay the
@@ -60,6 +68,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from haa_sym.analysis.passivity import passivity
 from haa_sym.analysis.torque import step_response, torque_bandwidth, torque_loop_margins
 from haa_sym.errors import ParameterError
 from haa_sym.loop import ClosedLoop, LoopOptions
@@ -107,6 +116,12 @@ class TuneOptions:
         Relative tolerance of the refinement, in I_t0 (the constraint's edge) and in tau.
     step_duration : float
         Window of the reported step responses, s.
+    passive_at : tuple of (float, float)
+        Impedance gains (P_gain Nm/rad, D_gain Nms/rad) where the port must be passive; default
+        () none.
+    passive_configurations : tuple of str
+        Where ``passive_at`` is required: ``"nominal"`` and / or configuration names of the file
+        (default ("nominal",)).
     """
 
     pm_deg: float = PM_TARGET_DEG
@@ -120,6 +135,8 @@ class TuneOptions:
     n_integral: int = 25
     rtol: float = 1e-3
     step_duration: float = 5.0
+    passive_at: tuple = ()
+    passive_configurations: tuple = (NOMINAL,)
 
     def __post_init__(self):
         def bad(name, allowed):
@@ -150,9 +167,19 @@ class TuneOptions:
             bad("rtol", "a number from 1e-9 to 0.5")
         if not isinstance(self.step_duration, (int, float)) or not 0 < self.step_duration <= 60:
             bad("step_duration", "a time in (0, 60] s")
+        pts = self.passive_at
+        if (not isinstance(pts, tuple) or len(pts) > 1000
+                or not all(isinstance(q, tuple) and len(q) == 2 and all(isinstance(x, (int, float)) and
+                                                                         math.isfinite(x) and x >= 0 for x in q)
+                           for q in pts)):
+            bad("passive_at", "a tuple of (P_gain, D_gain) pairs, each finite and >= 0 (Nm/rad, Nms/rad)")
+        if (not isinstance(self.passive_configurations, tuple) or not self.passive_configurations
+                or not all(isinstance(c, str) for c in self.passive_configurations)):
+            bad("passive_configurations", "a non-empty tuple of configuration names ('nominal' or the file's)")
 
     def to_dict(self) -> dict:
-        return {k: (list(v) if isinstance(v, tuple) else v) for k, v in self.__dict__.items()}
+        return {k: ([list(q) for q in v] if k == "passive_at" else list(v) if isinstance(v, tuple) else v)
+                for k, v in self.__dict__.items()}
 
 
 @dataclass(frozen=True)
@@ -164,7 +191,8 @@ class GainReport:
     the gain crossovers, deg; inf: none), ``gm_db`` (min |GM| over the phase crossovers, dB; inf:
     none), ``stable`` (the torque loop alone, and over ``stable_alpha``), ``meets`` (every
     target), ``rise_time_s`` (10-90 %) and ``t90_s`` (first reaching 90 % of the final value) of
-    the unit torque step in ``step_duration`` (NaN: not reached).
+    the unit torque step in ``step_duration`` (NaN: not reached), ``passive`` (the port passive at
+    every point of ``passive_at``; True when there are none).
     """
 
     P_t0: float
@@ -176,6 +204,7 @@ class GainReport:
     meets: np.ndarray
     rise_time_s: np.ndarray
     t90_s: np.ndarray
+    passive: np.ndarray
 
     @property
     def worst_bandwidth(self) -> float:
@@ -238,10 +267,12 @@ class TuneResult:
                     "configurations": {c: {"bandwidth_rad_s": num(g.bandwidth_rad_s[i]), "pm_deg": num(g.pm_deg[i]),
                                            "gm_db": num(g.gm_db[i]), "stable": bool(g.stable[i]),
                                            "meets_targets": bool(g.meets[i]), "rise_time_s": num(g.rise_time_s[i]),
-                                           "t90_s": num(g.t90_s[i])}
+                                           "t90_s": num(g.t90_s[i]), "passive_at_points": bool(g.passive[i])}
                                        for i, c in enumerate(self.configurations)}}
         return {"targets": {"pm_deg": self.options.pm_deg, "gm_db": self.options.gm_db,
-                            "stable_alpha": None if self.options.stable_alpha is None else list(self.options.stable_alpha)},
+                            "stable_alpha": None if self.options.stable_alpha is None else list(self.options.stable_alpha),
+                            "passive_at": [list(q) for q in self.options.passive_at],
+                            "passive_configurations": list(self.options.passive_configurations)},
                 "objective": self.options.objective, "objective_rad_s": num(self.objective_rad_s),
                 "active": self.active, "at_range_edge": self.at_range_edge,
                 "before": report(self.before), "after": report(self.after),
@@ -273,6 +304,14 @@ class _Problem:
         self.evaluations = 0
         a = opts.stable_alpha
         self.alphas = None if a is None else np.linspace(a[0], a[1], opts.n_alpha)
+        self.passive_P = np.array([q[0] for q in opts.passive_at], float)
+        self.passive_D = np.array([q[1] for q in opts.passive_at], float)
+        unknown = [c for c in opts.passive_configurations if c not in self.configurations]
+        if unknown:
+            raise ParameterError(f"passive_configurations = {list(opts.passive_configurations)}: {unknown} not in "
+                                 f"{params.source}; allowed: {list(self.configurations)}")
+        self.passive_required = {k for c, k in zip(self.configurations, self.index)
+                                 if c in opts.passive_configurations}
 
     def loop(self, k: int, tau: float) -> ClosedLoop:
         key = (k, tau)
@@ -312,6 +351,9 @@ class _Problem:
             sa = loop.stability(np.zeros(self.alphas.size), 0.0, b, self.alphas)
             if not bool((sa.stable | sa.marginal).all()):
                 return ("stability over alpha", k)
+        if self.passive_P.size and k in self.passive_required and not bool(passivity(loop, self.passive_P, self.passive_D, beta=b,
+                                                      progress=False).passive.all()):
+            return ("passivity", k)
         return None
 
     def name(self, k: int) -> str:
@@ -329,7 +371,7 @@ def evaluate_gains(params, P_t0: float, I_t0: float, options: LoopOptions | None
     prob = _Problem(params, options, opts)
     n = len(prob.configurations)
     out = {k: np.full(n, np.nan) for k in ("bw", "pm", "gm", "rise", "t90")}
-    stable, meets = np.zeros(n, bool), np.zeros(n, bool)
+    stable, meets, passive = np.zeros(n, bool), np.zeros(n, bool), np.ones(n, bool)
     for i, p in enumerate([params] + [params.configuration(c) for c in params.configurations]):
         loop = ClosedLoop(p.with_values(P_t0=float(P_t0), I_t0=float(I_t0)), options)
         st = loop.stability(0.0, 0.0)
@@ -347,10 +389,13 @@ def evaluate_gains(params, P_t0: float, I_t0: float, options: LoopOptions | None
             out["rise"][i] = s.rise_time
             reached = np.flatnonzero(s.T >= 0.9 * s.final_value)
             out["t90"][i] = s.t[reached[0]] if reached.size else np.nan
+        if prob.passive_P.size:
+            passive[i] = bool(passivity(loop, prob.passive_P, prob.passive_D, progress=False).passive.all())
         meets[i] = (ok and out["pm"][i] >= opts.pm_deg and out["gm"][i] >= opts.gm_db
-                    and np.isfinite(out["bw"][i]))
+                    and np.isfinite(out["bw"][i])
+                    and (passive[i] or prob.configurations[i] not in opts.passive_configurations))
     return GainReport(float(P_t0), float(I_t0), out["bw"], out["pm"], out["gm"], stable, meets, out["rise"],
-                      out["t90"])
+                      out["t90"], passive)
 
 
 # ----------------------------------------------------------------------------- the search
@@ -521,6 +566,9 @@ def rule_text(result: TuneResult, key: str, was: str) -> str:
                     for i, c in enumerate(result.configurations))
     alpha = ("" if o.stable_alpha is None else
              f" and the loop stable for alpha {o.stable_alpha[0]:g} to {o.stable_alpha[1]:g}")
+    if o.passive_at:
+        alpha += (" and the port passive at (P_gain, D_gain) = " + ", ".join(f"({p:g}, {d:g})" for p, d in o.passive_at)
+                  + " at " + ", ".join(o.passive_configurations))
     shape = ("a pure integrator (P_t0 = 0)" if a.P_t0 == 0 else f"PI zero I_t0/P_t0 = {_num(1 / tau, 'rad/s')}")
     return (f"Rule (haa-sym tune, {result.meta.get('tuned_utc', '')[:10]}): the torque PI (at beta = "
             f"{result.meta['params']['controller']['beta']:g}, alpha = {result.meta['params']['controller']['alpha']:g}) "
