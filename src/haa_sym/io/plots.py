@@ -438,7 +438,7 @@ def plot_tune(lead_s, integral, grid_objective, before, after, steps, title: str
         tau = P / I if I > 0 else 0.0
         ax.plot([I], [tau if tau > 0 else y[0]], style, ms=9, mfc="none", mew=2, label=label)
     mark(before[0], before[1], f"file: P_t0 = {before[0]:.4g}, I_t0 = {before[1]:.4g}", "rs")
-    mark(after[0], after[1], f"tuned: P_t0 = {after[0]:.4g}, I_t0 = {after[1]:.4g}", "wo")
+    mark(after[0], after[1], f"tuned: P_t0 = {after[0]:.4g}, I_t0 = {after[1]:.4g}", "m*")
     ax.set_xlabel("I_t0 (V/(Nm s))")
     ax.set_ylabel("tau = P_t0 / I_t0 (s); bottom row: tau = 0")
     ax.set_title("feasible PIs (blank: a target missed)", fontsize=10)
