@@ -566,15 +566,15 @@ def rule_text(result: TuneResult, key: str, was: str) -> str:
                     for i, c in enumerate(result.configurations))
     alpha = ("" if o.stable_alpha is None else
              f" and the loop stable for alpha {o.stable_alpha[0]:g} to {o.stable_alpha[1]:g}")
-    if o.passive_at:
-        alpha += (" and the port passive at (P_gain, D_gain) = " + ", ".join(f"({p:g}, {d:g})" for p, d in o.passive_at)
-                  + " at " + ", ".join(o.passive_configurations))
+    passive = "" if not o.passive_at else (
+        ", and the port passive at (P_gain, D_gain) = " + ", ".join(f"({p:g}, {d:g})" for p, d in o.passive_at)
+        + " at " + ", ".join(o.passive_configurations))
     shape = ("a pure integrator (P_t0 = 0)" if a.P_t0 == 0 else f"PI zero I_t0/P_t0 = {_num(1 / tau, 'rad/s')}")
     return (f"Rule (haa-sym tune, {result.meta.get('tuned_utc', '')[:10]}): the torque PI (at beta = "
             f"{result.meta['params']['controller']['beta']:g}, alpha = {result.meta['params']['controller']['alpha']:g}) "
             f"of widest {'worst-case' if o.objective == 'worst' else 'nominal'} -3 dB torque bandwidth, impedance "
             f"loop open, with PM >= {o.pm_deg:g} deg and GM >= {o.gm_db:g} dB (focchi2016 Sec. 3.2){alpha} at the "
-            f"nominal values and every configuration; {shape}. Achieved: {per}; active constraint: {result.active}. "
+            f"nominal values and every configuration{passive}; {shape}. Achieved: {per}; active constraint: {result.active}. "
             f"Before: worst-case bandwidth {_num(b.worst_bandwidth, 'rad/s')}, targets met at "
             f"{int(b.meets.sum())} of {b.meets.size}; was {was}")
 
