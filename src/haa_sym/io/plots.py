@@ -501,3 +501,45 @@ def plot_describing(panels, title: str = ""):
     if title:
         fig.suptitle(_wrap(title, 5.2 * len(panels)), fontsize=_title_size(title, 10))
     return fig
+
+
+def plot_tune(lead_s, integral, grid_objective, before, after, steps, title: str = "",
+              ylabel: str = "torque (Nm)"):
+    """``haa-sym tune``: left, the coarse search grid, the objective (rad/s) where every target is
+    met (blank: some target missed) over the PI's lead time tau = P_t0 / I_t0 (s; the first row,
+    tau = 0, the pure integrator, drawn at the bottom) and I_t0 (V/(Nm s)), with the file's and
+    the tuned PI marked; right, unit torque steps ``steps`` = [(t, T, label, linestyle)]."""
+    lead_s, integral, obj = (np.asarray(a, float) for a in (lead_s, integral, grid_objective))
+    fig, (ax, ax2) = plt.subplots(1, 2, figsize=(11, 4.4 + (0.6 if title else 0)), constrained_layout=True)
+    # tau = 0 cannot sit on a log axis: its row is drawn one grid step below the smallest tau
+    pos = lead_s[1:]
+    step = pos[1] / pos[0] if pos.size > 1 else 10.0
+    y = np.concatenate([[pos[0] / step], pos])
+    img = ax.pcolormesh(_edges(integral, True), _edges(y, True), np.ma.masked_invalid(obj), cmap="viridis",
+                        shading="flat")
+    ax.set_xscale("log")
+    ax.set_yscale("log")
+    cbar = fig.colorbar(img, ax=ax)
+    cbar.set_label("objective: torque bandwidth (rad/s)")
+
+    def mark(P, I, label, style):
+        tau = P / I if I > 0 else 0.0
+        ax.plot([I], [tau if tau > 0 else y[0]], style, ms=9, mfc="none", mew=2, label=label)
+    mark(before[0], before[1], f"file: P_t0 = {before[0]:.4g}, I_t0 = {before[1]:.4g}", "rs")
+    mark(after[0], after[1], f"tuned: P_t0 = {after[0]:.4g}, I_t0 = {after[1]:.4g}", "m*")
+    ax.set_xlabel("I_t0 (V/(Nm s))")
+    ax.set_ylabel("tau = P_t0 / I_t0 (s); bottom row: tau = 0")
+    ax.set_title("feasible PIs (blank: a target missed)", fontsize=10)
+    ax.legend(fontsize=8, loc="upper right")
+    for t, T, label, ls in steps:
+        ax2.plot(t, T, ls, label=label)
+    ax2.axhline(1.0, color="0.6", lw=0.8)
+    ax2.axhline(0.9, color="0.6", lw=0.8, ls=":")
+    ax2.set_xlabel("t (s)")
+    ax2.set_ylabel(ylabel)
+    ax2.set_title("unit torque step, impedance loop open", fontsize=10)
+    ax2.legend(fontsize=8)
+    ax2.grid(True, alpha=0.3)
+    if title:
+        fig.suptitle(_wrap(title, 11), fontsize=_title_size(title, 11))
+    return fig
