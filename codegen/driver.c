@@ -51,3 +51,79 @@ CASADI_SYMBOL_EXPORT int haa_columns(void* f, void* work, casadi_int n_in,
   free(w);
   return flag;
 }
+
+/* haa_simulate: the nonlinear simulation's sample loop (haa_sym.analysis.simulate).
+ *
+ * Per sample k: sample(x, xc, exo_k, ctrl) -> (u, xc_next, y_k), then step(x, u, exo_k[delta],
+ * plant) -> x applied n_sub times (the exact ZOH transition once, or n_sub integrating
+ * substeps). One C call runs a whole chunk: a call of a generated function through CasADi costs
+ * more than the step itself. x (nx) and xc (nc) hold the initial state and return the final
+ * one; exo holds n_steps columns of n_exo reals (delta is its last row); y receives n_steps
+ * columns of n_y reals. Returns 0, 1 if a function failed, 2 if out of memory. */
+CASADI_SYMBOL_EXPORT int haa_simulate(void* sample, void* sample_work, void* step, void* step_work,
+                                      casadi_int n_sub, casadi_int nx, casadi_int nc, casadi_int n_u,
+                                      casadi_real* x, casadi_real* xc, const casadi_real* exo,
+                                      casadi_int n_exo, const casadi_real* ctrl,
+                                      const casadi_real* plant, casadi_real* y, casadi_int n_y,
+                                      casadi_int n_steps) {
+  casadi_int a1, r1, i1, w1, a2, r2, i2, w2, k, j, sz_arg, sz_res, sz_iw, sz_w;
+  int flag = 0;
+  const casadi_real** arg;
+  casadi_real** res;
+  casadi_int* iw;
+  casadi_real *w, *u, *x2, *xc2;
+  ((haa_work_fn)sample_work)(&a1, &r1, &i1, &w1);
+  ((haa_work_fn)step_work)(&a2, &r2, &i2, &w2);
+  sz_arg = a1 > a2 ? a1 : a2;
+  sz_res = r1 > r2 ? r1 : r2;
+  sz_iw = i1 > i2 ? i1 : i2;
+  sz_w = w1 > w2 ? w1 : w2;
+  if (sz_arg < 4) sz_arg = 4;
+  if (sz_res < 3) sz_res = 3;
+  arg = (const casadi_real**)malloc(sizeof(casadi_real*) * sz_arg);
+  res = (casadi_real**)malloc(sizeof(casadi_real*) * sz_res);
+  iw = (casadi_int*)malloc(sizeof(casadi_int) * (sz_iw > 0 ? sz_iw : 1));
+  w = (casadi_real*)malloc(sizeof(casadi_real) * ((sz_w > 0 ? sz_w : 1) + n_u + nx + nc));
+  if (!arg || !res || !iw || !w) {
+    flag = 2;
+  } else {
+    u = w + (sz_w > 0 ? sz_w : 1);
+    x2 = u + n_u;
+    xc2 = x2 + nx;
+    for (k = 0; k < n_steps && !flag; ++k) {
+      const casadi_real* e = exo + k * n_exo;
+      arg[0] = x;
+      arg[1] = xc;
+      arg[2] = e;
+      arg[3] = ctrl;
+      res[0] = u;
+      res[1] = xc2;
+      res[2] = y + k * n_y;
+      if (((haa_fn)sample)(arg, res, iw, w, 0)) {
+        flag = 1;
+        break;
+      }
+      for (j = 0; j < nc; ++j) xc[j] = xc2[j];
+      for (j = 0; j < n_sub; ++j) {
+        arg[0] = x;
+        arg[1] = u;
+        arg[2] = e + n_exo - 1;
+        arg[3] = plant;
+        res[0] = x2;
+        if (((haa_fn)step)(arg, res, iw, w, 0)) {
+          flag = 1;
+          break;
+        }
+        {
+          casadi_int i;
+          for (i = 0; i < nx; ++i) x[i] = x2[i];
+        }
+      }
+    }
+  }
+  free(arg);
+  free(res);
+  free(iw);
+  free(w);
+  return flag;
+}

@@ -364,6 +364,52 @@ class Evaluators:
             raise RuntimeError(f"generated {name} failed on a column (code {flag})")
         return outs
 
+    def run_simulation(self, sample: str, step: str, n_sub: int, x: np.ndarray, xc: np.ndarray,
+                       exo: np.ndarray, ctrl: np.ndarray, plant: np.ndarray):
+        """Run the simulation's sample loop (``codegen/driver.c``, ``haa_simulate``): per column
+        of ``exo`` (n_exo x n_steps) the generated ``sample`` function, then ``step`` n_sub times.
+
+        Returns ``(y, x_final, xc_final)`` with ``y`` of shape (n_steps, n_y). Compiled: one C
+        call for the whole run. VM: the same loop in Python over CasADi's VM (slow; the same
+        numbers up to rounding).
+        """
+        fs, fp = self[sample], self[step]
+        x = np.array(x, dtype=float).copy()
+        xc = np.array(xc, dtype=float).copy()
+        exo = np.asfortranarray(np.asarray(exo, dtype=float))
+        ctrl = np.ascontiguousarray(ctrl, dtype=float)
+        plant = np.ascontiguousarray(plant, dtype=float)
+        n_exo, n = exo.shape
+        n_y = fs.numel_out(2)
+        for arr, i, f, what in ((x, 0, fs, "x"), (xc, 1, fs, "xc"), (ctrl, 3, fs, "par"),
+                                (plant, 3, fp, "plant par")):
+            if arr.size != f.numel_in(i):
+                raise ValueError(f"{f.name()}: {what} has {arr.size} values, expected {f.numel_in(i)}")
+        if n_exo != fs.numel_in(2):
+            raise ValueError(f"{sample}: exo has {n_exo} rows, expected {fs.numel_in(2)}")
+        if self.backend != "compiled":
+            y = np.empty((n, n_y))
+            for k in range(n):
+                u, xc_next, yk = fs(x, xc, exo[:, k], ctrl)
+                y[k] = np.asarray(yk).ravel()
+                xc = np.asarray(xc_next).ravel()
+                for _ in range(n_sub):
+                    x = np.asarray(fp(x, u, exo[-1, k], plant)).ravel()
+            return y, x, xc
+        lib = self._cdll()
+        y = np.empty((n, n_y))
+        vp = ctypes.c_void_p
+        flag = lib.haa_simulate(ctypes.cast(getattr(lib, sample), vp),
+                                ctypes.cast(getattr(lib, f"{sample}_work"), vp),
+                                ctypes.cast(getattr(lib, step), vp),
+                                ctypes.cast(getattr(lib, f"{step}_work"), vp),
+                                int(n_sub), x.size, xc.size, fp.numel_in(1),
+                                x.ctypes.data, xc.ctypes.data, exo.ctypes.data, n_exo,
+                                ctrl.ctypes.data, plant.ctypes.data, y.ctypes.data, n_y, n)
+        if flag:
+            raise RuntimeError(f"generated {sample} / {step} failed (code {flag})")
+        return y, x, xc
+
     def _cdll(self):
         if getattr(self, "_lib", None) is None:
             lib = ctypes.CDLL(str(self.library))
@@ -372,6 +418,9 @@ class Evaluators:
                                         ctypes.c_void_p, ctypes.c_longlong, ctypes.c_longlong,
                                         ctypes.c_longlong, ctypes.c_longlong, ctypes.c_void_p,
                                         ctypes.c_void_p]
+            lib.haa_simulate.restype = ctypes.c_int
+            lib.haa_simulate.argtypes = [ctypes.c_void_p] * 4 + [ctypes.c_longlong] * 4 + \
+                [ctypes.c_void_p] * 3 + [ctypes.c_longlong] + [ctypes.c_void_p] * 3 + [ctypes.c_longlong] * 2
             self._lib = lib
         return self._lib
 
