@@ -284,8 +284,7 @@ class _Setup:
                                      f"plant; allowed: a jitter below {MAX_SUBSTEPS * JITTER_STEP_BOUND / (2 * JITTER_CLIP * rho):g} s")
             h = Ts / self.n_sub0
             Phi, Gam = _zoh(A, Bu, h)
-            self.M = np.hstack([A, Bu])
-            self.plant_parts = dict(Phi=Phi, Gamma=Gam, M=self.M, inv_n=1.0 / self.n_sub0)
+            self.plant_parts = dict(Phi=Phi, Gamma=Gam, inv_n=1.0 / self.n_sub0)
         else:
             self.kind = "zoh"
             self.n_sub0 = 1
@@ -324,8 +323,11 @@ def _run(loop, setup: _Setup, P_gain, D_gain):
                                        ctrl, plant)
         return y
 
-    if setup.kind != "lawson":
-        return run(setup.n_sub0, setup.plant_parts), {"integrator": setup.kind, "n_sub": setup.n_sub0}
+    if setup.kind == "jitter":      # [A, B] padded block by block: the u columns follow all cx states
+        parts = dict(setup.plant_parts, M=np.hstack([_pad(setup.A, cx, cx), _pad(setup.Bu, cx, len(L.SIM_U))]))
+        return run(setup.n_sub0, parts), {"integrator": "jitter", "n_sub": setup.n_sub0}
+    if setup.kind == "zoh":
+        return run(setup.n_sub0, setup.plant_parts), {"integrator": "zoh", "n_sub": 1}
     # step doubling: RK4's error at n_sub is about 16/15 of the difference to 2 n_sub, the
     # 2 n_sub result's about 1/15 of it (Richardson); compared on the unquantised signals
     cols = [L.SIM_COLUMNS.index(c) for c in ("velocity", "current")]
