@@ -60,7 +60,7 @@ def closed_loop_batch(loop, P_gain, D_gain, beta=None, alpha=None, cut: str | No
     """
     if cut not in CUTS:
         raise ValueError(f"cut = {cut!r}; allowed: {list(CUTS)}")
-    ctrl, pl, opt = loop.params.controller, loop.plant, loop.options
+    pl, opt = loop.plant, loop.options
     P, D, P_t, I_t, VC = _gains(loop, P_gain, D_gain, beta, alpha)
     k = P.shape[0]
     owner, blocks, n = _layout(loop)
