@@ -4,7 +4,7 @@ Per sample the C driver (``codegen/driver.c``, ``haa_simulate``) calls the *samp
 (measurements with quantisation and noise, the controller's linear update, the saturation of the
 held voltage) and then a *plant step* ``n_sub`` times: the exact zero-order-hold transition
 (``zoh``), the same with the sample interval stretched by the jitter (``jitter``), or one
-integrating-factor Runge-Kutta substep (``lawson``) when Coulomb friction acts between samples.
+exponential Runge-Kutta substep (``etd``, ETDRK4) when Coulomb friction acts between samples.
 The matrix exponentials (Phi, Gamma; the half and full substep transitions) come in as inputs,
 computed by ``scipy.linalg.expm`` (CasADi has no code-generable expm). Every vector is laid out
 by name in ``haa_sym.compiled.layout``.
@@ -62,7 +62,7 @@ def sample_function(nx: int, nc: int) -> ca.Function:
 
 def plant_step_function(kind: str, nx: int, nc: int) -> ca.Function:
     """``(x, u, s, par) -> x_next``: one plant step of ``kind`` (``s`` is the sample's jitter
-    ``delta``, s; unused by ``zoh`` and ``lawson``)."""
+    ``delta``, s; unused by ``zoh`` and ``etd``)."""
     lay = L.sim_plant_layout(kind, nx)
     nu = len(L.SIM_U)
     x, u, s = ca.SX.sym("x", nx), ca.SX.sym("u", nu), ca.SX.sym("s")
@@ -77,22 +77,23 @@ def plant_step_function(kind: str, nx: int, nc: int) -> ca.Function:
             v = x + (d / j) * ca.mtimes(m["M"], ca.vertcat(v, u))
         x_next = ca.mtimes(m["Phi"], v) + ca.mtimes(m["Gamma"], u)
     else:
-        h = m["h"][0]
+        def N(xx):                                  # Coulomb friction torques, smooth (tanh) model
+            return -m["Fc"] * ca.tanh(ca.mtimes(m["Fsel"], xx) * m["inv_vs"][0])
 
-        def N(xx):                                  # Coulomb friction, smooth (tanh) model
-            v = ca.mtimes(m["Fsel"], xx) * m["inv_vs"][0]
-            return ca.mtimes(m["Fcol"], -m["Fc"] * ca.tanh(v))
+        def E(xx):                                  # half-substep transition, held u
+            return ca.mtimes(m["Ph"], xx) + ca.mtimes(m["Gh"], u)
 
-        def E(xx):                                  # half-substep transition of x, held u
-            return ca.mtimes(m["Ph"], xx)
-
-        Ez = E(x) + ca.mtimes(m["Gh"], u)
-        E2z = ca.mtimes(m["P"], x) + ca.mtimes(m["G"], u)
-        k1 = N(x)
-        k2 = N(Ez + h / 2 * E(k1))
-        k3 = N(Ez + h / 2 * k2)
-        k4 = N(E2z + h * E(k3))
-        x_next = E2z + h / 6 * (ca.mtimes(m["P"], k1) + 2 * E(k2 + k3) + k4)
+        # ETDRK4 (Cox and Matthews 2002): the linear part and a constant friction exactly
+        Ex = E(x)
+        n0 = N(x)
+        a = Ex + ca.mtimes(m["Qh"], n0)
+        na = N(a)
+        b = Ex + ca.mtimes(m["Qh"], na)
+        nb = N(b)
+        c = E(a) + ca.mtimes(m["Qh"], 2 * nb - n0)
+        nc_ = N(c)
+        x_next = ca.mtimes(m["P"], x) + ca.mtimes(m["G"], u) + ca.mtimes(m["F1"], n0) \
+            + 2 * ca.mtimes(m["F2"], na + nb) + ca.mtimes(m["F3"], nc_)
     name = L.sim_function_names(nx, nc)[kind]
     return ca.Function(name, [x, u, s, par], [x_next], ["x", "u", "s", "par"], ["x_next"])
 

@@ -215,24 +215,24 @@ int haa_sim_jitter_8_work_bytes(casadi_int *sz_arg, casadi_int* sz_res, casadi_i
 #define haa_sim_jitter_8_SZ_RES 1
 #define haa_sim_jitter_8_SZ_IW 0
 #define haa_sim_jitter_8_SZ_W 0
-int haa_sim_lawson_8(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem);
-int haa_sim_lawson_8_checkout(void);
-void haa_sim_lawson_8_release(int mem);
-void haa_sim_lawson_8_incref(void);
-void haa_sim_lawson_8_decref(void);
-casadi_int haa_sim_lawson_8_n_in(void);
-casadi_int haa_sim_lawson_8_n_out(void);
-casadi_real haa_sim_lawson_8_default_in(casadi_int i);
-const char* haa_sim_lawson_8_name_in(casadi_int i);
-const char* haa_sim_lawson_8_name_out(casadi_int i);
-const casadi_int* haa_sim_lawson_8_sparsity_in(casadi_int i);
-const casadi_int* haa_sim_lawson_8_sparsity_out(casadi_int i);
-int haa_sim_lawson_8_work(casadi_int *sz_arg, casadi_int* sz_res, casadi_int *sz_iw, casadi_int *sz_w);
-int haa_sim_lawson_8_work_bytes(casadi_int *sz_arg, casadi_int* sz_res, casadi_int *sz_iw, casadi_int *sz_w);
-#define haa_sim_lawson_8_SZ_ARG 4
-#define haa_sim_lawson_8_SZ_RES 1
-#define haa_sim_lawson_8_SZ_IW 0
-#define haa_sim_lawson_8_SZ_W 0
+int haa_sim_etd_8(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem);
+int haa_sim_etd_8_checkout(void);
+void haa_sim_etd_8_release(int mem);
+void haa_sim_etd_8_incref(void);
+void haa_sim_etd_8_decref(void);
+casadi_int haa_sim_etd_8_n_in(void);
+casadi_int haa_sim_etd_8_n_out(void);
+casadi_real haa_sim_etd_8_default_in(casadi_int i);
+const char* haa_sim_etd_8_name_in(casadi_int i);
+const char* haa_sim_etd_8_name_out(casadi_int i);
+const casadi_int* haa_sim_etd_8_sparsity_in(casadi_int i);
+const casadi_int* haa_sim_etd_8_sparsity_out(casadi_int i);
+int haa_sim_etd_8_work(casadi_int *sz_arg, casadi_int* sz_res, casadi_int *sz_iw, casadi_int *sz_w);
+int haa_sim_etd_8_work_bytes(casadi_int *sz_arg, casadi_int* sz_res, casadi_int *sz_iw, casadi_int *sz_w);
+#define haa_sim_etd_8_SZ_ARG 4
+#define haa_sim_etd_8_SZ_RES 1
+#define haa_sim_etd_8_SZ_IW 0
+#define haa_sim_etd_8_SZ_W 0
 int haa_sim_sample_8_64(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem);
 int haa_sim_sample_8_64_checkout(void);
 void haa_sim_sample_8_64_release(int mem);
@@ -305,24 +305,24 @@ int haa_sim_jitter_16_work_bytes(casadi_int *sz_arg, casadi_int* sz_res, casadi_
 #define haa_sim_jitter_16_SZ_RES 1
 #define haa_sim_jitter_16_SZ_IW 0
 #define haa_sim_jitter_16_SZ_W 0
-int haa_sim_lawson_16(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem);
-int haa_sim_lawson_16_checkout(void);
-void haa_sim_lawson_16_release(int mem);
-void haa_sim_lawson_16_incref(void);
-void haa_sim_lawson_16_decref(void);
-casadi_int haa_sim_lawson_16_n_in(void);
-casadi_int haa_sim_lawson_16_n_out(void);
-casadi_real haa_sim_lawson_16_default_in(casadi_int i);
-const char* haa_sim_lawson_16_name_in(casadi_int i);
-const char* haa_sim_lawson_16_name_out(casadi_int i);
-const casadi_int* haa_sim_lawson_16_sparsity_in(casadi_int i);
-const casadi_int* haa_sim_lawson_16_sparsity_out(casadi_int i);
-int haa_sim_lawson_16_work(casadi_int *sz_arg, casadi_int* sz_res, casadi_int *sz_iw, casadi_int *sz_w);
-int haa_sim_lawson_16_work_bytes(casadi_int *sz_arg, casadi_int* sz_res, casadi_int *sz_iw, casadi_int *sz_w);
-#define haa_sim_lawson_16_SZ_ARG 4
-#define haa_sim_lawson_16_SZ_RES 1
-#define haa_sim_lawson_16_SZ_IW 0
-#define haa_sim_lawson_16_SZ_W 0
+int haa_sim_etd_16(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem);
+int haa_sim_etd_16_checkout(void);
+void haa_sim_etd_16_release(int mem);
+void haa_sim_etd_16_incref(void);
+void haa_sim_etd_16_decref(void);
+casadi_int haa_sim_etd_16_n_in(void);
+casadi_int haa_sim_etd_16_n_out(void);
+casadi_real haa_sim_etd_16_default_in(casadi_int i);
+const char* haa_sim_etd_16_name_in(casadi_int i);
+const char* haa_sim_etd_16_name_out(casadi_int i);
+const casadi_int* haa_sim_etd_16_sparsity_in(casadi_int i);
+const casadi_int* haa_sim_etd_16_sparsity_out(casadi_int i);
+int haa_sim_etd_16_work(casadi_int *sz_arg, casadi_int* sz_res, casadi_int *sz_iw, casadi_int *sz_w);
+int haa_sim_etd_16_work_bytes(casadi_int *sz_arg, casadi_int* sz_res, casadi_int *sz_iw, casadi_int *sz_w);
+#define haa_sim_etd_16_SZ_ARG 4
+#define haa_sim_etd_16_SZ_RES 1
+#define haa_sim_etd_16_SZ_IW 0
+#define haa_sim_etd_16_SZ_W 0
 void haa_sym_gen_casadi_version(int* major, int* minor, int* patch);
 int haa_sym_gen_casadi_int_size(void);
 int haa_sym_gen_casadi_real_size(void);

@@ -110,3 +110,18 @@ def test_bad_arguments_are_one_line_parameter_errors(kw, field):
 def test_friction_with_jitter_is_refused():
     with pytest.raises(ParameterError, match="jitter"):
         simulate(_loop(), 100.0, 1.0, limits=Limits(friction={"m": 0.01}, jitter=1e-6), duration=0.01)
+
+
+@pytest.mark.parametrize("lim", [Limits(V_max=6.0, encoder_counts=4096), Limits(friction={"L2": 0.5}),
+                                 Limits(jitter=2e-6)])
+def test_casadi_vm_runs_the_same_loop(lim):
+    # without a C compiler the serialised functions run in CasADi's VM, the drivers' loops in Python
+    p = load_params()
+    a = simulate(ClosedLoop(p, basis=False, backend="vm"), 300.0, 4.0, limits=lim, experiment="torque-step",
+                 amplitude=20.0, duration=0.02)
+    b = simulate(ClosedLoop(p, basis=False), 300.0, 4.0, limits=lim, experiment="torque-step",
+                 amplitude=20.0, duration=0.02)
+    assert a.meta["backend"] == "vm" and b.meta["backend"] == "compiled"
+    for name in ("theta", "torque", "voltage", "current"):
+        ref = getattr(b, name)
+        assert np.abs(getattr(a, name) - ref).max() <= 1e-12 * np.abs(ref).max(), name

@@ -146,7 +146,7 @@ def test_coulomb_friction_agrees_with_solve_ivp(friction):
     sim = simulate(ClosedLoop(params, basis=False), 300.0, 4.0, limits=lim, experiment="torque-step",
                    amplitude=2.0, duration=(n - 1) * params.controller.Ts, rtol=1e-7)
     t, ref = hand_simulation(params, 300.0, 4.0, lim, n, T_ff=2.0)
-    assert sim.meta["error_estimate"] <= 1e-7
+    assert sim.meta["n_sub_max"] > 1
     # the friction changes the run by far more than the tolerance
     free = simulate(ClosedLoop(params, basis=False), 300.0, 4.0, limits=Limits(), experiment="torque-step",
                     amplitude=2.0, duration=(n - 1) * params.controller.Ts)

@@ -30,9 +30,9 @@ def _cmd_simulate(args) -> int:
     _write_outputs(out, plot, lambda path, tx: tx.write_text(path, csv_text(rows), "--out"),
                    lambda: _plots().plot_simulation(s.time, cols, s.saturated, title, cycle))
     m = s.meta
-    integ = m["integrator"] + (f", {m['n_sub']} substeps per sample" if m["n_sub"] > 1 else "")
-    if "error_estimate" in m:
-        integ += f", estimated error {m['error_estimate']:.2g} (rtol {m['rtol']:g})"
+    integ = m["integrator"] + (f", {m['n_sub']:.3g} substeps per sample" if m["n_sub"] > 1 else "")
+    if "n_sub_max" in m:
+        integ += f" (at most {m['n_sub_max']}; rtol {m['rtol']:g})"
     lim = ", ".join(f"{k} = {v:g}" if isinstance(v, (int, float)) else f"{k} = {v}"
                     for k, v in m["limits"].items()) or "none (the linear loop)"
     print(f"{args.experiment} (A = {s.meta['amplitude']:g}), {len(s.time)} samples over {s.time[-1]:.6g} s; "

@@ -365,13 +365,18 @@ class Evaluators:
         return outs
 
     def run_simulation(self, sample: str, step: str, n_sub: int, x: np.ndarray, xc: np.ndarray,
-                       exo: np.ndarray, ctrl: np.ndarray, plant: np.ndarray):
-        """Run the simulation's sample loop (``codegen/driver.c``, ``haa_simulate``): per column
-        of ``exo`` (n_exo x n_steps) the generated ``sample`` function, then ``step`` n_sub times.
+                       exo: np.ndarray, ctrl: np.ndarray, plant: np.ndarray, *, scale=None,
+                       tol: float | None = None, peaks: bool = False):
+        """Run the simulation's sample loop (``codegen/driver.c``): per column of ``exo``
+        (n_exo x n_steps) the generated ``sample`` function, then ``step`` n_sub times
+        (``haa_simulate``); or, with ``scale`` and ``tol``, ``plant`` holding n_sub parameter
+        vectors of levels 0..n_sub-1 (2^level substeps), the level chosen per sample by step
+        doubling (``haa_simulate_adaptive``).
 
-        Returns ``(y, x_final, xc_final)`` with ``y`` of shape (n_steps, n_y). Compiled: one C
-        call for the whole run. VM: the same loop in Python over CasADi's VM (slow; the same
-        numbers up to rounding).
+        Returns ``(y, x_final, xc_final, extra)`` with ``y`` of shape (n_steps, n_y); ``extra``
+        is the level per sample (adaptive), the peak |x_i| over the sample instants
+        (``peaks``), else None. Compiled: one C call for the whole run. VM: the same loop in
+        Python over CasADi's VM (slow; the same numbers up to rounding).
         """
         fs, fp = self[sample], self[step]
         x = np.array(x, dtype=float).copy()
@@ -381,34 +386,75 @@ class Evaluators:
         plant = np.ascontiguousarray(plant, dtype=float)
         n_exo, n = exo.shape
         n_y = fs.numel_out(2)
+        adaptive = scale is not None
+        levels = n_sub if adaptive else 0
+        psize = fp.numel_in(3)
+        if adaptive and plant.size != levels * psize:
+            raise ValueError(f"{step}: plant table has {plant.size} values, expected {levels} x {psize}")
         for arr, i, f, what in ((x, 0, fs, "x"), (xc, 1, fs, "xc"), (ctrl, 3, fs, "par"),
-                                (plant, 3, fp, "plant par")):
+                                (plant[:psize], 3, fp, "plant par")):
             if arr.size != f.numel_in(i):
                 raise ValueError(f"{f.name()}: {what} has {arr.size} values, expected {f.numel_in(i)}")
         if n_exo != fs.numel_in(2):
             raise ValueError(f"{sample}: exo has {n_exo} rows, expected {fs.numel_in(2)}")
         if self.backend != "compiled":
-            y = np.empty((n, n_y))
-            for k in range(n):
-                u, xc_next, yk = fs(x, xc, exo[:, k], ctrl)
-                y[k] = np.asarray(yk).ravel()
-                xc = np.asarray(xc_next).ravel()
-                for _ in range(n_sub):
-                    x = np.asarray(fp(x, u, exo[-1, k], plant)).ravel()
-            return y, x, xc
+            return self._simulate_vm(fs, fp, n_sub, x, xc, exo, ctrl, plant, scale, tol, peaks)
         lib = self._cdll()
         y = np.empty((n, n_y))
         vp = ctypes.c_void_p
-        flag = lib.haa_simulate(ctypes.cast(getattr(lib, sample), vp),
-                                ctypes.cast(getattr(lib, f"{sample}_work"), vp),
-                                ctypes.cast(getattr(lib, step), vp),
-                                ctypes.cast(getattr(lib, f"{step}_work"), vp),
-                                int(n_sub), x.size, xc.size, fp.numel_in(1),
-                                x.ctypes.data, xc.ctypes.data, exo.ctypes.data, n_exo,
-                                ctrl.ctypes.data, plant.ctypes.data, y.ctypes.data, n_y, n)
+        fns = (ctypes.cast(getattr(lib, sample), vp), ctypes.cast(getattr(lib, f"{sample}_work"), vp),
+               ctypes.cast(getattr(lib, step), vp), ctypes.cast(getattr(lib, f"{step}_work"), vp))
+        if adaptive:
+            scale = np.ascontiguousarray(scale, dtype=float)
+            extra = np.empty(n)
+            flag = lib.haa_simulate_adaptive(*fns, levels, psize, x.size, xc.size, fp.numel_in(1),
+                                             x.ctypes.data, xc.ctypes.data, exo.ctypes.data, n_exo,
+                                             ctrl.ctypes.data, plant.ctypes.data, scale.ctypes.data,
+                                             float(tol), y.ctypes.data, n_y, extra.ctypes.data, n)
+        else:
+            extra = np.empty(x.size) if peaks else None
+            flag = lib.haa_simulate(*fns, int(n_sub), x.size, xc.size, fp.numel_in(1),
+                                    x.ctypes.data, xc.ctypes.data, exo.ctypes.data, n_exo,
+                                    ctrl.ctypes.data, plant.ctypes.data, y.ctypes.data, n_y,
+                                    None if extra is None else extra.ctypes.data, n)
         if flag:
             raise RuntimeError(f"generated {sample} / {step} failed (code {flag})")
-        return y, x, xc
+        return y, x, xc, extra
+
+    @staticmethod
+    def _simulate_vm(fs, fp, n_sub, x, xc, exo, ctrl, plant, scale, tol, peaks):
+        """:meth:`run_simulation` in Python over CasADi's VM: the C drivers' loops, line by line."""
+        n = exo.shape[1]
+        y = np.empty((n, fs.numel_out(2)))
+        psize = fp.numel_in(3)
+        extra = np.empty(n) if scale is not None else (np.zeros(x.size) if peaks else None)
+        lev = 0
+
+        def advance(x0, u, s, par, m):
+            for _ in range(m):
+                x0 = np.asarray(fp(x0, u, s, par)).ravel()
+            return x0
+        for k in range(n):
+            if peaks and scale is None:
+                extra = np.maximum(extra, np.abs(x))
+            u, xc_next, yk = fs(x, xc, exo[:, k], ctrl)
+            y[k] = np.asarray(yk).ravel()
+            xc = np.asarray(xc_next).ravel()
+            if scale is None:
+                x = advance(x, u, exo[-1, k], plant, n_sub)
+                continue
+            lev = min(max(lev - 1, 0), n_sub - 2)
+            xa = advance(x, u, exo[-1, k], plant[lev * psize:(lev + 1) * psize], 2 ** lev)
+            while True:
+                xb = advance(x, u, exo[-1, k], plant[(lev + 1) * psize:(lev + 2) * psize], 2 ** (lev + 1))
+                err = np.max(np.abs(xa - xb) / scale)
+                lev += 1
+                if err <= tol or lev + 1 >= n_sub:
+                    break
+                xa = xb
+            x = xb
+            extra[k] = lev
+        return y, x, xc, extra
 
     def _cdll(self):
         if getattr(self, "_lib", None) is None:
@@ -419,8 +465,11 @@ class Evaluators:
                                         ctypes.c_longlong, ctypes.c_longlong, ctypes.c_void_p,
                                         ctypes.c_void_p]
             lib.haa_simulate.restype = ctypes.c_int
-            lib.haa_simulate.argtypes = [ctypes.c_void_p] * 4 + [ctypes.c_longlong] * 4 + \
-                [ctypes.c_void_p] * 3 + [ctypes.c_longlong] + [ctypes.c_void_p] * 3 + [ctypes.c_longlong] * 2
+            ll, vp = ctypes.c_longlong, ctypes.c_void_p
+            lib.haa_simulate.argtypes = [vp] * 4 + [ll] * 4 + [vp] * 3 + [ll] + [vp] * 3 + [ll] + [vp, ll]
+            lib.haa_simulate_adaptive.restype = ctypes.c_int
+            lib.haa_simulate_adaptive.argtypes = [vp] * 4 + [ll] * 5 + [vp] * 3 + [ll] + [vp] * 3 + \
+                [ctypes.c_double, vp, ll, vp, ll]
             self._lib = lib
         return self._lib
 

@@ -161,21 +161,23 @@ def sim_ctrl_layout(nx: int, nc: int) -> Slices:
 def sim_plant_layout(kind: str, nx: int) -> Slices:
     """The plant step's parameter vector, by kind: ``zoh`` (``Phi``, ``Gamma`` over Ts),
     ``jitter`` (``Phi``, ``Gamma`` over Ts/n_sub, ``M`` = [A, B] of the continuous plant for the
-    interval's correction and ``inv_n`` = 1/n_sub), ``lawson`` (``Ph``, ``Gh`` over h/2, ``P``, ``G`` over h, the substep ``h``,
-    friction rows ``Fsel``, columns ``Fcol``, torques ``Fc`` and 1/velocity scale ``inv_vs``)."""
+    interval's correction and ``inv_n`` = 1/n_sub), ``etd`` (one ETDRK4 substep of length h:
+    ``Ph``, ``Gh`` over h/2, ``P``, ``G`` over h; the friction torques' columns through the
+    phi-functions, ``Qh`` = (h/2) phi1(A h/2) Fcol and ``F1``, ``F2``, ``F3`` = h f_i(A h) Fcol of
+    Cox and Matthews; friction rows ``Fsel``, torques ``Fc`` and 1/velocity scale ``inv_vs``)."""
     nu, nf = len(SIM_U), SIM_FRICTION_CAP
     if kind == "zoh":
         return Slices([("Phi", (nx, nx)), ("Gamma", (nx, nu))])
     if kind == "jitter":
         return Slices([("Phi", (nx, nx)), ("Gamma", (nx, nu)), ("M", (nx, nx + nu)), ("inv_n", (1, 1))])
-    if kind == "lawson":
+    if kind == "etd":
         return Slices([("Ph", (nx, nx)), ("Gh", (nx, nu)), ("P", (nx, nx)), ("G", (nx, nu)),
-                       ("h", (1, 1)), ("Fsel", (nf, nx)), ("Fcol", (nx, nf)), ("Fc", (nf, 1)),
-                       ("inv_vs", (1, 1))])
-    raise ValueError(f"plant step kind = {kind!r}; allowed: 'zoh', 'jitter', 'lawson'")
+                       ("Qh", (nx, nf)), ("F1", (nx, nf)), ("F2", (nx, nf)), ("F3", (nx, nf)),
+                       ("Fsel", (nf, nx)), ("Fc", (nf, 1)), ("inv_vs", (1, 1))])
+    raise ValueError(f"plant step kind = {kind!r}; allowed: {list(SIM_PLANT_KINDS)}")
 
 
-SIM_PLANT_KINDS = ("zoh", "jitter", "lawson")
+SIM_PLANT_KINDS = ("zoh", "jitter", "etd")
 
 
 def sim_function_names(nx: int, nc: int) -> dict[str, str]:
