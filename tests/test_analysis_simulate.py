@@ -125,3 +125,15 @@ def test_casadi_vm_runs_the_same_loop(lim):
     for name in ("theta", "torque", "voltage", "current"):
         ref = getattr(b, name)
         assert np.abs(getattr(a, name) - ref).max() <= 1e-12 * np.abs(ref).max(), name
+
+
+@pytest.mark.parametrize("name", ["sea", "harmonic_drive", "qdd_leg"])
+def test_limits_off_is_the_linear_closed_loop_for_every_bundled_actuator(name):
+    # other chains, a current-based torque estimate (qdd_leg) and a motor-side encoder
+    loop = ClosedLoop(load_params(name), basis=False)
+    n, Ts = 300, loop.params.controller.Ts
+    s = simulate(loop, 20.0, 0.5, limits=Limits(), experiment="disturbance-step", amplitude=0.3,
+                 duration=(n - 1) * Ts)
+    _, y, _ = scipy.signal.dlsim((*closed_loop_matrices(loop, 20.0, 0.5), Ts), np.c_[np.full(n, 0.3), np.zeros(n)])
+    for name_, row in (("torque", 0), ("theta", 1), ("velocity", 2)):
+        assert np.abs(getattr(s, name_) - y[:, row]).max() <= 1e-9 * np.abs(y[:, row]).max(), name_

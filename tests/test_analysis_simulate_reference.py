@@ -84,7 +84,7 @@ def hand_simulation(params, P, D, lim: Limits, n, *, T_ff=0.0, T_dist=0.0, jitte
         T = quant(plant.hd @ x, q_T)
         v = (th - hist[-1]) / (Nav * Ts)
         hist = [th] + hist[:-1]
-        T_ref = T_ff - P * th - D * v
+        T_ref = (T_ff[k] if np.ndim(T_ff) else T_ff) - P * th - D * v
         e = T_ref - T
         integ += Ts * e
         V = P_t * e + I_t * integ + VC * v
@@ -165,6 +165,19 @@ def test_jitter_agrees_with_exact_transitions_over_the_jittered_intervals():
     eps[1:] = np.clip(sigma * np.random.default_rng(7).standard_normal(n), -3 * sigma, 3 * sigma)
     assert np.allclose(sim.time, np.arange(n) * Ts + eps[:n], rtol=0, atol=1e-18)
     t, ref = hand_simulation(params, 300.0, 4.0, lim, n, T_dist=2.0, jitter_eps=eps)
+    _compare(sim, ref, 1e-8)
+
+
+@pytest.mark.slow
+def test_chirp_agrees_with_solve_ivp():
+    params = load_params()
+    Ts, n, f1 = params.controller.Ts, 200, 40.0
+    sim = simulate(ClosedLoop(params, basis=False), 300.0, 4.0, limits=Limits(V_max=10.0), experiment="chirp",
+                   amplitude=8.0, duration=(n - 1) * Ts, chirp_f1=f1)
+    t = np.arange(n) * Ts
+    T_ff = 8.0 * np.sin(2 * np.pi * (0.1 * t + (f1 - 0.1) * t ** 2 / (2 * t[-1])))
+    _, ref = hand_simulation(params, 300.0, 4.0, Limits(V_max=10.0), n, T_ff=T_ff)
+    assert np.abs(sim.torque_ref + 300.0 * sim.theta).max() > 1.0
     _compare(sim, ref, 1e-8)
 
 

@@ -89,9 +89,6 @@ class Limits:
             out.update(friction_model=self.friction_model, friction_velocity=self.friction_velocity)
         return out
 
-    def off(self) -> "Limits":
-        return Limits()
-
 
 def limit_units(bodies) -> dict[str, str | None]:
     """Key -> SI unit of every ``[limits]`` key for an actuator with these body names."""
