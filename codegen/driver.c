@@ -136,8 +136,10 @@ CASADI_SYMBOL_EXPORT int haa_simulate(void* sample, void* sample_work, void* ste
 
 /* haa_simulate_adaptive: haa_simulate with the plant step's substeps chosen per sample.
  *
- * plant holds n_levels parameter vectors of plant_size reals: level j for 2^j substeps per
- * sample. Per sample the state is advanced at two adjacent levels j and j + 1 (step doubling);
+ * plant holds 2^n_rows tables of n_levels parameter vectors of plant_size reals: level j for
+ * 2^j substeps per sample; table m where bit r of m is set when |stick_rows[r] . x| < thr at
+ * the sample instant (stick_rows: n_rows rows of nx reals; the friction's split at stick).
+ * Per sample the state is advanced at two adjacent levels j and j + 1 (step doubling);
  * the finer result is kept when max_i |x_j - x_(j+1)|_i / scale_i <= tol (or at the finest
  * level), else j grows. The next sample starts one level coarser than this one ended. levels
  * receives the level used per sample (as a real). Returns as haa_simulate; 3 if n_levels < 2. */
@@ -163,7 +165,8 @@ CASADI_SYMBOL_EXPORT int haa_simulate_adaptive(
     void* sample, void* sample_work, void* step, void* step_work, casadi_int n_levels,
     casadi_int plant_size, casadi_int nx, casadi_int nc, casadi_int n_u, casadi_real* x,
     casadi_real* xc, const casadi_real* exo, casadi_int n_exo, const casadi_real* ctrl,
-    const casadi_real* plant, const casadi_real* scale, casadi_real tol, casadi_real* y,
+    const casadi_real* plant, const casadi_real* scale, casadi_real tol,
+    const casadi_real* stick_rows, casadi_int n_rows, casadi_real thr, casadi_real* y,
     casadi_int n_y, casadi_real* levels, casadi_int n_steps) {
   casadi_int a1, r1, i1, w1, a2, r2, i2, w2, k, j, i, lev = 0, sz_arg, sz_res, sz_iw, sz_w;
   int flag = 0;
@@ -171,6 +174,7 @@ CASADI_SYMBOL_EXPORT int haa_simulate_adaptive(
   casadi_real** res;
   casadi_int* iw;
   casadi_real *w, *u, *xa, *xb, *tmp, *xc2;
+  const casadi_real* table;
   if (n_levels < 2) return 3;
   ((haa_work_fn)sample_work)(&a1, &r1, &i1, &w1);
   ((haa_work_fn)step_work)(&a2, &r2, &i2, &w2);
@@ -206,14 +210,23 @@ CASADI_SYMBOL_EXPORT int haa_simulate_adaptive(
         break;
       }
       for (j = 0; j < nc; ++j) xc[j] = xc2[j];
+      {
+        casadi_int mask = 0, r;
+        for (r = 0; r < n_rows; ++r) {
+          casadi_real v = 0;
+          for (i = 0; i < nx; ++i) v += stick_rows[r * nx + i] * x[i];
+          if (fabs(v) < thr) mask |= (casadi_int)1 << r;
+        }
+        table = plant + mask * n_levels * plant_size;
+      }
       if (lev > 0) --lev;
       if (lev > n_levels - 2) lev = n_levels - 2;
-      flag = haa_advance(step, arg, res, iw, w, x, u, e + n_exo - 1, plant + lev * plant_size,
+      flag = haa_advance(step, arg, res, iw, w, x, u, e + n_exo - 1, table + lev * plant_size,
                          (casadi_int)1 << lev, nx, xa, tmp);
       while (!flag) {
         casadi_real err = 0;
         flag = haa_advance(step, arg, res, iw, w, x, u, e + n_exo - 1,
-                           plant + (lev + 1) * plant_size, (casadi_int)1 << (lev + 1), nx, xb, tmp);
+                           table + (lev + 1) * plant_size, (casadi_int)1 << (lev + 1), nx, xb, tmp);
         if (flag) break;
         for (i = 0; i < nx; ++i) {
           casadi_real d = (xa[i] - xb[i]) / scale[i];

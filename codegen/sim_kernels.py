@@ -77,8 +77,9 @@ def plant_step_function(kind: str, nx: int, nc: int) -> ca.Function:
             v = x + (d / j) * ca.mtimes(m["M"], ca.vertcat(v, u))
         x_next = ca.mtimes(m["Phi"], v) + ca.mtimes(m["Gamma"], u)
     else:
-        def N(xx):                                  # Coulomb friction torques, smooth (tanh) model
-            return -m["Fc"] * ca.tanh(ca.mtimes(m["Fsel"], xx) * m["inv_vs"][0])
+        def N(xx):                                  # Coulomb friction torques, smooth (tanh) model,
+            v = ca.mtimes(m["Fsel"], xx)            # less the slope ``lin`` moved into A (at stick)
+            return -m["Fc"] * ca.tanh(v * m["inv_vs"][0]) + m["lin"] * v
 
         def E(xx):                                  # half-substep transition, held u
             return ca.mtimes(m["Ph"], xx) + ca.mtimes(m["Gh"], u)

@@ -366,12 +366,14 @@ class Evaluators:
 
     def run_simulation(self, sample: str, step: str, n_sub: int, x: np.ndarray, xc: np.ndarray,
                        exo: np.ndarray, ctrl: np.ndarray, plant: np.ndarray, *, scale=None,
-                       tol: float | None = None, peaks: bool = False):
+                       tol: float | None = None, peaks: bool = False, stick_rows=None,
+                       stick_threshold: float = 0.0):
         """Run the simulation's sample loop (``codegen/driver.c``): per column of ``exo``
         (n_exo x n_steps) the generated ``sample`` function, then ``step`` n_sub times
-        (``haa_simulate``); or, with ``scale`` and ``tol``, ``plant`` holding n_sub parameter
-        vectors of levels 0..n_sub-1 (2^level substeps), the level chosen per sample by step
-        doubling (``haa_simulate_adaptive``).
+        (``haa_simulate``); or, with ``scale`` and ``tol``, ``plant`` holding 2^len(stick_rows)
+        tables of n_sub parameter vectors of levels 0..n_sub-1 (2^level substeps), the table
+        chosen per sample by which |stick_rows . x| are below ``stick_threshold`` (a bit each),
+        the level by step doubling (``haa_simulate_adaptive``).
 
         Returns ``(y, x_final, xc_final, extra)`` with ``y`` of shape (n_steps, n_y); ``extra``
         is the level per sample (adaptive), the peak |x_i| over the sample instants
@@ -389,8 +391,10 @@ class Evaluators:
         adaptive = scale is not None
         levels = n_sub if adaptive else 0
         psize = fp.numel_in(3)
-        if adaptive and plant.size != levels * psize:
-            raise ValueError(f"{step}: plant table has {plant.size} values, expected {levels} x {psize}")
+        rows = np.zeros((0, x.size)) if stick_rows is None else np.ascontiguousarray(stick_rows, dtype=float)
+        if adaptive and plant.size != 2 ** len(rows) * levels * psize:
+            raise ValueError(f"{step}: plant table has {plant.size} values, expected "
+                             f"{2 ** len(rows)} x {levels} x {psize}")
         for arr, i, f, what in ((x, 0, fs, "x"), (xc, 1, fs, "xc"), (ctrl, 3, fs, "par"),
                                 (plant[:psize], 3, fp, "plant par")):
             if arr.size != f.numel_in(i):
@@ -398,7 +402,8 @@ class Evaluators:
         if n_exo != fs.numel_in(2):
             raise ValueError(f"{sample}: exo has {n_exo} rows, expected {fs.numel_in(2)}")
         if self.backend != "compiled":
-            return self._simulate_vm(fs, fp, n_sub, x, xc, exo, ctrl, plant, scale, tol, peaks)
+            return self._simulate_vm(fs, fp, n_sub, x, xc, exo, ctrl, plant, scale, tol, peaks, rows,
+                                     stick_threshold)
         lib = self._cdll()
         y = np.empty((n, n_y))
         vp = ctypes.c_void_p
@@ -410,7 +415,9 @@ class Evaluators:
             flag = lib.haa_simulate_adaptive(*fns, levels, psize, x.size, xc.size, fp.numel_in(1),
                                              x.ctypes.data, xc.ctypes.data, exo.ctypes.data, n_exo,
                                              ctrl.ctypes.data, plant.ctypes.data, scale.ctypes.data,
-                                             float(tol), y.ctypes.data, n_y, extra.ctypes.data, n)
+                                             float(tol), rows.ctypes.data, len(rows),
+                                             float(stick_threshold), y.ctypes.data, n_y,
+                                             extra.ctypes.data, n)
         else:
             extra = np.empty(x.size) if peaks else None
             flag = lib.haa_simulate(*fns, int(n_sub), x.size, xc.size, fp.numel_in(1),
@@ -422,7 +429,7 @@ class Evaluators:
         return y, x, xc, extra
 
     @staticmethod
-    def _simulate_vm(fs, fp, n_sub, x, xc, exo, ctrl, plant, scale, tol, peaks):
+    def _simulate_vm(fs, fp, n_sub, x, xc, exo, ctrl, plant, scale, tol, peaks, rows, thr):
         """:meth:`run_simulation` in Python over CasADi's VM: the C drivers' loops, line by line."""
         n = exo.shape[1]
         y = np.empty((n, fs.numel_out(2)))
@@ -443,10 +450,12 @@ class Evaluators:
             if scale is None:
                 x = advance(x, u, exo[-1, k], plant, n_sub)
                 continue
+            mask = sum(1 << r for r in range(len(rows)) if abs(rows[r] @ x) < thr)
+            table = plant[mask * n_sub * psize:(mask + 1) * n_sub * psize]
             lev = min(max(lev - 1, 0), n_sub - 2)
-            xa = advance(x, u, exo[-1, k], plant[lev * psize:(lev + 1) * psize], 2 ** lev)
+            xa = advance(x, u, exo[-1, k], table[lev * psize:(lev + 1) * psize], 2 ** lev)
             while True:
-                xb = advance(x, u, exo[-1, k], plant[(lev + 1) * psize:(lev + 2) * psize], 2 ** (lev + 1))
+                xb = advance(x, u, exo[-1, k], table[(lev + 1) * psize:(lev + 2) * psize], 2 ** (lev + 1))
                 err = np.max(np.abs(xa - xb) / scale)
                 lev += 1
                 if err <= tol or lev + 1 >= n_sub:
@@ -469,7 +478,7 @@ class Evaluators:
             lib.haa_simulate.argtypes = [vp] * 4 + [ll] * 4 + [vp] * 3 + [ll] + [vp] * 3 + [ll] + [vp, ll]
             lib.haa_simulate_adaptive.restype = ctypes.c_int
             lib.haa_simulate_adaptive.argtypes = [vp] * 4 + [ll] * 5 + [vp] * 3 + [ll] + [vp] * 3 + \
-                [ctypes.c_double, vp, ll, vp, ll]
+                [ctypes.c_double, vp, ll, ctypes.c_double, vp, ll, vp, ll]
             self._lib = lib
         return self._lib
 

@@ -164,7 +164,8 @@ def sim_plant_layout(kind: str, nx: int) -> Slices:
     interval's correction and ``inv_n`` = 1/n_sub), ``etd`` (one ETDRK4 substep of length h:
     ``Ph``, ``Gh`` over h/2, ``P``, ``G`` over h; the friction torques' columns through the
     phi-functions, ``Qh`` = (h/2) phi1(A h/2) Fcol and ``F1``, ``F2``, ``F3`` = h f_i(A h) Fcol of
-    Cox and Matthews; friction rows ``Fsel``, torques ``Fc`` and 1/velocity scale ``inv_vs``)."""
+    Cox and Matthews; friction rows ``Fsel``, torques ``Fc``, 1/velocity scale ``inv_vs`` and
+    ``lin``, the friction slopes Fc / v_s already in A for the bodies at stick, else 0)."""
     nu, nf = len(SIM_U), SIM_FRICTION_CAP
     if kind == "zoh":
         return Slices([("Phi", (nx, nx)), ("Gamma", (nx, nu))])
@@ -173,7 +174,7 @@ def sim_plant_layout(kind: str, nx: int) -> Slices:
     if kind == "etd":
         return Slices([("Ph", (nx, nx)), ("Gh", (nx, nu)), ("P", (nx, nx)), ("G", (nx, nu)),
                        ("Qh", (nx, nf)), ("F1", (nx, nf)), ("F2", (nx, nf)), ("F3", (nx, nf)),
-                       ("Fsel", (nf, nx)), ("Fc", (nf, 1)), ("inv_vs", (1, 1))])
+                       ("Fsel", (nf, nx)), ("Fc", (nf, 1)), ("inv_vs", (1, 1)), ("lin", (nf, 1))])
     raise ValueError(f"plant step kind = {kind!r}; allowed: {list(SIM_PLANT_KINDS)}")
 
 
