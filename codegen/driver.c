@@ -136,9 +136,12 @@ CASADI_SYMBOL_EXPORT int haa_simulate(void* sample, void* sample_work, void* ste
 
 /* haa_simulate_adaptive: haa_simulate with the plant step's substeps chosen per sample.
  *
- * plant holds 2^n_rows tables of n_levels parameter vectors of plant_size reals: level j for
- * 2^j substeps per sample; table m where bit r of m is set when |stick_rows[r] . x| < thr at
- * the sample instant (stick_rows: n_rows rows of nx reals; the friction's split at stick).
+ * plant holds n_slopes^n_rows tables of n_levels parameter vectors of plant_size reals: level j
+ * for 2^j substeps per sample. The table is chosen at each sample instant from the friction
+ * rows (stick_rows: n_rows rows of nx reals, v_r = stick_rows[r] . x = velocity / v_s): digit r
+ * (base n_slopes) is the index of the entry of slopes nearest to 1 - tanh(v_r)^2, the tanh
+ * model's slope there relative to its slope at v = 0 (that slope sits in the table's exact
+ * linear part).
  * Per sample the state is advanced at two adjacent levels j and j + 1 (step doubling);
  * the finer result is kept when max_i |x_j - x_(j+1)|_i / scale_i <= tol (or at the finest
  * level), else j grows. The next sample starts one level coarser than this one ended. levels
@@ -166,7 +169,8 @@ CASADI_SYMBOL_EXPORT int haa_simulate_adaptive(
     casadi_int plant_size, casadi_int nx, casadi_int nc, casadi_int n_u, casadi_real* x,
     casadi_real* xc, const casadi_real* exo, casadi_int n_exo, const casadi_real* ctrl,
     const casadi_real* plant, const casadi_real* scale, casadi_real tol,
-    const casadi_real* stick_rows, casadi_int n_rows, casadi_real thr, casadi_real* y,
+    const casadi_real* stick_rows, casadi_int n_rows, const casadi_real* slopes,
+    casadi_int n_slopes, casadi_real* y,
     casadi_int n_y, casadi_real* levels, casadi_int n_steps) {
   casadi_int a1, r1, i1, w1, a2, r2, i2, w2, k, j, i, lev = 0, sz_arg, sz_res, sz_iw, sz_w;
   int flag = 0;
@@ -211,13 +215,22 @@ CASADI_SYMBOL_EXPORT int haa_simulate_adaptive(
       }
       for (j = 0; j < nc; ++j) xc[j] = xc2[j];
       {
-        casadi_int mask = 0, r;
+        casadi_int index = 0, r, q, radix = 1;
         for (r = 0; r < n_rows; ++r) {
-          casadi_real v = 0;
+          casadi_real v = 0, f, best = 2;
+          casadi_int pick = 0;
           for (i = 0; i < nx; ++i) v += stick_rows[r * nx + i] * x[i];
-          if (fabs(v) < thr) mask |= (casadi_int)1 << r;
+          f = tanh(v);
+          f = 1 - f * f;
+          for (q = 0; q < n_slopes; ++q)
+            if (fabs(f - slopes[q]) < best) {
+              best = fabs(f - slopes[q]);
+              pick = q;
+            }
+          index += pick * radix;
+          radix *= n_slopes;
         }
-        table = plant + mask * n_levels * plant_size;
+        table = plant + index * n_levels * plant_size;
       }
       if (lev > 0) --lev;
       if (lev > n_levels - 2) lev = n_levels - 2;

@@ -59,7 +59,10 @@ CSV_COLUMNS = ("time",) + L.SIM_COLUMNS[:-1]
 DEFAULT_RTOL = 1e-6          # step-doubling error bound of the friction integrator, relative
 MAX_SUBSTEPS = 4096
 LEVELS = 13                  # friction substeps per sample: 1, 2, 4, ..., 4096
-STICK = 0.5                  # |v| / v_s below which a body's friction slope joins the linear part
+# The friction slopes (fractions of Fc / v_s) a table may put into the exact linear part, by the
+# number of friction entries (1, 2, 3, 4): len(SLOPES)^n tables of LEVELS levels each
+SLOPES = ((0.0, 0.03, 0.06, 0.125, 0.25, 0.5, 0.75, 1.0), (0.0, 0.03, 0.06, 0.125, 0.25, 0.5, 0.75, 1.0),
+          (0.0, 0.1, 0.3, 1.0), (0.0, 1.0))
 MAX_SAMPLES = 50_000_000     # 7 columns of float64: 2.8 GB
 CHIRP_F0 = 0.1               # Hz
 JITTER_CLIP = 3.0            # the sample offsets are Gaussian clipped to +-3 sigma
@@ -153,6 +156,19 @@ def _pack(lay: L.Slices, **parts) -> np.ndarray:
         r, c = lay.shape[name]
         v[lay[name]] = _pad(np.reshape(val, (-1, 1)) if np.ndim(val) < 2 else val, r, c).ravel(order="F")
     return v
+
+
+def _pack_many(lay: L.Slices, parts: list[dict]) -> np.ndarray:
+    """:func:`_pack` of many parameter sets at once, concatenated (one row each, flattened)."""
+    out = np.zeros((len(parts), lay.size))
+    for name in parts[0]:
+        r, c = lay.shape[name]
+        vals = [np.asarray(p[name], float) for p in parts]
+        v = np.stack([x.reshape(-1, 1) if x.ndim < 2 else x for x in vals])
+        pad = np.zeros((len(parts), r, c))
+        pad[:, :v.shape[1], :v.shape[2]] = v
+        out[:, lay[name]] = pad.transpose(0, 2, 1).reshape(len(parts), r * c)
+    return out.ravel()
 
 
 def _zoh(A, B, h):
@@ -294,37 +310,43 @@ class _Setup:
         self.A, self.Bu = A, Bu
         self.Bu_d = loop.plant.Gamma[:, iu]
 
-    def etd_parts(self, n_sub, stuck=()):
-        """The ETDRK4 substep's matrices for n_sub substeps per sample (h = Ts / n_sub); the
-        friction entries ``stuck`` (indices) have their slope at v = 0, Fc / v_s, moved into the
-        linear part (integrated exactly) and out of the explicit stages."""
-        h = self.Ts / n_sub
+    def etd_levels(self, fractions=None):
+        """The ETDRK4 substep's matrices for 2^j substeps per sample, j = 0 .. LEVELS - 1
+        (h = Ts / 2^j); friction entry b has ``fractions[b]`` of its slope at v = 0, Fc / v_s,
+        moved into the linear part (integrated exactly) and out of the explicit stages.
+
+        One expm at the finest half step of the block matrix [[A, B, W, 0, 0], [0, 0, 0, 0, 0],
+        [0, 0, 0, I, 0], [0, 0, 0, 0, I], 0] (W: the friction columns), whose exponential's top
+        row is [e^(A h), Gamma(h), h phi_1 W, h^2 phi_2 W, h^3 phi_3 W]; every coarser step by
+        squaring (expm's own scaling and squaring, continued)."""
         sel, col, fc = self.friction
-        Fsel = np.zeros((len(sel), self.nx))
-        Fsel[np.arange(len(sel)), sel] = 1.0
-        lin = np.zeros(len(sel))
-        lin[list(stuck)] = fc[list(stuck)] / self.limits.friction_velocity
+        n, nu, m = self.nx, self.Bu.shape[1], len(sel)
+        Fsel = np.zeros((m, n))
+        Fsel[np.arange(m), sel] = 1.0
+        lin = (np.zeros(m) if fractions is None else np.asarray(fractions)) * fc / self.limits.friction_velocity
         A = self.A - col @ (lin[:, None] * Fsel)
-        Ph, Gh = _zoh(A, self.Bu, h / 2)
-        P, G = _zoh(A, self.Bu, h)
-        p1h = _phis(A, col, h / 2)[0]
-        p1, p2, p3 = _phis(A, col, h)
-        return dict(Ph=Ph, Gh=Gh, P=P, G=G, Qh=h / 2 * p1h, F1=h * (p1 - 3 * p2 + 4 * p3),
-                    F2=h * (p2 - 2 * p3), F3=h * (-p2 + 4 * p3), Fsel=Fsel, Fc=fc,
-                    inv_vs=1.0 / self.limits.friction_velocity, lin=lin)
-
-
-def _phis(A, W, h):
-    """phi_1(A h) W, phi_2(A h) W, phi_3(A h) W (phi_k(z) = sum_j z^j / (j + k)!), exactly from one
-    expm: the top row of exp(h [[A, W, 0, 0], [0, 0, I, 0], [0, 0, 0, I], [0, 0, 0, 0]]) is
-    [e^(A h), h phi_1 W, h^2 phi_2 W, h^3 phi_3 W]."""
-    n, m = W.shape
-    K = np.zeros((n + 3 * m, n + 3 * m))
-    K[:n, :n], K[:n, n:n + m] = A, W
-    K[n:n + m, n + m:n + 2 * m] = np.eye(m)
-    K[n + m:n + 2 * m, n + 2 * m:] = np.eye(m)
-    E = scipy.linalg.expm(K * h)
-    return tuple(E[:n, n + k * m:n + (k + 1) * m] / h ** (k + 1) for k in range(3))
+        size = n + nu + 3 * m
+        K = np.zeros((size, size))
+        o = n + nu
+        K[:n, :n], K[:n, n:o], K[:n, o:o + m] = A, self.Bu, col
+        K[o:o + m, o + m:o + 2 * m] = np.eye(m)
+        K[o + m:o + 2 * m, o + 2 * m:] = np.eye(m)
+        h = self.Ts / 2 ** LEVELS                       # the finest level's half step
+        E = scipy.linalg.expm(K * h)
+        steps = []
+        for _ in range(LEVELS + 1):                     # steps[i]: over Ts / 2^(LEVELS - i)
+            top = E[:n]
+            phis = [top[:, o + k * m:o + (k + 1) * m] / h ** (k + 1) for k in range(3)]
+            steps.append((top[:, :n], top[:, n:o], phis, h))
+            E, h = E @ E, 2 * h
+        out = []
+        for j in range(LEVELS):
+            P, G, (p1, p2, p3), hj = steps[LEVELS - j]
+            Ph, Gh, (p1h, _, _), _ = steps[LEVELS - j - 1]
+            out.append(dict(Ph=Ph, Gh=Gh, P=P, G=G, Qh=hj / 2 * p1h, F1=hj * (p1 - 3 * p2 + 4 * p3),
+                            F2=hj * (p2 - 2 * p3), F3=hj * (-p2 + 4 * p3), Fsel=Fsel, Fc=fc,
+                            inv_vs=1.0 / self.limits.friction_velocity, lin=lin))
+        return out
 
 
 def _run(loop, setup: _Setup, P_gain, D_gain):
@@ -341,8 +363,7 @@ def _run(loop, setup: _Setup, P_gain, D_gain):
     xc0 = np.zeros(cc)
 
     def run(n_sub, parts, kind=setup.kind, **kw):
-        plant = np.concatenate([_pack(L.sim_plant_layout(kind, cx), **p) for p in parts]) \
-            if isinstance(parts, list) else _pack(L.sim_plant_layout(kind, cx), **parts)
+        plant = parts if isinstance(parts, np.ndarray) else _pack(L.sim_plant_layout(kind, cx), **parts)
         y, _x, _xc, extra = ev.run_simulation(names["sample"], names[kind], n_sub, x0, xc0, setup.exo,
                                               ctrl, plant, **kw)
         return y, extra
@@ -359,14 +380,20 @@ def _run(loop, setup: _Setup, P_gain, D_gain):
     # add up over a run, hence the margin)
     _y, peaks = run(1, dict(Phi=loop.plant.Phi, Gamma=setup.Bu_d), kind="zoh", peaks=True)
     scale = np.maximum(_pad(peaks[:, None], cx, 1).ravel(), 1e-12)
-    # a table per set of bodies at stick (|v| < STICK v_s at the sample instant): there the
-    # friction's steep slope is in the exact linear part, elsewhere its torque is nearly constant
+    # the tanh's slope at the sample's velocity, to the nearest of SLOPES, goes into the exact
+    # linear part (a table per combination over the bodies), so that the explicit stages see
+    # only its change over the sample: at stick the slope is steep (Fc / v_s), while sliding
+    # the torque is nearly constant (the tables depend on the plant only: built once per setup)
     nf = len(setup.friction[0])
-    table = [setup.etd_parts(2 ** j, [b for b in range(nf) if mask >> b & 1])
-             for mask in range(2 ** nf) for j in range(LEVELS)]
+    slopes = SLOPES[min(len(SLOPES) - 1, nf - 1)]
+    if getattr(setup, "etd_table", None) is None or setup.etd_table[0] != cx:
+        K = len(slopes)              # table index: sum_r (slope index of row r) K^r (driver.c)
+        combos = [[slopes[i // K ** r % K] for r in range(nf)] for i in range(K ** nf)]
+        parts = [p for c in combos for p in setup.etd_levels(c)]
+        setup.etd_table = (cx, _pack_many(L.sim_plant_layout("etd", cx), parts))
     rows = np.zeros((nf, cx))
     rows[np.arange(nf), setup.friction[0]] = 1.0 / setup.limits.friction_velocity
-    y, lev = run(LEVELS, table, scale=scale, tol=setup.rtol, stick_rows=rows, stick_threshold=STICK)
+    y, lev = run(LEVELS, setup.etd_table[1], scale=scale, tol=setup.rtol, stick_rows=rows, slopes=slopes)
     subs = 2.0 ** lev
     return y, {"integrator": "etdrk4, substeps per sample by step doubling", "n_sub": float(subs.mean()),
                "n_sub_max": int(subs.max()), "rtol": setup.rtol}

@@ -367,13 +367,14 @@ class Evaluators:
     def run_simulation(self, sample: str, step: str, n_sub: int, x: np.ndarray, xc: np.ndarray,
                        exo: np.ndarray, ctrl: np.ndarray, plant: np.ndarray, *, scale=None,
                        tol: float | None = None, peaks: bool = False, stick_rows=None,
-                       stick_threshold: float = 0.0):
+                       slopes=(0.0,)):
         """Run the simulation's sample loop (``codegen/driver.c``): per column of ``exo``
         (n_exo x n_steps) the generated ``sample`` function, then ``step`` n_sub times
-        (``haa_simulate``); or, with ``scale`` and ``tol``, ``plant`` holding 2^len(stick_rows)
-        tables of n_sub parameter vectors of levels 0..n_sub-1 (2^level substeps), the table
-        chosen per sample by which |stick_rows . x| are below ``stick_threshold`` (a bit each),
-        the level by step doubling (``haa_simulate_adaptive``).
+        (``haa_simulate``); or, with ``scale`` and ``tol``, ``plant`` holding
+        len(slopes)^len(stick_rows) tables of n_sub parameter vectors of levels 0..n_sub-1
+        (2^level substeps), the table chosen per sample from the nearest entries of ``slopes`` to
+        1 - tanh(stick_rows . x)^2 (one base-len(slopes) digit per row), the level by step
+        doubling (``haa_simulate_adaptive``).
 
         Returns ``(y, x_final, xc_final, extra)`` with ``y`` of shape (n_steps, n_y); ``extra``
         is the level per sample (adaptive), the peak |x_i| over the sample instants
@@ -392,9 +393,10 @@ class Evaluators:
         levels = n_sub if adaptive else 0
         psize = fp.numel_in(3)
         rows = np.zeros((0, x.size)) if stick_rows is None else np.ascontiguousarray(stick_rows, dtype=float)
-        if adaptive and plant.size != 2 ** len(rows) * levels * psize:
+        slopes = np.ascontiguousarray(slopes, dtype=float)
+        if adaptive and plant.size != len(slopes) ** len(rows) * levels * psize:
             raise ValueError(f"{step}: plant table has {plant.size} values, expected "
-                             f"{2 ** len(rows)} x {levels} x {psize}")
+                             f"{len(slopes) ** len(rows)} x {levels} x {psize}")
         for arr, i, f, what in ((x, 0, fs, "x"), (xc, 1, fs, "xc"), (ctrl, 3, fs, "par"),
                                 (plant[:psize], 3, fp, "plant par")):
             if arr.size != f.numel_in(i):
@@ -403,7 +405,7 @@ class Evaluators:
             raise ValueError(f"{sample}: exo has {n_exo} rows, expected {fs.numel_in(2)}")
         if self.backend != "compiled":
             return self._simulate_vm(fs, fp, n_sub, x, xc, exo, ctrl, plant, scale, tol, peaks, rows,
-                                     stick_threshold)
+                                     slopes)
         lib = self._cdll()
         y = np.empty((n, n_y))
         vp = ctypes.c_void_p
@@ -416,7 +418,7 @@ class Evaluators:
                                              x.ctypes.data, xc.ctypes.data, exo.ctypes.data, n_exo,
                                              ctrl.ctypes.data, plant.ctypes.data, scale.ctypes.data,
                                              float(tol), rows.ctypes.data, len(rows),
-                                             float(stick_threshold), y.ctypes.data, n_y,
+                                             slopes.ctypes.data, len(slopes), y.ctypes.data, n_y,
                                              extra.ctypes.data, n)
         else:
             extra = np.empty(x.size) if peaks else None
@@ -429,7 +431,7 @@ class Evaluators:
         return y, x, xc, extra
 
     @staticmethod
-    def _simulate_vm(fs, fp, n_sub, x, xc, exo, ctrl, plant, scale, tol, peaks, rows, thr):
+    def _simulate_vm(fs, fp, n_sub, x, xc, exo, ctrl, plant, scale, tol, peaks, rows, slopes):
         """:meth:`run_simulation` in Python over CasADi's VM: the C drivers' loops, line by line."""
         n = exo.shape[1]
         y = np.empty((n, fs.numel_out(2)))
@@ -450,8 +452,9 @@ class Evaluators:
             if scale is None:
                 x = advance(x, u, exo[-1, k], plant, n_sub)
                 continue
-            mask = sum(1 << r for r in range(len(rows)) if abs(rows[r] @ x) < thr)
-            table = plant[mask * n_sub * psize:(mask + 1) * n_sub * psize]
+            index = sum(int(np.argmin(np.abs(1 - np.tanh(rows[r] @ x) ** 2 - slopes))) * len(slopes) ** r
+                        for r in range(len(rows)))
+            table = plant[index * n_sub * psize:(index + 1) * n_sub * psize]
             lev = min(max(lev - 1, 0), n_sub - 2)
             xa = advance(x, u, exo[-1, k], table[lev * psize:(lev + 1) * psize], 2 ** lev)
             while True:
@@ -478,7 +481,7 @@ class Evaluators:
             lib.haa_simulate.argtypes = [vp] * 4 + [ll] * 4 + [vp] * 3 + [ll] + [vp] * 3 + [ll] + [vp, ll]
             lib.haa_simulate_adaptive.restype = ctypes.c_int
             lib.haa_simulate_adaptive.argtypes = [vp] * 4 + [ll] * 5 + [vp] * 3 + [ll] + [vp] * 3 + \
-                [ctypes.c_double, vp, ll, ctypes.c_double, vp, ll, vp, ll]
+                [ctypes.c_double, vp, ll, vp, ll, vp, ll, vp, ll]
             self._lib = lib
         return self._lib
 
