@@ -119,7 +119,7 @@ def _compare(sim, ref, rtol, names=("theta", "velocity", "torque", "voltage", "c
 def test_voltage_and_current_limits_agree_with_solve_ivp():
     params = load_params()
     lim = Limits(V_max=8.0, I_max=1.5)
-    n = 150
+    n = 100
     sim = simulate(ClosedLoop(params, basis=False), 300.0, 4.0, limits=lim, experiment="torque-step",
                    amplitude=40.0, duration=(n - 1) * params.controller.Ts)
     t, ref = hand_simulation(params, 300.0, 4.0, lim, n, T_ff=40.0)
