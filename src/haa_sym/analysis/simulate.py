@@ -25,6 +25,7 @@ Example
 """
 from __future__ import annotations
 
+import functools
 import math
 from dataclasses import dataclass, field
 
@@ -179,6 +180,12 @@ def _zoh(A, B, h):
     return E[:n, :n], E[:n, n:]
 
 
+@functools.lru_cache(maxsize=16)
+def _continuous(plant, backend):
+    # a sweep of gains simulates one plant many times (evaluating it costs a CasADi call)
+    return continuous_plant(plant, backend)
+
+
 def _capacity(nx, nc):
     for cx, cc in L.SIM_CAPACITIES:
         if nx <= cx and nc <= cc:
@@ -219,7 +226,7 @@ class _Setup:
                                  "(the parameter file's [limits])")
         self.limits, self.experiment, self.duration, self.n, self.seed = lim, experiment, duration, n, seed
         top = params.plant.topology
-        cont = continuous_plant(params.plant, loop.backend)
+        cont = _continuous(params.plant, loop.backend)
         A, B = cont.A, cont.B
         self.nx = nx = A.shape[0]
         states, outs = cont.state_names, cont.output_names
