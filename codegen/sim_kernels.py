@@ -20,6 +20,14 @@ from haa_sym.compiled import layout as L
 # vector; the runtime picks n_sub so that |lambda_max delta| / n_sub <= 1/2, where 12 terms
 # leave a truncation below 1e-13 of the state.
 JITTER_TERMS = 12
+# SX (every multiply written out: the fastest code) up to capacity SX_MAX, MX above: there the
+# products with the padded dense matrices stay loops in the C (an SX sample function of
+# capacity 64 is 13,000 lines of C and made the library take 10x longer to compile)
+SX_MAX = 8
+
+
+def _sym(*caps):
+    return ca.SX if max(caps) <= SX_MAX else ca.MX
 
 
 def _mat(par, lay, name):
@@ -36,8 +44,9 @@ def sample_function(nx: int, nc: int) -> ca.Function:
     """``(x, xc, exo, par) -> (u, xc_next, y)`` of one sample (layout: SIM_EXO, SIM_U, SIM_COLUMNS,
     :func:`haa_sym.compiled.layout.sim_ctrl_layout`)."""
     lay = L.sim_ctrl_layout(nx, nc)
-    x, xc = ca.SX.sym("x", nx), ca.SX.sym("xc", nc)
-    exo, par = ca.SX.sym("exo", len(L.SIM_EXO)), ca.SX.sym("par", lay.size)
+    SYM = _sym(nx, nc)
+    x, xc = SYM.sym("x", nx), SYM.sym("xc", nc)
+    exo, par = SYM.sym("exo", len(L.SIM_EXO)), SYM.sym("par", lay.size)
     e = {n: exo[i] for i, n in enumerate(L.SIM_EXO)}
     row = {n: _mat(par, lay, n) for n in ("c_theta", "c_T", "c_I", "c_v", "c_emf")}
     p = {n: par[lay[n]][0] for n in ("V_max", "RI_max", "q_theta", "q_T")}
@@ -65,8 +74,9 @@ def plant_step_function(kind: str, nx: int, nc: int) -> ca.Function:
     ``delta``, s; unused by ``zoh`` and ``etd``)."""
     lay = L.sim_plant_layout(kind, nx)
     nu = len(L.SIM_U)
-    x, u, s = ca.SX.sym("x", nx), ca.SX.sym("u", nu), ca.SX.sym("s")
-    par = ca.SX.sym("par", lay.size)
+    SYM = _sym(nx)
+    x, u, s = SYM.sym("x", nx), SYM.sym("u", nu), SYM.sym("s")
+    par = SYM.sym("par", lay.size)
     m = {n: _mat(par, lay, n) for n in lay.names()}
     if kind == "zoh":
         x_next = ca.mtimes(m["Phi"], x) + ca.mtimes(m["Gamma"], u)

@@ -247,10 +247,10 @@ const casadi_int* haa_sim_sample_8_64_sparsity_in(casadi_int i);
 const casadi_int* haa_sim_sample_8_64_sparsity_out(casadi_int i);
 int haa_sim_sample_8_64_work(casadi_int *sz_arg, casadi_int* sz_res, casadi_int *sz_iw, casadi_int *sz_w);
 int haa_sim_sample_8_64_work_bytes(casadi_int *sz_arg, casadi_int* sz_res, casadi_int *sz_iw, casadi_int *sz_w);
-#define haa_sim_sample_8_64_SZ_ARG 4
-#define haa_sim_sample_8_64_SZ_RES 3
+#define haa_sim_sample_8_64_SZ_ARG 8
+#define haa_sim_sample_8_64_SZ_RES 4
 #define haa_sim_sample_8_64_SZ_IW 0
-#define haa_sim_sample_8_64_SZ_W 0
+#define haa_sim_sample_8_64_SZ_W 205
 int haa_sim_sample_16_64(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem);
 int haa_sim_sample_16_64_checkout(void);
 void haa_sim_sample_16_64_release(int mem);
@@ -265,10 +265,10 @@ const casadi_int* haa_sim_sample_16_64_sparsity_in(casadi_int i);
 const casadi_int* haa_sim_sample_16_64_sparsity_out(casadi_int i);
 int haa_sim_sample_16_64_work(casadi_int *sz_arg, casadi_int* sz_res, casadi_int *sz_iw, casadi_int *sz_w);
 int haa_sim_sample_16_64_work_bytes(casadi_int *sz_arg, casadi_int* sz_res, casadi_int *sz_iw, casadi_int *sz_w);
-#define haa_sim_sample_16_64_SZ_ARG 4
-#define haa_sim_sample_16_64_SZ_RES 3
+#define haa_sim_sample_16_64_SZ_ARG 8
+#define haa_sim_sample_16_64_SZ_RES 4
 #define haa_sim_sample_16_64_SZ_IW 0
-#define haa_sim_sample_16_64_SZ_W 0
+#define haa_sim_sample_16_64_SZ_W 205
 int haa_sim_zoh_16(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem);
 int haa_sim_zoh_16_checkout(void);
 void haa_sim_zoh_16_release(int mem);
@@ -283,10 +283,10 @@ const casadi_int* haa_sim_zoh_16_sparsity_in(casadi_int i);
 const casadi_int* haa_sim_zoh_16_sparsity_out(casadi_int i);
 int haa_sim_zoh_16_work(casadi_int *sz_arg, casadi_int* sz_res, casadi_int *sz_iw, casadi_int *sz_w);
 int haa_sim_zoh_16_work_bytes(casadi_int *sz_arg, casadi_int* sz_res, casadi_int *sz_iw, casadi_int *sz_w);
-#define haa_sim_zoh_16_SZ_ARG 4
-#define haa_sim_zoh_16_SZ_RES 1
+#define haa_sim_zoh_16_SZ_ARG 7
+#define haa_sim_zoh_16_SZ_RES 2
 #define haa_sim_zoh_16_SZ_IW 0
-#define haa_sim_zoh_16_SZ_W 0
+#define haa_sim_zoh_16_SZ_W 50
 int haa_sim_jitter_16(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem);
 int haa_sim_jitter_16_checkout(void);
 void haa_sim_jitter_16_release(int mem);
@@ -301,10 +301,10 @@ const casadi_int* haa_sim_jitter_16_sparsity_in(casadi_int i);
 const casadi_int* haa_sim_jitter_16_sparsity_out(casadi_int i);
 int haa_sim_jitter_16_work(casadi_int *sz_arg, casadi_int* sz_res, casadi_int *sz_iw, casadi_int *sz_w);
 int haa_sim_jitter_16_work_bytes(casadi_int *sz_arg, casadi_int* sz_res, casadi_int *sz_iw, casadi_int *sz_w);
-#define haa_sim_jitter_16_SZ_ARG 4
-#define haa_sim_jitter_16_SZ_RES 1
+#define haa_sim_jitter_16_SZ_ARG 7
+#define haa_sim_jitter_16_SZ_RES 2
 #define haa_sim_jitter_16_SZ_IW 0
-#define haa_sim_jitter_16_SZ_W 0
+#define haa_sim_jitter_16_SZ_W 260
 int haa_sim_etd_16(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem);
 int haa_sim_etd_16_checkout(void);
 void haa_sim_etd_16_release(int mem);
@@ -319,10 +319,10 @@ const casadi_int* haa_sim_etd_16_sparsity_in(casadi_int i);
 const casadi_int* haa_sim_etd_16_sparsity_out(casadi_int i);
 int haa_sim_etd_16_work(casadi_int *sz_arg, casadi_int* sz_res, casadi_int *sz_iw, casadi_int *sz_w);
 int haa_sim_etd_16_work_bytes(casadi_int *sz_arg, casadi_int* sz_res, casadi_int *sz_iw, casadi_int *sz_w);
-#define haa_sim_etd_16_SZ_ARG 4
-#define haa_sim_etd_16_SZ_RES 1
+#define haa_sim_etd_16_SZ_ARG 7
+#define haa_sim_etd_16_SZ_RES 2
 #define haa_sim_etd_16_SZ_IW 0
-#define haa_sim_etd_16_SZ_W 0
+#define haa_sim_etd_16_SZ_W 122
 void haa_sym_gen_casadi_version(int* major, int* minor, int* patch);
 int haa_sym_gen_casadi_int_size(void);
 int haa_sym_gen_casadi_real_size(void);
