@@ -92,7 +92,18 @@ def test_batch_summarises_each_point_like_single_runs():
         s = simulate(loop, P, 5.0, limits=lim, experiment="disturbance-step", duration=0.2)
         assert b.saturation_time[i] == s.saturation_time
         assert b.final_theta[i] == pytest.approx(s.theta[-20:].mean(), rel=1e-12)
-    assert list(b.status) == ["converging", "converging"]
+    assert list(b.status) == ["no limit cycle", "no limit cycle"]
+
+
+def test_batch_tells_growth_from_a_limit_cycle():
+    # beta = 3, P_gain = 20000, D_gain = 10 is linearly unstable (spectral radius 1.013 per
+    # sample): without limits the swing grows by 1.013^150 per quarter of 0.6 s; a 24 V supply
+    # bounds it to a limit cycle
+    loop = ClosedLoop(load_params().with_values(beta=3.0), basis=False)
+    free = simulate_batch(loop, 20000.0, 10.0, limits=Limits(), duration=0.6)
+    sat = simulate_batch(loop, 20000.0, 10.0, limits=Limits(V_max=24.0), duration=1.5)
+    assert free.growth[0] == pytest.approx(1.01258529 ** 150, rel=0.1)
+    assert list(sat.status) == ["limit cycle"] and sat.growth[0] == pytest.approx(1.0, abs=0.05)
 
 
 @pytest.mark.parametrize("kw, field", [

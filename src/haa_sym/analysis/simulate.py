@@ -102,9 +102,12 @@ class Simulation:
 @dataclass(frozen=True)
 class SimulationBatch:
     """Summaries of simulations at k gain points: ``saturation_time`` (s), ``cycle_amplitude``
-    (Nm), ``cycle_frequency`` (Hz), ``final_theta`` (rad, mean over the last tenth) and
-    ``status``: "converging", "limit cycle", "saturating" (in saturation over half the run
-    without a limit cycle) or "diverging" (a non-finite state)."""
+    (Nm), ``cycle_frequency`` (Hz), ``final_theta`` (rad, mean over the last tenth), ``growth``
+    (the torque's peak-to-peak swing over the last quarter of the run over the quarter's before)
+    and ``status``: "non-finite" (a state overflowed), else "limit cycle"
+    (:func:`detect_oscillation`), else "saturating" (in saturation over half the run), else "no
+    limit cycle". Whether a point converges is left to the caller: a run shorter than the loop's
+    slowest mode (HyQ: 11 s) cannot tell slow convergence from slow growth by itself."""
 
     P_gain: np.ndarray
     D_gain: np.ndarray
@@ -112,6 +115,7 @@ class SimulationBatch:
     cycle_amplitude: np.ndarray
     cycle_frequency: np.ndarray
     final_theta: np.ndarray
+    growth: np.ndarray
     status: np.ndarray
     meta: dict = field(repr=False)
 
@@ -484,7 +488,7 @@ def _batch(loop, P, D, limits, experiment, amplitude, duration, seed, rtol):
     setup = _Setup(loop, limits, experiment, amplitude, duration, seed, None)
     setup.rtol = _number("rtol", rtol, "a number in (0, 0.1)", lambda v: 0 < v < 0.1)
     k = P.size
-    sat, amp, freq, fin = (np.empty(k) for _ in range(4))
+    sat, amp, freq, fin, growth = (np.empty(k) for _ in range(5))
     status = np.empty(k, dtype=object)
     tail = max(1, setup.n // 10)
     for i in range(k):
@@ -492,8 +496,12 @@ def _batch(loop, P, D, limits, experiment, amplitude, duration, seed, rtol):
         r = _result(loop, setup, P[i], D[i], y, _info)
         sat[i], amp[i], freq[i] = r.saturation_time, r.cycle_amplitude, r.cycle_frequency
         fin[i] = r.theta[-tail:].mean()
-        status[i] = ("diverging" if not np.all(np.isfinite(y)) else "limit cycle" if r.limit_cycle
-                     else "saturating" if sat[i] > setup.duration / 2 else "converging")
+        # the torque's swing over the last quarter of the run and the quarter's before
+        q = max(1, setup.n // 4)
+        swing = [np.ptp(r.torque[-(j + 1) * q:len(r.torque) - j * q]) for j in (0, 1)]
+        growth[i] = swing[0] / swing[1] if swing[1] > 0 else (math.inf if swing[0] > 0 else 1.0)
+        status[i] = ("non-finite" if not np.all(np.isfinite(y)) else "limit cycle" if r.limit_cycle
+                     else "saturating" if sat[i] > setup.duration / 2 else "no limit cycle")
     meta = loop.provenance(analysis="simulate_batch", experiment=experiment, amplitude=setup.amplitude,
                            duration=setup.duration, seed=seed, limits=setup.limits.active)
-    return SimulationBatch(P, D, sat, amp, freq, fin, status.astype(str), meta)
+    return SimulationBatch(P, D, sat, amp, freq, fin, growth, status.astype(str), meta)
