@@ -13101,8 +13101,8 @@ CASADI_SYMBOL_EXPORT int haa_simulate(void* sample, void* sample_work, void* ste
 /* haa_simulate_adaptive: haa_simulate with the plant step's substeps chosen per sample.
  *
  * plant holds n_slopes^n_rows tables of n_levels parameter vectors of plant_size reals: level j
- * for 2^j substeps per sample. The table is chosen at each sample instant from the friction
- * rows (stick_rows: n_rows rows of nx reals, v_r = stick_rows[r] . x = velocity / v_s): digit r
+ * for 2^j substeps per sample. The table is chosen at the start of each substep from the
+ * friction rows (stick_rows: n_rows rows of nx reals, v_r = stick_rows[r] . x = velocity / v_s): digit r
  * (base n_slopes) is the index of the entry of slopes nearest to 1 - tanh(v_r)^2, the tanh
  * model's slope there relative to its slope at v = 0 (that slope sits in the table's exact
  * linear part).
@@ -13110,17 +13110,44 @@ CASADI_SYMBOL_EXPORT int haa_simulate(void* sample, void* sample_work, void* ste
  * the finer result is kept when max_i |x_j - x_(j+1)|_i / scale_i <= tol (or at the finest
  * level), else j grows. The next sample starts one level coarser than this one ended. levels
  * receives the level used per sample (as a real). Returns as haa_simulate; 3 if n_levels < 2. */
+/* the table of the friction's slopes at x (see haa_simulate_adaptive) */
+static const casadi_real* haa_table(const casadi_real* plant, casadi_int n_levels,
+                                    casadi_int plant_size, const casadi_real* x, casadi_int nx,
+                                    const casadi_real* rows, casadi_int n_rows,
+                                    const casadi_real* slopes, casadi_int n_slopes) {
+  casadi_int index = 0, r, q, i, radix = 1;
+  for (r = 0; r < n_rows; ++r) {
+    casadi_real v = 0, f, best = 2;
+    casadi_int pick = 0;
+    for (i = 0; i < nx; ++i) v += rows[r * nx + i] * x[i];
+    f = tanh(v);
+    f = 1 - f * f;
+    for (q = 0; q < n_slopes; ++q)
+      if (fabs(f - slopes[q]) < best) {
+        best = fabs(f - slopes[q]);
+        pick = q;
+      }
+    index += pick * radix;
+    radix *= n_slopes;
+  }
+  return plant + index * n_levels * plant_size;
+}
+
+/* x = x0 advanced by n_sub = 2^lev substeps, each with the table of the slopes at its start */
 static int haa_advance(void* step, const casadi_real** arg, casadi_real** res, casadi_int* iw,
                        casadi_real* w, const casadi_real* x0, const casadi_real* u,
-                       const casadi_real* s, const casadi_real* par, casadi_int n_sub,
+                       const casadi_real* s, const casadi_real* plant, casadi_int lev,
+                       casadi_int n_levels, casadi_int plant_size, const casadi_real* rows,
+                       casadi_int n_rows, const casadi_real* slopes, casadi_int n_slopes,
                        casadi_int nx, casadi_real* x, casadi_real* tmp) {
-  casadi_int j, i;
+  casadi_int j, i, n_sub = (casadi_int)1 << lev;
   for (i = 0; i < nx; ++i) x[i] = x0[i];
   for (j = 0; j < n_sub; ++j) {
     arg[0] = x;
     arg[1] = u;
     arg[2] = s;
-    arg[3] = par;
+    arg[3] = haa_table(plant, n_levels, plant_size, x, nx, rows, n_rows, slopes, n_slopes) +
+             lev * plant_size;
     res[0] = tmp;
     if (((haa_fn)step)(arg, res, iw, w, 0)) return 1;
     for (i = 0; i < nx; ++i) x[i] = tmp[i];
@@ -13142,7 +13169,6 @@ CASADI_SYMBOL_EXPORT int haa_simulate_adaptive(
   casadi_real** res;
   casadi_int* iw;
   casadi_real *w, *u, *xa, *xb, *tmp, *xc2;
-  const casadi_real* table;
   if (n_levels < 2) return 3;
   ((haa_work_fn)sample_work)(&a1, &r1, &i1, &w1);
   ((haa_work_fn)step_work)(&a2, &r2, &i2, &w2);
@@ -13178,32 +13204,14 @@ CASADI_SYMBOL_EXPORT int haa_simulate_adaptive(
         break;
       }
       for (j = 0; j < nc; ++j) xc[j] = xc2[j];
-      {
-        casadi_int index = 0, r, q, radix = 1;
-        for (r = 0; r < n_rows; ++r) {
-          casadi_real v = 0, f, best = 2;
-          casadi_int pick = 0;
-          for (i = 0; i < nx; ++i) v += stick_rows[r * nx + i] * x[i];
-          f = tanh(v);
-          f = 1 - f * f;
-          for (q = 0; q < n_slopes; ++q)
-            if (fabs(f - slopes[q]) < best) {
-              best = fabs(f - slopes[q]);
-              pick = q;
-            }
-          index += pick * radix;
-          radix *= n_slopes;
-        }
-        table = plant + index * n_levels * plant_size;
-      }
       if (lev > 0) --lev;
       if (lev > n_levels - 2) lev = n_levels - 2;
-      flag = haa_advance(step, arg, res, iw, w, x, u, e + n_exo - 1, table + lev * plant_size,
-                         (casadi_int)1 << lev, nx, xa, tmp);
+      flag = haa_advance(step, arg, res, iw, w, x, u, e + n_exo - 1, plant, lev, n_levels,
+                         plant_size, stick_rows, n_rows, slopes, n_slopes, nx, xa, tmp);
       while (!flag) {
         casadi_real err = 0;
-        flag = haa_advance(step, arg, res, iw, w, x, u, e + n_exo - 1,
-                           table + (lev + 1) * plant_size, (casadi_int)1 << (lev + 1), nx, xb, tmp);
+        flag = haa_advance(step, arg, res, iw, w, x, u, e + n_exo - 1, plant, lev + 1, n_levels,
+                           plant_size, stick_rows, n_rows, slopes, n_slopes, nx, xb, tmp);
         if (flag) break;
         for (i = 0; i < nx; ++i) {
           casadi_real d = (xa[i] - xb[i]) / scale[i];

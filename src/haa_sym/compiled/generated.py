@@ -372,9 +372,9 @@ class Evaluators:
         (n_exo x n_steps) the generated ``sample`` function, then ``step`` n_sub times
         (``haa_simulate``); or, with ``scale`` and ``tol``, ``plant`` holding
         len(slopes)^len(stick_rows) tables of n_sub parameter vectors of levels 0..n_sub-1
-        (2^level substeps), the table chosen per sample from the nearest entries of ``slopes`` to
-        1 - tanh(stick_rows . x)^2 (one base-len(slopes) digit per row), the level by step
-        doubling (``haa_simulate_adaptive``).
+        (2^level substeps), the table chosen per substep from the nearest entries of ``slopes``
+        to 1 - tanh(stick_rows . x)^2 (one base-len(slopes) digit per row), the level per sample
+        by step doubling (``haa_simulate_adaptive``).
 
         Returns ``(y, x_final, xc_final, extra)`` with ``y`` of shape (n_steps, n_y); ``extra``
         is the level per sample (adaptive), the peak |x_i| over the sample instants
@@ -439,9 +439,14 @@ class Evaluators:
         extra = np.empty(n) if scale is not None else (np.zeros(x.size) if peaks else None)
         lev = 0
 
-        def advance(x0, u, s, par, m):
-            for _ in range(m):
-                x0 = np.asarray(fp(x0, u, s, par)).ravel()
+        def table(xx):
+            index = sum(int(np.argmin(np.abs(1 - np.tanh(rows[r] @ xx) ** 2 - slopes))) * len(slopes) ** r
+                        for r in range(len(rows)))
+            return plant[index * n_sub * psize:(index + 1) * n_sub * psize]
+
+        def advance(x0, u, s, lev):
+            for _ in range(2 ** lev):
+                x0 = np.asarray(fp(x0, u, s, table(x0)[lev * psize:(lev + 1) * psize])).ravel()
             return x0
         for k in range(n):
             if peaks and scale is None:
@@ -450,15 +455,13 @@ class Evaluators:
             y[k] = np.asarray(yk).ravel()
             xc = np.asarray(xc_next).ravel()
             if scale is None:
-                x = advance(x, u, exo[-1, k], plant, n_sub)
+                for _ in range(n_sub):
+                    x = np.asarray(fp(x, u, exo[-1, k], plant)).ravel()
                 continue
-            index = sum(int(np.argmin(np.abs(1 - np.tanh(rows[r] @ x) ** 2 - slopes))) * len(slopes) ** r
-                        for r in range(len(rows)))
-            table = plant[index * n_sub * psize:(index + 1) * n_sub * psize]
             lev = min(max(lev - 1, 0), n_sub - 2)
-            xa = advance(x, u, exo[-1, k], table[lev * psize:(lev + 1) * psize], 2 ** lev)
+            xa = advance(x, u, exo[-1, k], lev)
             while True:
-                xb = advance(x, u, exo[-1, k], table[(lev + 1) * psize:(lev + 2) * psize], 2 ** (lev + 1))
+                xb = advance(x, u, exo[-1, k], lev + 1)
                 err = np.max(np.abs(xa - xb) / scale)
                 lev += 1
                 if err <= tol or lev + 1 >= n_sub:
