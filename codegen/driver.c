@@ -5,6 +5,7 @@
  * Schur-Cohn test itself; this loop runs all columns in one C call. Inputs other than the
  * column input are shared by every point. Column-major (CasADi's dense layout) throughout.
  */
+#include <math.h>
 #include <stdlib.h>
 
 typedef int (*haa_fn)(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w,
@@ -43,6 +44,225 @@ CASADI_SYMBOL_EXPORT int haa_columns(void* f, void* work, casadi_int n_in,
         flag = 1;
         break;
       }
+    }
+  }
+  free(arg);
+  free(res);
+  free(iw);
+  free(w);
+  return flag;
+}
+
+/* haa_simulate: the nonlinear simulation's sample loop (haa_sym.analysis.simulate).
+ *
+ * Per sample k: sample(x, xc, exo_k, ctrl) -> (u, xc_next, y_k), then step(x, u, exo_k[delta],
+ * plant) -> x applied n_sub times (the exact ZOH transition once, or n_sub integrating
+ * substeps). One C call runs a whole chunk: a call of a generated function through CasADi costs
+ * more than the step itself. x (nx) and xc (nc) hold the initial state and return the final
+ * one; exo holds n_steps columns of n_exo reals (delta is its last row); y receives n_steps
+ * columns of n_y reals; xpeak (nx reals, or NULL) receives max_k |x_i| over the sample instants.
+ * Returns 0, 1 if a function failed, 2 if out of memory. */
+CASADI_SYMBOL_EXPORT int haa_simulate(void* sample, void* sample_work, void* step, void* step_work,
+                                      casadi_int n_sub, casadi_int nx, casadi_int nc, casadi_int n_u,
+                                      casadi_real* x, casadi_real* xc, const casadi_real* exo,
+                                      casadi_int n_exo, const casadi_real* ctrl,
+                                      const casadi_real* plant, casadi_real* y, casadi_int n_y,
+                                      casadi_real* xpeak, casadi_int n_steps) {
+  casadi_int a1, r1, i1, w1, a2, r2, i2, w2, k, j, sz_arg, sz_res, sz_iw, sz_w;
+  int flag = 0;
+  const casadi_real** arg;
+  casadi_real** res;
+  casadi_int* iw;
+  casadi_real *w, *u, *x2, *xc2;
+  ((haa_work_fn)sample_work)(&a1, &r1, &i1, &w1);
+  ((haa_work_fn)step_work)(&a2, &r2, &i2, &w2);
+  sz_arg = a1 > a2 ? a1 : a2;
+  sz_res = r1 > r2 ? r1 : r2;
+  sz_iw = i1 > i2 ? i1 : i2;
+  sz_w = w1 > w2 ? w1 : w2;
+  if (sz_arg < 4) sz_arg = 4;
+  if (sz_res < 3) sz_res = 3;
+  arg = (const casadi_real**)malloc(sizeof(casadi_real*) * sz_arg);
+  res = (casadi_real**)malloc(sizeof(casadi_real*) * sz_res);
+  iw = (casadi_int*)malloc(sizeof(casadi_int) * (sz_iw > 0 ? sz_iw : 1));
+  w = (casadi_real*)malloc(sizeof(casadi_real) * ((sz_w > 0 ? sz_w : 1) + n_u + nx + nc));
+  if (!arg || !res || !iw || !w) {
+    flag = 2;
+  } else {
+    u = w + (sz_w > 0 ? sz_w : 1);
+    x2 = u + n_u;
+    xc2 = x2 + nx;
+    if (xpeak)
+      for (j = 0; j < nx; ++j) xpeak[j] = 0;
+    for (k = 0; k < n_steps && !flag; ++k) {
+      const casadi_real* e = exo + k * n_exo;
+      if (xpeak)
+        for (j = 0; j < nx; ++j) xpeak[j] = fabs(x[j]) > xpeak[j] ? fabs(x[j]) : xpeak[j];
+      arg[0] = x;
+      arg[1] = xc;
+      arg[2] = e;
+      arg[3] = ctrl;
+      res[0] = u;
+      res[1] = xc2;
+      res[2] = y + k * n_y;
+      if (((haa_fn)sample)(arg, res, iw, w, 0)) {
+        flag = 1;
+        break;
+      }
+      for (j = 0; j < nc; ++j) xc[j] = xc2[j];
+      for (j = 0; j < n_sub; ++j) {
+        arg[0] = x;
+        arg[1] = u;
+        arg[2] = e + n_exo - 1;
+        arg[3] = plant;
+        res[0] = x2;
+        if (((haa_fn)step)(arg, res, iw, w, 0)) {
+          flag = 1;
+          break;
+        }
+        {
+          casadi_int i;
+          for (i = 0; i < nx; ++i) x[i] = x2[i];
+        }
+      }
+    }
+  }
+  free(arg);
+  free(res);
+  free(iw);
+  free(w);
+  return flag;
+}
+
+/* haa_simulate_adaptive: haa_simulate with the plant step's substeps chosen per sample.
+ *
+ * plant holds n_slopes^n_rows tables of n_levels parameter vectors of plant_size reals: level j
+ * for 2^j substeps per sample. The table is chosen at the start of each substep from the
+ * friction rows (stick_rows: n_rows rows of nx reals, v_r = stick_rows[r] . x = velocity / v_s): digit r
+ * (base n_slopes) is the index of the entry of slopes nearest to 1 - tanh(v_r)^2, the tanh
+ * model's slope there relative to its slope at v = 0 (that slope sits in the table's exact
+ * linear part).
+ * Per sample the state is advanced at two adjacent levels j and j + 1 (step doubling);
+ * the finer result is kept when max_i |x_j - x_(j+1)|_i / scale_i <= tol (or at the finest
+ * level), else j grows. The next sample starts one level coarser than this one ended. levels
+ * receives the level used per sample (as a real). Returns as haa_simulate; 3 if n_levels < 2. */
+/* the table of the friction's slopes at x (see haa_simulate_adaptive) */
+static const casadi_real* haa_table(const casadi_real* plant, casadi_int n_levels,
+                                    casadi_int plant_size, const casadi_real* x, casadi_int nx,
+                                    const casadi_real* rows, casadi_int n_rows,
+                                    const casadi_real* slopes, casadi_int n_slopes) {
+  casadi_int index = 0, r, q, i, radix = 1;
+  for (r = 0; r < n_rows; ++r) {
+    casadi_real v = 0, f, best = 2;
+    casadi_int pick = 0;
+    for (i = 0; i < nx; ++i) v += rows[r * nx + i] * x[i];
+    f = tanh(v);
+    f = 1 - f * f;
+    for (q = 0; q < n_slopes; ++q)
+      if (fabs(f - slopes[q]) < best) {
+        best = fabs(f - slopes[q]);
+        pick = q;
+      }
+    index += pick * radix;
+    radix *= n_slopes;
+  }
+  return plant + index * n_levels * plant_size;
+}
+
+/* x = x0 advanced by n_sub = 2^lev substeps, each with the table of the slopes at its start */
+static int haa_advance(void* step, const casadi_real** arg, casadi_real** res, casadi_int* iw,
+                       casadi_real* w, const casadi_real* x0, const casadi_real* u,
+                       const casadi_real* s, const casadi_real* plant, casadi_int lev,
+                       casadi_int n_levels, casadi_int plant_size, const casadi_real* rows,
+                       casadi_int n_rows, const casadi_real* slopes, casadi_int n_slopes,
+                       casadi_int nx, casadi_real* x, casadi_real* tmp) {
+  casadi_int j, i, n_sub = (casadi_int)1 << lev;
+  for (i = 0; i < nx; ++i) x[i] = x0[i];
+  for (j = 0; j < n_sub; ++j) {
+    arg[0] = x;
+    arg[1] = u;
+    arg[2] = s;
+    arg[3] = haa_table(plant, n_levels, plant_size, x, nx, rows, n_rows, slopes, n_slopes) +
+             lev * plant_size;
+    res[0] = tmp;
+    if (((haa_fn)step)(arg, res, iw, w, 0)) return 1;
+    for (i = 0; i < nx; ++i) x[i] = tmp[i];
+  }
+  return 0;
+}
+
+CASADI_SYMBOL_EXPORT int haa_simulate_adaptive(
+    void* sample, void* sample_work, void* step, void* step_work, casadi_int n_levels,
+    casadi_int plant_size, casadi_int nx, casadi_int nc, casadi_int n_u, casadi_real* x,
+    casadi_real* xc, const casadi_real* exo, casadi_int n_exo, const casadi_real* ctrl,
+    const casadi_real* plant, const casadi_real* scale, casadi_real tol,
+    const casadi_real* stick_rows, casadi_int n_rows, const casadi_real* slopes,
+    casadi_int n_slopes, casadi_real* y,
+    casadi_int n_y, casadi_real* levels, casadi_int n_steps) {
+  casadi_int a1, r1, i1, w1, a2, r2, i2, w2, k, j, i, lev = 0, sz_arg, sz_res, sz_iw, sz_w;
+  int flag = 0;
+  const casadi_real** arg;
+  casadi_real** res;
+  casadi_int* iw;
+  casadi_real *w, *u, *xa, *xb, *tmp, *xc2;
+  if (n_levels < 2) return 3;
+  ((haa_work_fn)sample_work)(&a1, &r1, &i1, &w1);
+  ((haa_work_fn)step_work)(&a2, &r2, &i2, &w2);
+  sz_arg = a1 > a2 ? a1 : a2;
+  sz_res = r1 > r2 ? r1 : r2;
+  sz_iw = i1 > i2 ? i1 : i2;
+  sz_w = w1 > w2 ? w1 : w2;
+  if (sz_arg < 4) sz_arg = 4;
+  if (sz_res < 3) sz_res = 3;
+  arg = (const casadi_real**)malloc(sizeof(casadi_real*) * sz_arg);
+  res = (casadi_real**)malloc(sizeof(casadi_real*) * sz_res);
+  iw = (casadi_int*)malloc(sizeof(casadi_int) * (sz_iw > 0 ? sz_iw : 1));
+  w = (casadi_real*)malloc(sizeof(casadi_real) * ((sz_w > 0 ? sz_w : 1) + n_u + 3 * nx + nc));
+  if (!arg || !res || !iw || !w) {
+    flag = 2;
+  } else {
+    u = w + (sz_w > 0 ? sz_w : 1);
+    xa = u + n_u;
+    xb = xa + nx;
+    tmp = xb + nx;
+    xc2 = tmp + nx;
+    for (k = 0; k < n_steps && !flag; ++k) {
+      const casadi_real* e = exo + k * n_exo;
+      arg[0] = x;
+      arg[1] = xc;
+      arg[2] = e;
+      arg[3] = ctrl;
+      res[0] = u;
+      res[1] = xc2;
+      res[2] = y + k * n_y;
+      if (((haa_fn)sample)(arg, res, iw, w, 0)) {
+        flag = 1;
+        break;
+      }
+      for (j = 0; j < nc; ++j) xc[j] = xc2[j];
+      if (lev > 0) --lev;
+      if (lev > n_levels - 2) lev = n_levels - 2;
+      flag = haa_advance(step, arg, res, iw, w, x, u, e + n_exo - 1, plant, lev, n_levels,
+                         plant_size, stick_rows, n_rows, slopes, n_slopes, nx, xa, tmp);
+      while (!flag) {
+        casadi_real err = 0;
+        flag = haa_advance(step, arg, res, iw, w, x, u, e + n_exo - 1, plant, lev + 1, n_levels,
+                           plant_size, stick_rows, n_rows, slopes, n_slopes, nx, xb, tmp);
+        if (flag) break;
+        for (i = 0; i < nx; ++i) {
+          casadi_real d = (xa[i] - xb[i]) / scale[i];
+          if (d < 0) d = -d;
+          if (!(d <= err)) err = d; /* NaN propagates as a failure to converge */
+        }
+        if (err <= tol || lev + 2 >= n_levels) {
+          ++lev;
+          break;
+        }
+        for (i = 0; i < nx; ++i) xa[i] = xb[i];
+        ++lev;
+      }
+      for (i = 0; i < nx; ++i) x[i] = xb[i];
+      levels[k] = (casadi_real)lev;
     }
   }
   free(arg);

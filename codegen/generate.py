@@ -23,6 +23,7 @@ import casadi as ca
 import sympy
 
 from codegen.kernels import decision_function, loop_coefficient_function
+from codegen.sim_kernels import simulation_functions
 from haa_sym.model.params import builtin_actuators, load_params
 from haa_sym.symbolic.chain import symbolic_model
 from haa_sym.symbolic.symbolic_to_casadi import plant_function
@@ -44,6 +45,7 @@ SOURCES = (
     "src/haa_sym/symbolic/model.py",
     "src/haa_sym/symbolic/symbolic_to_casadi.py",
     "codegen/kernels.py",
+    "codegen/sim_kernels.py",
     "codegen/generate.py",
     "codegen/driver.c",
 )
@@ -65,6 +67,7 @@ def functions(topologies: dict[str, dict] | None = None) -> list[ca.Function]:
     fns = [plant_function(symbolic_model(t["topology"]), t["function"]) for _, t in sorted(topologies.items())]
     fns += [loop_coefficient_function()]
     fns += [decision_function(cap) for cap in CAPACITIES]
+    fns += simulation_functions()
     return fns
 
 

@@ -46,6 +46,15 @@ extern "C" {
 #define casadi_f0 CASADI_PREFIX(f0)
 #define casadi_f1 CASADI_PREFIX(f1)
 #define casadi_f10 CASADI_PREFIX(f10)
+#define casadi_f11 CASADI_PREFIX(f11)
+#define casadi_f12 CASADI_PREFIX(f12)
+#define casadi_f13 CASADI_PREFIX(f13)
+#define casadi_f14 CASADI_PREFIX(f14)
+#define casadi_f15 CASADI_PREFIX(f15)
+#define casadi_f16 CASADI_PREFIX(f16)
+#define casadi_f17 CASADI_PREFIX(f17)
+#define casadi_f18 CASADI_PREFIX(f18)
+#define casadi_f19 CASADI_PREFIX(f19)
 #define casadi_f2 CASADI_PREFIX(f2)
 #define casadi_f3 CASADI_PREFIX(f3)
 #define casadi_f4 CASADI_PREFIX(f4)
@@ -56,6 +65,7 @@ extern "C" {
 #define casadi_f9 CASADI_PREFIX(f9)
 #define casadi_fabs CASADI_PREFIX(fabs)
 #define casadi_fmax CASADI_PREFIX(fmax)
+#define casadi_fmin CASADI_PREFIX(fmin)
 #define casadi_mmax CASADI_PREFIX(mmax)
 #define casadi_mtimes_dense CASADI_PREFIX(mtimes_dense)
 #define casadi_s0 CASADI_PREFIX(s0)
@@ -67,7 +77,20 @@ extern "C" {
 #define casadi_s14 CASADI_PREFIX(s14)
 #define casadi_s15 CASADI_PREFIX(s15)
 #define casadi_s16 CASADI_PREFIX(s16)
+#define casadi_s17 CASADI_PREFIX(s17)
+#define casadi_s18 CASADI_PREFIX(s18)
+#define casadi_s19 CASADI_PREFIX(s19)
 #define casadi_s2 CASADI_PREFIX(s2)
+#define casadi_s20 CASADI_PREFIX(s20)
+#define casadi_s21 CASADI_PREFIX(s21)
+#define casadi_s22 CASADI_PREFIX(s22)
+#define casadi_s23 CASADI_PREFIX(s23)
+#define casadi_s24 CASADI_PREFIX(s24)
+#define casadi_s25 CASADI_PREFIX(s25)
+#define casadi_s26 CASADI_PREFIX(s26)
+#define casadi_s27 CASADI_PREFIX(s27)
+#define casadi_s28 CASADI_PREFIX(s28)
+#define casadi_s29 CASADI_PREFIX(s29)
 #define casadi_s3 CASADI_PREFIX(s3)
 #define casadi_s4 CASADI_PREFIX(s4)
 #define casadi_s5 CASADI_PREFIX(s5)
@@ -173,6 +196,15 @@ casadi_real casadi_mmax(const casadi_real* x, casadi_int n, casadi_int is_dense)
   return casadi_vfmax(x, n, r);
 }
 
+casadi_real casadi_fmin(casadi_real x, casadi_real y) {
+/* Pre-c99 compatibility */
+#if __STDC_VERSION__ < 199901L
+  return x<y ? x : y;
+#else
+  return fmin(x, y);
+#endif
+}
+
 /* Configuration this file was compiled with */
 CASADI_SYMBOL_EXPORT void haa_sym_gen_casadi_version(int* major, int* minor, int* patch) {
   *major = 3;
@@ -199,6 +231,19 @@ static const casadi_int casadi_s13[3] = {17, 8, 1};
 static const casadi_int casadi_s14[3] = {4, 1, 1};
 static const casadi_int casadi_s15[3] = {33, 8, 1};
 static const casadi_int casadi_s16[3] = {65, 8, 1};
+static const casadi_int casadi_s17[3] = {8, 1, 1};
+static const casadi_int casadi_s18[3] = {5, 1, 1};
+static const casadi_int casadi_s19[3] = {164, 1, 1};
+static const casadi_int casadi_s20[3] = {7, 1, 1};
+static const casadi_int casadi_s21[3] = {80, 1, 1};
+static const casadi_int casadi_s22[3] = {161, 1, 1};
+static const casadi_int casadi_s23[3] = {329, 1, 1};
+static const casadi_int casadi_s24[3] = {64, 1, 1};
+static const casadi_int casadi_s25[3] = {4532, 1, 1};
+static const casadi_int casadi_s26[3] = {4572, 1, 1};
+static const casadi_int casadi_s27[3] = {288, 1, 1};
+static const casadi_int casadi_s28[3] = {577, 1, 1};
+static const casadi_int casadi_s29[3] = {905, 1, 1};
 
 static const casadi_real casadi_c0[17] = 
   {-1., -1., 1., 1., -1., -1., 1., 1.,
@@ -281,7 +326,7 @@ static const casadi_real casadi_c11[65] =
   1., -1., -1., 1., 1., -1., -1., 1.,
   1.};
 
-static const casadi_real casadi_zeros[520] = 
+static const casadi_real casadi_zeros[4572] = 
   {0.};
 
 /* haa_plant_1c37b2fe0b35:(p[12])->(A[5x5],B[5x3],C[4x5],VC0) */
@@ -6620,6 +6665,6298 @@ CASADI_SYMBOL_EXPORT int haa_decide64_work_bytes(casadi_int *sz_arg, casadi_int*
   return 0;
 }
 
+/* haa_sim_sample_8_8:(x[8],xc[8],exo[5],par[164])->(u[2],xc_next[8],y[7]) */
+static int casadi_f11(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
+  casadi_real a00, a01, a02, a03, a04, a05, a06, a07, a08, a09, a10, a11;
+  casadi_real a12, a13, a14, a15, a16, a17, a18, a19, a20, a21, a22, a23;
+  casadi_real a24, a25;
+  a00=arg[3]? arg[3][96] : 0;
+  a01=arg[1]? arg[1][0] : 0;
+  a00=(a00*a01);
+  a02=arg[3]? arg[3][98] : 0;
+  a03=arg[1]? arg[1][1] : 0;
+  a02=(a02*a03);
+  a00=(a00+a02);
+  a02=arg[3]? arg[3][100] : 0;
+  a04=arg[1]? arg[1][2] : 0;
+  a02=(a02*a04);
+  a00=(a00+a02);
+  a02=arg[3]? arg[3][102] : 0;
+  a05=arg[1]? arg[1][3] : 0;
+  a02=(a02*a05);
+  a00=(a00+a02);
+  a02=arg[3]? arg[3][104] : 0;
+  a06=arg[1]? arg[1][4] : 0;
+  a02=(a02*a06);
+  a00=(a00+a02);
+  a02=arg[3]? arg[3][106] : 0;
+  a07=arg[1]? arg[1][5] : 0;
+  a02=(a02*a07);
+  a00=(a00+a02);
+  a02=arg[3]? arg[3][108] : 0;
+  a08=arg[1]? arg[1][6] : 0;
+  a02=(a02*a08);
+  a00=(a00+a02);
+  a02=arg[3]? arg[3][110] : 0;
+  a09=arg[1]? arg[1][7] : 0;
+  a02=(a02*a09);
+  a00=(a00+a02);
+  a02=arg[3]? arg[3][112] : 0;
+  a10=0.;
+  a11=arg[3]? arg[3][162] : 0;
+  a12=(a10<a11);
+  a13=arg[3]? arg[3][120] : 0;
+  a14=arg[0]? arg[0][0] : 0;
+  a13=(a13*a14);
+  a15=arg[3]? arg[3][121] : 0;
+  a16=arg[0]? arg[0][1] : 0;
+  a15=(a15*a16);
+  a13=(a13+a15);
+  a15=arg[3]? arg[3][122] : 0;
+  a17=arg[0]? arg[0][2] : 0;
+  a15=(a15*a17);
+  a13=(a13+a15);
+  a15=arg[3]? arg[3][123] : 0;
+  a18=arg[0]? arg[0][3] : 0;
+  a15=(a15*a18);
+  a13=(a13+a15);
+  a15=arg[3]? arg[3][124] : 0;
+  a19=arg[0]? arg[0][4] : 0;
+  a15=(a15*a19);
+  a13=(a13+a15);
+  a15=arg[3]? arg[3][125] : 0;
+  a20=arg[0]? arg[0][5] : 0;
+  a15=(a15*a20);
+  a13=(a13+a15);
+  a15=arg[3]? arg[3][126] : 0;
+  a21=arg[0]? arg[0][6] : 0;
+  a15=(a15*a21);
+  a13=(a13+a15);
+  a15=arg[3]? arg[3][127] : 0;
+  a22=arg[0]? arg[0][7] : 0;
+  a15=(a15*a22);
+  a13=(a13+a15);
+  a15=(a13/a11);
+  a23=5.0000000000000000e-01;
+  a15=(a15+a23);
+  a15=floor(a15);
+  a15=(a15*a11);
+  a15=(a12?a15:0);
+  a12=(!a12);
+  a12=(a12?a13:0);
+  a15=(a15+a12);
+  a02=(a02*a15);
+  a12=arg[3]? arg[3][114] : 0;
+  a13=arg[3]? arg[3][163] : 0;
+  a10=(a10<a13);
+  a11=arg[3]? arg[3][128] : 0;
+  a11=(a11*a14);
+  a24=arg[3]? arg[3][129] : 0;
+  a24=(a24*a16);
+  a11=(a11+a24);
+  a24=arg[3]? arg[3][130] : 0;
+  a24=(a24*a17);
+  a11=(a11+a24);
+  a24=arg[3]? arg[3][131] : 0;
+  a24=(a24*a18);
+  a11=(a11+a24);
+  a24=arg[3]? arg[3][132] : 0;
+  a24=(a24*a19);
+  a11=(a11+a24);
+  a24=arg[3]? arg[3][133] : 0;
+  a24=(a24*a20);
+  a11=(a11+a24);
+  a24=arg[3]? arg[3][134] : 0;
+  a24=(a24*a21);
+  a11=(a11+a24);
+  a24=arg[3]? arg[3][135] : 0;
+  a24=(a24*a22);
+  a11=(a11+a24);
+  a24=arg[2]? arg[2][3] : 0;
+  a11=(a11+a24);
+  a24=(a11/a13);
+  a24=(a24+a23);
+  a24=floor(a24);
+  a24=(a24*a13);
+  a24=(a10?a24:0);
+  a10=(!a10);
+  a10=(a10?a11:0);
+  a24=(a24+a10);
+  a12=(a12*a24);
+  a02=(a02+a12);
+  a12=arg[3]? arg[3][116] : 0;
+  a10=arg[2]? arg[2][1] : 0;
+  a12=(a12*a10);
+  a02=(a02+a12);
+  a12=arg[3]? arg[3][118] : 0;
+  a11=arg[2]? arg[2][2] : 0;
+  a12=(a12*a11);
+  a02=(a02+a12);
+  a00=(a00+a02);
+  a02=arg[3]? arg[3][160] : 0;
+  a12=(-a02);
+  a13=arg[3]? arg[3][152] : 0;
+  a13=(a13*a14);
+  a23=arg[3]? arg[3][153] : 0;
+  a23=(a23*a16);
+  a13=(a13+a23);
+  a23=arg[3]? arg[3][154] : 0;
+  a23=(a23*a17);
+  a13=(a13+a23);
+  a23=arg[3]? arg[3][155] : 0;
+  a23=(a23*a18);
+  a13=(a13+a23);
+  a23=arg[3]? arg[3][156] : 0;
+  a23=(a23*a19);
+  a13=(a13+a23);
+  a23=arg[3]? arg[3][157] : 0;
+  a23=(a23*a20);
+  a13=(a13+a23);
+  a23=arg[3]? arg[3][158] : 0;
+  a23=(a23*a21);
+  a13=(a13+a23);
+  a23=arg[3]? arg[3][159] : 0;
+  a23=(a23*a22);
+  a13=(a13+a23);
+  a23=arg[3]? arg[3][161] : 0;
+  a25=(a13-a23);
+  a12=casadi_fmax(a12,a25);
+  a12=casadi_fmax(a00,a12);
+  a23=(a23+a13);
+  a02=casadi_fmin(a02,a23);
+  a12=casadi_fmin(a12,a02);
+  if (res[0]!=0) res[0][0]=a12;
+  a02=arg[2]? arg[2][0] : 0;
+  if (res[0]!=0) res[0][1]=a02;
+  a02=arg[3]? arg[3][0] : 0;
+  a02=(a02*a01);
+  a23=arg[3]? arg[3][8] : 0;
+  a23=(a23*a03);
+  a02=(a02+a23);
+  a23=arg[3]? arg[3][16] : 0;
+  a23=(a23*a04);
+  a02=(a02+a23);
+  a23=arg[3]? arg[3][24] : 0;
+  a23=(a23*a05);
+  a02=(a02+a23);
+  a23=arg[3]? arg[3][32] : 0;
+  a23=(a23*a06);
+  a02=(a02+a23);
+  a23=arg[3]? arg[3][40] : 0;
+  a23=(a23*a07);
+  a02=(a02+a23);
+  a23=arg[3]? arg[3][48] : 0;
+  a23=(a23*a08);
+  a02=(a02+a23);
+  a23=arg[3]? arg[3][56] : 0;
+  a23=(a23*a09);
+  a02=(a02+a23);
+  a23=arg[3]? arg[3][64] : 0;
+  a23=(a23*a15);
+  a13=arg[3]? arg[3][72] : 0;
+  a13=(a13*a24);
+  a23=(a23+a13);
+  a13=arg[3]? arg[3][80] : 0;
+  a13=(a13*a10);
+  a23=(a23+a13);
+  a13=arg[3]? arg[3][88] : 0;
+  a13=(a13*a11);
+  a23=(a23+a13);
+  a02=(a02+a23);
+  if (res[1]!=0) res[1][0]=a02;
+  a02=arg[3]? arg[3][1] : 0;
+  a02=(a02*a01);
+  a23=arg[3]? arg[3][9] : 0;
+  a23=(a23*a03);
+  a02=(a02+a23);
+  a23=arg[3]? arg[3][17] : 0;
+  a23=(a23*a04);
+  a02=(a02+a23);
+  a23=arg[3]? arg[3][25] : 0;
+  a23=(a23*a05);
+  a02=(a02+a23);
+  a23=arg[3]? arg[3][33] : 0;
+  a23=(a23*a06);
+  a02=(a02+a23);
+  a23=arg[3]? arg[3][41] : 0;
+  a23=(a23*a07);
+  a02=(a02+a23);
+  a23=arg[3]? arg[3][49] : 0;
+  a23=(a23*a08);
+  a02=(a02+a23);
+  a23=arg[3]? arg[3][57] : 0;
+  a23=(a23*a09);
+  a02=(a02+a23);
+  a23=arg[3]? arg[3][65] : 0;
+  a23=(a23*a15);
+  a13=arg[3]? arg[3][73] : 0;
+  a13=(a13*a24);
+  a23=(a23+a13);
+  a13=arg[3]? arg[3][81] : 0;
+  a13=(a13*a10);
+  a23=(a23+a13);
+  a13=arg[3]? arg[3][89] : 0;
+  a13=(a13*a11);
+  a23=(a23+a13);
+  a02=(a02+a23);
+  if (res[1]!=0) res[1][1]=a02;
+  a02=arg[3]? arg[3][2] : 0;
+  a02=(a02*a01);
+  a23=arg[3]? arg[3][10] : 0;
+  a23=(a23*a03);
+  a02=(a02+a23);
+  a23=arg[3]? arg[3][18] : 0;
+  a23=(a23*a04);
+  a02=(a02+a23);
+  a23=arg[3]? arg[3][26] : 0;
+  a23=(a23*a05);
+  a02=(a02+a23);
+  a23=arg[3]? arg[3][34] : 0;
+  a23=(a23*a06);
+  a02=(a02+a23);
+  a23=arg[3]? arg[3][42] : 0;
+  a23=(a23*a07);
+  a02=(a02+a23);
+  a23=arg[3]? arg[3][50] : 0;
+  a23=(a23*a08);
+  a02=(a02+a23);
+  a23=arg[3]? arg[3][58] : 0;
+  a23=(a23*a09);
+  a02=(a02+a23);
+  a23=arg[3]? arg[3][66] : 0;
+  a23=(a23*a15);
+  a13=arg[3]? arg[3][74] : 0;
+  a13=(a13*a24);
+  a23=(a23+a13);
+  a13=arg[3]? arg[3][82] : 0;
+  a13=(a13*a10);
+  a23=(a23+a13);
+  a13=arg[3]? arg[3][90] : 0;
+  a13=(a13*a11);
+  a23=(a23+a13);
+  a02=(a02+a23);
+  if (res[1]!=0) res[1][2]=a02;
+  a02=arg[3]? arg[3][3] : 0;
+  a02=(a02*a01);
+  a23=arg[3]? arg[3][11] : 0;
+  a23=(a23*a03);
+  a02=(a02+a23);
+  a23=arg[3]? arg[3][19] : 0;
+  a23=(a23*a04);
+  a02=(a02+a23);
+  a23=arg[3]? arg[3][27] : 0;
+  a23=(a23*a05);
+  a02=(a02+a23);
+  a23=arg[3]? arg[3][35] : 0;
+  a23=(a23*a06);
+  a02=(a02+a23);
+  a23=arg[3]? arg[3][43] : 0;
+  a23=(a23*a07);
+  a02=(a02+a23);
+  a23=arg[3]? arg[3][51] : 0;
+  a23=(a23*a08);
+  a02=(a02+a23);
+  a23=arg[3]? arg[3][59] : 0;
+  a23=(a23*a09);
+  a02=(a02+a23);
+  a23=arg[3]? arg[3][67] : 0;
+  a23=(a23*a15);
+  a13=arg[3]? arg[3][75] : 0;
+  a13=(a13*a24);
+  a23=(a23+a13);
+  a13=arg[3]? arg[3][83] : 0;
+  a13=(a13*a10);
+  a23=(a23+a13);
+  a13=arg[3]? arg[3][91] : 0;
+  a13=(a13*a11);
+  a23=(a23+a13);
+  a02=(a02+a23);
+  if (res[1]!=0) res[1][3]=a02;
+  a02=arg[3]? arg[3][4] : 0;
+  a02=(a02*a01);
+  a23=arg[3]? arg[3][12] : 0;
+  a23=(a23*a03);
+  a02=(a02+a23);
+  a23=arg[3]? arg[3][20] : 0;
+  a23=(a23*a04);
+  a02=(a02+a23);
+  a23=arg[3]? arg[3][28] : 0;
+  a23=(a23*a05);
+  a02=(a02+a23);
+  a23=arg[3]? arg[3][36] : 0;
+  a23=(a23*a06);
+  a02=(a02+a23);
+  a23=arg[3]? arg[3][44] : 0;
+  a23=(a23*a07);
+  a02=(a02+a23);
+  a23=arg[3]? arg[3][52] : 0;
+  a23=(a23*a08);
+  a02=(a02+a23);
+  a23=arg[3]? arg[3][60] : 0;
+  a23=(a23*a09);
+  a02=(a02+a23);
+  a23=arg[3]? arg[3][68] : 0;
+  a23=(a23*a15);
+  a13=arg[3]? arg[3][76] : 0;
+  a13=(a13*a24);
+  a23=(a23+a13);
+  a13=arg[3]? arg[3][84] : 0;
+  a13=(a13*a10);
+  a23=(a23+a13);
+  a13=arg[3]? arg[3][92] : 0;
+  a13=(a13*a11);
+  a23=(a23+a13);
+  a02=(a02+a23);
+  if (res[1]!=0) res[1][4]=a02;
+  a02=arg[3]? arg[3][5] : 0;
+  a02=(a02*a01);
+  a23=arg[3]? arg[3][13] : 0;
+  a23=(a23*a03);
+  a02=(a02+a23);
+  a23=arg[3]? arg[3][21] : 0;
+  a23=(a23*a04);
+  a02=(a02+a23);
+  a23=arg[3]? arg[3][29] : 0;
+  a23=(a23*a05);
+  a02=(a02+a23);
+  a23=arg[3]? arg[3][37] : 0;
+  a23=(a23*a06);
+  a02=(a02+a23);
+  a23=arg[3]? arg[3][45] : 0;
+  a23=(a23*a07);
+  a02=(a02+a23);
+  a23=arg[3]? arg[3][53] : 0;
+  a23=(a23*a08);
+  a02=(a02+a23);
+  a23=arg[3]? arg[3][61] : 0;
+  a23=(a23*a09);
+  a02=(a02+a23);
+  a23=arg[3]? arg[3][69] : 0;
+  a23=(a23*a15);
+  a13=arg[3]? arg[3][77] : 0;
+  a13=(a13*a24);
+  a23=(a23+a13);
+  a13=arg[3]? arg[3][85] : 0;
+  a13=(a13*a10);
+  a23=(a23+a13);
+  a13=arg[3]? arg[3][93] : 0;
+  a13=(a13*a11);
+  a23=(a23+a13);
+  a02=(a02+a23);
+  if (res[1]!=0) res[1][5]=a02;
+  a02=arg[3]? arg[3][6] : 0;
+  a02=(a02*a01);
+  a23=arg[3]? arg[3][14] : 0;
+  a23=(a23*a03);
+  a02=(a02+a23);
+  a23=arg[3]? arg[3][22] : 0;
+  a23=(a23*a04);
+  a02=(a02+a23);
+  a23=arg[3]? arg[3][30] : 0;
+  a23=(a23*a05);
+  a02=(a02+a23);
+  a23=arg[3]? arg[3][38] : 0;
+  a23=(a23*a06);
+  a02=(a02+a23);
+  a23=arg[3]? arg[3][46] : 0;
+  a23=(a23*a07);
+  a02=(a02+a23);
+  a23=arg[3]? arg[3][54] : 0;
+  a23=(a23*a08);
+  a02=(a02+a23);
+  a23=arg[3]? arg[3][62] : 0;
+  a23=(a23*a09);
+  a02=(a02+a23);
+  a23=arg[3]? arg[3][70] : 0;
+  a23=(a23*a15);
+  a13=arg[3]? arg[3][78] : 0;
+  a13=(a13*a24);
+  a23=(a23+a13);
+  a13=arg[3]? arg[3][86] : 0;
+  a13=(a13*a10);
+  a23=(a23+a13);
+  a13=arg[3]? arg[3][94] : 0;
+  a13=(a13*a11);
+  a23=(a23+a13);
+  a02=(a02+a23);
+  if (res[1]!=0) res[1][6]=a02;
+  a02=arg[3]? arg[3][7] : 0;
+  a02=(a02*a01);
+  a23=arg[3]? arg[3][15] : 0;
+  a23=(a23*a03);
+  a02=(a02+a23);
+  a23=arg[3]? arg[3][23] : 0;
+  a23=(a23*a04);
+  a02=(a02+a23);
+  a23=arg[3]? arg[3][31] : 0;
+  a23=(a23*a05);
+  a02=(a02+a23);
+  a23=arg[3]? arg[3][39] : 0;
+  a23=(a23*a06);
+  a02=(a02+a23);
+  a23=arg[3]? arg[3][47] : 0;
+  a23=(a23*a07);
+  a02=(a02+a23);
+  a23=arg[3]? arg[3][55] : 0;
+  a23=(a23*a08);
+  a02=(a02+a23);
+  a23=arg[3]? arg[3][63] : 0;
+  a23=(a23*a09);
+  a02=(a02+a23);
+  a23=arg[3]? arg[3][71] : 0;
+  a23=(a23*a15);
+  a13=arg[3]? arg[3][79] : 0;
+  a13=(a13*a24);
+  a23=(a23+a13);
+  a13=arg[3]? arg[3][87] : 0;
+  a13=(a13*a10);
+  a23=(a23+a13);
+  a13=arg[3]? arg[3][95] : 0;
+  a13=(a13*a11);
+  a23=(a23+a13);
+  a02=(a02+a23);
+  if (res[1]!=0) res[1][7]=a02;
+  if (res[2]!=0) res[2][0]=a15;
+  a02=arg[3]? arg[3][144] : 0;
+  a02=(a02*a14);
+  a23=arg[3]? arg[3][145] : 0;
+  a23=(a23*a16);
+  a02=(a02+a23);
+  a23=arg[3]? arg[3][146] : 0;
+  a23=(a23*a17);
+  a02=(a02+a23);
+  a23=arg[3]? arg[3][147] : 0;
+  a23=(a23*a18);
+  a02=(a02+a23);
+  a23=arg[3]? arg[3][148] : 0;
+  a23=(a23*a19);
+  a02=(a02+a23);
+  a23=arg[3]? arg[3][149] : 0;
+  a23=(a23*a20);
+  a02=(a02+a23);
+  a23=arg[3]? arg[3][150] : 0;
+  a23=(a23*a21);
+  a02=(a02+a23);
+  a23=arg[3]? arg[3][151] : 0;
+  a23=(a23*a22);
+  a02=(a02+a23);
+  if (res[2]!=0) res[2][1]=a02;
+  if (res[2]!=0) res[2][2]=a24;
+  a02=arg[3]? arg[3][97] : 0;
+  a02=(a02*a01);
+  a01=arg[3]? arg[3][99] : 0;
+  a01=(a01*a03);
+  a02=(a02+a01);
+  a01=arg[3]? arg[3][101] : 0;
+  a01=(a01*a04);
+  a02=(a02+a01);
+  a01=arg[3]? arg[3][103] : 0;
+  a01=(a01*a05);
+  a02=(a02+a01);
+  a01=arg[3]? arg[3][105] : 0;
+  a01=(a01*a06);
+  a02=(a02+a01);
+  a01=arg[3]? arg[3][107] : 0;
+  a01=(a01*a07);
+  a02=(a02+a01);
+  a01=arg[3]? arg[3][109] : 0;
+  a01=(a01*a08);
+  a02=(a02+a01);
+  a01=arg[3]? arg[3][111] : 0;
+  a01=(a01*a09);
+  a02=(a02+a01);
+  a01=arg[3]? arg[3][113] : 0;
+  a01=(a01*a15);
+  a15=arg[3]? arg[3][115] : 0;
+  a15=(a15*a24);
+  a01=(a01+a15);
+  a15=arg[3]? arg[3][117] : 0;
+  a15=(a15*a10);
+  a01=(a01+a15);
+  a15=arg[3]? arg[3][119] : 0;
+  a15=(a15*a11);
+  a01=(a01+a15);
+  a02=(a02+a01);
+  if (res[2]!=0) res[2][3]=a02;
+  if (res[2]!=0) res[2][4]=a12;
+  a02=arg[3]? arg[3][136] : 0;
+  a02=(a02*a14);
+  a14=arg[3]? arg[3][137] : 0;
+  a14=(a14*a16);
+  a02=(a02+a14);
+  a14=arg[3]? arg[3][138] : 0;
+  a14=(a14*a17);
+  a02=(a02+a14);
+  a14=arg[3]? arg[3][139] : 0;
+  a14=(a14*a18);
+  a02=(a02+a14);
+  a14=arg[3]? arg[3][140] : 0;
+  a14=(a14*a19);
+  a02=(a02+a14);
+  a14=arg[3]? arg[3][141] : 0;
+  a14=(a14*a20);
+  a02=(a02+a14);
+  a14=arg[3]? arg[3][142] : 0;
+  a14=(a14*a21);
+  a02=(a02+a14);
+  a14=arg[3]? arg[3][143] : 0;
+  a14=(a14*a22);
+  a02=(a02+a14);
+  if (res[2]!=0) res[2][5]=a02;
+  a12=(a12==a00);
+  a12=(!a12);
+  a00=1.;
+  a12=(a12?a00:0);
+  if (res[2]!=0) res[2][6]=a12;
+  return 0;
+}
+
+CASADI_SYMBOL_EXPORT int haa_sim_sample_8_8(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem){
+  return casadi_f11(arg, res, iw, w, mem);
+}
+
+CASADI_SYMBOL_EXPORT int haa_sim_sample_8_8_checkout(void) {
+  return 0;
+}
+
+CASADI_SYMBOL_EXPORT void haa_sim_sample_8_8_release(int mem) {
+}
+
+CASADI_SYMBOL_EXPORT void haa_sim_sample_8_8_incref(void) {
+}
+
+CASADI_SYMBOL_EXPORT void haa_sim_sample_8_8_decref(void) {
+}
+
+CASADI_SYMBOL_EXPORT casadi_int haa_sim_sample_8_8_n_in(void) { return 4;}
+
+CASADI_SYMBOL_EXPORT casadi_int haa_sim_sample_8_8_n_out(void) { return 3;}
+
+CASADI_SYMBOL_EXPORT casadi_real haa_sim_sample_8_8_default_in(casadi_int i) {
+  switch (i) {
+    default: return 0;
+  }
+}
+
+CASADI_SYMBOL_EXPORT const char* haa_sim_sample_8_8_name_in(casadi_int i) {
+  switch (i) {
+    case 0: return "x";
+    case 1: return "xc";
+    case 2: return "exo";
+    case 3: return "par";
+    default: return 0;
+  }
+}
+
+CASADI_SYMBOL_EXPORT const char* haa_sim_sample_8_8_name_out(casadi_int i) {
+  switch (i) {
+    case 0: return "u";
+    case 1: return "xc_next";
+    case 2: return "y";
+    default: return 0;
+  }
+}
+
+CASADI_SYMBOL_EXPORT const casadi_int* haa_sim_sample_8_8_sparsity_in(casadi_int i) {
+  switch (i) {
+    case 0: return casadi_s17;
+    case 1: return casadi_s17;
+    case 2: return casadi_s18;
+    case 3: return casadi_s19;
+    default: return 0;
+  }
+}
+
+CASADI_SYMBOL_EXPORT const casadi_int* haa_sim_sample_8_8_sparsity_out(casadi_int i) {
+  switch (i) {
+    case 0: return casadi_s11;
+    case 1: return casadi_s17;
+    case 2: return casadi_s20;
+    default: return 0;
+  }
+}
+
+CASADI_SYMBOL_EXPORT int haa_sim_sample_8_8_work(casadi_int *sz_arg, casadi_int* sz_res, casadi_int *sz_iw, casadi_int *sz_w) {
+  if (sz_arg) *sz_arg = 4;
+  if (sz_res) *sz_res = 3;
+  if (sz_iw) *sz_iw = 0;
+  if (sz_w) *sz_w = 0;
+  return 0;
+}
+
+CASADI_SYMBOL_EXPORT int haa_sim_sample_8_8_work_bytes(casadi_int *sz_arg, casadi_int* sz_res, casadi_int *sz_iw, casadi_int *sz_w) {
+  if (sz_arg) *sz_arg = 4*sizeof(const casadi_real*);
+  if (sz_res) *sz_res = 3*sizeof(casadi_real*);
+  if (sz_iw) *sz_iw = 0*sizeof(casadi_int);
+  if (sz_w) *sz_w = 0*sizeof(casadi_real);
+  return 0;
+}
+
+/* haa_sim_zoh_8:(x[8],u[2],s,par[80])->(x_next[8]) */
+static int casadi_f12(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
+  casadi_real a00, a01, a02, a03, a04, a05, a06, a07, a08, a09, a10, a11;
+  casadi_real a12;
+  a00=arg[3]? arg[3][0] : 0;
+  a01=arg[0]? arg[0][0] : 0;
+  a00=(a00*a01);
+  a02=arg[3]? arg[3][8] : 0;
+  a03=arg[0]? arg[0][1] : 0;
+  a02=(a02*a03);
+  a00=(a00+a02);
+  a02=arg[3]? arg[3][16] : 0;
+  a04=arg[0]? arg[0][2] : 0;
+  a02=(a02*a04);
+  a00=(a00+a02);
+  a02=arg[3]? arg[3][24] : 0;
+  a05=arg[0]? arg[0][3] : 0;
+  a02=(a02*a05);
+  a00=(a00+a02);
+  a02=arg[3]? arg[3][32] : 0;
+  a06=arg[0]? arg[0][4] : 0;
+  a02=(a02*a06);
+  a00=(a00+a02);
+  a02=arg[3]? arg[3][40] : 0;
+  a07=arg[0]? arg[0][5] : 0;
+  a02=(a02*a07);
+  a00=(a00+a02);
+  a02=arg[3]? arg[3][48] : 0;
+  a08=arg[0]? arg[0][6] : 0;
+  a02=(a02*a08);
+  a00=(a00+a02);
+  a02=arg[3]? arg[3][56] : 0;
+  a09=arg[0]? arg[0][7] : 0;
+  a02=(a02*a09);
+  a00=(a00+a02);
+  a02=arg[3]? arg[3][64] : 0;
+  a10=arg[1]? arg[1][0] : 0;
+  a02=(a02*a10);
+  a11=arg[3]? arg[3][72] : 0;
+  a12=arg[1]? arg[1][1] : 0;
+  a11=(a11*a12);
+  a02=(a02+a11);
+  a00=(a00+a02);
+  if (res[0]!=0) res[0][0]=a00;
+  a00=arg[3]? arg[3][1] : 0;
+  a00=(a00*a01);
+  a02=arg[3]? arg[3][9] : 0;
+  a02=(a02*a03);
+  a00=(a00+a02);
+  a02=arg[3]? arg[3][17] : 0;
+  a02=(a02*a04);
+  a00=(a00+a02);
+  a02=arg[3]? arg[3][25] : 0;
+  a02=(a02*a05);
+  a00=(a00+a02);
+  a02=arg[3]? arg[3][33] : 0;
+  a02=(a02*a06);
+  a00=(a00+a02);
+  a02=arg[3]? arg[3][41] : 0;
+  a02=(a02*a07);
+  a00=(a00+a02);
+  a02=arg[3]? arg[3][49] : 0;
+  a02=(a02*a08);
+  a00=(a00+a02);
+  a02=arg[3]? arg[3][57] : 0;
+  a02=(a02*a09);
+  a00=(a00+a02);
+  a02=arg[3]? arg[3][65] : 0;
+  a02=(a02*a10);
+  a11=arg[3]? arg[3][73] : 0;
+  a11=(a11*a12);
+  a02=(a02+a11);
+  a00=(a00+a02);
+  if (res[0]!=0) res[0][1]=a00;
+  a00=arg[3]? arg[3][2] : 0;
+  a00=(a00*a01);
+  a02=arg[3]? arg[3][10] : 0;
+  a02=(a02*a03);
+  a00=(a00+a02);
+  a02=arg[3]? arg[3][18] : 0;
+  a02=(a02*a04);
+  a00=(a00+a02);
+  a02=arg[3]? arg[3][26] : 0;
+  a02=(a02*a05);
+  a00=(a00+a02);
+  a02=arg[3]? arg[3][34] : 0;
+  a02=(a02*a06);
+  a00=(a00+a02);
+  a02=arg[3]? arg[3][42] : 0;
+  a02=(a02*a07);
+  a00=(a00+a02);
+  a02=arg[3]? arg[3][50] : 0;
+  a02=(a02*a08);
+  a00=(a00+a02);
+  a02=arg[3]? arg[3][58] : 0;
+  a02=(a02*a09);
+  a00=(a00+a02);
+  a02=arg[3]? arg[3][66] : 0;
+  a02=(a02*a10);
+  a11=arg[3]? arg[3][74] : 0;
+  a11=(a11*a12);
+  a02=(a02+a11);
+  a00=(a00+a02);
+  if (res[0]!=0) res[0][2]=a00;
+  a00=arg[3]? arg[3][3] : 0;
+  a00=(a00*a01);
+  a02=arg[3]? arg[3][11] : 0;
+  a02=(a02*a03);
+  a00=(a00+a02);
+  a02=arg[3]? arg[3][19] : 0;
+  a02=(a02*a04);
+  a00=(a00+a02);
+  a02=arg[3]? arg[3][27] : 0;
+  a02=(a02*a05);
+  a00=(a00+a02);
+  a02=arg[3]? arg[3][35] : 0;
+  a02=(a02*a06);
+  a00=(a00+a02);
+  a02=arg[3]? arg[3][43] : 0;
+  a02=(a02*a07);
+  a00=(a00+a02);
+  a02=arg[3]? arg[3][51] : 0;
+  a02=(a02*a08);
+  a00=(a00+a02);
+  a02=arg[3]? arg[3][59] : 0;
+  a02=(a02*a09);
+  a00=(a00+a02);
+  a02=arg[3]? arg[3][67] : 0;
+  a02=(a02*a10);
+  a11=arg[3]? arg[3][75] : 0;
+  a11=(a11*a12);
+  a02=(a02+a11);
+  a00=(a00+a02);
+  if (res[0]!=0) res[0][3]=a00;
+  a00=arg[3]? arg[3][4] : 0;
+  a00=(a00*a01);
+  a02=arg[3]? arg[3][12] : 0;
+  a02=(a02*a03);
+  a00=(a00+a02);
+  a02=arg[3]? arg[3][20] : 0;
+  a02=(a02*a04);
+  a00=(a00+a02);
+  a02=arg[3]? arg[3][28] : 0;
+  a02=(a02*a05);
+  a00=(a00+a02);
+  a02=arg[3]? arg[3][36] : 0;
+  a02=(a02*a06);
+  a00=(a00+a02);
+  a02=arg[3]? arg[3][44] : 0;
+  a02=(a02*a07);
+  a00=(a00+a02);
+  a02=arg[3]? arg[3][52] : 0;
+  a02=(a02*a08);
+  a00=(a00+a02);
+  a02=arg[3]? arg[3][60] : 0;
+  a02=(a02*a09);
+  a00=(a00+a02);
+  a02=arg[3]? arg[3][68] : 0;
+  a02=(a02*a10);
+  a11=arg[3]? arg[3][76] : 0;
+  a11=(a11*a12);
+  a02=(a02+a11);
+  a00=(a00+a02);
+  if (res[0]!=0) res[0][4]=a00;
+  a00=arg[3]? arg[3][5] : 0;
+  a00=(a00*a01);
+  a02=arg[3]? arg[3][13] : 0;
+  a02=(a02*a03);
+  a00=(a00+a02);
+  a02=arg[3]? arg[3][21] : 0;
+  a02=(a02*a04);
+  a00=(a00+a02);
+  a02=arg[3]? arg[3][29] : 0;
+  a02=(a02*a05);
+  a00=(a00+a02);
+  a02=arg[3]? arg[3][37] : 0;
+  a02=(a02*a06);
+  a00=(a00+a02);
+  a02=arg[3]? arg[3][45] : 0;
+  a02=(a02*a07);
+  a00=(a00+a02);
+  a02=arg[3]? arg[3][53] : 0;
+  a02=(a02*a08);
+  a00=(a00+a02);
+  a02=arg[3]? arg[3][61] : 0;
+  a02=(a02*a09);
+  a00=(a00+a02);
+  a02=arg[3]? arg[3][69] : 0;
+  a02=(a02*a10);
+  a11=arg[3]? arg[3][77] : 0;
+  a11=(a11*a12);
+  a02=(a02+a11);
+  a00=(a00+a02);
+  if (res[0]!=0) res[0][5]=a00;
+  a00=arg[3]? arg[3][6] : 0;
+  a00=(a00*a01);
+  a02=arg[3]? arg[3][14] : 0;
+  a02=(a02*a03);
+  a00=(a00+a02);
+  a02=arg[3]? arg[3][22] : 0;
+  a02=(a02*a04);
+  a00=(a00+a02);
+  a02=arg[3]? arg[3][30] : 0;
+  a02=(a02*a05);
+  a00=(a00+a02);
+  a02=arg[3]? arg[3][38] : 0;
+  a02=(a02*a06);
+  a00=(a00+a02);
+  a02=arg[3]? arg[3][46] : 0;
+  a02=(a02*a07);
+  a00=(a00+a02);
+  a02=arg[3]? arg[3][54] : 0;
+  a02=(a02*a08);
+  a00=(a00+a02);
+  a02=arg[3]? arg[3][62] : 0;
+  a02=(a02*a09);
+  a00=(a00+a02);
+  a02=arg[3]? arg[3][70] : 0;
+  a02=(a02*a10);
+  a11=arg[3]? arg[3][78] : 0;
+  a11=(a11*a12);
+  a02=(a02+a11);
+  a00=(a00+a02);
+  if (res[0]!=0) res[0][6]=a00;
+  a00=arg[3]? arg[3][7] : 0;
+  a00=(a00*a01);
+  a01=arg[3]? arg[3][15] : 0;
+  a01=(a01*a03);
+  a00=(a00+a01);
+  a01=arg[3]? arg[3][23] : 0;
+  a01=(a01*a04);
+  a00=(a00+a01);
+  a01=arg[3]? arg[3][31] : 0;
+  a01=(a01*a05);
+  a00=(a00+a01);
+  a01=arg[3]? arg[3][39] : 0;
+  a01=(a01*a06);
+  a00=(a00+a01);
+  a01=arg[3]? arg[3][47] : 0;
+  a01=(a01*a07);
+  a00=(a00+a01);
+  a01=arg[3]? arg[3][55] : 0;
+  a01=(a01*a08);
+  a00=(a00+a01);
+  a01=arg[3]? arg[3][63] : 0;
+  a01=(a01*a09);
+  a00=(a00+a01);
+  a01=arg[3]? arg[3][71] : 0;
+  a01=(a01*a10);
+  a10=arg[3]? arg[3][79] : 0;
+  a10=(a10*a12);
+  a01=(a01+a10);
+  a00=(a00+a01);
+  if (res[0]!=0) res[0][7]=a00;
+  return 0;
+}
+
+CASADI_SYMBOL_EXPORT int haa_sim_zoh_8(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem){
+  return casadi_f12(arg, res, iw, w, mem);
+}
+
+CASADI_SYMBOL_EXPORT int haa_sim_zoh_8_checkout(void) {
+  return 0;
+}
+
+CASADI_SYMBOL_EXPORT void haa_sim_zoh_8_release(int mem) {
+}
+
+CASADI_SYMBOL_EXPORT void haa_sim_zoh_8_incref(void) {
+}
+
+CASADI_SYMBOL_EXPORT void haa_sim_zoh_8_decref(void) {
+}
+
+CASADI_SYMBOL_EXPORT casadi_int haa_sim_zoh_8_n_in(void) { return 4;}
+
+CASADI_SYMBOL_EXPORT casadi_int haa_sim_zoh_8_n_out(void) { return 1;}
+
+CASADI_SYMBOL_EXPORT casadi_real haa_sim_zoh_8_default_in(casadi_int i) {
+  switch (i) {
+    default: return 0;
+  }
+}
+
+CASADI_SYMBOL_EXPORT const char* haa_sim_zoh_8_name_in(casadi_int i) {
+  switch (i) {
+    case 0: return "x";
+    case 1: return "u";
+    case 2: return "s";
+    case 3: return "par";
+    default: return 0;
+  }
+}
+
+CASADI_SYMBOL_EXPORT const char* haa_sim_zoh_8_name_out(casadi_int i) {
+  switch (i) {
+    case 0: return "x_next";
+    default: return 0;
+  }
+}
+
+CASADI_SYMBOL_EXPORT const casadi_int* haa_sim_zoh_8_sparsity_in(casadi_int i) {
+  switch (i) {
+    case 0: return casadi_s17;
+    case 1: return casadi_s11;
+    case 2: return casadi_s4;
+    case 3: return casadi_s21;
+    default: return 0;
+  }
+}
+
+CASADI_SYMBOL_EXPORT const casadi_int* haa_sim_zoh_8_sparsity_out(casadi_int i) {
+  switch (i) {
+    case 0: return casadi_s17;
+    default: return 0;
+  }
+}
+
+CASADI_SYMBOL_EXPORT int haa_sim_zoh_8_work(casadi_int *sz_arg, casadi_int* sz_res, casadi_int *sz_iw, casadi_int *sz_w) {
+  if (sz_arg) *sz_arg = 4;
+  if (sz_res) *sz_res = 1;
+  if (sz_iw) *sz_iw = 0;
+  if (sz_w) *sz_w = 0;
+  return 0;
+}
+
+CASADI_SYMBOL_EXPORT int haa_sim_zoh_8_work_bytes(casadi_int *sz_arg, casadi_int* sz_res, casadi_int *sz_iw, casadi_int *sz_w) {
+  if (sz_arg) *sz_arg = 4*sizeof(const casadi_real*);
+  if (sz_res) *sz_res = 1*sizeof(casadi_real*);
+  if (sz_iw) *sz_iw = 0*sizeof(casadi_int);
+  if (sz_w) *sz_w = 0*sizeof(casadi_real);
+  return 0;
+}
+
+/* haa_sim_jitter_8:(x[8],u[2],s,par[161])->(x_next[8]) */
+static int casadi_f13(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
+  casadi_real a000, a001, a002, a003, a004, a005, a006, a007, a008, a009, a010, a011;
+  casadi_real a012, a013, a014, a015, a016, a017, a018, a019, a020, a021, a022, a023;
+  casadi_real a024, a025, a026, a027, a028, a029, a030, a031, a032, a033, a034, a035;
+  casadi_real a036, a037, a038, a039, a040, a041, a042, a043, a044, a045, a046, a047;
+  casadi_real a048, a049, a050, a051, a052, a053, a054, a055, a056, a057, a058, a059;
+  casadi_real a060, a061, a062, a063, a064, a065, a066, a067, a068, a069, a070, a071;
+  casadi_real a072, a073, a074, a075, a076, a077, a078, a079, a080, a081, a082, a083;
+  casadi_real a084, a085, a086, a087, a088, a089, a090, a091, a092, a093, a094, a095;
+  casadi_real a096, a097, a098, a099, a100, a101, a102, a103, a104, a105, a106, a107;
+  casadi_real a108, a109, a110, a111, a112, a113, a114, a115, a116, a117, a118;
+  a000=arg[3]? arg[3][0] : 0;
+  a001=arg[0]? arg[0][0] : 0;
+  a002=arg[2]? arg[2][0] : 0;
+  a003=arg[3]? arg[3][160] : 0;
+  a002=(a002*a003);
+  a003=arg[3]? arg[3][80] : 0;
+  a004=2.;
+  a004=(a002/a004);
+  a005=3.;
+  a005=(a002/a005);
+  a006=4.;
+  a006=(a002/a006);
+  a007=5.;
+  a007=(a002/a007);
+  a008=6.;
+  a008=(a002/a008);
+  a009=7.;
+  a009=(a002/a009);
+  a010=8.;
+  a010=(a002/a010);
+  a011=9.;
+  a011=(a002/a011);
+  a012=10.;
+  a012=(a002/a012);
+  a013=11.;
+  a013=(a002/a013);
+  a014=12.;
+  a014=(a002/a014);
+  a015=(a003*a001);
+  a016=arg[3]? arg[3][88] : 0;
+  a017=arg[0]? arg[0][1] : 0;
+  a018=(a016*a017);
+  a015=(a015+a018);
+  a018=arg[3]? arg[3][96] : 0;
+  a019=arg[0]? arg[0][2] : 0;
+  a020=(a018*a019);
+  a015=(a015+a020);
+  a020=arg[3]? arg[3][104] : 0;
+  a021=arg[0]? arg[0][3] : 0;
+  a022=(a020*a021);
+  a015=(a015+a022);
+  a022=arg[3]? arg[3][112] : 0;
+  a023=arg[0]? arg[0][4] : 0;
+  a024=(a022*a023);
+  a015=(a015+a024);
+  a024=arg[3]? arg[3][120] : 0;
+  a025=arg[0]? arg[0][5] : 0;
+  a026=(a024*a025);
+  a015=(a015+a026);
+  a026=arg[3]? arg[3][128] : 0;
+  a027=arg[0]? arg[0][6] : 0;
+  a028=(a026*a027);
+  a015=(a015+a028);
+  a028=arg[3]? arg[3][136] : 0;
+  a029=arg[0]? arg[0][7] : 0;
+  a030=(a028*a029);
+  a015=(a015+a030);
+  a030=arg[3]? arg[3][144] : 0;
+  a031=arg[1]? arg[1][0] : 0;
+  a032=(a030*a031);
+  a015=(a015+a032);
+  a032=arg[3]? arg[3][152] : 0;
+  a033=arg[1]? arg[1][1] : 0;
+  a034=(a032*a033);
+  a015=(a015+a034);
+  a015=(a014*a015);
+  a015=(a001+a015);
+  a034=(a003*a015);
+  a035=arg[3]? arg[3][81] : 0;
+  a036=(a035*a001);
+  a037=arg[3]? arg[3][89] : 0;
+  a038=(a037*a017);
+  a036=(a036+a038);
+  a038=arg[3]? arg[3][97] : 0;
+  a039=(a038*a019);
+  a036=(a036+a039);
+  a039=arg[3]? arg[3][105] : 0;
+  a040=(a039*a021);
+  a036=(a036+a040);
+  a040=arg[3]? arg[3][113] : 0;
+  a041=(a040*a023);
+  a036=(a036+a041);
+  a041=arg[3]? arg[3][121] : 0;
+  a042=(a041*a025);
+  a036=(a036+a042);
+  a042=arg[3]? arg[3][129] : 0;
+  a043=(a042*a027);
+  a036=(a036+a043);
+  a043=arg[3]? arg[3][137] : 0;
+  a044=(a043*a029);
+  a036=(a036+a044);
+  a044=arg[3]? arg[3][145] : 0;
+  a045=(a044*a031);
+  a036=(a036+a045);
+  a045=arg[3]? arg[3][153] : 0;
+  a046=(a045*a033);
+  a036=(a036+a046);
+  a036=(a014*a036);
+  a036=(a017+a036);
+  a046=(a016*a036);
+  a034=(a034+a046);
+  a046=arg[3]? arg[3][82] : 0;
+  a047=(a046*a001);
+  a048=arg[3]? arg[3][90] : 0;
+  a049=(a048*a017);
+  a047=(a047+a049);
+  a049=arg[3]? arg[3][98] : 0;
+  a050=(a049*a019);
+  a047=(a047+a050);
+  a050=arg[3]? arg[3][106] : 0;
+  a051=(a050*a021);
+  a047=(a047+a051);
+  a051=arg[3]? arg[3][114] : 0;
+  a052=(a051*a023);
+  a047=(a047+a052);
+  a052=arg[3]? arg[3][122] : 0;
+  a053=(a052*a025);
+  a047=(a047+a053);
+  a053=arg[3]? arg[3][130] : 0;
+  a054=(a053*a027);
+  a047=(a047+a054);
+  a054=arg[3]? arg[3][138] : 0;
+  a055=(a054*a029);
+  a047=(a047+a055);
+  a055=arg[3]? arg[3][146] : 0;
+  a056=(a055*a031);
+  a047=(a047+a056);
+  a056=arg[3]? arg[3][154] : 0;
+  a057=(a056*a033);
+  a047=(a047+a057);
+  a047=(a014*a047);
+  a047=(a019+a047);
+  a057=(a018*a047);
+  a034=(a034+a057);
+  a057=arg[3]? arg[3][83] : 0;
+  a058=(a057*a001);
+  a059=arg[3]? arg[3][91] : 0;
+  a060=(a059*a017);
+  a058=(a058+a060);
+  a060=arg[3]? arg[3][99] : 0;
+  a061=(a060*a019);
+  a058=(a058+a061);
+  a061=arg[3]? arg[3][107] : 0;
+  a062=(a061*a021);
+  a058=(a058+a062);
+  a062=arg[3]? arg[3][115] : 0;
+  a063=(a062*a023);
+  a058=(a058+a063);
+  a063=arg[3]? arg[3][123] : 0;
+  a064=(a063*a025);
+  a058=(a058+a064);
+  a064=arg[3]? arg[3][131] : 0;
+  a065=(a064*a027);
+  a058=(a058+a065);
+  a065=arg[3]? arg[3][139] : 0;
+  a066=(a065*a029);
+  a058=(a058+a066);
+  a066=arg[3]? arg[3][147] : 0;
+  a067=(a066*a031);
+  a058=(a058+a067);
+  a067=arg[3]? arg[3][155] : 0;
+  a068=(a067*a033);
+  a058=(a058+a068);
+  a058=(a014*a058);
+  a058=(a021+a058);
+  a068=(a020*a058);
+  a034=(a034+a068);
+  a068=arg[3]? arg[3][84] : 0;
+  a069=(a068*a001);
+  a070=arg[3]? arg[3][92] : 0;
+  a071=(a070*a017);
+  a069=(a069+a071);
+  a071=arg[3]? arg[3][100] : 0;
+  a072=(a071*a019);
+  a069=(a069+a072);
+  a072=arg[3]? arg[3][108] : 0;
+  a073=(a072*a021);
+  a069=(a069+a073);
+  a073=arg[3]? arg[3][116] : 0;
+  a074=(a073*a023);
+  a069=(a069+a074);
+  a074=arg[3]? arg[3][124] : 0;
+  a075=(a074*a025);
+  a069=(a069+a075);
+  a075=arg[3]? arg[3][132] : 0;
+  a076=(a075*a027);
+  a069=(a069+a076);
+  a076=arg[3]? arg[3][140] : 0;
+  a077=(a076*a029);
+  a069=(a069+a077);
+  a077=arg[3]? arg[3][148] : 0;
+  a078=(a077*a031);
+  a069=(a069+a078);
+  a078=arg[3]? arg[3][156] : 0;
+  a079=(a078*a033);
+  a069=(a069+a079);
+  a069=(a014*a069);
+  a069=(a023+a069);
+  a079=(a022*a069);
+  a034=(a034+a079);
+  a079=arg[3]? arg[3][85] : 0;
+  a080=(a079*a001);
+  a081=arg[3]? arg[3][93] : 0;
+  a082=(a081*a017);
+  a080=(a080+a082);
+  a082=arg[3]? arg[3][101] : 0;
+  a083=(a082*a019);
+  a080=(a080+a083);
+  a083=arg[3]? arg[3][109] : 0;
+  a084=(a083*a021);
+  a080=(a080+a084);
+  a084=arg[3]? arg[3][117] : 0;
+  a085=(a084*a023);
+  a080=(a080+a085);
+  a085=arg[3]? arg[3][125] : 0;
+  a086=(a085*a025);
+  a080=(a080+a086);
+  a086=arg[3]? arg[3][133] : 0;
+  a087=(a086*a027);
+  a080=(a080+a087);
+  a087=arg[3]? arg[3][141] : 0;
+  a088=(a087*a029);
+  a080=(a080+a088);
+  a088=arg[3]? arg[3][149] : 0;
+  a089=(a088*a031);
+  a080=(a080+a089);
+  a089=arg[3]? arg[3][157] : 0;
+  a090=(a089*a033);
+  a080=(a080+a090);
+  a080=(a014*a080);
+  a080=(a025+a080);
+  a090=(a024*a080);
+  a034=(a034+a090);
+  a090=arg[3]? arg[3][86] : 0;
+  a091=(a090*a001);
+  a092=arg[3]? arg[3][94] : 0;
+  a093=(a092*a017);
+  a091=(a091+a093);
+  a093=arg[3]? arg[3][102] : 0;
+  a094=(a093*a019);
+  a091=(a091+a094);
+  a094=arg[3]? arg[3][110] : 0;
+  a095=(a094*a021);
+  a091=(a091+a095);
+  a095=arg[3]? arg[3][118] : 0;
+  a096=(a095*a023);
+  a091=(a091+a096);
+  a096=arg[3]? arg[3][126] : 0;
+  a097=(a096*a025);
+  a091=(a091+a097);
+  a097=arg[3]? arg[3][134] : 0;
+  a098=(a097*a027);
+  a091=(a091+a098);
+  a098=arg[3]? arg[3][142] : 0;
+  a099=(a098*a029);
+  a091=(a091+a099);
+  a099=arg[3]? arg[3][150] : 0;
+  a100=(a099*a031);
+  a091=(a091+a100);
+  a100=arg[3]? arg[3][158] : 0;
+  a101=(a100*a033);
+  a091=(a091+a101);
+  a091=(a014*a091);
+  a091=(a027+a091);
+  a101=(a026*a091);
+  a034=(a034+a101);
+  a101=arg[3]? arg[3][87] : 0;
+  a102=(a101*a001);
+  a103=arg[3]? arg[3][95] : 0;
+  a104=(a103*a017);
+  a102=(a102+a104);
+  a104=arg[3]? arg[3][103] : 0;
+  a105=(a104*a019);
+  a102=(a102+a105);
+  a105=arg[3]? arg[3][111] : 0;
+  a106=(a105*a021);
+  a102=(a102+a106);
+  a106=arg[3]? arg[3][119] : 0;
+  a107=(a106*a023);
+  a102=(a102+a107);
+  a107=arg[3]? arg[3][127] : 0;
+  a108=(a107*a025);
+  a102=(a102+a108);
+  a108=arg[3]? arg[3][135] : 0;
+  a109=(a108*a027);
+  a102=(a102+a109);
+  a109=arg[3]? arg[3][143] : 0;
+  a110=(a109*a029);
+  a102=(a102+a110);
+  a110=arg[3]? arg[3][151] : 0;
+  a111=(a110*a031);
+  a102=(a102+a111);
+  a111=arg[3]? arg[3][159] : 0;
+  a112=(a111*a033);
+  a102=(a102+a112);
+  a014=(a014*a102);
+  a014=(a029+a014);
+  a102=(a028*a014);
+  a034=(a034+a102);
+  a102=(a030*a031);
+  a034=(a034+a102);
+  a102=(a032*a033);
+  a034=(a034+a102);
+  a034=(a013*a034);
+  a034=(a001+a034);
+  a102=(a003*a034);
+  a112=(a035*a015);
+  a113=(a037*a036);
+  a112=(a112+a113);
+  a113=(a038*a047);
+  a112=(a112+a113);
+  a113=(a039*a058);
+  a112=(a112+a113);
+  a113=(a040*a069);
+  a112=(a112+a113);
+  a113=(a041*a080);
+  a112=(a112+a113);
+  a113=(a042*a091);
+  a112=(a112+a113);
+  a113=(a043*a014);
+  a112=(a112+a113);
+  a113=(a044*a031);
+  a112=(a112+a113);
+  a113=(a045*a033);
+  a112=(a112+a113);
+  a112=(a013*a112);
+  a112=(a017+a112);
+  a113=(a016*a112);
+  a102=(a102+a113);
+  a113=(a046*a015);
+  a114=(a048*a036);
+  a113=(a113+a114);
+  a114=(a049*a047);
+  a113=(a113+a114);
+  a114=(a050*a058);
+  a113=(a113+a114);
+  a114=(a051*a069);
+  a113=(a113+a114);
+  a114=(a052*a080);
+  a113=(a113+a114);
+  a114=(a053*a091);
+  a113=(a113+a114);
+  a114=(a054*a014);
+  a113=(a113+a114);
+  a114=(a055*a031);
+  a113=(a113+a114);
+  a114=(a056*a033);
+  a113=(a113+a114);
+  a113=(a013*a113);
+  a113=(a019+a113);
+  a114=(a018*a113);
+  a102=(a102+a114);
+  a114=(a057*a015);
+  a115=(a059*a036);
+  a114=(a114+a115);
+  a115=(a060*a047);
+  a114=(a114+a115);
+  a115=(a061*a058);
+  a114=(a114+a115);
+  a115=(a062*a069);
+  a114=(a114+a115);
+  a115=(a063*a080);
+  a114=(a114+a115);
+  a115=(a064*a091);
+  a114=(a114+a115);
+  a115=(a065*a014);
+  a114=(a114+a115);
+  a115=(a066*a031);
+  a114=(a114+a115);
+  a115=(a067*a033);
+  a114=(a114+a115);
+  a114=(a013*a114);
+  a114=(a021+a114);
+  a115=(a020*a114);
+  a102=(a102+a115);
+  a115=(a068*a015);
+  a116=(a070*a036);
+  a115=(a115+a116);
+  a116=(a071*a047);
+  a115=(a115+a116);
+  a116=(a072*a058);
+  a115=(a115+a116);
+  a116=(a073*a069);
+  a115=(a115+a116);
+  a116=(a074*a080);
+  a115=(a115+a116);
+  a116=(a075*a091);
+  a115=(a115+a116);
+  a116=(a076*a014);
+  a115=(a115+a116);
+  a116=(a077*a031);
+  a115=(a115+a116);
+  a116=(a078*a033);
+  a115=(a115+a116);
+  a115=(a013*a115);
+  a115=(a023+a115);
+  a116=(a022*a115);
+  a102=(a102+a116);
+  a116=(a079*a015);
+  a117=(a081*a036);
+  a116=(a116+a117);
+  a117=(a082*a047);
+  a116=(a116+a117);
+  a117=(a083*a058);
+  a116=(a116+a117);
+  a117=(a084*a069);
+  a116=(a116+a117);
+  a117=(a085*a080);
+  a116=(a116+a117);
+  a117=(a086*a091);
+  a116=(a116+a117);
+  a117=(a087*a014);
+  a116=(a116+a117);
+  a117=(a088*a031);
+  a116=(a116+a117);
+  a117=(a089*a033);
+  a116=(a116+a117);
+  a116=(a013*a116);
+  a116=(a025+a116);
+  a117=(a024*a116);
+  a102=(a102+a117);
+  a117=(a090*a015);
+  a118=(a092*a036);
+  a117=(a117+a118);
+  a118=(a093*a047);
+  a117=(a117+a118);
+  a118=(a094*a058);
+  a117=(a117+a118);
+  a118=(a095*a069);
+  a117=(a117+a118);
+  a118=(a096*a080);
+  a117=(a117+a118);
+  a118=(a097*a091);
+  a117=(a117+a118);
+  a118=(a098*a014);
+  a117=(a117+a118);
+  a118=(a099*a031);
+  a117=(a117+a118);
+  a118=(a100*a033);
+  a117=(a117+a118);
+  a117=(a013*a117);
+  a117=(a027+a117);
+  a118=(a026*a117);
+  a102=(a102+a118);
+  a015=(a101*a015);
+  a036=(a103*a036);
+  a015=(a015+a036);
+  a047=(a104*a047);
+  a015=(a015+a047);
+  a058=(a105*a058);
+  a015=(a015+a058);
+  a069=(a106*a069);
+  a015=(a015+a069);
+  a080=(a107*a080);
+  a015=(a015+a080);
+  a091=(a108*a091);
+  a015=(a015+a091);
+  a014=(a109*a014);
+  a015=(a015+a014);
+  a014=(a110*a031);
+  a015=(a015+a014);
+  a014=(a111*a033);
+  a015=(a015+a014);
+  a013=(a013*a015);
+  a013=(a029+a013);
+  a015=(a028*a013);
+  a102=(a102+a015);
+  a015=(a030*a031);
+  a102=(a102+a015);
+  a015=(a032*a033);
+  a102=(a102+a015);
+  a102=(a012*a102);
+  a102=(a001+a102);
+  a015=(a003*a102);
+  a014=(a035*a034);
+  a091=(a037*a112);
+  a014=(a014+a091);
+  a091=(a038*a113);
+  a014=(a014+a091);
+  a091=(a039*a114);
+  a014=(a014+a091);
+  a091=(a040*a115);
+  a014=(a014+a091);
+  a091=(a041*a116);
+  a014=(a014+a091);
+  a091=(a042*a117);
+  a014=(a014+a091);
+  a091=(a043*a013);
+  a014=(a014+a091);
+  a091=(a044*a031);
+  a014=(a014+a091);
+  a091=(a045*a033);
+  a014=(a014+a091);
+  a014=(a012*a014);
+  a014=(a017+a014);
+  a091=(a016*a014);
+  a015=(a015+a091);
+  a091=(a046*a034);
+  a080=(a048*a112);
+  a091=(a091+a080);
+  a080=(a049*a113);
+  a091=(a091+a080);
+  a080=(a050*a114);
+  a091=(a091+a080);
+  a080=(a051*a115);
+  a091=(a091+a080);
+  a080=(a052*a116);
+  a091=(a091+a080);
+  a080=(a053*a117);
+  a091=(a091+a080);
+  a080=(a054*a013);
+  a091=(a091+a080);
+  a080=(a055*a031);
+  a091=(a091+a080);
+  a080=(a056*a033);
+  a091=(a091+a080);
+  a091=(a012*a091);
+  a091=(a019+a091);
+  a080=(a018*a091);
+  a015=(a015+a080);
+  a080=(a057*a034);
+  a069=(a059*a112);
+  a080=(a080+a069);
+  a069=(a060*a113);
+  a080=(a080+a069);
+  a069=(a061*a114);
+  a080=(a080+a069);
+  a069=(a062*a115);
+  a080=(a080+a069);
+  a069=(a063*a116);
+  a080=(a080+a069);
+  a069=(a064*a117);
+  a080=(a080+a069);
+  a069=(a065*a013);
+  a080=(a080+a069);
+  a069=(a066*a031);
+  a080=(a080+a069);
+  a069=(a067*a033);
+  a080=(a080+a069);
+  a080=(a012*a080);
+  a080=(a021+a080);
+  a069=(a020*a080);
+  a015=(a015+a069);
+  a069=(a068*a034);
+  a058=(a070*a112);
+  a069=(a069+a058);
+  a058=(a071*a113);
+  a069=(a069+a058);
+  a058=(a072*a114);
+  a069=(a069+a058);
+  a058=(a073*a115);
+  a069=(a069+a058);
+  a058=(a074*a116);
+  a069=(a069+a058);
+  a058=(a075*a117);
+  a069=(a069+a058);
+  a058=(a076*a013);
+  a069=(a069+a058);
+  a058=(a077*a031);
+  a069=(a069+a058);
+  a058=(a078*a033);
+  a069=(a069+a058);
+  a069=(a012*a069);
+  a069=(a023+a069);
+  a058=(a022*a069);
+  a015=(a015+a058);
+  a058=(a079*a034);
+  a047=(a081*a112);
+  a058=(a058+a047);
+  a047=(a082*a113);
+  a058=(a058+a047);
+  a047=(a083*a114);
+  a058=(a058+a047);
+  a047=(a084*a115);
+  a058=(a058+a047);
+  a047=(a085*a116);
+  a058=(a058+a047);
+  a047=(a086*a117);
+  a058=(a058+a047);
+  a047=(a087*a013);
+  a058=(a058+a047);
+  a047=(a088*a031);
+  a058=(a058+a047);
+  a047=(a089*a033);
+  a058=(a058+a047);
+  a058=(a012*a058);
+  a058=(a025+a058);
+  a047=(a024*a058);
+  a015=(a015+a047);
+  a047=(a090*a034);
+  a036=(a092*a112);
+  a047=(a047+a036);
+  a036=(a093*a113);
+  a047=(a047+a036);
+  a036=(a094*a114);
+  a047=(a047+a036);
+  a036=(a095*a115);
+  a047=(a047+a036);
+  a036=(a096*a116);
+  a047=(a047+a036);
+  a036=(a097*a117);
+  a047=(a047+a036);
+  a036=(a098*a013);
+  a047=(a047+a036);
+  a036=(a099*a031);
+  a047=(a047+a036);
+  a036=(a100*a033);
+  a047=(a047+a036);
+  a047=(a012*a047);
+  a047=(a027+a047);
+  a036=(a026*a047);
+  a015=(a015+a036);
+  a034=(a101*a034);
+  a112=(a103*a112);
+  a034=(a034+a112);
+  a113=(a104*a113);
+  a034=(a034+a113);
+  a114=(a105*a114);
+  a034=(a034+a114);
+  a115=(a106*a115);
+  a034=(a034+a115);
+  a116=(a107*a116);
+  a034=(a034+a116);
+  a117=(a108*a117);
+  a034=(a034+a117);
+  a013=(a109*a013);
+  a034=(a034+a013);
+  a013=(a110*a031);
+  a034=(a034+a013);
+  a013=(a111*a033);
+  a034=(a034+a013);
+  a012=(a012*a034);
+  a012=(a029+a012);
+  a034=(a028*a012);
+  a015=(a015+a034);
+  a034=(a030*a031);
+  a015=(a015+a034);
+  a034=(a032*a033);
+  a015=(a015+a034);
+  a015=(a011*a015);
+  a015=(a001+a015);
+  a034=(a003*a015);
+  a013=(a035*a102);
+  a117=(a037*a014);
+  a013=(a013+a117);
+  a117=(a038*a091);
+  a013=(a013+a117);
+  a117=(a039*a080);
+  a013=(a013+a117);
+  a117=(a040*a069);
+  a013=(a013+a117);
+  a117=(a041*a058);
+  a013=(a013+a117);
+  a117=(a042*a047);
+  a013=(a013+a117);
+  a117=(a043*a012);
+  a013=(a013+a117);
+  a117=(a044*a031);
+  a013=(a013+a117);
+  a117=(a045*a033);
+  a013=(a013+a117);
+  a013=(a011*a013);
+  a013=(a017+a013);
+  a117=(a016*a013);
+  a034=(a034+a117);
+  a117=(a046*a102);
+  a116=(a048*a014);
+  a117=(a117+a116);
+  a116=(a049*a091);
+  a117=(a117+a116);
+  a116=(a050*a080);
+  a117=(a117+a116);
+  a116=(a051*a069);
+  a117=(a117+a116);
+  a116=(a052*a058);
+  a117=(a117+a116);
+  a116=(a053*a047);
+  a117=(a117+a116);
+  a116=(a054*a012);
+  a117=(a117+a116);
+  a116=(a055*a031);
+  a117=(a117+a116);
+  a116=(a056*a033);
+  a117=(a117+a116);
+  a117=(a011*a117);
+  a117=(a019+a117);
+  a116=(a018*a117);
+  a034=(a034+a116);
+  a116=(a057*a102);
+  a115=(a059*a014);
+  a116=(a116+a115);
+  a115=(a060*a091);
+  a116=(a116+a115);
+  a115=(a061*a080);
+  a116=(a116+a115);
+  a115=(a062*a069);
+  a116=(a116+a115);
+  a115=(a063*a058);
+  a116=(a116+a115);
+  a115=(a064*a047);
+  a116=(a116+a115);
+  a115=(a065*a012);
+  a116=(a116+a115);
+  a115=(a066*a031);
+  a116=(a116+a115);
+  a115=(a067*a033);
+  a116=(a116+a115);
+  a116=(a011*a116);
+  a116=(a021+a116);
+  a115=(a020*a116);
+  a034=(a034+a115);
+  a115=(a068*a102);
+  a114=(a070*a014);
+  a115=(a115+a114);
+  a114=(a071*a091);
+  a115=(a115+a114);
+  a114=(a072*a080);
+  a115=(a115+a114);
+  a114=(a073*a069);
+  a115=(a115+a114);
+  a114=(a074*a058);
+  a115=(a115+a114);
+  a114=(a075*a047);
+  a115=(a115+a114);
+  a114=(a076*a012);
+  a115=(a115+a114);
+  a114=(a077*a031);
+  a115=(a115+a114);
+  a114=(a078*a033);
+  a115=(a115+a114);
+  a115=(a011*a115);
+  a115=(a023+a115);
+  a114=(a022*a115);
+  a034=(a034+a114);
+  a114=(a079*a102);
+  a113=(a081*a014);
+  a114=(a114+a113);
+  a113=(a082*a091);
+  a114=(a114+a113);
+  a113=(a083*a080);
+  a114=(a114+a113);
+  a113=(a084*a069);
+  a114=(a114+a113);
+  a113=(a085*a058);
+  a114=(a114+a113);
+  a113=(a086*a047);
+  a114=(a114+a113);
+  a113=(a087*a012);
+  a114=(a114+a113);
+  a113=(a088*a031);
+  a114=(a114+a113);
+  a113=(a089*a033);
+  a114=(a114+a113);
+  a114=(a011*a114);
+  a114=(a025+a114);
+  a113=(a024*a114);
+  a034=(a034+a113);
+  a113=(a090*a102);
+  a112=(a092*a014);
+  a113=(a113+a112);
+  a112=(a093*a091);
+  a113=(a113+a112);
+  a112=(a094*a080);
+  a113=(a113+a112);
+  a112=(a095*a069);
+  a113=(a113+a112);
+  a112=(a096*a058);
+  a113=(a113+a112);
+  a112=(a097*a047);
+  a113=(a113+a112);
+  a112=(a098*a012);
+  a113=(a113+a112);
+  a112=(a099*a031);
+  a113=(a113+a112);
+  a112=(a100*a033);
+  a113=(a113+a112);
+  a113=(a011*a113);
+  a113=(a027+a113);
+  a112=(a026*a113);
+  a034=(a034+a112);
+  a102=(a101*a102);
+  a014=(a103*a014);
+  a102=(a102+a014);
+  a091=(a104*a091);
+  a102=(a102+a091);
+  a080=(a105*a080);
+  a102=(a102+a080);
+  a069=(a106*a069);
+  a102=(a102+a069);
+  a058=(a107*a058);
+  a102=(a102+a058);
+  a047=(a108*a047);
+  a102=(a102+a047);
+  a012=(a109*a012);
+  a102=(a102+a012);
+  a012=(a110*a031);
+  a102=(a102+a012);
+  a012=(a111*a033);
+  a102=(a102+a012);
+  a011=(a011*a102);
+  a011=(a029+a011);
+  a102=(a028*a011);
+  a034=(a034+a102);
+  a102=(a030*a031);
+  a034=(a034+a102);
+  a102=(a032*a033);
+  a034=(a034+a102);
+  a034=(a010*a034);
+  a034=(a001+a034);
+  a102=(a003*a034);
+  a012=(a035*a015);
+  a047=(a037*a013);
+  a012=(a012+a047);
+  a047=(a038*a117);
+  a012=(a012+a047);
+  a047=(a039*a116);
+  a012=(a012+a047);
+  a047=(a040*a115);
+  a012=(a012+a047);
+  a047=(a041*a114);
+  a012=(a012+a047);
+  a047=(a042*a113);
+  a012=(a012+a047);
+  a047=(a043*a011);
+  a012=(a012+a047);
+  a047=(a044*a031);
+  a012=(a012+a047);
+  a047=(a045*a033);
+  a012=(a012+a047);
+  a012=(a010*a012);
+  a012=(a017+a012);
+  a047=(a016*a012);
+  a102=(a102+a047);
+  a047=(a046*a015);
+  a058=(a048*a013);
+  a047=(a047+a058);
+  a058=(a049*a117);
+  a047=(a047+a058);
+  a058=(a050*a116);
+  a047=(a047+a058);
+  a058=(a051*a115);
+  a047=(a047+a058);
+  a058=(a052*a114);
+  a047=(a047+a058);
+  a058=(a053*a113);
+  a047=(a047+a058);
+  a058=(a054*a011);
+  a047=(a047+a058);
+  a058=(a055*a031);
+  a047=(a047+a058);
+  a058=(a056*a033);
+  a047=(a047+a058);
+  a047=(a010*a047);
+  a047=(a019+a047);
+  a058=(a018*a047);
+  a102=(a102+a058);
+  a058=(a057*a015);
+  a069=(a059*a013);
+  a058=(a058+a069);
+  a069=(a060*a117);
+  a058=(a058+a069);
+  a069=(a061*a116);
+  a058=(a058+a069);
+  a069=(a062*a115);
+  a058=(a058+a069);
+  a069=(a063*a114);
+  a058=(a058+a069);
+  a069=(a064*a113);
+  a058=(a058+a069);
+  a069=(a065*a011);
+  a058=(a058+a069);
+  a069=(a066*a031);
+  a058=(a058+a069);
+  a069=(a067*a033);
+  a058=(a058+a069);
+  a058=(a010*a058);
+  a058=(a021+a058);
+  a069=(a020*a058);
+  a102=(a102+a069);
+  a069=(a068*a015);
+  a080=(a070*a013);
+  a069=(a069+a080);
+  a080=(a071*a117);
+  a069=(a069+a080);
+  a080=(a072*a116);
+  a069=(a069+a080);
+  a080=(a073*a115);
+  a069=(a069+a080);
+  a080=(a074*a114);
+  a069=(a069+a080);
+  a080=(a075*a113);
+  a069=(a069+a080);
+  a080=(a076*a011);
+  a069=(a069+a080);
+  a080=(a077*a031);
+  a069=(a069+a080);
+  a080=(a078*a033);
+  a069=(a069+a080);
+  a069=(a010*a069);
+  a069=(a023+a069);
+  a080=(a022*a069);
+  a102=(a102+a080);
+  a080=(a079*a015);
+  a091=(a081*a013);
+  a080=(a080+a091);
+  a091=(a082*a117);
+  a080=(a080+a091);
+  a091=(a083*a116);
+  a080=(a080+a091);
+  a091=(a084*a115);
+  a080=(a080+a091);
+  a091=(a085*a114);
+  a080=(a080+a091);
+  a091=(a086*a113);
+  a080=(a080+a091);
+  a091=(a087*a011);
+  a080=(a080+a091);
+  a091=(a088*a031);
+  a080=(a080+a091);
+  a091=(a089*a033);
+  a080=(a080+a091);
+  a080=(a010*a080);
+  a080=(a025+a080);
+  a091=(a024*a080);
+  a102=(a102+a091);
+  a091=(a090*a015);
+  a014=(a092*a013);
+  a091=(a091+a014);
+  a014=(a093*a117);
+  a091=(a091+a014);
+  a014=(a094*a116);
+  a091=(a091+a014);
+  a014=(a095*a115);
+  a091=(a091+a014);
+  a014=(a096*a114);
+  a091=(a091+a014);
+  a014=(a097*a113);
+  a091=(a091+a014);
+  a014=(a098*a011);
+  a091=(a091+a014);
+  a014=(a099*a031);
+  a091=(a091+a014);
+  a014=(a100*a033);
+  a091=(a091+a014);
+  a091=(a010*a091);
+  a091=(a027+a091);
+  a014=(a026*a091);
+  a102=(a102+a014);
+  a015=(a101*a015);
+  a013=(a103*a013);
+  a015=(a015+a013);
+  a117=(a104*a117);
+  a015=(a015+a117);
+  a116=(a105*a116);
+  a015=(a015+a116);
+  a115=(a106*a115);
+  a015=(a015+a115);
+  a114=(a107*a114);
+  a015=(a015+a114);
+  a113=(a108*a113);
+  a015=(a015+a113);
+  a011=(a109*a011);
+  a015=(a015+a011);
+  a011=(a110*a031);
+  a015=(a015+a011);
+  a011=(a111*a033);
+  a015=(a015+a011);
+  a010=(a010*a015);
+  a010=(a029+a010);
+  a015=(a028*a010);
+  a102=(a102+a015);
+  a015=(a030*a031);
+  a102=(a102+a015);
+  a015=(a032*a033);
+  a102=(a102+a015);
+  a102=(a009*a102);
+  a102=(a001+a102);
+  a015=(a003*a102);
+  a011=(a035*a034);
+  a113=(a037*a012);
+  a011=(a011+a113);
+  a113=(a038*a047);
+  a011=(a011+a113);
+  a113=(a039*a058);
+  a011=(a011+a113);
+  a113=(a040*a069);
+  a011=(a011+a113);
+  a113=(a041*a080);
+  a011=(a011+a113);
+  a113=(a042*a091);
+  a011=(a011+a113);
+  a113=(a043*a010);
+  a011=(a011+a113);
+  a113=(a044*a031);
+  a011=(a011+a113);
+  a113=(a045*a033);
+  a011=(a011+a113);
+  a011=(a009*a011);
+  a011=(a017+a011);
+  a113=(a016*a011);
+  a015=(a015+a113);
+  a113=(a046*a034);
+  a114=(a048*a012);
+  a113=(a113+a114);
+  a114=(a049*a047);
+  a113=(a113+a114);
+  a114=(a050*a058);
+  a113=(a113+a114);
+  a114=(a051*a069);
+  a113=(a113+a114);
+  a114=(a052*a080);
+  a113=(a113+a114);
+  a114=(a053*a091);
+  a113=(a113+a114);
+  a114=(a054*a010);
+  a113=(a113+a114);
+  a114=(a055*a031);
+  a113=(a113+a114);
+  a114=(a056*a033);
+  a113=(a113+a114);
+  a113=(a009*a113);
+  a113=(a019+a113);
+  a114=(a018*a113);
+  a015=(a015+a114);
+  a114=(a057*a034);
+  a115=(a059*a012);
+  a114=(a114+a115);
+  a115=(a060*a047);
+  a114=(a114+a115);
+  a115=(a061*a058);
+  a114=(a114+a115);
+  a115=(a062*a069);
+  a114=(a114+a115);
+  a115=(a063*a080);
+  a114=(a114+a115);
+  a115=(a064*a091);
+  a114=(a114+a115);
+  a115=(a065*a010);
+  a114=(a114+a115);
+  a115=(a066*a031);
+  a114=(a114+a115);
+  a115=(a067*a033);
+  a114=(a114+a115);
+  a114=(a009*a114);
+  a114=(a021+a114);
+  a115=(a020*a114);
+  a015=(a015+a115);
+  a115=(a068*a034);
+  a116=(a070*a012);
+  a115=(a115+a116);
+  a116=(a071*a047);
+  a115=(a115+a116);
+  a116=(a072*a058);
+  a115=(a115+a116);
+  a116=(a073*a069);
+  a115=(a115+a116);
+  a116=(a074*a080);
+  a115=(a115+a116);
+  a116=(a075*a091);
+  a115=(a115+a116);
+  a116=(a076*a010);
+  a115=(a115+a116);
+  a116=(a077*a031);
+  a115=(a115+a116);
+  a116=(a078*a033);
+  a115=(a115+a116);
+  a115=(a009*a115);
+  a115=(a023+a115);
+  a116=(a022*a115);
+  a015=(a015+a116);
+  a116=(a079*a034);
+  a117=(a081*a012);
+  a116=(a116+a117);
+  a117=(a082*a047);
+  a116=(a116+a117);
+  a117=(a083*a058);
+  a116=(a116+a117);
+  a117=(a084*a069);
+  a116=(a116+a117);
+  a117=(a085*a080);
+  a116=(a116+a117);
+  a117=(a086*a091);
+  a116=(a116+a117);
+  a117=(a087*a010);
+  a116=(a116+a117);
+  a117=(a088*a031);
+  a116=(a116+a117);
+  a117=(a089*a033);
+  a116=(a116+a117);
+  a116=(a009*a116);
+  a116=(a025+a116);
+  a117=(a024*a116);
+  a015=(a015+a117);
+  a117=(a090*a034);
+  a013=(a092*a012);
+  a117=(a117+a013);
+  a013=(a093*a047);
+  a117=(a117+a013);
+  a013=(a094*a058);
+  a117=(a117+a013);
+  a013=(a095*a069);
+  a117=(a117+a013);
+  a013=(a096*a080);
+  a117=(a117+a013);
+  a013=(a097*a091);
+  a117=(a117+a013);
+  a013=(a098*a010);
+  a117=(a117+a013);
+  a013=(a099*a031);
+  a117=(a117+a013);
+  a013=(a100*a033);
+  a117=(a117+a013);
+  a117=(a009*a117);
+  a117=(a027+a117);
+  a013=(a026*a117);
+  a015=(a015+a013);
+  a034=(a101*a034);
+  a012=(a103*a012);
+  a034=(a034+a012);
+  a047=(a104*a047);
+  a034=(a034+a047);
+  a058=(a105*a058);
+  a034=(a034+a058);
+  a069=(a106*a069);
+  a034=(a034+a069);
+  a080=(a107*a080);
+  a034=(a034+a080);
+  a091=(a108*a091);
+  a034=(a034+a091);
+  a010=(a109*a010);
+  a034=(a034+a010);
+  a010=(a110*a031);
+  a034=(a034+a010);
+  a010=(a111*a033);
+  a034=(a034+a010);
+  a009=(a009*a034);
+  a009=(a029+a009);
+  a034=(a028*a009);
+  a015=(a015+a034);
+  a034=(a030*a031);
+  a015=(a015+a034);
+  a034=(a032*a033);
+  a015=(a015+a034);
+  a015=(a008*a015);
+  a015=(a001+a015);
+  a034=(a003*a015);
+  a010=(a035*a102);
+  a091=(a037*a011);
+  a010=(a010+a091);
+  a091=(a038*a113);
+  a010=(a010+a091);
+  a091=(a039*a114);
+  a010=(a010+a091);
+  a091=(a040*a115);
+  a010=(a010+a091);
+  a091=(a041*a116);
+  a010=(a010+a091);
+  a091=(a042*a117);
+  a010=(a010+a091);
+  a091=(a043*a009);
+  a010=(a010+a091);
+  a091=(a044*a031);
+  a010=(a010+a091);
+  a091=(a045*a033);
+  a010=(a010+a091);
+  a010=(a008*a010);
+  a010=(a017+a010);
+  a091=(a016*a010);
+  a034=(a034+a091);
+  a091=(a046*a102);
+  a080=(a048*a011);
+  a091=(a091+a080);
+  a080=(a049*a113);
+  a091=(a091+a080);
+  a080=(a050*a114);
+  a091=(a091+a080);
+  a080=(a051*a115);
+  a091=(a091+a080);
+  a080=(a052*a116);
+  a091=(a091+a080);
+  a080=(a053*a117);
+  a091=(a091+a080);
+  a080=(a054*a009);
+  a091=(a091+a080);
+  a080=(a055*a031);
+  a091=(a091+a080);
+  a080=(a056*a033);
+  a091=(a091+a080);
+  a091=(a008*a091);
+  a091=(a019+a091);
+  a080=(a018*a091);
+  a034=(a034+a080);
+  a080=(a057*a102);
+  a069=(a059*a011);
+  a080=(a080+a069);
+  a069=(a060*a113);
+  a080=(a080+a069);
+  a069=(a061*a114);
+  a080=(a080+a069);
+  a069=(a062*a115);
+  a080=(a080+a069);
+  a069=(a063*a116);
+  a080=(a080+a069);
+  a069=(a064*a117);
+  a080=(a080+a069);
+  a069=(a065*a009);
+  a080=(a080+a069);
+  a069=(a066*a031);
+  a080=(a080+a069);
+  a069=(a067*a033);
+  a080=(a080+a069);
+  a080=(a008*a080);
+  a080=(a021+a080);
+  a069=(a020*a080);
+  a034=(a034+a069);
+  a069=(a068*a102);
+  a058=(a070*a011);
+  a069=(a069+a058);
+  a058=(a071*a113);
+  a069=(a069+a058);
+  a058=(a072*a114);
+  a069=(a069+a058);
+  a058=(a073*a115);
+  a069=(a069+a058);
+  a058=(a074*a116);
+  a069=(a069+a058);
+  a058=(a075*a117);
+  a069=(a069+a058);
+  a058=(a076*a009);
+  a069=(a069+a058);
+  a058=(a077*a031);
+  a069=(a069+a058);
+  a058=(a078*a033);
+  a069=(a069+a058);
+  a069=(a008*a069);
+  a069=(a023+a069);
+  a058=(a022*a069);
+  a034=(a034+a058);
+  a058=(a079*a102);
+  a047=(a081*a011);
+  a058=(a058+a047);
+  a047=(a082*a113);
+  a058=(a058+a047);
+  a047=(a083*a114);
+  a058=(a058+a047);
+  a047=(a084*a115);
+  a058=(a058+a047);
+  a047=(a085*a116);
+  a058=(a058+a047);
+  a047=(a086*a117);
+  a058=(a058+a047);
+  a047=(a087*a009);
+  a058=(a058+a047);
+  a047=(a088*a031);
+  a058=(a058+a047);
+  a047=(a089*a033);
+  a058=(a058+a047);
+  a058=(a008*a058);
+  a058=(a025+a058);
+  a047=(a024*a058);
+  a034=(a034+a047);
+  a047=(a090*a102);
+  a012=(a092*a011);
+  a047=(a047+a012);
+  a012=(a093*a113);
+  a047=(a047+a012);
+  a012=(a094*a114);
+  a047=(a047+a012);
+  a012=(a095*a115);
+  a047=(a047+a012);
+  a012=(a096*a116);
+  a047=(a047+a012);
+  a012=(a097*a117);
+  a047=(a047+a012);
+  a012=(a098*a009);
+  a047=(a047+a012);
+  a012=(a099*a031);
+  a047=(a047+a012);
+  a012=(a100*a033);
+  a047=(a047+a012);
+  a047=(a008*a047);
+  a047=(a027+a047);
+  a012=(a026*a047);
+  a034=(a034+a012);
+  a102=(a101*a102);
+  a011=(a103*a011);
+  a102=(a102+a011);
+  a113=(a104*a113);
+  a102=(a102+a113);
+  a114=(a105*a114);
+  a102=(a102+a114);
+  a115=(a106*a115);
+  a102=(a102+a115);
+  a116=(a107*a116);
+  a102=(a102+a116);
+  a117=(a108*a117);
+  a102=(a102+a117);
+  a009=(a109*a009);
+  a102=(a102+a009);
+  a009=(a110*a031);
+  a102=(a102+a009);
+  a009=(a111*a033);
+  a102=(a102+a009);
+  a008=(a008*a102);
+  a008=(a029+a008);
+  a102=(a028*a008);
+  a034=(a034+a102);
+  a102=(a030*a031);
+  a034=(a034+a102);
+  a102=(a032*a033);
+  a034=(a034+a102);
+  a034=(a007*a034);
+  a034=(a001+a034);
+  a102=(a003*a034);
+  a009=(a035*a015);
+  a117=(a037*a010);
+  a009=(a009+a117);
+  a117=(a038*a091);
+  a009=(a009+a117);
+  a117=(a039*a080);
+  a009=(a009+a117);
+  a117=(a040*a069);
+  a009=(a009+a117);
+  a117=(a041*a058);
+  a009=(a009+a117);
+  a117=(a042*a047);
+  a009=(a009+a117);
+  a117=(a043*a008);
+  a009=(a009+a117);
+  a117=(a044*a031);
+  a009=(a009+a117);
+  a117=(a045*a033);
+  a009=(a009+a117);
+  a009=(a007*a009);
+  a009=(a017+a009);
+  a117=(a016*a009);
+  a102=(a102+a117);
+  a117=(a046*a015);
+  a116=(a048*a010);
+  a117=(a117+a116);
+  a116=(a049*a091);
+  a117=(a117+a116);
+  a116=(a050*a080);
+  a117=(a117+a116);
+  a116=(a051*a069);
+  a117=(a117+a116);
+  a116=(a052*a058);
+  a117=(a117+a116);
+  a116=(a053*a047);
+  a117=(a117+a116);
+  a116=(a054*a008);
+  a117=(a117+a116);
+  a116=(a055*a031);
+  a117=(a117+a116);
+  a116=(a056*a033);
+  a117=(a117+a116);
+  a117=(a007*a117);
+  a117=(a019+a117);
+  a116=(a018*a117);
+  a102=(a102+a116);
+  a116=(a057*a015);
+  a115=(a059*a010);
+  a116=(a116+a115);
+  a115=(a060*a091);
+  a116=(a116+a115);
+  a115=(a061*a080);
+  a116=(a116+a115);
+  a115=(a062*a069);
+  a116=(a116+a115);
+  a115=(a063*a058);
+  a116=(a116+a115);
+  a115=(a064*a047);
+  a116=(a116+a115);
+  a115=(a065*a008);
+  a116=(a116+a115);
+  a115=(a066*a031);
+  a116=(a116+a115);
+  a115=(a067*a033);
+  a116=(a116+a115);
+  a116=(a007*a116);
+  a116=(a021+a116);
+  a115=(a020*a116);
+  a102=(a102+a115);
+  a115=(a068*a015);
+  a114=(a070*a010);
+  a115=(a115+a114);
+  a114=(a071*a091);
+  a115=(a115+a114);
+  a114=(a072*a080);
+  a115=(a115+a114);
+  a114=(a073*a069);
+  a115=(a115+a114);
+  a114=(a074*a058);
+  a115=(a115+a114);
+  a114=(a075*a047);
+  a115=(a115+a114);
+  a114=(a076*a008);
+  a115=(a115+a114);
+  a114=(a077*a031);
+  a115=(a115+a114);
+  a114=(a078*a033);
+  a115=(a115+a114);
+  a115=(a007*a115);
+  a115=(a023+a115);
+  a114=(a022*a115);
+  a102=(a102+a114);
+  a114=(a079*a015);
+  a113=(a081*a010);
+  a114=(a114+a113);
+  a113=(a082*a091);
+  a114=(a114+a113);
+  a113=(a083*a080);
+  a114=(a114+a113);
+  a113=(a084*a069);
+  a114=(a114+a113);
+  a113=(a085*a058);
+  a114=(a114+a113);
+  a113=(a086*a047);
+  a114=(a114+a113);
+  a113=(a087*a008);
+  a114=(a114+a113);
+  a113=(a088*a031);
+  a114=(a114+a113);
+  a113=(a089*a033);
+  a114=(a114+a113);
+  a114=(a007*a114);
+  a114=(a025+a114);
+  a113=(a024*a114);
+  a102=(a102+a113);
+  a113=(a090*a015);
+  a011=(a092*a010);
+  a113=(a113+a011);
+  a011=(a093*a091);
+  a113=(a113+a011);
+  a011=(a094*a080);
+  a113=(a113+a011);
+  a011=(a095*a069);
+  a113=(a113+a011);
+  a011=(a096*a058);
+  a113=(a113+a011);
+  a011=(a097*a047);
+  a113=(a113+a011);
+  a011=(a098*a008);
+  a113=(a113+a011);
+  a011=(a099*a031);
+  a113=(a113+a011);
+  a011=(a100*a033);
+  a113=(a113+a011);
+  a113=(a007*a113);
+  a113=(a027+a113);
+  a011=(a026*a113);
+  a102=(a102+a011);
+  a015=(a101*a015);
+  a010=(a103*a010);
+  a015=(a015+a010);
+  a091=(a104*a091);
+  a015=(a015+a091);
+  a080=(a105*a080);
+  a015=(a015+a080);
+  a069=(a106*a069);
+  a015=(a015+a069);
+  a058=(a107*a058);
+  a015=(a015+a058);
+  a047=(a108*a047);
+  a015=(a015+a047);
+  a008=(a109*a008);
+  a015=(a015+a008);
+  a008=(a110*a031);
+  a015=(a015+a008);
+  a008=(a111*a033);
+  a015=(a015+a008);
+  a007=(a007*a015);
+  a007=(a029+a007);
+  a015=(a028*a007);
+  a102=(a102+a015);
+  a015=(a030*a031);
+  a102=(a102+a015);
+  a015=(a032*a033);
+  a102=(a102+a015);
+  a102=(a006*a102);
+  a102=(a001+a102);
+  a015=(a003*a102);
+  a008=(a035*a034);
+  a047=(a037*a009);
+  a008=(a008+a047);
+  a047=(a038*a117);
+  a008=(a008+a047);
+  a047=(a039*a116);
+  a008=(a008+a047);
+  a047=(a040*a115);
+  a008=(a008+a047);
+  a047=(a041*a114);
+  a008=(a008+a047);
+  a047=(a042*a113);
+  a008=(a008+a047);
+  a047=(a043*a007);
+  a008=(a008+a047);
+  a047=(a044*a031);
+  a008=(a008+a047);
+  a047=(a045*a033);
+  a008=(a008+a047);
+  a008=(a006*a008);
+  a008=(a017+a008);
+  a047=(a016*a008);
+  a015=(a015+a047);
+  a047=(a046*a034);
+  a058=(a048*a009);
+  a047=(a047+a058);
+  a058=(a049*a117);
+  a047=(a047+a058);
+  a058=(a050*a116);
+  a047=(a047+a058);
+  a058=(a051*a115);
+  a047=(a047+a058);
+  a058=(a052*a114);
+  a047=(a047+a058);
+  a058=(a053*a113);
+  a047=(a047+a058);
+  a058=(a054*a007);
+  a047=(a047+a058);
+  a058=(a055*a031);
+  a047=(a047+a058);
+  a058=(a056*a033);
+  a047=(a047+a058);
+  a047=(a006*a047);
+  a047=(a019+a047);
+  a058=(a018*a047);
+  a015=(a015+a058);
+  a058=(a057*a034);
+  a069=(a059*a009);
+  a058=(a058+a069);
+  a069=(a060*a117);
+  a058=(a058+a069);
+  a069=(a061*a116);
+  a058=(a058+a069);
+  a069=(a062*a115);
+  a058=(a058+a069);
+  a069=(a063*a114);
+  a058=(a058+a069);
+  a069=(a064*a113);
+  a058=(a058+a069);
+  a069=(a065*a007);
+  a058=(a058+a069);
+  a069=(a066*a031);
+  a058=(a058+a069);
+  a069=(a067*a033);
+  a058=(a058+a069);
+  a058=(a006*a058);
+  a058=(a021+a058);
+  a069=(a020*a058);
+  a015=(a015+a069);
+  a069=(a068*a034);
+  a080=(a070*a009);
+  a069=(a069+a080);
+  a080=(a071*a117);
+  a069=(a069+a080);
+  a080=(a072*a116);
+  a069=(a069+a080);
+  a080=(a073*a115);
+  a069=(a069+a080);
+  a080=(a074*a114);
+  a069=(a069+a080);
+  a080=(a075*a113);
+  a069=(a069+a080);
+  a080=(a076*a007);
+  a069=(a069+a080);
+  a080=(a077*a031);
+  a069=(a069+a080);
+  a080=(a078*a033);
+  a069=(a069+a080);
+  a069=(a006*a069);
+  a069=(a023+a069);
+  a080=(a022*a069);
+  a015=(a015+a080);
+  a080=(a079*a034);
+  a091=(a081*a009);
+  a080=(a080+a091);
+  a091=(a082*a117);
+  a080=(a080+a091);
+  a091=(a083*a116);
+  a080=(a080+a091);
+  a091=(a084*a115);
+  a080=(a080+a091);
+  a091=(a085*a114);
+  a080=(a080+a091);
+  a091=(a086*a113);
+  a080=(a080+a091);
+  a091=(a087*a007);
+  a080=(a080+a091);
+  a091=(a088*a031);
+  a080=(a080+a091);
+  a091=(a089*a033);
+  a080=(a080+a091);
+  a080=(a006*a080);
+  a080=(a025+a080);
+  a091=(a024*a080);
+  a015=(a015+a091);
+  a091=(a090*a034);
+  a010=(a092*a009);
+  a091=(a091+a010);
+  a010=(a093*a117);
+  a091=(a091+a010);
+  a010=(a094*a116);
+  a091=(a091+a010);
+  a010=(a095*a115);
+  a091=(a091+a010);
+  a010=(a096*a114);
+  a091=(a091+a010);
+  a010=(a097*a113);
+  a091=(a091+a010);
+  a010=(a098*a007);
+  a091=(a091+a010);
+  a010=(a099*a031);
+  a091=(a091+a010);
+  a010=(a100*a033);
+  a091=(a091+a010);
+  a091=(a006*a091);
+  a091=(a027+a091);
+  a010=(a026*a091);
+  a015=(a015+a010);
+  a034=(a101*a034);
+  a009=(a103*a009);
+  a034=(a034+a009);
+  a117=(a104*a117);
+  a034=(a034+a117);
+  a116=(a105*a116);
+  a034=(a034+a116);
+  a115=(a106*a115);
+  a034=(a034+a115);
+  a114=(a107*a114);
+  a034=(a034+a114);
+  a113=(a108*a113);
+  a034=(a034+a113);
+  a007=(a109*a007);
+  a034=(a034+a007);
+  a007=(a110*a031);
+  a034=(a034+a007);
+  a007=(a111*a033);
+  a034=(a034+a007);
+  a006=(a006*a034);
+  a006=(a029+a006);
+  a034=(a028*a006);
+  a015=(a015+a034);
+  a034=(a030*a031);
+  a015=(a015+a034);
+  a034=(a032*a033);
+  a015=(a015+a034);
+  a015=(a005*a015);
+  a015=(a001+a015);
+  a034=(a003*a015);
+  a007=(a035*a102);
+  a113=(a037*a008);
+  a007=(a007+a113);
+  a113=(a038*a047);
+  a007=(a007+a113);
+  a113=(a039*a058);
+  a007=(a007+a113);
+  a113=(a040*a069);
+  a007=(a007+a113);
+  a113=(a041*a080);
+  a007=(a007+a113);
+  a113=(a042*a091);
+  a007=(a007+a113);
+  a113=(a043*a006);
+  a007=(a007+a113);
+  a113=(a044*a031);
+  a007=(a007+a113);
+  a113=(a045*a033);
+  a007=(a007+a113);
+  a007=(a005*a007);
+  a007=(a017+a007);
+  a113=(a016*a007);
+  a034=(a034+a113);
+  a113=(a046*a102);
+  a114=(a048*a008);
+  a113=(a113+a114);
+  a114=(a049*a047);
+  a113=(a113+a114);
+  a114=(a050*a058);
+  a113=(a113+a114);
+  a114=(a051*a069);
+  a113=(a113+a114);
+  a114=(a052*a080);
+  a113=(a113+a114);
+  a114=(a053*a091);
+  a113=(a113+a114);
+  a114=(a054*a006);
+  a113=(a113+a114);
+  a114=(a055*a031);
+  a113=(a113+a114);
+  a114=(a056*a033);
+  a113=(a113+a114);
+  a113=(a005*a113);
+  a113=(a019+a113);
+  a114=(a018*a113);
+  a034=(a034+a114);
+  a114=(a057*a102);
+  a115=(a059*a008);
+  a114=(a114+a115);
+  a115=(a060*a047);
+  a114=(a114+a115);
+  a115=(a061*a058);
+  a114=(a114+a115);
+  a115=(a062*a069);
+  a114=(a114+a115);
+  a115=(a063*a080);
+  a114=(a114+a115);
+  a115=(a064*a091);
+  a114=(a114+a115);
+  a115=(a065*a006);
+  a114=(a114+a115);
+  a115=(a066*a031);
+  a114=(a114+a115);
+  a115=(a067*a033);
+  a114=(a114+a115);
+  a114=(a005*a114);
+  a114=(a021+a114);
+  a115=(a020*a114);
+  a034=(a034+a115);
+  a115=(a068*a102);
+  a116=(a070*a008);
+  a115=(a115+a116);
+  a116=(a071*a047);
+  a115=(a115+a116);
+  a116=(a072*a058);
+  a115=(a115+a116);
+  a116=(a073*a069);
+  a115=(a115+a116);
+  a116=(a074*a080);
+  a115=(a115+a116);
+  a116=(a075*a091);
+  a115=(a115+a116);
+  a116=(a076*a006);
+  a115=(a115+a116);
+  a116=(a077*a031);
+  a115=(a115+a116);
+  a116=(a078*a033);
+  a115=(a115+a116);
+  a115=(a005*a115);
+  a115=(a023+a115);
+  a116=(a022*a115);
+  a034=(a034+a116);
+  a116=(a079*a102);
+  a117=(a081*a008);
+  a116=(a116+a117);
+  a117=(a082*a047);
+  a116=(a116+a117);
+  a117=(a083*a058);
+  a116=(a116+a117);
+  a117=(a084*a069);
+  a116=(a116+a117);
+  a117=(a085*a080);
+  a116=(a116+a117);
+  a117=(a086*a091);
+  a116=(a116+a117);
+  a117=(a087*a006);
+  a116=(a116+a117);
+  a117=(a088*a031);
+  a116=(a116+a117);
+  a117=(a089*a033);
+  a116=(a116+a117);
+  a116=(a005*a116);
+  a116=(a025+a116);
+  a117=(a024*a116);
+  a034=(a034+a117);
+  a117=(a090*a102);
+  a009=(a092*a008);
+  a117=(a117+a009);
+  a009=(a093*a047);
+  a117=(a117+a009);
+  a009=(a094*a058);
+  a117=(a117+a009);
+  a009=(a095*a069);
+  a117=(a117+a009);
+  a009=(a096*a080);
+  a117=(a117+a009);
+  a009=(a097*a091);
+  a117=(a117+a009);
+  a009=(a098*a006);
+  a117=(a117+a009);
+  a009=(a099*a031);
+  a117=(a117+a009);
+  a009=(a100*a033);
+  a117=(a117+a009);
+  a117=(a005*a117);
+  a117=(a027+a117);
+  a009=(a026*a117);
+  a034=(a034+a009);
+  a102=(a101*a102);
+  a008=(a103*a008);
+  a102=(a102+a008);
+  a047=(a104*a047);
+  a102=(a102+a047);
+  a058=(a105*a058);
+  a102=(a102+a058);
+  a069=(a106*a069);
+  a102=(a102+a069);
+  a080=(a107*a080);
+  a102=(a102+a080);
+  a091=(a108*a091);
+  a102=(a102+a091);
+  a006=(a109*a006);
+  a102=(a102+a006);
+  a006=(a110*a031);
+  a102=(a102+a006);
+  a006=(a111*a033);
+  a102=(a102+a006);
+  a005=(a005*a102);
+  a005=(a029+a005);
+  a102=(a028*a005);
+  a034=(a034+a102);
+  a102=(a030*a031);
+  a034=(a034+a102);
+  a102=(a032*a033);
+  a034=(a034+a102);
+  a034=(a004*a034);
+  a034=(a001+a034);
+  a003=(a003*a034);
+  a102=(a035*a015);
+  a006=(a037*a007);
+  a102=(a102+a006);
+  a006=(a038*a113);
+  a102=(a102+a006);
+  a006=(a039*a114);
+  a102=(a102+a006);
+  a006=(a040*a115);
+  a102=(a102+a006);
+  a006=(a041*a116);
+  a102=(a102+a006);
+  a006=(a042*a117);
+  a102=(a102+a006);
+  a006=(a043*a005);
+  a102=(a102+a006);
+  a006=(a044*a031);
+  a102=(a102+a006);
+  a006=(a045*a033);
+  a102=(a102+a006);
+  a102=(a004*a102);
+  a102=(a017+a102);
+  a016=(a016*a102);
+  a003=(a003+a016);
+  a016=(a046*a015);
+  a006=(a048*a007);
+  a016=(a016+a006);
+  a006=(a049*a113);
+  a016=(a016+a006);
+  a006=(a050*a114);
+  a016=(a016+a006);
+  a006=(a051*a115);
+  a016=(a016+a006);
+  a006=(a052*a116);
+  a016=(a016+a006);
+  a006=(a053*a117);
+  a016=(a016+a006);
+  a006=(a054*a005);
+  a016=(a016+a006);
+  a006=(a055*a031);
+  a016=(a016+a006);
+  a006=(a056*a033);
+  a016=(a016+a006);
+  a016=(a004*a016);
+  a016=(a019+a016);
+  a018=(a018*a016);
+  a003=(a003+a018);
+  a018=(a057*a015);
+  a006=(a059*a007);
+  a018=(a018+a006);
+  a006=(a060*a113);
+  a018=(a018+a006);
+  a006=(a061*a114);
+  a018=(a018+a006);
+  a006=(a062*a115);
+  a018=(a018+a006);
+  a006=(a063*a116);
+  a018=(a018+a006);
+  a006=(a064*a117);
+  a018=(a018+a006);
+  a006=(a065*a005);
+  a018=(a018+a006);
+  a006=(a066*a031);
+  a018=(a018+a006);
+  a006=(a067*a033);
+  a018=(a018+a006);
+  a018=(a004*a018);
+  a018=(a021+a018);
+  a020=(a020*a018);
+  a003=(a003+a020);
+  a020=(a068*a015);
+  a006=(a070*a007);
+  a020=(a020+a006);
+  a006=(a071*a113);
+  a020=(a020+a006);
+  a006=(a072*a114);
+  a020=(a020+a006);
+  a006=(a073*a115);
+  a020=(a020+a006);
+  a006=(a074*a116);
+  a020=(a020+a006);
+  a006=(a075*a117);
+  a020=(a020+a006);
+  a006=(a076*a005);
+  a020=(a020+a006);
+  a006=(a077*a031);
+  a020=(a020+a006);
+  a006=(a078*a033);
+  a020=(a020+a006);
+  a020=(a004*a020);
+  a020=(a023+a020);
+  a022=(a022*a020);
+  a003=(a003+a022);
+  a022=(a079*a015);
+  a006=(a081*a007);
+  a022=(a022+a006);
+  a006=(a082*a113);
+  a022=(a022+a006);
+  a006=(a083*a114);
+  a022=(a022+a006);
+  a006=(a084*a115);
+  a022=(a022+a006);
+  a006=(a085*a116);
+  a022=(a022+a006);
+  a006=(a086*a117);
+  a022=(a022+a006);
+  a006=(a087*a005);
+  a022=(a022+a006);
+  a006=(a088*a031);
+  a022=(a022+a006);
+  a006=(a089*a033);
+  a022=(a022+a006);
+  a022=(a004*a022);
+  a022=(a025+a022);
+  a024=(a024*a022);
+  a003=(a003+a024);
+  a024=(a090*a015);
+  a006=(a092*a007);
+  a024=(a024+a006);
+  a006=(a093*a113);
+  a024=(a024+a006);
+  a006=(a094*a114);
+  a024=(a024+a006);
+  a006=(a095*a115);
+  a024=(a024+a006);
+  a006=(a096*a116);
+  a024=(a024+a006);
+  a006=(a097*a117);
+  a024=(a024+a006);
+  a006=(a098*a005);
+  a024=(a024+a006);
+  a006=(a099*a031);
+  a024=(a024+a006);
+  a006=(a100*a033);
+  a024=(a024+a006);
+  a024=(a004*a024);
+  a024=(a027+a024);
+  a026=(a026*a024);
+  a003=(a003+a026);
+  a015=(a101*a015);
+  a007=(a103*a007);
+  a015=(a015+a007);
+  a113=(a104*a113);
+  a015=(a015+a113);
+  a114=(a105*a114);
+  a015=(a015+a114);
+  a115=(a106*a115);
+  a015=(a015+a115);
+  a116=(a107*a116);
+  a015=(a015+a116);
+  a117=(a108*a117);
+  a015=(a015+a117);
+  a005=(a109*a005);
+  a015=(a015+a005);
+  a005=(a110*a031);
+  a015=(a015+a005);
+  a005=(a111*a033);
+  a015=(a015+a005);
+  a004=(a004*a015);
+  a004=(a029+a004);
+  a028=(a028*a004);
+  a003=(a003+a028);
+  a030=(a030*a031);
+  a003=(a003+a030);
+  a032=(a032*a033);
+  a003=(a003+a032);
+  a003=(a002*a003);
+  a001=(a001+a003);
+  a000=(a000*a001);
+  a003=arg[3]? arg[3][8] : 0;
+  a035=(a035*a034);
+  a037=(a037*a102);
+  a035=(a035+a037);
+  a038=(a038*a016);
+  a035=(a035+a038);
+  a039=(a039*a018);
+  a035=(a035+a039);
+  a040=(a040*a020);
+  a035=(a035+a040);
+  a041=(a041*a022);
+  a035=(a035+a041);
+  a042=(a042*a024);
+  a035=(a035+a042);
+  a043=(a043*a004);
+  a035=(a035+a043);
+  a044=(a044*a031);
+  a035=(a035+a044);
+  a045=(a045*a033);
+  a035=(a035+a045);
+  a035=(a002*a035);
+  a017=(a017+a035);
+  a003=(a003*a017);
+  a000=(a000+a003);
+  a003=arg[3]? arg[3][16] : 0;
+  a046=(a046*a034);
+  a048=(a048*a102);
+  a046=(a046+a048);
+  a049=(a049*a016);
+  a046=(a046+a049);
+  a050=(a050*a018);
+  a046=(a046+a050);
+  a051=(a051*a020);
+  a046=(a046+a051);
+  a052=(a052*a022);
+  a046=(a046+a052);
+  a053=(a053*a024);
+  a046=(a046+a053);
+  a054=(a054*a004);
+  a046=(a046+a054);
+  a055=(a055*a031);
+  a046=(a046+a055);
+  a056=(a056*a033);
+  a046=(a046+a056);
+  a046=(a002*a046);
+  a019=(a019+a046);
+  a003=(a003*a019);
+  a000=(a000+a003);
+  a003=arg[3]? arg[3][24] : 0;
+  a057=(a057*a034);
+  a059=(a059*a102);
+  a057=(a057+a059);
+  a060=(a060*a016);
+  a057=(a057+a060);
+  a061=(a061*a018);
+  a057=(a057+a061);
+  a062=(a062*a020);
+  a057=(a057+a062);
+  a063=(a063*a022);
+  a057=(a057+a063);
+  a064=(a064*a024);
+  a057=(a057+a064);
+  a065=(a065*a004);
+  a057=(a057+a065);
+  a066=(a066*a031);
+  a057=(a057+a066);
+  a067=(a067*a033);
+  a057=(a057+a067);
+  a057=(a002*a057);
+  a021=(a021+a057);
+  a003=(a003*a021);
+  a000=(a000+a003);
+  a003=arg[3]? arg[3][32] : 0;
+  a068=(a068*a034);
+  a070=(a070*a102);
+  a068=(a068+a070);
+  a071=(a071*a016);
+  a068=(a068+a071);
+  a072=(a072*a018);
+  a068=(a068+a072);
+  a073=(a073*a020);
+  a068=(a068+a073);
+  a074=(a074*a022);
+  a068=(a068+a074);
+  a075=(a075*a024);
+  a068=(a068+a075);
+  a076=(a076*a004);
+  a068=(a068+a076);
+  a077=(a077*a031);
+  a068=(a068+a077);
+  a078=(a078*a033);
+  a068=(a068+a078);
+  a068=(a002*a068);
+  a023=(a023+a068);
+  a003=(a003*a023);
+  a000=(a000+a003);
+  a003=arg[3]? arg[3][40] : 0;
+  a079=(a079*a034);
+  a081=(a081*a102);
+  a079=(a079+a081);
+  a082=(a082*a016);
+  a079=(a079+a082);
+  a083=(a083*a018);
+  a079=(a079+a083);
+  a084=(a084*a020);
+  a079=(a079+a084);
+  a085=(a085*a022);
+  a079=(a079+a085);
+  a086=(a086*a024);
+  a079=(a079+a086);
+  a087=(a087*a004);
+  a079=(a079+a087);
+  a088=(a088*a031);
+  a079=(a079+a088);
+  a089=(a089*a033);
+  a079=(a079+a089);
+  a079=(a002*a079);
+  a025=(a025+a079);
+  a003=(a003*a025);
+  a000=(a000+a003);
+  a003=arg[3]? arg[3][48] : 0;
+  a090=(a090*a034);
+  a092=(a092*a102);
+  a090=(a090+a092);
+  a093=(a093*a016);
+  a090=(a090+a093);
+  a094=(a094*a018);
+  a090=(a090+a094);
+  a095=(a095*a020);
+  a090=(a090+a095);
+  a096=(a096*a022);
+  a090=(a090+a096);
+  a097=(a097*a024);
+  a090=(a090+a097);
+  a098=(a098*a004);
+  a090=(a090+a098);
+  a099=(a099*a031);
+  a090=(a090+a099);
+  a100=(a100*a033);
+  a090=(a090+a100);
+  a090=(a002*a090);
+  a027=(a027+a090);
+  a003=(a003*a027);
+  a000=(a000+a003);
+  a003=arg[3]? arg[3][56] : 0;
+  a101=(a101*a034);
+  a103=(a103*a102);
+  a101=(a101+a103);
+  a104=(a104*a016);
+  a101=(a101+a104);
+  a105=(a105*a018);
+  a101=(a101+a105);
+  a106=(a106*a020);
+  a101=(a101+a106);
+  a107=(a107*a022);
+  a101=(a101+a107);
+  a108=(a108*a024);
+  a101=(a101+a108);
+  a109=(a109*a004);
+  a101=(a101+a109);
+  a110=(a110*a031);
+  a101=(a101+a110);
+  a111=(a111*a033);
+  a101=(a101+a111);
+  a002=(a002*a101);
+  a029=(a029+a002);
+  a003=(a003*a029);
+  a000=(a000+a003);
+  a003=arg[3]? arg[3][64] : 0;
+  a003=(a003*a031);
+  a002=arg[3]? arg[3][72] : 0;
+  a002=(a002*a033);
+  a003=(a003+a002);
+  a000=(a000+a003);
+  if (res[0]!=0) res[0][0]=a000;
+  a000=arg[3]? arg[3][1] : 0;
+  a000=(a000*a001);
+  a003=arg[3]? arg[3][9] : 0;
+  a003=(a003*a017);
+  a000=(a000+a003);
+  a003=arg[3]? arg[3][17] : 0;
+  a003=(a003*a019);
+  a000=(a000+a003);
+  a003=arg[3]? arg[3][25] : 0;
+  a003=(a003*a021);
+  a000=(a000+a003);
+  a003=arg[3]? arg[3][33] : 0;
+  a003=(a003*a023);
+  a000=(a000+a003);
+  a003=arg[3]? arg[3][41] : 0;
+  a003=(a003*a025);
+  a000=(a000+a003);
+  a003=arg[3]? arg[3][49] : 0;
+  a003=(a003*a027);
+  a000=(a000+a003);
+  a003=arg[3]? arg[3][57] : 0;
+  a003=(a003*a029);
+  a000=(a000+a003);
+  a003=arg[3]? arg[3][65] : 0;
+  a003=(a003*a031);
+  a002=arg[3]? arg[3][73] : 0;
+  a002=(a002*a033);
+  a003=(a003+a002);
+  a000=(a000+a003);
+  if (res[0]!=0) res[0][1]=a000;
+  a000=arg[3]? arg[3][2] : 0;
+  a000=(a000*a001);
+  a003=arg[3]? arg[3][10] : 0;
+  a003=(a003*a017);
+  a000=(a000+a003);
+  a003=arg[3]? arg[3][18] : 0;
+  a003=(a003*a019);
+  a000=(a000+a003);
+  a003=arg[3]? arg[3][26] : 0;
+  a003=(a003*a021);
+  a000=(a000+a003);
+  a003=arg[3]? arg[3][34] : 0;
+  a003=(a003*a023);
+  a000=(a000+a003);
+  a003=arg[3]? arg[3][42] : 0;
+  a003=(a003*a025);
+  a000=(a000+a003);
+  a003=arg[3]? arg[3][50] : 0;
+  a003=(a003*a027);
+  a000=(a000+a003);
+  a003=arg[3]? arg[3][58] : 0;
+  a003=(a003*a029);
+  a000=(a000+a003);
+  a003=arg[3]? arg[3][66] : 0;
+  a003=(a003*a031);
+  a002=arg[3]? arg[3][74] : 0;
+  a002=(a002*a033);
+  a003=(a003+a002);
+  a000=(a000+a003);
+  if (res[0]!=0) res[0][2]=a000;
+  a000=arg[3]? arg[3][3] : 0;
+  a000=(a000*a001);
+  a003=arg[3]? arg[3][11] : 0;
+  a003=(a003*a017);
+  a000=(a000+a003);
+  a003=arg[3]? arg[3][19] : 0;
+  a003=(a003*a019);
+  a000=(a000+a003);
+  a003=arg[3]? arg[3][27] : 0;
+  a003=(a003*a021);
+  a000=(a000+a003);
+  a003=arg[3]? arg[3][35] : 0;
+  a003=(a003*a023);
+  a000=(a000+a003);
+  a003=arg[3]? arg[3][43] : 0;
+  a003=(a003*a025);
+  a000=(a000+a003);
+  a003=arg[3]? arg[3][51] : 0;
+  a003=(a003*a027);
+  a000=(a000+a003);
+  a003=arg[3]? arg[3][59] : 0;
+  a003=(a003*a029);
+  a000=(a000+a003);
+  a003=arg[3]? arg[3][67] : 0;
+  a003=(a003*a031);
+  a002=arg[3]? arg[3][75] : 0;
+  a002=(a002*a033);
+  a003=(a003+a002);
+  a000=(a000+a003);
+  if (res[0]!=0) res[0][3]=a000;
+  a000=arg[3]? arg[3][4] : 0;
+  a000=(a000*a001);
+  a003=arg[3]? arg[3][12] : 0;
+  a003=(a003*a017);
+  a000=(a000+a003);
+  a003=arg[3]? arg[3][20] : 0;
+  a003=(a003*a019);
+  a000=(a000+a003);
+  a003=arg[3]? arg[3][28] : 0;
+  a003=(a003*a021);
+  a000=(a000+a003);
+  a003=arg[3]? arg[3][36] : 0;
+  a003=(a003*a023);
+  a000=(a000+a003);
+  a003=arg[3]? arg[3][44] : 0;
+  a003=(a003*a025);
+  a000=(a000+a003);
+  a003=arg[3]? arg[3][52] : 0;
+  a003=(a003*a027);
+  a000=(a000+a003);
+  a003=arg[3]? arg[3][60] : 0;
+  a003=(a003*a029);
+  a000=(a000+a003);
+  a003=arg[3]? arg[3][68] : 0;
+  a003=(a003*a031);
+  a002=arg[3]? arg[3][76] : 0;
+  a002=(a002*a033);
+  a003=(a003+a002);
+  a000=(a000+a003);
+  if (res[0]!=0) res[0][4]=a000;
+  a000=arg[3]? arg[3][5] : 0;
+  a000=(a000*a001);
+  a003=arg[3]? arg[3][13] : 0;
+  a003=(a003*a017);
+  a000=(a000+a003);
+  a003=arg[3]? arg[3][21] : 0;
+  a003=(a003*a019);
+  a000=(a000+a003);
+  a003=arg[3]? arg[3][29] : 0;
+  a003=(a003*a021);
+  a000=(a000+a003);
+  a003=arg[3]? arg[3][37] : 0;
+  a003=(a003*a023);
+  a000=(a000+a003);
+  a003=arg[3]? arg[3][45] : 0;
+  a003=(a003*a025);
+  a000=(a000+a003);
+  a003=arg[3]? arg[3][53] : 0;
+  a003=(a003*a027);
+  a000=(a000+a003);
+  a003=arg[3]? arg[3][61] : 0;
+  a003=(a003*a029);
+  a000=(a000+a003);
+  a003=arg[3]? arg[3][69] : 0;
+  a003=(a003*a031);
+  a002=arg[3]? arg[3][77] : 0;
+  a002=(a002*a033);
+  a003=(a003+a002);
+  a000=(a000+a003);
+  if (res[0]!=0) res[0][5]=a000;
+  a000=arg[3]? arg[3][6] : 0;
+  a000=(a000*a001);
+  a003=arg[3]? arg[3][14] : 0;
+  a003=(a003*a017);
+  a000=(a000+a003);
+  a003=arg[3]? arg[3][22] : 0;
+  a003=(a003*a019);
+  a000=(a000+a003);
+  a003=arg[3]? arg[3][30] : 0;
+  a003=(a003*a021);
+  a000=(a000+a003);
+  a003=arg[3]? arg[3][38] : 0;
+  a003=(a003*a023);
+  a000=(a000+a003);
+  a003=arg[3]? arg[3][46] : 0;
+  a003=(a003*a025);
+  a000=(a000+a003);
+  a003=arg[3]? arg[3][54] : 0;
+  a003=(a003*a027);
+  a000=(a000+a003);
+  a003=arg[3]? arg[3][62] : 0;
+  a003=(a003*a029);
+  a000=(a000+a003);
+  a003=arg[3]? arg[3][70] : 0;
+  a003=(a003*a031);
+  a002=arg[3]? arg[3][78] : 0;
+  a002=(a002*a033);
+  a003=(a003+a002);
+  a000=(a000+a003);
+  if (res[0]!=0) res[0][6]=a000;
+  a000=arg[3]? arg[3][7] : 0;
+  a000=(a000*a001);
+  a001=arg[3]? arg[3][15] : 0;
+  a001=(a001*a017);
+  a000=(a000+a001);
+  a001=arg[3]? arg[3][23] : 0;
+  a001=(a001*a019);
+  a000=(a000+a001);
+  a001=arg[3]? arg[3][31] : 0;
+  a001=(a001*a021);
+  a000=(a000+a001);
+  a001=arg[3]? arg[3][39] : 0;
+  a001=(a001*a023);
+  a000=(a000+a001);
+  a001=arg[3]? arg[3][47] : 0;
+  a001=(a001*a025);
+  a000=(a000+a001);
+  a001=arg[3]? arg[3][55] : 0;
+  a001=(a001*a027);
+  a000=(a000+a001);
+  a001=arg[3]? arg[3][63] : 0;
+  a001=(a001*a029);
+  a000=(a000+a001);
+  a001=arg[3]? arg[3][71] : 0;
+  a001=(a001*a031);
+  a031=arg[3]? arg[3][79] : 0;
+  a031=(a031*a033);
+  a001=(a001+a031);
+  a000=(a000+a001);
+  if (res[0]!=0) res[0][7]=a000;
+  return 0;
+}
+
+CASADI_SYMBOL_EXPORT int haa_sim_jitter_8(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem){
+  return casadi_f13(arg, res, iw, w, mem);
+}
+
+CASADI_SYMBOL_EXPORT int haa_sim_jitter_8_checkout(void) {
+  return 0;
+}
+
+CASADI_SYMBOL_EXPORT void haa_sim_jitter_8_release(int mem) {
+}
+
+CASADI_SYMBOL_EXPORT void haa_sim_jitter_8_incref(void) {
+}
+
+CASADI_SYMBOL_EXPORT void haa_sim_jitter_8_decref(void) {
+}
+
+CASADI_SYMBOL_EXPORT casadi_int haa_sim_jitter_8_n_in(void) { return 4;}
+
+CASADI_SYMBOL_EXPORT casadi_int haa_sim_jitter_8_n_out(void) { return 1;}
+
+CASADI_SYMBOL_EXPORT casadi_real haa_sim_jitter_8_default_in(casadi_int i) {
+  switch (i) {
+    default: return 0;
+  }
+}
+
+CASADI_SYMBOL_EXPORT const char* haa_sim_jitter_8_name_in(casadi_int i) {
+  switch (i) {
+    case 0: return "x";
+    case 1: return "u";
+    case 2: return "s";
+    case 3: return "par";
+    default: return 0;
+  }
+}
+
+CASADI_SYMBOL_EXPORT const char* haa_sim_jitter_8_name_out(casadi_int i) {
+  switch (i) {
+    case 0: return "x_next";
+    default: return 0;
+  }
+}
+
+CASADI_SYMBOL_EXPORT const casadi_int* haa_sim_jitter_8_sparsity_in(casadi_int i) {
+  switch (i) {
+    case 0: return casadi_s17;
+    case 1: return casadi_s11;
+    case 2: return casadi_s4;
+    case 3: return casadi_s22;
+    default: return 0;
+  }
+}
+
+CASADI_SYMBOL_EXPORT const casadi_int* haa_sim_jitter_8_sparsity_out(casadi_int i) {
+  switch (i) {
+    case 0: return casadi_s17;
+    default: return 0;
+  }
+}
+
+CASADI_SYMBOL_EXPORT int haa_sim_jitter_8_work(casadi_int *sz_arg, casadi_int* sz_res, casadi_int *sz_iw, casadi_int *sz_w) {
+  if (sz_arg) *sz_arg = 4;
+  if (sz_res) *sz_res = 1;
+  if (sz_iw) *sz_iw = 0;
+  if (sz_w) *sz_w = 0;
+  return 0;
+}
+
+CASADI_SYMBOL_EXPORT int haa_sim_jitter_8_work_bytes(casadi_int *sz_arg, casadi_int* sz_res, casadi_int *sz_iw, casadi_int *sz_w) {
+  if (sz_arg) *sz_arg = 4*sizeof(const casadi_real*);
+  if (sz_res) *sz_res = 1*sizeof(casadi_real*);
+  if (sz_iw) *sz_iw = 0*sizeof(casadi_int);
+  if (sz_w) *sz_w = 0*sizeof(casadi_real);
+  return 0;
+}
+
+/* haa_sim_etd_8:(x[8],u[2],s,par[329])->(x_next[8]) */
+static int casadi_f14(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
+  casadi_real a000, a001, a002, a003, a004, a005, a006, a007, a008, a009, a010, a011;
+  casadi_real a012, a013, a014, a015, a016, a017, a018, a019, a020, a021, a022, a023;
+  casadi_real a024, a025, a026, a027, a028, a029, a030, a031, a032, a033, a034, a035;
+  casadi_real a036, a037, a038, a039, a040, a041, a042, a043, a044, a045, a046, a047;
+  casadi_real a048, a049, a050, a051, a052, a053, a054, a055, a056, a057, a058, a059;
+  casadi_real a060, a061, a062, a063, a064, a065, a066, a067, a068, a069, a070, a071;
+  casadi_real a072, a073, a074, a075, a076, a077, a078, a079, a080, a081, a082, a083;
+  casadi_real a084, a085, a086, a087, a088, a089, a090, a091, a092, a093, a094, a095;
+  casadi_real a096, a097, a098, a099, a100, a101, a102, a103, a104, a105, a106, a107;
+  casadi_real a108, a109, a110, a111, a112, a113, a114, a115, a116, a117, a118, a119;
+  casadi_real a120, a121, a122, a123, a124, a125, a126, a127, a128, a129, a130, a131;
+  casadi_real a132, a133, a134, a135, a136, a137, a138, a139, a140, a141, a142, a143;
+  casadi_real a144, a145, a146, a147, a148, a149, a150, a151, a152, a153, a154, a155;
+  casadi_real a156, a157, a158, a159, a160, a161, a162, a163, a164, a165, a166, a167;
+  casadi_real a168, a169, a170, a171, a172, a173, a174, a175, a176, a177, a178, a179;
+  casadi_real a180, a181, a182, a183, a184, a185, a186, a187, a188, a189, a190, a191;
+  casadi_real a192, a193;
+  a000=arg[3]? arg[3][80] : 0;
+  a001=arg[0]? arg[0][0] : 0;
+  a000=(a000*a001);
+  a002=arg[3]? arg[3][88] : 0;
+  a003=arg[0]? arg[0][1] : 0;
+  a002=(a002*a003);
+  a000=(a000+a002);
+  a002=arg[3]? arg[3][96] : 0;
+  a004=arg[0]? arg[0][2] : 0;
+  a002=(a002*a004);
+  a000=(a000+a002);
+  a002=arg[3]? arg[3][104] : 0;
+  a005=arg[0]? arg[0][3] : 0;
+  a002=(a002*a005);
+  a000=(a000+a002);
+  a002=arg[3]? arg[3][112] : 0;
+  a006=arg[0]? arg[0][4] : 0;
+  a002=(a002*a006);
+  a000=(a000+a002);
+  a002=arg[3]? arg[3][120] : 0;
+  a007=arg[0]? arg[0][5] : 0;
+  a002=(a002*a007);
+  a000=(a000+a002);
+  a002=arg[3]? arg[3][128] : 0;
+  a008=arg[0]? arg[0][6] : 0;
+  a002=(a002*a008);
+  a000=(a000+a002);
+  a002=arg[3]? arg[3][136] : 0;
+  a009=arg[0]? arg[0][7] : 0;
+  a002=(a002*a009);
+  a000=(a000+a002);
+  a002=arg[3]? arg[3][144] : 0;
+  a010=arg[1]? arg[1][0] : 0;
+  a002=(a002*a010);
+  a011=arg[3]? arg[3][152] : 0;
+  a012=arg[1]? arg[1][1] : 0;
+  a011=(a011*a012);
+  a002=(a002+a011);
+  a000=(a000+a002);
+  a002=arg[3]? arg[3][192] : 0;
+  a011=arg[3]? arg[3][325] : 0;
+  a013=arg[3]? arg[3][288] : 0;
+  a014=(a013*a001);
+  a015=arg[3]? arg[3][292] : 0;
+  a016=(a015*a003);
+  a014=(a014+a016);
+  a016=arg[3]? arg[3][296] : 0;
+  a017=(a016*a004);
+  a014=(a014+a017);
+  a017=arg[3]? arg[3][300] : 0;
+  a018=(a017*a005);
+  a014=(a014+a018);
+  a018=arg[3]? arg[3][304] : 0;
+  a019=(a018*a006);
+  a014=(a014+a019);
+  a019=arg[3]? arg[3][308] : 0;
+  a020=(a019*a007);
+  a014=(a014+a020);
+  a020=arg[3]? arg[3][312] : 0;
+  a021=(a020*a008);
+  a014=(a014+a021);
+  a021=arg[3]? arg[3][316] : 0;
+  a022=(a021*a009);
+  a014=(a014+a022);
+  a022=(a011*a014);
+  a023=arg[3]? arg[3][320] : 0;
+  a024=arg[3]? arg[3][324] : 0;
+  a014=(a014*a024);
+  a014=tanh(a014);
+  a014=(a023*a014);
+  a022=(a022-a014);
+  a002=(a002*a022);
+  a014=arg[3]? arg[3][200] : 0;
+  a025=arg[3]? arg[3][326] : 0;
+  a026=arg[3]? arg[3][289] : 0;
+  a027=(a026*a001);
+  a028=arg[3]? arg[3][293] : 0;
+  a029=(a028*a003);
+  a027=(a027+a029);
+  a029=arg[3]? arg[3][297] : 0;
+  a030=(a029*a004);
+  a027=(a027+a030);
+  a030=arg[3]? arg[3][301] : 0;
+  a031=(a030*a005);
+  a027=(a027+a031);
+  a031=arg[3]? arg[3][305] : 0;
+  a032=(a031*a006);
+  a027=(a027+a032);
+  a032=arg[3]? arg[3][309] : 0;
+  a033=(a032*a007);
+  a027=(a027+a033);
+  a033=arg[3]? arg[3][313] : 0;
+  a034=(a033*a008);
+  a027=(a027+a034);
+  a034=arg[3]? arg[3][317] : 0;
+  a035=(a034*a009);
+  a027=(a027+a035);
+  a035=(a025*a027);
+  a036=arg[3]? arg[3][321] : 0;
+  a027=(a027*a024);
+  a027=tanh(a027);
+  a027=(a036*a027);
+  a035=(a035-a027);
+  a014=(a014*a035);
+  a002=(a002+a014);
+  a014=arg[3]? arg[3][208] : 0;
+  a027=arg[3]? arg[3][327] : 0;
+  a037=arg[3]? arg[3][290] : 0;
+  a038=(a037*a001);
+  a039=arg[3]? arg[3][294] : 0;
+  a040=(a039*a003);
+  a038=(a038+a040);
+  a040=arg[3]? arg[3][298] : 0;
+  a041=(a040*a004);
+  a038=(a038+a041);
+  a041=arg[3]? arg[3][302] : 0;
+  a042=(a041*a005);
+  a038=(a038+a042);
+  a042=arg[3]? arg[3][306] : 0;
+  a043=(a042*a006);
+  a038=(a038+a043);
+  a043=arg[3]? arg[3][310] : 0;
+  a044=(a043*a007);
+  a038=(a038+a044);
+  a044=arg[3]? arg[3][314] : 0;
+  a045=(a044*a008);
+  a038=(a038+a045);
+  a045=arg[3]? arg[3][318] : 0;
+  a046=(a045*a009);
+  a038=(a038+a046);
+  a046=(a027*a038);
+  a047=arg[3]? arg[3][322] : 0;
+  a038=(a038*a024);
+  a038=tanh(a038);
+  a038=(a047*a038);
+  a046=(a046-a038);
+  a014=(a014*a046);
+  a002=(a002+a014);
+  a014=arg[3]? arg[3][216] : 0;
+  a038=arg[3]? arg[3][328] : 0;
+  a048=arg[3]? arg[3][291] : 0;
+  a049=(a048*a001);
+  a050=arg[3]? arg[3][295] : 0;
+  a051=(a050*a003);
+  a049=(a049+a051);
+  a051=arg[3]? arg[3][299] : 0;
+  a052=(a051*a004);
+  a049=(a049+a052);
+  a052=arg[3]? arg[3][303] : 0;
+  a053=(a052*a005);
+  a049=(a049+a053);
+  a053=arg[3]? arg[3][307] : 0;
+  a054=(a053*a006);
+  a049=(a049+a054);
+  a054=arg[3]? arg[3][311] : 0;
+  a055=(a054*a007);
+  a049=(a049+a055);
+  a055=arg[3]? arg[3][315] : 0;
+  a056=(a055*a008);
+  a049=(a049+a056);
+  a056=arg[3]? arg[3][319] : 0;
+  a057=(a056*a009);
+  a049=(a049+a057);
+  a057=(a038*a049);
+  a058=arg[3]? arg[3][323] : 0;
+  a049=(a049*a024);
+  a049=tanh(a049);
+  a049=(a058*a049);
+  a057=(a057-a049);
+  a014=(a014*a057);
+  a002=(a002+a014);
+  a000=(a000+a002);
+  a002=arg[3]? arg[3][224] : 0;
+  a014=arg[3]? arg[3][0] : 0;
+  a049=(a014*a001);
+  a059=arg[3]? arg[3][8] : 0;
+  a060=(a059*a003);
+  a049=(a049+a060);
+  a060=arg[3]? arg[3][16] : 0;
+  a061=(a060*a004);
+  a049=(a049+a061);
+  a061=arg[3]? arg[3][24] : 0;
+  a062=(a061*a005);
+  a049=(a049+a062);
+  a062=arg[3]? arg[3][32] : 0;
+  a063=(a062*a006);
+  a049=(a049+a063);
+  a063=arg[3]? arg[3][40] : 0;
+  a064=(a063*a007);
+  a049=(a049+a064);
+  a064=arg[3]? arg[3][48] : 0;
+  a065=(a064*a008);
+  a049=(a049+a065);
+  a065=arg[3]? arg[3][56] : 0;
+  a066=(a065*a009);
+  a049=(a049+a066);
+  a066=arg[3]? arg[3][64] : 0;
+  a067=(a066*a010);
+  a068=arg[3]? arg[3][72] : 0;
+  a069=(a068*a012);
+  a067=(a067+a069);
+  a049=(a049+a067);
+  a067=arg[3]? arg[3][160] : 0;
+  a069=(a067*a022);
+  a070=arg[3]? arg[3][168] : 0;
+  a071=(a070*a035);
+  a069=(a069+a071);
+  a071=arg[3]? arg[3][176] : 0;
+  a072=(a071*a046);
+  a069=(a069+a072);
+  a072=arg[3]? arg[3][184] : 0;
+  a073=(a072*a057);
+  a069=(a069+a073);
+  a069=(a049+a069);
+  a073=(a013*a069);
+  a074=arg[3]? arg[3][1] : 0;
+  a075=(a074*a001);
+  a076=arg[3]? arg[3][9] : 0;
+  a077=(a076*a003);
+  a075=(a075+a077);
+  a077=arg[3]? arg[3][17] : 0;
+  a078=(a077*a004);
+  a075=(a075+a078);
+  a078=arg[3]? arg[3][25] : 0;
+  a079=(a078*a005);
+  a075=(a075+a079);
+  a079=arg[3]? arg[3][33] : 0;
+  a080=(a079*a006);
+  a075=(a075+a080);
+  a080=arg[3]? arg[3][41] : 0;
+  a081=(a080*a007);
+  a075=(a075+a081);
+  a081=arg[3]? arg[3][49] : 0;
+  a082=(a081*a008);
+  a075=(a075+a082);
+  a082=arg[3]? arg[3][57] : 0;
+  a083=(a082*a009);
+  a075=(a075+a083);
+  a083=arg[3]? arg[3][65] : 0;
+  a084=(a083*a010);
+  a085=arg[3]? arg[3][73] : 0;
+  a086=(a085*a012);
+  a084=(a084+a086);
+  a075=(a075+a084);
+  a084=arg[3]? arg[3][161] : 0;
+  a086=(a084*a022);
+  a087=arg[3]? arg[3][169] : 0;
+  a088=(a087*a035);
+  a086=(a086+a088);
+  a088=arg[3]? arg[3][177] : 0;
+  a089=(a088*a046);
+  a086=(a086+a089);
+  a089=arg[3]? arg[3][185] : 0;
+  a090=(a089*a057);
+  a086=(a086+a090);
+  a086=(a075+a086);
+  a090=(a015*a086);
+  a073=(a073+a090);
+  a090=arg[3]? arg[3][2] : 0;
+  a091=(a090*a001);
+  a092=arg[3]? arg[3][10] : 0;
+  a093=(a092*a003);
+  a091=(a091+a093);
+  a093=arg[3]? arg[3][18] : 0;
+  a094=(a093*a004);
+  a091=(a091+a094);
+  a094=arg[3]? arg[3][26] : 0;
+  a095=(a094*a005);
+  a091=(a091+a095);
+  a095=arg[3]? arg[3][34] : 0;
+  a096=(a095*a006);
+  a091=(a091+a096);
+  a096=arg[3]? arg[3][42] : 0;
+  a097=(a096*a007);
+  a091=(a091+a097);
+  a097=arg[3]? arg[3][50] : 0;
+  a098=(a097*a008);
+  a091=(a091+a098);
+  a098=arg[3]? arg[3][58] : 0;
+  a099=(a098*a009);
+  a091=(a091+a099);
+  a099=arg[3]? arg[3][66] : 0;
+  a100=(a099*a010);
+  a101=arg[3]? arg[3][74] : 0;
+  a102=(a101*a012);
+  a100=(a100+a102);
+  a091=(a091+a100);
+  a100=arg[3]? arg[3][162] : 0;
+  a102=(a100*a022);
+  a103=arg[3]? arg[3][170] : 0;
+  a104=(a103*a035);
+  a102=(a102+a104);
+  a104=arg[3]? arg[3][178] : 0;
+  a105=(a104*a046);
+  a102=(a102+a105);
+  a105=arg[3]? arg[3][186] : 0;
+  a106=(a105*a057);
+  a102=(a102+a106);
+  a102=(a091+a102);
+  a106=(a016*a102);
+  a073=(a073+a106);
+  a106=arg[3]? arg[3][3] : 0;
+  a107=(a106*a001);
+  a108=arg[3]? arg[3][11] : 0;
+  a109=(a108*a003);
+  a107=(a107+a109);
+  a109=arg[3]? arg[3][19] : 0;
+  a110=(a109*a004);
+  a107=(a107+a110);
+  a110=arg[3]? arg[3][27] : 0;
+  a111=(a110*a005);
+  a107=(a107+a111);
+  a111=arg[3]? arg[3][35] : 0;
+  a112=(a111*a006);
+  a107=(a107+a112);
+  a112=arg[3]? arg[3][43] : 0;
+  a113=(a112*a007);
+  a107=(a107+a113);
+  a113=arg[3]? arg[3][51] : 0;
+  a114=(a113*a008);
+  a107=(a107+a114);
+  a114=arg[3]? arg[3][59] : 0;
+  a115=(a114*a009);
+  a107=(a107+a115);
+  a115=arg[3]? arg[3][67] : 0;
+  a116=(a115*a010);
+  a117=arg[3]? arg[3][75] : 0;
+  a118=(a117*a012);
+  a116=(a116+a118);
+  a107=(a107+a116);
+  a116=arg[3]? arg[3][163] : 0;
+  a118=(a116*a022);
+  a119=arg[3]? arg[3][171] : 0;
+  a120=(a119*a035);
+  a118=(a118+a120);
+  a120=arg[3]? arg[3][179] : 0;
+  a121=(a120*a046);
+  a118=(a118+a121);
+  a121=arg[3]? arg[3][187] : 0;
+  a122=(a121*a057);
+  a118=(a118+a122);
+  a118=(a107+a118);
+  a122=(a017*a118);
+  a073=(a073+a122);
+  a122=arg[3]? arg[3][4] : 0;
+  a123=(a122*a001);
+  a124=arg[3]? arg[3][12] : 0;
+  a125=(a124*a003);
+  a123=(a123+a125);
+  a125=arg[3]? arg[3][20] : 0;
+  a126=(a125*a004);
+  a123=(a123+a126);
+  a126=arg[3]? arg[3][28] : 0;
+  a127=(a126*a005);
+  a123=(a123+a127);
+  a127=arg[3]? arg[3][36] : 0;
+  a128=(a127*a006);
+  a123=(a123+a128);
+  a128=arg[3]? arg[3][44] : 0;
+  a129=(a128*a007);
+  a123=(a123+a129);
+  a129=arg[3]? arg[3][52] : 0;
+  a130=(a129*a008);
+  a123=(a123+a130);
+  a130=arg[3]? arg[3][60] : 0;
+  a131=(a130*a009);
+  a123=(a123+a131);
+  a131=arg[3]? arg[3][68] : 0;
+  a132=(a131*a010);
+  a133=arg[3]? arg[3][76] : 0;
+  a134=(a133*a012);
+  a132=(a132+a134);
+  a123=(a123+a132);
+  a132=arg[3]? arg[3][164] : 0;
+  a134=(a132*a022);
+  a135=arg[3]? arg[3][172] : 0;
+  a136=(a135*a035);
+  a134=(a134+a136);
+  a136=arg[3]? arg[3][180] : 0;
+  a137=(a136*a046);
+  a134=(a134+a137);
+  a137=arg[3]? arg[3][188] : 0;
+  a138=(a137*a057);
+  a134=(a134+a138);
+  a134=(a123+a134);
+  a138=(a018*a134);
+  a073=(a073+a138);
+  a138=arg[3]? arg[3][5] : 0;
+  a139=(a138*a001);
+  a140=arg[3]? arg[3][13] : 0;
+  a141=(a140*a003);
+  a139=(a139+a141);
+  a141=arg[3]? arg[3][21] : 0;
+  a142=(a141*a004);
+  a139=(a139+a142);
+  a142=arg[3]? arg[3][29] : 0;
+  a143=(a142*a005);
+  a139=(a139+a143);
+  a143=arg[3]? arg[3][37] : 0;
+  a144=(a143*a006);
+  a139=(a139+a144);
+  a144=arg[3]? arg[3][45] : 0;
+  a145=(a144*a007);
+  a139=(a139+a145);
+  a145=arg[3]? arg[3][53] : 0;
+  a146=(a145*a008);
+  a139=(a139+a146);
+  a146=arg[3]? arg[3][61] : 0;
+  a147=(a146*a009);
+  a139=(a139+a147);
+  a147=arg[3]? arg[3][69] : 0;
+  a148=(a147*a010);
+  a149=arg[3]? arg[3][77] : 0;
+  a150=(a149*a012);
+  a148=(a148+a150);
+  a139=(a139+a148);
+  a148=arg[3]? arg[3][165] : 0;
+  a150=(a148*a022);
+  a151=arg[3]? arg[3][173] : 0;
+  a152=(a151*a035);
+  a150=(a150+a152);
+  a152=arg[3]? arg[3][181] : 0;
+  a153=(a152*a046);
+  a150=(a150+a153);
+  a153=arg[3]? arg[3][189] : 0;
+  a154=(a153*a057);
+  a150=(a150+a154);
+  a150=(a139+a150);
+  a154=(a019*a150);
+  a073=(a073+a154);
+  a154=arg[3]? arg[3][6] : 0;
+  a155=(a154*a001);
+  a156=arg[3]? arg[3][14] : 0;
+  a157=(a156*a003);
+  a155=(a155+a157);
+  a157=arg[3]? arg[3][22] : 0;
+  a158=(a157*a004);
+  a155=(a155+a158);
+  a158=arg[3]? arg[3][30] : 0;
+  a159=(a158*a005);
+  a155=(a155+a159);
+  a159=arg[3]? arg[3][38] : 0;
+  a160=(a159*a006);
+  a155=(a155+a160);
+  a160=arg[3]? arg[3][46] : 0;
+  a161=(a160*a007);
+  a155=(a155+a161);
+  a161=arg[3]? arg[3][54] : 0;
+  a162=(a161*a008);
+  a155=(a155+a162);
+  a162=arg[3]? arg[3][62] : 0;
+  a163=(a162*a009);
+  a155=(a155+a163);
+  a163=arg[3]? arg[3][70] : 0;
+  a164=(a163*a010);
+  a165=arg[3]? arg[3][78] : 0;
+  a166=(a165*a012);
+  a164=(a164+a166);
+  a155=(a155+a164);
+  a164=arg[3]? arg[3][166] : 0;
+  a166=(a164*a022);
+  a167=arg[3]? arg[3][174] : 0;
+  a168=(a167*a035);
+  a166=(a166+a168);
+  a168=arg[3]? arg[3][182] : 0;
+  a169=(a168*a046);
+  a166=(a166+a169);
+  a169=arg[3]? arg[3][190] : 0;
+  a170=(a169*a057);
+  a166=(a166+a170);
+  a166=(a155+a166);
+  a170=(a020*a166);
+  a073=(a073+a170);
+  a170=arg[3]? arg[3][7] : 0;
+  a171=(a170*a001);
+  a172=arg[3]? arg[3][15] : 0;
+  a173=(a172*a003);
+  a171=(a171+a173);
+  a173=arg[3]? arg[3][23] : 0;
+  a174=(a173*a004);
+  a171=(a171+a174);
+  a174=arg[3]? arg[3][31] : 0;
+  a175=(a174*a005);
+  a171=(a171+a175);
+  a175=arg[3]? arg[3][39] : 0;
+  a176=(a175*a006);
+  a171=(a171+a176);
+  a176=arg[3]? arg[3][47] : 0;
+  a177=(a176*a007);
+  a171=(a171+a177);
+  a177=arg[3]? arg[3][55] : 0;
+  a178=(a177*a008);
+  a171=(a171+a178);
+  a178=arg[3]? arg[3][63] : 0;
+  a179=(a178*a009);
+  a171=(a171+a179);
+  a179=arg[3]? arg[3][71] : 0;
+  a180=(a179*a010);
+  a181=arg[3]? arg[3][79] : 0;
+  a182=(a181*a012);
+  a180=(a180+a182);
+  a171=(a171+a180);
+  a180=arg[3]? arg[3][167] : 0;
+  a182=(a180*a022);
+  a183=arg[3]? arg[3][175] : 0;
+  a184=(a183*a035);
+  a182=(a182+a184);
+  a184=arg[3]? arg[3][183] : 0;
+  a185=(a184*a046);
+  a182=(a182+a185);
+  a185=arg[3]? arg[3][191] : 0;
+  a186=(a185*a057);
+  a182=(a182+a186);
+  a182=(a171+a182);
+  a186=(a021*a182);
+  a073=(a073+a186);
+  a186=(a011*a073);
+  a073=(a073*a024);
+  a073=tanh(a073);
+  a073=(a023*a073);
+  a186=(a186-a073);
+  a073=(a067*a186);
+  a187=(a026*a069);
+  a188=(a028*a086);
+  a187=(a187+a188);
+  a188=(a029*a102);
+  a187=(a187+a188);
+  a188=(a030*a118);
+  a187=(a187+a188);
+  a188=(a031*a134);
+  a187=(a187+a188);
+  a188=(a032*a150);
+  a187=(a187+a188);
+  a188=(a033*a166);
+  a187=(a187+a188);
+  a188=(a034*a182);
+  a187=(a187+a188);
+  a188=(a025*a187);
+  a187=(a187*a024);
+  a187=tanh(a187);
+  a187=(a036*a187);
+  a188=(a188-a187);
+  a187=(a070*a188);
+  a073=(a073+a187);
+  a187=(a037*a069);
+  a189=(a039*a086);
+  a187=(a187+a189);
+  a189=(a040*a102);
+  a187=(a187+a189);
+  a189=(a041*a118);
+  a187=(a187+a189);
+  a189=(a042*a134);
+  a187=(a187+a189);
+  a189=(a043*a150);
+  a187=(a187+a189);
+  a189=(a044*a166);
+  a187=(a187+a189);
+  a189=(a045*a182);
+  a187=(a187+a189);
+  a189=(a027*a187);
+  a187=(a187*a024);
+  a187=tanh(a187);
+  a187=(a047*a187);
+  a189=(a189-a187);
+  a187=(a071*a189);
+  a073=(a073+a187);
+  a187=(a048*a069);
+  a190=(a050*a086);
+  a187=(a187+a190);
+  a190=(a051*a102);
+  a187=(a187+a190);
+  a190=(a052*a118);
+  a187=(a187+a190);
+  a190=(a053*a134);
+  a187=(a187+a190);
+  a190=(a054*a150);
+  a187=(a187+a190);
+  a190=(a055*a166);
+  a187=(a187+a190);
+  a190=(a056*a182);
+  a187=(a187+a190);
+  a190=(a038*a187);
+  a187=(a187*a024);
+  a187=tanh(a187);
+  a187=(a058*a187);
+  a190=(a190-a187);
+  a187=(a072*a190);
+  a073=(a073+a187);
+  a049=(a049+a073);
+  a073=(a013*a049);
+  a187=(a084*a186);
+  a191=(a087*a188);
+  a187=(a187+a191);
+  a191=(a088*a189);
+  a187=(a187+a191);
+  a191=(a089*a190);
+  a187=(a187+a191);
+  a075=(a075+a187);
+  a187=(a015*a075);
+  a073=(a073+a187);
+  a187=(a100*a186);
+  a191=(a103*a188);
+  a187=(a187+a191);
+  a191=(a104*a189);
+  a187=(a187+a191);
+  a191=(a105*a190);
+  a187=(a187+a191);
+  a091=(a091+a187);
+  a187=(a016*a091);
+  a073=(a073+a187);
+  a187=(a116*a186);
+  a191=(a119*a188);
+  a187=(a187+a191);
+  a191=(a120*a189);
+  a187=(a187+a191);
+  a191=(a121*a190);
+  a187=(a187+a191);
+  a107=(a107+a187);
+  a187=(a017*a107);
+  a073=(a073+a187);
+  a187=(a132*a186);
+  a191=(a135*a188);
+  a187=(a187+a191);
+  a191=(a136*a189);
+  a187=(a187+a191);
+  a191=(a137*a190);
+  a187=(a187+a191);
+  a123=(a123+a187);
+  a187=(a018*a123);
+  a073=(a073+a187);
+  a187=(a148*a186);
+  a191=(a151*a188);
+  a187=(a187+a191);
+  a191=(a152*a189);
+  a187=(a187+a191);
+  a191=(a153*a190);
+  a187=(a187+a191);
+  a139=(a139+a187);
+  a187=(a019*a139);
+  a073=(a073+a187);
+  a187=(a164*a186);
+  a191=(a167*a188);
+  a187=(a187+a191);
+  a191=(a168*a189);
+  a187=(a187+a191);
+  a191=(a169*a190);
+  a187=(a187+a191);
+  a155=(a155+a187);
+  a187=(a020*a155);
+  a073=(a073+a187);
+  a187=(a180*a186);
+  a191=(a183*a188);
+  a187=(a187+a191);
+  a191=(a184*a189);
+  a187=(a187+a191);
+  a191=(a185*a190);
+  a187=(a187+a191);
+  a171=(a171+a187);
+  a187=(a021*a171);
+  a073=(a073+a187);
+  a187=(a011*a073);
+  a073=(a073*a024);
+  a073=tanh(a073);
+  a073=(a023*a073);
+  a187=(a187-a073);
+  a186=(a186+a187);
+  a002=(a002*a186);
+  a073=arg[3]? arg[3][232] : 0;
+  a191=(a026*a049);
+  a192=(a028*a075);
+  a191=(a191+a192);
+  a192=(a029*a091);
+  a191=(a191+a192);
+  a192=(a030*a107);
+  a191=(a191+a192);
+  a192=(a031*a123);
+  a191=(a191+a192);
+  a192=(a032*a139);
+  a191=(a191+a192);
+  a192=(a033*a155);
+  a191=(a191+a192);
+  a192=(a034*a171);
+  a191=(a191+a192);
+  a192=(a025*a191);
+  a191=(a191*a024);
+  a191=tanh(a191);
+  a191=(a036*a191);
+  a192=(a192-a191);
+  a188=(a188+a192);
+  a073=(a073*a188);
+  a002=(a002+a073);
+  a073=arg[3]? arg[3][240] : 0;
+  a191=(a037*a049);
+  a193=(a039*a075);
+  a191=(a191+a193);
+  a193=(a040*a091);
+  a191=(a191+a193);
+  a193=(a041*a107);
+  a191=(a191+a193);
+  a193=(a042*a123);
+  a191=(a191+a193);
+  a193=(a043*a139);
+  a191=(a191+a193);
+  a193=(a044*a155);
+  a191=(a191+a193);
+  a193=(a045*a171);
+  a191=(a191+a193);
+  a193=(a027*a191);
+  a191=(a191*a024);
+  a191=tanh(a191);
+  a191=(a047*a191);
+  a193=(a193-a191);
+  a189=(a189+a193);
+  a073=(a073*a189);
+  a002=(a002+a073);
+  a073=arg[3]? arg[3][248] : 0;
+  a049=(a048*a049);
+  a075=(a050*a075);
+  a049=(a049+a075);
+  a091=(a051*a091);
+  a049=(a049+a091);
+  a107=(a052*a107);
+  a049=(a049+a107);
+  a123=(a053*a123);
+  a049=(a049+a123);
+  a139=(a054*a139);
+  a049=(a049+a139);
+  a155=(a055*a155);
+  a049=(a049+a155);
+  a171=(a056*a171);
+  a049=(a049+a171);
+  a171=(a038*a049);
+  a049=(a049*a024);
+  a049=tanh(a049);
+  a049=(a058*a049);
+  a171=(a171-a049);
+  a190=(a190+a171);
+  a073=(a073*a190);
+  a002=(a002+a073);
+  a002=(2.*a002);
+  a000=(a000+a002);
+  a002=arg[3]? arg[3][256] : 0;
+  a014=(a014*a069);
+  a059=(a059*a086);
+  a014=(a014+a059);
+  a060=(a060*a102);
+  a014=(a014+a060);
+  a061=(a061*a118);
+  a014=(a014+a061);
+  a062=(a062*a134);
+  a014=(a014+a062);
+  a063=(a063*a150);
+  a014=(a014+a063);
+  a064=(a064*a166);
+  a014=(a014+a064);
+  a065=(a065*a182);
+  a014=(a014+a065);
+  a066=(a066*a010);
+  a068=(a068*a012);
+  a066=(a066+a068);
+  a014=(a014+a066);
+  a187=(2.*a187);
+  a187=(a187-a022);
+  a067=(a067*a187);
+  a192=(2.*a192);
+  a192=(a192-a035);
+  a070=(a070*a192);
+  a067=(a067+a070);
+  a193=(2.*a193);
+  a193=(a193-a046);
+  a071=(a071*a193);
+  a067=(a067+a071);
+  a171=(2.*a171);
+  a171=(a171-a057);
+  a072=(a072*a171);
+  a067=(a067+a072);
+  a014=(a014+a067);
+  a013=(a013*a014);
+  a074=(a074*a069);
+  a076=(a076*a086);
+  a074=(a074+a076);
+  a077=(a077*a102);
+  a074=(a074+a077);
+  a078=(a078*a118);
+  a074=(a074+a078);
+  a079=(a079*a134);
+  a074=(a074+a079);
+  a080=(a080*a150);
+  a074=(a074+a080);
+  a081=(a081*a166);
+  a074=(a074+a081);
+  a082=(a082*a182);
+  a074=(a074+a082);
+  a083=(a083*a010);
+  a085=(a085*a012);
+  a083=(a083+a085);
+  a074=(a074+a083);
+  a084=(a084*a187);
+  a087=(a087*a192);
+  a084=(a084+a087);
+  a088=(a088*a193);
+  a084=(a084+a088);
+  a089=(a089*a171);
+  a084=(a084+a089);
+  a074=(a074+a084);
+  a015=(a015*a074);
+  a013=(a013+a015);
+  a090=(a090*a069);
+  a092=(a092*a086);
+  a090=(a090+a092);
+  a093=(a093*a102);
+  a090=(a090+a093);
+  a094=(a094*a118);
+  a090=(a090+a094);
+  a095=(a095*a134);
+  a090=(a090+a095);
+  a096=(a096*a150);
+  a090=(a090+a096);
+  a097=(a097*a166);
+  a090=(a090+a097);
+  a098=(a098*a182);
+  a090=(a090+a098);
+  a099=(a099*a010);
+  a101=(a101*a012);
+  a099=(a099+a101);
+  a090=(a090+a099);
+  a100=(a100*a187);
+  a103=(a103*a192);
+  a100=(a100+a103);
+  a104=(a104*a193);
+  a100=(a100+a104);
+  a105=(a105*a171);
+  a100=(a100+a105);
+  a090=(a090+a100);
+  a016=(a016*a090);
+  a013=(a013+a016);
+  a106=(a106*a069);
+  a108=(a108*a086);
+  a106=(a106+a108);
+  a109=(a109*a102);
+  a106=(a106+a109);
+  a110=(a110*a118);
+  a106=(a106+a110);
+  a111=(a111*a134);
+  a106=(a106+a111);
+  a112=(a112*a150);
+  a106=(a106+a112);
+  a113=(a113*a166);
+  a106=(a106+a113);
+  a114=(a114*a182);
+  a106=(a106+a114);
+  a115=(a115*a010);
+  a117=(a117*a012);
+  a115=(a115+a117);
+  a106=(a106+a115);
+  a116=(a116*a187);
+  a119=(a119*a192);
+  a116=(a116+a119);
+  a120=(a120*a193);
+  a116=(a116+a120);
+  a121=(a121*a171);
+  a116=(a116+a121);
+  a106=(a106+a116);
+  a017=(a017*a106);
+  a013=(a013+a017);
+  a122=(a122*a069);
+  a124=(a124*a086);
+  a122=(a122+a124);
+  a125=(a125*a102);
+  a122=(a122+a125);
+  a126=(a126*a118);
+  a122=(a122+a126);
+  a127=(a127*a134);
+  a122=(a122+a127);
+  a128=(a128*a150);
+  a122=(a122+a128);
+  a129=(a129*a166);
+  a122=(a122+a129);
+  a130=(a130*a182);
+  a122=(a122+a130);
+  a131=(a131*a010);
+  a133=(a133*a012);
+  a131=(a131+a133);
+  a122=(a122+a131);
+  a132=(a132*a187);
+  a135=(a135*a192);
+  a132=(a132+a135);
+  a136=(a136*a193);
+  a132=(a132+a136);
+  a137=(a137*a171);
+  a132=(a132+a137);
+  a122=(a122+a132);
+  a018=(a018*a122);
+  a013=(a013+a018);
+  a138=(a138*a069);
+  a140=(a140*a086);
+  a138=(a138+a140);
+  a141=(a141*a102);
+  a138=(a138+a141);
+  a142=(a142*a118);
+  a138=(a138+a142);
+  a143=(a143*a134);
+  a138=(a138+a143);
+  a144=(a144*a150);
+  a138=(a138+a144);
+  a145=(a145*a166);
+  a138=(a138+a145);
+  a146=(a146*a182);
+  a138=(a138+a146);
+  a147=(a147*a010);
+  a149=(a149*a012);
+  a147=(a147+a149);
+  a138=(a138+a147);
+  a148=(a148*a187);
+  a151=(a151*a192);
+  a148=(a148+a151);
+  a152=(a152*a193);
+  a148=(a148+a152);
+  a153=(a153*a171);
+  a148=(a148+a153);
+  a138=(a138+a148);
+  a019=(a019*a138);
+  a013=(a013+a019);
+  a154=(a154*a069);
+  a156=(a156*a086);
+  a154=(a154+a156);
+  a157=(a157*a102);
+  a154=(a154+a157);
+  a158=(a158*a118);
+  a154=(a154+a158);
+  a159=(a159*a134);
+  a154=(a154+a159);
+  a160=(a160*a150);
+  a154=(a154+a160);
+  a161=(a161*a166);
+  a154=(a154+a161);
+  a162=(a162*a182);
+  a154=(a154+a162);
+  a163=(a163*a010);
+  a165=(a165*a012);
+  a163=(a163+a165);
+  a154=(a154+a163);
+  a164=(a164*a187);
+  a167=(a167*a192);
+  a164=(a164+a167);
+  a168=(a168*a193);
+  a164=(a164+a168);
+  a169=(a169*a171);
+  a164=(a164+a169);
+  a154=(a154+a164);
+  a020=(a020*a154);
+  a013=(a013+a020);
+  a170=(a170*a069);
+  a172=(a172*a086);
+  a170=(a170+a172);
+  a173=(a173*a102);
+  a170=(a170+a173);
+  a174=(a174*a118);
+  a170=(a170+a174);
+  a175=(a175*a134);
+  a170=(a170+a175);
+  a176=(a176*a150);
+  a170=(a170+a176);
+  a177=(a177*a166);
+  a170=(a170+a177);
+  a178=(a178*a182);
+  a170=(a170+a178);
+  a179=(a179*a010);
+  a181=(a181*a012);
+  a179=(a179+a181);
+  a170=(a170+a179);
+  a180=(a180*a187);
+  a183=(a183*a192);
+  a180=(a180+a183);
+  a184=(a184*a193);
+  a180=(a180+a184);
+  a185=(a185*a171);
+  a180=(a180+a185);
+  a170=(a170+a180);
+  a021=(a021*a170);
+  a013=(a013+a021);
+  a011=(a011*a013);
+  a013=(a013*a024);
+  a013=tanh(a013);
+  a023=(a023*a013);
+  a011=(a011-a023);
+  a002=(a002*a011);
+  a023=arg[3]? arg[3][264] : 0;
+  a026=(a026*a014);
+  a028=(a028*a074);
+  a026=(a026+a028);
+  a029=(a029*a090);
+  a026=(a026+a029);
+  a030=(a030*a106);
+  a026=(a026+a030);
+  a031=(a031*a122);
+  a026=(a026+a031);
+  a032=(a032*a138);
+  a026=(a026+a032);
+  a033=(a033*a154);
+  a026=(a026+a033);
+  a034=(a034*a170);
+  a026=(a026+a034);
+  a025=(a025*a026);
+  a026=(a026*a024);
+  a026=tanh(a026);
+  a036=(a036*a026);
+  a025=(a025-a036);
+  a023=(a023*a025);
+  a002=(a002+a023);
+  a023=arg[3]? arg[3][272] : 0;
+  a037=(a037*a014);
+  a039=(a039*a074);
+  a037=(a037+a039);
+  a040=(a040*a090);
+  a037=(a037+a040);
+  a041=(a041*a106);
+  a037=(a037+a041);
+  a042=(a042*a122);
+  a037=(a037+a042);
+  a043=(a043*a138);
+  a037=(a037+a043);
+  a044=(a044*a154);
+  a037=(a037+a044);
+  a045=(a045*a170);
+  a037=(a037+a045);
+  a027=(a027*a037);
+  a037=(a037*a024);
+  a037=tanh(a037);
+  a047=(a047*a037);
+  a027=(a027-a047);
+  a023=(a023*a027);
+  a002=(a002+a023);
+  a023=arg[3]? arg[3][280] : 0;
+  a048=(a048*a014);
+  a050=(a050*a074);
+  a048=(a048+a050);
+  a051=(a051*a090);
+  a048=(a048+a051);
+  a052=(a052*a106);
+  a048=(a048+a052);
+  a053=(a053*a122);
+  a048=(a048+a053);
+  a054=(a054*a138);
+  a048=(a048+a054);
+  a055=(a055*a154);
+  a048=(a048+a055);
+  a056=(a056*a170);
+  a048=(a048+a056);
+  a038=(a038*a048);
+  a048=(a048*a024);
+  a048=tanh(a048);
+  a058=(a058*a048);
+  a038=(a038-a058);
+  a023=(a023*a038);
+  a002=(a002+a023);
+  a000=(a000+a002);
+  if (res[0]!=0) res[0][0]=a000;
+  a000=arg[3]? arg[3][81] : 0;
+  a000=(a000*a001);
+  a002=arg[3]? arg[3][89] : 0;
+  a002=(a002*a003);
+  a000=(a000+a002);
+  a002=arg[3]? arg[3][97] : 0;
+  a002=(a002*a004);
+  a000=(a000+a002);
+  a002=arg[3]? arg[3][105] : 0;
+  a002=(a002*a005);
+  a000=(a000+a002);
+  a002=arg[3]? arg[3][113] : 0;
+  a002=(a002*a006);
+  a000=(a000+a002);
+  a002=arg[3]? arg[3][121] : 0;
+  a002=(a002*a007);
+  a000=(a000+a002);
+  a002=arg[3]? arg[3][129] : 0;
+  a002=(a002*a008);
+  a000=(a000+a002);
+  a002=arg[3]? arg[3][137] : 0;
+  a002=(a002*a009);
+  a000=(a000+a002);
+  a002=arg[3]? arg[3][145] : 0;
+  a002=(a002*a010);
+  a023=arg[3]? arg[3][153] : 0;
+  a023=(a023*a012);
+  a002=(a002+a023);
+  a000=(a000+a002);
+  a002=arg[3]? arg[3][193] : 0;
+  a002=(a002*a022);
+  a023=arg[3]? arg[3][201] : 0;
+  a023=(a023*a035);
+  a002=(a002+a023);
+  a023=arg[3]? arg[3][209] : 0;
+  a023=(a023*a046);
+  a002=(a002+a023);
+  a023=arg[3]? arg[3][217] : 0;
+  a023=(a023*a057);
+  a002=(a002+a023);
+  a000=(a000+a002);
+  a002=arg[3]? arg[3][225] : 0;
+  a002=(a002*a186);
+  a023=arg[3]? arg[3][233] : 0;
+  a023=(a023*a188);
+  a002=(a002+a023);
+  a023=arg[3]? arg[3][241] : 0;
+  a023=(a023*a189);
+  a002=(a002+a023);
+  a023=arg[3]? arg[3][249] : 0;
+  a023=(a023*a190);
+  a002=(a002+a023);
+  a002=(2.*a002);
+  a000=(a000+a002);
+  a002=arg[3]? arg[3][257] : 0;
+  a002=(a002*a011);
+  a023=arg[3]? arg[3][265] : 0;
+  a023=(a023*a025);
+  a002=(a002+a023);
+  a023=arg[3]? arg[3][273] : 0;
+  a023=(a023*a027);
+  a002=(a002+a023);
+  a023=arg[3]? arg[3][281] : 0;
+  a023=(a023*a038);
+  a002=(a002+a023);
+  a000=(a000+a002);
+  if (res[0]!=0) res[0][1]=a000;
+  a000=arg[3]? arg[3][82] : 0;
+  a000=(a000*a001);
+  a002=arg[3]? arg[3][90] : 0;
+  a002=(a002*a003);
+  a000=(a000+a002);
+  a002=arg[3]? arg[3][98] : 0;
+  a002=(a002*a004);
+  a000=(a000+a002);
+  a002=arg[3]? arg[3][106] : 0;
+  a002=(a002*a005);
+  a000=(a000+a002);
+  a002=arg[3]? arg[3][114] : 0;
+  a002=(a002*a006);
+  a000=(a000+a002);
+  a002=arg[3]? arg[3][122] : 0;
+  a002=(a002*a007);
+  a000=(a000+a002);
+  a002=arg[3]? arg[3][130] : 0;
+  a002=(a002*a008);
+  a000=(a000+a002);
+  a002=arg[3]? arg[3][138] : 0;
+  a002=(a002*a009);
+  a000=(a000+a002);
+  a002=arg[3]? arg[3][146] : 0;
+  a002=(a002*a010);
+  a023=arg[3]? arg[3][154] : 0;
+  a023=(a023*a012);
+  a002=(a002+a023);
+  a000=(a000+a002);
+  a002=arg[3]? arg[3][194] : 0;
+  a002=(a002*a022);
+  a023=arg[3]? arg[3][202] : 0;
+  a023=(a023*a035);
+  a002=(a002+a023);
+  a023=arg[3]? arg[3][210] : 0;
+  a023=(a023*a046);
+  a002=(a002+a023);
+  a023=arg[3]? arg[3][218] : 0;
+  a023=(a023*a057);
+  a002=(a002+a023);
+  a000=(a000+a002);
+  a002=arg[3]? arg[3][226] : 0;
+  a002=(a002*a186);
+  a023=arg[3]? arg[3][234] : 0;
+  a023=(a023*a188);
+  a002=(a002+a023);
+  a023=arg[3]? arg[3][242] : 0;
+  a023=(a023*a189);
+  a002=(a002+a023);
+  a023=arg[3]? arg[3][250] : 0;
+  a023=(a023*a190);
+  a002=(a002+a023);
+  a002=(2.*a002);
+  a000=(a000+a002);
+  a002=arg[3]? arg[3][258] : 0;
+  a002=(a002*a011);
+  a023=arg[3]? arg[3][266] : 0;
+  a023=(a023*a025);
+  a002=(a002+a023);
+  a023=arg[3]? arg[3][274] : 0;
+  a023=(a023*a027);
+  a002=(a002+a023);
+  a023=arg[3]? arg[3][282] : 0;
+  a023=(a023*a038);
+  a002=(a002+a023);
+  a000=(a000+a002);
+  if (res[0]!=0) res[0][2]=a000;
+  a000=arg[3]? arg[3][83] : 0;
+  a000=(a000*a001);
+  a002=arg[3]? arg[3][91] : 0;
+  a002=(a002*a003);
+  a000=(a000+a002);
+  a002=arg[3]? arg[3][99] : 0;
+  a002=(a002*a004);
+  a000=(a000+a002);
+  a002=arg[3]? arg[3][107] : 0;
+  a002=(a002*a005);
+  a000=(a000+a002);
+  a002=arg[3]? arg[3][115] : 0;
+  a002=(a002*a006);
+  a000=(a000+a002);
+  a002=arg[3]? arg[3][123] : 0;
+  a002=(a002*a007);
+  a000=(a000+a002);
+  a002=arg[3]? arg[3][131] : 0;
+  a002=(a002*a008);
+  a000=(a000+a002);
+  a002=arg[3]? arg[3][139] : 0;
+  a002=(a002*a009);
+  a000=(a000+a002);
+  a002=arg[3]? arg[3][147] : 0;
+  a002=(a002*a010);
+  a023=arg[3]? arg[3][155] : 0;
+  a023=(a023*a012);
+  a002=(a002+a023);
+  a000=(a000+a002);
+  a002=arg[3]? arg[3][195] : 0;
+  a002=(a002*a022);
+  a023=arg[3]? arg[3][203] : 0;
+  a023=(a023*a035);
+  a002=(a002+a023);
+  a023=arg[3]? arg[3][211] : 0;
+  a023=(a023*a046);
+  a002=(a002+a023);
+  a023=arg[3]? arg[3][219] : 0;
+  a023=(a023*a057);
+  a002=(a002+a023);
+  a000=(a000+a002);
+  a002=arg[3]? arg[3][227] : 0;
+  a002=(a002*a186);
+  a023=arg[3]? arg[3][235] : 0;
+  a023=(a023*a188);
+  a002=(a002+a023);
+  a023=arg[3]? arg[3][243] : 0;
+  a023=(a023*a189);
+  a002=(a002+a023);
+  a023=arg[3]? arg[3][251] : 0;
+  a023=(a023*a190);
+  a002=(a002+a023);
+  a002=(2.*a002);
+  a000=(a000+a002);
+  a002=arg[3]? arg[3][259] : 0;
+  a002=(a002*a011);
+  a023=arg[3]? arg[3][267] : 0;
+  a023=(a023*a025);
+  a002=(a002+a023);
+  a023=arg[3]? arg[3][275] : 0;
+  a023=(a023*a027);
+  a002=(a002+a023);
+  a023=arg[3]? arg[3][283] : 0;
+  a023=(a023*a038);
+  a002=(a002+a023);
+  a000=(a000+a002);
+  if (res[0]!=0) res[0][3]=a000;
+  a000=arg[3]? arg[3][84] : 0;
+  a000=(a000*a001);
+  a002=arg[3]? arg[3][92] : 0;
+  a002=(a002*a003);
+  a000=(a000+a002);
+  a002=arg[3]? arg[3][100] : 0;
+  a002=(a002*a004);
+  a000=(a000+a002);
+  a002=arg[3]? arg[3][108] : 0;
+  a002=(a002*a005);
+  a000=(a000+a002);
+  a002=arg[3]? arg[3][116] : 0;
+  a002=(a002*a006);
+  a000=(a000+a002);
+  a002=arg[3]? arg[3][124] : 0;
+  a002=(a002*a007);
+  a000=(a000+a002);
+  a002=arg[3]? arg[3][132] : 0;
+  a002=(a002*a008);
+  a000=(a000+a002);
+  a002=arg[3]? arg[3][140] : 0;
+  a002=(a002*a009);
+  a000=(a000+a002);
+  a002=arg[3]? arg[3][148] : 0;
+  a002=(a002*a010);
+  a023=arg[3]? arg[3][156] : 0;
+  a023=(a023*a012);
+  a002=(a002+a023);
+  a000=(a000+a002);
+  a002=arg[3]? arg[3][196] : 0;
+  a002=(a002*a022);
+  a023=arg[3]? arg[3][204] : 0;
+  a023=(a023*a035);
+  a002=(a002+a023);
+  a023=arg[3]? arg[3][212] : 0;
+  a023=(a023*a046);
+  a002=(a002+a023);
+  a023=arg[3]? arg[3][220] : 0;
+  a023=(a023*a057);
+  a002=(a002+a023);
+  a000=(a000+a002);
+  a002=arg[3]? arg[3][228] : 0;
+  a002=(a002*a186);
+  a023=arg[3]? arg[3][236] : 0;
+  a023=(a023*a188);
+  a002=(a002+a023);
+  a023=arg[3]? arg[3][244] : 0;
+  a023=(a023*a189);
+  a002=(a002+a023);
+  a023=arg[3]? arg[3][252] : 0;
+  a023=(a023*a190);
+  a002=(a002+a023);
+  a002=(2.*a002);
+  a000=(a000+a002);
+  a002=arg[3]? arg[3][260] : 0;
+  a002=(a002*a011);
+  a023=arg[3]? arg[3][268] : 0;
+  a023=(a023*a025);
+  a002=(a002+a023);
+  a023=arg[3]? arg[3][276] : 0;
+  a023=(a023*a027);
+  a002=(a002+a023);
+  a023=arg[3]? arg[3][284] : 0;
+  a023=(a023*a038);
+  a002=(a002+a023);
+  a000=(a000+a002);
+  if (res[0]!=0) res[0][4]=a000;
+  a000=arg[3]? arg[3][85] : 0;
+  a000=(a000*a001);
+  a002=arg[3]? arg[3][93] : 0;
+  a002=(a002*a003);
+  a000=(a000+a002);
+  a002=arg[3]? arg[3][101] : 0;
+  a002=(a002*a004);
+  a000=(a000+a002);
+  a002=arg[3]? arg[3][109] : 0;
+  a002=(a002*a005);
+  a000=(a000+a002);
+  a002=arg[3]? arg[3][117] : 0;
+  a002=(a002*a006);
+  a000=(a000+a002);
+  a002=arg[3]? arg[3][125] : 0;
+  a002=(a002*a007);
+  a000=(a000+a002);
+  a002=arg[3]? arg[3][133] : 0;
+  a002=(a002*a008);
+  a000=(a000+a002);
+  a002=arg[3]? arg[3][141] : 0;
+  a002=(a002*a009);
+  a000=(a000+a002);
+  a002=arg[3]? arg[3][149] : 0;
+  a002=(a002*a010);
+  a023=arg[3]? arg[3][157] : 0;
+  a023=(a023*a012);
+  a002=(a002+a023);
+  a000=(a000+a002);
+  a002=arg[3]? arg[3][197] : 0;
+  a002=(a002*a022);
+  a023=arg[3]? arg[3][205] : 0;
+  a023=(a023*a035);
+  a002=(a002+a023);
+  a023=arg[3]? arg[3][213] : 0;
+  a023=(a023*a046);
+  a002=(a002+a023);
+  a023=arg[3]? arg[3][221] : 0;
+  a023=(a023*a057);
+  a002=(a002+a023);
+  a000=(a000+a002);
+  a002=arg[3]? arg[3][229] : 0;
+  a002=(a002*a186);
+  a023=arg[3]? arg[3][237] : 0;
+  a023=(a023*a188);
+  a002=(a002+a023);
+  a023=arg[3]? arg[3][245] : 0;
+  a023=(a023*a189);
+  a002=(a002+a023);
+  a023=arg[3]? arg[3][253] : 0;
+  a023=(a023*a190);
+  a002=(a002+a023);
+  a002=(2.*a002);
+  a000=(a000+a002);
+  a002=arg[3]? arg[3][261] : 0;
+  a002=(a002*a011);
+  a023=arg[3]? arg[3][269] : 0;
+  a023=(a023*a025);
+  a002=(a002+a023);
+  a023=arg[3]? arg[3][277] : 0;
+  a023=(a023*a027);
+  a002=(a002+a023);
+  a023=arg[3]? arg[3][285] : 0;
+  a023=(a023*a038);
+  a002=(a002+a023);
+  a000=(a000+a002);
+  if (res[0]!=0) res[0][5]=a000;
+  a000=arg[3]? arg[3][86] : 0;
+  a000=(a000*a001);
+  a002=arg[3]? arg[3][94] : 0;
+  a002=(a002*a003);
+  a000=(a000+a002);
+  a002=arg[3]? arg[3][102] : 0;
+  a002=(a002*a004);
+  a000=(a000+a002);
+  a002=arg[3]? arg[3][110] : 0;
+  a002=(a002*a005);
+  a000=(a000+a002);
+  a002=arg[3]? arg[3][118] : 0;
+  a002=(a002*a006);
+  a000=(a000+a002);
+  a002=arg[3]? arg[3][126] : 0;
+  a002=(a002*a007);
+  a000=(a000+a002);
+  a002=arg[3]? arg[3][134] : 0;
+  a002=(a002*a008);
+  a000=(a000+a002);
+  a002=arg[3]? arg[3][142] : 0;
+  a002=(a002*a009);
+  a000=(a000+a002);
+  a002=arg[3]? arg[3][150] : 0;
+  a002=(a002*a010);
+  a023=arg[3]? arg[3][158] : 0;
+  a023=(a023*a012);
+  a002=(a002+a023);
+  a000=(a000+a002);
+  a002=arg[3]? arg[3][198] : 0;
+  a002=(a002*a022);
+  a023=arg[3]? arg[3][206] : 0;
+  a023=(a023*a035);
+  a002=(a002+a023);
+  a023=arg[3]? arg[3][214] : 0;
+  a023=(a023*a046);
+  a002=(a002+a023);
+  a023=arg[3]? arg[3][222] : 0;
+  a023=(a023*a057);
+  a002=(a002+a023);
+  a000=(a000+a002);
+  a002=arg[3]? arg[3][230] : 0;
+  a002=(a002*a186);
+  a023=arg[3]? arg[3][238] : 0;
+  a023=(a023*a188);
+  a002=(a002+a023);
+  a023=arg[3]? arg[3][246] : 0;
+  a023=(a023*a189);
+  a002=(a002+a023);
+  a023=arg[3]? arg[3][254] : 0;
+  a023=(a023*a190);
+  a002=(a002+a023);
+  a002=(2.*a002);
+  a000=(a000+a002);
+  a002=arg[3]? arg[3][262] : 0;
+  a002=(a002*a011);
+  a023=arg[3]? arg[3][270] : 0;
+  a023=(a023*a025);
+  a002=(a002+a023);
+  a023=arg[3]? arg[3][278] : 0;
+  a023=(a023*a027);
+  a002=(a002+a023);
+  a023=arg[3]? arg[3][286] : 0;
+  a023=(a023*a038);
+  a002=(a002+a023);
+  a000=(a000+a002);
+  if (res[0]!=0) res[0][6]=a000;
+  a000=arg[3]? arg[3][87] : 0;
+  a000=(a000*a001);
+  a001=arg[3]? arg[3][95] : 0;
+  a001=(a001*a003);
+  a000=(a000+a001);
+  a001=arg[3]? arg[3][103] : 0;
+  a001=(a001*a004);
+  a000=(a000+a001);
+  a001=arg[3]? arg[3][111] : 0;
+  a001=(a001*a005);
+  a000=(a000+a001);
+  a001=arg[3]? arg[3][119] : 0;
+  a001=(a001*a006);
+  a000=(a000+a001);
+  a001=arg[3]? arg[3][127] : 0;
+  a001=(a001*a007);
+  a000=(a000+a001);
+  a001=arg[3]? arg[3][135] : 0;
+  a001=(a001*a008);
+  a000=(a000+a001);
+  a001=arg[3]? arg[3][143] : 0;
+  a001=(a001*a009);
+  a000=(a000+a001);
+  a001=arg[3]? arg[3][151] : 0;
+  a001=(a001*a010);
+  a010=arg[3]? arg[3][159] : 0;
+  a010=(a010*a012);
+  a001=(a001+a010);
+  a000=(a000+a001);
+  a001=arg[3]? arg[3][199] : 0;
+  a001=(a001*a022);
+  a022=arg[3]? arg[3][207] : 0;
+  a022=(a022*a035);
+  a001=(a001+a022);
+  a022=arg[3]? arg[3][215] : 0;
+  a022=(a022*a046);
+  a001=(a001+a022);
+  a022=arg[3]? arg[3][223] : 0;
+  a022=(a022*a057);
+  a001=(a001+a022);
+  a000=(a000+a001);
+  a001=arg[3]? arg[3][231] : 0;
+  a001=(a001*a186);
+  a186=arg[3]? arg[3][239] : 0;
+  a186=(a186*a188);
+  a001=(a001+a186);
+  a186=arg[3]? arg[3][247] : 0;
+  a186=(a186*a189);
+  a001=(a001+a186);
+  a186=arg[3]? arg[3][255] : 0;
+  a186=(a186*a190);
+  a001=(a001+a186);
+  a001=(2.*a001);
+  a000=(a000+a001);
+  a001=arg[3]? arg[3][263] : 0;
+  a001=(a001*a011);
+  a011=arg[3]? arg[3][271] : 0;
+  a011=(a011*a025);
+  a001=(a001+a011);
+  a011=arg[3]? arg[3][279] : 0;
+  a011=(a011*a027);
+  a001=(a001+a011);
+  a011=arg[3]? arg[3][287] : 0;
+  a011=(a011*a038);
+  a001=(a001+a011);
+  a000=(a000+a001);
+  if (res[0]!=0) res[0][7]=a000;
+  return 0;
+}
+
+CASADI_SYMBOL_EXPORT int haa_sim_etd_8(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem){
+  return casadi_f14(arg, res, iw, w, mem);
+}
+
+CASADI_SYMBOL_EXPORT int haa_sim_etd_8_checkout(void) {
+  return 0;
+}
+
+CASADI_SYMBOL_EXPORT void haa_sim_etd_8_release(int mem) {
+}
+
+CASADI_SYMBOL_EXPORT void haa_sim_etd_8_incref(void) {
+}
+
+CASADI_SYMBOL_EXPORT void haa_sim_etd_8_decref(void) {
+}
+
+CASADI_SYMBOL_EXPORT casadi_int haa_sim_etd_8_n_in(void) { return 4;}
+
+CASADI_SYMBOL_EXPORT casadi_int haa_sim_etd_8_n_out(void) { return 1;}
+
+CASADI_SYMBOL_EXPORT casadi_real haa_sim_etd_8_default_in(casadi_int i) {
+  switch (i) {
+    default: return 0;
+  }
+}
+
+CASADI_SYMBOL_EXPORT const char* haa_sim_etd_8_name_in(casadi_int i) {
+  switch (i) {
+    case 0: return "x";
+    case 1: return "u";
+    case 2: return "s";
+    case 3: return "par";
+    default: return 0;
+  }
+}
+
+CASADI_SYMBOL_EXPORT const char* haa_sim_etd_8_name_out(casadi_int i) {
+  switch (i) {
+    case 0: return "x_next";
+    default: return 0;
+  }
+}
+
+CASADI_SYMBOL_EXPORT const casadi_int* haa_sim_etd_8_sparsity_in(casadi_int i) {
+  switch (i) {
+    case 0: return casadi_s17;
+    case 1: return casadi_s11;
+    case 2: return casadi_s4;
+    case 3: return casadi_s23;
+    default: return 0;
+  }
+}
+
+CASADI_SYMBOL_EXPORT const casadi_int* haa_sim_etd_8_sparsity_out(casadi_int i) {
+  switch (i) {
+    case 0: return casadi_s17;
+    default: return 0;
+  }
+}
+
+CASADI_SYMBOL_EXPORT int haa_sim_etd_8_work(casadi_int *sz_arg, casadi_int* sz_res, casadi_int *sz_iw, casadi_int *sz_w) {
+  if (sz_arg) *sz_arg = 4;
+  if (sz_res) *sz_res = 1;
+  if (sz_iw) *sz_iw = 0;
+  if (sz_w) *sz_w = 0;
+  return 0;
+}
+
+CASADI_SYMBOL_EXPORT int haa_sim_etd_8_work_bytes(casadi_int *sz_arg, casadi_int* sz_res, casadi_int *sz_iw, casadi_int *sz_w) {
+  if (sz_arg) *sz_arg = 4*sizeof(const casadi_real*);
+  if (sz_res) *sz_res = 1*sizeof(casadi_real*);
+  if (sz_iw) *sz_iw = 0*sizeof(casadi_int);
+  if (sz_w) *sz_w = 0*sizeof(casadi_real);
+  return 0;
+}
+
+/* haa_sim_sample_8_64:(x[8],xc[64],exo[5],par[4532])->(u[2],xc_next[64],y[7]) */
+static int casadi_f15(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
+  casadi_int i;
+  casadi_real *rr, *w00=w+64, *w03=w+66, *w04=w+130, w06, w07, w08, w09, w12, *w13=w+132, w14, *w15=w+137;
+  casadi_real w16, w17, *w18=w+141;
+  const casadi_real *cs, *wr01, *wr02, *wr03, *wr05, *wr10, *wr11, *wr19, *wr20;
+  /* #0: @0 = zeros(2x1) */
+  casadi_clear(w00, 2);
+  /* #1: @1 = input[3][0] */
+  wr01 = arg[3] ? arg[3] : casadi_zeros;
+  /* #2: @2 = @1[4352:4480] */
+  wr02 = wr01+4352;
+  /* #3: @2 = reshape(@2) */
+  /* #4: @3 = input[1][0] */
+  wr03 = arg[1] ? arg[1] : casadi_zeros;
+  /* #5: @0 = mac(@2,@3,@0) */
+  casadi_mtimes_dense(wr02, 2, 64, wr03, 1, w00, 0);
+  /* #6: @4 = zeros(2x1) */
+  casadi_clear(w04, 2);
+  /* #7: @5 = @1[4480:4488] */
+  wr05 = wr01+4480;
+  /* #8: @5 = reshape(@5) */
+  /* #9: @6 = 0 */
+  w06 = 0.;
+  /* #10: @7 = @1[4530] */
+  w07 = wr01[4530];
+  /* #11: @6 = (@6<@7) */
+  w06  = (w06<w07);
+  /* #12: @8 = 0.5 */
+  w08 = 5.0000000000000000e-01;
+  /* #13: @9 = 0 */
+  w09 = 0.;
+  /* #14: @10 = @1[4488:4496] */
+  wr10 = wr01+4488;
+  /* #15: @10 = @10' */
+  /* #16: @11 = input[0][0] */
+  wr11 = arg[0] ? arg[0] : casadi_zeros;
+  /* #17: @9 = mac(@10,@11,@9) */
+  casadi_mtimes_dense(wr10, 1, 8, wr11, 1, (&w09), 0);
+  /* #18: @12 = (@9/@7) */
+  w12  = (w09/w07);
+  /* #19: @8 = (@8+@12) */
+  w08 += w12;
+  /* #20: @8 = floor(@8) */
+  w08 = floor( w08 );
+  /* #21: @8 = (@8*@7) */
+  w08 *= w07;
+  /* #22: @8 = (@6?@8:0) */
+  w08  = (w06?w08:0);
+  /* #23: @6 = (!@6) */
+  w06 = (! w06 );
+  /* #24: @6 = (@6?@9:0) */
+  w06  = (w06?w09:0);
+  /* #25: @8 = (@8+@6) */
+  w08 += w06;
+  /* #26: @6 = 0 */
+  w06 = 0.;
+  /* #27: @9 = @1[4531] */
+  w09 = wr01[4531];
+  /* #28: @6 = (@6<@9) */
+  w06  = (w06<w09);
+  /* #29: @7 = 0.5 */
+  w07 = 5.0000000000000000e-01;
+  /* #30: @12 = 0 */
+  w12 = 0.;
+  /* #31: @10 = @1[4496:4504] */
+  wr10 = wr01+4496;
+  /* #32: @10 = @10' */
+  /* #33: @12 = mac(@10,@11,@12) */
+  casadi_mtimes_dense(wr10, 1, 8, wr11, 1, (&w12), 0);
+  /* #34: @13 = input[2][0] */
+  casadi_copy(arg[2], 5, w13);
+  /* #35: @14 = @13[3] */
+  for (rr=(&w14), cs=w13+3; cs!=w13+4; cs+=1) *rr++ = *cs;
+  /* #36: @12 = (@12+@14) */
+  w12 += w14;
+  /* #37: @14 = (@12/@9) */
+  w14  = (w12/w09);
+  /* #38: @7 = (@7+@14) */
+  w07 += w14;
+  /* #39: @7 = floor(@7) */
+  w07 = floor( w07 );
+  /* #40: @7 = (@7*@9) */
+  w07 *= w09;
+  /* #41: @7 = (@6?@7:0) */
+  w07  = (w06?w07:0);
+  /* #42: @6 = (!@6) */
+  w06 = (! w06 );
+  /* #43: @6 = (@6?@12:0) */
+  w06  = (w06?w12:0);
+  /* #44: @7 = (@7+@6) */
+  w07 += w06;
+  /* #45: @6 = @13[1] */
+  for (rr=(&w06), cs=w13+1; cs!=w13+2; cs+=1) *rr++ = *cs;
+  /* #46: @12 = @13[2] */
+  for (rr=(&w12), cs=w13+2; cs!=w13+3; cs+=1) *rr++ = *cs;
+  /* #47: @15 = vertcat(@8, @7, @6, @12) */
+  rr=w15;
+  *rr++ = w08;
+  *rr++ = w07;
+  *rr++ = w06;
+  *rr++ = w12;
+  /* #48: @4 = mac(@5,@15,@4) */
+  casadi_mtimes_dense(wr05, 2, 4, w15, 1, w04, 0);
+  /* #49: @0 = (@0+@4) */
+  for (i=0, rr=w00, cs=w04; i<2; ++i) (*rr++) += (*cs++);
+  /* #50: @6 = @0[0] */
+  for (rr=(&w06), cs=w00+0; cs!=w00+1; cs+=1) *rr++ = *cs;
+  /* #51: @12 = @1[4528] */
+  w12 = wr01[4528];
+  /* #52: @9 = (-@12) */
+  w09 = (- w12 );
+  /* #53: @14 = 0 */
+  w14 = 0.;
+  /* #54: @5 = @1[4520:4528] */
+  wr05 = wr01+4520;
+  /* #55: @5 = @5' */
+  /* #56: @14 = mac(@5,@11,@14) */
+  casadi_mtimes_dense(wr05, 1, 8, wr11, 1, (&w14), 0);
+  /* #57: @16 = @1[4529] */
+  w16 = wr01[4529];
+  /* #58: @17 = (@14-@16) */
+  w17  = (w14-w16);
+  /* #59: @9 = fmax(@9,@17) */
+  w09  = casadi_fmax(w09,w17);
+  /* #60: @6 = fmax(@6,@9) */
+  w06  = casadi_fmax(w06,w09);
+  /* #61: @16 = (@16+@14) */
+  w16 += w14;
+  /* #62: @12 = fmin(@12,@16) */
+  w12  = casadi_fmin(w12,w16);
+  /* #63: @6 = fmin(@6,@12) */
+  w06  = casadi_fmin(w06,w12);
+  /* #64: output[0][0] = @6 */
+  if (res[0]) res[0][0] = w06;
+  /* #65: @12 = @13[0] */
+  for (rr=(&w12), cs=w13+0; cs!=w13+1; cs+=1) *rr++ = *cs;
+  /* #66: output[0][1] = @12 */
+  if (res[0]) res[0][1] = w12;
+  /* #67: @18 = zeros(64x1) */
+  casadi_clear(w18, 64);
+  /* #68: @19 = @1[:4096] */
+  wr19 = wr01+0;
+  /* #69: @19 = reshape(@19) */
+  /* #70: @18 = mac(@19,@3,@18) */
+  casadi_mtimes_dense(wr19, 64, 64, wr03, 1, w18, 0);
+  /* #71: @3 = zeros(64x1) */
+  casadi_clear(w03, 64);
+  /* #72: @20 = @1[4096:4352] */
+  wr20 = wr01+4096;
+  /* #73: @20 = reshape(@20) */
+  /* #74: @3 = mac(@20,@15,@3) */
+  casadi_mtimes_dense(wr20, 64, 4, w15, 1, w03, 0);
+  /* #75: @18 = (@18+@3) */
+  for (i=0, rr=w18, cs=w03; i<64; ++i) (*rr++) += (*cs++);
+  /* #76: output[1][0] = @18 */
+  casadi_copy(w18, 64, res[1]);
+  /* #77: output[2][0] = @8 */
+  if (res[2]) res[2][0] = w08;
+  /* #78: @8 = 0 */
+  w08 = 0.;
+  /* #79: @5 = @1[4512:4520] */
+  wr05 = wr01+4512;
+  /* #80: @5 = @5' */
+  /* #81: @8 = mac(@5,@11,@8) */
+  casadi_mtimes_dense(wr05, 1, 8, wr11, 1, (&w08), 0);
+  /* #82: output[2][1] = @8 */
+  if (res[2]) res[2][1] = w08;
+  /* #83: output[2][2] = @7 */
+  if (res[2]) res[2][2] = w07;
+  /* #84: @7 = @0[1] */
+  for (rr=(&w07), cs=w00+1; cs!=w00+2; cs+=1) *rr++ = *cs;
+  /* #85: output[2][3] = @7 */
+  if (res[2]) res[2][3] = w07;
+  /* #86: output[2][4] = @6 */
+  if (res[2]) res[2][4] = w06;
+  /* #87: @7 = 0 */
+  w07 = 0.;
+  /* #88: @5 = @1[4504:4512] */
+  wr05 = wr01+4504;
+  /* #89: @5 = @5' */
+  /* #90: @7 = mac(@5,@11,@7) */
+  casadi_mtimes_dense(wr05, 1, 8, wr11, 1, (&w07), 0);
+  /* #91: output[2][5] = @7 */
+  if (res[2]) res[2][5] = w07;
+  /* #92: @7 = @0[0] */
+  for (rr=(&w07), cs=w00+0; cs!=w00+1; cs+=1) *rr++ = *cs;
+  /* #93: @6 = (@6==@7) */
+  w06  = (w06==w07);
+  /* #94: @6 = (!@6) */
+  w06 = (! w06 );
+  /* #95: @7 = 1 */
+  w07 = 1.;
+  /* #96: @6 = (@6?@7:0) */
+  w06  = (w06?w07:0);
+  /* #97: output[2][6] = @6 */
+  if (res[2]) res[2][6] = w06;
+  return 0;
+}
+
+CASADI_SYMBOL_EXPORT int haa_sim_sample_8_64(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem){
+  return casadi_f15(arg, res, iw, w, mem);
+}
+
+CASADI_SYMBOL_EXPORT int haa_sim_sample_8_64_checkout(void) {
+  return 0;
+}
+
+CASADI_SYMBOL_EXPORT void haa_sim_sample_8_64_release(int mem) {
+}
+
+CASADI_SYMBOL_EXPORT void haa_sim_sample_8_64_incref(void) {
+}
+
+CASADI_SYMBOL_EXPORT void haa_sim_sample_8_64_decref(void) {
+}
+
+CASADI_SYMBOL_EXPORT casadi_int haa_sim_sample_8_64_n_in(void) { return 4;}
+
+CASADI_SYMBOL_EXPORT casadi_int haa_sim_sample_8_64_n_out(void) { return 3;}
+
+CASADI_SYMBOL_EXPORT casadi_real haa_sim_sample_8_64_default_in(casadi_int i) {
+  switch (i) {
+    default: return 0;
+  }
+}
+
+CASADI_SYMBOL_EXPORT const char* haa_sim_sample_8_64_name_in(casadi_int i) {
+  switch (i) {
+    case 0: return "x";
+    case 1: return "xc";
+    case 2: return "exo";
+    case 3: return "par";
+    default: return 0;
+  }
+}
+
+CASADI_SYMBOL_EXPORT const char* haa_sim_sample_8_64_name_out(casadi_int i) {
+  switch (i) {
+    case 0: return "u";
+    case 1: return "xc_next";
+    case 2: return "y";
+    default: return 0;
+  }
+}
+
+CASADI_SYMBOL_EXPORT const casadi_int* haa_sim_sample_8_64_sparsity_in(casadi_int i) {
+  switch (i) {
+    case 0: return casadi_s17;
+    case 1: return casadi_s24;
+    case 2: return casadi_s18;
+    case 3: return casadi_s25;
+    default: return 0;
+  }
+}
+
+CASADI_SYMBOL_EXPORT const casadi_int* haa_sim_sample_8_64_sparsity_out(casadi_int i) {
+  switch (i) {
+    case 0: return casadi_s11;
+    case 1: return casadi_s24;
+    case 2: return casadi_s20;
+    default: return 0;
+  }
+}
+
+CASADI_SYMBOL_EXPORT int haa_sim_sample_8_64_work(casadi_int *sz_arg, casadi_int* sz_res, casadi_int *sz_iw, casadi_int *sz_w) {
+  if (sz_arg) *sz_arg = 8;
+  if (sz_res) *sz_res = 4;
+  if (sz_iw) *sz_iw = 0;
+  if (sz_w) *sz_w = 205;
+  return 0;
+}
+
+CASADI_SYMBOL_EXPORT int haa_sim_sample_8_64_work_bytes(casadi_int *sz_arg, casadi_int* sz_res, casadi_int *sz_iw, casadi_int *sz_w) {
+  if (sz_arg) *sz_arg = 8*sizeof(const casadi_real*);
+  if (sz_res) *sz_res = 4*sizeof(casadi_real*);
+  if (sz_iw) *sz_iw = 0*sizeof(casadi_int);
+  if (sz_w) *sz_w = 205*sizeof(casadi_real);
+  return 0;
+}
+
+/* haa_sim_sample_16_64:(x[16],xc[64],exo[5],par[4572])->(u[2],xc_next[64],y[7]) */
+static int casadi_f16(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
+  casadi_int i;
+  casadi_real *rr, *w00=w+64, *w03=w+66, *w04=w+130, w06, w07, w08, w09, w12, *w13=w+132, w14, *w15=w+137;
+  casadi_real w16, w17, *w18=w+141;
+  const casadi_real *cs, *wr01, *wr02, *wr03, *wr05, *wr10, *wr11, *wr19, *wr20;
+  /* #0: @0 = zeros(2x1) */
+  casadi_clear(w00, 2);
+  /* #1: @1 = input[3][0] */
+  wr01 = arg[3] ? arg[3] : casadi_zeros;
+  /* #2: @2 = @1[4352:4480] */
+  wr02 = wr01+4352;
+  /* #3: @2 = reshape(@2) */
+  /* #4: @3 = input[1][0] */
+  wr03 = arg[1] ? arg[1] : casadi_zeros;
+  /* #5: @0 = mac(@2,@3,@0) */
+  casadi_mtimes_dense(wr02, 2, 64, wr03, 1, w00, 0);
+  /* #6: @4 = zeros(2x1) */
+  casadi_clear(w04, 2);
+  /* #7: @5 = @1[4480:4488] */
+  wr05 = wr01+4480;
+  /* #8: @5 = reshape(@5) */
+  /* #9: @6 = 0 */
+  w06 = 0.;
+  /* #10: @7 = @1[4570] */
+  w07 = wr01[4570];
+  /* #11: @6 = (@6<@7) */
+  w06  = (w06<w07);
+  /* #12: @8 = 0.5 */
+  w08 = 5.0000000000000000e-01;
+  /* #13: @9 = 0 */
+  w09 = 0.;
+  /* #14: @10 = @1[4488:4504] */
+  wr10 = wr01+4488;
+  /* #15: @10 = @10' */
+  /* #16: @11 = input[0][0] */
+  wr11 = arg[0] ? arg[0] : casadi_zeros;
+  /* #17: @9 = mac(@10,@11,@9) */
+  casadi_mtimes_dense(wr10, 1, 16, wr11, 1, (&w09), 0);
+  /* #18: @12 = (@9/@7) */
+  w12  = (w09/w07);
+  /* #19: @8 = (@8+@12) */
+  w08 += w12;
+  /* #20: @8 = floor(@8) */
+  w08 = floor( w08 );
+  /* #21: @8 = (@8*@7) */
+  w08 *= w07;
+  /* #22: @8 = (@6?@8:0) */
+  w08  = (w06?w08:0);
+  /* #23: @6 = (!@6) */
+  w06 = (! w06 );
+  /* #24: @6 = (@6?@9:0) */
+  w06  = (w06?w09:0);
+  /* #25: @8 = (@8+@6) */
+  w08 += w06;
+  /* #26: @6 = 0 */
+  w06 = 0.;
+  /* #27: @9 = @1[4571] */
+  w09 = wr01[4571];
+  /* #28: @6 = (@6<@9) */
+  w06  = (w06<w09);
+  /* #29: @7 = 0.5 */
+  w07 = 5.0000000000000000e-01;
+  /* #30: @12 = 0 */
+  w12 = 0.;
+  /* #31: @10 = @1[4504:4520] */
+  wr10 = wr01+4504;
+  /* #32: @10 = @10' */
+  /* #33: @12 = mac(@10,@11,@12) */
+  casadi_mtimes_dense(wr10, 1, 16, wr11, 1, (&w12), 0);
+  /* #34: @13 = input[2][0] */
+  casadi_copy(arg[2], 5, w13);
+  /* #35: @14 = @13[3] */
+  for (rr=(&w14), cs=w13+3; cs!=w13+4; cs+=1) *rr++ = *cs;
+  /* #36: @12 = (@12+@14) */
+  w12 += w14;
+  /* #37: @14 = (@12/@9) */
+  w14  = (w12/w09);
+  /* #38: @7 = (@7+@14) */
+  w07 += w14;
+  /* #39: @7 = floor(@7) */
+  w07 = floor( w07 );
+  /* #40: @7 = (@7*@9) */
+  w07 *= w09;
+  /* #41: @7 = (@6?@7:0) */
+  w07  = (w06?w07:0);
+  /* #42: @6 = (!@6) */
+  w06 = (! w06 );
+  /* #43: @6 = (@6?@12:0) */
+  w06  = (w06?w12:0);
+  /* #44: @7 = (@7+@6) */
+  w07 += w06;
+  /* #45: @6 = @13[1] */
+  for (rr=(&w06), cs=w13+1; cs!=w13+2; cs+=1) *rr++ = *cs;
+  /* #46: @12 = @13[2] */
+  for (rr=(&w12), cs=w13+2; cs!=w13+3; cs+=1) *rr++ = *cs;
+  /* #47: @15 = vertcat(@8, @7, @6, @12) */
+  rr=w15;
+  *rr++ = w08;
+  *rr++ = w07;
+  *rr++ = w06;
+  *rr++ = w12;
+  /* #48: @4 = mac(@5,@15,@4) */
+  casadi_mtimes_dense(wr05, 2, 4, w15, 1, w04, 0);
+  /* #49: @0 = (@0+@4) */
+  for (i=0, rr=w00, cs=w04; i<2; ++i) (*rr++) += (*cs++);
+  /* #50: @6 = @0[0] */
+  for (rr=(&w06), cs=w00+0; cs!=w00+1; cs+=1) *rr++ = *cs;
+  /* #51: @12 = @1[4568] */
+  w12 = wr01[4568];
+  /* #52: @9 = (-@12) */
+  w09 = (- w12 );
+  /* #53: @14 = 0 */
+  w14 = 0.;
+  /* #54: @10 = @1[4552:4568] */
+  wr10 = wr01+4552;
+  /* #55: @10 = @10' */
+  /* #56: @14 = mac(@10,@11,@14) */
+  casadi_mtimes_dense(wr10, 1, 16, wr11, 1, (&w14), 0);
+  /* #57: @16 = @1[4569] */
+  w16 = wr01[4569];
+  /* #58: @17 = (@14-@16) */
+  w17  = (w14-w16);
+  /* #59: @9 = fmax(@9,@17) */
+  w09  = casadi_fmax(w09,w17);
+  /* #60: @6 = fmax(@6,@9) */
+  w06  = casadi_fmax(w06,w09);
+  /* #61: @16 = (@16+@14) */
+  w16 += w14;
+  /* #62: @12 = fmin(@12,@16) */
+  w12  = casadi_fmin(w12,w16);
+  /* #63: @6 = fmin(@6,@12) */
+  w06  = casadi_fmin(w06,w12);
+  /* #64: output[0][0] = @6 */
+  if (res[0]) res[0][0] = w06;
+  /* #65: @12 = @13[0] */
+  for (rr=(&w12), cs=w13+0; cs!=w13+1; cs+=1) *rr++ = *cs;
+  /* #66: output[0][1] = @12 */
+  if (res[0]) res[0][1] = w12;
+  /* #67: @18 = zeros(64x1) */
+  casadi_clear(w18, 64);
+  /* #68: @19 = @1[:4096] */
+  wr19 = wr01+0;
+  /* #69: @19 = reshape(@19) */
+  /* #70: @18 = mac(@19,@3,@18) */
+  casadi_mtimes_dense(wr19, 64, 64, wr03, 1, w18, 0);
+  /* #71: @3 = zeros(64x1) */
+  casadi_clear(w03, 64);
+  /* #72: @20 = @1[4096:4352] */
+  wr20 = wr01+4096;
+  /* #73: @20 = reshape(@20) */
+  /* #74: @3 = mac(@20,@15,@3) */
+  casadi_mtimes_dense(wr20, 64, 4, w15, 1, w03, 0);
+  /* #75: @18 = (@18+@3) */
+  for (i=0, rr=w18, cs=w03; i<64; ++i) (*rr++) += (*cs++);
+  /* #76: output[1][0] = @18 */
+  casadi_copy(w18, 64, res[1]);
+  /* #77: output[2][0] = @8 */
+  if (res[2]) res[2][0] = w08;
+  /* #78: @8 = 0 */
+  w08 = 0.;
+  /* #79: @10 = @1[4536:4552] */
+  wr10 = wr01+4536;
+  /* #80: @10 = @10' */
+  /* #81: @8 = mac(@10,@11,@8) */
+  casadi_mtimes_dense(wr10, 1, 16, wr11, 1, (&w08), 0);
+  /* #82: output[2][1] = @8 */
+  if (res[2]) res[2][1] = w08;
+  /* #83: output[2][2] = @7 */
+  if (res[2]) res[2][2] = w07;
+  /* #84: @7 = @0[1] */
+  for (rr=(&w07), cs=w00+1; cs!=w00+2; cs+=1) *rr++ = *cs;
+  /* #85: output[2][3] = @7 */
+  if (res[2]) res[2][3] = w07;
+  /* #86: output[2][4] = @6 */
+  if (res[2]) res[2][4] = w06;
+  /* #87: @7 = 0 */
+  w07 = 0.;
+  /* #88: @10 = @1[4520:4536] */
+  wr10 = wr01+4520;
+  /* #89: @10 = @10' */
+  /* #90: @7 = mac(@10,@11,@7) */
+  casadi_mtimes_dense(wr10, 1, 16, wr11, 1, (&w07), 0);
+  /* #91: output[2][5] = @7 */
+  if (res[2]) res[2][5] = w07;
+  /* #92: @7 = @0[0] */
+  for (rr=(&w07), cs=w00+0; cs!=w00+1; cs+=1) *rr++ = *cs;
+  /* #93: @6 = (@6==@7) */
+  w06  = (w06==w07);
+  /* #94: @6 = (!@6) */
+  w06 = (! w06 );
+  /* #95: @7 = 1 */
+  w07 = 1.;
+  /* #96: @6 = (@6?@7:0) */
+  w06  = (w06?w07:0);
+  /* #97: output[2][6] = @6 */
+  if (res[2]) res[2][6] = w06;
+  return 0;
+}
+
+CASADI_SYMBOL_EXPORT int haa_sim_sample_16_64(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem){
+  return casadi_f16(arg, res, iw, w, mem);
+}
+
+CASADI_SYMBOL_EXPORT int haa_sim_sample_16_64_checkout(void) {
+  return 0;
+}
+
+CASADI_SYMBOL_EXPORT void haa_sim_sample_16_64_release(int mem) {
+}
+
+CASADI_SYMBOL_EXPORT void haa_sim_sample_16_64_incref(void) {
+}
+
+CASADI_SYMBOL_EXPORT void haa_sim_sample_16_64_decref(void) {
+}
+
+CASADI_SYMBOL_EXPORT casadi_int haa_sim_sample_16_64_n_in(void) { return 4;}
+
+CASADI_SYMBOL_EXPORT casadi_int haa_sim_sample_16_64_n_out(void) { return 3;}
+
+CASADI_SYMBOL_EXPORT casadi_real haa_sim_sample_16_64_default_in(casadi_int i) {
+  switch (i) {
+    default: return 0;
+  }
+}
+
+CASADI_SYMBOL_EXPORT const char* haa_sim_sample_16_64_name_in(casadi_int i) {
+  switch (i) {
+    case 0: return "x";
+    case 1: return "xc";
+    case 2: return "exo";
+    case 3: return "par";
+    default: return 0;
+  }
+}
+
+CASADI_SYMBOL_EXPORT const char* haa_sim_sample_16_64_name_out(casadi_int i) {
+  switch (i) {
+    case 0: return "u";
+    case 1: return "xc_next";
+    case 2: return "y";
+    default: return 0;
+  }
+}
+
+CASADI_SYMBOL_EXPORT const casadi_int* haa_sim_sample_16_64_sparsity_in(casadi_int i) {
+  switch (i) {
+    case 0: return casadi_s5;
+    case 1: return casadi_s24;
+    case 2: return casadi_s18;
+    case 3: return casadi_s26;
+    default: return 0;
+  }
+}
+
+CASADI_SYMBOL_EXPORT const casadi_int* haa_sim_sample_16_64_sparsity_out(casadi_int i) {
+  switch (i) {
+    case 0: return casadi_s11;
+    case 1: return casadi_s24;
+    case 2: return casadi_s20;
+    default: return 0;
+  }
+}
+
+CASADI_SYMBOL_EXPORT int haa_sim_sample_16_64_work(casadi_int *sz_arg, casadi_int* sz_res, casadi_int *sz_iw, casadi_int *sz_w) {
+  if (sz_arg) *sz_arg = 8;
+  if (sz_res) *sz_res = 4;
+  if (sz_iw) *sz_iw = 0;
+  if (sz_w) *sz_w = 205;
+  return 0;
+}
+
+CASADI_SYMBOL_EXPORT int haa_sim_sample_16_64_work_bytes(casadi_int *sz_arg, casadi_int* sz_res, casadi_int *sz_iw, casadi_int *sz_w) {
+  if (sz_arg) *sz_arg = 8*sizeof(const casadi_real*);
+  if (sz_res) *sz_res = 4*sizeof(casadi_real*);
+  if (sz_iw) *sz_iw = 0*sizeof(casadi_int);
+  if (sz_w) *sz_w = 205*sizeof(casadi_real);
+  return 0;
+}
+
+/* haa_sim_zoh_16:(x[16],u[2],s,par[288])->(x_next[16]) */
+static int casadi_f17(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
+  casadi_int i;
+  casadi_real *rr, *w0=w+16, *w3=w+32, *w5=w+48;
+  const casadi_real *cs, *wr1, *wr2, *wr3, *wr4;
+  /* #0: @0 = zeros(16x1) */
+  casadi_clear(w0, 16);
+  /* #1: @1 = input[3][0] */
+  wr1 = arg[3] ? arg[3] : casadi_zeros;
+  /* #2: @2 = @1[:256] */
+  wr2 = wr1+0;
+  /* #3: @2 = reshape(@2) */
+  /* #4: @3 = input[0][0] */
+  wr3 = arg[0] ? arg[0] : casadi_zeros;
+  /* #5: @0 = mac(@2,@3,@0) */
+  casadi_mtimes_dense(wr2, 16, 16, wr3, 1, w0, 0);
+  /* #6: @3 = zeros(16x1) */
+  casadi_clear(w3, 16);
+  /* #7: @4 = @1[256:288] */
+  wr4 = wr1+256;
+  /* #8: @4 = reshape(@4) */
+  /* #9: @5 = input[1][0] */
+  casadi_copy(arg[1], 2, w5);
+  /* #10: @3 = mac(@4,@5,@3) */
+  casadi_mtimes_dense(wr4, 16, 2, w5, 1, w3, 0);
+  /* #11: @0 = (@0+@3) */
+  for (i=0, rr=w0, cs=w3; i<16; ++i) (*rr++) += (*cs++);
+  /* #12: output[0][0] = @0 */
+  casadi_copy(w0, 16, res[0]);
+  return 0;
+}
+
+CASADI_SYMBOL_EXPORT int haa_sim_zoh_16(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem){
+  return casadi_f17(arg, res, iw, w, mem);
+}
+
+CASADI_SYMBOL_EXPORT int haa_sim_zoh_16_checkout(void) {
+  return 0;
+}
+
+CASADI_SYMBOL_EXPORT void haa_sim_zoh_16_release(int mem) {
+}
+
+CASADI_SYMBOL_EXPORT void haa_sim_zoh_16_incref(void) {
+}
+
+CASADI_SYMBOL_EXPORT void haa_sim_zoh_16_decref(void) {
+}
+
+CASADI_SYMBOL_EXPORT casadi_int haa_sim_zoh_16_n_in(void) { return 4;}
+
+CASADI_SYMBOL_EXPORT casadi_int haa_sim_zoh_16_n_out(void) { return 1;}
+
+CASADI_SYMBOL_EXPORT casadi_real haa_sim_zoh_16_default_in(casadi_int i) {
+  switch (i) {
+    default: return 0;
+  }
+}
+
+CASADI_SYMBOL_EXPORT const char* haa_sim_zoh_16_name_in(casadi_int i) {
+  switch (i) {
+    case 0: return "x";
+    case 1: return "u";
+    case 2: return "s";
+    case 3: return "par";
+    default: return 0;
+  }
+}
+
+CASADI_SYMBOL_EXPORT const char* haa_sim_zoh_16_name_out(casadi_int i) {
+  switch (i) {
+    case 0: return "x_next";
+    default: return 0;
+  }
+}
+
+CASADI_SYMBOL_EXPORT const casadi_int* haa_sim_zoh_16_sparsity_in(casadi_int i) {
+  switch (i) {
+    case 0: return casadi_s5;
+    case 1: return casadi_s11;
+    case 2: return casadi_s4;
+    case 3: return casadi_s27;
+    default: return 0;
+  }
+}
+
+CASADI_SYMBOL_EXPORT const casadi_int* haa_sim_zoh_16_sparsity_out(casadi_int i) {
+  switch (i) {
+    case 0: return casadi_s5;
+    default: return 0;
+  }
+}
+
+CASADI_SYMBOL_EXPORT int haa_sim_zoh_16_work(casadi_int *sz_arg, casadi_int* sz_res, casadi_int *sz_iw, casadi_int *sz_w) {
+  if (sz_arg) *sz_arg = 7;
+  if (sz_res) *sz_res = 2;
+  if (sz_iw) *sz_iw = 0;
+  if (sz_w) *sz_w = 50;
+  return 0;
+}
+
+CASADI_SYMBOL_EXPORT int haa_sim_zoh_16_work_bytes(casadi_int *sz_arg, casadi_int* sz_res, casadi_int *sz_iw, casadi_int *sz_w) {
+  if (sz_arg) *sz_arg = 7*sizeof(const casadi_real*);
+  if (sz_res) *sz_res = 2*sizeof(casadi_real*);
+  if (sz_iw) *sz_iw = 0*sizeof(casadi_int);
+  if (sz_w) *sz_w = 50*sizeof(casadi_real);
+  return 0;
+}
+
+/* haa_sim_jitter_16:(x[16],u[2],s,par[577])->(x_next[16]) */
+static int casadi_f18(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
+  casadi_int i;
+  casadi_real *rr, *w00=w+16, *w03=w+32, w04, w05, *w06=w+48, *w08=w+64, w09, *w10=w+80, w11, *w12=w+96, w13;
+  casadi_real *w14=w+112, w15, *w16=w+128, w17, *w18=w+144, w19, *w20=w+160, w21, *w22=w+176, w23, *w24=w+192, w25;
+  casadi_real *w26=w+208, w27, *w28=w+224, *w29=w+240, *w30=w+242;
+  const casadi_real *cr, *cs, *wr01, *wr02, *wr03, *wr07, *wr31;
+  /* #0: @0 = zeros(16x1) */
+  casadi_clear(w00, 16);
+  /* #1: @1 = input[3][0] */
+  wr01 = arg[3] ? arg[3] : casadi_zeros;
+  /* #2: @2 = @1[:256] */
+  wr02 = wr01+0;
+  /* #3: @2 = reshape(@2) */
+  /* #4: @3 = input[0][0] */
+  wr03 = arg[0] ? arg[0] : casadi_zeros;
+  /* #5: @4 = input[2][0] */
+  w04 = arg[2] ? arg[2][0] : 0;
+  /* #6: @5 = @1[576] */
+  w05 = wr01[576];
+  /* #7: @4 = (@4*@5) */
+  w04 *= w05;
+  /* #8: @6 = zeros(16x1) */
+  casadi_clear(w06, 16);
+  /* #9: @7 = @1[288:576] */
+  wr07 = wr01+288;
+  /* #10: @7 = reshape(@7) */
+  /* #11: @5 = 2 */
+  w05 = 2.;
+  /* #12: @5 = (@4/@5) */
+  w05  = (w04/w05);
+  /* #13: @8 = zeros(16x1) */
+  casadi_clear(w08, 16);
+  /* #14: @9 = 3 */
+  w09 = 3.;
+  /* #15: @9 = (@4/@9) */
+  w09  = (w04/w09);
+  /* #16: @10 = zeros(16x1) */
+  casadi_clear(w10, 16);
+  /* #17: @11 = 4 */
+  w11 = 4.;
+  /* #18: @11 = (@4/@11) */
+  w11  = (w04/w11);
+  /* #19: @12 = zeros(16x1) */
+  casadi_clear(w12, 16);
+  /* #20: @13 = 5 */
+  w13 = 5.;
+  /* #21: @13 = (@4/@13) */
+  w13  = (w04/w13);
+  /* #22: @14 = zeros(16x1) */
+  casadi_clear(w14, 16);
+  /* #23: @15 = 6 */
+  w15 = 6.;
+  /* #24: @15 = (@4/@15) */
+  w15  = (w04/w15);
+  /* #25: @16 = zeros(16x1) */
+  casadi_clear(w16, 16);
+  /* #26: @17 = 7 */
+  w17 = 7.;
+  /* #27: @17 = (@4/@17) */
+  w17  = (w04/w17);
+  /* #28: @18 = zeros(16x1) */
+  casadi_clear(w18, 16);
+  /* #29: @19 = 8 */
+  w19 = 8.;
+  /* #30: @19 = (@4/@19) */
+  w19  = (w04/w19);
+  /* #31: @20 = zeros(16x1) */
+  casadi_clear(w20, 16);
+  /* #32: @21 = 9 */
+  w21 = 9.;
+  /* #33: @21 = (@4/@21) */
+  w21  = (w04/w21);
+  /* #34: @22 = zeros(16x1) */
+  casadi_clear(w22, 16);
+  /* #35: @23 = 10 */
+  w23 = 10.;
+  /* #36: @23 = (@4/@23) */
+  w23  = (w04/w23);
+  /* #37: @24 = zeros(16x1) */
+  casadi_clear(w24, 16);
+  /* #38: @25 = 11 */
+  w25 = 11.;
+  /* #39: @25 = (@4/@25) */
+  w25  = (w04/w25);
+  /* #40: @26 = zeros(16x1) */
+  casadi_clear(w26, 16);
+  /* #41: @27 = 12 */
+  w27 = 12.;
+  /* #42: @27 = (@4/@27) */
+  w27  = (w04/w27);
+  /* #43: @28 = zeros(16x1) */
+  casadi_clear(w28, 16);
+  /* #44: @29 = input[1][0] */
+  casadi_copy(arg[1], 2, w29);
+  /* #45: @30 = vertcat(@3, @29) */
+  rr=w30;
+  for (i=0, cs=wr03; i<16; ++i) *rr++ = *cs++;
+  for (i=0, cs=w29; i<2; ++i) *rr++ = *cs++;
+  /* #46: @28 = mac(@7,@30,@28) */
+  casadi_mtimes_dense(wr07, 16, 18, w30, 1, w28, 0);
+  /* #47: @28 = (@27*@28) */
+  for (i=0, rr=w28, cs=w28; i<16; ++i) (*rr++)  = (w27*(*cs++));
+  /* #48: @28 = (@3+@28) */
+  for (i=0, rr=w28, cr=wr03, cs=w28; i<16; ++i) (*rr++)  = ((*cr++)+(*cs++));
+  /* #49: @30 = vertcat(@28, @29) */
+  rr=w30;
+  for (i=0, cs=w28; i<16; ++i) *rr++ = *cs++;
+  for (i=0, cs=w29; i<2; ++i) *rr++ = *cs++;
+  /* #50: @26 = mac(@7,@30,@26) */
+  casadi_mtimes_dense(wr07, 16, 18, w30, 1, w26, 0);
+  /* #51: @26 = (@25*@26) */
+  for (i=0, rr=w26, cs=w26; i<16; ++i) (*rr++)  = (w25*(*cs++));
+  /* #52: @26 = (@3+@26) */
+  for (i=0, rr=w26, cr=wr03, cs=w26; i<16; ++i) (*rr++)  = ((*cr++)+(*cs++));
+  /* #53: @30 = vertcat(@26, @29) */
+  rr=w30;
+  for (i=0, cs=w26; i<16; ++i) *rr++ = *cs++;
+  for (i=0, cs=w29; i<2; ++i) *rr++ = *cs++;
+  /* #54: @24 = mac(@7,@30,@24) */
+  casadi_mtimes_dense(wr07, 16, 18, w30, 1, w24, 0);
+  /* #55: @24 = (@23*@24) */
+  for (i=0, rr=w24, cs=w24; i<16; ++i) (*rr++)  = (w23*(*cs++));
+  /* #56: @24 = (@3+@24) */
+  for (i=0, rr=w24, cr=wr03, cs=w24; i<16; ++i) (*rr++)  = ((*cr++)+(*cs++));
+  /* #57: @30 = vertcat(@24, @29) */
+  rr=w30;
+  for (i=0, cs=w24; i<16; ++i) *rr++ = *cs++;
+  for (i=0, cs=w29; i<2; ++i) *rr++ = *cs++;
+  /* #58: @22 = mac(@7,@30,@22) */
+  casadi_mtimes_dense(wr07, 16, 18, w30, 1, w22, 0);
+  /* #59: @22 = (@21*@22) */
+  for (i=0, rr=w22, cs=w22; i<16; ++i) (*rr++)  = (w21*(*cs++));
+  /* #60: @22 = (@3+@22) */
+  for (i=0, rr=w22, cr=wr03, cs=w22; i<16; ++i) (*rr++)  = ((*cr++)+(*cs++));
+  /* #61: @30 = vertcat(@22, @29) */
+  rr=w30;
+  for (i=0, cs=w22; i<16; ++i) *rr++ = *cs++;
+  for (i=0, cs=w29; i<2; ++i) *rr++ = *cs++;
+  /* #62: @20 = mac(@7,@30,@20) */
+  casadi_mtimes_dense(wr07, 16, 18, w30, 1, w20, 0);
+  /* #63: @20 = (@19*@20) */
+  for (i=0, rr=w20, cs=w20; i<16; ++i) (*rr++)  = (w19*(*cs++));
+  /* #64: @20 = (@3+@20) */
+  for (i=0, rr=w20, cr=wr03, cs=w20; i<16; ++i) (*rr++)  = ((*cr++)+(*cs++));
+  /* #65: @30 = vertcat(@20, @29) */
+  rr=w30;
+  for (i=0, cs=w20; i<16; ++i) *rr++ = *cs++;
+  for (i=0, cs=w29; i<2; ++i) *rr++ = *cs++;
+  /* #66: @18 = mac(@7,@30,@18) */
+  casadi_mtimes_dense(wr07, 16, 18, w30, 1, w18, 0);
+  /* #67: @18 = (@17*@18) */
+  for (i=0, rr=w18, cs=w18; i<16; ++i) (*rr++)  = (w17*(*cs++));
+  /* #68: @18 = (@3+@18) */
+  for (i=0, rr=w18, cr=wr03, cs=w18; i<16; ++i) (*rr++)  = ((*cr++)+(*cs++));
+  /* #69: @30 = vertcat(@18, @29) */
+  rr=w30;
+  for (i=0, cs=w18; i<16; ++i) *rr++ = *cs++;
+  for (i=0, cs=w29; i<2; ++i) *rr++ = *cs++;
+  /* #70: @16 = mac(@7,@30,@16) */
+  casadi_mtimes_dense(wr07, 16, 18, w30, 1, w16, 0);
+  /* #71: @16 = (@15*@16) */
+  for (i=0, rr=w16, cs=w16; i<16; ++i) (*rr++)  = (w15*(*cs++));
+  /* #72: @16 = (@3+@16) */
+  for (i=0, rr=w16, cr=wr03, cs=w16; i<16; ++i) (*rr++)  = ((*cr++)+(*cs++));
+  /* #73: @30 = vertcat(@16, @29) */
+  rr=w30;
+  for (i=0, cs=w16; i<16; ++i) *rr++ = *cs++;
+  for (i=0, cs=w29; i<2; ++i) *rr++ = *cs++;
+  /* #74: @14 = mac(@7,@30,@14) */
+  casadi_mtimes_dense(wr07, 16, 18, w30, 1, w14, 0);
+  /* #75: @14 = (@13*@14) */
+  for (i=0, rr=w14, cs=w14; i<16; ++i) (*rr++)  = (w13*(*cs++));
+  /* #76: @14 = (@3+@14) */
+  for (i=0, rr=w14, cr=wr03, cs=w14; i<16; ++i) (*rr++)  = ((*cr++)+(*cs++));
+  /* #77: @30 = vertcat(@14, @29) */
+  rr=w30;
+  for (i=0, cs=w14; i<16; ++i) *rr++ = *cs++;
+  for (i=0, cs=w29; i<2; ++i) *rr++ = *cs++;
+  /* #78: @12 = mac(@7,@30,@12) */
+  casadi_mtimes_dense(wr07, 16, 18, w30, 1, w12, 0);
+  /* #79: @12 = (@11*@12) */
+  for (i=0, rr=w12, cs=w12; i<16; ++i) (*rr++)  = (w11*(*cs++));
+  /* #80: @12 = (@3+@12) */
+  for (i=0, rr=w12, cr=wr03, cs=w12; i<16; ++i) (*rr++)  = ((*cr++)+(*cs++));
+  /* #81: @30 = vertcat(@12, @29) */
+  rr=w30;
+  for (i=0, cs=w12; i<16; ++i) *rr++ = *cs++;
+  for (i=0, cs=w29; i<2; ++i) *rr++ = *cs++;
+  /* #82: @10 = mac(@7,@30,@10) */
+  casadi_mtimes_dense(wr07, 16, 18, w30, 1, w10, 0);
+  /* #83: @10 = (@9*@10) */
+  for (i=0, rr=w10, cs=w10; i<16; ++i) (*rr++)  = (w09*(*cs++));
+  /* #84: @10 = (@3+@10) */
+  for (i=0, rr=w10, cr=wr03, cs=w10; i<16; ++i) (*rr++)  = ((*cr++)+(*cs++));
+  /* #85: @30 = vertcat(@10, @29) */
+  rr=w30;
+  for (i=0, cs=w10; i<16; ++i) *rr++ = *cs++;
+  for (i=0, cs=w29; i<2; ++i) *rr++ = *cs++;
+  /* #86: @8 = mac(@7,@30,@8) */
+  casadi_mtimes_dense(wr07, 16, 18, w30, 1, w08, 0);
+  /* #87: @8 = (@5*@8) */
+  for (i=0, rr=w08, cs=w08; i<16; ++i) (*rr++)  = (w05*(*cs++));
+  /* #88: @8 = (@3+@8) */
+  for (i=0, rr=w08, cr=wr03, cs=w08; i<16; ++i) (*rr++)  = ((*cr++)+(*cs++));
+  /* #89: @30 = vertcat(@8, @29) */
+  rr=w30;
+  for (i=0, cs=w08; i<16; ++i) *rr++ = *cs++;
+  for (i=0, cs=w29; i<2; ++i) *rr++ = *cs++;
+  /* #90: @6 = mac(@7,@30,@6) */
+  casadi_mtimes_dense(wr07, 16, 18, w30, 1, w06, 0);
+  /* #91: @6 = (@4*@6) */
+  for (i=0, rr=w06, cs=w06; i<16; ++i) (*rr++)  = (w04*(*cs++));
+  /* #92: @3 = (@3+@6) */
+  for (i=0, rr=w03, cr=wr03, cs=w06; i<16; ++i) (*rr++)  = ((*cr++)+(*cs++));
+  /* #93: @0 = mac(@2,@3,@0) */
+  casadi_mtimes_dense(wr02, 16, 16, w03, 1, w00, 0);
+  /* #94: @3 = zeros(16x1) */
+  casadi_clear(w03, 16);
+  /* #95: @31 = @1[256:288] */
+  wr31 = wr01+256;
+  /* #96: @31 = reshape(@31) */
+  /* #97: @3 = mac(@31,@29,@3) */
+  casadi_mtimes_dense(wr31, 16, 2, w29, 1, w03, 0);
+  /* #98: @0 = (@0+@3) */
+  for (i=0, rr=w00, cs=w03; i<16; ++i) (*rr++) += (*cs++);
+  /* #99: output[0][0] = @0 */
+  casadi_copy(w00, 16, res[0]);
+  return 0;
+}
+
+CASADI_SYMBOL_EXPORT int haa_sim_jitter_16(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem){
+  return casadi_f18(arg, res, iw, w, mem);
+}
+
+CASADI_SYMBOL_EXPORT int haa_sim_jitter_16_checkout(void) {
+  return 0;
+}
+
+CASADI_SYMBOL_EXPORT void haa_sim_jitter_16_release(int mem) {
+}
+
+CASADI_SYMBOL_EXPORT void haa_sim_jitter_16_incref(void) {
+}
+
+CASADI_SYMBOL_EXPORT void haa_sim_jitter_16_decref(void) {
+}
+
+CASADI_SYMBOL_EXPORT casadi_int haa_sim_jitter_16_n_in(void) { return 4;}
+
+CASADI_SYMBOL_EXPORT casadi_int haa_sim_jitter_16_n_out(void) { return 1;}
+
+CASADI_SYMBOL_EXPORT casadi_real haa_sim_jitter_16_default_in(casadi_int i) {
+  switch (i) {
+    default: return 0;
+  }
+}
+
+CASADI_SYMBOL_EXPORT const char* haa_sim_jitter_16_name_in(casadi_int i) {
+  switch (i) {
+    case 0: return "x";
+    case 1: return "u";
+    case 2: return "s";
+    case 3: return "par";
+    default: return 0;
+  }
+}
+
+CASADI_SYMBOL_EXPORT const char* haa_sim_jitter_16_name_out(casadi_int i) {
+  switch (i) {
+    case 0: return "x_next";
+    default: return 0;
+  }
+}
+
+CASADI_SYMBOL_EXPORT const casadi_int* haa_sim_jitter_16_sparsity_in(casadi_int i) {
+  switch (i) {
+    case 0: return casadi_s5;
+    case 1: return casadi_s11;
+    case 2: return casadi_s4;
+    case 3: return casadi_s28;
+    default: return 0;
+  }
+}
+
+CASADI_SYMBOL_EXPORT const casadi_int* haa_sim_jitter_16_sparsity_out(casadi_int i) {
+  switch (i) {
+    case 0: return casadi_s5;
+    default: return 0;
+  }
+}
+
+CASADI_SYMBOL_EXPORT int haa_sim_jitter_16_work(casadi_int *sz_arg, casadi_int* sz_res, casadi_int *sz_iw, casadi_int *sz_w) {
+  if (sz_arg) *sz_arg = 7;
+  if (sz_res) *sz_res = 2;
+  if (sz_iw) *sz_iw = 0;
+  if (sz_w) *sz_w = 260;
+  return 0;
+}
+
+CASADI_SYMBOL_EXPORT int haa_sim_jitter_16_work_bytes(casadi_int *sz_arg, casadi_int* sz_res, casadi_int *sz_iw, casadi_int *sz_w) {
+  if (sz_arg) *sz_arg = 7*sizeof(const casadi_real*);
+  if (sz_res) *sz_res = 2*sizeof(casadi_real*);
+  if (sz_iw) *sz_iw = 0*sizeof(casadi_int);
+  if (sz_w) *sz_w = 260*sizeof(casadi_real);
+  return 0;
+}
+
+/* haa_sim_etd_16:(x[16],u[2],s,par[905])->(x_next[16]) */
+static int casadi_f19(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
+  casadi_int i;
+  casadi_real *rr, *w00=w+16, *w03=w+32, *w04=w+48, *w06=w+64, *w08=w+66, *w09=w+70, *w11=w+74, *w12=w+78, w13, *w14=w+82, *w16=w+98;
+  casadi_real *w17=w+102, *w18=w+118;
+  const casadi_real *cr, *cs, *wr01, *wr02, *wr03, *wr05, *wr07, *wr08, *wr10, *wr12, *wr15;
+  /* #0: @0 = zeros(16x1) */
+  casadi_clear(w00, 16);
+  /* #1: @1 = input[3][0] */
+  wr01 = arg[3] ? arg[3] : casadi_zeros;
+  /* #2: @2 = @1[288:544] */
+  wr02 = wr01+288;
+  /* #3: @2 = reshape(@2) */
+  /* #4: @3 = input[0][0] */
+  wr03 = arg[0] ? arg[0] : casadi_zeros;
+  /* #5: @0 = mac(@2,@3,@0) */
+  casadi_mtimes_dense(wr02, 16, 16, wr03, 1, w00, 0);
+  /* #6: @4 = zeros(16x1) */
+  casadi_clear(w04, 16);
+  /* #7: @5 = @1[544:576] */
+  wr05 = wr01+544;
+  /* #8: @5 = reshape(@5) */
+  /* #9: @6 = input[1][0] */
+  casadi_copy(arg[1], 2, w06);
+  /* #10: @4 = mac(@5,@6,@4) */
+  casadi_mtimes_dense(wr05, 16, 2, w06, 1, w04, 0);
+  /* #11: @0 = (@0+@4) */
+  for (i=0, rr=w00, cs=w04; i<16; ++i) (*rr++) += (*cs++);
+  /* #12: @4 = zeros(16x1) */
+  casadi_clear(w04, 16);
+  /* #13: @7 = @1[640:704] */
+  wr07 = wr01+640;
+  /* #14: @7 = reshape(@7) */
+  /* #15: @8 = @1[901:905] */
+  wr08 = wr01+901;
+  /* #16: @9 = zeros(4x1) */
+  casadi_clear(w09, 4);
+  /* #17: @10 = @1[832:896] */
+  wr10 = wr01+832;
+  /* #18: @10 = reshape(@10) */
+  /* #19: @9 = mac(@10,@3,@9) */
+  casadi_mtimes_dense(wr10, 4, 16, wr03, 1, w09, 0);
+  /* #20: @11 = (@8*@9) */
+  for (i=0, rr=w11, cr=wr08, cs=w09; i<4; ++i) (*rr++)  = ((*cr++)*(*cs++));
+  /* #21: @12 = @1[896:900] */
+  wr12 = wr01+896;
+  /* #22: @13 = @1[900] */
+  w13 = wr01[900];
+  /* #23: @9 = (@9*@13) */
+  for (i=0, rr=w09; i<4; ++i) (*rr++) *= w13;
+  /* #24: @9 = tanh(@9) */
+  for (i=0, rr=w09, cs=w09; i<4; ++i) *rr++ = tanh( *cs++ );
+  /* #25: @9 = (@12*@9) */
+  for (i=0, rr=w09, cr=wr12, cs=w09; i<4; ++i) (*rr++)  = ((*cr++)*(*cs++));
+  /* #26: @11 = (@11-@9) */
+  for (i=0, rr=w11, cs=w09; i<4; ++i) (*rr++) -= (*cs++);
+  /* #27: @4 = mac(@7,@11,@4) */
+  casadi_mtimes_dense(wr07, 16, 4, w11, 1, w04, 0);
+  /* #28: @0 = (@0+@4) */
+  for (i=0, rr=w00, cs=w04; i<16; ++i) (*rr++) += (*cs++);
+  /* #29: @4 = zeros(16x1) */
+  casadi_clear(w04, 16);
+  /* #30: @7 = @1[704:768] */
+  wr07 = wr01+704;
+  /* #31: @7 = reshape(@7) */
+  /* #32: @9 = zeros(4x1) */
+  casadi_clear(w09, 4);
+  /* #33: @14 = zeros(16x1) */
+  casadi_clear(w14, 16);
+  /* #34: @2 = @1[:256] */
+  wr02 = wr01+0;
+  /* #35: @2 = reshape(@2) */
+  /* #36: @14 = mac(@2,@3,@14) */
+  casadi_mtimes_dense(wr02, 16, 16, wr03, 1, w14, 0);
+  /* #37: @3 = zeros(16x1) */
+  casadi_clear(w03, 16);
+  /* #38: @5 = @1[256:288] */
+  wr05 = wr01+256;
+  /* #39: @5 = reshape(@5) */
+  /* #40: @3 = mac(@5,@6,@3) */
+  casadi_mtimes_dense(wr05, 16, 2, w06, 1, w03, 0);
+  /* #41: @14 = (@14+@3) */
+  for (i=0, rr=w14, cs=w03; i<16; ++i) (*rr++) += (*cs++);
+  /* #42: @3 = zeros(16x1) */
+  casadi_clear(w03, 16);
+  /* #43: @15 = @1[576:640] */
+  wr15 = wr01+576;
+  /* #44: @15 = reshape(@15) */
+  /* #45: @3 = mac(@15,@11,@3) */
+  casadi_mtimes_dense(wr15, 16, 4, w11, 1, w03, 0);
+  /* #46: @3 = (@14+@3) */
+  for (i=0, rr=w03, cr=w14, cs=w03; i<16; ++i) (*rr++)  = ((*cr++)+(*cs++));
+  /* #47: @9 = mac(@10,@3,@9) */
+  casadi_mtimes_dense(wr10, 4, 16, w03, 1, w09, 0);
+  /* #48: @16 = (@8*@9) */
+  for (i=0, rr=w16, cr=wr08, cs=w09; i<4; ++i) (*rr++)  = ((*cr++)*(*cs++));
+  /* #49: @13 = @1[900] */
+  w13 = wr01[900];
+  /* #50: @9 = (@9*@13) */
+  for (i=0, rr=w09; i<4; ++i) (*rr++) *= w13;
+  /* #51: @9 = tanh(@9) */
+  for (i=0, rr=w09, cs=w09; i<4; ++i) *rr++ = tanh( *cs++ );
+  /* #52: @9 = (@12*@9) */
+  for (i=0, rr=w09, cr=wr12, cs=w09; i<4; ++i) (*rr++)  = ((*cr++)*(*cs++));
+  /* #53: @16 = (@16-@9) */
+  for (i=0, rr=w16, cs=w09; i<4; ++i) (*rr++) -= (*cs++);
+  /* #54: @9 = zeros(4x1) */
+  casadi_clear(w09, 4);
+  /* #55: @17 = zeros(16x1) */
+  casadi_clear(w17, 16);
+  /* #56: @17 = mac(@15,@16,@17) */
+  casadi_mtimes_dense(wr15, 16, 4, w16, 1, w17, 0);
+  /* #57: @14 = (@14+@17) */
+  for (i=0, rr=w14, cs=w17; i<16; ++i) (*rr++) += (*cs++);
+  /* #58: @9 = mac(@10,@14,@9) */
+  casadi_mtimes_dense(wr10, 4, 16, w14, 1, w09, 0);
+  /* #59: @18 = (@8*@9) */
+  for (i=0, rr=w18, cr=wr08, cs=w09; i<4; ++i) (*rr++)  = ((*cr++)*(*cs++));
+  /* #60: @13 = @1[900] */
+  w13 = wr01[900];
+  /* #61: @9 = (@9*@13) */
+  for (i=0, rr=w09; i<4; ++i) (*rr++) *= w13;
+  /* #62: @9 = tanh(@9) */
+  for (i=0, rr=w09, cs=w09; i<4; ++i) *rr++ = tanh( *cs++ );
+  /* #63: @9 = (@12*@9) */
+  for (i=0, rr=w09, cr=wr12, cs=w09; i<4; ++i) (*rr++)  = ((*cr++)*(*cs++));
+  /* #64: @18 = (@18-@9) */
+  for (i=0, rr=w18, cs=w09; i<4; ++i) (*rr++) -= (*cs++);
+  /* #65: @16 = (@16+@18) */
+  for (i=0, rr=w16, cs=w18; i<4; ++i) (*rr++) += (*cs++);
+  /* #66: @4 = mac(@7,@16,@4) */
+  casadi_mtimes_dense(wr07, 16, 4, w16, 1, w04, 0);
+  /* #67: @4 = (2.*@4) */
+  for (i=0, rr=w04, cs=w04; i<16; ++i) *rr++ = (2.* *cs++ );
+  /* #68: @0 = (@0+@4) */
+  for (i=0, rr=w00, cs=w04; i<16; ++i) (*rr++) += (*cs++);
+  /* #69: @4 = zeros(16x1) */
+  casadi_clear(w04, 16);
+  /* #70: @7 = @1[768:832] */
+  wr07 = wr01+768;
+  /* #71: @7 = reshape(@7) */
+  /* #72: @16 = zeros(4x1) */
+  casadi_clear(w16, 4);
+  /* #73: @14 = zeros(16x1) */
+  casadi_clear(w14, 16);
+  /* #74: @14 = mac(@2,@3,@14) */
+  casadi_mtimes_dense(wr02, 16, 16, w03, 1, w14, 0);
+  /* #75: @3 = zeros(16x1) */
+  casadi_clear(w03, 16);
+  /* #76: @3 = mac(@5,@6,@3) */
+  casadi_mtimes_dense(wr05, 16, 2, w06, 1, w03, 0);
+  /* #77: @14 = (@14+@3) */
+  for (i=0, rr=w14, cs=w03; i<16; ++i) (*rr++) += (*cs++);
+  /* #78: @3 = zeros(16x1) */
+  casadi_clear(w03, 16);
+  /* #79: @18 = (2.*@18) */
+  for (i=0, rr=w18, cs=w18; i<4; ++i) *rr++ = (2.* *cs++ );
+  /* #80: @18 = (@18-@11) */
+  for (i=0, rr=w18, cs=w11; i<4; ++i) (*rr++) -= (*cs++);
+  /* #81: @3 = mac(@15,@18,@3) */
+  casadi_mtimes_dense(wr15, 16, 4, w18, 1, w03, 0);
+  /* #82: @14 = (@14+@3) */
+  for (i=0, rr=w14, cs=w03; i<16; ++i) (*rr++) += (*cs++);
+  /* #83: @16 = mac(@10,@14,@16) */
+  casadi_mtimes_dense(wr10, 4, 16, w14, 1, w16, 0);
+  /* #84: @8 = (@8*@16) */
+  for (i=0, rr=w08, cr=wr08, cs=w16; i<4; ++i) (*rr++)  = ((*cr++)*(*cs++));
+  /* #85: @13 = @1[900] */
+  w13 = wr01[900];
+  /* #86: @16 = (@16*@13) */
+  for (i=0, rr=w16; i<4; ++i) (*rr++) *= w13;
+  /* #87: @16 = tanh(@16) */
+  for (i=0, rr=w16, cs=w16; i<4; ++i) *rr++ = tanh( *cs++ );
+  /* #88: @12 = (@12*@16) */
+  for (i=0, rr=w12, cr=wr12, cs=w16; i<4; ++i) (*rr++)  = ((*cr++)*(*cs++));
+  /* #89: @8 = (@8-@12) */
+  for (i=0, rr=w08, cs=w12; i<4; ++i) (*rr++) -= (*cs++);
+  /* #90: @4 = mac(@7,@8,@4) */
+  casadi_mtimes_dense(wr07, 16, 4, w08, 1, w04, 0);
+  /* #91: @0 = (@0+@4) */
+  for (i=0, rr=w00, cs=w04; i<16; ++i) (*rr++) += (*cs++);
+  /* #92: output[0][0] = @0 */
+  casadi_copy(w00, 16, res[0]);
+  return 0;
+}
+
+CASADI_SYMBOL_EXPORT int haa_sim_etd_16(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem){
+  return casadi_f19(arg, res, iw, w, mem);
+}
+
+CASADI_SYMBOL_EXPORT int haa_sim_etd_16_checkout(void) {
+  return 0;
+}
+
+CASADI_SYMBOL_EXPORT void haa_sim_etd_16_release(int mem) {
+}
+
+CASADI_SYMBOL_EXPORT void haa_sim_etd_16_incref(void) {
+}
+
+CASADI_SYMBOL_EXPORT void haa_sim_etd_16_decref(void) {
+}
+
+CASADI_SYMBOL_EXPORT casadi_int haa_sim_etd_16_n_in(void) { return 4;}
+
+CASADI_SYMBOL_EXPORT casadi_int haa_sim_etd_16_n_out(void) { return 1;}
+
+CASADI_SYMBOL_EXPORT casadi_real haa_sim_etd_16_default_in(casadi_int i) {
+  switch (i) {
+    default: return 0;
+  }
+}
+
+CASADI_SYMBOL_EXPORT const char* haa_sim_etd_16_name_in(casadi_int i) {
+  switch (i) {
+    case 0: return "x";
+    case 1: return "u";
+    case 2: return "s";
+    case 3: return "par";
+    default: return 0;
+  }
+}
+
+CASADI_SYMBOL_EXPORT const char* haa_sim_etd_16_name_out(casadi_int i) {
+  switch (i) {
+    case 0: return "x_next";
+    default: return 0;
+  }
+}
+
+CASADI_SYMBOL_EXPORT const casadi_int* haa_sim_etd_16_sparsity_in(casadi_int i) {
+  switch (i) {
+    case 0: return casadi_s5;
+    case 1: return casadi_s11;
+    case 2: return casadi_s4;
+    case 3: return casadi_s29;
+    default: return 0;
+  }
+}
+
+CASADI_SYMBOL_EXPORT const casadi_int* haa_sim_etd_16_sparsity_out(casadi_int i) {
+  switch (i) {
+    case 0: return casadi_s5;
+    default: return 0;
+  }
+}
+
+CASADI_SYMBOL_EXPORT int haa_sim_etd_16_work(casadi_int *sz_arg, casadi_int* sz_res, casadi_int *sz_iw, casadi_int *sz_w) {
+  if (sz_arg) *sz_arg = 7;
+  if (sz_res) *sz_res = 2;
+  if (sz_iw) *sz_iw = 0;
+  if (sz_w) *sz_w = 122;
+  return 0;
+}
+
+CASADI_SYMBOL_EXPORT int haa_sim_etd_16_work_bytes(casadi_int *sz_arg, casadi_int* sz_res, casadi_int *sz_iw, casadi_int *sz_w) {
+  if (sz_arg) *sz_arg = 7*sizeof(const casadi_real*);
+  if (sz_res) *sz_res = 2*sizeof(casadi_real*);
+  if (sz_iw) *sz_iw = 0*sizeof(casadi_int);
+  if (sz_w) *sz_w = 122*sizeof(casadi_real);
+  return 0;
+}
+
 
 #ifdef __cplusplus
 } /* extern "C" */
@@ -6632,6 +12969,7 @@ CASADI_SYMBOL_EXPORT int haa_decide64_work_bytes(casadi_int *sz_arg, casadi_int*
  * Schur-Cohn test itself; this loop runs all columns in one C call. Inputs other than the
  * column input are shared by every point. Column-major (CasADi's dense layout) throughout.
  */
+#include <math.h>
 #include <stdlib.h>
 
 typedef int (*haa_fn)(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w,
@@ -6670,6 +13008,225 @@ CASADI_SYMBOL_EXPORT int haa_columns(void* f, void* work, casadi_int n_in,
         flag = 1;
         break;
       }
+    }
+  }
+  free(arg);
+  free(res);
+  free(iw);
+  free(w);
+  return flag;
+}
+
+/* haa_simulate: the nonlinear simulation's sample loop (haa_sym.analysis.simulate).
+ *
+ * Per sample k: sample(x, xc, exo_k, ctrl) -> (u, xc_next, y_k), then step(x, u, exo_k[delta],
+ * plant) -> x applied n_sub times (the exact ZOH transition once, or n_sub integrating
+ * substeps). One C call runs a whole chunk: a call of a generated function through CasADi costs
+ * more than the step itself. x (nx) and xc (nc) hold the initial state and return the final
+ * one; exo holds n_steps columns of n_exo reals (delta is its last row); y receives n_steps
+ * columns of n_y reals; xpeak (nx reals, or NULL) receives max_k |x_i| over the sample instants.
+ * Returns 0, 1 if a function failed, 2 if out of memory. */
+CASADI_SYMBOL_EXPORT int haa_simulate(void* sample, void* sample_work, void* step, void* step_work,
+                                      casadi_int n_sub, casadi_int nx, casadi_int nc, casadi_int n_u,
+                                      casadi_real* x, casadi_real* xc, const casadi_real* exo,
+                                      casadi_int n_exo, const casadi_real* ctrl,
+                                      const casadi_real* plant, casadi_real* y, casadi_int n_y,
+                                      casadi_real* xpeak, casadi_int n_steps) {
+  casadi_int a1, r1, i1, w1, a2, r2, i2, w2, k, j, sz_arg, sz_res, sz_iw, sz_w;
+  int flag = 0;
+  const casadi_real** arg;
+  casadi_real** res;
+  casadi_int* iw;
+  casadi_real *w, *u, *x2, *xc2;
+  ((haa_work_fn)sample_work)(&a1, &r1, &i1, &w1);
+  ((haa_work_fn)step_work)(&a2, &r2, &i2, &w2);
+  sz_arg = a1 > a2 ? a1 : a2;
+  sz_res = r1 > r2 ? r1 : r2;
+  sz_iw = i1 > i2 ? i1 : i2;
+  sz_w = w1 > w2 ? w1 : w2;
+  if (sz_arg < 4) sz_arg = 4;
+  if (sz_res < 3) sz_res = 3;
+  arg = (const casadi_real**)malloc(sizeof(casadi_real*) * sz_arg);
+  res = (casadi_real**)malloc(sizeof(casadi_real*) * sz_res);
+  iw = (casadi_int*)malloc(sizeof(casadi_int) * (sz_iw > 0 ? sz_iw : 1));
+  w = (casadi_real*)malloc(sizeof(casadi_real) * ((sz_w > 0 ? sz_w : 1) + n_u + nx + nc));
+  if (!arg || !res || !iw || !w) {
+    flag = 2;
+  } else {
+    u = w + (sz_w > 0 ? sz_w : 1);
+    x2 = u + n_u;
+    xc2 = x2 + nx;
+    if (xpeak)
+      for (j = 0; j < nx; ++j) xpeak[j] = 0;
+    for (k = 0; k < n_steps && !flag; ++k) {
+      const casadi_real* e = exo + k * n_exo;
+      if (xpeak)
+        for (j = 0; j < nx; ++j) xpeak[j] = fabs(x[j]) > xpeak[j] ? fabs(x[j]) : xpeak[j];
+      arg[0] = x;
+      arg[1] = xc;
+      arg[2] = e;
+      arg[3] = ctrl;
+      res[0] = u;
+      res[1] = xc2;
+      res[2] = y + k * n_y;
+      if (((haa_fn)sample)(arg, res, iw, w, 0)) {
+        flag = 1;
+        break;
+      }
+      for (j = 0; j < nc; ++j) xc[j] = xc2[j];
+      for (j = 0; j < n_sub; ++j) {
+        arg[0] = x;
+        arg[1] = u;
+        arg[2] = e + n_exo - 1;
+        arg[3] = plant;
+        res[0] = x2;
+        if (((haa_fn)step)(arg, res, iw, w, 0)) {
+          flag = 1;
+          break;
+        }
+        {
+          casadi_int i;
+          for (i = 0; i < nx; ++i) x[i] = x2[i];
+        }
+      }
+    }
+  }
+  free(arg);
+  free(res);
+  free(iw);
+  free(w);
+  return flag;
+}
+
+/* haa_simulate_adaptive: haa_simulate with the plant step's substeps chosen per sample.
+ *
+ * plant holds n_slopes^n_rows tables of n_levels parameter vectors of plant_size reals: level j
+ * for 2^j substeps per sample. The table is chosen at the start of each substep from the
+ * friction rows (stick_rows: n_rows rows of nx reals, v_r = stick_rows[r] . x = velocity / v_s): digit r
+ * (base n_slopes) is the index of the entry of slopes nearest to 1 - tanh(v_r)^2, the tanh
+ * model's slope there relative to its slope at v = 0 (that slope sits in the table's exact
+ * linear part).
+ * Per sample the state is advanced at two adjacent levels j and j + 1 (step doubling);
+ * the finer result is kept when max_i |x_j - x_(j+1)|_i / scale_i <= tol (or at the finest
+ * level), else j grows. The next sample starts one level coarser than this one ended. levels
+ * receives the level used per sample (as a real). Returns as haa_simulate; 3 if n_levels < 2. */
+/* the table of the friction's slopes at x (see haa_simulate_adaptive) */
+static const casadi_real* haa_table(const casadi_real* plant, casadi_int n_levels,
+                                    casadi_int plant_size, const casadi_real* x, casadi_int nx,
+                                    const casadi_real* rows, casadi_int n_rows,
+                                    const casadi_real* slopes, casadi_int n_slopes) {
+  casadi_int index = 0, r, q, i, radix = 1;
+  for (r = 0; r < n_rows; ++r) {
+    casadi_real v = 0, f, best = 2;
+    casadi_int pick = 0;
+    for (i = 0; i < nx; ++i) v += rows[r * nx + i] * x[i];
+    f = tanh(v);
+    f = 1 - f * f;
+    for (q = 0; q < n_slopes; ++q)
+      if (fabs(f - slopes[q]) < best) {
+        best = fabs(f - slopes[q]);
+        pick = q;
+      }
+    index += pick * radix;
+    radix *= n_slopes;
+  }
+  return plant + index * n_levels * plant_size;
+}
+
+/* x = x0 advanced by n_sub = 2^lev substeps, each with the table of the slopes at its start */
+static int haa_advance(void* step, const casadi_real** arg, casadi_real** res, casadi_int* iw,
+                       casadi_real* w, const casadi_real* x0, const casadi_real* u,
+                       const casadi_real* s, const casadi_real* plant, casadi_int lev,
+                       casadi_int n_levels, casadi_int plant_size, const casadi_real* rows,
+                       casadi_int n_rows, const casadi_real* slopes, casadi_int n_slopes,
+                       casadi_int nx, casadi_real* x, casadi_real* tmp) {
+  casadi_int j, i, n_sub = (casadi_int)1 << lev;
+  for (i = 0; i < nx; ++i) x[i] = x0[i];
+  for (j = 0; j < n_sub; ++j) {
+    arg[0] = x;
+    arg[1] = u;
+    arg[2] = s;
+    arg[3] = haa_table(plant, n_levels, plant_size, x, nx, rows, n_rows, slopes, n_slopes) +
+             lev * plant_size;
+    res[0] = tmp;
+    if (((haa_fn)step)(arg, res, iw, w, 0)) return 1;
+    for (i = 0; i < nx; ++i) x[i] = tmp[i];
+  }
+  return 0;
+}
+
+CASADI_SYMBOL_EXPORT int haa_simulate_adaptive(
+    void* sample, void* sample_work, void* step, void* step_work, casadi_int n_levels,
+    casadi_int plant_size, casadi_int nx, casadi_int nc, casadi_int n_u, casadi_real* x,
+    casadi_real* xc, const casadi_real* exo, casadi_int n_exo, const casadi_real* ctrl,
+    const casadi_real* plant, const casadi_real* scale, casadi_real tol,
+    const casadi_real* stick_rows, casadi_int n_rows, const casadi_real* slopes,
+    casadi_int n_slopes, casadi_real* y,
+    casadi_int n_y, casadi_real* levels, casadi_int n_steps) {
+  casadi_int a1, r1, i1, w1, a2, r2, i2, w2, k, j, i, lev = 0, sz_arg, sz_res, sz_iw, sz_w;
+  int flag = 0;
+  const casadi_real** arg;
+  casadi_real** res;
+  casadi_int* iw;
+  casadi_real *w, *u, *xa, *xb, *tmp, *xc2;
+  if (n_levels < 2) return 3;
+  ((haa_work_fn)sample_work)(&a1, &r1, &i1, &w1);
+  ((haa_work_fn)step_work)(&a2, &r2, &i2, &w2);
+  sz_arg = a1 > a2 ? a1 : a2;
+  sz_res = r1 > r2 ? r1 : r2;
+  sz_iw = i1 > i2 ? i1 : i2;
+  sz_w = w1 > w2 ? w1 : w2;
+  if (sz_arg < 4) sz_arg = 4;
+  if (sz_res < 3) sz_res = 3;
+  arg = (const casadi_real**)malloc(sizeof(casadi_real*) * sz_arg);
+  res = (casadi_real**)malloc(sizeof(casadi_real*) * sz_res);
+  iw = (casadi_int*)malloc(sizeof(casadi_int) * (sz_iw > 0 ? sz_iw : 1));
+  w = (casadi_real*)malloc(sizeof(casadi_real) * ((sz_w > 0 ? sz_w : 1) + n_u + 3 * nx + nc));
+  if (!arg || !res || !iw || !w) {
+    flag = 2;
+  } else {
+    u = w + (sz_w > 0 ? sz_w : 1);
+    xa = u + n_u;
+    xb = xa + nx;
+    tmp = xb + nx;
+    xc2 = tmp + nx;
+    for (k = 0; k < n_steps && !flag; ++k) {
+      const casadi_real* e = exo + k * n_exo;
+      arg[0] = x;
+      arg[1] = xc;
+      arg[2] = e;
+      arg[3] = ctrl;
+      res[0] = u;
+      res[1] = xc2;
+      res[2] = y + k * n_y;
+      if (((haa_fn)sample)(arg, res, iw, w, 0)) {
+        flag = 1;
+        break;
+      }
+      for (j = 0; j < nc; ++j) xc[j] = xc2[j];
+      if (lev > 0) --lev;
+      if (lev > n_levels - 2) lev = n_levels - 2;
+      flag = haa_advance(step, arg, res, iw, w, x, u, e + n_exo - 1, plant, lev, n_levels,
+                         plant_size, stick_rows, n_rows, slopes, n_slopes, nx, xa, tmp);
+      while (!flag) {
+        casadi_real err = 0;
+        flag = haa_advance(step, arg, res, iw, w, x, u, e + n_exo - 1, plant, lev + 1, n_levels,
+                           plant_size, stick_rows, n_rows, slopes, n_slopes, nx, xb, tmp);
+        if (flag) break;
+        for (i = 0; i < nx; ++i) {
+          casadi_real d = (xa[i] - xb[i]) / scale[i];
+          if (d < 0) d = -d;
+          if (!(d <= err)) err = d; /* NaN propagates as a failure to converge */
+        }
+        if (err <= tol || lev + 2 >= n_levels) {
+          ++lev;
+          break;
+        }
+        for (i = 0; i < nx; ++i) xa[i] = xb[i];
+        ++lev;
+      }
+      for (i = 0; i < nx; ++i) x[i] = xb[i];
+      levels[k] = (casadi_real)lev;
     }
   }
   free(arg);

@@ -161,6 +161,168 @@ int haa_decide64_work_bytes(casadi_int *sz_arg, casadi_int* sz_res, casadi_int *
 #define haa_decide64_SZ_RES 4
 #define haa_decide64_SZ_IW 0
 #define haa_decide64_SZ_W 829
+int haa_sim_sample_8_8(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem);
+int haa_sim_sample_8_8_checkout(void);
+void haa_sim_sample_8_8_release(int mem);
+void haa_sim_sample_8_8_incref(void);
+void haa_sim_sample_8_8_decref(void);
+casadi_int haa_sim_sample_8_8_n_in(void);
+casadi_int haa_sim_sample_8_8_n_out(void);
+casadi_real haa_sim_sample_8_8_default_in(casadi_int i);
+const char* haa_sim_sample_8_8_name_in(casadi_int i);
+const char* haa_sim_sample_8_8_name_out(casadi_int i);
+const casadi_int* haa_sim_sample_8_8_sparsity_in(casadi_int i);
+const casadi_int* haa_sim_sample_8_8_sparsity_out(casadi_int i);
+int haa_sim_sample_8_8_work(casadi_int *sz_arg, casadi_int* sz_res, casadi_int *sz_iw, casadi_int *sz_w);
+int haa_sim_sample_8_8_work_bytes(casadi_int *sz_arg, casadi_int* sz_res, casadi_int *sz_iw, casadi_int *sz_w);
+#define haa_sim_sample_8_8_SZ_ARG 4
+#define haa_sim_sample_8_8_SZ_RES 3
+#define haa_sim_sample_8_8_SZ_IW 0
+#define haa_sim_sample_8_8_SZ_W 0
+int haa_sim_zoh_8(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem);
+int haa_sim_zoh_8_checkout(void);
+void haa_sim_zoh_8_release(int mem);
+void haa_sim_zoh_8_incref(void);
+void haa_sim_zoh_8_decref(void);
+casadi_int haa_sim_zoh_8_n_in(void);
+casadi_int haa_sim_zoh_8_n_out(void);
+casadi_real haa_sim_zoh_8_default_in(casadi_int i);
+const char* haa_sim_zoh_8_name_in(casadi_int i);
+const char* haa_sim_zoh_8_name_out(casadi_int i);
+const casadi_int* haa_sim_zoh_8_sparsity_in(casadi_int i);
+const casadi_int* haa_sim_zoh_8_sparsity_out(casadi_int i);
+int haa_sim_zoh_8_work(casadi_int *sz_arg, casadi_int* sz_res, casadi_int *sz_iw, casadi_int *sz_w);
+int haa_sim_zoh_8_work_bytes(casadi_int *sz_arg, casadi_int* sz_res, casadi_int *sz_iw, casadi_int *sz_w);
+#define haa_sim_zoh_8_SZ_ARG 4
+#define haa_sim_zoh_8_SZ_RES 1
+#define haa_sim_zoh_8_SZ_IW 0
+#define haa_sim_zoh_8_SZ_W 0
+int haa_sim_jitter_8(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem);
+int haa_sim_jitter_8_checkout(void);
+void haa_sim_jitter_8_release(int mem);
+void haa_sim_jitter_8_incref(void);
+void haa_sim_jitter_8_decref(void);
+casadi_int haa_sim_jitter_8_n_in(void);
+casadi_int haa_sim_jitter_8_n_out(void);
+casadi_real haa_sim_jitter_8_default_in(casadi_int i);
+const char* haa_sim_jitter_8_name_in(casadi_int i);
+const char* haa_sim_jitter_8_name_out(casadi_int i);
+const casadi_int* haa_sim_jitter_8_sparsity_in(casadi_int i);
+const casadi_int* haa_sim_jitter_8_sparsity_out(casadi_int i);
+int haa_sim_jitter_8_work(casadi_int *sz_arg, casadi_int* sz_res, casadi_int *sz_iw, casadi_int *sz_w);
+int haa_sim_jitter_8_work_bytes(casadi_int *sz_arg, casadi_int* sz_res, casadi_int *sz_iw, casadi_int *sz_w);
+#define haa_sim_jitter_8_SZ_ARG 4
+#define haa_sim_jitter_8_SZ_RES 1
+#define haa_sim_jitter_8_SZ_IW 0
+#define haa_sim_jitter_8_SZ_W 0
+int haa_sim_etd_8(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem);
+int haa_sim_etd_8_checkout(void);
+void haa_sim_etd_8_release(int mem);
+void haa_sim_etd_8_incref(void);
+void haa_sim_etd_8_decref(void);
+casadi_int haa_sim_etd_8_n_in(void);
+casadi_int haa_sim_etd_8_n_out(void);
+casadi_real haa_sim_etd_8_default_in(casadi_int i);
+const char* haa_sim_etd_8_name_in(casadi_int i);
+const char* haa_sim_etd_8_name_out(casadi_int i);
+const casadi_int* haa_sim_etd_8_sparsity_in(casadi_int i);
+const casadi_int* haa_sim_etd_8_sparsity_out(casadi_int i);
+int haa_sim_etd_8_work(casadi_int *sz_arg, casadi_int* sz_res, casadi_int *sz_iw, casadi_int *sz_w);
+int haa_sim_etd_8_work_bytes(casadi_int *sz_arg, casadi_int* sz_res, casadi_int *sz_iw, casadi_int *sz_w);
+#define haa_sim_etd_8_SZ_ARG 4
+#define haa_sim_etd_8_SZ_RES 1
+#define haa_sim_etd_8_SZ_IW 0
+#define haa_sim_etd_8_SZ_W 0
+int haa_sim_sample_8_64(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem);
+int haa_sim_sample_8_64_checkout(void);
+void haa_sim_sample_8_64_release(int mem);
+void haa_sim_sample_8_64_incref(void);
+void haa_sim_sample_8_64_decref(void);
+casadi_int haa_sim_sample_8_64_n_in(void);
+casadi_int haa_sim_sample_8_64_n_out(void);
+casadi_real haa_sim_sample_8_64_default_in(casadi_int i);
+const char* haa_sim_sample_8_64_name_in(casadi_int i);
+const char* haa_sim_sample_8_64_name_out(casadi_int i);
+const casadi_int* haa_sim_sample_8_64_sparsity_in(casadi_int i);
+const casadi_int* haa_sim_sample_8_64_sparsity_out(casadi_int i);
+int haa_sim_sample_8_64_work(casadi_int *sz_arg, casadi_int* sz_res, casadi_int *sz_iw, casadi_int *sz_w);
+int haa_sim_sample_8_64_work_bytes(casadi_int *sz_arg, casadi_int* sz_res, casadi_int *sz_iw, casadi_int *sz_w);
+#define haa_sim_sample_8_64_SZ_ARG 8
+#define haa_sim_sample_8_64_SZ_RES 4
+#define haa_sim_sample_8_64_SZ_IW 0
+#define haa_sim_sample_8_64_SZ_W 205
+int haa_sim_sample_16_64(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem);
+int haa_sim_sample_16_64_checkout(void);
+void haa_sim_sample_16_64_release(int mem);
+void haa_sim_sample_16_64_incref(void);
+void haa_sim_sample_16_64_decref(void);
+casadi_int haa_sim_sample_16_64_n_in(void);
+casadi_int haa_sim_sample_16_64_n_out(void);
+casadi_real haa_sim_sample_16_64_default_in(casadi_int i);
+const char* haa_sim_sample_16_64_name_in(casadi_int i);
+const char* haa_sim_sample_16_64_name_out(casadi_int i);
+const casadi_int* haa_sim_sample_16_64_sparsity_in(casadi_int i);
+const casadi_int* haa_sim_sample_16_64_sparsity_out(casadi_int i);
+int haa_sim_sample_16_64_work(casadi_int *sz_arg, casadi_int* sz_res, casadi_int *sz_iw, casadi_int *sz_w);
+int haa_sim_sample_16_64_work_bytes(casadi_int *sz_arg, casadi_int* sz_res, casadi_int *sz_iw, casadi_int *sz_w);
+#define haa_sim_sample_16_64_SZ_ARG 8
+#define haa_sim_sample_16_64_SZ_RES 4
+#define haa_sim_sample_16_64_SZ_IW 0
+#define haa_sim_sample_16_64_SZ_W 205
+int haa_sim_zoh_16(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem);
+int haa_sim_zoh_16_checkout(void);
+void haa_sim_zoh_16_release(int mem);
+void haa_sim_zoh_16_incref(void);
+void haa_sim_zoh_16_decref(void);
+casadi_int haa_sim_zoh_16_n_in(void);
+casadi_int haa_sim_zoh_16_n_out(void);
+casadi_real haa_sim_zoh_16_default_in(casadi_int i);
+const char* haa_sim_zoh_16_name_in(casadi_int i);
+const char* haa_sim_zoh_16_name_out(casadi_int i);
+const casadi_int* haa_sim_zoh_16_sparsity_in(casadi_int i);
+const casadi_int* haa_sim_zoh_16_sparsity_out(casadi_int i);
+int haa_sim_zoh_16_work(casadi_int *sz_arg, casadi_int* sz_res, casadi_int *sz_iw, casadi_int *sz_w);
+int haa_sim_zoh_16_work_bytes(casadi_int *sz_arg, casadi_int* sz_res, casadi_int *sz_iw, casadi_int *sz_w);
+#define haa_sim_zoh_16_SZ_ARG 7
+#define haa_sim_zoh_16_SZ_RES 2
+#define haa_sim_zoh_16_SZ_IW 0
+#define haa_sim_zoh_16_SZ_W 50
+int haa_sim_jitter_16(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem);
+int haa_sim_jitter_16_checkout(void);
+void haa_sim_jitter_16_release(int mem);
+void haa_sim_jitter_16_incref(void);
+void haa_sim_jitter_16_decref(void);
+casadi_int haa_sim_jitter_16_n_in(void);
+casadi_int haa_sim_jitter_16_n_out(void);
+casadi_real haa_sim_jitter_16_default_in(casadi_int i);
+const char* haa_sim_jitter_16_name_in(casadi_int i);
+const char* haa_sim_jitter_16_name_out(casadi_int i);
+const casadi_int* haa_sim_jitter_16_sparsity_in(casadi_int i);
+const casadi_int* haa_sim_jitter_16_sparsity_out(casadi_int i);
+int haa_sim_jitter_16_work(casadi_int *sz_arg, casadi_int* sz_res, casadi_int *sz_iw, casadi_int *sz_w);
+int haa_sim_jitter_16_work_bytes(casadi_int *sz_arg, casadi_int* sz_res, casadi_int *sz_iw, casadi_int *sz_w);
+#define haa_sim_jitter_16_SZ_ARG 7
+#define haa_sim_jitter_16_SZ_RES 2
+#define haa_sim_jitter_16_SZ_IW 0
+#define haa_sim_jitter_16_SZ_W 260
+int haa_sim_etd_16(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem);
+int haa_sim_etd_16_checkout(void);
+void haa_sim_etd_16_release(int mem);
+void haa_sim_etd_16_incref(void);
+void haa_sim_etd_16_decref(void);
+casadi_int haa_sim_etd_16_n_in(void);
+casadi_int haa_sim_etd_16_n_out(void);
+casadi_real haa_sim_etd_16_default_in(casadi_int i);
+const char* haa_sim_etd_16_name_in(casadi_int i);
+const char* haa_sim_etd_16_name_out(casadi_int i);
+const casadi_int* haa_sim_etd_16_sparsity_in(casadi_int i);
+const casadi_int* haa_sim_etd_16_sparsity_out(casadi_int i);
+int haa_sim_etd_16_work(casadi_int *sz_arg, casadi_int* sz_res, casadi_int *sz_iw, casadi_int *sz_w);
+int haa_sim_etd_16_work_bytes(casadi_int *sz_arg, casadi_int* sz_res, casadi_int *sz_iw, casadi_int *sz_w);
+#define haa_sim_etd_16_SZ_ARG 7
+#define haa_sim_etd_16_SZ_RES 2
+#define haa_sim_etd_16_SZ_IW 0
+#define haa_sim_etd_16_SZ_W 122
 void haa_sym_gen_casadi_version(int* major, int* minor, int* patch);
 int haa_sym_gen_casadi_int_size(void);
 int haa_sym_gen_casadi_real_size(void);

@@ -31,7 +31,8 @@ def test_regeneration_is_byte_identical(tmp_path):
 
 def test_no_dates_in_generated_files():
     for p in GEN.iterdir():
-        text = p.read_text(errors="replace")
+        # an array subscript is no date (the simulation's parameter vectors reach index 2026)
+        text = re.sub(r"\[\d+\]", "[]", p.read_text(errors="replace"))
         assert "2026" not in text and "2025" not in text, p
 
 

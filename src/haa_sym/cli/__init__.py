@@ -9,6 +9,7 @@ Examples, one per command:
   haa-sym margins --P-gain 200 --D-gain 10
   haa-sym contact --P-gain 200 --D-gain 10 --out contact.json
   haa-sym step --set K_L2=0 --out step.csv --plot step.png                 # Fig. 7
+  haa-sym simulate --params FILE --P-gain 200 --D-gain 5 --experiment disturbance-step --duration 1 --out sim.csv
   haa-sym reproduce --out results/            every figure and table of the paper + REPORT.md
   haa-sym verify --params harmonic_drive      check the equations (any actuator: the generic rows)
   haa-sym compile my_actuator.toml            compile an actuator file's plant ahead of time
@@ -49,11 +50,11 @@ from haa_sym._version import __version__
 from haa_sym.errors import CompilerError, ParameterError, StaleGeneratedCode, Terminated
 from haa_sym.io.progress import set_progress
 
-from haa_sym.cli import analyses, describe, tune
+from haa_sym.cli import analyses, describe, simulate, tune
 from haa_sym.cli.common import _Parser, _progress_flags
 
 # every module adding commands: register(sub) -> {command: run(args) -> exit status}
-COMMAND_MODULES = (analyses, tune, describe)
+COMMAND_MODULES = (analyses, tune, simulate, describe)
 
 
 def main(argv: list[str] | None = None) -> int:

@@ -364,6 +364,113 @@ class Evaluators:
             raise RuntimeError(f"generated {name} failed on a column (code {flag})")
         return outs
 
+    def run_simulation(self, sample: str, step: str, n_sub: int, x: np.ndarray, xc: np.ndarray,
+                       exo: np.ndarray, ctrl: np.ndarray, plant: np.ndarray, *, scale=None,
+                       tol: float | None = None, peaks: bool = False, stick_rows=None,
+                       slopes=(0.0,)):
+        """Run the simulation's sample loop (``codegen/driver.c``): per column of ``exo``
+        (n_exo x n_steps) the generated ``sample`` function, then ``step`` n_sub times
+        (``haa_simulate``); or, with ``scale`` and ``tol``, ``plant`` holding
+        len(slopes)^len(stick_rows) tables of n_sub parameter vectors of levels 0..n_sub-1
+        (2^level substeps), the table chosen per substep from the nearest entries of ``slopes``
+        to 1 - tanh(stick_rows . x)^2 (one base-len(slopes) digit per row), the level per sample
+        by step doubling (``haa_simulate_adaptive``).
+
+        Returns ``(y, x_final, xc_final, extra)`` with ``y`` of shape (n_steps, n_y); ``extra``
+        is the level per sample (adaptive), the peak |x_i| over the sample instants
+        (``peaks``), else None. Compiled: one C call for the whole run. VM: the same loop in
+        Python over CasADi's VM (slow; the same numbers up to rounding).
+        """
+        fs, fp = self[sample], self[step]
+        x = np.array(x, dtype=float).copy()
+        xc = np.array(xc, dtype=float).copy()
+        exo = np.asfortranarray(np.asarray(exo, dtype=float))
+        ctrl = np.ascontiguousarray(ctrl, dtype=float)
+        plant = np.ascontiguousarray(plant, dtype=float)
+        n_exo, n = exo.shape
+        n_y = fs.numel_out(2)
+        adaptive = scale is not None
+        levels = n_sub if adaptive else 0
+        psize = fp.numel_in(3)
+        rows = np.zeros((0, x.size)) if stick_rows is None else np.ascontiguousarray(stick_rows, dtype=float)
+        slopes = np.ascontiguousarray(slopes, dtype=float)
+        if adaptive and plant.size != len(slopes) ** len(rows) * levels * psize:
+            raise ValueError(f"{step}: plant table has {plant.size} values, expected "
+                             f"{len(slopes) ** len(rows)} x {levels} x {psize}")
+        for arr, i, f, what in ((x, 0, fs, "x"), (xc, 1, fs, "xc"), (ctrl, 3, fs, "par"),
+                                (plant[:psize], 3, fp, "plant par")):
+            if arr.size != f.numel_in(i):
+                raise ValueError(f"{f.name()}: {what} has {arr.size} values, expected {f.numel_in(i)}")
+        if n_exo != fs.numel_in(2):
+            raise ValueError(f"{sample}: exo has {n_exo} rows, expected {fs.numel_in(2)}")
+        if self.backend != "compiled":
+            return self._simulate_vm(fs, fp, n_sub, x, xc, exo, ctrl, plant, scale, tol, peaks, rows,
+                                     slopes)
+        lib = self._cdll()
+        y = np.empty((n, n_y))
+        vp = ctypes.c_void_p
+        fns = (ctypes.cast(getattr(lib, sample), vp), ctypes.cast(getattr(lib, f"{sample}_work"), vp),
+               ctypes.cast(getattr(lib, step), vp), ctypes.cast(getattr(lib, f"{step}_work"), vp))
+        if adaptive:
+            scale = np.ascontiguousarray(scale, dtype=float)
+            extra = np.empty(n)
+            flag = lib.haa_simulate_adaptive(*fns, levels, psize, x.size, xc.size, fp.numel_in(1),
+                                             x.ctypes.data, xc.ctypes.data, exo.ctypes.data, n_exo,
+                                             ctrl.ctypes.data, plant.ctypes.data, scale.ctypes.data,
+                                             float(tol), rows.ctypes.data, len(rows),
+                                             slopes.ctypes.data, len(slopes), y.ctypes.data, n_y,
+                                             extra.ctypes.data, n)
+        else:
+            extra = np.empty(x.size) if peaks else None
+            flag = lib.haa_simulate(*fns, int(n_sub), x.size, xc.size, fp.numel_in(1),
+                                    x.ctypes.data, xc.ctypes.data, exo.ctypes.data, n_exo,
+                                    ctrl.ctypes.data, plant.ctypes.data, y.ctypes.data, n_y,
+                                    None if extra is None else extra.ctypes.data, n)
+        if flag:
+            raise RuntimeError(f"generated {sample} / {step} failed (code {flag})")
+        return y, x, xc, extra
+
+    @staticmethod
+    def _simulate_vm(fs, fp, n_sub, x, xc, exo, ctrl, plant, scale, tol, peaks, rows, slopes):
+        """:meth:`run_simulation` in Python over CasADi's VM: the C drivers' loops, line by line."""
+        n = exo.shape[1]
+        y = np.empty((n, fs.numel_out(2)))
+        psize = fp.numel_in(3)
+        extra = np.empty(n) if scale is not None else (np.zeros(x.size) if peaks else None)
+        lev = 0
+
+        def table(xx):
+            index = sum(int(np.argmin(np.abs(1 - np.tanh(rows[r] @ xx) ** 2 - slopes))) * len(slopes) ** r
+                        for r in range(len(rows)))
+            return plant[index * n_sub * psize:(index + 1) * n_sub * psize]
+
+        def advance(x0, u, s, lev):
+            for _ in range(2 ** lev):
+                x0 = np.asarray(fp(x0, u, s, table(x0)[lev * psize:(lev + 1) * psize])).ravel()
+            return x0
+        for k in range(n):
+            if peaks and scale is None:
+                extra = np.maximum(extra, np.abs(x))
+            u, xc_next, yk = fs(x, xc, exo[:, k], ctrl)
+            y[k] = np.asarray(yk).ravel()
+            xc = np.asarray(xc_next).ravel()
+            if scale is None:
+                for _ in range(n_sub):
+                    x = np.asarray(fp(x, u, exo[-1, k], plant)).ravel()
+                continue
+            lev = min(max(lev - 1, 0), n_sub - 2)
+            xa = advance(x, u, exo[-1, k], lev)
+            while True:
+                xb = advance(x, u, exo[-1, k], lev + 1)
+                err = np.max(np.abs(xa - xb) / scale)
+                lev += 1
+                if err <= tol or lev + 1 >= n_sub:
+                    break
+                xa = xb
+            x = xb
+            extra[k] = lev
+        return y, x, xc, extra
+
     def _cdll(self):
         if getattr(self, "_lib", None) is None:
             lib = ctypes.CDLL(str(self.library))
@@ -372,6 +479,12 @@ class Evaluators:
                                         ctypes.c_void_p, ctypes.c_longlong, ctypes.c_longlong,
                                         ctypes.c_longlong, ctypes.c_longlong, ctypes.c_void_p,
                                         ctypes.c_void_p]
+            lib.haa_simulate.restype = ctypes.c_int
+            ll, vp = ctypes.c_longlong, ctypes.c_void_p
+            lib.haa_simulate.argtypes = [vp] * 4 + [ll] * 4 + [vp] * 3 + [ll] + [vp] * 3 + [ll] + [vp, ll]
+            lib.haa_simulate_adaptive.restype = ctypes.c_int
+            lib.haa_simulate_adaptive.argtypes = [vp] * 4 + [ll] * 5 + [vp] * 3 + [ll] + [vp] * 3 + \
+                [ctypes.c_double, vp, ll, vp, ll, vp, ll, vp, ll]
             self._lib = lib
         return self._lib
 

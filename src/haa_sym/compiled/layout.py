@@ -22,7 +22,8 @@ from __future__ import annotations
 
 __all__ = ["CONST", "POINT", "TORQUE_GAINS", "GAIN_MONOMIALS", "N_BASIS", "torque_gains",
            "gain_monomials", "gain_monomial_bounds", "FREQ_COLUMN", "COEF_FORMS", "COEF_TERMS",
-           "COEF_OUTPUTS"]
+           "COEF_OUTPUTS", "SIM_CAPACITIES", "SIM_FRICTION_CAP", "SIM_EXO", "SIM_COLUMNS", "SIM_U",
+           "sim_ctrl_layout", "sim_plant_layout", "sim_function_names", "Slices"]
 
 # Per-loop constants, per-point gains (the order of the generated functions' inputs).
 CONST = ("P_t0", "I_t0", "VC0")              # V/Nm, V/(Nm s), V s/rad (Eq. 6 at alpha = 1)
@@ -105,3 +106,82 @@ FREQ_COLUMN = ("G_TV", "G_Td", "G_thV", "G_thd", "G_pV", "G_pd",
 COEF_FORMS = ("L_t", "L_imp", "Z_num", "Z_den")
 COEF_TERMS = ("1", "P_gain", "D_gain")
 COEF_OUTPUTS = tuple(f"{form}.{t}" for form in COEF_FORMS for t in COEF_TERMS) + ("H_T",)
+
+
+# --- The nonlinear simulation (haa_sym.analysis.simulate) -----------------------------------
+# Per sample k the driver (codegen/driver.c, haa_simulate) calls the sample function once, then a
+# plant step n_sub times. Sizes are capacities: the runtime pads the plant's states to nx and the
+# controller's to nc with zeros (a padded state has zero rows and columns, so it stays zero).
+# (nx, nc): plant-state and controller-state capacities, one set of functions each; the
+# smallest that fits is used (HyQ at N_av = 4: 7 and 4).
+SIM_CAPACITIES = ((8, 8), (8, 64), (16, 64))
+SIM_FRICTION_CAP = 4          # Coulomb friction torques: the rotor and up to three bodies
+# Exogenous inputs of one sample: the external torque on the port body (Nm), the torque
+# feed-forward (Nm), the angle set point (rad), the torque sensor's noise sample (Nm), and the
+# offset of the sample's end from its nominal instant minus its start's (s, jitter).
+SIM_EXO = ("T_dist", "T_ff", "theta_ref", "noise_T", "delta")
+# The held plant input over one sample: the applied voltage (V) and the external torque (Nm).
+SIM_U = ("V", "T_dist")
+# One row per sample, what the sample function reports (the CSV columns after ``time``, and the
+# saturation flag: 1 when the held voltage was clipped).
+SIM_COLUMNS = ("theta", "velocity", "torque", "torque_ref", "voltage", "current", "saturated")
+
+
+class Slices:
+    """Named slices of one flat vector: ``lay["Ac"]`` is a slice, ``lay.shape["Ac"]`` its
+    (rows, cols) in column-major order (CasADi's dense layout), ``lay.size`` the total."""
+
+    def __init__(self, fields):
+        self.slice, self.shape, start = {}, {}, 0
+        for name, (r, c) in fields:
+            self.slice[name] = slice(start, start + r * c)
+            self.shape[name] = (r, c)
+            start += r * c
+        self.size = start
+
+    def __getitem__(self, name):
+        return self.slice[name]
+
+    def names(self):
+        return tuple(self.slice)
+
+
+def sim_ctrl_layout(nx: int, nc: int) -> Slices:
+    """The sample function's parameter vector: the controller (``Ac``, ``Bc``, ``Cc``, ``Dc`` of
+    ``haa_sym.loop.statespace.controller_batch``), the plant's output rows it reads (encoder angle,
+    torque signal, motor current, port velocity, back-EMF ``k_w dtheta_m``), and the limits:
+    ``V_max`` (V), ``RI_max`` (R I_max, V), the encoder and torque quanta (rad, Nm; 0 = off)."""
+    n_in, n_out = 4, 2
+    return Slices([("Ac", (nc, nc)), ("Bc", (nc, n_in)), ("Cc", (n_out, nc)), ("Dc", (n_out, n_in)),
+                   ("c_theta", (1, nx)), ("c_T", (1, nx)), ("c_I", (1, nx)), ("c_v", (1, nx)),
+                   ("c_emf", (1, nx)), ("V_max", (1, 1)), ("RI_max", (1, 1)), ("q_theta", (1, 1)),
+                   ("q_T", (1, 1))])
+
+
+def sim_plant_layout(kind: str, nx: int) -> Slices:
+    """The plant step's parameter vector, by kind: ``zoh`` (``Phi``, ``Gamma`` over Ts),
+    ``jitter`` (``Phi``, ``Gamma`` over Ts/n_sub, ``M`` = [A, B] of the continuous plant for the
+    interval's correction and ``inv_n`` = 1/n_sub), ``etd`` (one ETDRK4 substep of length h:
+    ``Ph``, ``Gh`` over h/2, ``P``, ``G`` over h; the friction torques' columns through the
+    phi-functions, ``Qh`` = (h/2) phi1(A h/2) Fcol and ``F1``, ``F2``, ``F3`` = h f_i(A h) Fcol of
+    Cox and Matthews; friction rows ``Fsel``, torques ``Fc``, 1/velocity scale ``inv_vs`` and
+    ``lin``, the friction slopes Fc / v_s already in A for the bodies at stick, else 0)."""
+    nu, nf = len(SIM_U), SIM_FRICTION_CAP
+    if kind == "zoh":
+        return Slices([("Phi", (nx, nx)), ("Gamma", (nx, nu))])
+    if kind == "jitter":
+        return Slices([("Phi", (nx, nx)), ("Gamma", (nx, nu)), ("M", (nx, nx + nu)), ("inv_n", (1, 1))])
+    if kind == "etd":
+        return Slices([("Ph", (nx, nx)), ("Gh", (nx, nu)), ("P", (nx, nx)), ("G", (nx, nu)),
+                       ("Qh", (nx, nf)), ("F1", (nx, nf)), ("F2", (nx, nf)), ("F3", (nx, nf)),
+                       ("Fsel", (nf, nx)), ("Fc", (nf, 1)), ("inv_vs", (1, 1)), ("lin", (nf, 1))])
+    raise ValueError(f"plant step kind = {kind!r}; allowed: {list(SIM_PLANT_KINDS)}")
+
+
+SIM_PLANT_KINDS = ("zoh", "jitter", "etd")
+
+
+def sim_function_names(nx: int, nc: int) -> dict[str, str]:
+    """The generated functions of capacity (nx, nc): ``sample`` and one plant step per kind."""
+    return {"sample": f"haa_sim_sample_{nx}_{nc}",
+            **{k: f"haa_sim_{k}_{nx}" for k in SIM_PLANT_KINDS}}

@@ -543,3 +543,36 @@ def plot_tune(lead_s, integral, grid_objective, before, after, steps, title: str
     if title:
         fig.suptitle(_wrap(title, 11), fontsize=_title_size(title, 11))
     return fig
+
+
+def plot_simulation(time, columns: dict, saturated=None, title: str = "", cycle: str = ""):
+    """A simulated run (``haa-sym simulate``): angle and velocity, torque and its reference,
+    voltage (saturated samples marked) and current over ``time`` (s). ``columns`` maps the CSV
+    names to arrays; ``cycle`` is a note on a detected limit cycle (shown in the torque panel)."""
+    t = np.asarray(time)
+    fig, axes = plt.subplots(4, 1, figsize=(6.4, 8.0 + (0.6 if title else 0)), sharex=True,
+                             constrained_layout=True)
+    axes[0].plot(t, columns["theta"], color="k", label="theta (encoder)")
+    axes[0].set_ylabel("theta (rad)")
+    ax2 = axes[0].twinx()
+    ax2.plot(t, columns["velocity"], color="tab:blue", lw=0.8)
+    ax2.set_ylabel("port velocity (rad/s)", color="tab:blue")
+    axes[1].plot(t, columns["torque"], color="k", label="torque (read by the loop)")
+    axes[1].plot(t, columns["torque_ref"], color="tab:orange", lw=0.8, label="torque reference")
+    axes[1].set_ylabel("torque (Nm)")
+    axes[1].legend(fontsize=8, title=cycle or None, title_fontsize=8)
+    axes[2].plot(t, columns["voltage"], color="k")
+    if saturated is not None and np.any(saturated):
+        sat = np.asarray(saturated, bool)
+        axes[2].plot(t[sat], np.asarray(columns["voltage"])[sat], ".", ms=2, color="tab:red",
+                     label="saturated")
+        axes[2].legend(fontsize=8)
+    axes[2].set_ylabel("voltage (V)")
+    axes[3].plot(t, columns["current"], color="k")
+    axes[3].set_ylabel("current (A)")
+    axes[3].set_xlabel("t (s)")
+    for ax in axes:
+        ax.grid(True, alpha=0.3)
+    if title:
+        fig.suptitle(_wrap(title, 6.4), fontsize=_title_size(title, 11))
+    return fig

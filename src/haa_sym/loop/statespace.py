@@ -19,20 +19,27 @@ from __future__ import annotations
 
 import numpy as np
 
-__all__ = ["CUTS", "INPUT_NAMES", "OUTPUT_NAMES", "closed_loop_batch", "closed_loop_eigenvalues",
-           "to_statespace"]
+__all__ = ["CUTS", "INPUT_NAMES", "OUTPUT_NAMES", "CONTROLLER_INPUTS", "CONTROLLER_OUTPUTS",
+           "closed_loop_batch", "closed_loop_eigenvalues", "controller_batch", "to_statespace"]
 
 CUTS = (None, "T_ref", "PI")
 INPUT_NAMES = ("T_dist", "r")
 OUTPUT_NAMES = ("T_meas", "theta_encoder", "port_velocity", "y")
+# The controller alone (what the nonlinear simulation closes around the continuous plant): it
+# reads the encoder angle and the torque signal, takes a torque feed-forward and an angle set
+# point, and gives the voltage applied after the delay and the torque reference.
+CONTROLLER_INPUTS = ("theta_encoder", "T_meas", "T_ff", "theta_ref")
+CONTROLLER_OUTPUTS = ("V", "T_ref")
 
 
-def _layout(loop):
-    """States of the closed loop: the plant's, then each distinct element's, by role."""
+def _layout(loop, start=None):
+    """States of the closed loop: the plant's, then each distinct element's, by role
+    (``start``: where the first element's states begin; default after the plant's)."""
     el = loop.elements
     roles = ["F_d", "F_vc"] + (["F_port"] if loop.options.structure.port == "encoder_average" else []) + \
         ["I_z", "z_delay"]
-    blocks, owner, start = [], {}, loop.plant.Phi.shape[0]
+    blocks, owner = [], {}
+    start = loop.plant.Phi.shape[0] if start is None else start
     for role in roles:
         for other, (_s, e) in owner.items():      # an element met before shares its states
             if el[other] == el[role] and role.startswith("F"):
@@ -53,33 +60,62 @@ def closed_loop_batch(loop, P_gain, D_gain, beta=None, alpha=None, cut: str | No
     """
     if cut not in CUTS:
         raise ValueError(f"cut = {cut!r}; allowed: {list(CUTS)}")
-    ctrl, pl, opt = loop.params.controller, loop.plant, loop.options
-    beta = ctrl.beta if beta is None else beta
-    alpha = ctrl.alpha if alpha is None else alpha
-    P, D, beta, alpha = (np.atleast_1d(np.asarray(v, float)) for v in np.broadcast_arrays(P_gain, D_gain, beta, alpha))
+    pl, opt = loop.plant, loop.options
+    P, D, P_t, I_t, VC = _gains(loop, P_gain, D_gain, beta, alpha)
     k = P.shape[0]
-    P_t, I_t, VC = beta * loop.const[0], beta * loop.const[1], alpha * loop.const[2]
     owner, blocks, n = _layout(loop)
     nx, nin = pl.Phi.shape[0], len(INPUT_NAMES)
     width = n + nin                                # every signal is a row over [state, inputs]
     i_r = n + INPUT_NAMES.index("r")
-
-    def unit(i):
-        r = np.zeros(width)
-        r[i] = 1.0
-        return r
 
     def plant_row(name):
         r = np.zeros(width)
         r[:nx] = pl.C[loop.plant_output(name)]
         return r
 
-    def bcast(r):
-        return np.broadcast_to(r, (k, width))
-
     rows = np.zeros((k, n, width))
     rows[:, :nx, :nx] = pl.Phi
     rows[:, :nx, n + INPUT_NAMES.index("T_dist")] = pl.Gamma[:, 2]
+    th, T = _bcast(plant_row("theta_encoder"), k), _bcast(plant_row(loop.torque_output), k)
+    sig = _controller_flow(loop, owner, rows, P, D, P_t, I_t, VC, th, T, cut=cut,
+                           r=_bcast(_unit(i_r, width), k))
+    rows[:, :nx] += pl.Gamma[None, :, 0, None] * sig["V"][:, None, :]
+    port = sig["port"] if opt.structure.port == "encoder_average" else _bcast(plant_row(opt.structure.port), k)
+    y = {None: np.zeros((k, width)), "T_ref": sig["imp"], "PI": -sig["u_pi"]}[cut]
+    out = np.stack([T, th, port, y], axis=1)
+    return rows[:, :, :n], rows[:, :, n:], out[:, :, :n], out[:, :, n:]
+
+
+def _gains(loop, P_gain, D_gain, beta, alpha):
+    ctrl = loop.params.controller
+    beta = ctrl.beta if beta is None else beta
+    alpha = ctrl.alpha if alpha is None else alpha
+    P, D, beta, alpha = (np.atleast_1d(np.asarray(v, float)) for v in np.broadcast_arrays(P_gain, D_gain, beta, alpha))
+    return P, D, beta * loop.const[0], beta * loop.const[1], alpha * loop.const[2]
+
+
+def _unit(i, width):
+    r = np.zeros(width)
+    r[i] = 1.0
+    return r
+
+
+def _bcast(r, k):
+    return np.broadcast_to(r, (k, r.shape[-1]))
+
+
+def _controller_flow(loop, owner, rows, P, D, P_t, I_t, VC, th, T, *, cut=None, r=None, T_ff=None,
+                     theta_ref=None):
+    """The controller's signal flow of one sample (Fig. 6), every signal a row over the caller's
+    [states, inputs]; writes each element's state update into ``rows`` (shape (k, n, width)).
+
+    ``th``, ``T``: the encoder angle and the torque signal the loop reads; ``r`` is injected at
+    ``cut``; ``T_ff`` (a torque feed-forward) and ``theta_ref`` (the set point of Eq. 8) are
+    optional rows. Returns the signals ``V`` (applied, after the delay), ``T_ref``, ``imp``,
+    ``u_pi`` and ``port`` (the port's velocity estimate, when the port reads one).
+    """
+    k, width = th.shape
+    written: set[int] = set()
 
     def element(role, u):
         """Output of element ``role`` driven by signal ``u`` (k, width); writes its state update."""
@@ -88,26 +124,42 @@ def closed_loop_batch(loop, P_gain, D_gain, beta=None, alpha=None, cut: str | No
         m = e.order
         xs = np.zeros((m, width))
         xs[:, s:s + m] = np.eye(m)
-        if blocks_written.get(s) is None:
+        if s not in written:
             rows[:, s:s + m] = A @ xs + B[None, :, 0, None] * u[:, None, :]
-            blocks_written[s] = True
+            written.add(s)
         return (C @ xs)[0] + Dm[0, 0] * u
 
-    blocks_written: dict[int, bool] = {}
-    th, T = bcast(plant_row("theta_encoder")), bcast(plant_row(loop.torque_output))
     v_d = element("F_d", th)
     v_vc = element("F_vc", th)
-    imp = P[:, None] * th + D[:, None] * v_d               # Eq. (8), theta_ref = 0: T_ref = -imp
-    T_ref = bcast(unit(i_r)) if cut == "T_ref" else -imp
+    err = th if theta_ref is None else th - theta_ref
+    imp = P[:, None] * err + D[:, None] * v_d               # Eq. (8): T_ref = T_ff - imp
+    T_ref = r if cut == "T_ref" else (-imp if T_ff is None else T_ff - imp)
     e = T_ref - T
     u_pi = P_t[:, None] * e + I_t[:, None] * element("I_z", e)
-    V_k = (bcast(unit(i_r)) if cut == "PI" else u_pi) + VC[:, None] * v_vc
+    V_k = (r if cut == "PI" else u_pi) + VC[:, None] * v_vc
     V = element("z_delay", V_k)
-    rows[:, :nx] += pl.Gamma[None, :, 0, None] * V[:, None, :]
-    port = element("F_port", th) if opt.structure.port == "encoder_average" else bcast(plant_row(opt.structure.port))
-    y = {None: np.zeros((k, width)), "T_ref": imp, "PI": -u_pi}[cut]
-    out = np.stack([T, th, port, y], axis=1)
-    return rows[:, :, :n], rows[:, :, n:], out[:, :, :n], out[:, :, n:]
+    port = element("F_port", th) if loop.options.structure.port == "encoder_average" else None
+    return {"V": V, "T_ref": T_ref, "imp": imp, "u_pi": u_pi, "port": port}
+
+
+def controller_batch(loop, P_gain, D_gain, beta=None, alpha=None):
+    """``(A, B, C, D)`` of the sampled controller alone at k gain points: the same elements and
+    signal flow as :func:`closed_loop_batch`, with the plant's signals as inputs.
+
+    Inputs :data:`CONTROLLER_INPUTS` (rad, Nm, Nm, rad), outputs :data:`CONTROLLER_OUTPUTS`
+    (the voltage applied after the delay, V; the torque reference, Nm); shapes (k, m, m),
+    (k, m, 4), (k, 2, m), (k, 2, 4) with m the controller's order.
+    """
+    P, D, P_t, I_t, VC = _gains(loop, P_gain, D_gain, beta, alpha)
+    k = P.shape[0]
+    owner, _blocks, m = _layout(loop, start=0)
+    width = m + len(CONTROLLER_INPUTS)
+    rows = np.zeros((k, m, width))
+    sig_in = {name: _bcast(_unit(m + i, width), k) for i, name in enumerate(CONTROLLER_INPUTS)}
+    sig = _controller_flow(loop, owner, rows, P, D, P_t, I_t, VC, sig_in["theta_encoder"],
+                           sig_in["T_meas"], T_ff=sig_in["T_ff"], theta_ref=sig_in["theta_ref"])
+    out = np.stack([sig[n] for n in CONTROLLER_OUTPUTS], axis=1)
+    return rows[:, :, :m], rows[:, :, m:], out[:, :, :m], out[:, :, m:]
 
 
 def closed_loop_eigenvalues(loop, points, chunk_bytes: int = 64 << 20) -> np.ndarray:

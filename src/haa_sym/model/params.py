@@ -36,6 +36,7 @@ from haa_sym.model.actuator import (ACTUATOR_SECTIONS, HYQ, Actuator, Topology, 
                               parse_actuator)
 from haa_sym.model import filters
 from haa_sym.model.filters import PARAMETERS as FILTER_PARAMETERS
+from haa_sym.model.limits import Limits, parse_limits
 from haa_sym.model.resources import data_dir
 from haa_sym.model.units import CONTROLLER_UNITS
 
@@ -253,6 +254,9 @@ class Params:
     configurations: Mapping[str, Mapping[str, float]] = field(default_factory=dict)
     source: str = "<memory>"
     about: Mapping[str, object] = field(default_factory=dict, compare=False)
+    # the nonlinear simulation's limits ([limits], haa_sym.model.limits); the linear analyses
+    # ignore them, so they take no part in equality (nor in the memos keyed by Params)
+    limits: Limits = field(default_factory=Limits, compare=False)
 
     def __post_init__(self):
         if not isinstance(self.plant, Plant):
@@ -533,8 +537,8 @@ def gain_points(P_gain=0.0, D_gain=0.0, beta=None, alpha=None):
             None if alpha is None else gain_array("alpha", alpha))
 
 
-_FILE_SECTIONS = ACTUATOR_SECTIONS + ("controller", "configurations")
-_LEGACY_SECTIONS = ("about", "plant", "controller", "configurations")
+_FILE_SECTIONS = ACTUATOR_SECTIONS + ("controller", "configurations", "limits")
+_LEGACY_SECTIONS = ("about", "plant", "controller", "configurations", "limits")
 
 
 def parse_params(data: Mapping[str, object], source: str = "<memory>") -> Params:
@@ -572,7 +576,9 @@ def parse_params(data: Mapping[str, object], source: str = "<memory>") -> Params
         if not isinstance(overrides, Mapping):
             raise ParameterError(f"{where}: must be a table of plant keys")
         configs[name] = entry_values(overrides, where, refs, topology.units)
-    return Params(plant=plant, controller=controller, configurations=configs, source=source, about=about)
+    limits = parse_limits(data["limits"], topology.body_names, source, refs) if "limits" in data else Limits()
+    return Params(plant=plant, controller=controller, configurations=configs, source=source, about=about,
+                  limits=limits)
 
 
 def load_params(path: str | Path | None = None) -> Params:

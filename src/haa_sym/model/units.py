@@ -82,6 +82,10 @@ KINDS: dict[str, Kind] = {k.si: k for k in (
     Kind("samples", "number of samples", ("samples", "-", "", "1"), ()),
     Kind("s", "time", ("s",), ("ms", "us")),
     Kind("Hz", "frequency in cycles per second", ("Hz", "1/s"), ("kHz",)),
+    Kind("V", "voltage", ("V",), ("mV", "kV")),
+    Kind("A", "current", ("A",), ("mA",)),
+    Kind("Nm", "torque", ("Nm", "N m", "N*m"), ("mNm", "N cm")),
+    Kind("rad/s", "angular velocity", ("rad/s",), ("deg/s", "rpm")),
     Kind("V/Nm", "torque-controller gain", ("V/Nm", "V/(N m)"), ("mV/Nm",)),
     Kind("V/(Nm s)", "torque-controller integral gain", ("V/(Nm s)", "V/(N m s)", "V/Nms"), ("mV/(Nm s)",)),
 )}

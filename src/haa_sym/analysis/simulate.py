@@ -1,0 +1,507 @@
+"""The nonlinear sampled-data simulation (issue 19; docs/simulate.md).
+
+The controller is the linear loop's own (:func:`haa_sym.loop.statespace.controller_batch`: the
+same elements and signal flow as the closed loop the maps analyse), closed around the
+continuous plant with the limits of the actuator file's ``[limits]`` section
+(:mod:`haa_sym.model.limits`). Per sample instant t_k: the encoder angle and the torque signal
+are read (torque-sensor noise added, both quantised), the controller updates, the voltage it
+applies (after the delay) is clipped to the supply and the drive's current window and held; the
+plant then runs to t_(k+1):
+
+* no friction: the exact zero-order-hold transition (Phi, Gamma from ``scipy.linalg.expm``);
+  with jitter, over the interval t_(k+1) - t_k = Ts + delta_k, exactly up to a 12-term series;
+* Coulomb friction (smooth model T = -Fc tanh(v / v_s)): substeps of the exponential
+  Runge-Kutta method ETDRK4 (Cox and Matthews 2002: the linear part and a constant friction
+  torque exactly), 2^j per sample with j chosen per sample by step doubling against ``rtol``.
+
+The loop over samples is generated C (``codegen/sim_kernels.py``, ``codegen/driver.c``).
+
+Example
+-------
+>>> from haa_sym import ClosedLoop, load_params
+>>> sim = simulate(ClosedLoop(load_params()), 200.0, 5.0, experiment="disturbance-step",
+...                amplitude=1.0, duration=0.5)                    # doctest: +SKIP
+>>> sim.columns()["theta"][-1]                                      # doctest: +SKIP
+"""
+from __future__ import annotations
+
+import functools
+import math
+from dataclasses import dataclass, field
+
+import numpy as np
+import scipy.linalg
+
+from haa_sym.analysis.sweep import blas_limits
+from haa_sym.compiled import layout as L
+from haa_sym.compiled.generated import evaluators
+from haa_sym.errors import ParameterError
+from haa_sym.loop import loop_first
+from haa_sym.loop.plant import continuous_plant
+from haa_sym.loop.statespace import controller_batch
+from haa_sym.model.limits import Limits
+
+__all__ = ["EXPERIMENTS", "CSV_COLUMNS", "Simulation", "SimulationBatch", "simulate", "simulate_batch",
+           "detect_oscillation", "DEFAULT_RTOL", "MAX_SAMPLES"]
+
+#: The experiments (docs/simulate.md): what ``amplitude`` A is and where it enters.
+EXPERIMENTS = {
+    "disturbance-step": "a constant external torque of A Nm on the port body from t = 0",
+    "torque-step": "a torque reference step of A Nm at t = 0 (added to the impedance law's)",
+    "impedance-step": "a step of A rad of the impedance law's angle set point at t = 0",
+    "deflection": "an initial angle of A rad of the port body, every other state at rest",
+    "chirp": "a torque reference A sin(2 pi (f0 t + (f1 - f0) t^2 / (2 T))) Nm, f0 -> f1 over T",
+}
+DEFAULT_AMPLITUDE = {"disturbance-step": 1.0, "torque-step": 1.0, "impedance-step": 0.1,
+                     "deflection": 0.1, "chirp": 1.0}
+#: The CSV's columns: time (s), theta (rad), velocity (rad/s), torque, torque_ref (Nm),
+#: voltage (V), current (A).
+CSV_COLUMNS = ("time",) + L.SIM_COLUMNS[:-1]
+DEFAULT_RTOL = 1e-6          # step-doubling error bound of the friction integrator, relative
+MAX_SUBSTEPS = 4096
+LEVELS = 13                  # friction substeps per sample: 1, 2, 4, ..., 4096
+# The friction slopes (fractions of Fc / v_s) a table may put into the exact linear part, by the
+# number of friction entries (1, 2, 3, 4): len(SLOPES)^n tables of LEVELS levels each
+SLOPES = ((0.0, 0.03, 0.06, 0.125, 0.25, 0.5, 0.75, 1.0), (0.0, 0.03, 0.06, 0.125, 0.25, 0.5, 0.75, 1.0),
+          (0.0, 0.1, 0.3, 1.0), (0.0, 1.0))
+MAX_SAMPLES = 50_000_000     # 7 columns of float64: 2.8 GB
+CHIRP_F0 = 0.1               # Hz
+JITTER_CLIP = 3.0            # the sample offsets are Gaussian clipped to +-3 sigma
+# |lambda_max delta| / n_sub of each jitter substep's series (codegen/sim_kernels.py)
+JITTER_STEP_BOUND = 0.5
+
+
+@dataclass(frozen=True)
+class Simulation:
+    """One simulated run: the CSV's columns (one row per sample instant), the saturation flags,
+    the time spent in saturation (s) and a detected limit cycle of the torque signal
+    (``cycle_amplitude`` Nm, half peak-to-peak; ``cycle_frequency`` Hz; NaN when none)."""
+
+    time: np.ndarray
+    theta: np.ndarray
+    velocity: np.ndarray
+    torque: np.ndarray
+    torque_ref: np.ndarray
+    voltage: np.ndarray
+    current: np.ndarray
+    saturated: np.ndarray
+    saturation_time: float
+    cycle_amplitude: float
+    cycle_frequency: float
+    meta: dict = field(repr=False)
+
+    def columns(self) -> dict[str, np.ndarray]:
+        """The CSV columns by name, in :data:`CSV_COLUMNS` order."""
+        return {c: getattr(self, c) for c in CSV_COLUMNS}
+
+    @property
+    def limit_cycle(self) -> bool:
+        return bool(np.isfinite(self.cycle_amplitude))
+
+
+@dataclass(frozen=True)
+class SimulationBatch:
+    """Summaries of simulations at k gain points: ``saturation_time`` (s), ``cycle_amplitude``
+    (Nm), ``cycle_frequency`` (Hz), ``final_theta`` (rad, mean over the last tenth), ``growth``
+    (the torque's peak-to-peak swing over the last quarter of the run over the quarter's before)
+    and ``status``: "non-finite" (a state overflowed), else "limit cycle"
+    (:func:`detect_oscillation`), else "saturating" (in saturation over half the run), else "no
+    limit cycle". Whether a point converges is left to the caller: a run shorter than the loop's
+    slowest mode (HyQ: 11 s) cannot tell slow convergence from slow growth by itself."""
+
+    P_gain: np.ndarray
+    D_gain: np.ndarray
+    saturation_time: np.ndarray
+    cycle_amplitude: np.ndarray
+    cycle_frequency: np.ndarray
+    final_theta: np.ndarray
+    growth: np.ndarray
+    status: np.ndarray
+    meta: dict = field(repr=False)
+
+
+def detect_oscillation(t, y, *, window: float = 0.5, tol: float = 0.02, floor: float = 0.0):
+    """A sustained oscillation of ``y`` over the last ``window`` fraction of the run.
+
+    Up-crossings of the window's mean split it into cycles; an oscillation is reported when
+    there are at least 4 cycles, their periods agree within ``tol`` (relative spread) and
+    their half peak-to-peak amplitudes within 5 ``tol`` with no trend (first and last cycles
+    within 5 ``tol``), and the amplitude exceeds ``floor``. Returns ``(amplitude, frequency)``
+    (units of ``y``, Hz; the period from the first to the last up-crossing, interpolated) or
+    ``(nan, nan)``.
+    """
+    t, y = np.asarray(t, float), np.asarray(y, float)
+    start = int(len(t) * (1 - window))
+    t, y = t[start:], y[start:]
+    if len(y) < 16 or not np.all(np.isfinite(y)):
+        return math.nan, math.nan
+    d = y - y.mean()
+    up = np.flatnonzero((d[:-1] < 0) & (d[1:] >= 0))
+    if len(up) < 5:
+        return math.nan, math.nan
+    tc = t[up] + (t[up + 1] - t[up]) * (-d[up]) / (d[up + 1] - d[up])
+    periods = np.diff(tc)
+    amps = np.array([(y[a:b + 1].max() - y[a:b + 1].min()) / 2 for a, b in zip(up[:-1], up[1:])])
+    if periods.std() > tol * periods.mean() or amps.std() > 5 * tol * amps.mean() \
+            or abs(amps[-1] - amps[0]) > 5 * tol * amps.mean() or amps.mean() <= floor:
+        return math.nan, math.nan
+    return float(amps.mean()), float((len(tc) - 1) / (tc[-1] - tc[0]))
+
+
+def _pad(M, rows, cols):
+    out = np.zeros((rows, cols))
+    M = np.atleast_2d(M)
+    out[:M.shape[0], :M.shape[1]] = M
+    return out
+
+
+def _pack(lay: L.Slices, **parts) -> np.ndarray:
+    v = np.zeros(lay.size)
+    for name, val in parts.items():
+        r, c = lay.shape[name]
+        v[lay[name]] = _pad(np.reshape(val, (-1, 1)) if np.ndim(val) < 2 else val, r, c).ravel(order="F")
+    return v
+
+
+def _pack_many(lay: L.Slices, parts: list[dict]) -> np.ndarray:
+    """:func:`_pack` of many parameter sets at once, concatenated (one row each, flattened)."""
+    out = np.zeros((len(parts), lay.size))
+    for name in parts[0]:
+        r, c = lay.shape[name]
+        vals = [np.asarray(p[name], float) for p in parts]
+        v = np.stack([x.reshape(-1, 1) if x.ndim < 2 else x for x in vals])
+        pad = np.zeros((len(parts), r, c))
+        pad[:, :v.shape[1], :v.shape[2]] = v
+        out[:, lay[name]] = pad.transpose(0, 2, 1).reshape(len(parts), r * c)
+    return out.ravel()
+
+
+def _zoh(A, B, h):
+    n, m = B.shape
+    aug = np.zeros((n + m, n + m))
+    aug[:n, :n], aug[:n, n:] = A, B
+    E = scipy.linalg.expm(aug * h)
+    return E[:n, :n], E[:n, n:]
+
+
+@functools.lru_cache(maxsize=16)
+def _continuous(plant, backend):
+    # a sweep of gains simulates one plant many times (evaluating it costs a CasADi call)
+    return continuous_plant(plant, backend)
+
+
+def _capacity(nx, nc):
+    for cx, cc in L.SIM_CAPACITIES:
+        if nx <= cx and nc <= cc:
+            return cx, cc
+    big = max(L.SIM_CAPACITIES)
+    raise ParameterError(f"a plant of {nx} states with a controller of {nc} states exceeds the simulation's "
+                         f"generated capacities {list(L.SIM_CAPACITIES)}; allowed: at most {big[0]} plant "
+                         f"and {big[1]} controller states (fewer bodies or a smaller N_av)")
+
+
+def _number(name, value, allowed, test):
+    if isinstance(value, bool) or not isinstance(value, (int, float, np.floating, np.integer)) \
+            or not math.isfinite(value) or not test(value):
+        raise ParameterError(f"{name} = {value!r}; allowed: {allowed}")
+    return float(value)
+
+
+class _Setup:
+    """Everything of one simulation but the gains' controller: plant matrices, limits, inputs."""
+
+    def __init__(self, loop, limits, experiment, amplitude, duration, seed, chirp_f1):
+        params, ctrl = loop.params, loop.params.controller
+        self.Ts = Ts = ctrl.Ts
+        if experiment not in EXPERIMENTS:
+            raise ParameterError(f"experiment = {experiment!r}; allowed: {list(EXPERIMENTS)}")
+        amplitude = DEFAULT_AMPLITUDE[experiment] if amplitude is None else amplitude
+        self.amplitude = _number("amplitude", amplitude, "a finite number", lambda v: True)
+        duration = _number("duration", duration, "a finite number of seconds > 0", lambda v: v > 0)
+        n = int(math.ceil(duration / Ts - 1e-9)) + 1
+        if n > MAX_SAMPLES:
+            raise ParameterError(f"duration = {duration!r} s is {n} samples at Ts = {Ts} s; allowed: at most "
+                                 f"{MAX_SAMPLES} samples ({MAX_SAMPLES * Ts:g} s)")
+        if not isinstance(seed, (int, np.integer)) or isinstance(seed, bool) or seed < 0:
+            raise ParameterError(f"seed = {seed!r}; allowed: an integer >= 0")
+        lim = params.limits if limits is None else limits
+        if not isinstance(lim, Limits):
+            raise ParameterError(f"limits = {lim!r}; allowed: a haa_sym.model.limits.Limits or None "
+                                 "(the parameter file's [limits])")
+        self.limits, self.experiment, self.duration, self.n, self.seed = lim, experiment, duration, n, seed
+        top = params.plant.topology
+        cont = _continuous(params.plant, loop.backend)
+        A, B = cont.A, cont.B
+        self.nx = nx = A.shape[0]
+        states, outs = cont.state_names, cont.output_names
+        Cm = loop.plant.C
+        self.rows = {"c_theta": Cm[outs.index("theta_encoder")], "c_T": Cm[outs.index(loop.torque_output)],
+                     "c_I": np.eye(nx)[states.index("I_m")], "c_v": Cm[outs.index(f"dtheta_{top.port}")]}
+        # the motor's voltage equation, row I_m of A and B: L dI/dt = V - R I - emf(x)
+        i = states.index("I_m")
+        L_m = 1.0 / B[i, 0]
+        emf = -A[i] * L_m
+        R = emf[i]
+        emf[i] = 0.0
+        self.rows["c_emf"] = emf
+        self.RI_max = math.inf if lim.I_max is None else R * lim.I_max
+        self.V_max = math.inf if lim.V_max is None else lim.V_max
+        turn = 2 * math.pi / (params.plant.N if top.encoder == "rotor" else 1.0)
+        self.q_theta = 0.0 if lim.encoder_counts is None else turn / lim.encoder_counts
+        self.q_T = lim.torque_resolution or 0.0
+        iu = [cont.input_names.index("V_m"), cont.input_names.index("T_dist")]
+        friction = {b: v for b, v in lim.friction.items() if v > 0}
+        jitter = lim.jitter or 0.0
+        if friction and jitter:
+            raise ParameterError("[limits]: jitter together with Coulomb friction is not supported; allowed: "
+                                 "one of them (docs/simulate.md)")
+        if jitter and JITTER_CLIP * jitter >= Ts / 2:
+            raise ParameterError(f"[limits]: jitter = {jitter!r} s rms; allowed: < Ts / {2 * JITTER_CLIP:g} = "
+                                 f"{Ts / (2 * JITTER_CLIP):g} s (the sample instants must stay ordered)")
+        # exogenous inputs
+        rng = np.random.default_rng(seed)
+        exo = np.zeros((len(L.SIM_EXO), n))
+        k = L.SIM_EXO.index
+        t_nom = np.arange(n) * Ts
+        A_ = self.amplitude
+        if experiment == "disturbance-step":
+            exo[k("T_dist")] = A_
+        elif experiment == "torque-step":
+            exo[k("T_ff")] = A_
+        elif experiment == "impedance-step":
+            exo[k("theta_ref")] = A_
+        elif experiment == "chirp":
+            f1 = 0.1 / Ts if chirp_f1 is None else _number("chirp_f1", chirp_f1, "a frequency > 0 (Hz)",
+                                                          lambda v: v > 0)
+            T_end = max(t_nom[-1], Ts)
+            exo[k("T_ff")] = A_ * np.sin(2 * np.pi * (CHIRP_F0 * t_nom + (f1 - CHIRP_F0) * t_nom ** 2 / (2 * T_end)))
+            self.chirp = (CHIRP_F0, f1)
+        self.x0 = np.zeros(nx)
+        if experiment == "deflection":
+            self.x0[states.index(f"theta_{top.port}")] = A_
+        if lim.torque_noise:
+            exo[k("noise_T")] = lim.torque_noise * rng.standard_normal(n)
+        eps = np.zeros(n + 1)
+        if jitter:
+            eps[1:] = np.clip(jitter * rng.standard_normal(n), -JITTER_CLIP * jitter, JITTER_CLIP * jitter)
+            exo[k("delta")] = np.diff(eps)
+        self.time = t_nom + eps[:n]
+        self.exo = exo
+        # plant step
+        Bu = B[:, iu]
+        if friction:
+            self.kind = "etd"
+            sel, col, fc = [], [], []
+            for b, v in sorted(friction.items()):
+                if b == "m":
+                    sel.append(states.index("dtheta_m"))
+                    col.append(B[:, cont.input_names.index("T_fr")])
+                else:
+                    j = states.index(f"dtheta_{b}")
+                    sel.append(j)
+                    col.append(np.eye(nx)[j] / getattr(params.plant, f"J_{b}"))
+                fc.append(v)
+            self.friction = (np.array(sel), np.array(col).T, np.array(fc))
+            self.n_sub0 = None          # chosen per sample (_run)
+        elif jitter:
+            self.kind = "jitter"
+            rho = np.abs(np.linalg.eigvals(A)).max()
+            self.n_sub0 = max(1, int(math.ceil(rho * 2 * JITTER_CLIP * jitter / JITTER_STEP_BOUND)))
+            if self.n_sub0 > MAX_SUBSTEPS:
+                raise ParameterError(f"[limits]: jitter = {jitter!r} s rms needs {self.n_sub0} substeps for this "
+                                     f"plant; allowed: a jitter below {MAX_SUBSTEPS * JITTER_STEP_BOUND / (2 * JITTER_CLIP * rho):g} s")
+            h = Ts / self.n_sub0
+            Phi, Gam = _zoh(A, Bu, h)
+            self.plant_parts = dict(Phi=Phi, Gamma=Gam, inv_n=1.0 / self.n_sub0)
+        else:
+            self.kind = "zoh"
+            self.n_sub0 = 1
+            # the linear loop's own sampled plant: with every limit off, the same numbers
+            self.plant_parts = dict(Phi=loop.plant.Phi, Gamma=loop.plant.Gamma[:, iu])
+        self.A, self.Bu = A, Bu
+        self.Bu_d = loop.plant.Gamma[:, iu]
+
+    def etd_levels(self, fractions=None):
+        """The ETDRK4 substep's matrices for 2^j substeps per sample, j = 0 .. LEVELS - 1
+        (h = Ts / 2^j); friction entry b has ``fractions[b]`` of its slope at v = 0, Fc / v_s,
+        moved into the linear part (integrated exactly) and out of the explicit stages.
+
+        One expm at the finest half step of the block matrix [[A, B, W, 0, 0], [0, 0, 0, 0, 0],
+        [0, 0, 0, I, 0], [0, 0, 0, 0, I], 0] (W: the friction columns), whose exponential's top
+        row is [e^(A h), Gamma(h), h phi_1 W, h^2 phi_2 W, h^3 phi_3 W]; every coarser step by
+        squaring (expm's own scaling and squaring, continued)."""
+        sel, col, fc = self.friction
+        n, nu, m = self.nx, self.Bu.shape[1], len(sel)
+        Fsel = np.zeros((m, n))
+        Fsel[np.arange(m), sel] = 1.0
+        lin = (np.zeros(m) if fractions is None else np.asarray(fractions)) * fc / self.limits.friction_velocity
+        A = self.A - col @ (lin[:, None] * Fsel)
+        size = n + nu + 3 * m
+        K = np.zeros((size, size))
+        o = n + nu
+        K[:n, :n], K[:n, n:o], K[:n, o:o + m] = A, self.Bu, col
+        K[o:o + m, o + m:o + 2 * m] = np.eye(m)
+        K[o + m:o + 2 * m, o + 2 * m:] = np.eye(m)
+        h = self.Ts / 2 ** LEVELS                       # the finest level's half step
+        E = scipy.linalg.expm(K * h)
+        steps = []
+        for _ in range(LEVELS + 1):                     # steps[i]: over Ts / 2^(LEVELS - i)
+            top = E[:n]
+            phis = [top[:, o + k * m:o + (k + 1) * m] / h ** (k + 1) for k in range(3)]
+            steps.append((top[:, :n], top[:, n:o], phis, h))
+            E, h = E @ E, 2 * h
+        out = []
+        for j in range(LEVELS):
+            P, G, (p1, p2, p3), hj = steps[LEVELS - j]
+            Ph, Gh, (p1h, _, _), _ = steps[LEVELS - j - 1]
+            out.append(dict(Ph=Ph, Gh=Gh, P=P, G=G, Qh=hj / 2 * p1h, F1=hj * (p1 - 3 * p2 + 4 * p3),
+                            F2=hj * (p2 - 2 * p3), F3=hj * (-p2 + 4 * p3), Fsel=Fsel, Fc=fc,
+                            inv_vs=1.0 / self.limits.friction_velocity, lin=lin))
+        return out
+
+
+def _run(loop, setup: _Setup, P_gain, D_gain):
+    """(y (n, len(SIM_COLUMNS)), integrator info) of one gain point."""
+    Ac, Bc, Cc, Dc = (m[0] for m in controller_batch(loop, P_gain, D_gain))
+    nc = Ac.shape[0]
+    cx, cc = _capacity(setup.nx, nc)
+    names = L.sim_function_names(cx, cc)
+    ev = evaluators(loop.backend)
+    ctrl = _pack(L.sim_ctrl_layout(cx, cc), Ac=Ac, Bc=Bc, Cc=Cc, Dc=Dc, V_max=setup.V_max,
+                 RI_max=setup.RI_max, q_theta=setup.q_theta, q_T=setup.q_T,
+                 **{k: v[None, :] for k, v in setup.rows.items()})
+    x0 = _pad(setup.x0[:, None], cx, 1).ravel()
+    xc0 = np.zeros(cc)
+
+    def run(n_sub, parts, kind=setup.kind, **kw):
+        plant = parts if isinstance(parts, np.ndarray) else _pack(L.sim_plant_layout(kind, cx), **parts)
+        y, _x, _xc, extra = ev.run_simulation(names["sample"], names[kind], n_sub, x0, xc0, setup.exo,
+                                              ctrl, plant, **kw)
+        return y, extra
+
+    if setup.kind == "jitter":      # [A, B] padded block by block: the u columns follow all cx states
+        parts = dict(setup.plant_parts, M=np.hstack([_pad(setup.A, cx, cx), _pad(setup.Bu, cx, len(L.SIM_U))]))
+        return run(setup.n_sub0, parts)[0], {"integrator": "jitter", "n_sub": setup.n_sub0}
+    if setup.kind == "zoh":
+        return run(setup.n_sub0, setup.plant_parts)[0], {"integrator": "zoh", "n_sub": 1}
+    # Coulomb friction: the error is measured against each state's peak in the same run without
+    # friction (exact ZOH, a fraction of the cost); per sample the driver halves the substep
+    # until two successive levels agree within rtol of those peaks and keeps the finer one
+    # (RK4: its local error is about 1/15 of the difference; the local errors of the samples
+    # add up over a run, hence the margin)
+    _y, peaks = run(1, dict(Phi=loop.plant.Phi, Gamma=setup.Bu_d), kind="zoh", peaks=True)
+    scale = np.maximum(_pad(peaks[:, None], cx, 1).ravel(), 1e-12)
+    # the tanh's slope at the sample's velocity, to the nearest of SLOPES, goes into the exact
+    # linear part (a table per combination over the bodies), so that the explicit stages see
+    # only its change over the sample: at stick the slope is steep (Fc / v_s), while sliding
+    # the torque is nearly constant (the tables depend on the plant only: built once per setup)
+    nf = len(setup.friction[0])
+    slopes = SLOPES[min(len(SLOPES) - 1, nf - 1)]
+    if getattr(setup, "etd_table", None) is None or setup.etd_table[0] != cx:
+        K = len(slopes)              # table index: sum_r (slope index of row r) K^r (driver.c)
+        combos = [[slopes[i // K ** r % K] for r in range(nf)] for i in range(K ** nf)]
+        parts = [p for c in combos for p in setup.etd_levels(c)]
+        setup.etd_table = (cx, _pack_many(L.sim_plant_layout("etd", cx), parts))
+    rows = np.zeros((nf, cx))
+    rows[np.arange(nf), setup.friction[0]] = 1.0 / setup.limits.friction_velocity
+    y, lev = run(LEVELS, setup.etd_table[1], scale=scale, tol=setup.rtol, stick_rows=rows, slopes=slopes)
+    subs = 2.0 ** lev
+    return y, {"integrator": "etdrk4, substeps per sample by step doubling", "n_sub": float(subs.mean()),
+               "n_sub_max": int(subs.max()), "rtol": setup.rtol}
+
+
+def _result(loop, setup, P_gain, D_gain, y, info):
+    col = {c: y[:, i] for i, c in enumerate(L.SIM_COLUMNS)}
+    sat = col["saturated"] > 0.5
+    dt = np.diff(np.append(setup.time, setup.time[-1] + setup.Ts))
+    sat_time = float(dt[sat].sum())
+    floor = max(setup.q_T, 3 * (setup.limits.torque_noise or 0.0), 1e-9)
+    amp, freq = detect_oscillation(setup.time, col["torque"], floor=floor)
+    meta = loop.provenance(
+        analysis="simulate", P_gain=float(P_gain), D_gain=float(D_gain), experiment=setup.experiment,
+        experiment_definition=EXPERIMENTS[setup.experiment], amplitude=setup.amplitude,
+        duration=setup.duration, seed=setup.seed, limits=setup.limits.active, **info,
+        saturation_time=sat_time, limit_cycle=None if not np.isfinite(amp) else
+        {"amplitude_Nm": amp, "frequency_Hz": freq, "signal": "torque"})
+    return Simulation(setup.time.copy(), col["theta"], col["velocity"], col["torque"], col["torque_ref"],
+                      col["voltage"], col["current"], sat, sat_time, amp, freq, meta)
+
+
+@loop_first
+def simulate(loop, P_gain: float, D_gain: float, *, limits: Limits | None = None,
+             experiment: str = "disturbance-step", amplitude: float | None = None,
+             duration: float = 1.0, seed: int = 0, rtol: float = DEFAULT_RTOL,
+             chirp_f1: float | None = None) -> Simulation:
+    """Simulate the sampled-data loop with the limits at one gain point.
+
+    Parameters
+    ----------
+    loop : ClosedLoop
+        Plant, controller and options (the same loop the linear analyses take).
+    P_gain, D_gain : float
+        Impedance gains of Eq. (8), Nm/rad and Nms/rad.
+    limits : Limits, optional
+        Default the parameter file's ``[limits]`` (``loop.params.limits``); ``Limits()`` is the
+        linear loop.
+    experiment : str
+        A key of :data:`EXPERIMENTS`.
+    amplitude : float, optional
+        A of the experiment (Nm or rad); default :data:`DEFAULT_AMPLITUDE`.
+    duration : float
+        Seconds; the run has ceil(duration / Ts) + 1 samples from t = 0.
+    seed : int
+        Seed of the torque noise and the jitter (numpy ``default_rng``).
+    rtol : float
+        Error bound of the friction integrator (relative to each signal's peak).
+    chirp_f1 : float, optional
+        End frequency of the chirp, Hz (default 0.1 / Ts); it starts at :data:`CHIRP_F0`.
+
+    Returns
+    -------
+    Simulation
+    """
+    P = _number("P_gain", P_gain, "a finite number (Nm/rad)", lambda v: True)
+    D = _number("D_gain", D_gain, "a finite number (Nms/rad)", lambda v: True)
+    # small matrices only: BLAS threads cost more than they give (16 ms vs 30 us for one
+    # expm of HyQ's plant on the 2-core machine under load)
+    with blas_limits(1):
+        setup = _Setup(loop, limits, experiment, amplitude, duration, seed, chirp_f1)
+        setup.rtol = _number("rtol", rtol, "a number in (0, 0.1)", lambda v: 0 < v < 0.1)
+        y, info = _run(loop, setup, P, D)
+        return _result(loop, setup, P, D, y, info)
+
+
+@loop_first
+def simulate_batch(loop, P_gain, D_gain, *, limits: Limits | None = None,
+                   experiment: str = "disturbance-step", amplitude: float | None = None,
+                   duration: float = 1.0, seed: int = 0, rtol: float = DEFAULT_RTOL) -> SimulationBatch:
+    """:func:`simulate` at k gain points (``P_gain``, ``D_gain`` broadcast), summarised per point
+    (:class:`SimulationBatch`); the plant's matrices and the inputs are built once."""
+    P, D = (np.atleast_1d(np.asarray(v, float)).ravel() for v in np.broadcast_arrays(P_gain, D_gain))
+    if not (np.all(np.isfinite(P)) and np.all(np.isfinite(D))):
+        raise ParameterError("P_gain, D_gain: not finite; allowed: finite gains (Nm/rad, Nms/rad)")
+    with blas_limits(1):
+        return _batch(loop, P, D, limits, experiment, amplitude, duration, seed, rtol)
+
+
+def _batch(loop, P, D, limits, experiment, amplitude, duration, seed, rtol):
+    setup = _Setup(loop, limits, experiment, amplitude, duration, seed, None)
+    setup.rtol = _number("rtol", rtol, "a number in (0, 0.1)", lambda v: 0 < v < 0.1)
+    k = P.size
+    sat, amp, freq, fin, growth = (np.empty(k) for _ in range(5))
+    status = np.empty(k, dtype=object)
+    tail = max(1, setup.n // 10)
+    for i in range(k):
+        y, _info = _run(loop, setup, P[i], D[i])
+        r = _result(loop, setup, P[i], D[i], y, _info)
+        sat[i], amp[i], freq[i] = r.saturation_time, r.cycle_amplitude, r.cycle_frequency
+        fin[i] = r.theta[-tail:].mean()
+        # the torque's swing over the last quarter of the run and the quarter's before
+        q = max(1, setup.n // 4)
+        swing = [np.ptp(r.torque[-(j + 1) * q:len(r.torque) - j * q]) for j in (0, 1)]
+        growth[i] = swing[0] / swing[1] if swing[1] > 0 else (math.inf if swing[0] > 0 else 1.0)
+        status[i] = ("non-finite" if not np.all(np.isfinite(y)) else "limit cycle" if r.limit_cycle
+                     else "saturating" if sat[i] > setup.duration / 2 else "no limit cycle")
+    meta = loop.provenance(analysis="simulate_batch", experiment=experiment, amplitude=setup.amplitude,
+                           duration=setup.duration, seed=seed, limits=setup.limits.active)
+    return SimulationBatch(P, D, sat, amp, freq, fin, growth, status.astype(str), meta)

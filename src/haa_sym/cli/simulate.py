@@ -1,0 +1,60 @@
+"""``haa-sym simulate``: the nonlinear sampled-data simulation of one gain point (docs/simulate.md)."""
+from __future__ import annotations
+
+from haa_sym.analysis.simulate import CSV_COLUMNS, DEFAULT_AMPLITUDE, EXPERIMENTS, simulate
+from haa_sym.io.outputs import csv_text
+from haa_sym.loop import ClosedLoop
+
+from haa_sym.cli.common import (TITLE_HELP, _check_out, _common, _gain_flags, _loaded, _params,
+                                _parse_options, _plots, _points, _write_outputs, _wrote, figure_title)
+
+EXPERIMENT_HELP = "; ".join(f"{k}: {v}" for k, v in EXPERIMENTS.items())
+
+
+def _cmd_simulate(args) -> int:
+    file_params = _loaded(args)
+    params, options = _params(args, file_params), _parse_options(args.option)
+    out = _check_out(args.out, "simulate", suffixes=(".csv",))
+    plot = _check_out(args.plot, "simulate", "--plot")
+    if plot and args.title:
+        _plots().check_title(args.title, "--title")
+    P, D = _points(args, "simulate")
+    loop = ClosedLoop(params, options)
+    title = figure_title(loop, file_params, args.configuration, args.title)
+    s = simulate(loop, float(P[0]), float(D[0]), experiment=args.experiment, amplitude=args.amplitude,
+                 duration=args.duration, seed=args.seed)
+    cols = s.columns()
+    rows = [{c: f"{cols[c][k]:.12g}" for c in CSV_COLUMNS} for k in range(len(s.time))]
+    cycle = (f"limit cycle: amplitude {s.cycle_amplitude:.6g} Nm, frequency {s.cycle_frequency:.6g} Hz"
+             if s.limit_cycle else "no limit cycle")
+    _write_outputs(out, plot, lambda path, tx: tx.write_text(path, csv_text(rows), "--out"),
+                   lambda: _plots().plot_simulation(s.time, cols, s.saturated, title, cycle))
+    m = s.meta
+    integ = m["integrator"] + (f", {m['n_sub']:.3g} substeps per sample" if m["n_sub"] > 1 else "")
+    if "n_sub_max" in m:
+        integ += f" (at most {m['n_sub_max']}; rtol {m['rtol']:g})"
+    lim = ", ".join(f"{k} = {v:g}" if isinstance(v, (int, float)) else f"{k} = {v}"
+                    for k, v in m["limits"].items()) or "none (the linear loop)"
+    print(f"{args.experiment} (A = {s.meta['amplitude']:g}), {len(s.time)} samples over {s.time[-1]:.6g} s; "
+          f"limits: {lim}; {integ}")
+    print(f"time in saturation: {s.saturation_time:.6g} s ({100 * s.saturation_time / max(args.duration, 1e-300):.3g} %); "
+          f"{cycle} (torque signal, last half of the run)" + _wrote(out))
+    return 0
+
+
+def register(sub) -> dict:
+    p = sub.add_parser("simulate", help="nonlinear simulation with the [limits] of the parameter file "
+                                        "(saturation, friction, quantisation, noise, jitter)")
+    _common(p)
+    _gain_flags(p, None, None, "one gain point")
+    p.add_argument("--experiment", required=True, choices=list(EXPERIMENTS), metavar="KIND",
+                   help=f"{EXPERIMENT_HELP} (choices: {', '.join(EXPERIMENTS)})")
+    p.add_argument("--amplitude", type=float, default=None, metavar="A",
+                   help="the experiment's amplitude A (Nm or rad); default "
+                        + ", ".join(f"{k} {v:g}" for k, v in DEFAULT_AMPLITUDE.items()))
+    p.add_argument("--duration", type=float, required=True, metavar="S", help="seconds")
+    p.add_argument("--seed", type=int, default=0, help="seed of the torque noise and the jitter (default 0)")
+    p.add_argument("--out", help="output .csv: " + ", ".join(CSV_COLUMNS))
+    p.add_argument("--plot", help="figure file (.png/.pdf/.svg)")
+    p.add_argument("--title", help=TITLE_HELP)
+    return {"simulate": _cmd_simulate}
