@@ -47,13 +47,17 @@ from haa_sym.model.params import (CONTROLLER_KEYS, actuator_path, apply_sets, ga
                                   parse_set)
 
 __all__ = ["ViewState", "Resolved", "View", "Detail", "resolve", "compute_view", "point_detail", "to_query",
-           "from_query", "MAX_POINTS", "STEP_DURATION_S", "CATEGORIES", "categories", "view_summary", "dumps",
-           "parse_point", "state_dict"]
+           "from_query", "MAX_POINTS", "CURVE_LINES", "STEP_DURATION_S", "CATEGORIES", "categories", "view_summary", "dumps",
+           "parse_point", "state_dict", "plain"]
 
 # The page's own limit on a map's points, on top of the memory budget: a map within the budget
 # can still take minutes (1e8 points), and the page answers every change; 1,000,000 points
 # (1000 x 1000) decide in about 1-3 s.
 MAX_POINTS = 1_000_000
+# Lines of each family on which the drawn passivity curve is located (boundaries' n_lines; the
+# CLI's `boundary` uses 101): 41 keep a change's redraw under 250 ms; the map's decisions do not
+# depend on it (they use the exact crossings of every D_gain row), only the drawn polyline's density.
+CURVE_LINES = 41
 # The window of the torque and impedance step responses, s (Fig. 7's).
 STEP_DURATION_S = 0.3
 # The map's categories, one per point (the page's colours; io.plots.plot_region's classes plus
@@ -282,7 +286,8 @@ def compute_view(state: ViewState, resolved: Resolved | None = None) -> View:
     m = region_map(loop, P, D, progress=False)
     curves = []
     if loop.options.conventions.pm_loop == "impedance":          # the curves are the impedance loop's
-        b = boundaries(loop, P_range=(float(P.min()), float(P.max())), D_range=(float(D.min()), float(D.max())))
+        b = boundaries(loop, P_range=(float(P.min()), float(P.max())), D_range=(float(D.min()), float(D.max())),
+                       n_lines=CURVE_LINES)
         for family, cs in (("stability", b.stability.curves), ("pm", b.phase_margin), ("passivity", b.passivity)):
             curves += [{"family": family, "kind": c.kind, "P_gain": np.asarray(c.P_gain, float),
                         "D_gain": np.asarray(c.D_gain, float)} for c in cs]
@@ -382,16 +387,16 @@ class Detail:
         """Plain JSON-able data (poles as [re, im] pairs)."""
         d = asdict(self)
         d["poles"] = [[float(z.real), float(z.imag)] for z in self.poles]
-        return _plain(d)
+        return plain(d)
 
 
-def _plain(v):
+def plain(v):
     if isinstance(v, dict):
-        return {k: _plain(x) for k, x in v.items()}
+        return {k: plain(x) for k, x in v.items()}
     if isinstance(v, (list, tuple)):
-        return [_plain(x) for x in v]
+        return [plain(x) for x in v]
     if isinstance(v, np.ndarray):
-        return _plain(v.tolist())
+        return plain(v.tolist())
     if isinstance(v, (np.floating, float)):
         return float(v) if math.isfinite(v) else None
     if isinstance(v, (np.integer, np.bool_)):
@@ -440,7 +445,7 @@ def view_summary(view: View) -> dict:
 
 def dumps(data) -> str:
     """JSON of plain data (NaN and inf as null)."""
-    return json.dumps(_plain(data), separators=(",", ":"))
+    return json.dumps(plain(data), separators=(",", ":"))
 
 
 def state_dict(state: ViewState) -> dict:
