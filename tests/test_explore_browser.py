@@ -142,6 +142,7 @@ class Tab:
     def click_map(self, fx, fy):
         """Click the map at fractions (fx, fy) of its canvas; returns the seconds to the detail."""
         bb = self.page.locator(".bk-Canvas").first.bounding_box()
+        self.page.wait_for_timeout(600)        # two clicks in quick succession are a double tap
         self.page.mouse.move(bb["x"] + bb["width"] * fx, bb["y"] + bb["height"] * fy)
         t = time.perf_counter()
         self.page.mouse.down()
@@ -179,7 +180,6 @@ def test_controls_redraw_the_library_map_fast(server, browser):
     for beta in ("2", "3", "1.5", "2.5", "0.8", "4", "1.2", "3.5", "1.8", "1"):
         times.append(tab.type(".ex-set-beta", beta))
         server_ms.append(tab.view()["compute_ms"])
-        print("DEBUG", round(1e3*(time.time() - tab.view()["t_sent"])), round(1e3*times[-1]), server_ms[-1])
     v = tab.view()
     assert v["query"] == "set.beta=1" and v["category"] == _library_categories(v["query"])
     times.append(tab.select(".ex-configuration", "retracted"))
@@ -262,9 +262,12 @@ def test_bad_input_shows_the_clis_message_and_the_server_keeps_running(server, b
         assert tab.error() == _refusal(state), text
         assert tab.view()["error"] == _refusal(state)[len("haa-sym: error: "):]
         tab.type(css, "" if css.startswith(".ex-set") else "log:1:20000:200")
-    tab.type(".ex-D_gain", "lin:1:50:100000")                  # 20 million points: the memory budget
-    assert "memory" in tab.error() and tab.error() == _refusal(
-        ViewState(D_gain="lin:1:50:100000"))
+    # 1e10 points: beyond the memory budget (the message of region_map's own gate)
+    tab.type(".ex-P_gain", "log:1:20000:100000")
+    tab.type(".ex-D_gain", "lin:1:50:100000")
+    huge = ViewState(P_gain="log:1:20000:100000", D_gain="lin:1:50:100000")
+    assert "memory budget" in tab.error() and tab.error() == _refusal(huge)
+    tab.type(".ex-P_gain", "log:1:20000:200")
     tab.type(".ex-D_gain", "lin:1:50:100")
     assert tab.error() is None and tab.view()["category"] == good["category"]
     assert server["proc"].poll() is None

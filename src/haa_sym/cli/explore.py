@@ -32,9 +32,12 @@ def _cmd_explore(args) -> int:
             raise ParameterError(f"--port {args.port}: {exc.strerror or exc}; allowed: a free port") from None
     print(f"haa-sym explore: serving http://127.0.0.1:{args.port}/ (127.0.0.1 only; Ctrl-C stops)", flush=True)
     try:
+        # Bokeh's server stops on SIGINT by itself and returns; a KeyboardInterrupt raised
+        # before its handler is installed ends the same way
         app.serve(state, port=args.port, show=not args.no_browser)
     except KeyboardInterrupt:
-        print("haa-sym explore: stopped", file=sys.stderr)
+        pass
+    print("haa-sym explore: stopped", file=sys.stderr)
     return 0
 
 

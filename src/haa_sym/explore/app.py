@@ -313,7 +313,7 @@ class _Page:
             summary = view_summary(v)
             # the server's share of a change's latency (the browser test reports the rest)
             summary.update(seq=self.seq, query=to_query(s), overlays=_overlay_summary(ov),
-                           compute_ms=round(1e3 * (time.perf_counter() - t0), 1), t_sent=time.time())
+                           compute_ms=round(1e3 * (time.perf_counter() - t0), 1))
             self.view_pre.object = _pre("explore-view", self.seq, summary)
             q = to_query(s)
             self.link.object = f'<a id="explore-link" href="?{html.escape(q)}">link to this view</a>'
