@@ -136,7 +136,7 @@ class _Page:
     # ------------------------------------------------------------------ layout
     def _figures(self):
         from bokeh.events import Tap
-        from bokeh.models import ColumnDataSource, LinearColorMapper
+        from bokeh.models import ColumnDataSource, LinearColorMapper, Span
         from bokeh.plotting import figure
         # a uniform grid (log or linear, as the axis) is one image, drawn fast; any other grid quads
         self.image_src = ColumnDataSource({"image": [], "x": [], "y": [], "dw": [], "dh": []})
@@ -180,10 +180,10 @@ class _Page:
         fp = figure(title="corrected phase of Z (deg)", x_axis_type="log", x_axis_label="omega (rad/s)", **small)
         fp.line("x", "y", source=self.phase_src)
         for y in (90, -90):
-            fp.line([1e-3, 1e6], [y, y], line_color="black", line_dash="dotted")
+            fp.add_layout(Span(location=y, dimension="width", line_color="black", line_dash="dotted"))
         ft = figure(title="torque step, impedance loop open (Nm)", x_axis_label="t (s)", **small)
         ft.line("x", "y", source=self.tstep_src)
-        fz = figure(title="impedance step: theta per 1 Nm on the port (rad)", x_axis_label="t (s)", **small)
+        fz = figure(title="impedance step: theta per Nm at the port", x_axis_label="t (s)", **small)
         fz.line("x", "y", source=self.zstep_src)
         fo = figure(title="closed-loop poles (z-plane)", match_aspect=True, **small)
         th = np.linspace(0, 2 * np.pi, 200)
