@@ -139,3 +139,40 @@ def test_point_detail_against_the_reference():
     assert d.impedance_step["final_value_rad_per_Nm"] == pytest.approx(dc, rel=1e-8)
     js = d.to_dict()
     assert js["P_gain"] == 300.0 and len(js["poles"]) == d.poles.size
+
+
+def test_overlays(tmp_path):
+    from haa_sym.design.schedule import CSV_COLUMNS
+    sched = tmp_path / "schedule.csv"
+    sched.write_text(",".join(CSV_COLUMNS) + "\n10,5,2.5,0.94,100,true,false\n20,5,,,,false,false\n")
+    meas = tmp_path / "measured.csv"
+    meas.write_text("P_gain,D_gain,outcome\n200,10,stable\n19000,1,unstable\n")
+    s = ViewState(P_gain="log:1:20000:12", D_gain="lin:1:50:6", schedule=str(sched), measured=str(meas))
+    v = compute_view(s)
+    sc, me = v.overlays["schedule"], v.overlays["measured"]
+    np.testing.assert_array_equal(sc["feasible"], [True, False])
+    assert sc["beta"][0] == 2.5 and np.isnan(sc["beta"][1])
+    assert me["outcome"] == ["stable", "unstable"]
+    # the model's prediction at the measured points: the reference's eigenvalues
+    loop = resolve(s).loop
+    rho = np.abs(reference.closed_loop_eigenvalues(loop, np.array([[200.0, 19000.0], [10.0, 1.0], [1.0, 1.0],
+                                                                   [loop.params.controller.alpha] * 2]))).max(axis=1)
+    np.testing.assert_array_equal(me["predicted_stable"], rho < 1)
+    bad = tmp_path / "bad.csv"
+    bad.write_text("P_gain,D_gain,outcome\n1,x,stable\n")
+    with pytest.raises(ParameterError, match="row 2: D_gain = 'x' is not a number"):
+        compute_view(s.replace(measured=str(bad), robust="", schedule=""))
+    with pytest.raises(ParameterError, match="missing column"):
+        compute_view(s.replace(schedule=str(meas), robust="", measured=""))
+    with pytest.raises(ParameterError, match="robust = 'x'"):
+        compute_view(s.replace(robust="x", schedule="", measured=""))
+
+
+def test_robust_overlay():
+    s = ViewState(P_gain="log:1:20000:12", D_gain="lin:1:50:6", robust="retracted:extended")
+    rb = compute_view(s).overlays["robust"]
+    # feasible only where both ends of the leg range are stable with PM >= 30 deg
+    for end in ("retracted", "extended"):
+        e = compute_view(s.replace(configuration=end, robust=""))
+        assert not (rb["feasible"] & ~(e.stable & ~e.low_pm)).any()
+    assert rb["feasible"].any() and rb["leg"] == ["retracted", "extended"]
