@@ -3,8 +3,8 @@ driven with playwright (Debian's /usr/bin/chromium, `make browser`), and what th
 (the JSON it exposes in ``#explore-view`` / ``#explore-detail``) compared with the library's own
 results for the same parameters, computed here in the test's process. Latencies are measured here
 and printed: a control change to the redrawn 200 x 100 map (median < 250 ms, worst < 1 s) and a
-click to the point's detail (median < 300 ms, worst < 1 s). Screenshots at three settings go to a
-temporary directory (printed)."""
+click to the point's detail (median < 300 ms, worst < 1 s). Screenshots at three settings (and one
+with overlays) go to a temporary directory (printed)."""
 import json
 import os
 import signal
@@ -15,6 +15,7 @@ import sys
 import tempfile
 import time
 import urllib.request
+from urllib.parse import urlencode
 from pathlib import Path
 
 import numpy as np
@@ -235,14 +236,24 @@ def test_click_shows_the_library_margins(server, browser):
 
 def test_screenshots_at_three_settings(server, browser):
     out = Path(tempfile.mkdtemp(prefix="haa_sym_explore_"))
+    measured = out / "measured.csv"
+    measured.write_text("P_gain,D_gain,outcome\n200,10,stable\n3000,2,unstable\n50,30,stable\n")
     settings = {"hyq_nominal": "?point=200%2C10",
                 "hyq_beta3_retracted": "?configuration=retracted&set.beta=3&point=1000%2C20",
+                # the overlays: measured points and the robust region over the leg range
+                "hyq_overlays": "?" + urlencode({"point": "200,10", "measured": str(measured), "robust": "on",
+                                                 "P_gain": "log:1:20000:100", "D_gain": "lin:1:50:50"}),
                 "sea": "?params=sea&point=50%2C1"}
     for name, query in settings.items():
         tab = Tab(browser, server["url"] + query)
         tab.detail_seq = tab._wait("explore-detail", 1)
         assert tab.error() is None
-        assert tab.view()["category"] == _library_categories(query)
+        v = tab.view()
+        assert v["category"] == _library_categories(query)
+        if name == "hyq_overlays":
+            lib = compute_view(from_query(query)).overlays
+            assert v["overlays"]["measured"]["predicted_stable"] == lib["measured"]["predicted_stable"].tolist()
+            assert v["overlays"]["robust_feasible"] == int(lib["robust"]["feasible"].sum()) > 0
         tab.page.screenshot(path=str(out / f"{name}.png"), full_page=True)
         assert (out / f"{name}.png").stat().st_size > 10_000
         tab.page.close()

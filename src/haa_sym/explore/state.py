@@ -55,8 +55,9 @@ __all__ = ["ViewState", "Resolved", "View", "Detail", "resolve", "compute_view",
 # (1000 x 1000) decide in about 1-3 s.
 MAX_POINTS = 1_000_000
 # Lines of each family on which the drawn passivity curve is located (boundaries' n_lines; the
-# CLI's `boundary` uses 101): 41 keep a change's redraw under 250 ms; the map's decisions do not
-# depend on it (they use the exact crossings of every D_gain row), only the drawn polyline's density.
+# CLI's `boundary` uses 101): the passivity curve is most of a change's computation and its cost
+# grows with the lines; the map's decisions do not depend on it (they use the exact crossings of
+# every D_gain row), only the drawn polyline's density (about 40 points per branch).
 CURVE_LINES = 41
 # The window of the torque and impedance step responses, s (Fig. 7's).
 STEP_DURATION_S = 0.3
