@@ -284,6 +284,22 @@ def compute_view(state: ViewState, resolved: Resolved | None = None) -> View:
     (:func:`haa_sym.analysis.boundaries.combined.boundaries`) and the overlays asked for."""
     r = resolve(state) if resolved is None else resolved
     loop, P, D = r.loop, r.P_gain, r.D_gain
+    m, curves = _map_and_curves(state.model_key(), state.P_gain, state.D_gain)
+    overlays = {"schedule": _schedule_overlay(state.schedule) if state.schedule else None,
+                "measured": _measured_overlay(state.measured, loop) if state.measured else None,
+                "robust": _robust_overlay(state.model_key(), state.P_gain, state.D_gain, state.robust)
+                if state.robust else None}
+    return View(P, D, m.stable, m.low_pm, m.passive, categories(m.stable, m.low_pm, m.passive), curves, overlays,
+                m.meta)
+
+
+@functools.lru_cache(maxsize=8)
+def _map_and_curves(model_key: tuple, P_text: str, D_text: str):
+    """The map and the exact curves of a state's model and grid, memoised: going back to a
+    setting seen before (an undo, a toggled overlay, a second tab) redraws at once. The loop is
+    :func:`_loop`'s for the same key, so the key captures every input."""
+    loop = _loop(model_key)[2]
+    P, D = gain_axis(P_text, "--P-gain", "P_gain"), gain_axis(D_text, "--D-gain", "D_gain")
     m = region_map(loop, P, D, progress=False)
     curves = []
     if loop.options.conventions.pm_loop == "impedance":          # the curves are the impedance loop's
@@ -292,11 +308,7 @@ def compute_view(state: ViewState, resolved: Resolved | None = None) -> View:
         for family, cs in (("stability", b.stability.curves), ("pm", b.phase_margin), ("passivity", b.passivity)):
             curves += [{"family": family, "kind": c.kind, "P_gain": np.asarray(c.P_gain, float),
                         "D_gain": np.asarray(c.D_gain, float)} for c in cs]
-    overlays = {"schedule": _schedule_overlay(state.schedule) if state.schedule else None,
-                "measured": _measured_overlay(state.measured, loop) if state.measured else None,
-                "robust": _robust_overlay(state.robust, loop, P, D) if state.robust else None}
-    return View(P, D, m.stable, m.low_pm, m.passive, categories(m.stable, m.low_pm, m.passive), curves, overlays,
-                m.meta)
+    return m, curves
 
 
 def _read_csv(path: str, field: str, required: tuple[str, ...]) -> list[dict]:
@@ -349,9 +361,13 @@ def _measured_overlay(path: str, loop) -> dict:
             "predicted_stable": np.asarray(loop.stability(P, D).stable, bool)}
 
 
-def _robust_overlay(text: str, loop, P, D) -> dict:
+@functools.lru_cache(maxsize=8)
+def _robust_overlay(model_key: tuple, P_text: str, D_text: str, text: str) -> dict:
     """The gains stable with PM >= 30 deg for every configuration of the leg range ("on": the
-    file's default range; "FROM:TO": two configurations), :func:`robust_region`."""
+    file's default range; "FROM:TO": two configurations), :func:`robust_region`; memoised as
+    :func:`_map_and_curves` (it maps every configuration of the range: seconds)."""
+    loop = _loop(model_key)[2]
+    P, D = gain_axis(P_text, "--P-gain", "P_gain"), gain_axis(D_text, "--D-gain", "D_gain")
     leg = None
     if text.strip().lower() != "on":
         a, sep, b = text.partition(":")
