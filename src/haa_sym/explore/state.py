@@ -37,6 +37,7 @@ from haa_sym.analysis.margins import margins
 from haa_sym.analysis.passivity import corrected_phase
 from haa_sym.analysis.regions import check_map_budget, region_map
 from haa_sym.analysis.robust import robust_region
+from haa_sym.analysis.sweep import BLAS_THREADS, blas_limits
 from haa_sym.analysis.torque import impedance_step, step_response
 from haa_sym.errors import ParameterError
 from haa_sym.io.gridspec import gain_axis
@@ -300,14 +301,18 @@ def _map_and_curves(model_key: tuple, P_text: str, D_text: str):
     :func:`_loop`'s for the same key, so the key captures every input."""
     loop = _loop(model_key)[2]
     P, D = gain_axis(P_text, "--P-gain", "P_gain"), gain_axis(D_text, "--D-gain", "D_gain")
-    m = region_map(loop, P, D, progress=False)
     curves = []
-    if loop.options.conventions.pm_loop == "impedance":          # the curves are the impedance loop's
-        b = boundaries(loop, P_range=(float(P.min()), float(P.max())), D_range=(float(D.min()), float(D.max())),
-                       n_lines=CURVE_LINES)
-        for family, cs in (("stability", b.stability.curves), ("pm", b.phase_margin), ("passivity", b.passivity)):
-            curves += [{"family": family, "kind": c.kind, "P_gain": np.asarray(c.P_gain, float),
-                        "D_gain": np.asarray(c.D_gain, float)} for c in cs]
+    # one BLAS thread for the whole view, as region_map's sweeps: the curves' small products gain
+    # nothing from a second thread and lose to it on a busy two-core machine (toolchain note)
+    with blas_limits(BLAS_THREADS):
+        m = region_map(loop, P, D, progress=False)
+        if loop.options.conventions.pm_loop == "impedance":      # the curves are the impedance loop's
+            b = boundaries(loop, P_range=(float(P.min()), float(P.max())),
+                           D_range=(float(D.min()), float(D.max())), n_lines=CURVE_LINES)
+            for family, cs in (("stability", b.stability.curves), ("pm", b.phase_margin),
+                               ("passivity", b.passivity)):
+                curves += [{"family": family, "kind": c.kind, "P_gain": np.asarray(c.P_gain, float),
+                            "D_gain": np.asarray(c.D_gain, float)} for c in cs]
     return m, curves
 
 
@@ -430,7 +435,11 @@ def _margins_dict(m) -> dict:
 def point_detail(state: ViewState, P_gain: float, D_gain: float, resolved: Resolved | None = None) -> Detail:
     """Everything the page shows for the gain point (``P_gain`` Nm/rad, ``D_gain`` Nms/rad)."""
     r = resolve(state) if resolved is None else resolved
-    loop = r.loop
+    with blas_limits(BLAS_THREADS):
+        return _point_detail(r.loop, P_gain, D_gain)
+
+
+def _point_detail(loop, P_gain, D_gain) -> Detail:
     P = float(gain_array("P_gain", P_gain, "point P_gain").reshape(()))
     D = float(gain_array("D_gain", D_gain, "point D_gain").reshape(()))
     st = loop.stability(P, D, radius=True)
