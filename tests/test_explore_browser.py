@@ -167,9 +167,18 @@ def _refusal(state: ViewState) -> str:
     return f"haa-sym: error: {exc.value}"
 
 
-def test_page_has_no_external_assets(server):
+def test_page_has_no_external_assets(server, browser):
     assert resources_are_local(server["html"]) == []
     assert "127.0.0.1" in server["url"]
+    # and the browser asks nothing of any other host while the page loads and draws
+    page = browser.new_page()
+    asked = []
+    page.on("request", lambda r: asked.append(r.url))
+    page.goto(server["url"])
+    page.wait_for_selector('#explore-view[data-seq="1"]', state="attached", timeout=60000)
+    page.close()
+    elsewhere = [u for u in asked if not u.startswith((server["url"], "ws://127.0.0.1", "data:", "blob:"))]
+    assert asked and not elsewhere, elsewhere
 
 
 def test_controls_redraw_the_library_map_fast(server, browser):
