@@ -294,6 +294,16 @@ def test_bad_input_shows_the_clis_message_and_the_server_keeps_running(server, b
     tab.page.close()
 
 
+def test_a_bad_url_is_refused_not_dropped(server, browser):
+    tab = Tab(browser, server["url"])
+    for query in ("set.bogus=1", "configuration=sitting", "option.delay=2", "set.velocity_filter=kalman",
+                  "set.P_t0=-1"):
+        tab.page.goto(server["url"] + "?" + query)
+        tab.seq = tab._wait("explore-view", 1)
+        assert tab.error() == _refusal(from_query(query)), query
+    tab.page.close()
+
+
 def test_two_tabs_at_once(server, browser):
     a = Tab(browser, server["url"] + "?set.beta=2")
     b = Tab(browser, server["url"] + "?params=harmonic_drive&P_gain=log:1:20000:60&D_gain=lin:1:50:30")

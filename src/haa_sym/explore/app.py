@@ -26,7 +26,7 @@ from haa_sym.explore.state import (CATEGORIES, ViewState, compute_view, dumps, f
                                    to_query, view_summary)
 from haa_sym.explore.export import export_view
 from haa_sym.model import filters
-from haa_sym.model.params import actuator_path, load_params
+from haa_sym.model.params import CONTROLLER_KEYS, CONTROLLER_UNITS, STRING_KEYS, actuator_path, load_params
 
 __all__ = ["page", "serve", "EXTRA_MISSING", "CATEGORY_COLORS", "available"]
 
@@ -98,10 +98,14 @@ class _Page:
         self.w_keys = {}
         for key in _CONTROL_KEYS:
             self.w_keys[key] = W.TextInput(name=key, value=sets.get(key, ""), css_classes=[f"ex-set-{key}"])
-        self.w_filter = W.Select(name="velocity_filter", options=[""] + list(filters.names()),
-                                 value=sets.get("velocity_filter", ""), css_classes=["ex-set-velocity_filter"])
+        # a value from the URL that is not a choice stays selectable, so that the page refuses it
+        # with the CLI's message rather than dropping it
+        vf = sets.get("velocity_filter", "")
+        self.w_filter = W.Select(name="velocity_filter", options=_with([""] + list(filters.names()), vf), value=vf,
+                                 css_classes=["ex-set-velocity_filter"])
         opts = dict(s.options)
-        self.w_delay = W.Select(name="delay (samples)", options=["", "0", "1"], value=opts.get("delay", ""),
+        delay = opts.get("delay", "")
+        self.w_delay = W.Select(name="delay (samples)", options=_with(["", "0", "1"], delay), value=delay,
                                 css_classes=["ex-option-delay"])
         self.extra_options = {k: v for k, v in opts.items() if k != "delay"}
         self.w_P = W.TextInput(name="P_gain axis (Nm/rad)", value=s.P_gain, css_classes=["ex-P_gain"])
@@ -117,6 +121,7 @@ class _Page:
         self.w_export = W.Button(name="export actuator file + PNG + JSON", css_classes=["ex-export"])
         self.actuator_box = pn.Column()
         self.plant_inputs: dict = {}
+        self.extra_sets: dict = {}
         self.message = pn.pane.HTML("", css_classes=["ex-message"], sizing_mode="stretch_width")
         self.view_pre = pn.pane.HTML(_pre("explore-view", 0, {}), sizing_mode="stretch_width")
         self.detail_pre = pn.pane.HTML(_pre("explore-detail", 0, {}), sizing_mode="stretch_width")
@@ -217,29 +222,34 @@ class _Page:
         except ParameterError:
             return
         names = [""] + list(p.configurations)
-        self.w_config.options = names
-        self.w_config.value = configuration if configuration in names else ""
-        self.w_blend_to.options = names
-        self.w_blend_to.value = blend_to if blend_to in names else ""
+        self.w_config.options = _with(names, configuration)
+        self.w_config.value = configuration
+        self.w_blend_to.options = _with(names, blend_to)
+        self.w_blend_to.value = blend_to
         for w in self.plant_inputs.values():
             w.param.unwatch(w._ex_watcher)
         self.plant_inputs = {}
         top = p.plant.topology
-        for key in top.parameter_keys:
-            w = self.pn.widgets.TextInput(name=f"{key} ({top.units.get(key, '')})", value=str(sets.get(key, "")),
-                                          placeholder=f"{getattr(p.plant, key):g}", css_classes=[f"ex-set-{key}"],
-                                          width=260)
+        units = {**top.units, **CONTROLLER_UNITS}
+        # every plant key, and the controller's keys without a control of their own (P_t0, I_t0)
+        keys = list(top.parameter_keys) + [k for k in CONTROLLER_KEYS if k not in _CONTROL_KEYS + STRING_KEYS]
+        for key in keys:
+            v = getattr(p.plant, key) if key in top.parameter_keys else getattr(p.controller, key)
+            w = self.pn.widgets.TextInput(name=f"{key} ({units.get(key, '')})", value=str(sets.get(key, "")),
+                                          placeholder=f"{v:g}", css_classes=[f"ex-set-{key}"], width=260)
             w._ex_watcher = w.param.watch(self._on_change, "value")
             self.plant_inputs[key] = w
         self.actuator_box.objects = list(self.plant_inputs.values())
+        # overrides of keys with no field (a URL's unknown key) stay in the state: refused, not dropped
+        self.extra_sets = {k: v for k, v in sets.items() if k not in keys and k not in _CONTROL_KEYS + STRING_KEYS}
         for key in ("beta", "alpha", "Ts") + tuple(filters.PARAMETERS):
             v = getattr(p.controller, key, None)
             self.w_keys[key].placeholder = "" if v is None else f"{v:g}"
-        self.w_filter.options = [""] + list(filters.names())
+        self.w_filter.options = _with([""] + list(filters.names()), self.w_filter.value)
 
     # ------------------------------------------------------------------ state
     def state(self) -> ViewState:
-        sets = [(k, w.value) for k, w in self.plant_inputs.items()]
+        sets = [(k, w.value) for k, w in self.plant_inputs.items()] + list(self.extra_sets.items())
         sets += [(k, self.w_keys[k].value) for k in _CONTROL_KEYS] + [("velocity_filter", self.w_filter.value)]
         s = ViewState(params=self.w_params.value.strip(), configuration=self.w_config.value or "",
                       blend_to=self.w_blend_to.value or "", blend=f"{self.w_blend.value:g}",
@@ -392,6 +402,10 @@ class _Page:
             return
         self.message.object = ('<div id="explore-exported">wrote ' + ", ".join(html.escape(str(p)) for p in written)
                                + "</div>")
+
+
+def _with(options: list, value: str) -> list:
+    return options if value in options else options + [value]
 
 
 def _float(text: str) -> float:
