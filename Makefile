@@ -4,7 +4,7 @@ VENV   := .venv
 PY     := $(VENV)/bin/python
 STAMP  := $(VENV)/.installed
 
-.PHONY: all venv derive verify test test-slow check-generated paper bench bench-readme clean
+.PHONY: all venv derive verify test test-slow browser check-generated paper bench bench-readme clean
 
 all: verify
 
@@ -48,9 +48,17 @@ bench-readme:
 test: $(STAMP)
 	$(PY) -m pytest -q -m "not slow" $(PYTEST_ARGS)
 
-## The tests marked slow (a wheel, C libraries, a dask cluster, the quick reproduction, ...).
-test-slow: $(STAMP)
+## The tests marked slow (a wheel, C libraries, a dask cluster, the quick reproduction, the
+## explorer in headless chromium, ...).
+test-slow: $(STAMP) browser
 	$(PY) -m pytest -q -m slow $(PYTEST_ARGS)
+
+## Debian's chromium for tests/test_explore_browser.py (playwright drives /usr/bin/chromium; its
+## own browser download is not used). Installs it with apt-get when missing (as root).
+browser:
+	@command -v chromium >/dev/null 2>&1 && echo "chromium: $$(command -v chromium)" || { \
+	  if [ "$$(id -u)" = 0 ]; then apt-get update && apt-get install -y chromium; \
+	  else echo "chromium is missing: run \`sudo apt-get update && sudo apt-get install -y chromium\` (Debian/Ubuntu) and retry"; exit 1; fi; }
 
 ## Fail if `make derive` would change generated/.
 check-generated: $(STAMP)

@@ -19,6 +19,7 @@ LAYERS = (
     ("haa_sym.loop",),
     ("haa_sym.analysis",),
     ("haa_sym.design",),
+    ("haa_sym.explore",),
     ("haa_sym.check",),
     ("haa_sym.paper",),
     ("haa_sym.cli", "haa_sym.verify", "haa_sym"),
@@ -26,9 +27,10 @@ LAYERS = (
 # what a function may import lazily: dependencies that are heavy to import and needed by few
 # calls, the sympy layer (the numeric runtime never imports sympy) and the plotting module (it
 # imports matplotlib: a command that draws nothing does not pay for it); pint (0.75 s to import
-# and build its registry) only for a file written in units other than SI (haa_sym.model.units)
+# and build its registry) only for a file written in units other than SI (haa_sym.model.units);
+# panel and bokeh (the optional extra haa_sym[explore], 0.6 s to import) only by the explorer's page
 LAZY_ALLOWED = ("sympy", "dask", "distributed", "control", "matplotlib", "pint", "haa_sym.symbolic",
-                "haa_sym.io.plots")
+                "haa_sym.io.plots", "panel", "bokeh")
 
 
 def _modules():

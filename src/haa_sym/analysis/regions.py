@@ -43,7 +43,7 @@ from haa_sym.io.progress import progress as progress_bar
 from haa_sym.model.params import gain_array
 from haa_sym.loop import loop_first
 
-__all__ = ["RegionMap", "region_map", "MAP_METHODS"]
+__all__ = ["RegionMap", "region_map", "MAP_METHODS", "check_map_budget"]
 
 # how a map is decided: from the exact boundaries (default) or point by point on the grid
 MAP_METHODS = ("curves", "grid")
@@ -75,6 +75,16 @@ class RegionMap:
     def load(cls, path: str | Path) -> "RegionMap":
         arrays, meta = load_npz(path)
         return cls(meta=meta, **arrays)
+
+
+def check_map_budget(loop, n_P: int, n_D: int) -> None:
+    """Refuse (:class:`ParameterError`) a map of ``n_P`` x ``n_D`` points that would exceed the
+    memory budget, before any work: the gate of :func:`region_map`, also asked by callers that
+    validate before they compute (the explorer)."""
+    n_omega = loop.options.numerics.n_omega
+    check_memory(sweep_bytes(n_P * n_D, n_omega, CHUNK),
+                 f"a region map of {n_P} x {n_D} (P_gain x D_gain) points on n_omega = "
+                 f"{n_omega} frequencies")
 
 
 @loop_first
@@ -131,10 +141,7 @@ def region_map(loop, P_gain, D_gain, *, beta: float | None = None, alpha: float 
     if method not in MAP_METHODS:
         raise ParameterError(f"method = {method!r}; allowed: {list(MAP_METHODS)}")
     _, _, beta, alpha = loop.gain_points(0.0, 0.0, beta, alpha)
-    n_omega = loop.options.numerics.n_omega
-    check_memory(sweep_bytes(P.size * D.size, n_omega, CHUNK),
-                 f"a region map of {P.size} x {D.size} (P_gain x D_gain) points on n_omega = "
-                 f"{n_omega} frequencies")
+    check_map_budget(loop, P.size, D.size)
     shape = (P.size, D.size)
     if method == "curves" and loop.options.conventions.pm_loop == "impedance":
         with progress_bar(P.size * D.size, "region map (from the curves)", "pt", progress) as bar:

@@ -26,7 +26,7 @@ from haa_sym.model.params import Params, gain_array
 from haa_sym.loop import loop_first
 
 __all__ = ["StepResponse", "step_response", "step_info", "dc_gain", "describe_step",
-           "torque_bandwidth", "STEP_CONVENTION"]
+           "torque_bandwidth", "STEP_CONVENTION", "ImpedanceStep", "impedance_step"]
 
 
 # python-control ``step_info`` / MATLAB ``stepinfo`` defaults
@@ -278,3 +278,58 @@ def torque_loop_margins(loop, *, beta: float | None = None, alpha: float | None 
     design targets: PM > 30 deg, GM > 12 dB at the leg-inertia and stiffness bounds), located
     exactly (:func:`haa_sym.analysis.margins.margins`)."""
     return margins(loop, 0.0, 0.0, beta, alpha, which="L_t")
+
+
+@dataclass(frozen=True)
+class ImpedanceStep:
+    """:func:`impedance_step`: samples ``t`` (s) and the encoder angle ``theta`` (rad) after a
+    unit step of the external torque T_dist (1 Nm) on the port at t = 0, with the impedance loop
+    closed; ``final_value`` (rad/Nm) is the closed loop's DC compliance, C (I - A)^-1 B + D, NaN
+    when the loop is not asymptotically stable (no steady state)."""
+
+    t: np.ndarray
+    theta: np.ndarray
+    final_value: float
+
+
+@loop_first
+def impedance_step(loop, P_gain: float = 0.0, D_gain: float = 0.0, *, duration: float = 0.3,
+                   beta: float | None = None, alpha: float | None = None) -> ImpedanceStep:
+    """The rendered impedance in the time domain: the encoder angle after a unit torque step
+    on the port, impedance loop closed at one gain point (theta_ref = 0; an ideal spring
+    P_gain would settle at 1 / P_gain rad per Nm, less where the port body has its own
+    stiffness to ground).
+
+    Parameters
+    ----------
+    loop : ClosedLoop
+    P_gain, D_gain : float
+        Impedance stiffness (Nm/rad) and damping (Nms/rad), Eq. (8); one point.
+    duration : float
+        Simulated time, s.
+    beta, alpha : float, optional
+        Torque-gain scale (Eq. 7) and velocity compensation (Eq. 6).
+
+    Returns
+    -------
+    ImpedanceStep
+    """
+    if not np.isfinite(duration) or duration <= 0:
+        raise ParameterError(f"duration = {duration!r}; allowed: a finite time > 0 (s)")
+    P, D, beta, alpha = loop.gain_points(P_gain, D_gain, beta, alpha)
+    if P.size != 1:
+        raise ParameterError(f"P_gain has {P.size} values; allowed: one gain point")
+    Ts = loop.params.controller.Ts
+    n = int(round(duration / Ts)) + 1
+    check_memory(16 * n, f"duration = {duration!r} s: a step response of {float(n):.4g} samples")
+    A, B, C, Dm = (m[0] for m in closed_loop_batch(loop, P, D, beta, alpha))
+    i_theta = 1                                     # outputs [T_meas, theta_encoder, port velocity, y]
+    x = np.zeros(A.shape[0])
+    theta = np.empty(n)
+    for k in range(n):
+        theta[k] = C[i_theta] @ x + Dm[i_theta, 0]
+        x = A @ x + B[:, 0]
+    stable = bool(np.all(loop.stability(P, D, beta, alpha).stable))
+    final = float(C[i_theta] @ np.linalg.solve(np.eye(A.shape[0]) - A, B[:, 0]) + Dm[i_theta, 0]) \
+        if stable else float("nan")
+    return ImpedanceStep(np.arange(n) * Ts, theta, final)

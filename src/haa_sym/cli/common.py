@@ -12,77 +12,24 @@ import numpy as np
 from haa_sym.analysis.measured import agreement
 from haa_sym.analysis.robust import check_uncertainty, leg_text, leg_values, uncertainty_text
 from haa_sym.errors import ParameterError
-from haa_sym.io.gridspec import grid
+from haa_sym.io.gridspec import gain_axis
 from haa_sym.io.measured import read_measured
 from haa_sym.io.uncertainty import fit_box, fit_values, read_fit
 from haa_sym.io.outputs import Transaction, check_file
 from haa_sym.loop import ClosedLoop, LoopOptions
+from haa_sym.loop.options import parse_options
 from haa_sym.model import filters
-from haa_sym.model.params import (CONTROLLER_KEYS, CONTROLLER_UNITS, STRING_KEYS, actuator_path, gain_array,
-                                  load_params)
+from haa_sym.model.params import (CONTROLLER_KEYS, CONTROLLER_UNITS, actuator_path, apply_sets,
+                                  load_params, parse_set)
 
 
 OUTPUT_SUFFIXES = {"regions": (".npz",), "passivity": (".csv", ".json"), "step": (".csv",),
                    "boundary": (".json",), "contact": (".json",), "schedule": (".csv",)}
 
 
-def _parse_set(items: list[str], known: tuple[str, ...] | None = None) -> dict[str, float]:
-    out = {}
-    for item in items:
-        key, sep, value = item.partition("=")
-        if not sep:
-            raise ParameterError(f"--set {item!r}: expected KEY=VALUE")
-        key, value = key.strip(), value.strip()
-        if key in STRING_KEYS:          # a choice by name (velocity_filter), checked by Controller
-            out[key] = value
-            continue
-        try:
-            # an integer stays one, so that messages show the value as typed (N_av = 0, not 0.0)
-            out[key] = int(value) if value.lstrip("+-").isdigit() else float(value)
-        except ValueError:
-            if known is not None and key not in known:    # the key is the mistake, not the value
-                raise ParameterError(f"--set {key}={value}: unknown parameter key(s) {[key]}; "
-                                     f"allowed: {list(known)}") from None
-            raise ParameterError(f"--set {key}={value}: {value!r} is not a number; allowed: a finite "
-                                 "number") from None
-    return out
-
-
-def _parse_options(items: list[str]):
-    fields = LoopOptions.field_names()
-    out = {}
-    for item in items:
-        key, sep, value = item.partition("=")
-        key, value = key.strip(), value.strip()
-        if not sep:
-            raise ParameterError(f"--option {item!r}: expected KEY=VALUE")
-        if key not in fields:
-            raise ParameterError(f"--option {item!r}: unknown option {key!r}; allowed: {list(fields)}")
-        kind, optional = LoopOptions.field_type(key)
-        try:
-            if optional and value.lower() == "none":        # the actuator file's default
-                out[key] = None
-            elif kind is bool:
-                if value.lower() not in ("true", "false", "1", "0"):
-                    raise ValueError
-                out[key] = value.lower() in ("true", "1")
-            elif kind is int:
-                out[key] = int(value)
-            elif kind is float:
-                out[key] = float(value)
-            else:
-                out[key] = value
-        except ValueError:
-            allowed = {bool: "true or false", int: "an integer", float: "a number"}.get(kind, "text")
-            raise ParameterError(f"--option {item!r}: {value!r} is not a valid {kind.__name__}; "
-                                 f"allowed: {allowed}{' or none' if optional else ''}") from None
-    try:
-        options = LoopOptions(**out)
-        # the one budget gate of the frequency grid, before any command builds or prints anything
-        options.numerics.check_budget()
-    except ParameterError as exc:
-        raise ParameterError(f"--option {exc}") from None
-    return options
+# the one parser of --set and --option, shared with the explorer (haa_sym.explore.state)
+_parse_set = parse_set
+_parse_options = parse_options
 
 
 class _Parser(argparse.ArgumentParser):
@@ -121,15 +68,7 @@ def _params(args, params=None):
     ``--set`` applied."""
     params = _loaded(args) if params is None else params
     sets = _parse_set(args.set, tuple(params.plant.topology.parameter_keys) + CONTROLLER_KEYS)
-    if not sets:
-        return params
-    try:                  # all at once: velocity_filter and its keys (f_c) are only valid together
-        return params.with_values(**sets)
-    except ParameterError as exc:
-        msg = str(exc)
-        named = [k for k in sets if msg.startswith((f"{k} ", f"unknown parameter key(s) ['{k}'"))]
-        given = " ".join(f"--set {k}={v}" for k, v in sets.items() if not named or k in named)
-        raise ParameterError(f"{given}: {msg}") from None
+    return apply_sets(params, sets)
 
 
 def _check_out(path: str | None, cmd: str, flag: str = "--out", suffixes: tuple[str, ...] | None = None) -> Path | None:
@@ -157,13 +96,7 @@ GRID_SHORT = "log:START:STOP:N, lin:START:STOP:N, V1,V2,... or one value V (>= 0
 def _axis(args, name: str) -> np.ndarray:
     """The values of ``--P-gain`` / ``--D-gain``: a grid spec, a list or one value (one syntax,
     :mod:`haa_sym.io.gridspec`, in every command)."""
-    spec, flag = getattr(args, name), GAIN_FLAGS[name][0]
-    try:
-        value = float(spec)
-    except (TypeError, ValueError):
-        return grid(spec, flag)
-    # one value: the gain rule's own message, which names the unit (--P-gain = -200.0 is out of range)
-    return gain_array(name, value, flag).reshape(1)
+    return gain_axis(getattr(args, name), GAIN_FLAGS[name][0], name)
 
 
 def _points(args, one: str | None = None) -> tuple[np.ndarray, np.ndarray]:

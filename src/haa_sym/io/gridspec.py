@@ -8,8 +8,9 @@ import numpy as np
 
 from haa_sym.errors import ParameterError
 from haa_sym.io.budget import check_memory
+from haa_sym.model.params import gain_array
 
-__all__ = ["grid", "GRID_SYNTAX"]
+__all__ = ["grid", "gain_axis", "GRID_SYNTAX"]
 
 GRID_SYNTAX = ("'log:START:STOP:N' (0 < START <= STOP), 'lin:START:STOP:N' (0 <= START <= STOP) or a "
                "comma-separated list of numbers >= 0, all finite, N an integer >= 1")
@@ -53,3 +54,14 @@ def grid(spec: str, name: str = "grid") -> np.ndarray:
         check_memory(16 * n, f"{name} = {spec!r}: a grid of {n} points")
         return np.logspace(np.log10(a), np.log10(b), n) if kind == "log" else np.linspace(a, b, n)
     return np.array([number(v) for v in s.split(",")])
+
+
+def gain_axis(spec, flag: str, name: str) -> np.ndarray:
+    """The values of a gain flag (``--P-gain``, the explorer's fields): a grid spec, a list, or
+    one value, which gets the gain rule's own message naming the unit (``name``: "P_gain" or
+    "D_gain"; ``flag``: how messages call the input)."""
+    try:
+        value = float(spec)
+    except (TypeError, ValueError):
+        return grid(spec, flag)
+    return gain_array(name, value, flag).reshape(1)

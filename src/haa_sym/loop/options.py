@@ -18,7 +18,8 @@ from haa_sym.errors import ParameterError
 from haa_sym.io.budget import check_memory, sweep_bytes
 
 __all__ = ["LoopOptions", "LoopStructure", "AnalysisConventions", "FrequencyGrid", "PORTS", "COLGATE",
-           "FILTERS", "PM_LOOPS", "PM_RULES", "ALLOWED"]
+           "FILTERS", "PM_LOOPS", "PM_RULES", "ALLOWED",
+           "parse_options"]
 
 PORTS = ("dtheta_L2", "dtheta_L1", "encoder_average")
 COLGATE = ("subtract", "add", "none")
@@ -280,3 +281,43 @@ class LoopOptions:
     def omega(self, Ts: float, n: int | None = None) -> np.ndarray:
         """The frequency grid (rad/s) of :attr:`numerics` for sampling time ``Ts``."""
         return self.numerics.omega(Ts, n)
+
+
+def parse_options(items: list[str]) -> LoopOptions:
+    """``KEY=VALUE`` texts (``--option``, the explorer's fields) as :class:`LoopOptions`, checked
+    against the memory budget of the frequency grid before anything is built. The one parser of
+    the CLI and the explorer."""
+    fields = LoopOptions.field_names()
+    out = {}
+    for item in items:
+        key, sep, value = item.partition("=")
+        key, value = key.strip(), value.strip()
+        if not sep:
+            raise ParameterError(f"--option {item!r}: expected KEY=VALUE")
+        if key not in fields:
+            raise ParameterError(f"--option {item!r}: unknown option {key!r}; allowed: {list(fields)}")
+        kind, optional = LoopOptions.field_type(key)
+        try:
+            if optional and value.lower() == "none":        # the actuator file's default
+                out[key] = None
+            elif kind is bool:
+                if value.lower() not in ("true", "false", "1", "0"):
+                    raise ValueError
+                out[key] = value.lower() in ("true", "1")
+            elif kind is int:
+                out[key] = int(value)
+            elif kind is float:
+                out[key] = float(value)
+            else:
+                out[key] = value
+        except ValueError:
+            allowed = {bool: "true or false", int: "an integer", float: "a number"}.get(kind, "text")
+            raise ParameterError(f"--option {item!r}: {value!r} is not a valid {kind.__name__}; "
+                                 f"allowed: {allowed}{' or none' if optional else ''}") from None
+    try:
+        options = LoopOptions(**out)
+        # the one budget gate of the frequency grid, before any command builds or prints anything
+        options.numerics.check_budget()
+    except ParameterError as exc:
+        raise ParameterError(f"--option {exc}") from None
+    return options

@@ -57,6 +57,8 @@ __all__ = [
     "bundled_actuators",
     "actuator_path",
     "ALIASES",
+    "parse_set",
+    "apply_sets",
 ]
 
 
@@ -623,3 +625,42 @@ def load_params(path: str | Path | None = None) -> Params:
     except OSError as exc:
         raise ParameterError(f"{p}: cannot read the parameter file ({exc.strerror or exc})") from None
     return parse_params(data, source=str(p))
+
+
+def parse_set(items: list[str], known: tuple[str, ...] | None = None) -> dict[str, float | int | str]:
+    """``KEY=VALUE`` texts (``--set``, the explorer's fields) as values: a number (an integer
+    stays one, so that messages show the value as typed: N_av = 0, not 0.0) or, for
+    :data:`STRING_KEYS`, the name. ``known``: the keys allowed (an unknown key with a non-number
+    value is reported as the key's mistake). The one parser of the CLI and the explorer."""
+    out = {}
+    for item in items:
+        key, sep, value = item.partition("=")
+        if not sep:
+            raise ParameterError(f"--set {item!r}: expected KEY=VALUE")
+        key, value = key.strip(), value.strip()
+        if key in STRING_KEYS:          # a choice by name (velocity_filter), checked by Controller
+            out[key] = value
+            continue
+        try:
+            out[key] = int(value) if value.lstrip("+-").isdigit() else float(value)
+        except ValueError:
+            if known is not None and key not in known:    # the key is the mistake, not the value
+                raise ParameterError(f"--set {key}={value}: unknown parameter key(s) {[key]}; "
+                                     f"allowed: {list(known)}") from None
+            raise ParameterError(f"--set {key}={value}: {value!r} is not a number; allowed: a finite "
+                                 "number") from None
+    return out
+
+
+def apply_sets(params: Params, sets: Mapping[str, object]) -> Params:
+    """``params`` with ``sets`` (from :func:`parse_set`) applied all at once (velocity_filter and
+    its keys, e.g. f_c, are only valid together); a refusal names the ``--set`` items at fault."""
+    if not sets:
+        return params
+    try:
+        return params.with_values(**sets)
+    except ParameterError as exc:
+        msg = str(exc)
+        named = [k for k in sets if msg.startswith((f"{k} ", f"unknown parameter key(s) ['{k}'"))]
+        given = " ".join(f"--set {k}={v}" for k, v in sets.items() if not named or k in named)
+        raise ParameterError(f"{given}: {msg}") from None

@@ -1,0 +1,490 @@
+"""The explorer's page (Panel + Bokeh): controls, the gain map with the exact curves, the detail
+of a clicked point, overlays and export. It computes nothing itself: every number comes from
+:mod:`haa_sym.explore.state` (which calls the library); a refusal shows the CLI's message and the
+page stays as it was.
+
+Every number the page shows is also in the DOM as JSON, for tests and scripts:
+``<pre id="explore-view" data-seq="N">`` (the state, the map's decisions, or the refusal) and
+``<pre id="explore-detail" data-seq="N">`` (the clicked point). ``data-seq`` counts the page's
+updates.
+
+Panel and Bokeh are imported lazily (the optional extra ``haa_sym[explore]``): importing this
+module costs nothing; :func:`serve` and :func:`page` import them.
+"""
+from __future__ import annotations
+
+import html
+import math
+import re
+import time
+from pathlib import Path
+
+import numpy as np
+
+from haa_sym.errors import ParameterError
+from haa_sym.explore.state import (CATEGORIES, ViewState, compute_view, dumps, from_query, point_detail, resolve,
+                                   to_query, view_summary)
+from haa_sym.explore.export import export_view
+from haa_sym.model import filters
+from haa_sym.model.params import CONTROLLER_KEYS, CONTROLLER_UNITS, STRING_KEYS, actuator_path, load_params
+
+__all__ = ["page", "serve", "EXTRA_MISSING", "CATEGORY_COLORS", "available"]
+
+EXTRA_MISSING = ("the explorer needs Panel and Bokeh, the optional extra: pip install 'haa_sym[explore]' "
+                 "(or pip install 'panel>=1.4' 'bokeh>=3.4')")
+# one colour per state.CATEGORIES entry: io.plots' region colours (white stable, grey PM < 30 deg,
+# dark unstable), tinted blue where the port is not passive
+CATEGORY_COLORS = ("#ffffff", "#cfe0f3", "#c8c8c8", "#9fb4cc", "#3a3a3a")
+CURVE_STYLES = {"stability": ("#d62728", "solid"), "pm": ("#2ca02c", "dashed"), "passivity": ("#17becf", "solid")}
+# controller keys with their own control (the rest of the file's keys are in the actuator panel)
+_CONTROL_KEYS = ("beta", "alpha", "Ts") + tuple(filters.PARAMETERS)
+
+
+def available() -> bool:
+    """Whether Panel and Bokeh can be imported."""
+    import importlib.util
+    return all(importlib.util.find_spec(m) is not None for m in ("panel", "bokeh"))
+
+
+def _edges(v: np.ndarray, log: bool) -> tuple[np.ndarray, np.ndarray]:
+    """Lower and upper cell edges of the grid values ``v`` (midpoints; in log space on a log axis)."""
+    x = np.log(v) if log else np.asarray(v, float)
+    if x.size == 1:
+        half = 0.05 * abs(x[0]) if x[0] else 0.5
+        e = np.array([x[0] - half, x[0] + half])
+    else:
+        mid = (x[1:] + x[:-1]) / 2
+        e = np.concatenate([[2 * x[0] - mid[0]], mid, [2 * x[-1] - mid[-1]]])
+    e = np.exp(e) if log else e
+    return e[:-1], e[1:]
+
+
+def _uniform(v: np.ndarray, log: bool) -> bool:
+    """Whether the grid values are evenly spaced (in log space on a log axis): then the map is one
+    image whose pixels fall on the cells."""
+    x = np.log(v) if log else np.asarray(v, float)
+    if x.size < 2:
+        return True
+    d = np.diff(x)
+    return bool(np.all(d > 0) and np.ptp(d) <= 1e-9 * max(abs(x).max(), 1.0))
+
+
+def _pre(pid: str, seq: int, data) -> str:
+    return f'<pre id="{pid}" data-seq="{seq}" style="font-size:9px;max-height:120px;overflow:auto">' \
+           f"{html.escape(dumps(data))}</pre>"
+
+
+class _Page:
+    """One browser tab: its widgets, figures and the last good state."""
+
+    def __init__(self, initial: ViewState, pn, bk):
+        self.pn, self.bk = pn, bk
+        self.seq = 0
+        self.detail_seq = 0
+        self.good: ViewState | None = None
+        self.view = None
+        self.detail = None
+        self._building = True
+        W = pn.widgets
+        s = initial
+        self.w_params = W.TextInput(name="actuator (bundled name or TOML file)", value=s.params,
+                                    css_classes=["ex-params"])
+        self.w_config = W.Select(name="configuration", options=[""], value="", css_classes=["ex-configuration"])
+        self.w_blend_to = W.Select(name="slide towards configuration", options=[""], value="",
+                                   css_classes=["ex-blend-to"])
+        self.w_blend = W.FloatSlider(name="position between them", start=0.0, end=1.0, step=0.05,
+                                     value=_float(s.blend), css_classes=["ex-blend"])
+        sets = dict(s.sets)
+        self.w_keys = {}
+        for key in _CONTROL_KEYS:
+            self.w_keys[key] = W.TextInput(name=key, value=sets.get(key, ""), css_classes=[f"ex-set-{key}"])
+        # a value from the URL that is not a choice stays selectable, so that the page refuses it
+        # with the CLI's message rather than dropping it
+        vf = sets.get("velocity_filter", "")
+        self.w_filter = W.Select(name="velocity_filter", options=_with([""] + list(filters.names()), vf), value=vf,
+                                 css_classes=["ex-set-velocity_filter"])
+        opts = dict(s.options)
+        delay = opts.get("delay", "")
+        self.w_delay = W.Select(name="delay (samples)", options=_with(["", "0", "1"], delay), value=delay,
+                                css_classes=["ex-option-delay"])
+        self.extra_options = {k: v for k, v in opts.items() if k != "delay"}
+        self.w_P = W.TextInput(name="P_gain axis (Nm/rad)", value=s.P_gain, css_classes=["ex-P_gain"])
+        self.w_D = W.TextInput(name="D_gain axis (Nms/rad)", value=s.D_gain, css_classes=["ex-D_gain"])
+        self.w_point = W.TextInput(name="point P_gain,D_gain (or click the map)", value=s.point,
+                                   css_classes=["ex-point"])
+        self.w_schedule = W.TextInput(name="schedule CSV (haa-sym schedule --out)", value=s.schedule,
+                                      css_classes=["ex-schedule"])
+        self.w_measured = W.TextInput(name="measured points CSV (P_gain,D_gain,outcome)", value=s.measured,
+                                      css_classes=["ex-measured"])
+        self.w_robust = W.TextInput(name="robust region: on or FROM:TO", value=s.robust, css_classes=["ex-robust"])
+        self.w_export_dir = W.TextInput(name="export directory", value="explore-export", css_classes=["ex-export-dir"])
+        self.w_export = W.Button(name="export actuator file + PNG + JSON", css_classes=["ex-export"])
+        self.actuator_box = pn.Column()
+        self.plant_inputs: dict = {}
+        self.extra_sets: dict = {}
+        self.message = pn.pane.HTML("", css_classes=["ex-message"], sizing_mode="stretch_width")
+        self.view_pre = pn.pane.HTML(_pre("explore-view", 0, {}), sizing_mode="stretch_width")
+        self.detail_pre = pn.pane.HTML(_pre("explore-detail", 0, {}), sizing_mode="stretch_width")
+        self.margins_html = pn.pane.HTML("click the map or type a point", sizing_mode="stretch_width")
+        self.link = pn.pane.HTML("", sizing_mode="stretch_width")
+        self._figures()
+        self._actuator_panel(s.params, sets, s.configuration, s.blend_to)
+        for w in [self.w_params]:
+            w.param.watch(self._on_params, "value")
+        for w in [self.w_config, self.w_blend_to, self.w_blend, self.w_filter, self.w_delay, self.w_P, self.w_D,
+                  self.w_schedule, self.w_measured, self.w_robust, *self.w_keys.values()]:
+            w.param.watch(self._on_change, "value")
+        self.w_point.param.watch(self._on_point, "value")
+        self.w_export.on_click(self._on_export)
+        self._building = False
+
+    # ------------------------------------------------------------------ layout
+    def _figures(self):
+        from bokeh.events import Tap
+        from bokeh.models import ColumnDataSource, LinearColorMapper, Span
+        from bokeh.plotting import figure
+        # a uniform grid (log or linear, as the axis) is one image, drawn fast; any other grid quads
+        self.image_src = ColumnDataSource({"image": [], "x": [], "y": [], "dw": [], "dh": []})
+        self.map_src = ColumnDataSource({"left": [], "right": [], "bottom": [], "top": [], "cat": []})
+        self.robust_src = ColumnDataSource({"left": [], "right": [], "bottom": [], "top": []})
+        self.curve_src = {f: ColumnDataSource({"xs": [], "ys": []}) for f in CURVE_STYLES}
+        self.sched_src = ColumnDataSource({"x": [], "y": [], "beta": []})
+        self.meas_src = ColumnDataSource({"x": [], "y": [], "outcome": [], "color": []})
+        self.point_src = ColumnDataSource({"x": [], "y": []})
+        self.mapper = LinearColorMapper(palette=list(CATEGORY_COLORS), low=-0.5, high=len(CATEGORY_COLORS) - 0.5)
+        self.figs = {}
+        for log in (True, False):
+            f = figure(width=640, height=440, x_axis_type="log" if log else "linear", tools="pan,wheel_zoom,reset,save",
+                       x_axis_label="P_gain (Nm/rad)", y_axis_label="D_gain (Nms/rad)", toolbar_location="above")
+            f.image(image="image", x="x", y="y", dw="dw", dh="dh", source=self.image_src, color_mapper=self.mapper)
+            f.quad(left="left", right="right", bottom="bottom", top="top", source=self.map_src, line_width=0,
+                   fill_color={"field": "cat", "transform": self.mapper})
+            f.quad(left="left", right="right", bottom="bottom", top="top", source=self.robust_src, line_width=0,
+                   fill_color="#2ca02c", fill_alpha=0.25, legend_label="robust over the leg range")
+            for fam, (color, dash) in CURVE_STYLES.items():
+                f.multi_line(xs="xs", ys="ys", source=self.curve_src[fam], line_color=color, line_dash=dash,
+                             line_width=2, legend_label={"stability": "stability boundary", "pm": "PM = 30 deg",
+                                                         "passivity": "passivity boundary"}[fam])
+            f.scatter("x", "y", source=self.sched_src, marker="triangle", size=6, color="#9467bd",
+                      legend_label="schedule: robust beta exists")
+            f.scatter("x", "y", source=self.meas_src, marker="circle", size=8, fill_color="color",
+                      line_color="black", legend_label="measured")
+            f.scatter("x", "y", source=self.point_src, marker="x", size=16, line_width=3, color="#ff7f0e")
+            f.legend.location = "top_left"
+            f.legend.label_text_font_size = "8pt"
+            f.legend.background_fill_alpha = 0.6
+            f.on_event(Tap, self._on_tap)
+            self.figs[log] = f
+        self.map_log = True
+        self.map_pane = self.pn.pane.Bokeh(self.figs[True])
+        self.phase_src = ColumnDataSource({"x": [], "y": []})
+        self.tstep_src = ColumnDataSource({"x": [], "y": []})
+        self.zstep_src = ColumnDataSource({"x": [], "y": []})
+        self.poles_src = ColumnDataSource({"x": [], "y": []})
+        small = dict(width=320, height=240, toolbar_location=None)
+        fp = figure(title="corrected phase of Z (deg)", x_axis_type="log", x_axis_label="omega (rad/s)", **small)
+        fp.line("x", "y", source=self.phase_src)
+        for y in (90, -90):
+            fp.add_layout(Span(location=y, dimension="width", line_color="black", line_dash="dotted"))
+        ft = figure(title="torque step, impedance loop open (Nm)", x_axis_label="t (s)", **small)
+        ft.line("x", "y", source=self.tstep_src)
+        fz = figure(title="impedance step: theta per Nm at the port", x_axis_label="t (s)", **small)
+        fz.line("x", "y", source=self.zstep_src)
+        fo = figure(title="closed-loop poles (z-plane)", match_aspect=True, **small)
+        th = np.linspace(0, 2 * np.pi, 200)
+        fo.line(np.cos(th), np.sin(th), line_color="gray")
+        fo.scatter("x", "y", source=self.poles_src, marker="x", size=8, color="#d62728")
+        self.detail_figs = (fp, ft, fz, fo)
+
+    def layout(self):
+        pn = self.pn
+        legend = "".join(f'<span style="background:{c};border:1px solid #888;padding:0 8px;margin:0 4px"></span>'
+                         f"{html.escape(t)}<br>" for c, t in zip(CATEGORY_COLORS, CATEGORIES))
+        controls = pn.Column(
+            "### Actuator and controller", self.w_params, self.w_config, self.w_blend_to, self.w_blend,
+            self.w_keys["beta"], self.w_keys["alpha"], self.w_filter,
+            *[self.w_keys[k] for k in filters.PARAMETERS], self.w_keys["Ts"], self.w_delay,
+            pn.Card(self.actuator_box, title="actuator (every numeric key; empty = the file's value)",
+                    collapsed=True, width=300),
+            "### Map", self.w_P, self.w_D, self.w_point,
+            pn.Card(self.w_schedule, self.w_measured, self.w_robust, title="overlays", collapsed=True, width=300),
+            pn.Card(self.w_export_dir, self.w_export, title="export", collapsed=True, width=300),
+            width=320)
+        main = pn.Column(self.message, pn.Row(self.map_pane, pn.pane.HTML(legend, width=260)), self.margins_html,
+                         pn.Row(*self.detail_figs[:2]), pn.Row(*self.detail_figs[2:]), self.link,
+                         self.view_pre, self.detail_pre)
+        return pn.Row(controls, main)
+
+    def _actuator_panel(self, name: str, sets: dict, configuration: str, blend_to: str):
+        """The file's configurations and one input per plant key (placeholder: the file's value)."""
+        try:
+            p = load_params(actuator_path(name or None, "--params"))
+        except ParameterError:
+            return
+        names = [""] + list(p.configurations)
+        self.w_config.options = _with(names, configuration)
+        self.w_config.value = configuration
+        self.w_blend_to.options = _with(names, blend_to)
+        self.w_blend_to.value = blend_to
+        for w in self.plant_inputs.values():
+            w.param.unwatch(w._ex_watcher)
+        self.plant_inputs = {}
+        top = p.plant.topology
+        units = {**top.units, **CONTROLLER_UNITS}
+        # every plant key, and the controller's keys without a control of their own (P_t0, I_t0)
+        keys = list(top.parameter_keys) + [k for k in CONTROLLER_KEYS if k not in _CONTROL_KEYS + STRING_KEYS]
+        for key in keys:
+            v = getattr(p.plant, key) if key in top.parameter_keys else getattr(p.controller, key)
+            w = self.pn.widgets.TextInput(name=f"{key} ({units.get(key, '')})", value=str(sets.get(key, "")),
+                                          placeholder=f"{v:g}", css_classes=[f"ex-set-{key}"], width=260)
+            w._ex_watcher = w.param.watch(self._on_change, "value")
+            self.plant_inputs[key] = w
+        self.actuator_box.objects = list(self.plant_inputs.values())
+        # overrides of keys with no field (a URL's unknown key) stay in the state: refused, not dropped
+        self.extra_sets = {k: v for k, v in sets.items() if k not in keys and k not in _CONTROL_KEYS + STRING_KEYS}
+        for key in ("beta", "alpha", "Ts") + tuple(filters.PARAMETERS):
+            v = getattr(p.controller, key, None)
+            self.w_keys[key].placeholder = "" if v is None else f"{v:g}"
+        self.w_filter.options = _with([""] + list(filters.names()), self.w_filter.value)
+
+    # ------------------------------------------------------------------ state
+    def state(self) -> ViewState:
+        sets = [(k, w.value) for k, w in self.plant_inputs.items()] + list(self.extra_sets.items())
+        sets += [(k, self.w_keys[k].value) for k in _CONTROL_KEYS] + [("velocity_filter", self.w_filter.value)]
+        s = ViewState(params=self.w_params.value.strip(), configuration=self.w_config.value or "",
+                      blend_to=self.w_blend_to.value or "", blend=f"{self.w_blend.value:g}",
+                      P_gain=self.w_P.value, D_gain=self.w_D.value, point=self.w_point.value,
+                      schedule=self.w_schedule.value.strip(), measured=self.w_measured.value.strip(),
+                      robust=self.w_robust.value.strip())
+        for k, v in sets:
+            s = s.with_set(k, v)
+        for k, v in {**self.extra_options, "delay": self.w_delay.value}.items():
+            s = s.with_option(k, v)
+        if not s.blend_to:
+            s = s.replace(blend="0")
+        return s
+
+    def _refused(self, exc: Exception, state: ViewState, pre_seq: bool = True):
+        self.message.object = (f'<div id="explore-error" style="color:#b00020;font-weight:bold">'
+                               f"haa-sym: error: {html.escape(str(exc))}</div>")
+        if pre_seq:
+            self.seq += 1
+            self.view_pre.object = _pre("explore-view", self.seq, {"seq": self.seq, "error": str(exc),
+                                                                   "query": to_query(state)})
+
+    def refresh(self):
+        """Recompute the map (and the point's detail) for the widgets' state."""
+        s = self.state()
+        t0 = time.perf_counter()
+        try:
+            r = resolve(s)
+            v = compute_view(s, r)
+        except ParameterError as exc:
+            self._refused(exc, s)
+            return
+        self.good, self.view = s, v
+        log = bool(np.all(v.P_gain > 0))
+        xl, xr = _edges(v.P_gain, log)
+        yb, yt = _edges(v.D_gain, False)
+        L, R_ = np.repeat(xl, v.D_gain.size), np.repeat(xr, v.D_gain.size)
+        B, T = np.tile(yb, v.P_gain.size), np.tile(yt, v.P_gain.size)
+        with self.pn.io.hold():
+            if log != self.map_log:
+                self.map_log = log
+                self.map_pane.object = self.figs[log]
+            if _uniform(v.P_gain, log) and _uniform(v.D_gain, False):
+                self.image_src.data = {"image": [v.category.T.astype(np.float32)], "x": [xl[0]], "y": [yb[0]],
+                                       "dw": [xr[-1] - xl[0]], "dh": [yt[-1] - yb[0]]}
+                if len(self.map_src.data["cat"]):
+                    self.map_src.data = {"left": [], "right": [], "bottom": [], "top": [], "cat": []}
+            else:
+                self.map_src.data = {"left": L, "right": R_, "bottom": B, "top": T, "cat": v.category.ravel()}
+                self.image_src.data = {"image": [], "x": [], "y": [], "dw": [], "dh": []}
+            for fam in CURVE_STYLES:
+                cs = [c for c in v.curves if c["family"] == fam]
+                self.curve_src[fam].data = {"xs": [c["P_gain"] for c in cs], "ys": [c["D_gain"] for c in cs]}
+            ov = v.overlays
+            rb = ov["robust"]
+            keep = rb["feasible"].ravel() if rb else np.zeros(0, bool)
+            self.robust_src.data = {"left": L[keep], "right": R_[keep], "bottom": B[keep], "top": T[keep]} if rb else \
+                {"left": [], "right": [], "bottom": [], "top": []}
+            sc = ov["schedule"]
+            self.sched_src.data = ({"x": sc["P_gain"][sc["feasible"]], "y": sc["D_gain"][sc["feasible"]],
+                                    "beta": sc["beta"][sc["feasible"]]} if sc else {"x": [], "y": [], "beta": []})
+            me = ov["measured"]
+            self.meas_src.data = ({"x": me["P_gain"], "y": me["D_gain"], "outcome": me["outcome"],
+                                   "color": ["#2ca02c" if o.lower().startswith("stable") else "#d62728"
+                                             for o in me["outcome"]]} if me else
+                                  {"x": [], "y": [], "outcome": [], "color": []})
+            f = self.figs[log]
+            f.title.text = _title(r)
+            self.message.object = ""
+            self.seq += 1
+            summary = view_summary(v)
+            # the server's share of a change's latency (the browser test reports the rest)
+            summary.update(seq=self.seq, query=to_query(s), overlays=_overlay_summary(ov),
+                           compute_ms=round(1e3 * (time.perf_counter() - t0), 1))
+            self.view_pre.object = _pre("explore-view", self.seq, summary)
+            q = to_query(s)
+            self.link.object = f'<a id="explore-link" href="?{html.escape(q)}">link to this view</a>'
+            if self.pn.state.location is not None:
+                self.pn.state.location.search = f"?{q}" if q else ""
+            if r.point is not None:
+                self._detail(s, r, *r.point)
+
+    def _detail(self, s: ViewState, r, P: float, D: float):
+        try:
+            d = point_detail(s, P, D, r)
+        except ParameterError as exc:
+            self._refused(exc, s, pre_seq=False)
+            return
+        self.detail = d
+        self.point_src.data = {"x": [P], "y": [D]}
+        self.phase_src.data = {"x": d.phase["omega_rad_s"], "y": d.phase["phase_deg"]}
+        self.tstep_src.data = {"x": d.torque_step["t_s"], "y": d.torque_step["T_Nm"]}
+        self.zstep_src.data = {"x": d.impedance_step["t_s"], "y": d.impedance_step["theta_rad"]}
+        self.poles_src.data = {"x": d.poles.real, "y": d.poles.imag}
+        self.margins_html.object = _margins_html(d)
+        self.detail_seq += 1
+        js = d.to_dict()
+        small = {k: js[k] for k in ("P_gain", "D_gain", "stable", "spectral_radius", "margins")}
+        small.update(seq=self.detail_seq, impedance_final_rad_per_Nm=js["impedance_step"]["final_value_rad_per_Nm"],
+                     n_poles=len(js["poles"]))
+        self.detail_pre.object = _pre("explore-detail", self.detail_seq, small)
+
+    # ------------------------------------------------------------------ events
+    def _on_change(self, event):
+        if not self._building:
+            self.refresh()
+
+    def _on_params(self, event):
+        if self._building:
+            return
+        self._building = True
+        try:
+            self._actuator_panel(event.new.strip(), {}, "", "")
+        finally:
+            self._building = False
+        self.refresh()
+
+    def _on_point(self, event):
+        if self._building:
+            return
+        s = self.state() if self.good is None else self.good.replace(point=event.new)
+        try:
+            r = resolve(s)
+        except ParameterError as exc:
+            self._refused(exc, s)
+            return
+        self.message.object = ""
+        self.good = s
+        if r.point is None:
+            return
+        with self.pn.io.hold():
+            self._detail(s, r, *r.point)
+            q = to_query(s)
+            if self.pn.state.location is not None:
+                self.pn.state.location.search = f"?{q}" if q else ""
+
+    def _on_tap(self, event):
+        if event.x is None or event.y is None or not (math.isfinite(event.x) and math.isfinite(event.y)):
+            return
+        # a click outside the quadrant snaps to the nearest allowed gain (>= 0)
+        self.w_point.value = f"{max(event.x, 0.0):.6g},{max(event.y, 0.0):.6g}"
+
+    def _on_export(self, event):
+        if self.good is None or self.view is None:
+            return
+        try:
+            written = export_view(self.good, self.w_export_dir.value.strip(), view=self.view)
+        except (ParameterError, OSError) as exc:
+            self._refused(exc, self.good, pre_seq=False)
+            return
+        self.message.object = ('<div id="explore-exported">wrote ' + ", ".join(html.escape(str(p)) for p in written)
+                               + "</div>")
+
+
+def _with(options: list, value: str) -> list:
+    return options if value in options else options + [value]
+
+
+def _float(text: str) -> float:
+    try:
+        v = float(text)
+    except ValueError:
+        return 0.0
+    return min(max(v, 0.0), 1.0) if math.isfinite(v) else 0.0
+
+
+def _title(r) -> str:
+    p = r.params
+    name = str(p.about.get("name") or Path(p.source).stem)
+    c = p.controller
+    return f"{name}: beta = {c.beta:g}, alpha = {c.alpha:g}, Ts = {c.Ts:g} s, filter {c.velocity_filter}"
+
+
+def _overlay_summary(ov: dict) -> dict:
+    out = {}
+    if ov["schedule"]:
+        out["schedule_feasible"] = int(ov["schedule"]["feasible"].sum())
+    if ov["measured"]:
+        m = ov["measured"]
+        out["measured"] = {"n": len(m["outcome"]), "predicted_stable": [bool(v) for v in m["predicted_stable"]]}
+    if ov["robust"]:
+        out["robust_feasible"] = int(ov["robust"]["feasible"].sum())
+    return out
+
+
+def _margins_html(d) -> str:
+    rows = []
+    for loop, label in (("impedance", "impedance loop (opened at T_lref)"),
+                        ("torque", "torque loop (opened at the PI output)")):
+        m = d.margins[loop]
+        pms = ", ".join(f"{pm:+.2f} deg @ {w:.4g} rad/s" for pm, w in zip(m["phase_margins_deg"],
+                                                                         m["gain_crossovers_rad_s"])) or "none"
+        gms = ", ".join(f"{g:+.2f} dB @ {w:.4g} rad/s" for g, w in zip(m["gain_margins_db"],
+                                                                      m["phase_crossovers_rad_s"])) or "none"
+        rows.append(f"<b>{label}</b>: PM {pms}; GM {gms}")
+    head = (f"<b>P_gain {d.P_gain:g} Nm/rad, D_gain {d.D_gain:g} Nms/rad</b>: "
+            f"{'stable' if d.stable else 'UNSTABLE'}, spectral radius {d.spectral_radius:.6f}; "
+            f"impedance step settles at {d.impedance_step['final_value_rad_per_Nm']:.4g} rad/Nm")
+    return "<div id='explore-margins'>" + "<br>".join([head] + rows) + "</div>"
+
+
+def page(initial: ViewState | None = None):
+    """A new page (one per browser tab): its state from the URL's query string when it has one,
+    else ``initial``."""
+    import bokeh
+    import panel as pn
+    state = initial or ViewState()
+    args = dict(pn.state.session_args or {}) if pn.state.curdoc is not None else {}
+    error = None
+    if args:
+        try:
+            state = from_query(args)
+        except ParameterError as exc:
+            error = exc
+    p = _Page(state, pn, bokeh)
+    if error is not None:
+        p._refused(error, state)
+    else:
+        p.refresh()
+    return p.layout()
+
+
+def serve(initial: ViewState, port: int = 5006, show: bool = True) -> None:
+    """Serve the page on http://127.0.0.1:``port``/ until Ctrl-C (KeyboardInterrupt propagates).
+
+    The server listens on 127.0.0.1 only and the page loads Bokeh's and Panel's scripts from the
+    server itself (no CDN)."""
+    import panel as pn
+    origins = [f"127.0.0.1:{port}", f"localhost:{port}"]
+    pn.serve({"/": lambda: page(initial)}, port=port, address="127.0.0.1", websocket_origin=origins, show=show,
+             title="haa-sym explore", start=True, threaded=False, verbose=False)
+
+
+def resources_are_local(text: str) -> list[str]:
+    """The external (http, https or protocol-relative) script or stylesheet addresses of a page's
+    HTML ``text`` (empty: everything is served locally)."""
+    return re.findall(r"""<(?:script|link)[^>]+(?:src|href)=["']((?:https?:)?//[^"']+)""", text, re.I)
+

@@ -1,0 +1,45 @@
+"""The explorer's export (haa_sym.explore.export): the actuator file it writes loads back as the
+parameters analysed (the configuration, the slider's position and the overrides applied), for
+every bundled actuator; PNG and JSON are written with it, all or nothing."""
+import json
+
+import pytest
+
+from haa_sym.errors import ParameterError
+from haa_sym.explore.export import EXPORT_NAMES, actuator_toml, export_view
+from haa_sym.explore.state import ViewState, resolve, to_query
+from haa_sym.model.params import bundled_actuators, load_params
+
+
+@pytest.mark.parametrize("name", sorted(bundled_actuators()))
+def test_actuator_file_round_trip(name, tmp_path):
+    p = load_params(bundled_actuators()[name])
+    state = ViewState(params=name).with_set("beta", "2.5").with_set("Ts", "0.0005")
+    key = p.plant.topology.parameter_keys[0]
+    state = state.with_set(key, repr(getattr(p.plant, key) * 1.25))
+    if len(p.configurations) >= 2:
+        a, b = list(p.configurations)[:2]
+        state = state.replace(configuration=a, blend_to=b, blend="0.3")
+    analysed = resolve(state).params
+    path = tmp_path / "a.toml"
+    path.write_text(actuator_toml(analysed))
+    back = load_params(path)
+    assert back.plant == analysed.plant
+    assert back.controller == analysed.controller
+    assert back.configurations == analysed.configurations
+    assert back.controller.beta == 2.5 and back.controller.Ts == 0.0005
+
+
+def test_export_view_writes_all_three(tmp_path):
+    state = ViewState(P_gain="log:1:20000:30", D_gain="lin:1:50:15", point="200,10").with_set("beta", "2")
+    paths = export_view(state, str(tmp_path / "out"))
+    assert sorted(p.name for p in paths) == sorted(EXPORT_NAMES)
+    data = json.loads((tmp_path / "out" / "view.json").read_text())
+    assert data["query"] == to_query(state) and data["point"]["P_gain"] == 200.0
+    assert (tmp_path / "out" / "view.png").read_bytes()[:4] == b"\x89PNG"
+
+
+def test_export_refuses_before_writing(tmp_path):
+    with pytest.raises(ParameterError, match="J_L2 = -1"):
+        export_view(ViewState().with_set("J_L2", "-1"), str(tmp_path / "out"))
+    assert not (tmp_path / "out").exists()
