@@ -124,9 +124,10 @@ def _check_keys(exps, keys, inputs):
                                  "does not act on the outputs; allowed: mechanical keys")
         confs = {e.configuration for e in exps if e.configuration and
                  k in e.params.configurations.get(e.configuration, {})}
-        if confs and len(exps) > 1:
-            raise ParameterError(f"--fit {k}: configuration {sorted(confs)[0]} sets it, so the logs do not share "
-                                 "one value; allowed: keys the configurations leave alone")
+        if confs:
+            raise ParameterError(f"--fit {k}: configuration {sorted(confs)[0]} sets it (the fitted file's entry "
+                                 "would not be the value the log was fitted with); allowed: keys the configurations "
+                                 "leave alone")
 
 
 def _slow_period(model) -> float:

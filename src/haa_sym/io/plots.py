@@ -17,7 +17,7 @@ from haa_sym.errors import ParameterError  # noqa: E402
 from haa_sym.io.outputs import transaction  # noqa: E402
 
 __all__ = ["plot_region", "plot_region_panels", "plot_corrected_phase", "plot_steps",
-           "plot_contact", "save_figure", "check_title"]
+           "plot_contact", "save_figure", "check_title", "plot_identify"]
 
 # Figs. 8-11: white stable, light grey stable with PM < 30 deg, dark unstable.
 REGION_COLORS = ListedColormap(["#ffffff", "#c8c8c8", "#3a3a3a"])
@@ -412,4 +412,51 @@ def plot_robust(r, title: str = ""):
             f"{leg[0]}..{leg[1]} ({r.meta['leg_mode']}, {r.n_configurations} configurations; dark: fails)")
     text = "\n".join(t for t in (title, auto, _leg_line(r.meta)) if t)
     ax.set_title(_wrap(text, 4.8, 7), fontsize=7)
+    return fig
+
+
+_UNITS = {"torque": "Nm", "theta": "rad", "current": "A", "velocity": "rad/s"}
+
+
+def plot_identify(result, title: str = "", max_points: int = 4000):
+    """``haa-sym identify --plot``: per output, the first log's measured trace against the
+    model's prediction before (initial values) and after the fit; below, the Bode magnitude and
+    phase of the Welch H1 estimate (first input to the output) with the model's before and
+    after, and the coherence. ``result`` is a :class:`haa_sym.fit.identify.FitResult` computed
+    with ``figure_data=True``."""
+    tr = result.traces[0]
+    bode = result.bode[0] if result.bode else None
+    outs = result.outputs
+    rows = 1 + (3 if bode is not None else 0)
+    fig, axes = plt.subplots(rows, len(outs), figsize=(6 * len(outs), 2.6 * rows), squeeze=False)
+    step = max(1, len(tr["t"]) // max_points)
+    for i, o in enumerate(outs):
+        ax = axes[0, i]
+        ax.plot(tr["t"][::step], tr["measured"][::step, i], color="0.6", lw=1.0, label="measured")
+        ax.plot(tr["t"][::step], tr["initial"][::step, i], color="C3", lw=0.8, ls="--", label="model, initial")
+        ax.plot(tr["t"][::step], tr["fitted"][::step, i], color="C0", lw=0.8, label="model, fitted")
+        ax.set_xlabel("t (s)")
+        ax.set_ylabel(f"{o} ({_UNITS[o]})")
+        ax.set_title(f"{tr['name']}: {o}, rms error {result.rms_initial[o]:.3g} -> {result.rms_fitted[o]:.3g}",
+                     fontsize=9)
+        ax.legend(fontsize=7, loc="upper right")
+        if bode is None:
+            continue
+        w = bode["omega"]
+        mag, ph, coh = axes[1, i], axes[2, i], axes[3, i]
+        for G, style in ((bode["H1"][i], dict(color="0.6", lw=1.2, label="H1 (Welch)")),
+                         (bode["initial"][i], dict(color="C3", lw=0.8, ls="--", label="model, initial")),
+                         (bode["fitted"][i], dict(color="C0", lw=0.8, label="model, fitted"))):
+            mag.loglog(w, np.abs(G), **style)
+            ph.semilogx(w, np.degrees(np.unwrap(np.angle(G))), **style)
+        mag.set_ylabel(f"|{o} / {result.inputs[0]}|")
+        mag.legend(fontsize=7)
+        ph.set_ylabel("phase (deg)")
+        coh.semilogx(w, bode["coherence"][i], color="k", lw=0.8)
+        coh.set_ylim(0, 1.05)
+        coh.set_ylabel("coherence")
+        coh.set_xlabel("omega (rad/s)")
+    if title:
+        fig.suptitle(_wrap(title, 6 * len(outs)), fontsize=_title_size(title, 11))
+    fig.tight_layout()
     return fig
