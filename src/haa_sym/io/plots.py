@@ -429,13 +429,17 @@ def plot_identify(result, title: str = "", max_points: int = 4000):
     outs = result.outputs
     rows = 1 + (3 if bode is not None else 0)
     fig, axes = plt.subplots(rows, len(outs), figsize=(6 * len(outs), 2.6 * rows), squeeze=False)
-    step = max(1, len(tr["t"]) // max_points)
+    # a window of the log (its last 2 s: past the start from rest), every sample of it up to max_points
+    t = tr["t"]
+    sel = slice(int(np.searchsorted(t, t[-1] - 2.0)), None)
+    step = max(1, (len(t) - sel.start) // max_points)
+    sel = slice(sel.start, None, step)
     for i, o in enumerate(outs):
         ax = axes[0, i]
-        ax.plot(tr["t"][::step], tr["measured"][::step, i], color="0.6", lw=1.0, label="measured")
-        ax.plot(tr["t"][::step], tr["initial"][::step, i], color="C3", lw=0.8, ls="--", label="model, initial")
-        ax.plot(tr["t"][::step], tr["fitted"][::step, i], color="C0", lw=0.8, label="model, fitted")
-        ax.set_xlabel("t (s)")
+        ax.plot(t[sel], tr["measured"][sel, i], color="0.6", lw=1.0, label="measured")
+        ax.plot(t[sel], tr["initial"][sel, i], color="C3", lw=0.8, ls="--", label="model, initial")
+        ax.plot(t[sel], tr["fitted"][sel, i], color="C0", lw=0.8, label="model, fitted")
+        ax.set_xlabel("t (s), the log's last 2 s")
         ax.set_ylabel(f"{o} ({_UNITS[o]})")
         ax.set_title(f"{tr['name']}: {o}, rms error {result.rms_initial[o]:.3g} -> {result.rms_fitted[o]:.3g}",
                      fontsize=9)
@@ -444,7 +448,9 @@ def plot_identify(result, title: str = "", max_points: int = 4000):
             continue
         w = bode["omega"]
         mag, ph, coh = axes[1, i], axes[2, i], axes[3, i]
-        for G, style in ((bode["H1"][i], dict(color="0.6", lw=1.2, label="H1 (Welch)")),
+        # H1 only where the coherence says the measurement carries the input (>= 0.5)
+        H1 = np.where(bode["coherence"][i] >= 0.5, bode["H1"][i], np.nan)
+        for G, style in ((H1, dict(color="0.6", lw=1.2, label="H1 (Welch), coherence >= 0.5")),
                          (bode["initial"][i], dict(color="C3", lw=0.8, ls="--", label="model, initial")),
                          (bode["fitted"][i], dict(color="C0", lw=0.8, label="model, fitted"))):
             mag.loglog(w, np.abs(G), **style)
