@@ -14,7 +14,6 @@ from haa_sym.fit.identify import INPUT_MODES, Experiment, FitOptions, identify
 from haa_sym.io.formats import save_json
 from haa_sym.io.logs import MAX_JITTER, OUTPUTS, read_log
 from haa_sym.io.outputs import Transaction
-from haa_sym.io.progress import message
 from haa_sym.loop import ClosedLoop
 from haa_sym.model.params import actuator_path, load_params
 
@@ -87,10 +86,6 @@ def run(args) -> int:
         params = _params(args, base)
         log = read_log(log_path, inputs, outputs, max_jitter=args.max_jitter)
         experiments.append(Experiment(log, params, conf))
-    for e in experiments:
-        s = e.log.sampling
-        message(f"{e.log.name}: {e.log.samples} samples, mean period {s['mean_period']:.6g} s, jitter "
-                f"{s['jitter']:.2g}" + (" (resampled onto the mean period)" if s["resampled"] else " (uniform)"))
     loop = ClosedLoop(experiments[0].params, loop_options, basis=False)
     result = identify(experiments, keys, inputs, outputs, FitOptions(), loop_options,
                       provenance={**loop.provenance(), "params_file": str(path)}, figure_data=plot is not None)
@@ -104,6 +99,11 @@ def run(args) -> int:
             name = str(file_params.about.get("name") or Path(path).stem)
             _plots().save_figure(_plots().plot_identify(result, title=f"{name}: identify {', '.join(keys)}"),
                                  plot, tx, "--plot")
+    for e in experiments:                 # after the fit: a refused command prints one line only
+        s = e.log.sampling
+        print(f"{e.log.name}: {e.log.samples} samples, mean period {s['mean_period']:.6g} s, jitter "
+              f"{s['jitter']:.2g} (max |dt - mean| / mean)"
+              + ("; resampled onto the mean period" if s["resampled"] else "; uniform"))
     for k, v, v0, (lo, hi) in zip(result.keys, result.value, result.initial, result.ci95):
         print(f"{k} = {v:.6g} (ci95 {lo:.6g} .. {hi:.6g}; initial {v0:.6g})")
     rms = ", ".join(f"{o} {result.rms_initial[o]:.3g} -> {result.rms_fitted[o]:.3g}" for o in outputs)

@@ -11,8 +11,6 @@ f'(0) = [8 (f(h) - f(-h)) - (f(2h) - f(-2h))] / (12 h), exact for polynomials up
 """
 from __future__ import annotations
 
-import functools
-
 import numpy as np
 
 from haa_sym.fit.model import Sampled, output_rows, plant_derivatives, sample, PlantModel
@@ -36,9 +34,18 @@ class _LoopWithPlant:
         return self.plant.output_names.index(name)
 
 
-@functools.lru_cache(maxsize=32)
+_LOOPS: dict = {}
+
+
 def _loop(params, options):
-    return ClosedLoop(params, options, basis=False)
+    """A loop of the controller and options (its elements cost rational arithmetic: built once
+    per controller; the plant it was built with is replaced by :class:`_LoopWithPlant`)."""
+    key = (repr(params.controller), repr(options), params.plant.topology.fingerprint)
+    if key not in _LOOPS:
+        if len(_LOOPS) > 16:
+            _LOOPS.clear()
+        _LOOPS[key] = ClosedLoop(params, options, basis=False)
+    return _LOOPS[key]
 
 
 def torque_loop_model(params, keys, inputs, outputs, options=None) -> Sampled:
