@@ -48,12 +48,15 @@ class FitOptions:
         Stop when the relative decrease of the cost is below this.
     max_step : float
         Largest change of a log-parameter per iteration (1 = a factor e).
+    first_pass_tolerance : float
+        The first pass (signal-scaled weights) stops at this relative decrease.
     """
 
     min_periods: float = 3.0
     max_iterations: int = 50
     tolerance: float = 1e-10
     max_step: float = 1.0
+    first_pass_tolerance: float = 1e-3
 
 
 @dataclass(frozen=True)
@@ -219,7 +222,9 @@ def identify(experiments: list[Experiment], keys: tuple[str, ...], inputs: tuple
                 return r, None
             return r, np.vstack([(-dy / s).reshape(len(keys), -1).T for dy, s in zip(dys, sigma)])
 
-        theta, it1 = _levenberg_marquardt(evaluate, theta0, opt, keys)
+        # the first pass only finds the neighbourhood (its weights are provisional); the second,
+        # with the noise levels of the residuals as weights, converges
+        theta, it1 = _levenberg_marquardt(evaluate, theta0, opt, keys, tolerance=opt.first_pass_tolerance)
         sigma = [np.maximum(np.sqrt(np.mean(err ** 2, axis=0)), 1e-12 * s) for err, s in zip(run(theta)[0], sigma)]
         theta, it2 = _levenberg_marquardt(evaluate, theta, opt, keys)
         r, J = evaluate(theta)
@@ -252,7 +257,7 @@ def identify(experiments: list[Experiment], keys: tuple[str, ...], inputs: tuple
                      outputs, inputs, traces, bode, meta)
 
 
-def _levenberg_marquardt(evaluate, theta, opt: FitOptions, keys):
+def _levenberg_marquardt(evaluate, theta, opt: FitOptions, keys, tolerance: float | None = None):
     """Minimise |r(theta)|^2 from ``theta``: Levenberg-Marquardt (Marquardt's diagonal scaling)
     with the exact Jacobian. Returns (theta, iterations)."""
     r, J = evaluate(theta)
@@ -276,7 +281,8 @@ def _levenberg_marquardt(evaluate, theta, opt: FitOptions, keys):
             c1 = float(r1 @ r1)
             if np.isfinite(c1) and c1 < cost:
                 theta, r, J, improved = theta + step, r1, J1, True
-                done = (cost - c1) <= opt.tolerance * cost or np.max(np.abs(step)) < 1e-10
+                done = (cost - c1) <= (opt.tolerance if tolerance is None else tolerance) * cost \
+                    or np.max(np.abs(step)) < 1e-10
                 cost = c1
                 lam = max(lam / 10, 1e-12)
                 break
