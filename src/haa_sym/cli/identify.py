@@ -65,9 +65,11 @@ def run(args) -> int:
     plot = _check_out(args.plot, "identify", "--plot")
     if not (args.max_jitter >= 0):
         raise ParameterError(f"--max-jitter {args.max_jitter!r}; allowed: a fraction >= 0")
-    if inputs[0] not in INPUT_MODES:
-        raise ParameterError(f"--input {args.input}: {inputs[0]!r}; allowed: one of {list(INPUT_MODES)}, "
-                             "optionally followed by ,T_dist")
+    if inputs[0] not in INPUT_MODES or any(i != "T_dist" for i in inputs[1:]) or len(set(inputs)) != len(inputs):
+        raise ParameterError(f"--input {args.input}; allowed: one of {list(INPUT_MODES)}, optionally followed by "
+                             ",T_dist")
+    if any(o not in OUTPUTS for o in outputs) or len(set(outputs)) != len(outputs):
+        raise ParameterError(f"--output {args.output}; allowed: distinct names of {list(OUTPUTS)}, comma separated")
     if args.option and inputs[0] != "torque_ref":
         raise ParameterError(f"--option {args.option[0]}: the loop options apply to the closed torque loop; "
                              "allowed: with --input torque_ref")
