@@ -40,12 +40,16 @@ def test_four_keys_within_3_percent_and_inside_ci95(tmp_path, name, model, truth
         assert r.rms_fitted[o] < r.rms_initial[o]
 
 
+# The SEA as it is usually driven, current-commanded: driven by voltage, its link friction B_link
+# (0.1 Nms/rad behind 232 Nms/rad of back-EMF damping) is weakly observed, ci95 about +-2.5 % from
+# 25 s (seed 8 lands 3.7 % off, inside its interval): docs/identify.md.
 @pytest.mark.slow
-@pytest.mark.parametrize("name,model,truth", [("harmonic_drive", two_mass, HD_TRUTH), ("sea", sea, SEA_TRUTH)])
-def test_ci95_covers_the_truth_in_19_of_20_seeds(tmp_path, name, model, truth):
+@pytest.mark.parametrize("name,model,truth,current", [("harmonic_drive", two_mass, HD_TRUTH, False),
+                                                      ("sea", sea, SEA_TRUTH, True)])
+def test_ci95_covers_the_truth_in_19_of_20_seeds(tmp_path, name, model, truth, current):
     inside = {k: 0 for k in truth}
     for seed in range(20):
-        r = _fit(tmp_path, name, model, truth, seed=seed)
+        r = _fit(tmp_path, name, model, truth, seed=seed, current=current)
         for k, v, (lo, hi) in zip(r.keys, r.value, r.ci95):
             assert abs(v / truth[k] - 1) < 0.03, (seed, k, v)
             inside[k] += bool(lo <= truth[k] <= hi)

@@ -6,6 +6,7 @@
 """
 from __future__ import annotations
 
+import argparse
 from pathlib import Path
 
 from haa_sym.errors import ParameterError
@@ -22,7 +23,7 @@ from haa_sym.cli.common import PARAMS_HELP, _check_out, _parse_options, _params,
 
 def register(sub) -> dict:
     p = sub.add_parser("identify", help="fit parameters of an actuator file to logged experiments (CSV logs)",
-                       description=__doc__)
+                       description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     p.add_argument("--params", metavar="NAME|FILE", help=PARAMS_HELP)
     p.add_argument("--log", action="append", required=True, metavar="LOG.csv",
                    help="a CSV log: header with time (s) and the signals (voltage, current, T_dist, torque_ref; "
