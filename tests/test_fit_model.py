@@ -53,7 +53,7 @@ def test_simulation_and_sensitivities_match_dlsim():
     params = load_params(actuator_path("sea"))
     keys = ("J_link", "K_bar")
     rng = np.random.default_rng(3)
-    u = np.column_stack([rng.standard_normal(3000), 0.1 * rng.standard_normal(3000)])
+    u = np.column_stack([rng.standard_normal(2000), 0.1 * rng.standard_normal(2000)])
     s = sample(open_loop_model(params.plant, keys, ("voltage", "T_dist"), ("torque", "theta")), 1e-3)
     y, dy = simulate(s, u)
     _, y_ref, _ = scipy.signal.dlsim((s.Phi, s.Gamma, s.C, s.D, 1e-3), u)
