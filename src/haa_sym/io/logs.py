@@ -61,10 +61,14 @@ def _read_rows(path: Path, label: str) -> tuple[list[str], np.ndarray, bytes]:
     except OSError as exc:
         raise ParameterError(f"{label}: cannot read: {exc.strerror or exc}; allowed: a readable CSV file") from None
     text = raw.decode("utf-8", errors="replace").splitlines()
-    rows = [r for r in csv.reader(line for line in text if line.strip() and not line.lstrip().startswith("#"))]
-    if not rows:
+    lines = [line for line in text if line.strip() and not line.lstrip().startswith("#")]
+    if not lines:
         raise ParameterError(f"{label}: empty file; allowed: a CSV with a header line (time and signals)")
-    header = [h.strip() for h in rows[0]]
+    header = [h.strip() for h in next(csv.reader(lines[:1]))]
+    data = _fast_body(lines[1:], len(header))
+    if data is not None:
+        return header, data, raw
+    rows = list(csv.reader(lines))
     body = rows[1:]
     for i, r in enumerate(body):
         if len(r) != len(header):
@@ -75,6 +79,19 @@ def _read_rows(path: Path, label: str) -> tuple[list[str], np.ndarray, bytes]:
     except ValueError as exc:
         raise ParameterError(f"{label}: {exc}; allowed: numbers (empty or nan fields are refused as NaN rows)") from None
     return header, data.reshape(len(body), len(header)), raw
+
+
+def _fast_body(lines: list[str], width: int) -> np.ndarray | None:
+    """The numbers of a well-formed body by numpy's C parser (a 30,000-row log in milliseconds);
+    None when anything is unusual (empty fields, ragged rows, text), which the careful reader
+    then names row by row."""
+    if not lines:
+        return np.empty((0, width))
+    try:
+        data = np.loadtxt(lines, delimiter=",", dtype=float, ndmin=2)
+    except ValueError:
+        return None
+    return data if data.shape[1] == width else None
 
 
 def read_log(path: str | Path, inputs: tuple[str, ...], outputs: tuple[str, ...], *,
