@@ -119,3 +119,28 @@ def test_bad_input_one_line_exit_2_nothing_written(tmp_path, hd_log, assert_refu
         else:
             argv += [flag, extra[i + 1]]
     assert_refused(argv, match)
+
+
+def test_current_commanded_sea_with_port_torque_and_velocity(tmp_path):
+    """--input current,T_dist, --output torque,velocity: the drive's current and a port torque
+    (the hand-written SEA, tests/identify_synthetic.py), fitted from 10 s."""
+    import scipy.signal
+    from identify_synthetic import SEA_TRUTH, sea
+    params = load_params(actuator_path("sea"))
+    A, B, C, D = sea(params.plant.as_dict(), True)
+    rng = np.random.default_rng(5)
+    n = 10000
+    b, a = scipy.signal.butter(4, 0.25)
+    U = np.column_stack([scipy.signal.lfilter(b, a, rng.standard_normal(n)) for _ in range(2)])
+    U *= np.array([5.0, 20.0]) / np.std(U, axis=0)
+    Phi, Gam, *_ = scipy.signal.cont2discrete((A, B, C, D), 1e-3, "zoh")
+    _, y, _ = scipy.signal.dlsim((Phi, Gam, C[[0, 2]], D[[0, 2]], 1e-3), U)
+    y = y + 0.01 * np.std(y, axis=0) * rng.standard_normal(y.shape)
+    log = write_csv(tmp_path / "sea.csv", 1e-3 * np.arange(n),
+                    {"current": U[:, 0], "T_dist": U[:, 1], "torque": y[:, 0], "velocity": y[:, 1]})
+    rep = tmp_path / "fit.json"
+    assert main(["identify", "--params", "sea", "--log", str(log), "--input", "current,T_dist", "--output",
+                 "torque,velocity", "--fit", ",".join(SEA_TRUTH), "--set", "J_link=0.1", "--set", "K_bar=2000",
+                 "--out", str(tmp_path / "f.toml"), "--report", str(rep), "-q"]) == 0
+    for k, p in json.loads(rep.read_text())["parameters"].items():
+        assert abs(p["value"] / SEA_TRUTH[k] - 1) < 0.03 and p["ci95"][0] <= SEA_TRUTH[k] <= p["ci95"][1], (k, p)

@@ -114,7 +114,7 @@ def read_log(path: str | Path, inputs: tuple[str, ...], outputs: tuple[str, ...]
     ------
     ParameterError
         A column missing or unknown, NaN rows, fewer than 3 samples, time not increasing, jitter
-        above ``max_jitter``, or an input that is constant.
+        above ``max_jitter``, or a constant first input (the drive's; ``T_dist`` may be constant).
     """
     path = Path(path)
     label = label or f"--log {str(path)!r}"
@@ -161,7 +161,7 @@ def read_log(path: str | Path, inputs: tuple[str, ...], outputs: tuple[str, ...]
         # continuous signal, interpolated
         cols = {k: v[held] if k in inputs else np.interp(grid, t, v) for k, v in cols.items()}
         sampling["resampled"] = True
-    for k in inputs:
+    for k in inputs[:1]:           # the drive's input must excite it; a port torque may stay 0
         v = cols[k]
         if np.ptp(v) <= 1e-12 * max(1.0, float(np.max(np.abs(v)))):
             raise ParameterError(f"{label}: input {k} is constant ({v[0]!r}); allowed: an input that "
