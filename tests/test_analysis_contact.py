@@ -37,11 +37,14 @@ TOL = LoopOptions().passivity_tol_deg
 # interval's); an impedance with a passivity end inside the range: HyQ at P 1000, D 9 (stiff
 # environments make it passive again), and the harmonic drive's torque loop alone
 PASSIVITY_CASES = [("hyq_haa", 1000.0, 9.0, (1.0, 1e6), 6.35e5), ("harmonic_drive", 0.0, 0.0, (1.0, 1e5), 5.28e4)]
+# the harmonic drive's case is its first torque PI's (before haa-sym tune re-tuned the file: with
+# the tuned PI its torque loop alone is not passive anywhere it is stable, so no end to locate)
+FIRST_PI = {"harmonic_drive": {"P_t0": 0.01954, "I_t0": 0.9205}}
 
 
 @pytest.mark.parametrize("name,P,D,K_range,end", PASSIVITY_CASES, ids=[c[0] for c in PASSIVITY_CASES])
 def test_not_passive_ends_against_state_space(name, P, D, K_range, end):
-    params = load_params(ROOT / "model" / f"{name}.toml")
+    params = load_params(ROOT / "model" / f"{name}.toml").with_values(**FIRST_PI.get(name, {}))
     r = contact_intervals(ClosedLoop(params), K_range, n_scan=40, P_gain=P, D_gain=D, progress=False)
     stability_ends = {k for iv in r.unstable for k in iv}
     passivity_ends = []

@@ -13,6 +13,14 @@ ends, then the midpoints, doubling the number of intervals until the result no l
 (:func:`robust_region` says how many that took). Each configuration's map is decided from the
 exact boundaries (:func:`haa_sym.analysis.regions.region_map`).
 
+Parameter uncertainty (issue 17, docs/uncertainty.md): ``uncertainty = {key: (lo, hi)}`` (plain
+data, e.g. the 95 % confidence intervals of an identification) adds one axis per key with
+``lo < hi`` and treats the box like ``leg_mode = "box"``: every key independently over its
+interval, combined with every leg configuration (the product), sampled at the same ``n``
+points per axis and refined by the same doubling. A key with ``lo == hi`` is fixed at that
+value. The interval replaces the parameters' own value of the key (the fit's value is inside
+it, not the file's); a key the leg range sets is refused (its value is the range's).
+
 Example
 -------
 >>> from haa_sym import ClosedLoop, load_params
@@ -34,7 +42,7 @@ from haa_sym.io.budget import check_memory, sweep_bytes
 from haa_sym.model.params import Params, gain_array
 
 __all__ = ["LEG_MODES", "REQUIREMENTS", "meets", "leg_ends", "leg_values", "leg_text", "leg_configurations", "feasible_map",
-           "RobustRegion", "robust_region"]
+           "RobustRegion", "robust_region", "check_uncertainty", "uncertainty_text"]
 
 LEG_MODES = ("segment", "box")
 # what a gain point must satisfy: closed loop stable, impedance-loop PM >= 30 deg, passive port
@@ -84,7 +92,7 @@ def _span(params: Params, leg=None):
     return a, b, keys, own, lo, hi
 
 
-def leg_values(params: Params, leg=None, leg_mode: str = "segment") -> dict:
+def leg_values(params: Params, leg=None, leg_mode: str = "segment", uncertainty=None) -> dict:
     """What a leg range analyses, as plain data (``meta["leg_values"]``, messages, plot titles).
 
     The configurations of the range replace the parameters' own values of the keys they set: a
@@ -97,11 +105,66 @@ def leg_values(params: Params, leg=None, leg_mode: str = "segment") -> dict:
         ``leg`` (the two end names), ``leg_mode``, ``ends`` (end name -> {key: value}, SI units),
         ``own`` ({key: the parameters' own value}, which the range replaces) and ``outside``
         ({key: own value} of the keys whose own value lies outside the interval the ends span;
-        empty when every own value is analysed or lies between the ends, key by key).
+        empty when every own value is analysed or lies between the ends, key by key); with
+        ``uncertainty`` also ``uncertainty`` ({key: [lo, hi]}, SI units, the box analysed) and
+        ``uncertainty_own`` ({key: the parameters' own value}, which the box replaces).
     """
     a, b, keys, own, lo, hi = _span(params, leg)
     outside = {k: own[k] for k in keys if not min(lo[k], hi[k]) <= own[k] <= max(lo[k], hi[k])}
-    return {"leg": [a, b], "leg_mode": leg_mode, "ends": {a: lo, b: hi}, "own": own, "outside": outside}
+    out = {"leg": [a, b], "leg_mode": leg_mode, "ends": {a: lo, b: hi}, "own": own, "outside": outside}
+    if uncertainty:
+        box = check_uncertainty(params, uncertainty, leg)
+        out["uncertainty"] = {k: list(v) for k, v in box.items()}
+        out["uncertainty_own"] = {k: float(getattr(params.plant, k)) for k in box}
+    return out
+
+
+def check_uncertainty(params: Params, uncertainty, leg=None) -> dict:
+    """``uncertainty`` ({key: (lo, hi)}, SI units) checked against ``params``: keys of the
+    actuator's plant that the leg range does not set, finite ``lo <= hi``, both ends allowed
+    values of the key. Returns {key: (lo, hi)} as floats, keys sorted; one-line ParameterError
+    naming the key otherwise."""
+    if not isinstance(uncertainty, dict) or not uncertainty:
+        raise ParameterError(f"uncertainty = {uncertainty!r}; allowed: a non-empty mapping {{key: (lo, hi)}} of "
+                             "plant keys")
+    keys = list(params.plant.topology.parameter_keys)
+    a, b, leg_keys, *_ = _span(params, leg)
+    box = {}
+    for k in sorted(uncertainty):
+        if k not in keys:
+            raise ParameterError(f"uncertainty key {k!r} is not a plant key of {params.source}; allowed: {keys}")
+        if k in leg_keys:
+            raise ParameterError(f"uncertainty key {k!r} is set by the leg range {a}..{b}, which gives its values; "
+                                 f"allowed: keys the range does not set, {[x for x in keys if x not in leg_keys]}")
+        try:
+            lo, hi = (float(v) for v in uncertainty[k])
+        except (TypeError, ValueError):
+            raise ParameterError(f"uncertainty {k} = {uncertainty[k]!r}; allowed: two numbers (lo, hi)") from None
+        if not (np.isfinite(lo) and np.isfinite(hi) and lo <= hi):
+            raise ParameterError(f"uncertainty {k} = ({lo:g}, {hi:g}); allowed: finite lo <= hi")
+        for v in (lo, hi):
+            try:
+                params.with_values(**{k: v})
+            except ParameterError as exc:
+                raise ParameterError(f"uncertainty {k} = ({lo:g}, {hi:g}): {exc}") from None
+        box[k] = (lo, hi)
+    return box
+
+
+def uncertainty_text(params: Params, values: dict | None, box: dict) -> tuple[str, str | None]:
+    """One line saying which box the uncertainty analyses, and a warning line (or None) when
+    the parameters' own value of a key differs from the fit's value ``values`` ({key: value},
+    the centre the box was estimated around; None: not known)."""
+    line = "uncertainty box " + ", ".join(f"{k} {lo:.6g}..{hi:.6g}" for k, (lo, hi) in box.items()) + \
+        "; it replaces the parameters' own " + _values_text({k: float(getattr(params.plant, k)) for k in box})
+    differ = {k: (float(getattr(params.plant, k)), float(v)) for k, v in (values or {}).items()
+              if k in box and not np.isclose(float(getattr(params.plant, k)), float(v), rtol=1e-9, atol=0.0)}
+    if not differ:
+        return line, None
+    what = ", ".join(f"{k} = {own:.6g} (the fit's {fit:.6g})" for k, (own, fit) in differ.items())
+    return line, (f"the parameters' own {what} differ from the fit's values; the box analysed is the fit's "
+                  "interval around the fit's value, so the file's value is not its centre (use the fitted "
+                  "file, or --set the fit's value, to make them agree)")
 
 
 def _values_text(values: dict) -> str:
@@ -123,10 +186,13 @@ def leg_text(lv: dict) -> tuple[str, str | None]:
                   f"parameters' own values, e.g. --leg nominal:{b}) or edit [configurations]")
 
 
-def leg_configurations(params: Params, n: int, *, leg=None, leg_mode: str = "segment") -> list[dict]:
+def leg_configurations(params: Params, n: int, *, leg=None, leg_mode: str = "segment",
+                       uncertainty=None) -> list[dict]:
     """Plant overrides of the leg configurations: ``n`` points per axis, evenly spaced from one
     end to the other (``n`` = 2: the ends). "segment": one axis, every differing key
-    interpolated together; "box": one axis per key, the product (n^keys configurations)."""
+    interpolated together; "box": one axis per key, the product (n^keys configurations).
+    ``uncertainty`` ({key: (lo, hi)}, :func:`check_uncertainty`): one more axis per key with
+    lo < hi, ``n`` points from lo to hi, the product with the leg's configurations."""
     if leg_mode not in LEG_MODES:
         raise ParameterError(f"leg_mode = {leg_mode!r}; allowed: {list(LEG_MODES)}")
     a, b, keys, base, lo, hi = _span(params, leg)
@@ -136,8 +202,15 @@ def leg_configurations(params: Params, n: int, *, leg=None, leg_mode: str = "seg
                              "configurations with different plant values")
     t = np.linspace(0.0, 1.0, n)
     if leg_mode == "segment":
-        return [{k: lo[k] + s * (hi[k] - lo[k]) for k in keys} for s in t]
-    return [{k: lo[k] + s * (hi[k] - lo[k]) for k, s in zip(keys, ss)} for ss in product(t, repeat=len(keys))]
+        configs = [{k: lo[k] + s * (hi[k] - lo[k]) for k in keys} for s in t]
+    else:
+        configs = [{k: lo[k] + s * (hi[k] - lo[k]) for k, s in zip(keys, ss)} for ss in product(t, repeat=len(keys))]
+    if not uncertainty:
+        return configs
+    box = check_uncertainty(params, uncertainty, leg)
+    # the same formula as the leg's axes: the ends are exactly lo and hi
+    axes = [[(k, u0 + s * (u1 - u0)) for s in (t if u0 < u1 else t[:1])] for k, (u0, u1) in box.items()]
+    return [{**c, **dict(vals)} for c in configs for vals in product(*axes)]
 
 
 def _check_requirements(requirements) -> tuple[str, ...]:
@@ -196,7 +269,7 @@ def _doubling(n: int) -> int:
 @loop_first
 def robust_region(loop, P_gain, D_gain, *, beta: float | None = None, alpha: float | None = None,
                   requirements=("stable", "pm"), leg=None, leg_mode: str = "segment",
-                  max_per_axis: int = MAX_LEG_POINTS) -> RobustRegion:
+                  uncertainty=None, max_per_axis: int = MAX_LEG_POINTS) -> RobustRegion:
     """The gains meeting ``requirements`` for every leg configuration of the range.
 
     Parameters
@@ -213,6 +286,10 @@ def robust_region(loop, P_gain, D_gain, *, beta: float | None = None, alpha: flo
     leg : (str, str), optional
         The two configurations bounding the range (see :func:`leg_ends`).
     leg_mode : {"segment", "box"}
+    uncertainty : dict, optional
+        ``{key: (lo, hi)}``, plant keys in SI units (e.g. an identification's 95 % confidence
+        intervals): the gains must meet the requirements for every value in the box too
+        (module docstring; :func:`check_uncertainty` says what is allowed).
     max_per_axis : int
         Stop doubling at this many configurations per axis (``converged`` says whether the
         last doubling changed nothing).
@@ -247,13 +324,13 @@ def robust_region(loop, P_gain, D_gain, *, beta: float | None = None, alpha: flo
         return out
 
     n = 2
-    configs = leg_configurations(params, n, leg=leg, leg_mode=leg_mode)
+    configs = leg_configurations(params, n, leg=leg, leg_mode=leg_mode, uncertainty=uncertainty)
     current = region(configs)
     history = [(len(configs), int(current.sum()))]
     converged = False
     while _doubling(n) <= max_per_axis:
         n2 = _doubling(n)
-        configs2 = leg_configurations(params, n2, leg=leg, leg_mode=leg_mode)
+        configs2 = leg_configurations(params, n2, leg=leg, leg_mode=leg_mode, uncertainty=uncertainty)
         nxt = region(configs2)
         history.append((len(configs2), int(nxt.sum())))
         same = np.array_equal(nxt, current)
@@ -261,7 +338,9 @@ def robust_region(loop, P_gain, D_gain, *, beta: float | None = None, alpha: flo
         if same:
             converged = True
             break
+    extra = {"uncertainty": {k: list(v) for k, v in check_uncertainty(params, uncertainty, leg).items()}} \
+        if uncertainty else {}
     return RobustRegion(P, D, current, len(configs), n, converged, history, configs,
                         loop.provenance(leg=list(leg_ends(params, leg)), leg_mode=leg_mode,
-                                        leg_values=leg_values(params, leg, leg_mode),
-                                        requirements=list(req), beta=beta, alpha=alpha))
+                                        leg_values=leg_values(params, leg, leg_mode, uncertainty),
+                                        requirements=list(req), beta=beta, alpha=alpha, **extra))

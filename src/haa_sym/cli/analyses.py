@@ -22,6 +22,7 @@ from haa_sym.design.schedule_c import check_c_directory, write_c
 from haa_sym.errors import ParameterError
 from haa_sym.io.formats import save_json, save_npz
 from haa_sym.io.gridspec import GRID_SYNTAX, grid
+from haa_sym.io.uncertainty import fit_box
 from haa_sym.io.outputs import Transaction, csv_text
 from haa_sym.io.progress import message
 from haa_sym.loop import ClosedLoop, LoopOptions
@@ -32,7 +33,7 @@ from haa_sym.paper.reproduce import reproduce
 from haa_sym.cli.common import (MAP_D_GAIN, PARAMS_HELP, POINTS_ROLE, TITLE_HELP, _axis, _common,
                                 _gain_flags, _leg, _leg_args, _map_args, _params, _parse_options, _plots,
                                 _points, _requirements, _say_leg, _setup, _write_outputs, _wrote,
-                                measured_torque)
+                                _agreement, _agreement_text, _measured, _uncertainty, measured_torque)
 
 
 def _cmd_verify(args) -> int:
@@ -43,7 +44,8 @@ def _cmd_regions(args) -> int:
     loop, out, plot = _setup(args, "regions")
     P, D = _axis(args, "P_gain"), _axis(args, "D_gain")
     robust_only = [f for f, given in (("--require", args.require != "stable,pm"), ("--leg", args.leg is not None),
-                                      ("--leg-mode", args.leg_mode != "segment")) if given]
+                                      ("--leg-mode", args.leg_mode != "segment"),
+                                      ("--uncertainty", args.uncertainty is not None)) if given]
     if robust_only and not args.robust:
         raise ParameterError(f"{robust_only[0]} applies to the leg range; allowed: with --robust")
     if args.robust:
@@ -53,32 +55,41 @@ def _cmd_regions(args) -> int:
             raise ParameterError(f"{plain_only[0]} with --robust: the robust map spans the leg range "
                                  "(decided from the curves); allowed: one of them")
         return _robust_regions(args, loop, out, plot, P, D)
+    points = _measured(args)
     m = region_map(loop, P, D, radius=args.radius, method=args.method)
+    counts, drawn = _agreement(loop, points, P, D)
+    if counts is not None:
+        m.meta["measured"] = counts
 
     def figure():
         b = boundaries(loop, P_range=(P.min(), P.max()), D_range=(D.min(), D.max())) \
             if loop.options.conventions.pm_loop == "impedance" else None
-        return _plots().plot_region(m, title=args.figure_title, boundary=b)
+        return _plots().plot_region(m, title=args.figure_title, boundary=b, measured=drawn)
     _write_outputs(out, plot, lambda path, tx: m.save(path, tx, "--out"), figure)
     print(f"{m.stable.size} points ({m.meta['method']}): {m.stable.sum()} stable, {m.low_pm.sum()} stable "
-          f"with PM < 30 deg, {m.passive.sum()} passive" + _wrote(out))
+          f"with PM < 30 deg, {m.passive.sum()} passive" + _agreement_text(counts) + _wrote(out))
     return 0
 
 
 def _robust_regions(args, loop, out, plot, P, D) -> int:
-    leg_line = _say_leg(loop.params, _leg(args, loop.params), args.leg_mode)
+    fit, points = _uncertainty(args, loop.params, _leg(args, loop.params)), _measured(args)
+    leg_line = _say_leg(loop.params, _leg(args, loop.params), args.leg_mode, fit)
     r = robust_region(loop, P, D, requirements=_requirements(args), leg=_leg(args, loop.params),
-                      leg_mode=args.leg_mode)
+                      leg_mode=args.leg_mode, uncertainty=None if fit is None else fit_box(fit))
     message(leg_line)
+    counts, drawn = _agreement(loop, points, P, D, r.configurations)
     meta = {**r.meta, "n_configurations": r.n_configurations, "converged": r.converged, "history": r.history,
-            "configurations": r.configurations}
+            "configurations": r.configurations, **({"uncertainty_source": fit["source"]} if fit else {}),
+            **({"measured": counts} if counts else {})}
     _write_outputs(out, plot,
                    lambda path, tx: save_npz(path, {"P_gain": r.P_gain, "D_gain": r.D_gain, "feasible": r.feasible},
                                              meta, tx, "--out"),
-                   lambda: _plots().plot_robust(r, title=args.figure_title))
+                   lambda: _plots().plot_robust(r, title=args.figure_title, measured=drawn))
+    box = "" if fit is None else " and every value of " + ", ".join(
+        f"{k} {lo:.4g}..{hi:.4g}" for k, (lo, hi) in r.meta["uncertainty"].items())
     print(f"{r.feasible.size} points: {int(r.feasible.sum())} meet {'+'.join(r.meta['requirements'])} for every leg "
-          f"configuration ({r.meta['leg'][0]}..{r.meta['leg'][1]}, {r.meta['leg_mode']}, {r.n_configurations} "
-          f"configurations{'' if r.converged else ', NOT converged'})" + _wrote(out))
+          f"configuration ({r.meta['leg'][0]}..{r.meta['leg'][1]}, {r.meta['leg_mode']}){box}: {r.n_configurations} "
+          f"configurations{'' if r.converged else ', NOT converged'}" + _agreement_text(counts) + _wrote(out))
     return 0
 
 
@@ -154,10 +165,11 @@ def _cmd_schedule(args) -> int:
     P, D = _axis(args, "P_gain"), _axis(args, "D_gain")
     beta_range = _range(args.beta_range, "--beta-range", "the torque-gain scale beta, Eq. 7")
     alphas = None if args.alpha_values is None else grid(args.alpha_values, "--alpha-values")
-    leg_line = _say_leg(loop.params, _leg(args, loop.params), args.leg_mode)
+    fit = _uncertainty(args, loop.params, _leg(args, loop.params))
+    leg_line = _say_leg(loop.params, _leg(args, loop.params), args.leg_mode, fit)
     s = schedule(loop, P, D, beta_range=beta_range, beta_tol=args.beta_tol, alpha_values=alphas,
                  requirements=_requirements(args), leg=_leg(args, loop.params), leg_mode=args.leg_mode,
-                 scheduler=args.scheduler)
+                 uncertainty=None if fit is None else fit_box(fit), scheduler=args.scheduler)
     message(leg_line)
     if not s.feasible.any():
         with_alpha = f" with --alpha-values {args.alpha_values}" if args.alpha_values is not None else ""
@@ -181,7 +193,9 @@ def _cmd_schedule(args) -> int:
               "the range's top if the hardware takes more", file=sys.stderr)
     unsafe = int((~s.beta_fixed_feasible & s.feasible).sum())
     print(f"{s.feasible.size} impedances: {feas} with a robust beta in [{beta_range[0]:g}, {beta_range[1]:g}] "
-          f"(tolerance {args.beta_tol:g}; leg {s.meta['leg'][0]}..{s.meta['leg'][1]}, {s.n_configurations} "
+          f"(tolerance {args.beta_tol:g}; leg {s.meta['leg'][0]}..{s.meta['leg'][1]}"
+          + ("".join(f", {k} {lo:.4g}..{hi:.4g}" for k, (lo, hi) in s.meta["uncertainty"].items())
+             if s.meta["uncertainty"] else "") + f", {s.n_configurations} "
           f"configurations{'' if s.converged else ', NOT converged'}); beta = 1 fails for some leg at {unsafe} of "
           f"them; lookup safe on {s.meta['cells_safe']} of {s.meta['cells']} cells ({s.meta['cell_subdivisions'] + 1}^2 "
           f"sub-grid checked, {s.meta['grid_points_lowered_by_cell_check']} grid values lowered)"
@@ -367,6 +381,10 @@ def register(sub) -> dict:
     r.add_argument("--robust", action="store_true",
                    help="the gains meeting --require for every leg configuration of the range (npz: feasible)")
     _leg_args(r)
+    r.add_argument("--measured", metavar="POINTS.csv",
+                   help="measured stability points (CSV columns P_gain,D_gain,outcome; outcome stable, unstable or "
+                        "limit_cycle): drawn over the map with the paper's symbols, and how many agree with the "
+                        "model (docs/uncertainty.md)")
     r.add_argument("--method", choices=("curves", "grid"), default="curves",
                    help="decide the map from the exact boundaries (default) or every point on the grid "
                         "(with per-point phase margin and passivity excess)")

@@ -9,9 +9,12 @@ from pathlib import Path
 
 import numpy as np
 
-from haa_sym.analysis.robust import leg_text, leg_values
+from haa_sym.analysis.measured import agreement
+from haa_sym.analysis.robust import check_uncertainty, leg_text, leg_values, uncertainty_text
 from haa_sym.errors import ParameterError
 from haa_sym.io.gridspec import grid
+from haa_sym.io.measured import read_measured
+from haa_sym.io.uncertainty import fit_box, fit_values, read_fit
 from haa_sym.io.outputs import Transaction, check_file
 from haa_sym.loop import ClosedLoop, LoopOptions
 from haa_sym.model import filters
@@ -273,15 +276,71 @@ def _leg(args, params):
     return (a.strip(), b.strip())
 
 
-def _say_leg(params, leg, leg_mode) -> str:
+def _say_leg(params, leg, leg_mode, fit=None) -> str:
     """Before a leg-range analysis: a warning, shown even with --quiet, when the parameters' own
-    values (a file's body tables, --set) lie outside the range, which replaces them. Returns the
-    line saying which configurations and values it analyses, a progress message the command
-    shows once its input has passed every check (a refused command prints one line only)."""
-    line, warning = leg_text(leg_values(params, leg, leg_mode))
-    if warning:
-        print(f"haa-sym: warning: {warning}", file=sys.stderr)
-    return line
+    values (a file's body tables, --set) lie outside the range, which replaces them, or differ
+    from the values of an identification ``fit`` (:func:`_uncertainty`), whose box replaces
+    them. Returns the line saying which configurations and values it analyses, a progress
+    message the command shows once its input has passed every check (a refused command prints
+    one line only)."""
+    box = fit_box(fit) if fit is not None else None
+    line, warning = leg_text(leg_values(params, leg, leg_mode, box))
+    lines, warnings = [line], [warning]
+    if fit is not None:
+        u_line, u_warning = uncertainty_text(params, fit_values(fit), box)
+        lines.append(f"{u_line} (from {fit['source']})")
+        warnings.append(u_warning)
+    for w in warnings:
+        if w:
+            print(f"haa-sym: warning: {w}", file=sys.stderr)
+    return "; ".join(lines)
+
+
+def _uncertainty(args, params, leg):
+    """The report of ``--uncertainty`` (None without), read and checked before any computation:
+    the schema (:func:`haa_sym.io.uncertainty.read_fit`), its keys against the actuator's plant
+    keys, and its box against the leg range (:func:`haa_sym.analysis.robust.check_uncertainty`)."""
+    if getattr(args, "uncertainty", None) is None:
+        return None
+    fit = read_fit(args.uncertainty, "--uncertainty", keys=tuple(params.plant.topology.parameter_keys))
+    try:
+        check_uncertainty(params, fit_box(fit), leg)
+    except ParameterError as exc:
+        raise ParameterError(f"--uncertainty {args.uncertainty!r}: {exc}") from None
+    return fit
+
+
+def _measured(args):
+    """The points of ``--measured`` (None without), read and checked before any computation."""
+    return None if getattr(args, "measured", None) is None else read_measured(args.measured, "--measured")
+
+
+def _agreement(loop, points, P, D, configurations=None):
+    """The model's agreement with measured ``points`` (None without): the counts (for meta and
+    the summary line) and the plain data the figure draws; a warning for points outside the
+    map's axes (counted, not drawn)."""
+    if points is None:
+        return None, None
+    a = agreement(loop, points.P_gain, points.D_gain, points.outcome, configurations=configurations)
+    outside = int((~((a.P_gain >= P.min()) & (a.P_gain <= P.max()) & (a.D_gain >= D.min())
+                     & (a.D_gain <= D.max()))).sum())
+    if outside:
+        print(f"haa-sym: warning: {outside} of {a.P_gain.size} measured points of {points.source} lie outside "
+              "the map's axes: counted, not drawn", file=sys.stderr)
+    counts = {**a.counts, "source": points.source, "outside_axes": outside}
+    drawn = {"P_gain": a.P_gain, "D_gain": a.D_gain, "outcome": a.outcome, "agrees": a.agrees}
+    return counts, drawn
+
+
+def _agreement_text(counts) -> str:
+    """The summary's clause on measured points: how many agree, per outcome."""
+    if counts is None:
+        return ""
+    per = ", ".join(f"{counts[o]['agree']}/{counts[o]['points']} {o}" for o in ("stable", "unstable", "limit_cycle")
+                    if counts[o]["points"])
+    strict = f" ({counts['agree_all']} for every configuration)" if counts["configurations"] > 1 else ""
+    return (f"; measured: {counts['agree']} of {counts['points']} agree with the model{strict} [{per}; "
+            "limit_cycle agrees with unstable or PM < 30 deg]")
 
 
 def _requirements(args):
@@ -322,5 +381,9 @@ def _leg_args(parser) -> None:
                         "retracted:extended, or the file's first two)")
     parser.add_argument("--leg-mode", choices=("segment", "box"), default="segment",
                         help="the leg range: the segment between the two (default) or the box of every pair")
+    parser.add_argument("--uncertainty", metavar="FIT.json",
+                        help="the report of haa-sym identify: the gains must hold for every value in the 95 %% "
+                             "confidence box of its fitted keys too (a box, combined with the leg range; "
+                             "docs/uncertainty.md)")
 
 

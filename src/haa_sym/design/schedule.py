@@ -68,8 +68,8 @@ import numpy as np
 
 from haa_sym._version import __version__
 from haa_sym.analysis.decide import decide_points
-from haa_sym.analysis.robust import (MAX_LEG_POINTS, _check_requirements, feasible_map, leg_configurations, leg_ends,
-                                     leg_values, meets)
+from haa_sym.analysis.robust import (MAX_LEG_POINTS, _check_requirements, check_uncertainty, feasible_map,
+                                     leg_configurations, leg_ends, leg_values, meets)
 from haa_sym.analysis.torque import torque_bandwidth
 from haa_sym.design.schedule_table import ScheduleTable
 from haa_sym.errors import ParameterError
@@ -367,7 +367,7 @@ def _free_in_the_air(params: Params) -> Params:
 @loop_first
 def schedule(loop, P_gain=None, D_gain=None, *, beta_range=(0.1, 8.0), beta_tol: float = 0.02,
              alpha=None, alpha_values=None, requirements=("stable", "pm"), leg=None,
-             leg_mode: str = "segment", scheduler=None, progress: bool | None = None,
+             leg_mode: str = "segment", uncertainty=None, scheduler=None, progress: bool | None = None,
              max_per_axis: int = MAX_LEG_POINTS, cell_subdivisions: int = CELL_SUBDIVISIONS) -> Schedule:
     """The largest robust beta (and alpha) for every impedance of the grid.
 
@@ -390,6 +390,10 @@ def schedule(loop, P_gain=None, D_gain=None, *, beta_range=(0.1, 8.0), beta_tol:
     requirements : sequence of {"stable", "pm", "passive"}
     leg, leg_mode
         The leg range (:func:`haa_sym.analysis.robust.leg_configurations`).
+    uncertainty : dict, optional
+        ``{key: (lo, hi)}``, plant keys in SI units (an identification's confidence box): beta
+        must hold for every value in the box too, sampled like the leg range's box and refined
+        by the same doubling (:mod:`haa_sym.analysis.robust`, docs/uncertainty.md).
     scheduler : None, str or distributed.Client
         None: dask's threaded scheduler in this process; an address ("tcp://host:port") or a
         Client: that dask.distributed cluster.
@@ -425,7 +429,7 @@ def schedule(loop, P_gain=None, D_gain=None, *, beta_range=(0.1, 8.0), beta_tol:
         if alphas.size == 0:
             raise ParameterError("alpha_values is empty; allowed: at least one value >= 0")
     ends = leg_ends(params, leg)
-    leg_configurations(params, 2, leg=leg, leg_mode=leg_mode)        # checks the range now
+    leg_configurations(params, 2, leg=leg, leg_mode=leg_mode, uncertainty=uncertainty)   # checks them now
     runner = _Runner(scheduler, progress)
     maps: dict = {}                     # (config key, beta index, alpha index) -> (n_P, n_D) bool
     points: dict = {}                   # (config key, beta index, alpha index) -> {flat index: bool}
@@ -479,13 +483,13 @@ def schedule(loop, P_gain=None, D_gain=None, *, beta_range=(0.1, 8.0), beta_tol:
 
     try:
         n = 2
-        configs = leg_configurations(params, n, leg=leg, leg_mode=leg_mode)
+        configs = leg_configurations(params, n, leg=leg, leg_mode=leg_mode, uncertainty=uncertainty)
         current = solve(configs)
         history = [(len(configs), int((current.max(axis=0) >= 0).sum()))]
         converged = False
         while 2 * n - 1 <= max_per_axis:
             n = 2 * n - 1
-            configs = leg_configurations(params, n, leg=leg, leg_mode=leg_mode)
+            configs = leg_configurations(params, n, leg=leg, leg_mode=leg_mode, uncertainty=uncertainty)
             nxt = solve(configs)
             history.append((len(configs), int((nxt.max(axis=0) >= 0).sum())))
             same = np.array_equal(nxt, current)
@@ -535,7 +539,9 @@ def schedule(loop, P_gain=None, D_gain=None, *, beta_range=(0.1, 8.0), beta_tol:
             "source": str(params.source), "requirements": list(req), "beta_range": [float(fine[0]), float(fine[-1])],
             "beta_tol": float(beta_tol), "beta_grid": int(fine.size), "coarse_values": int(coarse.size),
             "alpha_scheduled": alpha_values is not None, "alpha_values": alphas.tolist(),
-            "leg": list(ends), "leg_mode": leg_mode, "leg_values": leg_values(params, leg, leg_mode),
+            "leg": list(ends), "leg_mode": leg_mode, "leg_values": leg_values(params, leg, leg_mode, uncertainty),
+            "uncertainty": {k: list(v) for k, v in check_uncertainty(params, uncertainty, leg).items()}
+            if uncertainty else None,
             "haa_sym": __version__,
             "scheduler": "dask threads (in-process)" if scheduler is None else "dask.distributed",
             "torque_bandwidth_beta_1_rad_s": bw_1, "lowered_by_point_check": lowered,

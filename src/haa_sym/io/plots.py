@@ -10,6 +10,7 @@ import matplotlib
 matplotlib.use("Agg")
 import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
+from matplotlib import patheffects  # noqa: E402
 from matplotlib.colors import ListedColormap  # noqa: E402
 from matplotlib.patches import Patch  # noqa: E402
 
@@ -17,7 +18,7 @@ from haa_sym.errors import ParameterError  # noqa: E402
 from haa_sym.io.outputs import transaction  # noqa: E402
 
 __all__ = ["plot_region", "plot_region_panels", "plot_corrected_phase", "plot_steps",
-           "plot_contact", "save_figure", "check_title", "plot_identify"]
+           "plot_contact", "plot_describing", "save_figure", "check_title", "plot_identify"]
 
 # Figs. 8-11: white stable, light grey stable with PM < 30 deg, dark unstable.
 REGION_COLORS = ListedColormap(["#ffffff", "#c8c8c8", "#3a3a3a"])
@@ -65,9 +66,10 @@ def _gain_axes(ax, logP: bool) -> None:
     ax.set_ylabel("D_gain (Nms/rad)")
 
 
-def plot_region(m, ax=None, title: str | None = None, passivity: bool = True, boundary=None):
+def plot_region(m, ax=None, title: str | None = None, passivity: bool = True, boundary=None, measured=None):
     """Draw one :class:`haa_sym.analysis.regions.RegionMap` on ``ax`` (log P_gain, linear D_gain), with
-    the exact curves (:func:`haa_sym.analysis.boundaries.stability.boundaries`) over it when given."""
+    the exact curves (:func:`haa_sym.analysis.boundaries.stability.boundaries`) over it when given,
+    and measured points (``measured``, see :func:`draw_measured`) over both."""
     fig = None
     if ax is None:
         fig, ax = plt.subplots(figsize=(4.6, 4.4), layout="constrained")
@@ -89,13 +91,14 @@ def plot_region(m, ax=None, title: str | None = None, passivity: bool = True, bo
         plot_boundary(boundary, ax)
         ax.set_xlim(_edges(m.P_gain, logP)[[0, -1]])
         ax.set_ylim(_edges(m.D_gain, False)[[0, -1]])
+    points = draw_measured(ax, measured, _edges(m.P_gain, logP)[[0, -1]], _edges(m.D_gain, False)[[0, -1]])
     _gain_axes(ax, logP)
     if title:
         w = ax.figure.get_figwidth() / (len(ax.figure.axes) or 1)
         ax.set_title(_wrap(title, w), fontsize=_title_size(title, 10))
     if fig is not None:
         extra = curve_legend(boundary) if boundary is not None else []
-        fig.legend(handles=_region_legend(boundary is None) + extra, loc="outside lower center", ncol=2,
+        fig.legend(handles=_region_legend(boundary is None) + extra + points, loc="outside lower center", ncol=2,
                    fontsize=7)
     return fig or ax.figure
 
@@ -150,6 +153,41 @@ def curve_legend(boundary) -> list:
             seen.add(label)
             out.append(plt.Line2D([], [], label=label, **_CURVE_STYLES[key]))
     return out
+
+
+# The paper's Figs. 8-11 mark experiments with crosses (unstable) and squares (stable); it has no
+# limit cycles, so an open triangle marks those. The colour says whether the model agrees
+# (haa_sym.analysis.measured's rule); a white outline keeps a marker visible on the dark region.
+MEASURED_MARKERS = {"stable": ("s", "stable (measured, square)"), "unstable": ("x", "unstable (measured, cross)"),
+                    "limit_cycle": ("^", "limit cycle (measured, triangle)")}
+MEASURED_COLORS = {True: ("#0060ff", "agrees with the model"), False: ("#e00000", "disagrees with the model")}
+
+
+def draw_measured(ax, measured, P_lim, D_lim) -> list:
+    """Measured points on ``ax`` with the paper's symbols (:data:`MEASURED_MARKERS`), coloured by
+    agreement (:data:`MEASURED_COLORS`); ``measured``: plain data ``{"P_gain", "D_gain",
+    "outcome", "agrees"}`` (flat arrays) or None. Points outside ``P_lim`` x ``D_lim`` are not
+    drawn (the axes keep the map's extent). Returns the legend handles (empty without points)."""
+    if measured is None:
+        return []
+    P, D = np.asarray(measured["P_gain"], float), np.asarray(measured["D_gain"], float)
+    out, agrees = np.asarray(measured["outcome"]).astype(str), np.asarray(measured["agrees"], bool)
+    inside = (P >= P_lim[0]) & (P <= P_lim[1]) & (D >= D_lim[0]) & (D <= D_lim[1])
+    halo = [patheffects.withStroke(linewidth=3.0, foreground="white")]
+    handles = []
+    for o, (marker, label) in MEASURED_MARKERS.items():
+        for ok, (color, _) in MEASURED_COLORS.items():
+            sel = inside & (out == o) & (agrees == ok)
+            if sel.any():
+                ax.plot(P[sel], D[sel], ls="none", marker=marker, ms=6, mfc="none", mec=color, mew=1.6,
+                        path_effects=halo, zorder=5)
+        if (out == o).any():
+            handles.append(plt.Line2D([], [], ls="none", marker=marker, ms=6, mfc="none", mec="k", mew=1.4,
+                                      label=label))
+    for ok, (color, label) in MEASURED_COLORS.items():
+        if (agrees == ok).any():
+            handles.append(Patch(facecolor=color, edgecolor=color, label=f"{label} (marker colour)"))
+    return handles
 
 
 def _region_legend(grid_contour: bool = True):
@@ -387,20 +425,25 @@ def plot_schedule(s, title: str = ""):
 
 
 def _leg_line(meta: dict) -> str:
-    """The leg range's ends and their values (``meta["leg_values"]``), two lines for a title; ""
-    without."""
+    """The leg range's ends and their values (``meta["leg_values"]``), two lines for a title, and
+    the uncertainty box (its keys and ranges) on a third when there is one; "" without."""
     lv = meta.get("leg_values")
     if not lv:
         return ""
     ends = " .. ".join(f"{name} (" + ", ".join(f"{k} {v:.4g}" for k, v in vals.items()) + ")"
                        for name, vals in lv["ends"].items())
     own = ", ".join(f"{k} {v:.4g}" for k, v in lv["own"].items())
-    return f"{ends}\nanalysed instead of the parameters' {own}" + (" (outside the range)" if lv["outside"] else "")
+    text = f"{ends}\nanalysed instead of the parameters' {own}" + (" (outside the range)" if lv["outside"] else "")
+    if lv.get("uncertainty"):
+        text += "\nand every value of the uncertainty box " + ", ".join(
+            f"{k} {lo:.4g}..{hi:.4g}" for k, (lo, hi) in lv["uncertainty"].items())
+    return text
 
 
-def plot_robust(r, title: str = ""):
+def plot_robust(r, title: str = "", measured=None):
     """A :class:`haa_sym.analysis.robust.RobustRegion`: the gains meeting the requirements for every leg
-    configuration of the range; ``title`` goes above the description of the range."""
+    configuration of the range; ``title`` goes above the description of the range; measured
+    points over it (``measured``, see :func:`draw_measured`)."""
     fig, ax = plt.subplots(figsize=(4.8, 4.2), layout="constrained")
     logP = bool(np.all(r.P_gain > 0))
     ax.pcolormesh(_edges(r.P_gain, logP), _edges(r.D_gain, False), (~r.feasible).T.astype(float),
@@ -412,6 +455,93 @@ def plot_robust(r, title: str = ""):
             f"{leg[0]}..{leg[1]} ({r.meta['leg_mode']}, {r.n_configurations} configurations; dark: fails)")
     text = "\n".join(t for t in (title, auto, _leg_line(r.meta)) if t)
     ax.set_title(_wrap(text, 4.8, 7), fontsize=7)
+    handles = draw_measured(ax, measured, _edges(r.P_gain, logP)[[0, -1]], _edges(r.D_gain, False)[[0, -1]])
+    if handles:
+        fig.legend(handles=handles, loc="outside lower center", ncol=2, fontsize=7)
+    return fig
+
+
+def plot_describing(panels, title: str = ""):
+    """Nyquist-type figures of describing-function predictions, one panel per nonlinearity.
+
+    ``panels`` = [dict(label=str, G=complex array (the loop's linear part on its frequency
+    grid), minus_inv_N=real array (-1/N(A) on a grid of amplitudes), points=[(G_crossing,
+    amplitude, omega, stable)], unit=str)]: G as a curve, -1/N(A) along the negative real axis,
+    each predicted limit cycle marked (filled: stable by the Loeb criterion, open: unstable) and
+    labelled with its amplitude (in ``unit``) and frequency. The view spans -1 and every
+    predicted point (G leaves it where it is larger)."""
+    fig, axes = plt.subplots(1, len(panels), figsize=(5.2 * len(panels), 4.6 + (0.4 if title else 0)),
+                             constrained_layout=True, squeeze=False)
+    for ax, p in zip(axes[0], panels):
+        G = np.asarray(p["G"])
+        pts = p["points"]
+        span = 1.6 * max([1.0] + [abs(g) for g, *_ in pts])
+        ax.plot(G.real, G.imag, color="k", lw=1.0, label="G(j omega), omega > 0")
+        ax.plot(G.real, -G.imag, color="0.6", lw=0.6, ls="--", label="G(-j omega)")
+        locus = np.asarray(p["minus_inv_N"], float)
+        locus = locus[np.isfinite(locus) & (locus >= -span)]
+        if locus.size:
+            ax.plot(locus, np.zeros_like(locus), color="tab:red", lw=3, alpha=0.5, solid_capstyle="butt",
+                    label="-1/N(A)")
+        ax.plot([-1], [0], "+", color="tab:red", ms=10)
+        for g, A, w, stable in pts:
+            ax.plot([g], [0], "o", ms=8, color="tab:blue", mfc="tab:blue" if stable else "white")
+            ax.annotate(f"A = {A:.4g} {p['unit']}\n{w:.4g} rad/s ({w / (2 * np.pi):.4g} Hz)\n"
+                        f"{'stable' if stable else 'unstable'}", (g, 0), textcoords="offset points",
+                        xytext=(6, 10), fontsize=8)
+        ax.set_xlim(-span, 0.5 * span)
+        ax.set_ylim(-0.8 * span, 0.8 * span)
+        ax.axhline(0, color="0.8", lw=0.6)
+        ax.axvline(0, color="0.8", lw=0.6)
+        ax.set_xlabel("Re")
+        ax.set_ylabel("Im")
+        ax.set_title(_wrap(p["label"], 5.2, 9), fontsize=9)
+        ax.grid(True, alpha=0.3)
+        ax.legend(fontsize=7, loc="lower left")
+    if title:
+        fig.suptitle(_wrap(title, 5.2 * len(panels)), fontsize=_title_size(title, 10))
+    return fig
+
+
+def plot_tune(lead_s, integral, grid_objective, before, after, steps, title: str = "",
+              ylabel: str = "torque (Nm)"):
+    """``haa-sym tune``: left, the coarse search grid, the objective (rad/s) where every target is
+    met (blank: some target missed) over the PI's lead time tau = P_t0 / I_t0 (s; the first row,
+    tau = 0, the pure integrator, drawn at the bottom) and I_t0 (V/(Nm s)), with the file's and
+    the tuned PI marked; right, unit torque steps ``steps`` = [(t, T, label, linestyle)]."""
+    lead_s, integral, obj = (np.asarray(a, float) for a in (lead_s, integral, grid_objective))
+    fig, (ax, ax2) = plt.subplots(1, 2, figsize=(11, 4.4 + (0.6 if title else 0)), constrained_layout=True)
+    # tau = 0 cannot sit on a log axis: its row is drawn one grid step below the smallest tau
+    pos = lead_s[1:]
+    step = pos[1] / pos[0] if pos.size > 1 else 10.0
+    y = np.concatenate([[pos[0] / step], pos])
+    img = ax.pcolormesh(_edges(integral, True), _edges(y, True), np.ma.masked_invalid(obj), cmap="viridis",
+                        shading="flat")
+    ax.set_xscale("log")
+    ax.set_yscale("log")
+    cbar = fig.colorbar(img, ax=ax)
+    cbar.set_label("objective: torque bandwidth (rad/s)")
+
+    def mark(P, I, label, style):
+        tau = P / I if I > 0 else 0.0
+        ax.plot([I], [tau if tau > 0 else y[0]], style, ms=9, mfc="none", mew=2, label=label)
+    mark(before[0], before[1], f"file: P_t0 = {before[0]:.4g}, I_t0 = {before[1]:.4g}", "rs")
+    mark(after[0], after[1], f"tuned: P_t0 = {after[0]:.4g}, I_t0 = {after[1]:.4g}", "m*")
+    ax.set_xlabel("I_t0 (V/(Nm s))")
+    ax.set_ylabel("tau = P_t0 / I_t0 (s); bottom row: tau = 0")
+    ax.set_title("feasible PIs (blank: a target missed)", fontsize=10)
+    ax.legend(fontsize=8, loc="upper right")
+    for t, T, label, ls in steps:
+        ax2.plot(t, T, ls, label=label)
+    ax2.axhline(1.0, color="0.6", lw=0.8)
+    ax2.axhline(0.9, color="0.6", lw=0.8, ls=":")
+    ax2.set_xlabel("t (s)")
+    ax2.set_ylabel(ylabel)
+    ax2.set_title("unit torque step, impedance loop open", fontsize=10)
+    ax2.legend(fontsize=8)
+    ax2.grid(True, alpha=0.3)
+    if title:
+        fig.suptitle(_wrap(title, 11), fontsize=_title_size(title, 11))
     return fig
 
 

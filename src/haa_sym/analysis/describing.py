@@ -1,0 +1,377 @@
+"""Describing-function estimates of limit cycles in the loop (docs/describing.md).
+
+One memoryless nonlinearity at a time is cut out of the sampled closed loop; the rest of the
+loop is linear, ``G``, written so that the loop closes as ``u = -G n(u)``: the signal ``u`` the
+nonlinearity sees goes round the loop and comes back with negative sign. A sinusoid
+``u = A sin(omega t)`` through the nonlinearity gives a fundamental ``N(A) A sin(omega t)``
+(the describing function ``N``, real for the odd single-valued nonlinearities here); a limit
+cycle is predicted where the harmonic balance ``1 + N(A) G(j omega) = 0`` holds. As ``N`` is
+real and positive, that is ``arg G = -180 deg`` (a phase crossover, located by root finding of
+``sin(arg G)`` from the sign changes on the loop's frequency grid) and ``N(A) = -1 / G`` there
+(solved for ``A`` in closed form or by root finding).
+
+The nonlinearities (their parameters plain data, ``{"V_max": 24.0}``; the names of issue 19's
+``[limits]`` section):
+
+``V_max`` (V)        saturation of the voltage command ``V_k`` (PI output + velocity
+                     compensation) before the delay and the zero-order hold; ``u = V_k`` (V),
+                     discrete: ``G = K_T G_TV + K_theta G_thV`` at ``z = exp(j omega Ts)``.
+``T_res`` (Nm)       a rounding quantiser of step ``T_res`` on the torque the loop reads; ``u`` the
+                     torque (Nm), discrete: ``G = K_T G_TV / (1 + K_theta G_thV)``.
+``Fc_m``, ``Fc_<body>`` (Nm)  Coulomb friction ``-Fc sign(v)`` on the rotor or on a body; ``u`` its
+                     velocity ``v`` (rad/s), a continuous signal: ``G`` is the fundamental
+                     harmonic response of the sampled-data loop from a torque on that body to its
+                     velocity (the continuous plant, the sampled controller, the hold).
+
+``K_T`` and ``K_theta`` are the controller's two branches (every element of the loop: the PI of
+Eq. 7, the impedance law Eq. 8 with its velocity estimate, velocity compensation Eq. 6 and the
+delay): the applied voltage is ``V = -(K_T T + K_theta theta)``. The Loeb criterion decides
+whether a predicted cycle is stable (attracting in amplitude).
+"""
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+
+import numpy as np
+from scipy.optimize import brentq
+
+from haa_sym.analysis.sweep import BLAS_THREADS, blas_limits
+from haa_sym.errors import ParameterError
+from haa_sym.loop import ClosedLoop, loop_first
+from haa_sym.loop.plant import continuous_plant
+from haa_sym.model.params import gain_array
+
+__all__ = ["LimitCycles", "NONLINEARITIES", "describing_function", "df_harmonics", "limit_cycles",
+           "linear_part", "nonlinearity_output"]
+
+# key (or prefix) -> (what the nonlinearity sees, the unit of that signal, the unit of the parameter)
+NONLINEARITIES = {
+    "V_max": ("voltage command V_k (PI output + velocity compensation, before the hold)", "V", "V"),
+    "T_res": ("torque the loop reads (the torque sensor)", "Nm", "Nm"),
+    "Fc_m": ("rotor velocity dtheta_m", "rad/s", "Nm"),
+    "Fc_<body>": ("velocity dtheta_<body> of the body", "rad/s", "Nm"),
+}
+KINDS = {"V_max": "saturation", "T_res": "quantiser", "Fc": "relay"}
+
+
+@dataclass(frozen=True)
+class LimitCycles:
+    """Predicted limit cycles of one nonlinearity at one gain point.
+
+    Attributes
+    ----------
+    nonlinearity : str
+        The key (``V_max``, ``T_res``, ``Fc_m``, ``Fc_<body>``); ``value`` its parameter, in
+        ``value_unit`` (V or Nm).
+    signal, unit : str
+        What the nonlinearity sees and its unit (the unit of ``amplitude``).
+    amplitude : ndarray
+        Amplitude ``A`` of the sinusoid at the nonlinearity's input, one per predicted cycle.
+    omega, frequency_hz : ndarray
+        Its frequency, rad/s and Hz.
+    stable : ndarray of bool
+        Loeb criterion: the cycle attracts perturbations of its amplitude (``loeb > 0``).
+    loeb : ndarray
+        ``N'(A) N(A) (Re G Im G' - Re G' Im G)`` at the cycle (G' = dG/domega); > 0 stable.
+    G_crossing : ndarray
+        ``Re G`` at the phase crossover (``-1/N(A)``; dimensionless).
+    distortion : ndarray
+        Filtering check: ``sum_k |G(k omega)| |b_k(A)| / (|G(omega)| |b_1(A)|)`` over the odd
+        harmonics k = 3 .. ``k_max`` (b_k: the harmonics of the nonlinearity's output), the
+        harmonic content that returns to the nonlinearity's input relative to the fundamental,
+        added in magnitude; the prediction is trustworthy when it is small (docs/describing.md).
+    omega_curve, G_curve : ndarray
+        The loop's ``G`` on the frequency grid (rad/s; complex), for the Nyquist-type figure.
+    amplitude_curve, minus_inv_N : ndarray
+        ``-1/N(A)`` on a grid of amplitudes (real: the negative real axis).
+    meta : dict
+        ``loop.provenance()`` with the gain point, the nonlinearity and the options.
+    """
+
+    nonlinearity: str
+    value: float
+    value_unit: str
+    signal: str
+    unit: str
+    amplitude: np.ndarray
+    omega: np.ndarray
+    frequency_hz: np.ndarray
+    stable: np.ndarray
+    loeb: np.ndarray
+    G_crossing: np.ndarray
+    distortion: np.ndarray
+    omega_curve: np.ndarray = field(repr=False)
+    G_curve: np.ndarray = field(repr=False)
+    amplitude_curve: np.ndarray = field(repr=False)
+    minus_inv_N: np.ndarray = field(repr=False)
+    meta: dict = field(repr=False, default_factory=dict)
+
+    def to_dict(self) -> dict:
+        """The cycles as plain JSON data (the curves left out)."""
+        cycles = [{"amplitude": float(a), "unit": self.unit, "omega_rad_s": float(w), "frequency_hz": float(f),
+                   "stable": bool(s), "loeb": float(lb), "G_crossing": float(g), "distortion": float(d)}
+                  for a, w, f, s, lb, g, d in zip(self.amplitude, self.omega, self.frequency_hz, self.stable,
+                                                  self.loeb, self.G_crossing, self.distortion)]
+        return {"nonlinearity": self.nonlinearity, "value": self.value, "value_unit": self.value_unit,
+                "signal": self.signal,
+                "unit": self.unit, "limit_cycles": cycles, "meta": self.meta}
+
+
+# --- the describing functions ---------------------------------------------------------------------
+def _kind(key: str) -> str:
+    return KINDS["Fc"] if key.startswith("Fc_") else KINDS[key]
+
+
+def nonlinearity_output(kind: str, value: float, u: np.ndarray) -> np.ndarray:
+    """The nonlinearity itself, ``n(u)``: saturation at +-value, rounding to multiples of value,
+    or the relay ``value sign(u)`` (Coulomb friction's magnitude; the loop applies it with minus)."""
+    u = np.asarray(u, float)
+    if kind == "saturation":
+        return np.clip(u, -value, value)
+    if kind == "quantiser":
+        return value * np.round(u / value)
+    return value * np.sign(u)
+
+
+def describing_function(kind: str, value: float, A) -> tuple[np.ndarray, np.ndarray]:
+    """``(N(A), dN/dA)`` of a nonlinearity for the input amplitude(s) ``A`` (the signal's unit).
+
+    saturation (limit ``value``): 1 for A <= value, else (2/pi)(asin a + a sqrt(1 - a^2)), a = value/A;
+    relay (``value`` sign(u)): 4 value / (pi A);
+    quantiser (rounding, step q = ``value``): (4 q / (pi A)) sum_i sqrt(1 - ((2i - 1) q / (2 A))^2)
+    over the thresholds (2i - 1) q / 2 below A (0 below the first).
+    """
+    A = np.asarray(A, float)
+    if kind == "saturation":
+        a = np.minimum(value / A, 1.0)
+        r = np.sqrt(np.maximum(1 - a * a, 0.0))
+        return (2 / np.pi) * (np.arcsin(a) + a * r), -(4 / np.pi) * (a / A) * r
+    if kind == "relay":
+        N = 4 * value / (np.pi * A)
+        return N, -N / A
+    q = value
+    n = np.floor(A / q + 0.5).astype(int)                # thresholds (2i - 1) q / 2 <= A
+    i = np.arange(1, max(int(n.max(initial=0)), 1) + 1)
+    c = (2 * i - 1) * q / 2 / A[..., None]
+    on = i <= n[..., None]
+    r = np.sqrt(np.where(on, np.maximum(1 - c * c, 1e-300), 1.0))
+    N = 4 * q / (np.pi * A) * np.where(on, r, 0.0).sum(-1)
+    dN = -N / A + 4 * q / (np.pi * A ** 2) * np.where(on, c * c / r, 0.0).sum(-1)
+    return N, dN
+
+
+def df_harmonics(kind: str, value: float, A: float, k_max: int = 39, n: int = 65536) -> np.ndarray:
+    """Amplitudes ``|b_k|`` of the odd harmonics k = 1, 3, ..., ``k_max`` of ``n(A sin t)`` (FFT over
+    one period of ``n`` points, midpoints: about 1e-4 relative where the nonlinearity jumps)."""
+    t = 2 * np.pi * (np.arange(n) + 0.5) / n
+    c = np.fft.rfft(nonlinearity_output(kind, value, A * np.sin(t))) * 2 / n
+    return np.abs(c[1:k_max + 1:2])
+
+
+# --- the linear part ------------------------------------------------------------------------------
+def _controller(loop: ClosedLoop, P: float, D: float, omega: np.ndarray):
+    """``(K_T, K_theta)``: the applied voltage V = -(K_T T + K_theta theta) at z = exp(j omega Ts)."""
+    ctrl, el = loop.params.controller, loop.elements
+    Ts = ctrl.Ts
+    E = {k: el[k].frequency_response(omega, Ts) for k in ("F_d", "F_vc", "I_z", "z_delay")}
+    P_t, I_t, VC = ctrl.beta * loop.const[0], ctrl.beta * loop.const[1], ctrl.alpha * loop.const[2]
+    PI = P_t + I_t * E["I_z"]
+    K_T = E["z_delay"] * PI
+    K_th = E["z_delay"] * (PI * (P + D * E["F_d"]) - VC * E["F_vc"])
+    return K_T, K_th
+
+
+def _friction_input(loop: ClosedLoop, key: str):
+    """(input column of a torque on the body, velocity row) of the continuous plant for ``Fc_<body>``."""
+    cont = continuous_plant(loop.params.plant)
+    body = key[3:]
+    names = cont.state_names
+    if f"dtheta_{body}" not in names:
+        bodies = [n[7:] for n in names if n.startswith("dtheta_")]
+        raise ParameterError(f"{key}: no body {body!r} in this actuator; allowed: "
+                             + ", ".join(f"Fc_{b}" for b in bodies) + " (Nm)")
+    row = np.zeros(len(names))
+    row[names.index(f"dtheta_{body}")] = 1.0
+    if body == "m":
+        col = cont.B[:, cont.input_names.index("T_fr")]
+    else:
+        col = np.zeros(len(names))
+        J = getattr(loop.params.plant, f"J_{body}", None)
+        if J is None:
+            raise ParameterError(f"{key}: the body {body!r} has no inertia J_{body} in this model; allowed: "
+                                 "friction on a body of the chain (docs/describing.md)")
+        col[names.index(f"dtheta_{body}")] = 1.0 / J
+    return cont, col, row
+
+
+def linear_part(loop: ClosedLoop, P_gain: float, D_gain: float, key: str, omega) -> np.ndarray:
+    """``G(omega)`` (complex, dimensionless in the nonlinearity's signal) seen by nonlinearity
+    ``key`` at one gain point: the loop closes as u = -G n(u) (module docstring)."""
+    omega = np.asarray(omega, float)
+    kind = _kind(key)
+    K_T, K_th = _controller(loop, P_gain, D_gain, omega)
+    if kind != "relay":
+        G = loop.plant.frequency_response(omega, outputs=(loop.torque_output, "theta_encoder"), inputs=("V_m",))
+        G_TV, G_thV = G[0, 0], G[1, 0]
+        if kind == "saturation":
+            return K_T * G_TV + K_th * G_thV
+        return K_T * G_TV / (1 + K_th * G_thV)
+    # the sampled-data loop's fundamental response to a torque f e^{j omega t} on the body: the
+    # samples of the measurements are G_mf f + G_mV,d V (exactly, at z = exp(j omega Ts)), the
+    # controller closes V = -K y, and the hold's fundamental (1 - e^{-j omega Ts})/(j omega Ts)
+    # carries V back into continuous time (the images at omega + k 2 pi/Ts are left out)
+    cont, col, row = _friction_input(loop, key)
+    Ts = loop.params.controller.Ts
+    C_m = loop.plant.C[[loop.plant_output(loop.torque_output), loop.plant_output("theta_encoder")]]
+    n = cont.A.shape[0]
+    M = 1j * omega[:, None, None] * np.eye(n) - cont.A
+    rhs = np.broadcast_to(np.stack([col, cont.B[:, cont.input_names.index("V_m")]], axis=1), (omega.size, n, 2))
+    X = np.linalg.solve(M, rhs)                                   # (w, n, 2): columns f, V
+    G_vf, G_vV = X[:, :, 0] @ row, X[:, :, 1] @ row
+    G_mf = np.einsum("on,wn->ow", C_m, X[:, :, 0])
+    Gd = loop.plant.frequency_response(omega, outputs=(loop.torque_output, "theta_encoder"), inputs=("V_m",))
+    V = -(K_T * G_mf[0] + K_th * G_mf[1]) / (1 + K_T * Gd[0, 0] + K_th * Gd[1, 0])
+    x = omega * Ts
+    hold = np.where(x > 0, -np.expm1(-1j * x) / np.where(x > 0, 1j * x, 1.0), 1.0)
+    # the friction torque is -n(v): G = (velocity per unit torque on the body)
+    return G_vf + G_vV * hold * V
+
+
+# --- the harmonic balance -------------------------------------------------------------------------
+def _check(nonlinearity) -> tuple[str, float]:
+    if not isinstance(nonlinearity, dict) or len(nonlinearity) != 1:
+        raise ParameterError(f"nonlinearity = {nonlinearity!r}; allowed: one entry, e.g. {{'V_max': 24.0}} "
+                             f"(keys {list(NONLINEARITIES)})")
+    (key, value), = nonlinearity.items()
+    if key not in NONLINEARITIES and not (isinstance(key, str) and key.startswith("Fc_") and len(key) > 3):
+        raise ParameterError(f"nonlinearity {key!r}; allowed: {', '.join(NONLINEARITIES)}")
+    try:
+        v = float(value)
+    except (TypeError, ValueError):
+        v = math.nan
+    unit = NONLINEARITIES.get(key, NONLINEARITIES["Fc_<body>"])[2]
+    if not (math.isfinite(v) and v > 0):
+        raise ParameterError(f"{key} = {value!r}; allowed: a finite number > 0 ({unit})")
+    return key, v
+
+
+def _amplitudes(kind: str, value: float, N_target: float, A_max: float) -> list[float]:
+    """Every amplitude A with N(A) = N_target (> 0)."""
+    if kind == "relay":
+        return [4 * value / (np.pi * N_target)]
+    if kind == "saturation":
+        if N_target >= 1:
+            return []                         # N <= 1: only a loop with |G| > 1 at the crossover
+        # N as a function of a = value/A in (0, 1) is increasing: one root
+        a = brentq(lambda a: (2 / np.pi) * (np.arcsin(a) + a * math.sqrt(1 - a * a)) - N_target,
+                   0.0, 1.0, xtol=1e-15, rtol=1e-14)
+        return [value / a] if a > 0 else []
+    # quantiser: N is smooth between thresholds and jumps up at each; sign changes of N - target
+    # inside each interval, and a root where the jump crosses the target is a discontinuity
+    # (no harmonic balance there); search thresholds up to A_max
+    out = []
+    q = value
+    edges = (np.arange(1, int(A_max / q) + 2) - 0.5) * q
+    for lo, hi in zip(edges[:-1], edges[1:]):
+        s = np.linspace(lo, hi, 33)[1:]
+        s[-1] = hi * (1 - 1e-12)
+        f = describing_function(kind, q, s)[0] - N_target
+        for i in np.flatnonzero(np.sign(f[1:]) != np.sign(f[:-1])):
+            out.append(brentq(lambda A: float(describing_function(kind, q, np.array(A))[0]) - N_target,
+                              s[i], s[i + 1], xtol=1e-14 * hi))
+    return out
+
+
+@loop_first
+def limit_cycles(loop: ClosedLoop, P_gain: float, D_gain: float, *, nonlinearity: dict,
+                 n_omega: int = 4000, amplitude_max: float = 200.0, k_max: int = 39) -> LimitCycles:
+    """Describing-function prediction of the limit cycles of one nonlinearity at one gain point.
+
+    Parameters
+    ----------
+    loop : ClosedLoop
+        The sampled loop (its ``beta``, ``alpha`` and options).
+    P_gain, D_gain : float
+        Impedance stiffness (Nm/rad) and damping (Nms/rad), Eq. (8); 0 and 0 is the torque loop
+        alone (the impedance loop open, T_ref = 0).
+    nonlinearity : dict
+        One entry: ``{"V_max": V}`` (V), ``{"T_res": q}`` (Nm), ``{"Fc_m": F}`` or
+        ``{"Fc_<body>": F}`` (Nm).
+    n_omega : int
+        Points of the loop's log frequency grid (``omega_min`` to Nyquist pi/Ts) whose sign
+        changes of ``sin(arg G)`` bracket the phase crossovers (each then refined by brentq).
+        Default 4000.
+    amplitude_max : float
+        Quantiser only: amplitudes searched up to ``amplitude_max`` steps. Default 200.
+    k_max : int
+        The highest odd harmonic in ``distortion``. Default 39.
+
+    Returns
+    -------
+    LimitCycles
+        Every (A, omega) of the harmonic balance, the crossings in increasing frequency.
+    """
+    key, value = _check(nonlinearity)
+    # many small stacked solves: threaded BLAS only contends for the cores (as in the sweeps)
+    with blas_limits(BLAS_THREADS):
+        return _limit_cycles(loop, P_gain, D_gain, key, value, n_omega, amplitude_max, k_max)
+
+
+def _limit_cycles(loop, P_gain, D_gain, key, value, n_omega, amplitude_max, k_max) -> LimitCycles:
+    kind = _kind(key)
+    P, D = (gain_array(n, v, n).ravel() for n, v in (("P_gain", P_gain), ("D_gain", D_gain)))
+    if P.size != 1 or D.size != 1:
+        raise ParameterError(f"P_gain has {P.size} and D_gain {D.size} values; allowed: one gain point "
+                             "(one value each)")
+    P, D = float(P[0]), float(D[0])
+    if not (isinstance(n_omega, int) and n_omega >= 10):
+        raise ParameterError(f"n_omega = {n_omega!r}; allowed: an integer >= 10")
+    if not (isinstance(k_max, int) and k_max >= 3 and k_max % 2):
+        raise ParameterError(f"k_max = {k_max!r}; allowed: an odd integer >= 3")
+    Ts = loop.params.controller.Ts
+    w_nyq = math.pi / Ts
+    grid = np.append(loop.options.numerics.omega(Ts, n_omega), w_nyq)
+
+    def G(w):
+        return linear_part(loop, P, D, key, np.atleast_1d(np.asarray(w, float)))
+
+    Gg = G(grid)
+    s = np.sin(np.angle(Gg))
+    found = []
+    for i in np.flatnonzero((np.sign(s[1:]) != np.sign(s[:-1])) & np.isfinite(s[1:]) & np.isfinite(s[:-1])):
+        if s[i + 1] == 0 and i + 1 == grid.size - 1:
+            w = grid[-1]                               # real at Nyquist (the discrete loops)
+        else:
+            w = brentq(lambda x: float(np.sin(np.angle(G(x)[0]))), grid[i], grid[i + 1], xtol=1e-13 * grid[i + 1])
+        g = G(w)[0]
+        if g.real < 0 and abs(g.imag) <= 1e-6 * abs(g):
+            found.append((w, g.real))
+    # a sampled loop is real at Nyquist (up to rounding): a negative G there is a crossover
+    if kind != "relay" and abs(Gg[-1].imag) <= 1e-9 * abs(Gg[-1]) and Gg[-1].real < 0 \
+            and not any(abs(w - w_nyq) <= 1e-9 * w_nyq for w, _ in found):
+        found.append((w_nyq, Gg[-1].real))
+    rows = []
+    for w, g in found:
+        h = 1e-6 * w
+        dG = (G(min(w + h, w_nyq))[0] - G(w - h)[0]) / (min(w + h, w_nyq) - (w - h))
+        for A in _amplitudes(kind, value, -1.0 / g, amplitude_max * value):
+            N, dN = (float(v) for v in describing_function(kind, value, np.array(A)))
+            # Loeb: N' N (Re G Im G' - Re G' Im G), with Im G = 0 at the crossing
+            loeb = dN * N * g * dG.imag
+            b = df_harmonics(kind, value, A, k_max)
+            Gk = np.abs(G(w * np.arange(3, k_max + 1, 2)))
+            rows.append((A, w, loeb, g, float((Gk * b[1:]).sum() / (abs(g) * b[0])) if b[0] > 0 else np.inf))
+    rows.sort(key=lambda r: (r[1], r[0]))
+    cols = [np.array(c, float) for c in zip(*rows)] if rows else [np.empty(0)] * 5
+    A, w, loeb, g, dist = cols
+    amp_curve = value * np.logspace(-0.3 if kind != "saturation" else 0.0, 3, 400)
+    N_curve = describing_function(kind, value, amp_curve)[0]
+    with np.errstate(divide="ignore"):
+        minus_inv_N = np.where(N_curve > 0, -1.0 / N_curve, -np.inf)
+    meta = loop.provenance(analysis="limit_cycles", P_gain=P, D_gain=D, nonlinearity={key: value},
+                           describing_function=kind, n_omega=n_omega, k_max=k_max)
+    info = NONLINEARITIES.get(key, NONLINEARITIES["Fc_<body>"])
+    signal = info[0].replace("<body>", key[3:]) if key.startswith("Fc_") and key != "Fc_m" else info[0]
+    return LimitCycles(key, value, info[2], signal, info[1], A, w, w / (2 * np.pi), loeb > 0, loeb, g, dist,
+                       grid, Gg, amp_curve, minus_inv_N, meta)

@@ -1,0 +1,82 @@
+"""``haa-sym describe``: describing-function predictions of limit cycles (docs/describing.md)."""
+from __future__ import annotations
+
+import math
+
+from haa_sym.analysis.describing import NONLINEARITIES, limit_cycles
+from haa_sym.errors import ParameterError
+from haa_sym.io.formats import save_json
+from haa_sym.loop import ClosedLoop
+
+from haa_sym.cli.common import (TITLE_HELP, _check_out, _common, _gain_flags, _loaded, _params, _parse_options,
+                                _plots, _points, _write_outputs, _wrote, figure_title)
+
+LIMIT_HELP = ("a nonlinearity and its parameter, KEY=VALUE (repeatable, each predicted alone): V_max (V, "
+              "saturation of the voltage command), T_res (Nm, rounding of the torque the loop reads), Fc_m or "
+              "Fc_<body> (Nm, Coulomb friction on the rotor or a body)")
+
+
+def _limits(items: list[str]) -> list[dict]:
+    if not items:
+        raise ParameterError("--limit missing; allowed: KEY=VALUE with KEY one of "
+                             + ", ".join(NONLINEARITIES) + " (e.g. --limit V_max=24)")
+    out = []
+    for item in items:
+        key, sep, value = item.partition("=")
+        try:
+            v = float(value)
+        except ValueError:
+            v = math.nan
+        if not sep or not math.isfinite(v):
+            raise ParameterError(f"--limit {item!r}; allowed: KEY=VALUE with a finite number, e.g. V_max=24")
+        out.append({key.strip(): v})
+    return out
+
+
+def _cmd_describe(args) -> int:
+    file_params = _loaded(args)
+    params, options = _params(args, file_params), _parse_options(args.option)
+    out = _check_out(args.out, "describe", suffixes=(".json",))
+    plot = _check_out(args.plot, "describe", "--plot")
+    if plot and args.title:
+        _plots().check_title(args.title, "--title")
+    limits = _limits(args.limit)
+    P, D = (float(v[0]) for v in _points(args, one="describe predicts at one gain point"))
+    loop = ClosedLoop(params, options)
+    try:
+        results = [limit_cycles(loop, P, D, nonlinearity=nl) for nl in limits]
+    except ParameterError as exc:
+        raise ParameterError(f"--limit: {exc}") from None
+    for r in results:
+        head = f"{r.nonlinearity} = {r.value:g} {r.value_unit} on the {r.signal}:"
+        if not r.amplitude.size:
+            print(f"{head} no limit cycle predicted (no phase crossover of G meets -1/N(A))")
+        for A, w, s, d in zip(r.amplitude, r.omega, r.stable, r.distortion):
+            print(f"{head} limit cycle A = {A:.6g} {r.unit} at {w:.6g} rad/s ({w / (2 * math.pi):.6g} Hz), "
+                  f"{'stable' if s else 'unstable'} (Loeb), distortion {d:.3g}"
+                  + ("  (large: the prediction is rough)" if d > 0.2 else ""))
+
+    def write(path, tx):
+        save_json(path, {"P_gain": P, "D_gain": D, "predictions": [r.to_dict() for r in results]}, tx, "--out")
+
+    def figure():
+        panels = [dict(label=f"{r.nonlinearity} = {r.value:g} {r.value_unit} on the {r.signal}", G=r.G_curve, minus_inv_N=r.minus_inv_N,
+                       unit=r.unit, points=list(zip(r.G_crossing, r.amplitude, r.omega, r.stable)))
+                  for r in results]
+        return _plots().plot_describing(panels, title=figure_title(loop, file_params, args.configuration, args.title)
+                                        + f"\nP_gain = {P:g} Nm/rad, D_gain = {D:g} Nms/rad")
+    _write_outputs(out, plot, write, figure)
+    print(f"(harmonic balance 1 + N(A) G(j omega) = 0; docs/describing.md){_wrote(out)}")
+    return 0
+
+
+def register(sub) -> dict:
+    p = sub.add_parser("describe", help="describing-function predictions of limit cycles (saturation, "
+                                        "quantisation, Coulomb friction) at one gain point")
+    _common(p)
+    _gain_flags(p, "0", "0", "one gain point (0 and 0: the torque loop alone)")
+    p.add_argument("--limit", action="append", default=[], metavar="KEY=VALUE", help=LIMIT_HELP)
+    p.add_argument("--out", help="the predictions as JSON (.json)")
+    p.add_argument("--plot", help="Nyquist-type figure of G and -1/N(A) with the predicted cycles (.png, .pdf, .svg)")
+    p.add_argument("--title", help=TITLE_HELP)
+    return {"describe": _cmd_describe}

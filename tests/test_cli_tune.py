@@ -1,0 +1,78 @@
+"""``haa-sym tune``: bad input is one line and exit 2 with nothing written; the written file loads
+and gives the new gains, its report agrees with it, and every other line of the input is kept."""
+import json
+import tomllib
+
+import numpy as np
+import pytest
+
+from haa_sym import load_params
+from haa_sym.cli import main
+
+from conftest import ROOT
+
+HD = ROOT / "model" / "harmonic_drive.toml"
+# a small search: the round trip, not the optimum, is what these tests check
+SMALL = ["--n-lead", "2", "--n-integral", "3", "--rtol", "0.2", "--step-duration", "0.2"]
+
+
+@pytest.mark.parametrize("argv, match", [
+    (["--out", "x.txt"], ("--out 'x.txt': unsupported file type", ".toml")),
+    (["--out", "x.toml", "--report", "r.csv"], ("--report 'r.csv'", ".json")),
+    (["--out", "x.toml", "--plot", "p.gif"], ("--plot 'p.gif'",)),
+    (["--out", "x.toml", "--pm", "-5"], ("--pm: pm_deg = -5.0", "allowed")),
+    (["--out", "x.toml", "--gm", "nan"], ("--gm: gm_db = nan", "allowed")),
+    (["--out", "x.toml", "--stable-alpha", "1"], ("--stable-alpha '1': not LO:HI",)),
+    (["--out", "x.toml", "--stable-alpha", "1:0"], ("--stable-alpha: stable_alpha = (1.0, 0.0)",)),
+    (["--out", "x.toml", "--lead-range", "0:1"], ("--lead-range: lead_range = (0.0, 1.0)",)),
+    (["--out", "x.toml", "--n-integral", "1"], ("--n-integral: n_integral = 1",)),
+    (["--out", "x.toml", "--objective", "best"], ("--objective", "invalid choice")),
+    (["--out", "x.toml", "--option", "delay=x"], ("--option",)),
+    (["--out", "x.toml", "--params", "no_such_actuator"], ("no_such_actuator",)),
+    (["--out", "x.toml", "--passive-at", "100"], ("--passive-at '100'", "P_GAIN:D_GAIN")),
+    (["--out", "x.toml", "--passive-at", "100:-1"], ("--passive-at: passive_at",)),
+    (["--out", "x.toml", "--params", "harmonic_drive", "--passive-configurations", "nominal,retracted"],
+     ("--passive-configurations", "['retracted']", "low_damping")),
+])
+def test_bad_input_is_one_line_exit_2_nothing_written(assert_refused, argv, match):
+    assert_refused(["tune", *argv], match)
+
+
+def test_out_is_required(assert_refused):
+    assert_refused(["tune", "--params", "harmonic_drive"], "--out")
+
+
+def test_targets_no_pi_meets_are_refused_before_writing(assert_refused):
+    assert_refused(["tune", "--params", str(HD), "--out", "x.toml", "--report", "r.json", "--stable-alpha", "2:3",
+                    "--n-lead", "2", "--n-integral", "3"],
+                   ("no PI of the search grid meets the targets", "stability over alpha"))
+
+
+@pytest.mark.slow
+def test_the_written_file_round_trips(tmp_path, capsys):
+    out, report, plot = tmp_path / "tuned.toml", tmp_path / "tune.json", tmp_path / "tune.png"
+    rc = main(["tune", "--params", str(HD), "--out", str(out), "--report", str(report), "--plot", str(plot), *SMALL])
+    assert rc == 0
+    printed = capsys.readouterr().out
+    r = json.loads(report.read_text())
+    tuned = load_params(out)
+    assert tuned.controller.P_t0 == r["after"]["P_t0_V_per_Nm"]
+    assert tuned.controller.I_t0 == r["after"]["I_t0_V_per_Nm_s"]
+    original = load_params(HD)
+    assert tuned.plant == original.plant and tuned.configurations == original.configurations
+    back = tuned.with_values(P_t0=original.controller.P_t0, I_t0=original.controller.I_t0).to_dict()
+    assert {k: v for k, v in back.items() if k != "source"} == {k: v for k, v in original.to_dict().items()
+                                                                 if k != "source"}
+    old, new = HD.read_text().splitlines(), out.read_text().splitlines()
+    assert len(old) == len(new) and sum(a != b for a, b in zip(old, new)) == 2
+    entry = tomllib.loads(out.read_text())["controller"]["P_t0"]
+    assert entry["unit"] == "V/Nm" and "GM >= 12 dB" in entry["description"] and "was " in entry["description"]
+    assert list(r["after"]["configurations"]) == ["nominal", *original.configurations]
+    assert all(c["meets_targets"] for c in r["after"]["configurations"].values())
+    assert plot.stat().st_size > 10_000
+    assert "active constraint:" in printed and f"wrote {out}" in printed
+    # tuning the tuned file again from its own gains: they are the before of the new run
+    out2 = tmp_path / "again.toml"
+    assert main(["tune", "--params", str(out), "--out", str(out2), *SMALL]) == 0
+    assert f"before: P_t0 = {tuned.controller.P_t0:.6g}" in capsys.readouterr().out
+    assert np.isfinite(load_params(out2).controller.I_t0)
