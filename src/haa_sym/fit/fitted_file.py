@@ -21,8 +21,9 @@ _HEADER = re.compile(r"^\s*\[([^\[\]]+)\]\s*(#.*)?$")
 
 
 def _fmt(x: float) -> str:
-    text = f"{x:.9g}"
-    return text if any(c in text for c in ".en") else text + ".0"
+    # the shortest text that reads back as the same float: the file gives exactly the fitted
+    # value of fit.json (regions --uncertainty compares the two)
+    return repr(float(x))
 
 
 def reference_text(result, date: str) -> str:
