@@ -7,6 +7,7 @@
 from __future__ import annotations
 
 import argparse
+import sys
 from pathlib import Path
 
 from haa_sym.errors import ParameterError
@@ -19,6 +20,11 @@ from haa_sym.loop import ClosedLoop
 from haa_sym.model.params import actuator_path, load_params
 
 from haa_sym.cli.common import PARAMS_HELP, _check_out, _parse_options, _params, _plots
+
+# the scaled normal matrix's condition beyond which a fit's intervals are not to be trusted: the
+# keys are then nearly linearly dependent in the logs (e.g. an inertia and a stiffness seen only
+# through their ratio), and the normal equations have lost ten of their sixteen digits
+CONDITION_WARNING = 1e10
 
 
 def register(sub) -> dict:
@@ -107,6 +113,10 @@ def run(args) -> int:
         print(f"{e.log.name}: {e.log.samples} samples, mean period {s['mean_period']:.6g} s, jitter "
               f"{s['jitter']:.2g} (max |dt - mean| / mean)"
               + ("; resampled onto the mean period" if s["resampled"] else "; uniform"))
+    if result.meta["condition_number"] > CONDITION_WARNING:
+        print(f"haa-sym: warning: the fitted keys are nearly indistinguishable in these logs (condition number "
+              f"{result.meta['condition_number']:.3g} of the scaled normal matrix): the intervals are not reliable; "
+              "fit fewer keys or log more outputs", file=sys.stderr)
     for k, v, v0, (lo, hi) in zip(result.keys, result.value, result.initial, result.ci95):
         print(f"{k} = {v:.6g} (ci95 {lo:.6g} .. {hi:.6g}; initial {v0:.6g})")
     rms = ", ".join(f"{o} {result.rms_initial[o]:.3g} -> {result.rms_fitted[o]:.3g}" for o in outputs)

@@ -231,7 +231,12 @@ def identify(experiments: list[Experiment], keys: tuple[str, ...], inputs: tuple
         pred0 = [y - err for y, err in zip(Y, run(theta0, False)[0])]
     dof = max(r.size - len(keys), 1)
     s2 = float(r @ r) / dof
-    cov = s2 * np.linalg.pinv(J.T @ J)
+    # the scaled normal matrix's condition: keys the logs cannot tell apart make it huge (and the
+    # intervals meaningless); reported in meta, warned about by the CLI
+    H = J.T @ J
+    d = np.sqrt(np.maximum(np.diag(H), 1e-300))
+    condition = float(np.linalg.cond(H / np.outer(d, d)))
+    cov = s2 * np.linalg.pinv(H)
     sd = np.sqrt(np.maximum(np.diag(cov), 0.0))
     ci = np.exp(np.column_stack([theta - Z95 * sd, theta + Z95 * sd]))
 
@@ -247,6 +252,7 @@ def identify(experiments: list[Experiment], keys: tuple[str, ...], inputs: tuple
     meta = {**(provenance or {}), "inputs": list(inputs), "outputs": list(outputs), "method":
             "time-domain output error, Levenberg-Marquardt on log-parameters, exact Jacobian (CasADi AD, "
             "Van Loan ZOH derivative)", "iterations": [it1, it2], "residual_variance": s2,
+            "condition_number": condition,
             "logs": {e.log.name: {"sha256": e.log.sha256, "samples": e.log.samples, "configuration": e.configuration}
                      for e in experiments},
             "date": datetime.datetime.now(datetime.timezone.utc).isoformat(timespec="seconds"),
