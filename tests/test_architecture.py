@@ -18,6 +18,7 @@ LAYERS = (
     ("haa_sym.compiled",),
     ("haa_sym.loop",),
     ("haa_sym.analysis",),
+    ("haa_sym.fit",),
     ("haa_sym.design",),
     ("haa_sym.explore",),
     ("haa_sym.check",),

@@ -18,7 +18,7 @@ from haa_sym.errors import ParameterError  # noqa: E402
 from haa_sym.io.outputs import transaction  # noqa: E402
 
 __all__ = ["plot_region", "plot_region_panels", "plot_corrected_phase", "plot_steps",
-           "plot_contact", "plot_describing", "save_figure", "check_title"]
+           "plot_contact", "plot_describing", "save_figure", "check_title", "plot_identify"]
 
 # Figs. 8-11: white stable, light grey stable with PM < 30 deg, dark unstable.
 REGION_COLORS = ListedColormap(["#ffffff", "#c8c8c8", "#3a3a3a"])
@@ -575,4 +575,57 @@ def plot_simulation(time, columns: dict, saturated=None, title: str = "", cycle:
         ax.grid(True, alpha=0.3)
     if title:
         fig.suptitle(_wrap(title, 6.4), fontsize=_title_size(title, 11))
+    return fig
+
+
+_UNITS = {"torque": "Nm", "theta": "rad", "current": "A", "velocity": "rad/s"}
+
+
+def plot_identify(result, title: str = "", max_points: int = 4000):
+    """``haa-sym identify --plot``: per output, the first log's measured trace against the
+    model's prediction before (initial values) and after the fit; below, the Bode magnitude and
+    phase of the Welch H1 estimate (first input to the output) with the model's before and
+    after, and the coherence. ``result`` is a :class:`haa_sym.fit.identify.FitResult` computed
+    with ``figure_data=True``."""
+    tr = result.traces[0]
+    bode = result.bode[0] if result.bode else None
+    outs = result.outputs
+    rows = 1 + (3 if bode is not None else 0)
+    fig, axes = plt.subplots(rows, len(outs), figsize=(6 * len(outs), 2.6 * rows), squeeze=False)
+    # a window of the log (its last 2 s: past the start from rest), every sample of it up to max_points
+    t = tr["t"]
+    sel = slice(int(np.searchsorted(t, t[-1] - 2.0)), None)
+    step = max(1, (len(t) - sel.start) // max_points)
+    sel = slice(sel.start, None, step)
+    for i, o in enumerate(outs):
+        ax = axes[0, i]
+        ax.plot(t[sel], tr["measured"][sel, i], color="0.6", lw=1.0, label="measured")
+        ax.plot(t[sel], tr["initial"][sel, i], color="C3", lw=0.8, ls="--", label="model, initial")
+        ax.plot(t[sel], tr["fitted"][sel, i], color="C0", lw=0.8, label="model, fitted")
+        ax.set_xlabel("t (s), the log's last 2 s")
+        ax.set_ylabel(f"{o} ({_UNITS[o]})")
+        ax.set_title(f"{tr['name']}: {o}, rms error {result.rms_initial[o]:.3g} -> {result.rms_fitted[o]:.3g}",
+                     fontsize=9)
+        ax.legend(fontsize=7, loc="upper right")
+        if bode is None:
+            continue
+        w = bode["omega"]
+        mag, ph, coh = axes[1, i], axes[2, i], axes[3, i]
+        # H1 only where the coherence says the measurement carries the input (>= 0.5)
+        H1 = np.where(bode["coherence"][i] >= 0.5, bode["H1"][i], np.nan)
+        for G, style in ((H1, dict(color="0.6", lw=1.2, label="H1 (Welch), coherence >= 0.5")),
+                         (bode["initial"][i], dict(color="C3", lw=0.8, ls="--", label="model, initial")),
+                         (bode["fitted"][i], dict(color="C0", lw=0.8, label="model, fitted"))):
+            mag.loglog(w, np.abs(G), **style)
+            ph.semilogx(w, np.degrees(np.unwrap(np.angle(G))), **style)
+        mag.set_ylabel(f"|{o} / {result.inputs[0]}|")
+        mag.legend(fontsize=7)
+        ph.set_ylabel("phase (deg)")
+        coh.semilogx(w, bode["coherence"][i], color="k", lw=0.8)
+        coh.set_ylim(0, 1.05)
+        coh.set_ylabel("coherence")
+        coh.set_xlabel("omega (rad/s)")
+    if title:
+        fig.suptitle(_wrap(title, 6 * len(outs)), fontsize=_title_size(title, 11))
+    fig.tight_layout()
     return fig

@@ -25,6 +25,7 @@ from __future__ import annotations
 
 import hashlib
 import json
+import math
 import re
 from dataclasses import dataclass, field
 from typing import Mapping
@@ -56,7 +57,8 @@ CURRENT = "current"
 ACTUATOR_SECTIONS = ("about", "motor", "bodies", "couplings", "sensors")
 INPUT_NAMES = ("V_m", "T_fr", "T_dist")
 SOURCE_LETTERS = ("D", "I", "C", "-")          # Table 1: datasheet, identified, computed, none
-_ENTRY_FIELDS = ("value", "unit", "source", "description")
+# ci95: an optional 95 % confidence interval [lo, hi] in the entry's unit (haa-sym identify writes it)
+_ENTRY_FIELDS = ("value", "unit", "source", "description", "ci95")
 _NAME = re.compile(r"[A-Za-z][A-Za-z0-9]*\Z")
 _RESERVED = (ROTOR, "m")                        # "m" would give J_m, B_m: the rotor's names
 
@@ -373,9 +375,23 @@ def _entry(value: object, where: str, key: str, references: Mapping[str, str],
     for f in ("unit", "description"):
         if f in value and not isinstance(value[f], str):
             raise _error(f"{where}: {key}: {f} = {value[f]!r}; allowed: a string")
+    if "ci95" in value:
+        _check_ci95(value["ci95"], value["value"], where, key)
     if units is not None and key in units:
         return to_si(value["value"], value.get("unit"), units[key], where, key)
     return value["value"]
+
+
+def _check_ci95(ci, value, where: str, key: str) -> None:
+    """A confidence interval must bracket its value: two finite numbers lo <= value <= hi (the
+    entry's unit), so that a file never claims an interval that excludes its own value."""
+    def number(x):
+        return isinstance(x, (int, float)) and not isinstance(x, bool) and math.isfinite(x)
+    if not (isinstance(ci, list) and len(ci) == 2 and all(number(x) for x in ci)):
+        raise _error(f"{where}: {key}: ci95 = {ci!r}; allowed: two finite numbers [lo, hi] in the entry's unit")
+    if number(value) and not ci[0] <= value <= ci[1]:
+        raise _error(f"{where}: {key}: ci95 = {ci!r} does not contain value = {value!r}; allowed: "
+                     "lo <= value <= hi")
 
 
 def entry_values(table: Mapping[str, object], where: str,

@@ -1,0 +1,147 @@
+"""``haa-sym identify`` against scipy, side by side in one run: a four-parameter fit of a
+30,000-sample log, whole process (start, imports, reading the CSV, the fit, writing the file).
+
+The log: the bundled harmonic drive (model/harmonic_drive.toml) driven by a band-limited Gaussian
+voltage (a quarter of Nyquist), simulated independently (tests/identify_synthetic.py: the
+equations written by hand, scipy ``cont2discrete`` + ``dlsim``), 1 % sensor noise on the torque
+and the link angle, 30 s at 1 kHz. Fitted: J_link, B_link, K_hd, D_hd from the same start
+(+29 %, +19 %, -19 %, -37 %).
+
+The baseline, a competent scipy user's script run as its own process: ``np.loadtxt`` of the log,
+the same hand-written model, exact ZOH by ``scipy.signal.cont2discrete``, the output error by
+``scipy.signal.dlsim``, each output scaled by its standard deviation, fitted in log-parameters
+by ``scipy.optimize.least_squares`` (trust region reflective, finite-difference Jacobian).
+haa_sym: ``python -m haa_sym.cli identify ... -q`` (exact Jacobian, Schur-basis simulation).
+Each is timed as the best of ``REPEATS`` runs, interleaved (wall time, ``perf_counter`` around the
+process); the same two fits are also timed in this process (imports done: the fit alone).
+
+Prints the times and the ratio and writes ``results_identify.json`` into ``$HAA_SYM_BENCH_DIR``
+(default ``bench-results/``, git-ignored). Usage: python benchmarks/bench_identify.py
+"""
+from __future__ import annotations
+
+import contextlib
+import io
+import json
+import os
+import subprocess
+import sys
+import tempfile
+import textwrap
+from pathlib import Path
+
+from timing import ROOT, Run, best
+
+sys.path.insert(0, str(ROOT / "tests"))
+from identify_synthetic import HD_TRUTH, experiment, two_mass, write_csv  # noqa: E402
+from haa_sym.cli import main as cli_main  # noqa: E402
+from haa_sym.model.params import actuator_path, load_params  # noqa: E402
+
+START = {"J_link": 0.45, "B_link": 2.5, "K_hd": 2.5e4, "D_hd": 40.0}
+REPEATS = 3
+
+BASELINE = textwrap.dedent("""
+    import json, sys
+    import numpy as np, scipy.optimize, scipy.signal
+    from identify_synthetic import two_mass
+
+    KEYS = ("J_link", "B_link", "K_hd", "D_hd")
+
+    def fit(path, p):
+        data = np.loadtxt(path, delimiter=",", skiprows=1)
+        t, u, y = data[:, 0], data[:, 1], data[:, 2:4]
+        Ts = (t[-1] - t[0]) / (len(t) - 1)
+        scale = np.std(y, axis=0)
+        U = np.column_stack([u, np.zeros_like(u)])
+
+        def residual(theta):
+            q = dict(p, **dict(zip(KEYS, np.exp(theta))))
+            A, B, C, D = two_mass(q)
+            Phi, Gam, *_ = scipy.signal.cont2discrete((A, B, C[:2], D[:2]), Ts, "zoh")
+            _, yp, _ = scipy.signal.dlsim((Phi, Gam, C[:2], D[:2], Ts), U)
+            return ((y - yp) / scale).ravel()
+
+        r = scipy.optimize.least_squares(residual, np.log([p[k] for k in KEYS]), method="trf")
+        return {"values": dict(zip(KEYS, np.exp(r.x).tolist())), "nfev": int(r.nfev)}
+
+    if __name__ == "__main__":
+        print(json.dumps(fit(sys.argv[1], json.loads(sys.argv[2]))))
+""")
+
+
+def main() -> int:
+    run = Run("bench_identify.py")
+    params = load_params(actuator_path("harmonic_drive"))
+    with tempfile.TemporaryDirectory() as tmp:
+        log = Path(tmp, "hd30.csv")
+        t, u, y, _ = experiment(two_mass, params.plant.as_dict(), seed=0, duration=30.0)
+        write_csv(log, t, {"voltage": u, "torque": y[:, 0], "theta": y[:, 1]})
+        script = Path(tmp, "baseline.py")
+        script.write_text(BASELINE)
+        start = dict(params.plant.as_dict(), **START)
+        env = dict(os.environ, PYTHONPATH=os.pathsep.join([str(ROOT / "src"), str(ROOT / "tests"),
+                                                           os.environ.get("PYTHONPATH", "")]))
+        argv = ["identify", "--params", "harmonic_drive", "--log", str(log), "--input", "voltage", "--output",
+                "torque,theta", "--fit", ",".join(START), "--out", str(Path(tmp, "fitted.toml")),
+                "--report", str(Path(tmp, "fit.json")), "-q"] + \
+            [a for k, v in START.items() for a in ("--set", f"{k}={v}")]
+
+        def baseline():
+            out = subprocess.run([sys.executable, str(script), str(log), json.dumps(start)],
+                                 check=True, capture_output=True, text=True, env=env)
+            return json.loads(out.stdout)
+
+        def ours():
+            subprocess.run([sys.executable, "-m", "haa_sym.cli"] + argv, check=True, capture_output=True, text=True,
+                           env=env)
+            return json.loads(Path(tmp, "fit.json").read_text())
+
+        def ours_in_process():
+            with contextlib.redirect_stdout(io.StringIO()):
+                assert cli_main(argv) == 0
+            return json.loads(Path(tmp, "fit.json").read_text())
+
+        def cli_import():
+            subprocess.run([sys.executable, "-c", "import haa_sym.cli"], check=True, env=env)
+
+        namespace: dict = {}
+        exec(compile(BASELINE, "baseline.py", "exec"), namespace)
+
+        ours()                                    # warm the disk cache and the compiled-code cache
+        # interleaved, so that a change of the machine's load falls on both alike
+        times = {"ours": [], "base": [], "ours_fit": [], "base_fit": [], "cli_import": []}
+        for _ in range(REPEATS):
+            for name, fn in (("ours", ours), ("base", baseline), ("cli_import", cli_import),
+                             ("ours_fit", ours_in_process),
+                             ("base_fit", lambda: namespace["fit"](str(log), start))):
+                t_run, res = best(fn, 1)
+                times[name].append(t_run)
+                if name == "ours":
+                    rep = res
+                elif name == "base":
+                    base = res
+    t_ours, t_base = min(times["ours"]), min(times["base"])
+    t_ours_fit, t_base_fit = min(times["ours_fit"]), min(times["base_fit"])
+    fitted = {k: rep["parameters"][k]["value"] for k in START}
+    err = {k: fitted[k] / HD_TRUTH[k] - 1 for k in START}
+    err_base = {k: base["values"][k] / HD_TRUTH[k] - 1 for k in START}
+    data = {"samples": len(t), "keys": list(START), "start": START, "truth": HD_TRUTH,
+            "haa_sym_identify_s": t_ours, "scipy_least_squares_dlsim_s": t_base, "ratio": t_base / t_ours,
+            "in_process": {"haa_sym_identify_s": t_ours_fit, "scipy_least_squares_dlsim_s": t_base_fit,
+                           "ratio": t_base_fit / t_ours_fit},
+            "cli_import_s": min(times["cli_import"]), "all_times_s": times, "haa_sym_values": fitted, "scipy_values": base["values"],
+            "scipy_nfev": base["nfev"], "haa_sym_iterations": rep["meta"]["iterations"],
+            "haa_sym_relative_error": err, "scipy_relative_error": err_base, "repeats": REPEATS}
+    print(f"30,000-sample log, 4 parameters, best of {REPEATS} interleaved runs: whole process haa-sym identify "
+          f"{t_ours:.2f} s, scipy least_squares over dlsim {t_base:.2f} s ({base['nfev']} evaluations): ratio "
+          f"{t_base / t_ours:.1f}x; in-process (imports done) {t_ours_fit:.2f} s against {t_base_fit:.2f} s: "
+          f"ratio {t_base_fit / t_ours_fit:.1f}x; of the whole process, `import haa_sym.cli` alone takes "
+          f"{min(times['cli_import']):.2f} s")
+    print("relative errors haa_sym " + ", ".join(f"{k} {v:+.2%}" for k, v in err.items()))
+    print("relative errors scipy   " + ", ".join(f"{k} {v:+.2%}" for k, v in err_base.items()))
+    print(f"wrote {run.write('results_identify.json', data)}")
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())

@@ -1,0 +1,160 @@
+"""``--out FITTED.toml``: the input parameter file's TEXT with the fitted values replaced.
+
+Comments, order and every other entry stay as written. Each fitted entry gets the fitted
+``value`` (in the entry's own ``unit``), ``source`` = a new key of ``[about.references]`` that
+describes the fit (logs, their SHA-256, date, method) and ``ci95 = [lo, hi]`` (same unit). A
+bare number becomes an entry table. The new text is parsed and validated before it is returned,
+and must give the fitted values (else an error: nothing is written).
+"""
+from __future__ import annotations
+
+import re
+import tomllib
+
+from haa_sym.errors import ParameterError
+from haa_sym.model.params import parse_params
+from haa_sym.model.units import to_si
+
+__all__ = ["fitted_text", "reference_text"]
+
+_HEADER = re.compile(r"^\s*\[([^\[\]]+)\]\s*(#.*)?$")
+
+
+def _fmt(x: float) -> str:
+    # the shortest text that reads back as the same float: the file gives exactly the fitted
+    # value of fit.json (regions --uncertainty compares the two)
+    return repr(float(x))
+
+
+def reference_text(result, date: str) -> str:
+    """The citation of a fit, for ``[about.references]``."""
+    logs = ", ".join(f"{name} (sha256 {m['sha256'][:16]}, {m['samples']} samples"
+                     + (f", configuration {m['configuration']}" if m.get("configuration") else "") + ")"
+                     for name, m in result.meta["logs"].items())
+    return (f"haa-sym identify, {date}: {', '.join(result.keys)} fitted to {logs}; input "
+            f"{','.join(result.inputs)}, outputs {','.join(result.outputs)}; time-domain output error, "
+            "95 % intervals (ci95) from the Gauss-Newton covariance assuming white output noise")
+
+
+def _section_and_key(topology, legacy: bool, key: str) -> tuple[str, str]:
+    return ("plant", key) if legacy else topology.section_of(key)
+
+
+def _new_ref_key(refs: dict, date: str) -> str:
+    base = "identify_" + re.sub(r"[^0-9]", "", date)[:8]
+    key, i = base, 2
+    while key in refs:
+        key, i = f"{base}_{i}", i + 1
+    return key
+
+
+def fitted_text(text: str, source: str, params, result, date: str) -> str:
+    """The file ``text`` (read from ``source``) with ``result``'s fitted values, sources and ci95.
+
+    Raises
+    ------
+    ParameterError
+        An entry the editor cannot find (e.g. written as a sub-table), or a result that does not
+        read back as the fitted values.
+    """
+    data = tomllib.loads(text)
+    legacy = "plant" in data
+    top = params.plant.topology
+    refs = data.get("about", {}).get("references", {}) if isinstance(data.get("about"), dict) else {}
+    ref_key = _new_ref_key(refs, date)
+    lines = text.splitlines(keepends=True)
+    targets = {_section_and_key(top, legacy, k): (k, v, ci) for k, v, ci in zip(result.keys, result.value, result.ci95)}
+    done, section, refs_end = set(), None, None
+    for i, line in enumerate(lines):
+        h = _HEADER.match(line)
+        if h:
+            section = h.group(1).strip()
+            continue
+        if section == "about.references" and line.strip() and not line.lstrip().startswith("#"):
+            refs_end = i
+        m = re.match(r"^(\s*)([A-Za-z0-9_]+)(\s*=\s*)(.*?)(\r?\n)?$", line)
+        if not m or (section, m.group(2)) not in targets:
+            continue
+        flat, v, ci = targets[(section, m.group(2))]
+        entry = _entry_of(data, section, m.group(2))
+        unit = entry.get("unit") if isinstance(entry, dict) else None
+        factor = to_si(1.0, unit, top.units[flat], source, flat) if unit else 1.0
+        val, lo, hi = v / factor, ci[0] / factor, ci[1] / factor
+        rest = m.group(4)
+        if isinstance(entry, dict):
+            brace = rest.index("{")
+            close = _closing(rest, brace)
+            inner = rest[brace + 1:close]
+            inner = re.sub(r"(\bvalue\s*=\s*)[^,}]+?(\s*(,|$))", lambda g: g.group(1) + _fmt(val) + g.group(2), inner, count=1)
+            if re.search(r"\bsource\s*=", inner):
+                inner = re.sub(r'(\bsource\s*=\s*)"[^"]*"', lambda g: f'{g.group(1)}"{ref_key}"', inner, count=1)
+            else:
+                inner = inner.rstrip() + f', source = "{ref_key}" '
+            ci_text = f"ci95 = [{_fmt(lo)}, {_fmt(hi)}]"
+            if re.search(r"\bci95\s*=", inner):
+                inner = re.sub(r"\bci95\s*=\s*\[[^\]]*\]", ci_text, inner, count=1)
+            else:
+                inner = re.sub(r"(\bvalue\s*=\s*[^,}]+?)(\s*(,|$))", lambda g: f"{g.group(1)}, {ci_text}{g.group(2)}",
+                               inner, count=1)
+            new_rest = rest[:brace + 1] + inner + rest[close:]
+        else:
+            comment = rest[rest.index("#"):] if "#" in rest else ""
+            new_rest = (f'{{ value = {_fmt(val)}, ci95 = [{_fmt(lo)}, {_fmt(hi)}], source = "{ref_key}" }}'
+                        + (f"   {comment}" if comment else ""))
+        lines[i] = m.group(1) + m.group(2) + m.group(3) + new_rest + (m.group(5) or "\n")
+        done.add((section, m.group(2)))
+    missing = [targets[t][0] for t in targets if t not in done]
+    if missing:
+        raise ParameterError(f"--out: cannot find the entry of {missing[0]} in {source} (looked for "
+                             f"{[t for t in targets if t not in done][0]}); allowed: entries written as "
+                             "KEY = { value = ... } or KEY = number in their section")
+    ref_line = f'{ref_key} = "{_escape(reference_text(result, date))}"\n'
+    if refs_end is not None:
+        if not lines[refs_end].endswith("\n"):
+            lines[refs_end] += "\n"
+        lines.insert(refs_end + 1, ref_line)
+    elif "about" in data and "references" in data["about"]:
+        raise ParameterError(f"--out: {source} writes [about] references inline; allowed: a "
+                             "[about.references] table (the fit adds its key there)")
+    else:
+        if lines and not lines[-1].endswith("\n"):
+            lines[-1] += "\n"
+        lines += ["\n", "[about.references]\n", ref_line]
+    new = "".join(lines)
+    check = parse_params(tomllib.loads(new), source)
+    for k, v in zip(result.keys, result.value):
+        got = getattr(check.plant, k)
+        if not abs(got - v) <= 1e-8 * abs(v):
+            raise ParameterError(f"--out: the written {k} reads back as {got!r}, not {v!r}; allowed: an "
+                                 "entry this editor can rewrite")
+    return new
+
+
+def _entry_of(data, section, key):
+    node = data
+    for part in section.split("."):
+        node = node.get(part, {})
+    return node.get(key)
+
+
+def _closing(text: str, start: int) -> int:
+    """Index of the brace closing the one at ``start`` (strings with braces skipped)."""
+    depth, quote = 0, None
+    for j in range(start, len(text)):
+        c = text[j]
+        if quote:
+            if c == quote and text[j - 1] != "\\":
+                quote = None
+        elif c in "\"'":
+            quote = c
+        elif c == "{":
+            depth += 1
+        elif c == "}":
+            depth -= 1
+            if depth == 0:
+                return j
+    raise ParameterError(f"--out: unbalanced braces in {text!r}")
+
+
+def _escape(s: str) -> str:
+    return s.replace("\\", "\\\\").replace('"', '\\"')

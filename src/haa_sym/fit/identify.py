@@ -1,0 +1,319 @@
+"""Identification of an actuator's parameters from logged experiments (``haa-sym identify``).
+
+Time-domain output error: the sampled model (:mod:`haa_sym.fit.model`), driven from rest by a
+log's inputs, predicts its outputs; the fitted keys minimise the sum over logs and outputs of the
+squared prediction errors, each output of each log weighted by 1 / sigma (its noise level,
+estimated from its own residuals; a first pass weights by the signal's standard deviation).
+The parameters are fitted as logarithms (positive by construction, the only bound the keys'
+domains impose: ``>0`` or ``>=0``, fitted from a positive start) by Levenberg-Marquardt with the
+exact Jacobian (sensitivities of the simulation, derivatives from CasADi), so a few iterations
+suffice. Confidence intervals are Gauss-Newton's: cov(log p) = s^2 (J^T J)^-1 with s^2 the
+weighted residual variance; 95 % intervals are log p +- 1.96 sd, so they are asymmetric and
+positive. They assume white, Gaussian output noise, a correct model and an input known exactly;
+coloured residuals (a model error) make them too narrow (docs/identify.md).
+"""
+from __future__ import annotations
+
+import datetime
+from dataclasses import dataclass, field
+
+import numpy as np
+import scipy.signal
+
+from haa_sym.analysis.sweep import blas_limits
+from haa_sym.errors import ParameterError
+from haa_sym.fit.closed import torque_loop_model
+from haa_sym.fit.model import open_loop_model, sample, simulate
+from haa_sym.io.logs import OUTPUTS, Log
+
+__all__ = ["FitOptions", "FitResult", "Experiment", "identify", "INPUT_MODES"]
+
+INPUT_MODES = ("voltage", "current", "torque_ref")
+Z95 = 1.959963984540054          # the two-sided 95 % point of the normal distribution
+
+
+@dataclass(frozen=True)
+class FitOptions:
+    """The choices of a fit, each with its default.
+
+    Parameters
+    ----------
+    min_periods : float
+        A log must last at least this many periods of the model's slowest oscillatory mode
+        (2 pi / |lambda| of its lowest complex pair; 2 pi / |lambda| of the slowest real mode
+        when it has none). Default 3.
+    max_iterations : int
+        Levenberg-Marquardt iterations per pass (two passes: signal-scaled, then noise-weighted).
+    tolerance : float
+        Stop when the relative decrease of the cost is below this.
+    max_step : float
+        Largest change of a log-parameter per iteration (1 = a factor e).
+    first_pass_tolerance : float
+        The first pass (signal-scaled weights) stops at this relative decrease.
+    """
+
+    min_periods: float = 3.0
+    max_iterations: int = 50
+    tolerance: float = 1e-10
+    max_step: float = 1.0
+    first_pass_tolerance: float = 1e-3
+
+
+@dataclass(frozen=True)
+class Experiment:
+    """One log and the parameters (file, configuration, --set) it was taken with."""
+
+    log: Log
+    params: object
+    configuration: str | None = None
+
+
+@dataclass(frozen=True)
+class FitResult:
+    """What a fit found: ``keys``, ``value`` and ``initial`` (SI), ``ci95`` (len(keys), 2),
+    ``covariance`` of the log-parameters, ``rms_initial`` / ``rms_fitted`` per output
+    (its unit), the iterations, and per log the traces and frequency responses for a figure."""
+
+    keys: tuple
+    value: np.ndarray
+    initial: np.ndarray
+    ci95: np.ndarray
+    covariance: np.ndarray
+    rms_initial: dict
+    rms_fitted: dict
+    iterations: int
+    samples: int
+    sampling: dict
+    outputs: tuple
+    inputs: tuple
+    traces: list = field(default_factory=list, repr=False)
+    bode: list = field(default_factory=list, repr=False)
+    meta: dict = field(default_factory=dict, repr=False)
+
+    def report(self) -> dict:
+        """The ``fit.json`` of the issue: parameters, rms_error, samples, sampling, meta."""
+        return {"parameters": {k: {"value": float(v), "initial": float(v0), "ci95": [float(lo), float(hi)]}
+                               for k, v, v0, (lo, hi) in zip(self.keys, self.value, self.initial, self.ci95)},
+                "rms_error": {o: {"initial": self.rms_initial[o], "fitted": self.rms_fitted[o]} for o in self.outputs},
+                "samples": self.samples, "sampling": self.sampling, "meta": self.meta}
+
+
+def _model(exp: Experiment, keys, values, inputs, outputs, options=None):
+    """The sampled model of ``exp`` with ``keys`` at ``values``."""
+    params = exp.params.with_values(**dict(zip(keys, values)))
+    if inputs[0] == "torque_ref":
+        return torque_loop_model(params, keys, inputs, outputs, options)
+    return sample(open_loop_model(params.plant, keys, inputs, outputs), exp.log.Ts)
+
+
+def _check_keys(exps, keys, inputs):
+    if not keys:
+        raise ParameterError("--fit: no keys; allowed: one or more parameter keys, comma separated")
+    top = exps[0].params.plant.topology
+    dup = sorted({k for k in keys if keys.count(k) > 1})
+    if dup:
+        raise ParameterError(f"--fit {','.join(keys)}: {dup} given twice; allowed: each key once")
+    for k in keys:
+        if k not in top.parameter_keys:
+            raise ParameterError(f"--fit {k}: not a plant parameter of {top.source}; allowed: "
+                                 f"{list(top.parameter_keys)}")
+        for e in exps:
+            v = getattr(e.params.plant, k)
+            if not v > 0:
+                raise ParameterError(f"--fit {k}: initial value {v!r} (domain {top.domain[k]}); allowed: a "
+                                     f"positive start (fitted as log {k}; --set {k}=VALUE)")
+        if inputs[0] == "current" and k in ("L", "R", "k_w"):
+            raise ParameterError(f"--fit {k}: with --input current the drive imposes the current, so {k} "
+                                 "does not act on the outputs; allowed: mechanical keys")
+        confs = {e.configuration for e in exps if e.configuration and
+                 k in e.params.configurations.get(e.configuration, {})}
+        if confs:
+            raise ParameterError(f"--fit {k}: configuration {sorted(confs)[0]} sets it (the fitted file's entry "
+                                 "would not be the value the log was fitted with); allowed: keys the configurations "
+                                 "leave alone")
+
+
+def _slow_period(model) -> float:
+    """2 pi / |s| of the slowest oscillatory mode (else the slowest nonzero real one), s =
+    log(z) / Ts from the sampled model's eigenvalues z (open or closed loop alike)."""
+    lam = np.log(np.linalg.eigvals(model.Phi).astype(complex)) / model.Ts
+    mag = np.abs(lam)
+    osc = mag[(np.abs(lam.imag) > 1e-9 * np.maximum(mag, 1e-300))]
+    use = osc if osc.size else mag[mag > 1e-9 * max(1.0, mag.max())]
+    return float(2 * np.pi / use.min()) if use.size else 0.0
+
+
+def identify(experiments: list[Experiment], keys: tuple[str, ...], inputs: tuple[str, ...],
+             outputs: tuple[str, ...], options: FitOptions | None = None, loop_options=None,
+             provenance: dict | None = None, figure_data: bool = False) -> FitResult:
+    """Fit ``keys`` to the experiments (jointly) by output error; see the module docstring.
+
+    Parameters
+    ----------
+    experiments : list of Experiment
+        Logs with the parameters each was taken with (the fitted keys shared by all).
+    keys : tuple of str
+        Plant parameter keys to fit (SI units).
+    inputs : tuple of str
+        ``("voltage" | "current" | "torque_ref", ["T_dist"])``: the log's inputs.
+    outputs : tuple of str
+        Log outputs (``torque``, ``theta``, ``current``, ``velocity``).
+    options : FitOptions, optional
+    loop_options : LoopOptions, optional
+        The torque loop's options (``--input torque_ref`` only).
+    provenance : dict, optional
+        Added to ``meta``.
+    figure_data : bool
+        Also compute the Welch H1 estimates, coherences and model responses (``bode``) for a
+        figure (Welch and 2 x ny frequency responses: only when a figure is drawn).
+
+    Raises
+    ------
+    ParameterError
+        Bad keys or inputs, a log shorter than ``min_periods`` of the slowest mode, a key the
+        outputs do not depend on.
+    """
+    opt = options or FitOptions()
+    keys, inputs, outputs = tuple(keys), tuple(inputs), tuple(outputs)
+    if not inputs or inputs[0] not in INPUT_MODES or any(i != "T_dist" for i in inputs[1:]):
+        raise ParameterError(f"--input {','.join(inputs)}; allowed: one of {list(INPUT_MODES)}, optionally "
+                             "followed by ,T_dist")
+    if not outputs or any(o not in OUTPUTS for o in outputs) or len(set(outputs)) != len(outputs):
+        raise ParameterError(f"--output {','.join(outputs)}; allowed: distinct names of {list(OUTPUTS)}")
+    _check_keys(experiments, keys, inputs)
+    theta0 = np.log([getattr(experiments[0].params.plant, k) for k in keys])
+    with blas_limits(1):          # small matrices, long signals: BLAS threads only contend
+        models0 = [_model(e, keys, np.exp(theta0), inputs, outputs, loop_options) for e in experiments]
+        for e, m in zip(experiments, models0):
+            if inputs[0] == "torque_ref" and abs(e.log.Ts - m.Ts) > 1e-6 * m.Ts:
+                raise ParameterError(f"--log {e.log.name!r}: mean period {e.log.Ts:.6g} s; allowed: the torque "
+                                     f"loop's Ts = {m.Ts:g} s with --input torque_ref (the controller runs at Ts)")
+            slow = _slow_period(m)
+            if e.log.duration < opt.min_periods * slow:
+                raise ParameterError(f"--log {e.log.name!r}: {e.log.duration:.3g} s long, {opt.min_periods:g} periods "
+                                     f"of the model's slowest mode are {opt.min_periods * slow:.3g} s; allowed: a "
+                                     "longer log")
+        U = [np.column_stack([e.log.signals[i] for i in inputs]) for e in experiments]
+        Y = [np.column_stack([e.log.signals[o] for o in outputs]) for e in experiments]
+        sigma = [np.maximum(np.std(y, axis=0), 1e-300) for y in Y]
+
+        cache: dict = {}
+
+        def run(theta, sens=True):
+            """Unweighted errors y - y_model and, with ``sens``, d y_model / d log p, per log; a
+            point's simulation is kept so that reweighting and the reports re-run nothing."""
+            key = theta.tobytes()
+            if key not in cache or (sens and cache[key][1] is None):
+                errs, sens_ = [], []
+                for e, u, y in zip(experiments, U, Y):
+                    m = _model(e, keys, np.exp(theta), inputs, outputs, loop_options)
+                    yp, dy = simulate(m, u, sens)
+                    errs.append(y - yp)
+                    sens_.append(None if dy is None else dy * np.exp(theta)[:, None, None])
+                cache.clear() if len(cache) > 8 else None
+                cache[key] = (errs, sens_ if sens else None)
+            return cache[key]
+
+        def evaluate(theta, sens=True):
+            errs, dys = run(theta, sens)
+            r = np.concatenate([(err / s).ravel() for err, s in zip(errs, sigma)])
+            if not sens:
+                return r, None
+            return r, np.vstack([(-dy / s).reshape(len(keys), -1).T for dy, s in zip(dys, sigma)])
+
+        # the first pass only finds the neighbourhood (its weights are provisional); the second,
+        # with the noise levels of the residuals as weights, converges
+        theta, it1 = _levenberg_marquardt(evaluate, theta0, opt, keys, tolerance=opt.first_pass_tolerance)
+        sigma = [np.maximum(np.sqrt(np.mean(err ** 2, axis=0)), 1e-12 * s) for err, s in zip(run(theta)[0], sigma)]
+        theta, it2 = _levenberg_marquardt(evaluate, theta, opt, keys)
+        r, J = evaluate(theta)
+        pred = [y - err for y, err in zip(Y, run(theta)[0])]
+        pred0 = [y - err for y, err in zip(Y, run(theta0, False)[0])]
+    dof = max(r.size - len(keys), 1)
+    s2 = float(r @ r) / dof
+    # the scaled normal matrix's condition: keys the logs cannot tell apart make it huge (and the
+    # intervals meaningless); reported in meta, warned about by the CLI
+    H = J.T @ J
+    d = np.sqrt(np.maximum(np.diag(H), 1e-300))
+    condition = float(np.linalg.cond(H / np.outer(d, d)))
+    cov = s2 * np.linalg.pinv(H)
+    sd = np.sqrt(np.maximum(np.diag(cov), 0.0))
+    ci = np.exp(np.column_stack([theta - Z95 * sd, theta + Z95 * sd]))
+
+    def rms(preds):
+        return {o: float(np.sqrt(np.mean(np.concatenate([(y[:, i] - p[:, i]) ** 2 for y, p in zip(Y, preds)]))))
+                for i, o in enumerate(outputs)}
+    traces, bode = [], []
+    for e, u, y, p0, p1 in zip(experiments, U, Y, pred0, pred):
+        traces.append({"name": e.log.name, "t": np.arange(len(y)) * e.log.Ts, "u": u, "measured": y,
+                       "initial": p0, "fitted": p1})
+        if figure_data:
+            bode.append(_bode(e, keys, np.exp(theta0), np.exp(theta), inputs, outputs, u, y, loop_options))
+    meta = {**(provenance or {}), "inputs": list(inputs), "outputs": list(outputs), "method":
+            "time-domain output error, Levenberg-Marquardt on log-parameters, exact Jacobian (CasADi AD, "
+            "Van Loan ZOH derivative)", "iterations": [it1, it2], "residual_variance": s2,
+            "condition_number": condition,
+            "logs": {e.log.name: {"sha256": e.log.sha256, "samples": e.log.samples, "configuration": e.configuration}
+                     for e in experiments},
+            "date": datetime.datetime.now(datetime.timezone.utc).isoformat(timespec="seconds"),
+            "options": {k: getattr(opt, k) for k in FitOptions.__dataclass_fields__}}
+    return FitResult(keys, np.exp(theta), np.exp(theta0), ci, cov, rms(pred0), rms(pred), it1 + it2,
+                     int(sum(len(y) for y in Y)), {e.log.name: e.log.sampling for e in experiments},
+                     outputs, inputs, traces, bode, meta)
+
+
+def _levenberg_marquardt(evaluate, theta, opt: FitOptions, keys, tolerance: float | None = None):
+    """Minimise |r(theta)|^2 from ``theta``: Levenberg-Marquardt (Marquardt's diagonal scaling)
+    with the exact Jacobian. Returns (theta, iterations)."""
+    r, J = evaluate(theta)
+    cost = float(r @ r)
+    norms = np.linalg.norm(J, axis=0)
+    dead = [k for k, nrm in zip(keys, norms) if not nrm > 1e-12 * max(norms.max(), 1e-300)]
+    if dead:
+        raise ParameterError(f"--fit {dead[0]}: the logged outputs do not depend on it (zero sensitivity); "
+                             "allowed: keys the chosen --input/--output observe")
+    lam = 1e-3
+    it = 0
+    for it in range(1, opt.max_iterations + 1):
+        H, g = J.T @ J, J.T @ r
+        improved = False
+        while lam < 1e12:
+            step = np.linalg.solve(H + lam * np.diag(np.diag(H)), -g)
+            big = np.max(np.abs(step))
+            if big > opt.max_step:
+                step *= opt.max_step / big
+            r1, J1 = evaluate(theta + step)
+            c1 = float(r1 @ r1)
+            if np.isfinite(c1) and c1 < cost:
+                theta, r, J, improved = theta + step, r1, J1, True
+                done = (cost - c1) <= (opt.tolerance if tolerance is None else tolerance) * cost \
+                    or np.max(np.abs(step)) < 1e-10
+                cost = c1
+                lam = max(lam / 10, 1e-12)
+                break
+            lam *= 10
+        if not improved or done:
+            break
+    return theta, it
+
+
+def _bode(exp, keys, v0, v1, inputs, outputs, u, y, loop_options):
+    """H1 = P_uy / P_uu (Welch) and coherence from the first input to every output, and the
+    model's response before and after at the same frequencies (rad/s)."""
+    Ts = exp.log.Ts
+    nper = int(min(len(u) // 8, 4096))
+    if nper < 16:
+        return None
+    f, Puu = scipy.signal.welch(u[:, 0], fs=1 / Ts, nperseg=nper)
+    out = {"name": exp.log.name, "omega": 2 * np.pi * f[1:], "H1": [], "coherence": [], "initial": [], "fitted": []}
+    z = np.exp(1j * 2 * np.pi * f[1:] * Ts)[:, None, None]
+    models = [_model(exp, keys, v, inputs, outputs, loop_options) for v in (v0, v1)]
+    for i in range(y.shape[1]):
+        _, Puy = scipy.signal.csd(u[:, 0], y[:, i], fs=1 / Ts, nperseg=nper)
+        _, coh = scipy.signal.coherence(u[:, 0], y[:, i], fs=1 / Ts, nperseg=nper)
+        out["H1"].append(Puy[1:] / Puu[1:])
+        out["coherence"].append(coh[1:])
+        for name, m in zip(("initial", "fitted"), models):
+            X = np.linalg.solve(z * np.eye(m.Phi.shape[0]) - m.Phi, np.broadcast_to(m.Gamma[:, :1], (len(z),) + m.Gamma[:, :1].shape))
+            out[name].append(X[:, :, 0] @ m.C[i] + m.D[i, 0])
+    return out

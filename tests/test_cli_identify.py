@@ -1,0 +1,147 @@
+"""haa-sym identify: the command end to end (FITTED.toml round trip, fit.json schema) and every
+bad input refused with one line, exit 2 and nothing written."""
+import json
+import tomllib
+
+import numpy as np
+import pytest
+
+from haa_sym.cli import main
+from haa_sym.errors import ParameterError
+from haa_sym.model.params import actuator_path, load_params, parse_params
+
+from identify_synthetic import HD_TRUTH, experiment, two_mass, write_csv
+
+KEYS = ("J_link", "B_link", "K_hd", "D_hd")
+START = ("--set", "J_link=0.42", "--set", "B_link=1.7", "--set", "K_hd=3.6e4", "--set", "D_hd=50")
+
+
+@pytest.fixture(scope="module")
+def hd_log(tmp_path_factory):
+    """A 6 s voltage log of the harmonic drive (its slowest oscillatory mode, 381 rad/s, is short)."""
+    d = tmp_path_factory.mktemp("logs")
+    params = load_params(actuator_path("harmonic_drive"))
+    t, u, y, _ = experiment(two_mass, params.plant.as_dict(), seed=7, duration=6.0)
+    return write_csv(d / "hd.csv", t, {"voltage": u, "torque": y[:, 0], "theta": y[:, 1]}), (t, u, y)
+
+
+def _argv(log, out, *extra):
+    return ["identify", "--params", "harmonic_drive", "--log", str(log), "--input", "voltage", "--output",
+            "torque,theta", "--fit", ",".join(KEYS), "--out", str(out), *START, "-q", *extra]
+
+
+def test_fitted_file_round_trip_and_report(tmp_path, hd_log, capsys):
+    log, _ = hd_log
+    out, rep = tmp_path / "fitted.toml", tmp_path / "fit.json"
+    assert main(_argv(log, out, "--report", str(rep))) == 0
+    printed = capsys.readouterr().out
+    assert "hd.csv: 6000 samples, mean period 0.001 s" in printed and "uniform" in printed
+    report = json.loads(rep.read_text())
+    assert set(report) == {"parameters", "rms_error", "samples", "sampling", "meta"}
+    assert report["samples"] == 6000 and report["meta"]["logs"]["hd.csv"]["sha256"]
+    text = out.read_text()
+    original = actuator_path("harmonic_drive").read_text()
+    # the text is the input's: every comment line kept
+    assert [ln for ln in original.splitlines() if ln.startswith("#")] == \
+        [ln for ln in text.splitlines() if ln.startswith("#")]
+    fitted = parse_params(tomllib.loads(text), str(out))
+    data = tomllib.loads(text)
+    ref = [k for k in data["about"]["references"] if k.startswith("identify_")]
+    assert len(ref) == 1 and "hd.csv" in data["about"]["references"][ref[0]]
+    sections = {"J_link": ("bodies", "link", "J"), "B_link": ("bodies", "link", "B"), "K_hd": ("couplings", "hd", "K"),
+                "D_hd": ("couplings", "hd", "D")}
+    for k in KEYS:
+        entry = data[sections[k][0]][sections[k][1]][sections[k][2]]
+        p = report["parameters"][k]
+        # exactly the report's numbers (regions --uncertainty compares the file's value with fit.json's)
+        assert getattr(fitted.plant, k) == p["value"]
+        assert entry["source"] == ref[0] and entry["ci95"] == p["ci95"]
+        assert p["ci95"][0] <= HD_TRUTH[k] <= p["ci95"][1] and abs(p["value"] / HD_TRUTH[k] - 1) < 0.03
+    # the keys not fitted are untouched
+    base = load_params(actuator_path("harmonic_drive"))
+    for k in base.plant.keys:
+        if k not in KEYS:
+            assert getattr(fitted.plant, k) == getattr(base.plant, k)
+
+
+def test_ci95_entry_is_validated(tmp_path):
+    text = actuator_path("harmonic_drive").read_text().replace(
+        'K = { value = 3.1e4, unit = "Nm/rad",', 'K = { value = 3.1e4, ci95 = [3.2e4, 3.3e4], unit = "Nm/rad",')
+    with pytest.raises(ParameterError, match=r"K: ci95 = \[32000.0, 33000.0\] does not contain value"):
+        parse_params(tomllib.loads(text), "x.toml")
+    with pytest.raises(ParameterError, match="ci95 = \\['a', 1\\]; allowed: two finite numbers"):
+        parse_params(tomllib.loads(text.replace("ci95 = [3.2e4, 3.3e4]", "ci95 = ['a', 1]")), "x.toml")
+
+
+def _bad_log(tmp_path, hd_log, case):
+    _, (t, u, y) = hd_log
+    cols = {"voltage": u.copy(), "torque": y[:, 0].copy(), "theta": y[:, 1].copy()}
+    t = t.copy()
+    if case == "nan":
+        cols["theta"][100] = np.nan
+    elif case == "missing":
+        del cols["theta"]
+    elif case == "constant":
+        cols["voltage"][:] = 1.0
+    elif case == "jitter":
+        t = t + 3e-4 * np.random.default_rng(0).uniform(-1, 1, t.size)
+        t.sort()
+    elif case == "short":
+        t, cols = t[:40], {k: v[:40] for k, v in cols.items()}
+    return write_csv(tmp_path.parent / f"{tmp_path.name}-{case}.csv", t, cols)
+
+
+@pytest.mark.parametrize("case,extra,match", [
+    ("nan", (), "row(s) with NaN"),
+    ("missing", (), "missing column(s) ['theta']"),
+    ("constant", (), "input voltage is constant"),
+    ("jitter", (), "sampling jitter"),
+    ("short", (), "periods of the model's slowest mode"),
+    (None, ("--fit", "K_nope"), "--fit K_nope: not a plant parameter"),
+    (None, ("--fit", "B_m,B_m"), "given twice"),
+    (None, ("--input", "velocity"), "--input velocity"),
+    (None, ("--output", "torque,speed"), "--output torque,speed"),
+    (None, ("--set", "K_link=0", "--fit", "K_link"), "--fit K_link: initial value 0"),
+    (None, ("--configuration", "heavy", "--fit", "J_link"), "configuration heavy sets it"),
+    (None, ("--configuration", "a", "--configuration", "b", "--configuration", "c"), "--configuration given 3 times"),
+    (None, ("--out", "fitted.txt"), "--out 'fitted.txt': unsupported file type"),
+    (None, ("--report", "fit.csv"), "--report 'fit.csv': unsupported file type"),
+    (None, ("--option", "delay=1"), "--option delay=1: the loop options apply to the closed torque loop"),
+])
+def test_bad_input_one_line_exit_2_nothing_written(tmp_path, hd_log, assert_refused, case, extra, match):
+    log = _bad_log(tmp_path, hd_log, case) if case else hd_log[0]
+    argv = _argv(log, "fitted.toml", "--report", "fit.json", "--plot", "fit.png")
+    # later flags win: replace the ones the case gives
+    for i in range(0, len(extra), 2):
+        flag = extra[i]
+        if flag in ("--fit", "--input", "--output", "--out", "--report") and flag in argv:
+            j = argv.index(flag)
+            argv[j + 1] = extra[i + 1]
+        else:
+            argv += [flag, extra[i + 1]]
+    assert_refused(argv, match)
+
+
+def test_current_commanded_sea_with_port_torque_and_velocity(tmp_path):
+    """--input current,T_dist, --output torque,velocity: the drive's current and a port torque
+    (the hand-written SEA, tests/identify_synthetic.py), fitted from 10 s."""
+    import scipy.signal
+    from identify_synthetic import SEA_TRUTH, sea
+    params = load_params(actuator_path("sea"))
+    A, B, C, D = sea(params.plant.as_dict(), True)
+    rng = np.random.default_rng(5)
+    n = 10000
+    b, a = scipy.signal.butter(4, 0.25)
+    U = np.column_stack([scipy.signal.lfilter(b, a, rng.standard_normal(n)) for _ in range(2)])
+    U *= np.array([5.0, 20.0]) / np.std(U, axis=0)
+    Phi, Gam, *_ = scipy.signal.cont2discrete((A, B, C, D), 1e-3, "zoh")
+    _, y, _ = scipy.signal.dlsim((Phi, Gam, C[[0, 2]], D[[0, 2]], 1e-3), U)
+    y = y + 0.01 * np.std(y, axis=0) * rng.standard_normal(y.shape)
+    log = write_csv(tmp_path / "sea.csv", 1e-3 * np.arange(n),
+                    {"current": U[:, 0], "T_dist": U[:, 1], "torque": y[:, 0], "velocity": y[:, 1]})
+    rep = tmp_path / "fit.json"
+    assert main(["identify", "--params", "sea", "--log", str(log), "--input", "current,T_dist", "--output",
+                 "torque,velocity", "--fit", ",".join(SEA_TRUTH), "--set", "J_link=0.1", "--set", "K_bar=2000",
+                 "--out", str(tmp_path / "f.toml"), "--report", str(rep), "-q"]) == 0
+    for k, p in json.loads(rep.read_text())["parameters"].items():
+        assert abs(p["value"] / SEA_TRUTH[k] - 1) < 0.03 and p["ci95"][0] <= SEA_TRUTH[k] <= p["ci95"][1], (k, p)
