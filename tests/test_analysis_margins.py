@@ -113,6 +113,9 @@ def test_bad_input_names_the_field(params):
         crossovers(loop, [1.0, 2.0], [1.0, 2.0, 3.0])
 
 
+# With the SEA's tuned PI its torque loop alone turns unstable at beta 3.98 (model/sea.toml's
+# header), so at beta 7.6 only 2 of this grid's 126 points are stable, both low-PM (71 stable, 30
+# low-PM with the first PI, SEA_FIRST_PI): sea-7.6 now checks mostly unstable points.
 @pytest.mark.parametrize("path,beta", [(SEA, 1.0), (SEA, 3.0), (SEA, 7.6), (HD, 1.0), (HD, 3.0), (HD, 7.6)],
                          ids=["sea-1", "sea-3", "sea-7.6", "hd-1", "hd-3", "hd-7.6"])
 def test_low_pm_maps_equal_the_reference_away_from_the_boundary(path, beta):

@@ -202,7 +202,9 @@ def contact_intervals(loop, K_range=(1.0, 1e5), *, n_scan: int = 400, P_gain: fl
     The passivity ends are exact for the options' frequency grid (``n_omega``, ``omega_min``),
     not for the continuum of frequencies: the excess is a maximum over the grid. Raising
     ``n_omega`` from 1000 to 4000 moved the end by 4.6e-5 relative on the harmonic-drive actuator
-    (torque loop alone, end 5.28e4 Nm/rad) and by 1.2e-5 on HyQ (P_gain 1000, D_gain 9, end
+    (torque loop alone with its first PI, P_t0 = 0.01954 V/Nm, I_t0 = 0.9205 V/(Nm s), end
+    5.28e4 Nm/rad; with the tuned PI of the file that loop has no passivity end: it is not passive
+    anywhere it is stable, docs/tune.md) and by 1.2e-5 on HyQ (P_gain 1000, D_gain 9, end
     6.35e5 Nm/rad). Where the excess is flat in K its rounding, not ``rtol``, bounds the end: on
     HyQ at 6.35e5 Nm/rad the excess changes by 2.6e-3 deg per unit of ln K and the sampled
     plant's rounding moves it by up to 1.5e-10 deg (the same in the state-space reference),
