@@ -54,3 +54,33 @@ def test_array_key_is_exact():
     assert array_key(a) != array_key(b)                                     # one ulp counts
     assert array_key(np.array([0.0])) != array_key(np.array([-0.0]))        # so does the sign of zero
     assert array_key([1.0, 2.0]) == array_key(np.array([1.0, 2.0]))        # lists as arrays
+
+
+def test_threads_evicting_at_once_neither_fail_nor_overgrow():
+    """Four threads missing distinct keys on a full cache: every get returns its own build and
+    the cache never exceeds its size (without the lock, two threads evicted the same oldest entry:
+    KeyError, or "dictionary changed size during iteration", seen in `haa-sym schedule`'s threads)."""
+    import sys
+    import threading
+    cache = BoundedCache(size=8)
+    interval = sys.getswitchinterval()
+    sys.setswitchinterval(1e-6)                 # switch threads often: make the race likely
+    errors, sizes = [], []
+
+    def work(offset):
+        try:
+            for i in range(20000):
+                key = (offset, i)
+                assert cache.get(key, lambda: key) == key
+                sizes.append(len(cache))
+        except Exception as exc:               # noqa: BLE001 - report any failure of a thread
+            errors.append(exc)
+    threads = [threading.Thread(target=work, args=(k,)) for k in range(4)]
+    for t in threads:
+        t.start()
+    try:
+        for t in threads:
+            t.join()
+    finally:
+        sys.setswitchinterval(interval)
+    assert errors == [] and max(sizes) <= 8

@@ -5,6 +5,7 @@ leg's inertia cannot grow it without limit. Keys must capture every input of ``b
 """
 from __future__ import annotations
 
+import threading
 from typing import Callable, Hashable, TypeVar
 
 import numpy as np
@@ -20,25 +21,34 @@ def array_key(*arrays) -> tuple:
 
 
 class BoundedCache:
-    """``cache.get(key, build)``: ``build()``'s result, computed once per key."""
+    """``cache.get(key, build)``: ``build()``'s result, computed once per key (twice at most when
+    two threads miss the same key at once: ``build`` runs outside the lock, as it may take long).
+
+    Thread-safe: the schedule's dask threads and the explorer's sessions share it; eviction under a
+    lock (two threads evicting the same oldest entry raised KeyError, and iterating while another
+    thread inserted raised "dictionary changed size during iteration")."""
 
     def __init__(self, size: int = 256):
         self.size = size
         self._items: dict = {}
+        self._lock = threading.Lock()
 
     def get(self, key: Hashable, build: Callable[[], T]) -> T:
-        try:
-            return self._items[key]
-        except KeyError:
-            pass
+        with self._lock:
+            if key in self._items:
+                return self._items[key]
         value = build()
-        if len(self._items) >= self.size:
-            self._items.pop(next(iter(self._items)))
-        self._items[key] = value
+        with self._lock:
+            if key in self._items:          # another thread built it meanwhile: one value per key
+                return self._items[key]
+            while len(self._items) >= self.size:
+                self._items.pop(next(iter(self._items)))
+            self._items[key] = value
         return value
 
     def clear(self) -> None:
-        self._items.clear()
+        with self._lock:
+            self._items.clear()
 
     def __len__(self) -> int:
         return len(self._items)
