@@ -599,7 +599,8 @@ def plot_identify(result, title: str = "", max_points: int = 4000):
     sel = slice(sel.start, None, step)
     for i, o in enumerate(outs):
         ax = axes[0, i]
-        ax.plot(t[sel], tr["measured"][sel, i], color="0.6", lw=1.0, label="measured")
+        # wide and light underneath: where the fit is good the model lies on the measurement
+        ax.plot(t[sel], tr["measured"][sel, i], color="0.75", lw=3.0, label="measured")
         ax.plot(t[sel], tr["initial"][sel, i], color="C3", lw=0.8, ls="--", label="model, initial")
         ax.plot(t[sel], tr["fitted"][sel, i], color="C0", lw=0.8, label="model, fitted")
         ax.set_xlabel("t (s), the log's last 2 s")
@@ -613,7 +614,7 @@ def plot_identify(result, title: str = "", max_points: int = 4000):
         mag, ph, coh = axes[1, i], axes[2, i], axes[3, i]
         # H1 only where the coherence says the measurement carries the input (>= 0.5)
         H1 = np.where(bode["coherence"][i] >= 0.5, bode["H1"][i], np.nan)
-        for G, style in ((H1, dict(color="0.6", lw=1.2, label="H1 (Welch), coherence >= 0.5")),
+        for G, style in ((H1, dict(color="0.75", lw=3.0, label="H1 (Welch), coherence >= 0.5")),
                          (bode["initial"][i], dict(color="C3", lw=0.8, ls="--", label="model, initial")),
                          (bode["fitted"][i], dict(color="C0", lw=0.8, label="model, fitted"))):
             mag.loglog(w, np.abs(G), **style)
