@@ -8,6 +8,7 @@ import pytest
 
 from haa_sym.cli import main
 from haa_sym.errors import ParameterError
+from haa_sym.fit.fitted_file import fitted_text
 from haa_sym.model.params import actuator_path, load_params, parse_params
 
 from identify_synthetic import HD_TRUTH, experiment, two_mass, write_csv
@@ -145,3 +146,25 @@ def test_current_commanded_sea_with_port_torque_and_velocity(tmp_path):
                  "--out", str(tmp_path / "f.toml"), "--report", str(rep), "-q"]) == 0
     for k, p in json.loads(rep.read_text())["parameters"].items():
         assert abs(p["value"] / SEA_TRUTH[k] - 1) < 0.03 and p["ci95"][0] <= SEA_TRUTH[k] <= p["ci95"][1], (k, p)
+
+
+def test_fitted_entries_say_they_were_fitted_before_their_old_description(tmp_path):
+    """A fitted entry's description starts with where the value now comes from and the initial
+    value; the file's own description follows (it may state a rule the fit replaced)."""
+    class Result:                           # what fitted_text reads of a FitResult
+        keys, value, initial = ("K_hd",), np.array([30000.0]), np.array([31000.0])
+        ci95 = np.array([[29900.0, 30100.0]])
+        inputs, outputs = ("voltage",), ("torque",)
+        meta = {"logs": {"run.csv": {"sha256": "0" * 64, "samples": 100}}}
+    path = actuator_path("harmonic_drive")
+    text = fitted_text(path.read_text(), str(path), load_params(path), Result(), "2026-11-24")
+    entry = tomllib.loads(text)
+    old = tomllib.loads(path.read_text())
+    new_d = _find(entry, "K")["description"]
+    assert new_d.startswith("Fitted by haa-sym identify (identify_20261124), initial value 31000. Before: ")
+    assert new_d.endswith(_find(old, "K")["description"])
+
+
+def _find(data, key):
+    """The [couplings.hd] entry ``key`` (K_hd) of a parsed harmonic_drive file."""
+    return data["couplings"]["hd"][key]

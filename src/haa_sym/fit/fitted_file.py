@@ -63,7 +63,8 @@ def fitted_text(text: str, source: str, params, result, date: str) -> str:
     refs = data.get("about", {}).get("references", {}) if isinstance(data.get("about"), dict) else {}
     ref_key = _new_ref_key(refs, date)
     lines = text.splitlines(keepends=True)
-    targets = {_section_and_key(top, legacy, k): (k, v, ci) for k, v, ci in zip(result.keys, result.value, result.ci95)}
+    targets = {_section_and_key(top, legacy, k): (k, v, ci, v0)
+               for k, v, ci, v0 in zip(result.keys, result.value, result.ci95, result.initial)}
     done, section, refs_end = set(), None, None
     for i, line in enumerate(lines):
         h = _HEADER.match(line)
@@ -75,7 +76,7 @@ def fitted_text(text: str, source: str, params, result, date: str) -> str:
         m = re.match(r"^(\s*)([A-Za-z0-9_]+)(\s*=\s*)(.*?)(\r?\n)?$", line)
         if not m or (section, m.group(2)) not in targets:
             continue
-        flat, v, ci = targets[(section, m.group(2))]
+        flat, v, ci, v0 = targets[(section, m.group(2))]
         entry = _entry_of(data, section, m.group(2))
         unit = entry.get("unit") if isinstance(entry, dict) else None
         factor = to_si(1.0, unit, top.units[flat], source, flat) if unit else 1.0
@@ -90,6 +91,9 @@ def fitted_text(text: str, source: str, params, result, date: str) -> str:
                 inner = re.sub(r'(\bsource\s*=\s*)"[^"]*"', lambda g: f'{g.group(1)}"{ref_key}"', inner, count=1)
             else:
                 inner = inner.rstrip() + f', source = "{ref_key}" '
+            # the old description stays, after what the value now is (it may name a rule the fit replaced)
+            said = f"Fitted by haa-sym identify ({ref_key}), initial value {v0 / factor:.6g}. Before: "
+            inner = re.sub(r'(\bdescription\s*=\s*")', lambda g: g.group(1) + _escape(said), inner, count=1)
             ci_text = f"ci95 = [{_fmt(lo)}, {_fmt(hi)}]"
             if re.search(r"\bci95\s*=", inner):
                 inner = re.sub(r"\bci95\s*=\s*\[[^\]]*\]", ci_text, inner, count=1)
