@@ -267,14 +267,15 @@ def _amplitudes(kind: str, value: float, N_target: float, A_max: float) -> list[
         a = brentq(lambda a: (2 / np.pi) * (np.arcsin(a) + a * math.sqrt(1 - a * a)) - N_target,
                    0.0, 1.0, xtol=1e-15, rtol=1e-14)
         return [value / a] if a > 0 else []
-    # quantiser: N is smooth between thresholds and jumps up at each; sign changes of N - target
-    # inside each interval, and a root where the jump crosses the target is a discontinuity
-    # (no harmonic balance there); search thresholds up to A_max
+    # quantiser: N is continuous but rises like sqrt(A - t) just above each threshold t, then falls
+    # smoothly to the next; the samples start at the threshold itself and crowd there (quadratic
+    # in the offset, so the sqrt rise is sampled evenly), else the root on the steep rise (where
+    # N' > 0: the stable cycles) falls between two intervals' samples and is lost
     out = []
     q = value
     edges = (np.arange(1, int(A_max / q) + 2) - 0.5) * q
     for lo, hi in zip(edges[:-1], edges[1:]):
-        s = np.linspace(lo, hi, 33)[1:]
+        s = lo + (hi - lo) * np.linspace(0.0, 1.0, 33) ** 2
         s[-1] = hi * (1 - 1e-12)
         f = describing_function(kind, q, s)[0] - N_target
         for i in np.flatnonzero(np.sign(f[1:]) != np.sign(f[:-1])):
