@@ -366,7 +366,14 @@ def _limit_cycles(loop, P_gain, D_gain, key, value, n_omega, amplitude_max, k_ma
     rows.sort(key=lambda r: (r[1], r[0]))
     cols = [np.array(c, float) for c in zip(*rows)] if rows else [np.empty(0)] * 5
     A, w, loeb, g, dist = cols
-    amp_curve = value * np.logspace(-0.3 if kind != "saturation" else 0.0, 3, 400)
+    # the locus -1/N(A) drawn: from the saturation's limit (-1) or below the quantiser's first
+    # threshold (-inf); the relay's -1/N = -pi A/(4 F) tends to 0, so it starts three decades
+    # down; and always past every predicted amplitude, else a cycle is drawn where no locus is
+    lo = {"saturation": 0.0, "quantiser": -0.3, "relay": -3.0}[kind]
+    hi = 3.0
+    if A.size:
+        lo, hi = min(lo, math.log10(A.min() / value) - 0.3), max(hi, math.log10(A.max() / value) + 0.3)
+    amp_curve = value * np.logspace(lo, hi, 400)
     N_curve = describing_function(kind, value, amp_curve)[0]
     with np.errstate(divide="ignore"):
         minus_inv_N = np.where(N_curve > 0, -1.0 / N_curve, -np.inf)

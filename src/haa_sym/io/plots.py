@@ -468,7 +468,9 @@ def plot_describing(panels, title: str = ""):
     grid), minus_inv_N=real array (-1/N(A) on a grid of amplitudes), points=[(G_crossing,
     amplitude, omega, stable)], unit=str)]: G as a curve, -1/N(A) along the negative real axis,
     each predicted limit cycle marked (filled: stable by the Loeb criterion, open: unstable) and
-    labelled with its amplitude (in ``unit``) and frequency. The view spans -1 and every
+    labelled with its amplitude (in ``unit``) and frequency; several cycles at one crossover (a
+    quantiser) share one marker (half filled when stable and unstable mix) and one label with
+    their number and amplitude range. The view spans -1 and every
     predicted point (G leaves it where it is larger)."""
     fig, axes = plt.subplots(1, len(panels), figsize=(5.2 * len(panels), 4.6 + (0.4 if title else 0)),
                              constrained_layout=True, squeeze=False)
@@ -484,11 +486,25 @@ def plot_describing(panels, title: str = ""):
             ax.plot(locus, np.zeros_like(locus), color="tab:red", lw=3, alpha=0.5, solid_capstyle="butt",
                     label="-1/N(A)")
         ax.plot([-1], [0], "+", color="tab:red", ms=10)
+        # a quantiser meets one crossover at many amplitudes: one marker and one label per
+        # crossover (overlaid labels were unreadable); half filled when stable and unstable mix
+        by_crossing = {}
         for g, A, w, stable in pts:
-            ax.plot([g], [0], "o", ms=8, color="tab:blue", mfc="tab:blue" if stable else "white")
-            ax.annotate(f"A = {A:.4g} {p['unit']}\n{w:.4g} rad/s ({w / (2 * np.pi):.4g} Hz)\n"
-                        f"{'stable' if stable else 'unstable'}", (g, 0), textcoords="offset points",
-                        xytext=(6, 10), fontsize=8)
+            by_crossing.setdefault((g, w), []).append((A, bool(stable)))
+        for (g, w), cycles in by_crossing.items():
+            n_stable = sum(s for _, s in cycles)
+            fill = "full" if n_stable == len(cycles) else "none" if not n_stable else "left"
+            ax.plot([g], [0], "o", ms=8, color="tab:blue", fillstyle=fill, mfc="tab:blue" if n_stable else "white",
+                    mfcalt="white")
+            freq = f"{w:.4g} rad/s ({w / (2 * np.pi):.4g} Hz)"
+            if len(cycles) == 1:
+                (A, stable), = cycles
+                text = f"A = {A:.4g} {p['unit']}\n{freq}\n{'stable' if stable else 'unstable'}"
+            else:
+                amps = [A for A, _ in cycles]
+                text = (f"{len(cycles)} cycles, A = {min(amps):.4g} .. {max(amps):.4g} {p['unit']}\n{freq}\n"
+                        f"{n_stable} stable, {len(cycles) - n_stable} unstable")
+            ax.annotate(text, (g, 0), textcoords="offset points", xytext=(6, 10), fontsize=8)
         ax.set_xlim(-span, 0.5 * span)
         ax.set_ylim(-0.8 * span, 0.8 * span)
         ax.axhline(0, color="0.8", lw=0.6)
