@@ -45,3 +45,14 @@ def test_several_cycles_at_one_crossover_share_one_label():
         assert len(markers) == 1 and markers[0].get_fillstyle() == "full"
     finally:
         plt.close(fig)
+
+
+def test_the_legend_says_what_the_markers_mean():
+    G = np.exp(1j * np.linspace(0.1, 3.0, 50)) * -1.2
+    fig = plots.plot_describing([dict(label="V_max", G=G, minus_inv_N=-np.geomspace(1, 5, 50), unit="V",
+                                      points=[(-2.0, 61.8, 40.4, True)])])
+    try:
+        labels = [t.get_text() for t in fig.axes[0].get_legend().get_texts()]
+        assert {"-1 (N = 1)", "limit cycle, stable (Loeb)", "limit cycle, unstable (Loeb)", "-1/N(A)"} <= set(labels)
+    finally:
+        plt.close(fig)

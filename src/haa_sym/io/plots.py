@@ -485,7 +485,7 @@ def plot_describing(panels, title: str = ""):
         if locus.size:
             ax.plot(locus, np.zeros_like(locus), color="tab:red", lw=3, alpha=0.5, solid_capstyle="butt",
                     label="-1/N(A)")
-        ax.plot([-1], [0], "+", color="tab:red", ms=10)
+        ax.plot([-1], [0], "+", color="tab:red", ms=10, ls="none", label="-1 (N = 1)")
         # a quantiser meets one crossover at many amplitudes: one marker and one label per
         # crossover (overlaid labels were unreadable); half filled when stable and unstable mix
         by_crossing = {}
@@ -513,7 +513,12 @@ def plot_describing(panels, title: str = ""):
         ax.set_ylabel("Im")
         ax.set_title(_wrap(p["label"], 5.2, 9), fontsize=9)
         ax.grid(True, alpha=0.3)
-        ax.legend(fontsize=7, loc="lower left")
+        # what the marker fill means, whether or not this panel has such a cycle
+        marks = [plt.Line2D([], [], ls="none", marker="o", ms=7, color="tab:blue", fillstyle=f, mfc=c,
+                            label=lab) for f, c, lab in (("full", "tab:blue", "limit cycle, stable (Loeb)"),
+                                                        ("none", "white", "limit cycle, unstable (Loeb)"))]
+        handles, _ = ax.get_legend_handles_labels()
+        ax.legend(handles=handles + marks, fontsize=7, loc="lower left")
     if title:
         fig.suptitle(_wrap(title, 5.2 * len(panels)), fontsize=_title_size(title, 10))
     return fig
