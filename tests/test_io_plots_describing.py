@@ -4,7 +4,7 @@ import matplotlib.pyplot as plt
 import numpy as np
 
 from haa_sym import ClosedLoop, load_params
-from haa_sym.analysis.describing import describing_function, limit_cycles
+from haa_sym.analysis.describing import limit_cycles
 from haa_sym.analysis.sweep import blas_limits
 from haa_sym.io import plots
 
