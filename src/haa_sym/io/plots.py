@@ -412,7 +412,9 @@ def plot_schedule(s, title: str = ""):
     handles = [no_beta]
     bad = s.feasible & ~s.beta_fixed_feasible
     if bad.any():
-        handles += ax.plot(PP[bad], DD[bad], "x", color="tab:cyan", ms=4, label="beta = 1 unsafe for some leg")
+        # with an uncertainty box the failing configuration may be the box's, not the leg's
+        where = "configuration" if s.meta.get("uncertainty") else "leg"
+        handles += ax.plot(PP[bad], DD[bad], "x", color="tab:cyan", ms=4, label=f"beta = 1 unsafe for some {where}")
     ax.legend(handles=handles, fontsize=7, loc="upper left")
     ax.set_title("bandwidth gained by the schedule", fontsize=10)
     for ax in axes:
