@@ -1,11 +1,13 @@
-"""The schedule figure with an uncertainty box (review of issue 17): where beta = 1 fails, the
-failing configuration may be a value of the box, not a leg, and the legend says so."""
+"""The schedule with an uncertainty box (review of issue 17): where beta = 1 fails, the failing
+configuration may be a value of the box, not a leg, and the figure's legend and the summary say so."""
+import json
 from types import SimpleNamespace
 
 import matplotlib.pyplot as plt
 import numpy as np
 import pytest
 
+from haa_sym.cli import main
 from haa_sym.io import plots
 
 
@@ -22,3 +24,13 @@ def test_beta_one_unsafe_names_what_fails(meta, word):
         assert f"beta = 1 unsafe for some {word}" in labels
     finally:
         plt.close(fig)
+
+
+def test_the_schedule_summary_says_configuration_with_a_box(tmp_path, capsys):
+    # a degenerate box (lo = hi: a fixed value, no new axis) keeps this to the leg's 3 maps
+    fit = {"parameters": {"R": {"value": 3.32, "initial": 3.0, "ci95": [3.32, 3.32]}},
+           "rms_error": {}, "samples": 10, "sampling": {}, "meta": {}}
+    (tmp_path / "fit.json").write_text(json.dumps(fit))
+    argv = ["schedule", "--P-gain", "100,1000", "--D-gain", "10,30", "--beta-tol", "0.1", "--require", "stable", "-q"]
+    assert main([*argv, "--uncertainty", str(tmp_path / "fit.json")]) == 0
+    assert "beta = 1 fails for some configuration at" in capsys.readouterr().out
