@@ -329,7 +329,8 @@ def _agreement(loop, points, P, D, configurations=None):
         print(f"haa-sym: warning: {outside} of {a.P_gain.size} measured points of {points.source} lie outside "
               "the map's axes: counted, not drawn", file=sys.stderr)
     counts = {**a.counts, "source": points.source, "outside_axes": outside}
-    drawn = {"P_gain": a.P_gain, "D_gain": a.D_gain, "outcome": a.outcome, "agrees": a.agrees}
+    drawn = {"P_gain": a.P_gain, "D_gain": a.D_gain, "outcome": a.outcome, "agrees": a.agrees,
+             "configurations": a.counts["configurations"]}
     return counts, drawn
 
 

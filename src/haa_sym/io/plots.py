@@ -166,7 +166,8 @@ MEASURED_COLORS = {True: ("#0060ff", "agrees with the model"), False: ("#e00000"
 def draw_measured(ax, measured, P_lim, D_lim) -> list:
     """Measured points on ``ax`` with the paper's symbols (:data:`MEASURED_MARKERS`), coloured by
     agreement (:data:`MEASURED_COLORS`); ``measured``: plain data ``{"P_gain", "D_gain",
-    "outcome", "agrees"}`` (flat arrays) or None. Points outside ``P_lim`` x ``D_lim`` are not
+    "outcome", "agrees"}`` (flat arrays) and optionally ``"configurations"`` (how many the verdict
+    spans: above 1 the legend says "at some configuration") or None. Points outside ``P_lim`` x ``D_lim`` are not
     drawn (the axes keep the map's extent). Returns the legend handles (empty without points)."""
     if measured is None:
         return []
@@ -184,9 +185,13 @@ def draw_measured(ax, measured, P_lim, D_lim) -> list:
         if (out == o).any():
             handles.append(plt.Line2D([], [], ls="none", marker=marker, ms=6, mfc="none", mec="k", mew=1.4,
                                       label=label))
+    # over several configurations a point agrees when SOME configuration predicts it
+    # (analysis.measured): the legend must not read as "the model" of one configuration
+    scope = {True: " at some configuration", False: " at every configuration"} \
+        if measured.get("configurations", 1) > 1 else {True: "", False: ""}
     for ok, (color, label) in MEASURED_COLORS.items():
         if (agrees == ok).any():
-            handles.append(Patch(facecolor=color, edgecolor=color, label=f"{label} (marker colour)"))
+            handles.append(Patch(facecolor=color, edgecolor=color, label=f"{label}{scope[ok]} (marker colour)"))
     return handles
 
 
@@ -439,6 +444,10 @@ def _leg_line(meta: dict) -> str:
     if lv.get("uncertainty"):
         text += "\nand every value of the uncertainty box " + ", ".join(
             f"{k} {lo:.4g}..{hi:.4g}" for k, (lo, hi) in lv["uncertainty"].items())
+        # the box replaces the file's values too (as the range does): a figure alone must say so
+        own_box = lv.get("uncertainty_own") or {}
+        if own_box:
+            text += " (instead of " + ", ".join(f"{k} {v:.4g}" for k, v in own_box.items()) + ")"
     return text
 
 
