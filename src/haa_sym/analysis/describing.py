@@ -270,7 +270,7 @@ def _amplitudes(kind: str, value: float, N_target: float, A_max: float) -> list[
     # quantiser: N is continuous but rises like sqrt(A - t) just above each threshold t, then falls
     # smoothly to the next; the samples start at the threshold itself and crowd there (quadratic
     # in the offset, so the sqrt rise is sampled evenly), else the root on the steep rise (where
-    # N' > 0: the stable cycles) falls between two intervals' samples and is lost
+    # N' > 0) falls between two intervals' samples and is lost
     out = []
     q = value
     edges = (np.arange(1, int(A_max / q) + 2) - 0.5) * q
