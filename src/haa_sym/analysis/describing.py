@@ -267,14 +267,15 @@ def _amplitudes(kind: str, value: float, N_target: float, A_max: float) -> list[
         a = brentq(lambda a: (2 / np.pi) * (np.arcsin(a) + a * math.sqrt(1 - a * a)) - N_target,
                    0.0, 1.0, xtol=1e-15, rtol=1e-14)
         return [value / a] if a > 0 else []
-    # quantiser: N is smooth between thresholds and jumps up at each; sign changes of N - target
-    # inside each interval, and a root where the jump crosses the target is a discontinuity
-    # (no harmonic balance there); search thresholds up to A_max
+    # quantiser: N is continuous but rises like sqrt(A - t) just above each threshold t, then falls
+    # smoothly to the next; the samples start at the threshold itself and crowd there (quadratic
+    # in the offset, so the sqrt rise is sampled evenly), else the root on the steep rise (where
+    # N' > 0) falls between two intervals' samples and is lost
     out = []
     q = value
     edges = (np.arange(1, int(A_max / q) + 2) - 0.5) * q
     for lo, hi in zip(edges[:-1], edges[1:]):
-        s = np.linspace(lo, hi, 33)[1:]
+        s = lo + (hi - lo) * np.linspace(0.0, 1.0, 33) ** 2
         s[-1] = hi * (1 - 1e-12)
         f = describing_function(kind, q, s)[0] - N_target
         for i in np.flatnonzero(np.sign(f[1:]) != np.sign(f[:-1])):
@@ -365,7 +366,14 @@ def _limit_cycles(loop, P_gain, D_gain, key, value, n_omega, amplitude_max, k_ma
     rows.sort(key=lambda r: (r[1], r[0]))
     cols = [np.array(c, float) for c in zip(*rows)] if rows else [np.empty(0)] * 5
     A, w, loeb, g, dist = cols
-    amp_curve = value * np.logspace(-0.3 if kind != "saturation" else 0.0, 3, 400)
+    # the locus -1/N(A) drawn: from the saturation's limit (-1) or below the quantiser's first
+    # threshold (-inf); the relay's -1/N = -pi A/(4 F) tends to 0, so it starts three decades
+    # down; and always past every predicted amplitude, else a cycle is drawn where no locus is
+    lo = {"saturation": 0.0, "quantiser": -0.3, "relay": -3.0}[kind]
+    hi = 3.0
+    if A.size:
+        lo, hi = min(lo, math.log10(A.min() / value) - 0.3), max(hi, math.log10(A.max() / value) + 0.3)
+    amp_curve = value * np.logspace(lo, hi, 400)
     N_curve = describing_function(kind, value, amp_curve)[0]
     with np.errstate(divide="ignore"):
         minus_inv_N = np.where(N_curve > 0, -1.0 / N_curve, -np.inf)

@@ -196,7 +196,8 @@ def _cmd_schedule(args) -> int:
           f"(tolerance {args.beta_tol:g}; leg {s.meta['leg'][0]}..{s.meta['leg'][1]}"
           + ("".join(f", {k} {lo:.4g}..{hi:.4g}" for k, (lo, hi) in s.meta["uncertainty"].items())
              if s.meta["uncertainty"] else "") + f", {s.n_configurations} "
-          f"configurations{'' if s.converged else ', NOT converged'}); beta = 1 fails for some leg at {unsafe} of "
+          f"configurations{'' if s.converged else ', NOT converged'}); beta = 1 fails for some "
+          f"{'configuration' if s.meta['uncertainty'] else 'leg'} at {unsafe} of "
           f"them; lookup safe on {s.meta['cells_safe']} of {s.meta['cells']} cells ({s.meta['cell_subdivisions'] + 1}^2 "
           f"sub-grid checked, {s.meta['grid_points_lowered_by_cell_check']} grid values lowered)"
           + _wrote(out) + (f"; C in {args.c_out}" if args.c_out else ""))

@@ -10,7 +10,7 @@ from pathlib import Path
 import numpy as np
 
 from haa_sym.analysis.measured import agreement
-from haa_sym.analysis.robust import check_uncertainty, leg_text, leg_values, uncertainty_text
+from haa_sym.analysis.robust import check_uncertainty, leg_ends, leg_text, leg_values, uncertainty_text
 from haa_sym.errors import ParameterError
 from haa_sym.io.gridspec import gain_axis
 from haa_sym.io.measured import read_measured
@@ -236,6 +236,7 @@ def _uncertainty(args, params, leg):
     if getattr(args, "uncertainty", None) is None:
         return None
     fit = read_fit(args.uncertainty, "--uncertainty", keys=tuple(params.plant.topology.parameter_keys))
+    leg_ends(params, leg)            # a bad --leg is the leg's mistake, not the report's
     try:
         check_uncertainty(params, fit_box(fit), leg)
     except ParameterError as exc:
@@ -261,7 +262,8 @@ def _agreement(loop, points, P, D, configurations=None):
         print(f"haa-sym: warning: {outside} of {a.P_gain.size} measured points of {points.source} lie outside "
               "the map's axes: counted, not drawn", file=sys.stderr)
     counts = {**a.counts, "source": points.source, "outside_axes": outside}
-    drawn = {"P_gain": a.P_gain, "D_gain": a.D_gain, "outcome": a.outcome, "agrees": a.agrees}
+    drawn = {"P_gain": a.P_gain, "D_gain": a.D_gain, "outcome": a.outcome, "agrees": a.agrees,
+             "configurations": a.counts["configurations"]}
     return counts, drawn
 
 

@@ -47,6 +47,10 @@ def _cmd_describe(args) -> int:
         results = [limit_cycles(loop, P, D, nonlinearity=nl) for nl in limits]
     except ParameterError as exc:
         raise ParameterError(f"--limit: {exc}") from None
+    # the linear verdict at the point: "no limit cycle" reads as harmless, but at a linearly
+    # unstable point it means the harmonic balance bounds nothing
+    lin = loop.stability([P], [D], radius=True)
+    lin_stable, radius = bool(lin.stable[0]), float(lin.spectral_radius[0])
     for r in results:
         head = f"{r.nonlinearity} = {r.value:g} {r.value_unit} on the {r.signal}:"
         if not r.amplitude.size:
@@ -56,8 +60,15 @@ def _cmd_describe(args) -> int:
                   f"{'stable' if s else 'unstable'} (Loeb), distortion {d:.3g}"
                   + ("  (large: the prediction is rough)" if d > 0.2 else ""))
 
+    unbounded = [r.nonlinearity for r in results if not r.stable.any()]
+    print(f"linear loop at this point: {'stable' if lin_stable else 'UNSTABLE'} (spectral radius {radius:.6g})"
+          + ("" if lin_stable or not unbounded else
+             f"; no stable cycle predicted for {', '.join(unbounded)}: the harmonic balance bounds no oscillation "
+             "there (one larger than any unstable cycle grows until another limit acts)"))
+
     def write(path, tx):
-        save_json(path, {"P_gain": P, "D_gain": D, "predictions": [r.to_dict() for r in results]}, tx, "--out")
+        save_json(path, {"P_gain": P, "D_gain": D, "linear": {"stable": lin_stable, "spectral_radius": radius},
+                         "predictions": [r.to_dict() for r in results]}, tx, "--out")
 
     def figure():
         panels = [dict(label=f"{r.nonlinearity} = {r.value:g} {r.value_unit} on the {r.signal}", G=r.G_curve, minus_inv_N=r.minus_inv_N,

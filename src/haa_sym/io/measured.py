@@ -54,6 +54,10 @@ def read_measured(path, field: str = "--measured") -> MeasuredPoints:
             missing = [c for c in COLUMNS if c not in header]
             if missing:
                 raise ParameterError(f"{where} line {line}: header {header} lacks {missing}; {allowed}")
+            twice = [c for c in COLUMNS if header.count(c) > 1]
+            if twice:                       # which of the two is the experiment's is not ours to guess
+                raise ParameterError(f"{where} line {line}: header {header} names {twice[0]} "
+                                     f"{header.count(twice[0])} times; {allowed}, each once")
             idx = [header.index(c) for c in COLUMNS]
             continue
         if len(row) != len(header):

@@ -166,7 +166,8 @@ MEASURED_COLORS = {True: ("#0060ff", "agrees with the model"), False: ("#e00000"
 def draw_measured(ax, measured, P_lim, D_lim) -> list:
     """Measured points on ``ax`` with the paper's symbols (:data:`MEASURED_MARKERS`), coloured by
     agreement (:data:`MEASURED_COLORS`); ``measured``: plain data ``{"P_gain", "D_gain",
-    "outcome", "agrees"}`` (flat arrays) or None. Points outside ``P_lim`` x ``D_lim`` are not
+    "outcome", "agrees"}`` (flat arrays) and optionally ``"configurations"`` (how many the verdict
+    spans: above 1 the legend says "at some configuration") or None. Points outside ``P_lim`` x ``D_lim`` are not
     drawn (the axes keep the map's extent). Returns the legend handles (empty without points)."""
     if measured is None:
         return []
@@ -184,9 +185,13 @@ def draw_measured(ax, measured, P_lim, D_lim) -> list:
         if (out == o).any():
             handles.append(plt.Line2D([], [], ls="none", marker=marker, ms=6, mfc="none", mec="k", mew=1.4,
                                       label=label))
+    # over several configurations a point agrees when SOME configuration predicts it
+    # (analysis.measured): the legend must not read as "the model" of one configuration
+    scope = {True: " at some configuration", False: " at every configuration"} \
+        if measured.get("configurations", 1) > 1 else {True: "", False: ""}
     for ok, (color, label) in MEASURED_COLORS.items():
         if (agrees == ok).any():
-            handles.append(Patch(facecolor=color, edgecolor=color, label=f"{label} (marker colour)"))
+            handles.append(Patch(facecolor=color, edgecolor=color, label=f"{label}{scope[ok]} (marker colour)"))
     return handles
 
 
@@ -412,7 +417,9 @@ def plot_schedule(s, title: str = ""):
     handles = [no_beta]
     bad = s.feasible & ~s.beta_fixed_feasible
     if bad.any():
-        handles += ax.plot(PP[bad], DD[bad], "x", color="tab:cyan", ms=4, label="beta = 1 unsafe for some leg")
+        # with an uncertainty box the failing configuration may be the box's, not the leg's
+        where = "configuration" if s.meta.get("uncertainty") else "leg"
+        handles += ax.plot(PP[bad], DD[bad], "x", color="tab:cyan", ms=4, label=f"beta = 1 unsafe for some {where}")
     ax.legend(handles=handles, fontsize=7, loc="upper left")
     ax.set_title("bandwidth gained by the schedule", fontsize=10)
     for ax in axes:
@@ -437,6 +444,10 @@ def _leg_line(meta: dict) -> str:
     if lv.get("uncertainty"):
         text += "\nand every value of the uncertainty box " + ", ".join(
             f"{k} {lo:.4g}..{hi:.4g}" for k, (lo, hi) in lv["uncertainty"].items())
+        # the box replaces the file's values too (as the range does): a figure alone must say so
+        own_box = lv.get("uncertainty_own") or {}
+        if own_box:
+            text += " (instead of " + ", ".join(f"{k} {v:.4g}" for k, v in own_box.items()) + ")"
     return text
 
 
@@ -468,7 +479,9 @@ def plot_describing(panels, title: str = ""):
     grid), minus_inv_N=real array (-1/N(A) on a grid of amplitudes), points=[(G_crossing,
     amplitude, omega, stable)], unit=str)]: G as a curve, -1/N(A) along the negative real axis,
     each predicted limit cycle marked (filled: stable by the Loeb criterion, open: unstable) and
-    labelled with its amplitude (in ``unit``) and frequency. The view spans -1 and every
+    labelled with its amplitude (in ``unit``) and frequency; several cycles at one crossover (a
+    quantiser) share one marker (half filled when stable and unstable mix) and one label with
+    their number and amplitude range. The view spans -1 and every
     predicted point (G leaves it where it is larger)."""
     fig, axes = plt.subplots(1, len(panels), figsize=(5.2 * len(panels), 4.6 + (0.4 if title else 0)),
                              constrained_layout=True, squeeze=False)
@@ -483,12 +496,26 @@ def plot_describing(panels, title: str = ""):
         if locus.size:
             ax.plot(locus, np.zeros_like(locus), color="tab:red", lw=3, alpha=0.5, solid_capstyle="butt",
                     label="-1/N(A)")
-        ax.plot([-1], [0], "+", color="tab:red", ms=10)
+        ax.plot([-1], [0], "+", color="tab:red", ms=10, ls="none", label="-1 (N = 1)")
+        # a quantiser meets one crossover at many amplitudes: one marker and one label per
+        # crossover (overlaid labels were unreadable); half filled when stable and unstable mix
+        by_crossing = {}
         for g, A, w, stable in pts:
-            ax.plot([g], [0], "o", ms=8, color="tab:blue", mfc="tab:blue" if stable else "white")
-            ax.annotate(f"A = {A:.4g} {p['unit']}\n{w:.4g} rad/s ({w / (2 * np.pi):.4g} Hz)\n"
-                        f"{'stable' if stable else 'unstable'}", (g, 0), textcoords="offset points",
-                        xytext=(6, 10), fontsize=8)
+            by_crossing.setdefault((g, w), []).append((A, bool(stable)))
+        for (g, w), cycles in by_crossing.items():
+            n_stable = sum(s for _, s in cycles)
+            fill = "full" if n_stable == len(cycles) else "none" if not n_stable else "left"
+            ax.plot([g], [0], "o", ms=8, color="tab:blue", fillstyle=fill, mfc="tab:blue" if n_stable else "white",
+                    mfcalt="white")
+            freq = f"{w:.4g} rad/s ({w / (2 * np.pi):.4g} Hz)"
+            if len(cycles) == 1:
+                (A, stable), = cycles
+                text = f"A = {A:.4g} {p['unit']}\n{freq}\n{'stable' if stable else 'unstable'}"
+            else:
+                amps = [A for A, _ in cycles]
+                text = (f"{len(cycles)} cycles, A = {min(amps):.4g} .. {max(amps):.4g} {p['unit']}\n{freq}\n"
+                        f"{n_stable} stable, {len(cycles) - n_stable} unstable")
+            ax.annotate(text, (g, 0), textcoords="offset points", xytext=(6, 10), fontsize=8)
         ax.set_xlim(-span, 0.5 * span)
         ax.set_ylim(-0.8 * span, 0.8 * span)
         ax.axhline(0, color="0.8", lw=0.6)
@@ -497,7 +524,12 @@ def plot_describing(panels, title: str = ""):
         ax.set_ylabel("Im")
         ax.set_title(_wrap(p["label"], 5.2, 9), fontsize=9)
         ax.grid(True, alpha=0.3)
-        ax.legend(fontsize=7, loc="lower left")
+        # what the marker fill means, whether or not this panel has such a cycle
+        marks = [plt.Line2D([], [], ls="none", marker="o", ms=7, color="tab:blue", fillstyle=f, mfc=c,
+                            label=lab) for f, c, lab in (("full", "tab:blue", "limit cycle, stable (Loeb)"),
+                                                        ("none", "white", "limit cycle, unstable (Loeb)"))]
+        handles, _ = ax.get_legend_handles_labels()
+        ax.legend(handles=handles + marks, fontsize=7, loc="lower left")
     if title:
         fig.suptitle(_wrap(title, 5.2 * len(panels)), fontsize=_title_size(title, 10))
     return fig

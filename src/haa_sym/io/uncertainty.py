@@ -56,11 +56,22 @@ def read_fit(path, field: str = "--uncertainty", keys=None) -> dict:
     except (OSError, UnicodeDecodeError) as exc:
         raise ParameterError(f"{where}: cannot be read ({type(exc).__name__}); allowed: a readable UTF-8 "
                              "JSON file") from None
+    twice = []
+
+    def unique(pairs):
+        # json keeps the last of a repeated name silently: two intervals for one key (a hand-edited
+        # report) would analyse whichever came last
+        names = [k for k, _ in pairs]
+        twice.extend(k for k in dict.fromkeys(names) if names.count(k) > 1)
+        return dict(pairs)
     try:
-        data = json.loads(text)
+        data = json.loads(text, object_pairs_hook=unique)
     except json.JSONDecodeError as exc:
         raise ParameterError(f"{where}: not JSON (line {exc.lineno}, column {exc.colno}: {exc.msg}); allowed: "
                              "the report of haa-sym identify") from None
+    if twice:
+        raise ParameterError(f"{where}: the name {twice[0]!r} appears twice in one JSON object; allowed: each "
+                             "name once (the report of haa-sym identify)")
     if not isinstance(data, dict):
         raise ParameterError(f"{where}: a JSON {type(data).__name__}; allowed: an object with fields "
                              f"{list(FIT_FIELDS)}")
