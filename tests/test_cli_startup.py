@@ -11,7 +11,6 @@ import os
 import subprocess
 import sys
 
-
 from conftest import ROOT
 
 HEAVY = ("sympy", "scipy.signal", "scipy.stats", "scipy.optimize", "matplotlib", "panel", "bokeh", "dask",

@@ -257,7 +257,7 @@ def _check(nonlinearity) -> tuple[str, float]:
 
 def _amplitudes(kind: str, value: float, N_target: float, A_max: float) -> list[float]:
     """Every amplitude A with N(A) = N_target (> 0)."""
-    # scipy.optimize takes 0.2-0.3 s to import: only the commands that locate a root pay it
+    # scipy.optimize takes about 0.25 s to import (docs/startup.md): only the commands that locate a root pay it
     from scipy.optimize import brentq
     if kind == "relay":
         return [4 * value / (np.pi * N_target)]

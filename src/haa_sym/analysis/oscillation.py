@@ -85,7 +85,7 @@ def theil_sen_slope(y) -> float:
     (y[j] - y[i]) / (j - i) over every pair i < j (Sen 1968), robust to a few outlying cycles.
 
     The same number as ``scipy.stats.theilslopes(y, np.arange(n))[0]``; written here because
-    importing scipy.stats costs every ``haa-sym`` command 0.2-0.3 s (tests/test_cli_startup.py).
+    importing scipy.stats would cost every ``haa-sym`` command about 0.5 s (docs/startup.md).
 
     Parameters
     ----------

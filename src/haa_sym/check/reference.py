@@ -60,7 +60,7 @@ def _own_output_row(plant, cont, name):
 
 
 def _zoh_plant(params, outputs):
-    # scipy.signal takes 0.4-0.7 s to import: only the cross-check pays it, not every command
+    # scipy.signal takes about 0.7 s to import (docs/startup.md): only the cross-check pays it
     from scipy.signal import cont2discrete
     cont = continuous_plant(params.plant)
     C = np.array([cont.C[cont.output_names.index(o)] if (own := _own_output_row(params.plant, cont, o)) is None

@@ -196,8 +196,8 @@ def _first_order(a: complex, d: np.ndarray) -> np.ndarray:
     The recursion is the lower bidiagonal system xi[k] - a xi[k-1] = d[k-1] (1 on the diagonal,
     -a below it), and LAPACK's triangular band solve (``ztbtrs``) is forward substitution: the
     recursion itself, in Fortran, with the same arithmetic as ``scipy.signal.lfilter([0, 1],
-    [1, -a], d)``, without importing scipy.signal (0.4-0.7 s, most of ``haa-sym identify``'s
-    start; tests/test_cli_startup.py).
+    [1, -a], d)``, without importing scipy.signal (about 0.7 s, most of ``haa-sym identify``'s
+    start before; docs/startup.md).
     """
     N = d.shape[-1]
     rhs = d.reshape(-1, N)
