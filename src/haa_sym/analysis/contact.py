@@ -20,7 +20,6 @@ from dataclasses import dataclass, field, replace
 
 import numpy as np
 
-from scipy.optimize import brentq
 from tqdm.auto import tqdm
 
 from haa_sym.analysis.sweep import BLAS_THREADS, blas_limits, gain_rows, phase_excess
@@ -256,6 +255,8 @@ def contact_intervals(loop, K_range=(1.0, 1e5), *, n_scan: int = 400, P_gain: fl
 
 def _locate(loop, key, base, K, P_gain, D_gain, beta, alpha, mode, rtol, passivity, progress) -> ContactIntervals:
     """The scan on the stiffnesses ``K`` and Brent's method on every bracketed change."""
+    # scipy.optimize takes about 0.25 s to import (docs/startup.md): only the commands that locate a root pay it
+    from scipy.optimize import brentq
     rho, excess = _scan(loop, key, base, K, P_gain, D_gain, beta, alpha, progress, passivity)
     stable = rho < 1
 

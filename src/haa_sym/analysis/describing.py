@@ -34,7 +34,6 @@ import math
 from dataclasses import dataclass, field
 
 import numpy as np
-from scipy.optimize import brentq
 
 from haa_sym.analysis.sweep import BLAS_THREADS, blas_limits
 from haa_sym.errors import ParameterError
@@ -258,6 +257,8 @@ def _check(nonlinearity) -> tuple[str, float]:
 
 def _amplitudes(kind: str, value: float, N_target: float, A_max: float) -> list[float]:
     """Every amplitude A with N(A) = N_target (> 0)."""
+    # scipy.optimize takes about 0.25 s to import (docs/startup.md): only the commands that locate a root pay it
+    from scipy.optimize import brentq
     if kind == "relay":
         return [4 * value / (np.pi * N_target)]
     if kind == "saturation":
@@ -320,6 +321,7 @@ def limit_cycles(loop: ClosedLoop, P_gain: float, D_gain: float, *, nonlinearity
 
 
 def _limit_cycles(loop, P_gain, D_gain, key, value, n_omega, amplitude_max, k_max) -> LimitCycles:
+    from scipy.optimize import brentq
     kind = _kind(key)
     P, D = (gain_array(n, v, n).ravel() for n, v in (("P_gain", P_gain), ("D_gain", D_gain)))
     if P.size != 1 or D.size != 1:

@@ -11,11 +11,10 @@ import math
 from dataclasses import dataclass
 
 import numpy as np
-from scipy.stats import theilslopes
 
 from haa_sym.errors import ParameterError
 
-__all__ = ["Oscillation", "limit_cycle", "OSCILLATION_KINDS"]
+__all__ = ["Oscillation", "limit_cycle", "theil_sen_slope", "OSCILLATION_KINDS"]
 
 OSCILLATION_KINDS = ("none", "decaying", "sustained", "growing")
 
@@ -79,6 +78,33 @@ def _noise_rms(y: np.ndarray) -> float:
     if d.size == 0:
         return 0.0
     return float(1.4826 * np.median(np.abs(d - np.median(d))) / np.sqrt(math.comb(2 * k, k)))
+
+
+def theil_sen_slope(y) -> float:
+    """Theil-Sen slope of ``y`` against its index 0, 1, ..., n-1: the median of the slopes
+    (y[j] - y[i]) / (j - i) over every pair i < j (Sen 1968), robust to a few outlying cycles.
+
+    The same number as ``scipy.stats.theilslopes(y, np.arange(n))[0]``; written here because
+    importing scipy.stats would cost every ``haa-sym`` command about 0.5 s (docs/startup.md).
+
+    Parameters
+    ----------
+    y : array_like, shape (n,), n >= 2
+        Values at equally spaced abscissae (unit spacing).
+
+    Returns
+    -------
+    float
+        The slope per index step (unit of ``y``).
+
+    Examples
+    --------
+    >>> theil_sen_slope([0.0, 1.0, 2.0, 3.0, 40.0])          # one outlier does not move it
+    1.0
+    """
+    y = np.asarray(y, float).ravel()
+    # the pairs at lag k are (y[k:] - y[:-k]) / k: n (n - 1) / 2 slopes, no index arrays
+    return float(np.median(np.concatenate([(y[k:] - y[:-k]) / k for k in range(1, y.size)])))
 
 
 def limit_cycle(t, y, *, settle: float = 0.5, min_cycles: int = 3, growth_tol: float = 0.01,
@@ -157,7 +183,7 @@ def limit_cycle(t, y, *, settle: float = 0.5, min_cycles: int = 3, growth_tol: f
         return none
     n = amps.size
     if n >= 3:
-        slope = theilslopes(np.log(amps), np.arange(n))[0]
+        slope = theil_sen_slope(np.log(amps))
     else:
         slope = np.log(amps[-1] / amps[0]) / (n - 1)
     growth = float(np.expm1(slope))

@@ -33,7 +33,6 @@ import math
 
 import numpy as np
 import scipy.linalg
-import scipy.signal
 
 from haa_sym.loop.plant import continuous_plant
 from haa_sym.model.actuator import CURRENT, ROTOR, Topology
@@ -61,12 +60,14 @@ def _own_output_row(plant, cont, name):
 
 
 def _zoh_plant(params, outputs):
+    # scipy.signal takes about 0.7 s to import (docs/startup.md): only the cross-check pays it
+    from scipy.signal import cont2discrete
     cont = continuous_plant(params.plant)
     C = np.array([cont.C[cont.output_names.index(o)] if (own := _own_output_row(params.plant, cont, o)) is None
                   else own for o in outputs])
     B = cont.B[:, [0, 2]]                                # V_m, T_dist
-    Ad, Bd, Cd, Dd, _ = scipy.signal.cont2discrete((cont.A, B, C, np.zeros((len(outputs), 2))),
-                                                   params.controller.Ts, method="zoh")
+    Ad, Bd, Cd, Dd, _ = cont2discrete((cont.A, B, C, np.zeros((len(outputs), 2))),
+                                      params.controller.Ts, method="zoh")
     return Ad, Bd, Cd, Dd
 
 
@@ -81,13 +82,14 @@ def _vc0(plant) -> float:
 
 def _tf_block(b, a):
     """(A, B, C, D) of b(z^-1)/a(z^-1) (coefficients in powers of z^-1), by scipy's tf2ss."""
+    from scipy.signal import tf2ss
     b, a = np.atleast_1d(np.asarray(b, float)), np.atleast_1d(np.asarray(a, float))
     if len(a) == 1 and len(b) == 1:
         return np.zeros((0, 0)), np.zeros((0, 1)), np.zeros((1, 0)), np.array([[b[0] / a[0]]])
     n = max(len(a), len(b))
     b = np.concatenate([b, np.zeros(n - len(b))])
     a = np.concatenate([a, np.zeros(n - len(a))])
-    return scipy.signal.tf2ss(b, a)
+    return tf2ss(b, a)
 
 
 def _average(ctrl):
@@ -102,16 +104,17 @@ def _analog_lowpass(num, den):
     """The backward difference followed by the analog prototype num(s)/den(s) (descending powers,
     functions of w_c) mapped by the bilinear transform."""
     def realise(ctrl):
+        from scipy.signal import cont2discrete, tf2ss
         Ts, w_c = ctrl.Ts, 2 * math.pi * ctrl.f_c
         # the analog prototype in state space, then the bilinear map in state-space form (well
         # conditioned at fast sampling, where the discrete polynomial's roots crowd at z = 1)
-        A, B, C, D = scipy.signal.tf2ss(num(w_c), den(w_c))
+        A, B, C, D = tf2ss(num(w_c), den(w_c))
         # scale the states (diagonal balancing of [[A, B], [C, D]]): the companion form's states
         # differ by powers of w_c, which costs digits in the frequency responses near Nyquist
         _, (scale, _) = scipy.linalg.matrix_balance(np.block([[A, B], [C, D]]), permute=False, separate=True)
         s = scale[:A.shape[0]]
         A, B, C = A * s[None, :] / s[:, None], B / s[:, None], C * s[None, :]
-        lowpass = scipy.signal.cont2discrete((A, B, C, D), Ts, method="bilinear")[:4]
+        lowpass = cont2discrete((A, B, C, D), Ts, method="bilinear")[:4]
         return [_tf_block([1 / Ts, -1 / Ts], [1.0]), lowpass]
     return realise
 

@@ -1,6 +1,8 @@
 """``python -m haa_sym.check.verify``: check the paper's equations and claims, one row each.
 
-Symbolic rows use sympy (haa_sym.symbolic); numeric rows use the generated evaluators on the
+Symbolic rows use sympy (haa_sym.symbolic), each importing it itself: ``haa-sym`` imports this
+module for its ``verify`` command, and no other command may pay sympy's import (about 0.4 s;
+tests/test_cli_startup.py). Numeric rows use the generated evaluators on the
 parameter file (default the bundled HyQ file). Each row prints PASS, FAIL or N/A (a row that
 does not apply to this actuator, with the reason) with the numbers behind it; the exit status is
 non-zero if any row fails. Nothing is compared against a typed-in expectation of the result:
@@ -20,7 +22,6 @@ import time
 from dataclasses import dataclass
 
 import numpy as np
-import sympy as sp
 
 from haa_sym.errors import CompilerError, StaleGeneratedCode
 from haa_sym.compiled.generated import evaluators
@@ -30,8 +31,6 @@ from haa_sym.analysis.torque import torque_loop_margins
 from haa_sym.model.actuator import CURRENT, HYQ, MOTOR_DOMAIN, Topology
 from haa_sym.errors import ParameterError
 from haa_sym.model.params import Params, load_params
-from haa_sym.symbolic import chain, eom, torque_tf as tt
-from haa_sym.symbolic.chain import symbolic_model
 
 LOAD_KEYS = ("J_L1", "B_L1", "J_L2", "B_L2", "K_L2", "K_p", "D_p")
 
@@ -50,6 +49,7 @@ class Row:
 
 
 def _rational_params(params: Params, syms: dict, **override) -> dict:
+    import sympy as sp
     vals = {k: sp.nsimplify(v, rational=True) for k, v in params.plant.as_dict().items()}
     vals.update({k: sp.nsimplify(v, rational=True) for k, v in override.items()})
     return {syms[k]: vals[k] for k in HYQ.parameter_keys}
@@ -57,6 +57,8 @@ def _rational_params(params: Params, syms: dict, **override) -> dict:
 
 def row_state_space(params: Params) -> Row:
     """The state space (used for code generation) and Eq. (1) give the same transfer matrix."""
+    import sympy as sp
+    from haa_sym.symbolic import eom
     ss = eom.state_space()
     syms = ss.symbols
     p, unknowns, eqs = eom.laplace_equations(syms)
@@ -84,6 +86,7 @@ def row_state_space(params: Params) -> Row:
 
 
 def row_gtvc() -> Row:
+    from haa_sym.symbolic import torque_tf as tt
     t = time.time()
     num, den, ring = tt.derive_g_tvc_fraction()
     same = tt.same_rational(num, den, tt.paper_g_tvc(), ring)
@@ -93,6 +96,8 @@ def row_gtvc() -> Row:
 
 
 def row_vc_exact() -> Row:
+    import sympy as sp
+    from haa_sym.symbolic import eom, torque_tf as tt
     syms = eom.plant_symbols()
     P = tt.paper_polynomials(syms)
     vc = tt.vc_gain_exact(syms)
@@ -109,6 +114,8 @@ def row_vc_exact() -> Row:
 
 
 def row_vc_simplified() -> Row:
+    import sympy as sp
+    from haa_sym.symbolic import eom, torque_tf as tt
     syms = eom.plant_symbols()
     d = sp.expand(tt.vc_gain_exact(syms).subs({syms["L"]: 0, syms["J_m"]: 0})
                   - tt.vc_gain_simplified(syms, 1))
@@ -116,6 +123,8 @@ def row_vc_simplified() -> Row:
 
 
 def row_p1_roots(params: Params) -> list[Row]:
+    import sympy as sp
+    from haa_sym.symbolic import eom, torque_tf as tt
     syms = eom.plant_symbols()
     rows = []
     for cfg in sorted(params.configurations):
@@ -150,6 +159,8 @@ def row_p1_roots(params: Params) -> list[Row]:
 
 
 def row_pi() -> Row:
+    import sympy as sp
+    from haa_sym.symbolic import torque_tf as tt
     P_t, I_t, Ts, z = sp.symbols("P_t I_t T_s z", positive=True)
     a, b = tt.pi_torque(P_t, I_t, Ts, z)
     d = sp.cancel(a - b)
@@ -200,6 +211,8 @@ def row_alpha_range(params: Params) -> Row:
 def row_chain_state_space(params: Params, n_points: int = 3) -> Row:
     """The chain's state space (code generation) and its Laplace form give the same transfer
     matrix, every output from every input, exactly at random rational (parameters, s)."""
+    import sympy as sp
+    from haa_sym.symbolic import chain
     top = params.plant.topology
     ss = chain.state_space(top)
     syms = ss.symbols
@@ -230,6 +243,7 @@ def row_exact_vc_generalised(params: Params) -> Row:
     """Eq. (3)-(5) for any chain: with the exact compensation (Eq. 5, or N k_w for the current
     estimate), the measured torque / V depends on the motor and the gearbox alone, when it
     applies (:func:`haa_sym.symbolic.chain.exact_vc_condition`)."""
+    from haa_sym.symbolic import chain, torque_tf as tt
     top = params.plant.topology
     rotor_side = top.encoder == "rotor" or top.sensor == CURRENT
     if top.sensor == CURRENT:
@@ -264,6 +278,8 @@ def row_exact_vc_generalised(params: Params) -> Row:
 def row_plant_values(params: Params) -> Row:
     """The generated (or compiled) plant function == the actuator's sympy model
     (``symbolic_model(actuator)``: the chain's state space, or a model written in code) at the values."""
+    import sympy as sp
+    from haa_sym.symbolic.chain import symbolic_model
     top = params.plant.topology
     cp = continuous_plant(params.plant)
     m = symbolic_model(top)

@@ -18,7 +18,6 @@ import datetime
 from dataclasses import dataclass, field
 
 import numpy as np
-import scipy.signal
 
 from haa_sym.analysis.sweep import blas_limits
 from haa_sym.errors import ParameterError
@@ -300,6 +299,8 @@ def _levenberg_marquardt(evaluate, theta, opt: FitOptions, keys, tolerance: floa
 def _bode(exp, keys, v0, v1, inputs, outputs, u, y, loop_options):
     """H1 = P_uy / P_uu (Welch) and coherence from the first input to every output, and the
     model's response before and after at the same frequencies (rad/s)."""
+    # scipy.signal takes about 0.7 s to import (docs/startup.md): only a fit that draws its figure pays it
+    import scipy.signal
     Ts = exp.log.Ts
     nper = int(min(len(u) // 8, 4096))
     if nper < 16:
