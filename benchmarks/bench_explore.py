@@ -3,10 +3,11 @@
 (1) In this process, one BLAS thread, the HyQ joint on the page's default 200 x 100 grid, for ten
     beta values (each a new loop, nothing memoised): ``compute_view`` (what the page computes for
     a change: the map decided from the exact curves, and the drawn curves reusing its stability
-    boundary) against the same view computed the way the page did before, the map
-    (``region_map``) and the three boundaries (``boundaries``, passivity refined to
-    ``REFINE_XTOL``) each on its own; the maps are compared on every point. Best and median of
-    the ten.
+    boundary, the passivity curve located to ``CURVE_XTOL``) against the same view computed the
+    way the page called the library before, the map (``region_map``) and the three boundaries
+    (``boundaries``, passivity refined to ``REFINE_XTOL``) each on its own, with today's library
+    in both (its own speed-ups count on both sides); the maps are compared on every point. Best
+    and median of the ten.
 (2) The page in headless Chromium (``tests/explore_driver.py``, as the browser test drives it):
     ``haa-sym explore`` on a free port, ``ROUNDS`` rounds of the test's control changes (ten beta
     values, then a configuration, alpha, a refused filter, f_c, Ts, the delay) and its five
