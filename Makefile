@@ -39,6 +39,7 @@ bench: $(STAMP)
 	HAA_SYM_BENCH_DIR=$(BENCH_DIR) $(PY) benchmarks/bench_schedule.py
 	HAA_SYM_BENCH_DIR=$(BENCH_DIR) $(PY) benchmarks/bench_simulate.py
 	HAA_SYM_BENCH_DIR=$(BENCH_DIR) $(PY) benchmarks/bench_identify.py
+	HAA_SYM_BENCH_DIR=$(BENCH_DIR) $(PY) benchmarks/bench_explore.py
 
 ## Rewrite the README's benchmark block (between <!-- bench:start --> and <!-- bench:end -->)
 ## from the JSON of `make bench`; `make bench-readme BENCH_ARGS=--check` only compares.

@@ -32,6 +32,7 @@ from pathlib import Path
 import numpy as np
 
 from haa_sym.analysis.boundaries.classify import classify_regions
+from haa_sym.analysis.boundaries.curves import StabilityBoundary
 from haa_sym.analysis.boundaries.stability import stability_boundary
 from haa_sym.analysis.decide import decide_points
 from haa_sym.analysis.margins import PM_THRESHOLD_DEG
@@ -87,10 +88,23 @@ def check_map_budget(loop, n_P: int, n_D: int) -> None:
                  f"{n_omega} frequencies")
 
 
+def _check_boundary(loop, b, beta: float, alpha: float) -> None:
+    """Refuse a given stability boundary that is not of this loop's gains (beta, alpha, Ts) or order."""
+    Ts = loop.params.controller.Ts
+    ABC = getattr(b, "ABC", None)
+    if not isinstance(b, StabilityBoundary) or ABC is None:
+        raise ParameterError(f"boundary = {type(b).__name__}; allowed: a StabilityBoundary of stability_boundary()")
+    if (b.beta, b.alpha, b.Ts) != (beta, alpha, Ts) or ABC.shape[1] != loop.basis.shape[0]:
+        raise ParameterError(f"boundary of beta = {b.beta:g}, alpha = {b.alpha:g}, Ts = {b.Ts:g} s (order "
+                             f"{ABC.shape[1] - 1}); allowed: the map's beta = {beta:g}, alpha = {alpha:g}, "
+                             f"Ts = {Ts:g} s (order {loop.basis.shape[0] - 1})")
+
+
 @loop_first
 def region_map(loop, P_gain, D_gain, *, beta: float | None = None, alpha: float | None = None,
                radius: bool = False, passivity: bool = True, method: str = "curves",
-               progress: bool | None = None, blas_threads: int | None = BLAS_THREADS) -> RegionMap:
+               progress: bool | None = None, blas_threads: int | None = BLAS_THREADS,
+               boundary: StabilityBoundary | None = None) -> RegionMap:
     """Stability, phase margin and passivity of ``loop`` on the grid ``P_gain`` x ``D_gain``.
 
     Parameters
@@ -122,6 +136,12 @@ def region_map(loop, P_gain, D_gain, *, beta: float | None = None, alpha: float 
         Progress bar on stderr; None follows :func:`haa_sym.io.progress.set_progress`.
     blas_threads : int or None
         BLAS threads during the sweep (threadpoolctl); None leaves BLAS alone.
+    boundary : StabilityBoundary, optional
+        The stability boundary of this loop at the same beta and alpha
+        (:func:`haa_sym.analysis.boundaries.stability.stability_boundary`, any box: the rows'
+        crossings are located from its polynomials, not its drawn curves), for a caller that
+        also draws it (the explorer): "curves" then does not compute it again. Default: computed
+        here.
 
     Returns
     -------
@@ -142,10 +162,13 @@ def region_map(loop, P_gain, D_gain, *, beta: float | None = None, alpha: float 
         raise ParameterError(f"method = {method!r}; allowed: {list(MAP_METHODS)}")
     _, _, beta, alpha = loop.gain_points(0.0, 0.0, beta, alpha)
     check_map_budget(loop, P.size, D.size)
+    if boundary is not None:
+        _check_boundary(loop, boundary, beta, alpha)
     shape = (P.size, D.size)
     if method == "curves" and loop.options.conventions.pm_loop == "impedance":
         with progress_bar(P.size * D.size, "region map (from the curves)", "pt", progress) as bar:
-            b = stability_boundary(loop, beta, alpha, P_range=(float(P.min()), float(P.max())),
+            b = boundary if boundary is not None else \
+                stability_boundary(loop, beta, alpha, P_range=(float(P.min()), float(P.max())),
                                    D_range=(float(D.min()), float(D.max())))
             r = classify_regions(loop, b, P, D, pm_deg=PM_THRESHOLD_DEG, passivity=passivity)
             rho = np.full(shape, np.nan)

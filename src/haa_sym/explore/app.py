@@ -293,7 +293,9 @@ class _Page:
                 self.map_log = log
                 self.map_pane.object = self.figs[log]
             if _uniform(v.P_gain, log) and _uniform(v.D_gain, False):
-                self.image_src.data = {"image": [v.category.T.astype(np.float32)], "x": [xl[0]], "y": [yb[0]],
+                # the categories as bytes: a quarter of float32's payload, mapped to colours alike
+                self.image_src.data = {"image": [np.ascontiguousarray(v.category.T, dtype=np.uint8)],
+                                       "x": [xl[0]], "y": [yb[0]],
                                        "dw": [xr[-1] - xl[0]], "dh": [yt[-1] - yb[0]]}
                 if len(self.map_src.data["cat"]):
                     self.map_src.data = {"left": [], "right": [], "bottom": [], "top": [], "cat": []}

@@ -43,7 +43,7 @@ from haa_sym.loop.exact import bilinear, polymul, polysub, to_float, transfer_po
 from haa_sym.errors import ParameterError
 from haa_sym.io.progress import message
 from haa_sym.model.params import Params, gain_array, gain_points
-from haa_sym.model.elements import backward_difference, common_denominator, delay, pi_integral
+from haa_sym.model.elements import backward_difference, common_denominator, delay, frequency_responses, pi_integral
 from haa_sym.model import filters
 from haa_sym.model.filters import controller_filter
 from haa_sym.compiled.layout import (COEF_FORMS, COEF_OUTPUTS, COEF_TERMS, FREQ_COLUMN, N_BASIS, TORQUE_GAINS,
@@ -427,10 +427,12 @@ class ClosedLoop:
         G = self.plant.frequency_response(omega, outputs=(self.torque_output, "theta_encoder", port),
                                           inputs=("V_m", "T_dist"))
         values = dict(zip(("G_TV", "G_Td", "G_thV", "G_thd", "G_pV", "G_pd"), G.reshape(6, -1)))
-        for k in ("F_d", "F_vc", "I_z", "z_delay"):
-            values[k] = el[k].frequency_response(omega, ctrl.Ts)
+        # the elements in one stacked evaluation (the same values as one by one): at the few
+        # frequencies of a refinement step their per-call cost dominated this function
+        keys = ("F_d", "F_vc", "I_z", "z_delay") + (("F_port",) if averaged else ())
+        values.update(zip(keys, frequency_responses([el[k] for k in keys], omega, ctrl.Ts)))
         if averaged:                      # the port reads the controller's velocity estimate
-            F = el["F_port"].frequency_response(omega, ctrl.Ts)
+            F = values.pop("F_port")
             values["G_pV"], values["G_pd"] = F * values["G_thV"], F * values["G_thd"]
         cols = np.empty((2 * len(FREQ_COLUMN), omega.size))
         for i, k in enumerate(FREQ_COLUMN):

@@ -32,7 +32,7 @@ from typing import Sequence
 
 import numpy as np
 
-__all__ = ["Element", "backward_difference", "tustin", "pi_integral", "delay", "common_denominator"]
+__all__ = ["Element", "frequency_responses", "backward_difference", "tustin", "pi_integral", "delay", "common_denominator"]
 
 
 def _trim(p: Sequence[Fraction]) -> tuple[Fraction, ...]:
@@ -126,6 +126,43 @@ def _evaluate(p_desc: Sequence[Fraction], x: np.ndarray) -> np.ndarray:
     for c in np.abs(cw)[::-1]:
         bw = bw * aw + c
     return np.where(bw <= bz, vw, vz)
+
+
+def frequency_responses(elements: Sequence["Element"], omega, Ts: float) -> list[np.ndarray]:
+    """Every element's :meth:`Element.frequency_response` at ``omega`` (rad/s, 1-D), at once.
+
+    The same arithmetic as one element at a time, row by row (equal to the last bit): the
+    numerators and denominators are stacked, each padded with leading zeros in z (trailing in w),
+    which Horner's steps carry as exact zeros, and both bases are evaluated in one pass. A loop's
+    few elements then cost one pass of array operations instead of one per polynomial: the
+    per-call cost that dominates the evaluations at a handful of frequencies (a root refinement).
+    """
+    x = np.asarray(omega, dtype=float).ravel() * Ts
+    polys = [p for e in elements for p in (e.numerator, e.denominator)]
+    if not polys:
+        return []
+    bases = [_bases(tuple(p)) for p in polys]
+    m = max(cz.size for cz, _ in bases)
+    CZ, CW = np.zeros((len(polys), m)), np.zeros((len(polys), m))
+    for i, (cz, cw) in enumerate(bases):
+        CZ[i, m - cz.size:] = cz
+        CW[i, :cw.size] = cw
+    z = np.exp(1j * x)
+    w = -2.0 * np.sin(x / 2) ** 2 + 1j * np.sin(x)      # z - 1 without cancellation
+    vz = np.zeros((len(polys), x.size), complex)
+    for c in CZ.T:
+        vz = vz * z + c[:, None]
+    vw = np.zeros((len(polys), x.size), complex)
+    for c in CW.T[::-1]:
+        vw = vw * w + c[:, None]
+    # each row's bound summed over its own coefficients, as _evaluate sums them
+    bz = np.array([np.abs(cz).sum() for cz, _ in bases])[:, None]
+    aw = np.abs(w)
+    bw = np.zeros((len(polys), x.size))
+    for c in np.abs(CW).T[::-1]:
+        bw = bw * aw + c[:, None]
+    v = np.where(bw <= bz, vw, vz)
+    return [v[2 * i] / v[2 * i + 1] for i in range(len(elements))]
 
 
 @dataclass(frozen=True)

@@ -149,13 +149,13 @@ def _meeting_points(loop, x_in, x_out, on_P_line, t, branch, beta, alpha, steps:
     return x_in
 
 
-def _refine(loop, on_P_line, t, branch, sign, lw, beta, alpha):
+def _refine(loop, on_P_line, t, branch, sign, lw, beta, alpha, xtol: float = REFINE_XTOL):
     """The extremum of sign * r(omega) (r: root ``branch`` 0 = lower, 1 = upper, on the line
     P_gain = t where ``on_P_line``, else D_gain = t) in log omega inside the bracketing triples
     ``lw`` (n, 3; the middle point the highest), all candidates at once, by Brent's method
     (parabolic steps while they shrink the bracket, golden sections otherwise: a root next to
     where the two roots meet behaves like a square root, which defeats parabolas alone).
-    Returns (root, omega) at the extremum, log omega located to ``REFINE_XTOL``."""
+    Returns (root, omega) at the extremum, log omega located to ``xtol``."""
     def f(k, x):                                      # Brent minimises
         return -sign[k] * _root_at(loop, x, on_P_line[k], t[k], branch[k], beta, alpha)
     n = lw.shape[0]
@@ -173,7 +173,7 @@ def _refine(loop, on_P_line, t, branch, sign, lw, beta, alpha):
         if not k.size:
             break
         xm = 0.5 * (a[k] + b[k])
-        tol1 = REFINE_XTOL * (1 + np.abs(x[k]))
+        tol1 = xtol * (1 + np.abs(x[k]))
         tol2 = 2 * tol1
         done = np.abs(x[k] - xm) <= tol2 - 0.5 * (b[k] - a[k])
         live[k[done]] = False
@@ -258,7 +258,8 @@ def _line_points(Q, omega, along, t):
 
 @loop_first
 def passivity_boundary(loop: ClosedLoop, beta: float | None = None, alpha: float | None = None, *,
-                       P_range=(0.0, 2e4), D_range=(0.0, 50.0), n_lines: int = 101) -> list:
+                       P_range=(0.0, 2e4), D_range=(0.0, 50.0), n_lines: int = 101,
+                       xtol: float = REFINE_XTOL) -> list:
     """The passivity boundary in the box, as polylines.
 
     The boundary is located on ``n_lines`` lines D_gain = const (evenly spaced) and on
@@ -275,6 +276,11 @@ def passivity_boundary(loop: ClosedLoop, beta: float | None = None, alpha: float
         The box of impedance gains, Nm/rad and Nms/rad.
     n_lines : int
         Lines per family.
+    xtol : float
+        How closely each tangency is located in log omega (default ``REFINE_XTOL``, 1e-10: the
+        root exact to rounding). A point is a root of its frequency's quadratic whatever
+        ``xtol``; a looser one (the explorer's drawing: 1e-6) moves it along the boundary by
+        about xtol^2 relative, and it must still pass the same on-boundary check.
 
     Returns
     -------
@@ -288,6 +294,8 @@ def passivity_boundary(loop: ClosedLoop, beta: float | None = None, alpha: float
     alpha = ctrl.alpha if alpha is None else float(alpha)
     if isinstance(n_lines, bool) or not isinstance(n_lines, int) or n_lines < 2:
         raise ParameterError(f"n_lines = {n_lines!r}; allowed: an integer >= 2")
+    if not (isinstance(xtol, (int, float)) and not isinstance(xtol, bool) and 0 < xtol <= 1e-3):
+        raise ParameterError(f"xtol = {xtol!r}; allowed: a number in (0, 1e-3] (log omega)")
     omega = loop.options.numerics.omega(ctrl.Ts)
     Q = _conics(loop, omega, beta, alpha, cached=True)
     box = {"P_gain": tuple(P_range), "D_gain": tuple(D_range)}
@@ -319,7 +327,7 @@ def passivity_boundary(loop: ClosedLoop, beta: float | None = None, alpha: float
     k = np.flatnonzero(col >= 0)
     if k.size:
         tri[k, col[k]] = _meeting_points(loop, tri[k, 1], tri[k, col[k]], fam[k], t[k], branch[k], beta, alpha)
-    x, wx = _refine(loop, fam, t, branch, sign, tri, beta, alpha)
+    x, wx = _refine(loop, fam, t, branch, sign, tri, beta, alpha, xtol)
     for along, f in found.items():
         m = fam == (along == "P_gain")
         n = int(m.sum())

@@ -293,6 +293,34 @@ def crossings(boundary: StabilityBoundary, D_gain) -> list:
     return [np.unique(np.asarray(c, float)) for c in cuts]
 
 
+def _brackets(Pn: np.ndarray, D: np.ndarray, det: np.ndarray, d: np.ndarray, P_range=None):
+    """The pairs (row j, nu interval i) where D(nu) - d[j] changes sign or vanishes between samples
+    i and i + 1 (both finite, no pole of D(nu) between them, and with ``P_range`` a P span
+    meeting it), ordered by row then interval: the same pairs as testing every row against every
+    interval, found instead from the rows sorted by d (d[j] in [min, max] of D's two samples),
+    so that the cost grows with the brackets rather than with n_D x n_nu."""
+    with np.errstate(invalid="ignore"):
+        ok = np.isfinite(D[:-1]) & np.isfinite(D[1:])
+        # where the 2 x 2 determinant changes sign, D(nu) passes a pole, not the value d
+        ok &= np.sign(det[:-1]) * np.sign(det[1:]) > 0
+        if P_range is not None:
+            # a crossing matters only inside the grid's P range, where P(nu) is continuous
+            # between the bracket's ends: skip brackets whose P span misses the range
+            lo_P, hi_P = np.fmin(Pn[:-1], Pn[1:]), np.fmax(Pn[:-1], Pn[1:])
+            ok &= np.isfinite(lo_P) & (hi_P >= P_range[0]) & (lo_P <= P_range[1])
+    i = np.flatnonzero(ok)
+    order = np.argsort(d, kind="stable")
+    ds = d[order]
+    first = np.searchsorted(ds, np.fmin(D[i], D[i + 1]), "left")
+    stop = np.searchsorted(ds, np.fmax(D[i], D[i + 1]), "right")
+    n = np.maximum(stop - first, 0)
+    ii = np.repeat(i, n)
+    k = np.arange(n.sum()) + np.repeat(first - (np.cumsum(n) - n), n)
+    rows = order[k]
+    s = np.lexsort((ii, rows))
+    return rows[s], ii[s]
+
+
 def _branch_crossings(branch, nu: np.ndarray, d: np.ndarray, P_range=None) -> list:
     """For each d, the P of ``branch(nu) -> (P, D)`` where D(nu) = d: brackets on the nu grid,
     then the Illinois variant of regula falsi in log nu (all brackets at once; superlinear, the
@@ -300,19 +328,9 @@ def _branch_crossings(branch, nu: np.ndarray, d: np.ndarray, P_range=None) -> li
     poles of D(nu) are dropped."""
     cuts = [[] for _ in d]
     Pn, D, det = branch(nu, True)
-    f = D[None, :] - d[:, None]                         # (n_D, n_nu)
-    with np.errstate(invalid="ignore"):
-        ok = np.isfinite(f[:, :-1]) & np.isfinite(f[:, 1:]) & (np.sign(f[:, :-1]) * np.sign(f[:, 1:]) <= 0)
-        # where the 2 x 2 determinant changes sign, D(nu) passes a pole, not the value d
-        ok &= (np.sign(det[:-1]) * np.sign(det[1:]) > 0)[None, :]
-        if P_range is not None:
-            # a crossing matters only inside the grid's P range, where P(nu) is continuous
-            # between the bracket's ends: skip brackets whose P span misses the range
-            lo_P, hi_P = np.fmin(Pn[:-1], Pn[1:]), np.fmax(Pn[:-1], Pn[1:])
-            ok &= (np.isfinite(lo_P) & (hi_P >= P_range[0]) & (lo_P <= P_range[1]))[None, :]
-    rows, i = np.nonzero(ok)
+    rows, i = _brackets(Pn, D, det, d, P_range)
     lo, hi = np.log(nu[i]), np.log(nu[i + 1])
-    f_lo, f_hi = f[rows, i], f[rows, i + 1]
+    f_lo, f_hi = D[i] - d[rows], D[i + 1] - d[rows]
     side = np.zeros(rows.size, int)                     # which end moved last (Illinois)
     x = 0.5 * (lo + hi)
     live = np.ones(rows.size, bool)
