@@ -92,3 +92,10 @@ def test_a_dask_cluster_gives_the_same_classes():
     assert np.array_equal(local.nonlinear_class, remote.nonlinear_class)
     assert np.array_equal(local.cycle_amplitude, remote.cycle_amplitude, equal_nan=True)
     assert remote.meta["scheduler"] == "dask.distributed"
+
+
+def test_theil_sen_slope_is_scipys():
+    from scipy.stats import theilslopes
+    from haa_sym.analysis.oscillation import theil_sen_slope
+    y = np.random.default_rng(1).standard_normal(37).cumsum()
+    assert theil_sen_slope(y) == pytest.approx(theilslopes(y, np.arange(y.size))[0], rel=1e-14, abs=1e-15)

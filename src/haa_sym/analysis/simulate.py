@@ -340,9 +340,11 @@ class _Setup:
         return out
 
 
-def _run(loop, setup: _Setup, P_gain, D_gain):
-    """(y (n, len(SIM_COLUMNS)), integrator info) of one gain point."""
-    Ac, Bc, Cc, Dc = (m[0] for m in controller_batch(loop, P_gain, D_gain))
+def _run(loop, setup: _Setup, P_gain, D_gain, controller=None):
+    """(y (n, len(SIM_COLUMNS)), integrator info) of one gain point; ``controller`` its
+    (Ac, Bc, Cc, Dc) if already built (a batch builds them all in one call)."""
+    Ac, Bc, Cc, Dc = controller if controller is not None else \
+        (m[0] for m in controller_batch(loop, P_gain, D_gain))
     nc = Ac.shape[0]
     cx, cc = _capacity(setup.nx, nc)
     names = L.sim_function_names(cx, cc)
@@ -482,8 +484,11 @@ def _batch(loop, P, D, limits, experiment, amplitude, duration, seed, rtol):
     status, kinds = np.empty(k, dtype=object), np.empty(k, dtype=object)
     tail_sat = np.empty(k)
     tail = max(1, setup.n // 10)
+    # every point's controller in one call: its exact element arithmetic (Fractions) per call
+    # cost more than a 1 s run of the C loop
+    ctrls = controller_batch(loop, P, D)
     for i in range(k):
-        y, _info = _run(loop, setup, P[i], D[i])
+        y, _info = _run(loop, setup, P[i], D[i], tuple(m[i] for m in ctrls))
         r = _result(loop, setup, P[i], D[i], y, _info)
         sat[i], amp[i], freq[i] = r.saturation_time, r.cycle_amplitude, r.cycle_frequency
         fin[i] = r.theta[-tail:].mean()
