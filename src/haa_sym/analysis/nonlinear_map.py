@@ -24,9 +24,8 @@ decides what only it can tell (a limit cycle and its amplitude, saturation on ev
 7. ``undecided``: the linear loop is unstable but the run shows neither a cycle, saturation nor
    growth (a limit, e.g. friction at stick, holds it, or the run was too short to see growth).
 
-Runs are independent tasks (``points_per_task`` points each) on dask
-(:class:`haa_sym.io.tasks.TaskRunner`): in-process on two threads (the C loop releases the GIL),
-or on a dask.distributed cluster whose workers build the loop from the parameters and options
+Runs are independent tasks (``points_per_task`` points each) (:class:`haa_sym.io.tasks.TaskRunner`):
+in-process one after the other (:data:`IN_PROCESS_THREADS`), or on a dask.distributed cluster whose workers build the loop from the parameters and options
 themselves. The classes are the same either way.
 
 Example
@@ -64,6 +63,10 @@ SATURATING_FRACTION = 0.9
 #: Gain points per task (a task's overhead on dask is about a millisecond; a point at 1 s and
 #: 1 ms about a millisecond too).
 POINTS_PER_TASK = 250
+#: Threads of an in-process map: one. Most of a point's time is Python holding the GIL (the
+#: controller, the trace classifier; the C loop is about a quarter), and two dask threads were
+#: slower than one in benchmarks/bench_nonlinear_map.py (7.5 s vs 4.3 s on 100 x 50, load 4.5).
+IN_PROCESS_THREADS = 1
 
 
 @dataclass(frozen=True)
@@ -176,7 +179,7 @@ def nonlinear_map(loop, P_gain, D_gain, *, limits: Limits | None = None, experim
     saturating_fraction : float
         Rule 4's threshold, in (0, 1]; default :data:`SATURATING_FRACTION`.
     scheduler : None, str or distributed.Client
-        None: in-process (dask threads); an address or a Client: that dask.distributed cluster.
+        None: in-process; an address or a Client: that dask.distributed cluster.
     progress : bool or None
         The progress bar (:func:`haa_sym.io.progress.progress`).
     points_per_task : int
@@ -207,7 +210,7 @@ def nonlinear_map(loop, P_gain, D_gain, *, limits: Limits | None = None, experim
     PP, DD = (a.ravel() for a in np.meshgrid(P, D, indexing="ij"))
     stable = np.asarray(loop.stability(PP, DD).stable, bool)
     chunks = [slice(a, min(a + points_per_task, PP.size)) for a in range(0, PP.size, points_per_task)]
-    runner = TaskRunner(scheduler, progress)
+    runner = TaskRunner(scheduler, progress, threads=IN_PROCESS_THREADS)
     try:
         res = runner.run(_task, [(loop.params, loop.options, loop.backend, limits, PP[s], DD[s], experiment,
                                   setup.amplitude, setup.duration, seed, rtol) for s in chunks],
@@ -222,7 +225,7 @@ def nonlinear_map(loop, P_gain, D_gain, *, limits: Limits | None = None, experim
         analysis="nonlinear_map", classes=list(CLASSES), experiment=experiment, amplitude=setup.amplitude,
         duration=setup.duration, seed=seed, rtol=rtol, limits=limits.active, limits_act_every_step=always,
         saturating_fraction=saturating_fraction, samples_per_run=setup.n,
-        scheduler="in-process (dask threads)" if scheduler is None else "dask.distributed",
+        scheduler="in-process" if scheduler is None else "dask.distributed",
         rules="docs/simulate.md, Nonlinear maps", P_gain_unit="Nm/rad", D_gain_unit="Nms/rad",
         cycle_amplitude_unit="Nm", cycle_frequency_unit="Hz")
     m = NonlinearMap(P, D, cls.reshape(shape), stable.reshape(shape), amp.reshape(shape), freq.reshape(shape),

@@ -72,11 +72,15 @@ class TaskRunner:
         The progress bar's setting (:func:`haa_sym.io.progress.progress`).
     connect_timeout : float
         Seconds for the connection and dask's handshake.
+    threads : int
+        Threads of the in-process run (default :data:`THREADS`); 1 runs the tasks one after
+        the other in this thread (for tasks whose Python part holds the GIL most of the time).
     """
 
-    def __init__(self, scheduler, progress, connect_timeout: float = DEFAULT_CONNECT_TIMEOUT):
+    def __init__(self, scheduler, progress, connect_timeout: float = DEFAULT_CONNECT_TIMEOUT,
+                 threads: int = THREADS):
         self.client, self.own = None, False
-        self.progress = progress
+        self.progress, self.threads = progress, threads
         if scheduler is None:
             return
         try:
@@ -104,6 +108,12 @@ class TaskRunner:
                 for _ in as_completed(futures):
                     bar.update(1)
                 return self.client.gather(futures)
+            if self.threads == 1:
+                out = []
+                for a in args_list:
+                    out.append(fn(*a))
+                    bar.update(1)
+                return out
             import dask
             from dask.callbacks import Callback
 
@@ -113,4 +123,4 @@ class TaskRunner:
                         bar.update(1)
             tasks = [dask.delayed(fn, pure=False)(*a, dask_key_name=f"task-{k}") for k, a in enumerate(args_list)]
             with _Bar():
-                return list(dask.compute(*tasks, scheduler="threads", num_workers=THREADS))
+                return list(dask.compute(*tasks, scheduler="threads", num_workers=self.threads))
