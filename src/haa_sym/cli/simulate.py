@@ -46,7 +46,7 @@ def _cmd_simulate(args) -> int:
     print(f"time in saturation: {s.saturation_time:.6g} s ({100 * s.saturation_time / max(args.duration, 1e-300):.3g} %); "
           f"{cycle} (torque signal, last half of the run)" + _wrote(out))
     for line, sim in predicted:
-        print(f"{line}; {sim}")
+        print(f"{line}; {sim}" if sim else line)
     return 0
 
 
