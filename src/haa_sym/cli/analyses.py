@@ -106,6 +106,9 @@ def _nonlinear_regions(args, loop, out, plot, P, D) -> int:
     print(f"{m.stable.size} points, linear ({m.meta['method']}): {m.stable.sum()} stable; simulated with "
           f"{lim} ({nl.meta['experiment']}, A = {nl.meta['amplitude']:g}, {nl.meta['duration']:g} s each): {counts}"
           + _wrote(out))
+    if nl.counts()["growing"]:
+        message(f"growing: still growing when the {nl.meta['duration']:g} s runs ended; a longer --duration may "
+                "show limit cycles there (docs/simulate.md, Nonlinear maps)")
     return 0
 
 
