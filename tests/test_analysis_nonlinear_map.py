@@ -20,7 +20,9 @@ def _loop(beta=3.0):
 def test_limits_that_never_act_give_the_linear_decisions():
     loop = _loop()
     P, D = np.geomspace(300.0, 20000.0, 7), np.array([1.0, 10.0, 40.0])
-    m = nonlinear_map(loop, P, D, limits=Limits(V_max=1e9), duration=0.3, progress=False)
+    # one 0.3 s run per point (max_duration): longer runs of the unstable points grow until even
+    # 1e9 V saturates (then they are limit cycles of the supply, rightly)
+    m = nonlinear_map(loop, P, D, limits=Limits(V_max=1e9), duration=0.3, max_duration=0.3, progress=False)
     eig_stable = np.array([[np.abs(np.linalg.eigvals(closed_loop_matrices(loop, p, d)[0])).max() < 1
                             for d in D] for p in P])
     assert eig_stable.any() and (~eig_stable).any()
@@ -99,3 +101,16 @@ def test_theil_sen_slope_is_scipys():
     from haa_sym.analysis.oscillation import theil_sen_slope
     y = np.random.default_rng(1).standard_normal(37).cumsum()
     assert theil_sen_slope(y) == pytest.approx(theilslopes(y, np.arange(y.size))[0], rel=1e-14, abs=1e-15)
+
+
+def test_a_point_still_growing_is_run_longer_until_its_cycle_shows():
+    # the 24 V cycle builds up over about 0.6 s: a 0.4 s run sees it growing
+    loop = _loop()
+    short = nonlinear_map(loop, [20000.0], [10.0], limits=Limits(V_max=24.0), duration=0.4, max_duration=0.4,
+                          progress=False)
+    assert short.class_names[0, 0] == "growing" and short.meta["longer_rounds"] == 0
+    longer = nonlinear_map(loop, [20000.0], [10.0], limits=Limits(V_max=24.0), duration=0.4, progress=False)
+    assert longer.class_names[0, 0] == "limit cycle"
+    assert longer.run_duration[0, 0] == pytest.approx(0.4 * 3 ** longer.meta["longer_rounds"])
+    with pytest.raises(ParameterError, match="^max_duration"):
+        nonlinear_map(loop, [100.0], [1.0], limits=Limits(V_max=24.0), duration=1.0, max_duration=0.5)

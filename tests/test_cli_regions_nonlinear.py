@@ -45,6 +45,8 @@ def test_regions_nonlinear_writes_classes_next_to_the_linear_map(tmp_path, capsy
     (["--nonlinear"], "limits: the parameter file has no [limits] section"),
     (["--duration", "2"], "--duration applies to the nonlinear map; allowed: with --nonlinear"),
     (["--scheduler", "tcp://127.0.0.1:1"], "--scheduler applies to the nonlinear map"),
+    (["--max-duration", "5"], "--max-duration applies to the nonlinear map"),
+    (["--nonlinear", "--duration", "2", "--max-duration", "1"], "limits: the parameter file has no [limits]"),
     (["--nonlinear", "--robust"], "--nonlinear with --robust; allowed: one of them"),
 ])
 def test_regions_nonlinear_bad_input_exit_2_writes_nothing(tmp_path, capsys, argv, message):

@@ -24,6 +24,9 @@ decides what only it can tell (a limit cycle and its amplitude, saturation on ev
 7. ``undecided``: the linear loop is unstable but the run shows neither a cycle, saturation nor
    growth (a limit, e.g. friction at stick, holds it, or the run was too short to see growth).
 
+Points classed ``growing`` (not overflowed) or ``undecided`` are run again, ``EXTEND_FACTOR``
+times longer each time, up to ``max_duration``: their class is that of their longest run.
+
 Runs are independent tasks (``points_per_task`` points each) (:class:`haa_sym.io.tasks.TaskRunner`):
 in-process one after the other (:data:`IN_PROCESS_THREADS`), or on a dask.distributed cluster whose workers build the loop from the parameters and options
 themselves. The classes are the same either way.
@@ -50,14 +53,19 @@ from haa_sym.loop import ClosedLoop, loop_first
 from haa_sym.model.limits import Limits
 from haa_sym.model.params import gain_array
 
-__all__ = ["NonlinearMap", "nonlinear_map", "CLASSES", "DEFAULT_DURATION", "SATURATING_FRACTION",
-           "POINTS_PER_TASK"]
+__all__ = ["NonlinearMap", "nonlinear_map", "classify", "CLASSES", "DEFAULT_DURATION", "DEFAULT_MAX_DURATION",
+           "EXTEND_FACTOR", "SATURATING_FRACTION", "POINTS_PER_TASK"]
 
 #: The classes, by their code in ``NonlinearMap.nonlinear_class``.
 CLASSES = ("converging", "limit cycle", "saturating", "growing", "undecided")
 #: Seconds simulated per point: the HyQ limit cycle (beta 3, P 20000, D 10, 24 V) settles within
 #: 0.6 s; the linear regime's decision does not depend on the run's length.
 DEFAULT_DURATION = 1.0
+#: The longest run (s) of a point still growing or undecided: such points are run again,
+#: EXTEND_FACTOR times longer each time, until they are something else or this length is reached
+#: (HyQ at beta 3 with 24 V: the growing points fall from 120 at 1 s to 27 at 10 s).
+DEFAULT_MAX_DURATION = 10.0
+EXTEND_FACTOR = 3.0
 #: Fraction of the last half's samples in saturation from which a point is "saturating".
 SATURATING_FRACTION = 0.9
 #: Gain points per task (a task's overhead on dask is about a millisecond; a point at 1 s and
@@ -85,6 +93,8 @@ class NonlinearMap:
         The torque signal's sustained oscillation (Nm, half peak-to-peak; Hz); NaN where none.
     saturation_fraction : ndarray, (n_P, n_D)
         Fraction of the last half's samples in saturation.
+    run_duration : ndarray, (n_P, n_D)
+        Seconds of the run that decided the point (longer where it was run again).
     meta : dict
         ``loop.provenance()`` with the experiment, the limits, the rules' options and the counts.
     """
@@ -96,6 +106,7 @@ class NonlinearMap:
     cycle_amplitude: np.ndarray
     cycle_frequency: np.ndarray
     saturation_fraction: np.ndarray
+    run_duration: np.ndarray
     meta: dict = field(repr=False)
 
     @property
@@ -109,7 +120,8 @@ class NonlinearMap:
 
     def arrays(self) -> dict[str, np.ndarray]:
         return {k: getattr(self, k) for k in ("P_gain", "D_gain", "nonlinear_class", "linear_stable",
-                                              "cycle_amplitude", "cycle_frequency", "saturation_fraction")}
+                                              "cycle_amplitude", "cycle_frequency", "saturation_fraction",
+                                              "run_duration")}
 
     def save(self, path, tx=None, field: str | None = None):
         """Write an ``.npz`` (arrays + ``meta``; :func:`haa_sym.io.formats.save_npz`)."""
@@ -157,7 +169,8 @@ def classify(kind, tail_saturation, linear_stable, always_acting: bool,
 
 @loop_first
 def nonlinear_map(loop, P_gain, D_gain, *, limits: Limits | None = None, experiment: str = "disturbance-step",
-                  amplitude: float | None = None, duration: float = DEFAULT_DURATION, seed: int = 0,
+                  amplitude: float | None = None, duration: float = DEFAULT_DURATION,
+                  max_duration: float | None = None, seed: int = 0,
                   rtol: float = DEFAULT_RTOL, saturating_fraction: float = SATURATING_FRACTION,
                   scheduler=None, progress: bool | None = None,
                   points_per_task: int = POINTS_PER_TASK) -> NonlinearMap:
@@ -176,6 +189,10 @@ def nonlinear_map(loop, P_gain, D_gain, *, limits: Limits | None = None, experim
     experiment, amplitude, duration, seed, rtol
         Of every run (:func:`haa_sym.analysis.simulate.simulate`); ``duration`` in s, default
         :data:`DEFAULT_DURATION`.
+    max_duration : float, optional
+        Points classed growing (not overflowed) or undecided are run again, :data:`EXTEND_FACTOR`
+        times longer each time, up to this many seconds; default ``max(DEFAULT_MAX_DURATION,
+        duration)``; ``max_duration = duration`` runs every point once.
     saturating_fraction : float
         Rule 4's threshold, in (0, 1]; default :data:`SATURATING_FRACTION`.
     scheduler : None, str or distributed.Client
@@ -207,29 +224,55 @@ def nonlinear_map(loop, P_gain, D_gain, *, limits: Limits | None = None, experim
     setup = _Setup(loop, limits, experiment, amplitude, duration, seed, None)
     if isinstance(rtol, bool) or not isinstance(rtol, (int, float)) or not 0 < rtol < 0.1:
         raise ParameterError(f"rtol = {rtol!r}; allowed: a number in (0, 0.1)")
+    if max_duration is None:
+        max_duration = max(DEFAULT_MAX_DURATION, setup.duration)
+    if isinstance(max_duration, bool) or not isinstance(max_duration, (int, float)) \
+            or not setup.duration <= max_duration < float("inf"):
+        raise ParameterError(f"max_duration = {max_duration!r} s; allowed: a finite number >= duration "
+                             f"({setup.duration:g} s)")
+    _Setup(loop, limits, experiment, amplitude, max_duration, seed, None)     # its sample count checked
     PP, DD = (a.ravel() for a in np.meshgrid(P, D, indexing="ij"))
     stable = np.asarray(loop.stability(PP, DD).stable, bool)
-    chunks = [slice(a, min(a + points_per_task, PP.size)) for a in range(0, PP.size, points_per_task)]
+    always = _always_acting(limits)
     runner = TaskRunner(scheduler, progress, threads=IN_PROCESS_THREADS)
+
+    def simulate_points(idx, seconds):
+        chunks = [idx[a:a + points_per_task] for a in range(0, idx.size, points_per_task)]
+        res = runner.run(_task, [(loop.params, loop.options, loop.backend, limits, PP[c], DD[c], experiment,
+                                  setup.amplitude, seconds, seed, rtol) for c in chunks],
+                         f"regions --nonlinear: {seconds:g} s runs")
+        return [np.concatenate([r[i] for r in res]) for i in range(4)]
     try:
-        res = runner.run(_task, [(loop.params, loop.options, loop.backend, limits, PP[s], DD[s], experiment,
-                                  setup.amplitude, setup.duration, seed, rtol) for s in chunks],
-                         "regions --nonlinear: simulations")
+        everything = np.arange(PP.size)
+        kind, ts, amp, freq = simulate_points(everything, setup.duration)
+        kind = kind.astype(object)          # a later run's kind may be a longer string
+        cls = classify(kind, ts, stable, always, saturating_fraction)
+        run_s = np.full(PP.size, setup.duration)
+        seconds, rounds = setup.duration, 0
+        while seconds < max_duration:
+            again = np.flatnonzero(((cls == CLASSES.index("growing")) & (kind != "non-finite"))
+                                   | (cls == CLASSES.index("undecided")))
+            if not again.size:
+                break
+            seconds = min(seconds * EXTEND_FACTOR, max_duration)
+            rounds += 1
+            k2, t2, a2, f2 = simulate_points(again, seconds)
+            kind[again], ts[again], amp[again], freq[again] = k2, t2, a2, f2
+            run_s[again] = seconds
+            cls[again] = classify(kind[again], ts[again], stable[again], always, saturating_fraction)
     finally:
         runner.close()
-    kind, ts, amp, freq = (np.concatenate([r[i] for r in res]) for i in range(4))
-    always = _always_acting(limits)
-    cls = classify(kind, ts, stable, always, saturating_fraction)
     shape = (P.size, D.size)
     meta = loop.provenance(
         analysis="nonlinear_map", classes=list(CLASSES), experiment=experiment, amplitude=setup.amplitude,
-        duration=setup.duration, seed=seed, rtol=rtol, limits=limits.active, limits_act_every_step=always,
+        duration=setup.duration, max_duration=max_duration, extend_factor=EXTEND_FACTOR, longer_rounds=rounds,
+        seed=seed, rtol=rtol, limits=limits.active, limits_act_every_step=always,
         saturating_fraction=saturating_fraction, samples_per_run=setup.n,
         scheduler="in-process" if scheduler is None else "dask.distributed",
         rules="docs/simulate.md, Nonlinear maps", P_gain_unit="Nm/rad", D_gain_unit="Nms/rad",
         cycle_amplitude_unit="Nm", cycle_frequency_unit="Hz")
     m = NonlinearMap(P, D, cls.reshape(shape), stable.reshape(shape), amp.reshape(shape), freq.reshape(shape),
-                     ts.reshape(shape), meta)
+                     ts.reshape(shape), run_s.reshape(shape), meta)
     meta["counts"] = m.counts()
     return m
 

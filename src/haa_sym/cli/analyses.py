@@ -11,7 +11,7 @@ from haa_sym.analysis.boundaries.combined import boundaries
 from haa_sym.analysis.contact import contact_intervals
 from haa_sym.analysis.margins import margins
 from haa_sym.analysis.passivity import bands_beyond, corrected_phase, passivity
-from haa_sym.analysis.nonlinear_map import CLASSES, DEFAULT_DURATION, nonlinear_map
+from haa_sym.analysis.nonlinear_map import CLASSES, DEFAULT_DURATION, DEFAULT_MAX_DURATION, EXTEND_FACTOR, nonlinear_map
 from haa_sym.analysis.regions import region_map
 from haa_sym.analysis.simulate import EXPERIMENTS
 from haa_sym.analysis.robust import robust_region
@@ -53,6 +53,7 @@ def _cmd_regions(args) -> int:
     nonlinear_only = [f for f, given in (("--experiment", args.experiment is not None),
                                          ("--amplitude", args.amplitude is not None),
                                          ("--duration", args.duration is not None),
+                                         ("--max-duration", args.max_duration is not None),
                                          ("--scheduler", args.scheduler is not None)) if given]
     if nonlinear_only and not args.nonlinear:
         raise ParameterError(f"{nonlinear_only[0]} applies to the nonlinear map; allowed: with --nonlinear")
@@ -88,7 +89,7 @@ def _nonlinear_regions(args, loop, out, plot, P, D) -> int:
     file's [limits] (docs/simulate.md, "Nonlinear maps"), in one npz."""
     nl = nonlinear_map(loop, P, D, experiment=args.experiment or "disturbance-step", amplitude=args.amplitude,
                        duration=DEFAULT_DURATION if args.duration is None else args.duration,
-                       scheduler=args.scheduler)
+                       max_duration=args.max_duration, scheduler=args.scheduler)
     m = region_map(loop, P, D, radius=args.radius, method=args.method)
 
     def write(path, tx):
@@ -107,8 +108,8 @@ def _nonlinear_regions(args, loop, out, plot, P, D) -> int:
           f"{lim} ({nl.meta['experiment']}, A = {nl.meta['amplitude']:g}, {nl.meta['duration']:g} s each): {counts}"
           + _wrote(out))
     if nl.counts()["growing"]:
-        message(f"growing: still growing when the {nl.meta['duration']:g} s runs ended; a longer --duration may "
-                "show limit cycles there (docs/simulate.md, Nonlinear maps)")
+        message(f"growing: still growing when the runs ended (up to {nl.meta['max_duration']:g} s); a longer "
+                "--max-duration may show limit cycles there (docs/simulate.md, Nonlinear maps)")
     return 0
 
 
@@ -439,6 +440,9 @@ def register(sub) -> dict:
                    help="with --nonlinear: the experiment's amplitude (Nm or rad; haa-sym simulate's default)")
     r.add_argument("--duration", type=float, metavar="S",
                    help=f"with --nonlinear: seconds simulated per point (default {DEFAULT_DURATION:g})")
+    r.add_argument("--max-duration", type=float, metavar="S",
+                   help=f"with --nonlinear: points still growing or undecided are run again, {EXTEND_FACTOR:g}x longer "
+                        f"each time, up to S seconds (default max({DEFAULT_MAX_DURATION:g}, --duration))")
     r.add_argument("--scheduler", help="with --nonlinear: address of a dask.distributed scheduler (default: "
                                        "in-process)")
     bd = sub.add_parser("boundary", help="exact stability, phase-margin and passivity boundaries in the "
