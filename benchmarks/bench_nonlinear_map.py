@@ -41,9 +41,10 @@ def main() -> int:
     nm.IN_PROCESS_THREADS = 1
     t_lin, _ = best(lambda: region_map(loop, P, D), repeats=2)
     same = bool(np.array_equal(m.nonlinear_class, m2.nonlinear_class))
-    samples = m.meta["samples_per_run"] * N_P * N_D
+    samples = m.meta["samples_simulated"]          # the first runs and the longer reruns
     res = {"grid": [N_P, N_D], "limits": LIMITS.active, "duration_each_s": m.meta["duration"], "beta": 3.0,
-           "counts": m.counts(), "in_process_s": t_one, "two_dask_threads_s": t_two,
+           "counts": m.counts(), "longer_rounds": m.meta["longer_rounds"],
+           "points_run_longer": int((m.run_duration > m.meta["duration"]).sum()), "in_process_s": t_one, "two_dask_threads_s": t_two,
            "ratio_two_threads_vs_default": t_one / t_two, "controller_steps_per_s": samples / t_one,
            "linear_region_map_s": t_lin, "same_classes_threads": same, "target_s": TARGET_S}
     print(f"{N_P} x {N_D} nonlinear map ({m.meta['duration']:g} s per point, {samples:,} controller steps): "

@@ -236,7 +236,10 @@ def nonlinear_map(loop, P_gain, D_gain, *, limits: Limits | None = None, experim
     always = _always_acting(limits)
     runner = TaskRunner(scheduler, progress, threads=IN_PROCESS_THREADS)
 
+    simulated = [0]                     # controller steps over every run
+
     def simulate_points(idx, seconds):
+        simulated[0] += idx.size * (int(np.ceil(seconds / setup.Ts - 1e-9)) + 1)
         chunks = [idx[a:a + points_per_task] for a in range(0, idx.size, points_per_task)]
         res = runner.run(_task, [(loop.params, loop.options, loop.backend, limits, PP[c], DD[c], experiment,
                                   setup.amplitude, seconds, seed, rtol) for c in chunks],
@@ -268,6 +271,7 @@ def nonlinear_map(loop, P_gain, D_gain, *, limits: Limits | None = None, experim
         duration=setup.duration, max_duration=max_duration, extend_factor=EXTEND_FACTOR, longer_rounds=rounds,
         seed=seed, rtol=rtol, limits=limits.active, limits_act_every_step=always,
         saturating_fraction=saturating_fraction, samples_per_run=setup.n,
+        samples_simulated=simulated[0],
         scheduler="in-process" if scheduler is None else "dask.distributed",
         rules="docs/simulate.md, Nonlinear maps", P_gain_unit="Nm/rad", D_gain_unit="Nms/rad",
         cycle_amplitude_unit="Nm", cycle_frequency_unit="Hz")
