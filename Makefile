@@ -38,6 +38,7 @@ bench: $(STAMP)
 	HAA_SYM_BENCH_DIR=$(BENCH_DIR) $(PY) benchmarks/bench_boundary.py
 	HAA_SYM_BENCH_DIR=$(BENCH_DIR) $(PY) benchmarks/bench_schedule.py
 	HAA_SYM_BENCH_DIR=$(BENCH_DIR) $(PY) benchmarks/bench_simulate.py
+	HAA_SYM_BENCH_DIR=$(BENCH_DIR) $(PY) benchmarks/bench_nonlinear_map.py --cluster
 	HAA_SYM_BENCH_DIR=$(BENCH_DIR) $(PY) benchmarks/bench_identify.py
 	HAA_SYM_BENCH_DIR=$(BENCH_DIR) $(PY) benchmarks/bench_explore.py
 

@@ -41,7 +41,7 @@ from haa_sym.loop import ClosedLoop, loop_first
 from haa_sym.loop.plant import continuous_plant
 from haa_sym.model.params import gain_array
 
-__all__ = ["LimitCycles", "NONLINEARITIES", "describing_function", "df_harmonics", "limit_cycles",
+__all__ = ["LimitCycles", "NONLINEARITIES", "describing_function", "df_harmonics", "limit_cycles", "limit_nonlinearities",
            "linear_part", "nonlinearity_output"]
 
 # key (or prefix) -> (what the nonlinearity sees, the unit of that signal, the unit of the parameter)
@@ -385,3 +385,17 @@ def _limit_cycles(loop, P_gain, D_gain, key, value, n_omega, amplitude_max, k_ma
     signal = info[0].replace("<body>", key[3:]) if key.startswith("Fc_") and key != "Fc_m" else info[0]
     return LimitCycles(key, value, info[2], signal, info[1], A, w, w / (2 * np.pi), loeb > 0, loeb, g, dist,
                        grid, Gg, amp_curve, minus_inv_N, meta)
+
+
+def limit_nonlinearities(limits) -> list[dict]:
+    """The entries of a :class:`haa_sym.model.limits.Limits` a describing function predicts, each
+    as a ``nonlinearity`` of :func:`limit_cycles`: ``V_max``, the torque quantum
+    (``torque_resolution`` as ``T_res``) and every Coulomb friction ``Fc_m``, ``Fc_<body>``
+    (the current window, encoder quantisation, noise and jitter have no describing function here)."""
+    out = []
+    if limits.V_max:
+        out.append({"V_max": float(limits.V_max)})
+    if limits.torque_resolution:
+        out.append({"T_res": float(limits.torque_resolution)})
+    out += [{f"Fc_{b}": float(v)} for b, v in limits.friction.items() if v > 0]
+    return out

@@ -32,6 +32,7 @@ from dataclasses import dataclass, field
 import numpy as np
 import scipy.linalg
 
+from haa_sym.analysis.oscillation import Oscillation, limit_cycle
 from haa_sym.analysis.sweep import blas_limits
 from haa_sym.compiled import layout as L
 from haa_sym.compiled.generated import evaluators
@@ -42,7 +43,7 @@ from haa_sym.loop.statespace import controller_batch
 from haa_sym.model.limits import Limits
 
 __all__ = ["EXPERIMENTS", "CSV_COLUMNS", "Simulation", "SimulationBatch", "simulate", "simulate_batch",
-           "detect_oscillation", "DEFAULT_RTOL", "MAX_SAMPLES"]
+           "DEFAULT_RTOL", "MAX_SAMPLES"]
 
 #: The experiments (docs/simulate.md): what ``amplitude`` A is and where it enters.
 EXPERIMENTS = {
@@ -75,7 +76,9 @@ JITTER_STEP_BOUND = 0.5
 class Simulation:
     """One simulated run: the CSV's columns (one row per sample instant), the saturation flags,
     the time spent in saturation (s) and a detected limit cycle of the torque signal
-    (``cycle_amplitude`` Nm, half peak-to-peak; ``cycle_frequency`` Hz; NaN when none)."""
+    (``cycle_amplitude`` Nm, half peak-to-peak; ``cycle_frequency`` Hz; NaN when none: the
+    ``oscillation`` :func:`haa_sym.analysis.oscillation.limit_cycle` found in the torque signal's
+    last half is not "sustained"; ``oscillation`` is None when a state overflowed)."""
 
     time: np.ndarray
     theta: np.ndarray
@@ -89,6 +92,7 @@ class Simulation:
     cycle_amplitude: float
     cycle_frequency: float
     meta: dict = field(repr=False)
+    oscillation: Oscillation | None = field(repr=False, default=None)
 
     def columns(self) -> dict[str, np.ndarray]:
         """The CSV columns by name, in :data:`CSV_COLUMNS` order."""
@@ -103,9 +107,11 @@ class Simulation:
 class SimulationBatch:
     """Summaries of simulations at k gain points: ``saturation_time`` (s), ``cycle_amplitude``
     (Nm), ``cycle_frequency`` (Hz), ``final_theta`` (rad, mean over the last tenth), ``growth``
-    (the torque's peak-to-peak swing over the last quarter of the run over the quarter's before)
-    and ``status``: "non-finite" (a state overflowed), else "limit cycle"
-    (:func:`detect_oscillation`), else "saturating" (in saturation over half the run), else "no
+    (the torque's peak-to-peak swing over the last quarter of the run over the quarter's before),
+    ``oscillation`` (the kind :func:`haa_sym.analysis.oscillation.limit_cycle` found in the torque's
+    last half: none, decaying, sustained, growing; "non-finite"), ``tail_saturation`` (the fraction
+    of the last half's samples in saturation) and ``status``: "non-finite" (a state overflowed),
+    else "limit cycle" (a sustained oscillation), else "saturating" (in saturation over half the run), else "no
     limit cycle". Whether a point converges is left to the caller: a run shorter than the loop's
     slowest mode (HyQ: 11 s) cannot tell slow convergence from slow growth by itself."""
 
@@ -118,34 +124,8 @@ class SimulationBatch:
     growth: np.ndarray
     status: np.ndarray
     meta: dict = field(repr=False)
-
-
-def detect_oscillation(t, y, *, window: float = 0.5, tol: float = 0.02, floor: float = 0.0):
-    """A sustained oscillation of ``y`` over the last ``window`` fraction of the run.
-
-    Up-crossings of the window's mean split it into cycles; an oscillation is reported when
-    there are at least 4 cycles, their periods agree within ``tol`` (relative spread) and
-    their half peak-to-peak amplitudes within 5 ``tol`` with no trend (first and last cycles
-    within 5 ``tol``), and the amplitude exceeds ``floor``. Returns ``(amplitude, frequency)``
-    (units of ``y``, Hz; the period from the first to the last up-crossing, interpolated) or
-    ``(nan, nan)``.
-    """
-    t, y = np.asarray(t, float), np.asarray(y, float)
-    start = int(len(t) * (1 - window))
-    t, y = t[start:], y[start:]
-    if len(y) < 16 or not np.all(np.isfinite(y)):
-        return math.nan, math.nan
-    d = y - y.mean()
-    up = np.flatnonzero((d[:-1] < 0) & (d[1:] >= 0))
-    if len(up) < 5:
-        return math.nan, math.nan
-    tc = t[up] + (t[up + 1] - t[up]) * (-d[up]) / (d[up + 1] - d[up])
-    periods = np.diff(tc)
-    amps = np.array([(y[a:b + 1].max() - y[a:b + 1].min()) / 2 for a, b in zip(up[:-1], up[1:])])
-    if periods.std() > tol * periods.mean() or amps.std() > 5 * tol * amps.mean() \
-            or abs(amps[-1] - amps[0]) > 5 * tol * amps.mean() or amps.mean() <= floor:
-        return math.nan, math.nan
-    return float(amps.mean()), float((len(tc) - 1) / (tc[-1] - tc[0]))
+    oscillation: np.ndarray | None = field(repr=False, default=None)
+    tail_saturation: np.ndarray | None = field(repr=False, default=None)
 
 
 def _pad(M, rows, cols):
@@ -360,9 +340,11 @@ class _Setup:
         return out
 
 
-def _run(loop, setup: _Setup, P_gain, D_gain):
-    """(y (n, len(SIM_COLUMNS)), integrator info) of one gain point."""
-    Ac, Bc, Cc, Dc = (m[0] for m in controller_batch(loop, P_gain, D_gain))
+def _run(loop, setup: _Setup, P_gain, D_gain, controller=None):
+    """(y (n, len(SIM_COLUMNS)), integrator info) of one gain point; ``controller`` its
+    (Ac, Bc, Cc, Dc) if already built (a batch builds them all in one call)."""
+    Ac, Bc, Cc, Dc = controller if controller is not None else \
+        (m[0] for m in controller_batch(loop, P_gain, D_gain))
     nc = Ac.shape[0]
     cx, cc = _capacity(setup.nx, nc)
     names = L.sim_function_names(cx, cc)
@@ -415,8 +397,9 @@ def _result(loop, setup, P_gain, D_gain, y, info):
     sat = col["saturated"] > 0.5
     dt = np.diff(np.append(setup.time, setup.time[-1] + setup.Ts))
     sat_time = float(dt[sat].sum())
-    floor = max(setup.q_T, 3 * (setup.limits.torque_noise or 0.0), 1e-9)
-    amp, freq = detect_oscillation(setup.time, col["torque"], floor=floor)
+    osc = trace_oscillation(setup, col["torque"])
+    amp, freq = (osc.amplitude, osc.frequency_hz) if osc is not None and osc.kind == "sustained" \
+        else (math.nan, math.nan)
     meta = loop.provenance(
         analysis="simulate", P_gain=float(P_gain), D_gain=float(D_gain), experiment=setup.experiment,
         experiment_definition=EXPERIMENTS[setup.experiment], amplitude=setup.amplitude,
@@ -424,7 +407,16 @@ def _result(loop, setup, P_gain, D_gain, y, info):
         saturation_time=sat_time, limit_cycle=None if not np.isfinite(amp) else
         {"amplitude_Nm": amp, "frequency_Hz": freq, "signal": "torque"})
     return Simulation(setup.time.copy(), col["theta"], col["velocity"], col["torque"], col["torque_ref"],
-                      col["voltage"], col["current"], sat, sat_time, amp, freq, meta)
+                      col["voltage"], col["current"], sat, sat_time, amp, freq, meta, osc)
+
+
+def trace_oscillation(setup, torque) -> Oscillation | None:
+    """The oscillation of the torque signal over the run's last half (the one trace classifier,
+    :func:`haa_sym.analysis.oscillation.limit_cycle`, its defaults; the torque quantum as its
+    resolution; on the nominal instants k Ts, jitter or not); None if the run overflowed."""
+    if not np.all(np.isfinite(torque)) or len(torque) < 8:
+        return None
+    return limit_cycle(np.arange(len(torque)) * setup.Ts, torque, resolution=setup.q_T)
 
 
 @loop_first
@@ -489,10 +481,14 @@ def _batch(loop, P, D, limits, experiment, amplitude, duration, seed, rtol):
     setup.rtol = _number("rtol", rtol, "a number in (0, 0.1)", lambda v: 0 < v < 0.1)
     k = P.size
     sat, amp, freq, fin, growth = (np.empty(k) for _ in range(5))
-    status = np.empty(k, dtype=object)
+    status, kinds = np.empty(k, dtype=object), np.empty(k, dtype=object)
+    tail_sat = np.empty(k)
     tail = max(1, setup.n // 10)
+    # every point's controller in one call: its exact element arithmetic (Fractions) per call
+    # cost more than a 1 s run of the C loop
+    ctrls = controller_batch(loop, P, D)
     for i in range(k):
-        y, _info = _run(loop, setup, P[i], D[i])
+        y, _info = _run(loop, setup, P[i], D[i], tuple(m[i] for m in ctrls))
         r = _result(loop, setup, P[i], D[i], y, _info)
         sat[i], amp[i], freq[i] = r.saturation_time, r.cycle_amplitude, r.cycle_frequency
         fin[i] = r.theta[-tail:].mean()
@@ -502,6 +498,9 @@ def _batch(loop, P, D, limits, experiment, amplitude, duration, seed, rtol):
         growth[i] = swing[0] / swing[1] if swing[1] > 0 else (math.inf if swing[0] > 0 else 1.0)
         status[i] = ("non-finite" if not np.all(np.isfinite(y)) else "limit cycle" if r.limit_cycle
                      else "saturating" if sat[i] > setup.duration / 2 else "no limit cycle")
+        kinds[i] = "non-finite" if r.oscillation is None else r.oscillation.kind
+        tail_sat[i] = r.saturated[setup.n // 2:].mean()
     meta = loop.provenance(analysis="simulate_batch", experiment=experiment, amplitude=setup.amplitude,
                            duration=setup.duration, seed=seed, limits=setup.limits.active)
-    return SimulationBatch(P, D, sat, amp, freq, fin, growth, status.astype(str), meta)
+    return SimulationBatch(P, D, sat, amp, freq, fin, growth, status.astype(str), meta, kinds.astype(str),
+                           tail_sat)

@@ -11,7 +11,9 @@ from haa_sym.analysis.boundaries.combined import boundaries
 from haa_sym.analysis.contact import contact_intervals
 from haa_sym.analysis.margins import margins
 from haa_sym.analysis.passivity import bands_beyond, corrected_phase, passivity
+from haa_sym.analysis.nonlinear_map import CLASSES, DEFAULT_DURATION, DEFAULT_MAX_DURATION, EXTEND_FACTOR, nonlinear_map
 from haa_sym.analysis.regions import region_map
+from haa_sym.analysis.simulate import EXPERIMENTS
 from haa_sym.analysis.robust import robust_region
 from haa_sym.analysis.torque import STEP_CONVENTION, describe_step, step_response, torque_bandwidth
 from haa_sym.check.verify import main as verify_main
@@ -20,7 +22,7 @@ from haa_sym.compiled.plant_code import compile_topology
 from haa_sym.design.schedule import schedule
 from haa_sym.design.schedule_c import check_c_directory, write_c
 from haa_sym.errors import ParameterError
-from haa_sym.io.formats import save_json, save_npz
+from haa_sym.io.formats import result_arrays, save_json, save_npz
 from haa_sym.io.gridspec import GRID_SYNTAX, grid
 from haa_sym.io.uncertainty import fit_box
 from haa_sym.io.outputs import Transaction, csv_text
@@ -48,6 +50,17 @@ def _cmd_regions(args) -> int:
                                       ("--uncertainty", args.uncertainty is not None)) if given]
     if robust_only and not args.robust:
         raise ParameterError(f"{robust_only[0]} applies to the leg range; allowed: with --robust")
+    nonlinear_only = [f for f, given in (("--experiment", args.experiment is not None),
+                                         ("--amplitude", args.amplitude is not None),
+                                         ("--duration", args.duration is not None),
+                                         ("--max-duration", args.max_duration is not None),
+                                         ("--scheduler", args.scheduler is not None)) if given]
+    if nonlinear_only and not args.nonlinear:
+        raise ParameterError(f"{nonlinear_only[0]} applies to the nonlinear map; allowed: with --nonlinear")
+    if args.nonlinear and (args.robust or args.measured):
+        raise ParameterError(f"--nonlinear with {'--robust' if args.robust else '--measured'}; allowed: one of them")
+    if args.nonlinear:
+        return _nonlinear_regions(args, loop, out, plot, P, D)
     if args.robust:
         plain_only = [f for f, given in (("--radius", args.radius), ("--method grid", args.method != "curves"),
                                          ("--configuration", args.configuration is not None)) if given]
@@ -68,6 +81,35 @@ def _cmd_regions(args) -> int:
     _write_outputs(out, plot, lambda path, tx: m.save(path, tx, "--out"), figure)
     print(f"{m.stable.size} points ({m.meta['method']}): {m.stable.sum()} stable, {m.low_pm.sum()} stable "
           f"with PM < 30 deg, {m.passive.sum()} passive" + _agreement_text(counts) + _wrote(out))
+    return 0
+
+
+def _nonlinear_regions(args, loop, out, plot, P, D) -> int:
+    """``regions --nonlinear``: the linear map and each point's class from a simulation with the
+    file's [limits] (docs/simulate.md, "Nonlinear maps"), in one npz."""
+    nl = nonlinear_map(loop, P, D, experiment=args.experiment or "disturbance-step", amplitude=args.amplitude,
+                       duration=DEFAULT_DURATION if args.duration is None else args.duration,
+                       max_duration=args.max_duration, scheduler=args.scheduler)
+    m = region_map(loop, P, D, radius=args.radius, method=args.method)
+
+    def write(path, tx):
+        save_npz(path, {**result_arrays(m), **nl.arrays()}, {**m.meta, "nonlinear": nl.meta}, tx, "--out")
+
+    def figure():
+        b = boundaries(loop, P_range=(P.min(), P.max()), D_range=(D.min(), D.max())) \
+            if loop.options.conventions.pm_loop == "impedance" else None
+        return _plots().plot_nonlinear_region(m, nl.P_gain, nl.D_gain, nl.class_names,
+                                              title=args.figure_title, boundary=b)
+    _write_outputs(out, plot, write, figure)
+    counts = ", ".join(f"{n} {c}" for c, n in nl.counts().items())
+    lim = ", ".join(f"{k} = {v:g}" if isinstance(v, (int, float)) else f"{k} = {v}"
+                    for k, v in nl.meta["limits"].items()) or "none"
+    print(f"{m.stable.size} points, linear ({m.meta['method']}): {m.stable.sum()} stable; simulated with "
+          f"{lim} ({nl.meta['experiment']}, A = {nl.meta['amplitude']:g}, {nl.meta['duration']:g} s each): {counts}"
+          + _wrote(out))
+    if nl.counts()["growing"]:
+        message(f"growing: still growing when the runs ended (up to {nl.meta['max_duration']:g} s); a longer "
+                "--max-duration may show limit cycles there (docs/simulate.md, Nonlinear maps)")
     return 0
 
 
@@ -389,6 +431,21 @@ def register(sub) -> dict:
     r.add_argument("--method", choices=("curves", "grid"), default="curves",
                    help="decide the map from the exact boundaries (default) or every point on the grid "
                         "(with per-point phase margin and passivity excess)")
+    r.add_argument("--nonlinear", action="store_true",
+                   help="also class every point as " + " / ".join(CLASSES) + " from a simulation with the "
+                        "file's [limits] (npz: nonlinear_class, ...; docs/simulate.md, Nonlinear maps)")
+    r.add_argument("--experiment", choices=list(EXPERIMENTS), metavar="KIND",
+                   help="with --nonlinear: the experiment of every run (default disturbance-step; choices: "
+                        + ", ".join(EXPERIMENTS) + ")")
+    r.add_argument("--amplitude", type=float, metavar="A",
+                   help="with --nonlinear: the experiment's amplitude (Nm or rad; haa-sym simulate's default)")
+    r.add_argument("--duration", type=float, metavar="S",
+                   help=f"with --nonlinear: seconds simulated per point (default {DEFAULT_DURATION:g})")
+    r.add_argument("--max-duration", type=float, metavar="S",
+                   help=f"with --nonlinear: points still growing or undecided are run again, {EXTEND_FACTOR:g}x longer "
+                        f"each time, up to S seconds (default max({DEFAULT_MAX_DURATION:g}, --duration))")
+    r.add_argument("--scheduler", help="with --nonlinear: address of a dask.distributed scheduler (default: "
+                                       "in-process)")
     bd = sub.add_parser("boundary", help="exact stability, phase-margin and passivity boundaries in the "
                         "(P_gain, D_gain) plane (parameter-space method)")
     _common(bd)

@@ -1,6 +1,10 @@
 """``haa-sym simulate``: the nonlinear sampled-data simulation of one gain point (docs/simulate.md)."""
 from __future__ import annotations
 
+import numpy as np
+
+from haa_sym.analysis.describing import describing_function, limit_cycles, limit_nonlinearities
+from haa_sym.analysis.oscillation import limit_cycle
 from haa_sym.analysis.simulate import CSV_COLUMNS, DEFAULT_AMPLITUDE, EXPERIMENTS, simulate
 from haa_sym.io.outputs import csv_text
 from haa_sym.loop import ClosedLoop
@@ -27,8 +31,10 @@ def _cmd_simulate(args) -> int:
     rows = [{c: f"{cols[c][k]:.12g}" for c in CSV_COLUMNS} for k in range(len(s.time))]
     cycle = (f"limit cycle: amplitude {s.cycle_amplitude:.6g} Nm, frequency {s.cycle_frequency:.6g} Hz"
              if s.limit_cycle else "no limit cycle")
+    predicted = _predictions(loop, float(P[0]), float(D[0]), s, cols)
+    note = "\n".join([f"simulated {cycle}"] + [f"{p}\n  {q}" if q else p for p, q in predicted])
     _write_outputs(out, plot, lambda path, tx: tx.write_text(path, csv_text(rows), "--out"),
-                   lambda: _plots().plot_simulation(s.time, cols, s.saturated, title, cycle))
+                   lambda: _plots().plot_simulation(s.time, cols, s.saturated, title, note))
     m = s.meta
     integ = m["integrator"] + (f", {m['n_sub']:.3g} substeps per sample" if m["n_sub"] > 1 else "")
     if "n_sub_max" in m:
@@ -39,7 +45,47 @@ def _cmd_simulate(args) -> int:
           f"limits: {lim}; {integ}")
     print(f"time in saturation: {s.saturation_time:.6g} s ({100 * s.saturation_time / max(args.duration, 1e-300):.3g} %); "
           f"{cycle} (torque signal, last half of the run)" + _wrote(out))
+    for line, sim in predicted:
+        print(f"{line}; {sim}" if sim else line)
     return 0
+
+
+# the CSV column that carries a nonlinearity's input signal (the describing function's u), and
+# whether it is the nonlinearity's output (the held voltage is the saturation's output)
+_SIGNAL_COLUMN = {"V_max": ("voltage", "output"), "T_res": ("torque", "input")}
+
+
+def _predictions(loop, P, D, s, cols) -> list[tuple[str, str]]:
+    """Per [limits] entry with a describing function (:func:`limit_nonlinearities`): a line of
+    the predicted stable limit cycles (docs/describing.md) and a line of the simulated oscillation
+    of the same signal where the CSV carries it (the same frequency; amplitude of the signal, or
+    for the supply the fundamental of the held voltage against N(A) A)."""
+    port = f"Fc_{loop.params.plant.topology.port}"
+    out = []
+    t = np.arange(len(s.time)) * loop.params.controller.Ts
+    for nl in limit_nonlinearities(loop.params.limits):
+        (key, value), = nl.items()
+        r = limit_cycles(loop, P, D, nonlinearity=nl)
+        ok = np.flatnonzero(r.stable)
+        head = f"describing function, {key} = {value:g} {r.value_unit}:"
+        if not ok.size:
+            out.append((f"{head} no stable limit cycle predicted", ""))
+            continue
+        k = ok[np.argmax(r.amplitude[ok])]
+        A, f = float(r.amplitude[k]), float(r.frequency_hz[k])
+        col, side = _SIGNAL_COLUMN.get(key, ("velocity", "input") if key == port else (None, None))
+        text = f"{head} A = {A:.4g} {r.unit} at {f:.4g} Hz"
+        sim = "the CSV has no column of that signal"
+        if col is not None and np.all(np.isfinite(cols[col])):
+            o = limit_cycle(t, cols[col])
+            if side == "output":
+                text += f" (output fundamental N(A) A = {float(describing_function('saturation', value, A)[0]) * A:.4g} {r.unit})"
+            sim = ("simulated " + col + (f": fundamental {o.fundamental:.4g}" if side == "output" else
+                                         f": amplitude {o.amplitude:.4g}") + f" {r.unit} at {o.frequency_hz:.4g} Hz"
+                   if o.kind == "sustained" else f"simulated {col}: no sustained oscillation ({o.kind})")
+        out.append((text, sim))
+    return out
+
 
 
 def register(sub) -> dict:

@@ -61,7 +61,6 @@ Example
 """
 from __future__ import annotations
 
-import threading
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -75,7 +74,7 @@ from haa_sym.design.schedule_table import ScheduleTable
 from haa_sym.errors import ParameterError
 from haa_sym.io.gridspec import grid
 from haa_sym.io.outputs import write_text
-from haa_sym.io.progress import progress as progress_bar
+from haa_sym.io.tasks import DEFAULT_CONNECT_TIMEOUT, TaskRunner
 from haa_sym.loop import ClosedLoop, loop_first
 from haa_sym.model.params import Params, gain_array
 
@@ -185,86 +184,13 @@ def _task_points(params, config, P, D, beta, alpha, requirements, options):
     return meets(decide_points(loop, P, D, beta, alpha, passivity="passive" in requirements), requirements)
 
 
-#: Seconds to connect to a --scheduler and finish dask's handshake.
-CONNECT_TIMEOUT = 5.0
+#: Seconds to connect to a --scheduler and finish dask's handshake (read at each call: tests lower it).
+CONNECT_TIMEOUT = DEFAULT_CONNECT_TIMEOUT
 
 
-def _connect(Client, address: str):
-    """A dask.distributed Client of ``address``, or one ParameterError within CONNECT_TIMEOUT.
-
-    Client's own ``timeout`` bounds the TCP connection only: a service that accepts and never
-    answers (an HTTP server waiting for a request) blocks the handshake for ever, and one that
-    greets first has its greeting read as a frame length (an allocation of exabytes). So the
-    client is made in a daemon thread, waited for with a deadline, and any failure it raises
-    (MemoryError included) is the address's fault.
-    """
-    out: dict = {}
-
-    def make():
-        try:
-            out["client"] = Client(address, timeout=f"{CONNECT_TIMEOUT:g}s")
-        except BaseException as exc:       # noqa: BLE001 - reported below, in the caller's thread
-            out["error"] = exc
-    worker = threading.Thread(target=make, name="haa_sym-scheduler-connect", daemon=True)
-    worker.start()
-    worker.join(CONNECT_TIMEOUT + 1)
-    allowed = "allowed: the address of a running dask.distributed scheduler, e.g. tcp://127.0.0.1:8786"
-    if "client" in out:
-        return out["client"]
-    if worker.is_alive():
-        why = f"no dask handshake within {CONNECT_TIMEOUT:g} s (a service that is not a dask scheduler?)"
-    else:
-        e = out.get("error")
-        first = str(e).splitlines()[0] if e is not None and str(e) else "no answer"
-        if isinstance(e, MemoryError):
-            first = "its answer is not dask's protocol"
-        why = f"no dask scheduler answers there ({type(e).__name__}: {first})"
-    raise ParameterError(f"--scheduler {address!r}: {why}; {allowed}")
-
-
-class _Runner:
-    """Runs task lists on dask (threaded, in-process) or on a dask.distributed cluster."""
-
-    def __init__(self, scheduler, progress):
-        self.client, self.own = None, False
-        self.progress = progress
-        if scheduler is None:
-            return
-        try:
-            from distributed import Client
-        except ImportError as e:               # pragma: no cover - a dependency
-            raise ParameterError(f"--scheduler {scheduler!r}: dask.distributed is not installed ({e})")
-        if isinstance(scheduler, Client):
-            self.client = scheduler
-            return
-        address = str(scheduler)
-        self.client = _connect(Client, address)
-        self.own = True
-
-    def close(self):
-        if self.own and self.client is not None:
-            self.client.close()
-
-    def run(self, fn, args_list: list, label: str) -> list:
-        if not args_list:
-            return []
-        with progress_bar(len(args_list), label, "task", self.progress) as bar:
-            if self.client is not None:
-                from distributed import as_completed
-                futures = [self.client.submit(fn, *a, pure=False) for a in args_list]
-                for _ in as_completed(futures):
-                    bar.update(1)
-                return self.client.gather(futures)
-            import dask
-            from dask.callbacks import Callback
-
-            class _Bar(Callback):
-                def _posttask(self, key, result, dsk, state, worker_id):
-                    if str(key[0] if isinstance(key, tuple) else key).startswith("task-"):
-                        bar.update(1)
-            tasks = [dask.delayed(fn, pure=False)(*a, dask_key_name=f"task-{k}") for k, a in enumerate(args_list)]
-            with _Bar():
-                return list(dask.compute(*tasks, scheduler="threads", num_workers=2))
+def _Runner(scheduler, progress):
+    """The task runner of :mod:`haa_sym.io.tasks` with this module's CONNECT_TIMEOUT."""
+    return TaskRunner(scheduler, progress, connect_timeout=CONNECT_TIMEOUT)
 
 
 def _verify(params, configs, P, D, fine, alphas, best_k, req, options):

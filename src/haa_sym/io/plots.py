@@ -203,6 +203,40 @@ def _region_legend(grid_contour: bool = True):
         [Patch(facecolor="none", edgecolor="tab:blue", hatch="////", label="stable, not passive")]
 
 
+#: Markers of the nonlinear classes (haa_sym.analysis.nonlinear_map.CLASSES) over a map.
+NONLINEAR_MARKERS = {"converging": dict(marker=".", color="tab:green", ms=3),
+                     "limit cycle": dict(marker="o", mfc="none", color="tab:red", ms=5),
+                     "saturating": dict(marker="s", mfc="none", color="tab:purple", ms=5),
+                     "growing": dict(marker="x", color="k", ms=5),
+                     "undecided": dict(marker="d", mfc="none", color="tab:orange", ms=5)}
+
+
+def plot_nonlinear_region(m, P_gain, D_gain, class_names, title: str | None = None, boundary=None,
+                          max_markers: int = 60):
+    """The linear map ``m`` (:func:`plot_region`, with the exact curves ``boundary``) and over it
+    the nonlinear class of each gain point (``class_names`` (n_P, n_D) strings on the axes
+    ``P_gain``, ``D_gain``), one marker per point of at most ``max_markers`` x ``max_markers``
+    evenly strided points (denser grids would hide the map)."""
+    fig, ax = plt.subplots(figsize=(5.2, 5.0), layout="constrained")
+    plot_region(m, ax, title, boundary=boundary)
+    P, D, names = np.asarray(P_gain), np.asarray(D_gain), np.asarray(class_names)
+    sp, sd = max(1, -(-P.size // max_markers)), max(1, -(-D.size // max_markers))
+    PP, DD = np.meshgrid(P[::sp], D[::sd], indexing="ij")
+    sub = names[::sp, ::sd]
+    handles = []
+    for name, style in NONLINEAR_MARKERS.items():
+        pick = sub == name
+        n_all = int((names == name).sum())
+        line, = ax.plot(PP[pick], DD[pick], ls="none", **style,
+                        label=f"simulated: {name} ({n_all})")
+        if n_all:
+            handles.append(line)
+    extra = curve_legend(boundary) if boundary is not None else []
+    fig.legend(handles=_region_legend(boundary is None) + extra + handles, loc="outside lower center", ncol=2,
+               fontsize=7)
+    return fig
+
+
 def plot_region_panels(maps, titles, suptitle: str = "", boundaries=None):
     """A row of region maps (one paper figure) with the legend of Figs. 8-11, and each panel's
     exact curves (:func:`haa_sym.analysis.boundaries.stability.boundaries`, one per map) over it when given."""

@@ -1,0 +1,126 @@
+"""Lists of independent tasks run on dask: in-process (dask's threaded scheduler) or on a
+dask.distributed cluster (``--scheduler ADDRESS``), with a progress bar (:mod:`haa_sym.io.progress`).
+
+A task is a module-level function of plain data (parameters, options, gain points): a worker
+process builds what it needs itself (the compiled library is loaded per process, never shipped).
+Used by the torque-gain scheduler (:mod:`haa_sym.design.schedule`) and the nonlinear maps
+(:mod:`haa_sym.analysis.nonlinear_map`).
+
+Example
+-------
+>>> r = TaskRunner(None, False)
+>>> r.run(pow, [(2, 3), (3, 2)], "demo")
+[8, 9]
+"""
+from __future__ import annotations
+
+import threading
+
+from haa_sym.errors import ParameterError
+from haa_sym.io.progress import progress as progress_bar
+
+__all__ = ["TaskRunner", "connect", "DEFAULT_CONNECT_TIMEOUT", "THREADS"]
+
+#: Seconds to connect to a --scheduler and finish dask's handshake.
+DEFAULT_CONNECT_TIMEOUT = 5.0
+#: Threads of the in-process scheduler (the machines this runs on have 2 cores).
+THREADS = 2
+
+
+def connect(Client, address: str, timeout: float = DEFAULT_CONNECT_TIMEOUT):
+    """A dask.distributed Client of ``address``, or one ParameterError within ``timeout`` s.
+
+    Client's own ``timeout`` bounds the TCP connection only: a service that accepts and never
+    answers (an HTTP server waiting for a request) blocks the handshake for ever, and one that
+    greets first has its greeting read as a frame length (an allocation of exabytes). So the
+    client is made in a daemon thread, waited for with a deadline, and any failure it raises
+    (MemoryError included) is the address's fault.
+    """
+    out: dict = {}
+
+    def make():
+        try:
+            out["client"] = Client(address, timeout=f"{timeout:g}s")
+        except BaseException as exc:       # noqa: BLE001 - reported below, in the caller's thread
+            out["error"] = exc
+    worker = threading.Thread(target=make, name="haa_sym-scheduler-connect", daemon=True)
+    worker.start()
+    worker.join(timeout + 1)
+    allowed = "allowed: the address of a running dask.distributed scheduler, e.g. tcp://127.0.0.1:8786"
+    if "client" in out:
+        return out["client"]
+    if worker.is_alive():
+        why = f"no dask handshake within {timeout:g} s (a service that is not a dask scheduler?)"
+    else:
+        e = out.get("error")
+        first = str(e).splitlines()[0] if e is not None and str(e) else "no answer"
+        if isinstance(e, MemoryError):
+            first = "its answer is not dask's protocol"
+        why = f"no dask scheduler answers there ({type(e).__name__}: {first})"
+    raise ParameterError(f"--scheduler {address!r}: {why}; {allowed}")
+
+
+class TaskRunner:
+    """Runs task lists on dask (threaded, in-process) or on a dask.distributed cluster.
+
+    Parameters
+    ----------
+    scheduler : None, str or distributed.Client
+        None: dask's threaded scheduler in this process (:data:`THREADS` threads); an address
+        ("tcp://host:port"): connect to it (closed by :meth:`close`); a Client: use it.
+    progress : bool or None
+        The progress bar's setting (:func:`haa_sym.io.progress.progress`).
+    connect_timeout : float
+        Seconds for the connection and dask's handshake.
+    threads : int
+        Threads of the in-process run (default :data:`THREADS`); 1 runs the tasks one after
+        the other in this thread (for tasks whose Python part holds the GIL most of the time).
+    """
+
+    def __init__(self, scheduler, progress, connect_timeout: float = DEFAULT_CONNECT_TIMEOUT,
+                 threads: int = THREADS):
+        self.client, self.own = None, False
+        self.progress, self.threads = progress, threads
+        if scheduler is None:
+            return
+        try:
+            from distributed import Client
+        except ImportError as e:               # pragma: no cover - a dependency
+            raise ParameterError(f"--scheduler {scheduler!r}: dask.distributed is not installed ({e})")
+        if isinstance(scheduler, Client):
+            self.client = scheduler
+            return
+        self.client = connect(Client, str(scheduler), connect_timeout)
+        self.own = True
+
+    def close(self):
+        if self.own and self.client is not None:
+            self.client.close()
+
+    def run(self, fn, args_list: list, label: str, unit: str = "task") -> list:
+        """``[fn(*a) for a in args_list]``, in that order, the tasks run concurrently."""
+        if not args_list:
+            return []
+        with progress_bar(len(args_list), label, unit, self.progress) as bar:
+            if self.client is not None:
+                from distributed import as_completed
+                futures = [self.client.submit(fn, *a, pure=False) for a in args_list]
+                for _ in as_completed(futures):
+                    bar.update(1)
+                return self.client.gather(futures)
+            if self.threads == 1:
+                out = []
+                for a in args_list:
+                    out.append(fn(*a))
+                    bar.update(1)
+                return out
+            import dask
+            from dask.callbacks import Callback
+
+            class _Bar(Callback):
+                def _posttask(self, key, result, dsk, state, worker_id):
+                    if str(key[0] if isinstance(key, tuple) else key).startswith("task-"):
+                        bar.update(1)
+            tasks = [dask.delayed(fn, pure=False)(*a, dask_key_name=f"task-{k}") for k, a in enumerate(args_list)]
+            with _Bar():
+                return list(dask.compute(*tasks, scheduler="threads", num_workers=self.threads))
