@@ -69,7 +69,7 @@ def test_threads_evicting_at_once_neither_fail_nor_overgrow():
 
     def work(offset):
         try:
-            for i in range(20000):
+            for i in range(4000):
                 key = (offset, i)
                 assert cache.get(key, lambda: key) == key
                 sizes.append(len(cache))
