@@ -3,8 +3,9 @@
 The block is everything between ``<!-- bench:start -->`` and ``<!-- bench:end -->`` in README.md:
 the sentence naming the machine, the date and the load of the run, the table, and the paragraph
 on agreement and targets. Every number in it comes from the JSON files (``results_baselines.json``,
-``results_regions.json``, ``results_boundary.json``, ``results_schedule.json`` in
-``$HAA_SYM_BENCH_DIR``, default ``bench-results/``); a file that is missing leaves its cells as
+``results_regions.json``, ``results_boundary.json``, ``results_schedule.json``, and for the second
+table ``results_identify.json``, ``results_simulate.json``, ``results_nonlinear_map.json``,
+``results_explore.json`` in ``$HAA_SYM_BENCH_DIR``, default ``bench-results/``); a file that is missing leaves its cells as
 "not measured". Nothing outside the markers is touched.
 
 Usage: python benchmarks/render_readme.py [--results DIR] [--readme README.md] [--check]
@@ -23,7 +24,10 @@ from pathlib import Path
 ROOT = Path(__file__).resolve().parent.parent
 START, END = "<!-- bench:start -->", "<!-- bench:end -->"
 FILES = {"baselines": "results_baselines.json", "regions": "results_regions.json",
-         "boundary": "results_boundary.json", "schedule": "results_schedule.json"}
+         "boundary": "results_boundary.json", "schedule": "results_schedule.json",
+         # issues 17-19: identification, the nonlinear simulation and its maps, the explorer
+         "identify": "results_identify.json", "simulate": "results_simulate.json",
+         "nonlinear_map": "results_nonlinear_map.json", "explore": "results_explore.json"}
 CONFIGS = ("nominal (N_av = 4)", "N_av = 50")
 NM = "not measured"
 TARGET_MAP_S = 0.100          # a full 200 x 200 map (stability + PM + passivity)
@@ -301,8 +305,59 @@ def setup(data) -> str:
     return what + " Whole processes are one run each. Each ratio names its baseline."
 
 
+def steps(x) -> str:
+    return NM if x is None else f"{_sig(x):,.0f} steps/s"
+
+
+def features_table(data) -> list[str]:
+    """The second table: the targets of issues 17-19, each cell from its script's JSON."""
+    rows = ["| issue: what | measured | target |", "|---|---|---|"]
+    d = data["identify"]
+    if d is not None:
+        rows.append(f"| 17: `haa-sym identify`, {count(d['samples'])} samples, {len(d['keys'])} keys, whole process, "
+                    f"vs scipy `least_squares` over `dlsim` (`bench_identify.py`, best of {d['repeats']}) | "
+                    f"{sec(d['haa_sym_identify_s'])} vs {sec(d['scipy_least_squares_dlsim_s'])} "
+                    f"(**{ratio(d['ratio'])}**; the fits alone {ratio(d['in_process']['ratio'])}) | "
+                    f"5x: {met(d['ratio'] >= 5)} |")
+    else:
+        rows.append(f"| 17: `haa-sym identify` (`bench_identify.py`) | {NM} | 5x |")
+    s = data["simulate"]
+    cases = {} if s is None else s["cases"]
+    for name, label in (("saturation + quantisation (exact ZOH)", "HyQ, voltage saturation + quantisation, exact ZOH"),
+                        ("Coulomb friction (integrated)", "HyQ, Coulomb friction of rotor and leg, integrated")):
+        c = cases.get(name)
+        rows.append(f"| 19: `haa-sym simulate`, {label} (`bench_simulate.py`) | "
+                    + (NM if c is None else f"{steps(c['steps_per_s'])} (solve_ivp loop "
+                       f"{steps(c['solve_ivp_steps_per_s'])}: **{ratio(c['ratio_vs_solve_ivp'])}**)")
+                    + " | " + (f"{c['target_steps_per_s']:,.0f} steps/s: {met(c['steps_per_s'] >= c['target_steps_per_s'])}"
+                               if c is not None else NM) + " |")
+    n = data["nonlinear_map"]
+    if n is not None:
+        rows.append(f"| 19: `regions --nonlinear`, {n['grid'][0]} x {n['grid'][1]}, {n['duration_each_s']:g} s a point "
+                    f"({n['points_run_longer']} run longer), in-process (`bench_nonlinear_map.py`) | "
+                    f"{sec(n['in_process_s'])} (the linear map {sec(n['linear_region_map_s'])}) | "
+                    f"{n['target_s']:g} s: {met(n['in_process_s'] < n['target_s'])} |")
+    else:
+        rows.append(f"| 19: `regions --nonlinear`, 100 x 50 (`bench_nonlinear_map.py`) | {NM} | 60 s |")
+    e = data["explore"]
+    br = None if e is None else e.get("browser")
+    if br is not None:
+        m, k, t = br["change_to_redrawn_map_200x100"], br["click_to_detail"], e["targets_ms"]
+        rows.append(f"| 18: `haa-sym explore` in headless Chromium: a control change to the redrawn 200 x 100 map, "
+                    f"median / worst of {m['n']} (`bench_explore.py`) | {m['median_ms']:.0f} / {m['worst_ms']:.0f} ms | "
+                    f"{t['map_median']:.0f} / {t['map_worst']:.0f} ms: {met(m['median_ms'] < t['map_median'])} / "
+                    f"{met(m['worst_ms'] < t['map_worst'])} |")
+        rows.append(f"| 18: a click to the point's detail, median / worst of {k['n']} | {k['median_ms']:.0f} / "
+                    f"{k['worst_ms']:.0f} ms | {t['click_median']:.0f} / {t['click_worst']:.0f} ms: "
+                    f"{met(k['median_ms'] < t['click_median'])} / {met(k['worst_ms'] < t['click_worst'])} |")
+    else:
+        rows.append(f"| 18: `haa-sym explore`, change to redrawn map (`bench_explore.py`) | {NM} | 250 / 1000 ms |")
+    return rows
+
+
 def render(data) -> str:
-    lines = [START, machine_sentence(data), setup(data), "", *table(data), "", agreement(data), END]
+    lines = [START, machine_sentence(data), setup(data), "", *table(data), "", agreement(data), "",
+             "Issues 17-19 (identification, the nonlinear simulation, the explorer):", "", *features_table(data), END]
     return "\n".join(lines) + "\n"
 
 
