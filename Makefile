@@ -4,7 +4,7 @@ VENV   := .venv
 PY     := $(VENV)/bin/python
 STAMP  := $(VENV)/.installed
 
-.PHONY: all venv derive verify test test-slow browser check-generated paper bench bench-readme clean browser
+.PHONY: all venv derive verify test test-slow browser check-generated paper bench bench-readme clean
 
 all: verify
 
