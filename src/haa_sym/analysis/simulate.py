@@ -317,23 +317,24 @@ class _Setup:
         K[:, o + m:o + 2 * m, o + 2 * m:] = np.eye(m)
         h = self.Ts / 2 ** LEVELS                       # the finest level's half step
         E = scipy.linalg.expm(K * h)
-        tops, hs = [], []
-        for _ in range(LEVELS + 1):                     # tops[i]: over Ts / 2^(LEVELS - i)
-            tops.append(E[:, :n].copy())
-            hs.append(h)
-            E, h = E @ E, 2 * h
+        tops = np.empty((LEVELS + 1, nt, n, size))     # tops[i]: over Ts / 2^(LEVELS - i)
+        hs = h * 2.0 ** np.arange(LEVELS + 1)
+        for i in range(LEVELS + 1):
+            tops[i] = E[:, :n]
+            if i < LEVELS:
+                E = E @ E
         lay = L.sim_plant_layout("etd", cx)
         out = np.zeros((nt, LEVELS, lay.size))
 
         def put(name, val):                              # val (nt, LEVELS, r', c') into its padded slot
-            r, c = lay.shape[name]
-            pad = np.zeros((nt, LEVELS, r, c))
-            pad[:, :, :val.shape[2], :val.shape[3]] = val
-            out[:, :, lay[name]] = pad.transpose(0, 1, 3, 2).reshape(nt, LEVELS, r * c)
+            r, c = lay.shape[name]                       # column-major: a view (.., c, r) of the slot
+            slot = out[:, :, lay[name]].reshape(nt, LEVELS, c, r)
+            slot[:, :, :val.shape[3], :val.shape[2]] = np.swapaxes(val, 2, 3)
 
-        full = np.stack([tops[LEVELS - j] for j in range(LEVELS)], axis=1)     # (nt, LEVELS, n, size)
-        half = np.stack([tops[LEVELS - j - 1] for j in range(LEVELS)], axis=1)
-        hj = np.array([hs[LEVELS - j] for j in range(LEVELS)])[None, :, None, None]
+        lev = np.arange(LEVELS)                          # level j: the step over Ts / 2^j and its half
+        full = tops[LEVELS - lev].swapaxes(0, 1)         # (nt, LEVELS, n, size), views
+        half = tops[LEVELS - lev - 1].swapaxes(0, 1)
+        hj = hs[LEVELS - lev][None, :, None, None]
         p1, p2, p3 = (full[..., o + k * m:o + (k + 1) * m] / hj ** (k + 1) for k in range(3))
         put("Ph", half[..., :n])
         put("Gh", half[..., n:o])
@@ -343,11 +344,10 @@ class _Setup:
         put("F1", hj * (p1 - 3 * p2 + 4 * p3))
         put("F2", hj * (p2 - 2 * p3))
         put("F3", hj * (-p2 + 4 * p3))
-        tile = np.ones((nt, LEVELS, 1, 1))
-        put("Fsel", tile * Fsel)
-        put("Fc", tile * fc[:, None])
-        put("inv_vs", tile * inv_vs)
-        put("lin", lin[:, None, :, None] * np.ones((1, LEVELS, 1, 1)))
+        put("Fsel", np.broadcast_to(Fsel, (nt, LEVELS, m, n)))
+        put("Fc", np.broadcast_to(fc[:, None], (nt, LEVELS, m, 1)))
+        put("inv_vs", np.full((nt, LEVELS, 1, 1), inv_vs))
+        put("lin", np.broadcast_to(lin[:, None, :, None], (nt, LEVELS, m, 1)))
         return out.ravel()
 
 
