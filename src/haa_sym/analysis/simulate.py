@@ -12,7 +12,8 @@ plant then runs to t_(k+1):
   with jitter, over the interval t_(k+1) - t_k = Ts + delta_k, exactly up to a 12-term series;
 * Coulomb friction (smooth model T = -Fc tanh(v / v_s)): substeps of the exponential
   Runge-Kutta method ETDRK4 (Cox and Matthews 2002: the linear part and a constant friction
-  torque exactly), 2^j per sample with j chosen per sample by step doubling against ``rtol``.
+  torque exactly), 2^j per sample with j chosen per sample by step doubling against
+  ``rtol`` x :data:`SAMPLE_TOL_FRACTION`.
 
 The loop over samples is generated C (``codegen/sim_kernels.py``, ``codegen/driver.c``).
 
@@ -58,7 +59,12 @@ DEFAULT_AMPLITUDE = {"disturbance-step": 1.0, "torque-step": 1.0, "impedance-ste
 #: The CSV's columns: time (s), theta (rad), velocity (rad/s), torque, torque_ref (Nm),
 #: voltage (V), current (A).
 CSV_COLUMNS = ("time",) + L.SIM_COLUMNS[:-1]
-DEFAULT_RTOL = 1e-6          # step-doubling error bound of the friction integrator, relative
+DEFAULT_RTOL = 1e-6          # error bound of the friction integrator's run, relative to each state's peak
+# Per sample, step doubling holds the difference of two levels to SAMPLE_TOL_FRACTION rtol: at
+# stick the samples' errors add up coherently (a creeping body errs the same way every sample),
+# measured on HyQ (docs/simulate.md: rotor friction, 5,000 samples) to 1.1e-8 of the peak at
+# rtol 1e-6, where a per-sample bound of rtol itself left 4e-6
+SAMPLE_TOL_FRACTION = 1e-3
 MAX_SUBSTEPS = 4096
 LEVELS = 13                  # friction substeps per sample: 1, 2, 4, ..., 4096
 # The friction slopes (fractions of Fc / v_s) a table may put into the exact linear part, by the
@@ -141,19 +147,6 @@ def _pack(lay: L.Slices, **parts) -> np.ndarray:
         r, c = lay.shape[name]
         v[lay[name]] = _pad(np.reshape(val, (-1, 1)) if np.ndim(val) < 2 else val, r, c).ravel(order="F")
     return v
-
-
-def _pack_many(lay: L.Slices, parts: list[dict]) -> np.ndarray:
-    """:func:`_pack` of many parameter sets at once, concatenated (one row each, flattened)."""
-    out = np.zeros((len(parts), lay.size))
-    for name in parts[0]:
-        r, c = lay.shape[name]
-        vals = [np.asarray(p[name], float) for p in parts]
-        v = np.stack([x.reshape(-1, 1) if x.ndim < 2 else x for x in vals])
-        pad = np.zeros((len(parts), r, c))
-        pad[:, :v.shape[1], :v.shape[2]] = v
-        out[:, lay[name]] = pad.transpose(0, 2, 1).reshape(len(parts), r * c)
-    return out.ravel()
 
 
 def _zoh(A, B, h):
@@ -301,43 +294,67 @@ class _Setup:
         self.A, self.Bu = A, Bu
         self.Bu_d = loop.plant.Gamma[:, iu]
 
-    def etd_levels(self, fractions=None):
-        """The ETDRK4 substep's matrices for 2^j substeps per sample, j = 0 .. LEVELS - 1
-        (h = Ts / 2^j); friction entry b has ``fractions[b]`` of its slope at v = 0, Fc / v_s,
-        moved into the linear part (integrated exactly) and out of the explicit stages.
+    def etd_tables(self, fractions, cx):
+        """The packed ETDRK4 substep parameters (``sim_plant_layout("etd", cx)``) of every row of
+        ``fractions`` (tables, one fraction per friction entry) and every level j = 0 .. LEVELS - 1
+        (2^j substeps per sample, h = Ts / 2^j), shape (len(fractions), LEVELS, plant size)
+        flattened: friction entry b of table c has ``fractions[c][b]`` of its slope at v = 0,
+        Fc / v_s, moved into the linear part (integrated exactly) and out of the explicit stages.
 
-        One expm at the finest half step of the block matrix [[A, B, W, 0, 0], [0, 0, 0, 0, 0],
-        [0, 0, 0, I, 0], [0, 0, 0, 0, I], 0] (W: the friction columns), whose exponential's top
-        row is [e^(A h), Gamma(h), h phi_1 W, h^2 phi_2 W, h^3 phi_3 W]; every coarser step by
-        squaring (expm's own scaling and squaring, continued)."""
+        Per table one expm at the finest half step of the block matrix [[A, B, W, 0, 0],
+        [0, 0, 0, 0, 0], [0, 0, 0, I, 0], [0, 0, 0, 0, I], 0] (W: the friction columns), whose
+        exponential's top row is [e^(A h), Gamma(h), h phi_1 W, h^2 phi_2 W, h^3 phi_3 W]; every
+        coarser step by squaring (expm's own scaling and squaring, continued). All tables at
+        once (batched expm and products): one table at a time, in Python, cost 0.05 s of a 0.08 s
+        friction run (HyQ, 64 tables)."""
         sel, col, fc = self.friction
         n, nu, m = self.nx, self.Bu.shape[1], len(sel)
+        fr = np.atleast_2d(np.asarray(fractions, float))
+        nt = fr.shape[0]
         Fsel = np.zeros((m, n))
         Fsel[np.arange(m), sel] = 1.0
-        lin = (np.zeros(m) if fractions is None else np.asarray(fractions)) * fc / self.limits.friction_velocity
-        A = self.A - col @ (lin[:, None] * Fsel)
-        size = n + nu + 3 * m
-        K = np.zeros((size, size))
-        o = n + nu
-        K[:n, :n], K[:n, n:o], K[:n, o:o + m] = A, self.Bu, col
-        K[o:o + m, o + m:o + 2 * m] = np.eye(m)
-        K[o + m:o + 2 * m, o + 2 * m:] = np.eye(m)
+        inv_vs = 1.0 / self.limits.friction_velocity
+        lin = fr * fc * inv_vs                                           # (nt, m)
+        size, o = n + nu + 3 * m, n + nu
+        K = np.zeros((nt, size, size))
+        K[:, :n, :n] = self.A - np.einsum("im,tm,mj->tij", col, lin, Fsel)
+        K[:, :n, n:o], K[:, :n, o:o + m] = self.Bu, col
+        K[:, o:o + m, o + m:o + 2 * m] = np.eye(m)
+        K[:, o + m:o + 2 * m, o + 2 * m:] = np.eye(m)
         h = self.Ts / 2 ** LEVELS                       # the finest level's half step
         E = scipy.linalg.expm(K * h)
-        steps = []
-        for _ in range(LEVELS + 1):                     # steps[i]: over Ts / 2^(LEVELS - i)
-            top = E[:n]
-            phis = [top[:, o + k * m:o + (k + 1) * m] / h ** (k + 1) for k in range(3)]
-            steps.append((top[:, :n], top[:, n:o], phis, h))
-            E, h = E @ E, 2 * h
-        out = []
-        for j in range(LEVELS):
-            P, G, (p1, p2, p3), hj = steps[LEVELS - j]
-            Ph, Gh, (p1h, _, _), _ = steps[LEVELS - j - 1]
-            out.append(dict(Ph=Ph, Gh=Gh, P=P, G=G, Qh=hj / 2 * p1h, F1=hj * (p1 - 3 * p2 + 4 * p3),
-                            F2=hj * (p2 - 2 * p3), F3=hj * (-p2 + 4 * p3), Fsel=Fsel, Fc=fc,
-                            inv_vs=1.0 / self.limits.friction_velocity, lin=lin))
-        return out
+        tops = np.empty((LEVELS + 1, nt, n, size))     # tops[i]: over Ts / 2^(LEVELS - i)
+        hs = h * 2.0 ** np.arange(LEVELS + 1)
+        for i in range(LEVELS + 1):
+            tops[i] = E[:, :n]
+            if i < LEVELS:
+                E = E @ E
+        lay = L.sim_plant_layout("etd", cx)
+        out = np.zeros((nt, LEVELS, lay.size))
+
+        def put(name, val):                              # val (nt, LEVELS, r', c') into its padded slot
+            r, c = lay.shape[name]                       # column-major: a view (.., c, r) of the slot
+            slot = out[:, :, lay[name]].reshape(nt, LEVELS, c, r)
+            slot[:, :, :val.shape[3], :val.shape[2]] = np.swapaxes(val, 2, 3)
+
+        lev = np.arange(LEVELS)                          # level j: the step over Ts / 2^j and its half
+        full = tops[LEVELS - lev].swapaxes(0, 1)         # (nt, LEVELS, n, size), views
+        half = tops[LEVELS - lev - 1].swapaxes(0, 1)
+        hj = hs[LEVELS - lev][None, :, None, None]
+        p1, p2, p3 = (full[..., o + k * m:o + (k + 1) * m] / hj ** (k + 1) for k in range(3))
+        put("Ph", half[..., :n])
+        put("Gh", half[..., n:o])
+        put("P", full[..., :n])
+        put("G", full[..., n:o])
+        put("Qh", hj / 2 * (half[..., o:o + m] / (hj / 2)))
+        put("F1", hj * (p1 - 3 * p2 + 4 * p3))
+        put("F2", hj * (p2 - 2 * p3))
+        put("F3", hj * (-p2 + 4 * p3))
+        put("Fsel", np.broadcast_to(Fsel, (nt, LEVELS, m, n)))
+        put("Fc", np.broadcast_to(fc[:, None], (nt, LEVELS, m, 1)))
+        put("inv_vs", np.full((nt, LEVELS, 1, 1), inv_vs))
+        put("lin", np.broadcast_to(lin[:, None, :, None], (nt, LEVELS, m, 1)))
+        return out.ravel()
 
 
 def _run(loop, setup: _Setup, P_gain, D_gain, controller=None):
@@ -368,7 +385,7 @@ def _run(loop, setup: _Setup, P_gain, D_gain, controller=None):
         return run(setup.n_sub0, setup.plant_parts)[0], {"integrator": "zoh", "n_sub": 1}
     # Coulomb friction: the error is measured against each state's peak in the same run without
     # friction (exact ZOH, a fraction of the cost); per sample the driver halves the substep
-    # until two successive levels agree within rtol of those peaks and keeps the finer one
+    # until two successive levels agree within SAMPLE_TOL_FRACTION rtol of those peaks and keeps the finer one
     # (RK4: its local error is about 1/15 of the difference; the local errors of the samples
     # add up over a run, hence the margin)
     _y, peaks = run(1, dict(Phi=loop.plant.Phi, Gamma=setup.Bu_d), kind="zoh", peaks=True)
@@ -379,17 +396,18 @@ def _run(loop, setup: _Setup, P_gain, D_gain, controller=None):
     # the torque is nearly constant (the tables depend on the plant only: built once per setup)
     nf = len(setup.friction[0])
     slopes = SLOPES[min(len(SLOPES) - 1, nf - 1)]
-    if getattr(setup, "etd_table", None) is None or setup.etd_table[0] != cx:
+    if getattr(setup, "etd_cache", None) is None or setup.etd_cache[0] != cx:
         K = len(slopes)              # table index: sum_r (slope index of row r) K^r (driver.c)
         combos = [[slopes[i // K ** r % K] for r in range(nf)] for i in range(K ** nf)]
-        parts = [p for c in combos for p in setup.etd_levels(c)]
-        setup.etd_table = (cx, _pack_many(L.sim_plant_layout("etd", cx), parts))
+        setup.etd_cache = (cx, setup.etd_tables(combos, cx))
     rows = np.zeros((nf, cx))
     rows[np.arange(nf), setup.friction[0]] = 1.0 / setup.limits.friction_velocity
-    y, lev = run(LEVELS, setup.etd_table[1], scale=scale, tol=setup.rtol, stick_rows=rows, slopes=slopes)
+    y, lev = run(LEVELS, setup.etd_cache[1], scale=scale, tol=setup.rtol * SAMPLE_TOL_FRACTION,
+                 stick_rows=rows, slopes=slopes)
     subs = 2.0 ** lev
     return y, {"integrator": "etdrk4, substeps per sample by step doubling", "n_sub": float(subs.mean()),
-               "n_sub_max": int(subs.max()), "rtol": setup.rtol}
+               "n_sub_max": int(subs.max()), "rtol": setup.rtol,
+               "sample_tol": setup.rtol * SAMPLE_TOL_FRACTION}
 
 
 def _result(loop, setup, P_gain, D_gain, y, info):
@@ -444,7 +462,9 @@ def simulate(loop, P_gain: float, D_gain: float, *, limits: Limits | None = None
     seed : int
         Seed of the torque noise and the jitter (numpy ``default_rng``).
     rtol : float
-        Error bound of the friction integrator (relative to each signal's peak).
+        Error bound of the friction integrator (relative to each state's peak over the run
+        without friction); per sample the step-doubling difference is held to
+        ``rtol`` x :data:`SAMPLE_TOL_FRACTION`.
     chirp_f1 : float, optional
         End frequency of the chirp, Hz (default 0.1 / Ts); it starts at :data:`CHIRP_F0`.
 

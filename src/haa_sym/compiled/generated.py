@@ -437,7 +437,7 @@ class Evaluators:
         y = np.empty((n, fs.numel_out(2)))
         psize = fp.numel_in(3)
         extra = np.empty(n) if scale is not None else (np.zeros(x.size) if peaks else None)
-        lev = 0
+        lev, err_last = 0, tol + 1 if tol is not None else 0.0
 
         def table(xx):
             index = sum(int(np.argmin(np.abs(1 - np.tanh(rows[r] @ xx) ** 2 - slopes))) * len(slopes) ** r
@@ -458,13 +458,16 @@ class Evaluators:
                 for _ in range(n_sub):
                     x = np.asarray(fp(x, u, exo[-1, k], plant)).ravel()
                 continue
-            lev = min(max(lev - 1, 0), n_sub - 2)
+            # driver.c's rule: the pair one level coarser than the level kept last, two when
+            # the last difference was below tol / 32
+            lev = min(max(lev - (2 if err_last <= tol / 32.0 else 1), 0), n_sub - 2)
             xa = advance(x, u, exo[-1, k], lev)
             while True:
                 xb = advance(x, u, exo[-1, k], lev + 1)
                 err = np.max(np.abs(xa - xb) / scale)
                 lev += 1
                 if err <= tol or lev + 1 >= n_sub:
+                    err_last = err
                     break
                 xa = xb
             x = xb
