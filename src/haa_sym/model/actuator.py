@@ -277,7 +277,6 @@ def _check_structure(t: Topology) -> None:
     if not t.bodies:
         raise _error(f"{src} [bodies]: no bodies; allowed: at least one [bodies.<name>] table "
                      "(the load after the gearbox)")
-    seen: dict[str, str] = {}
     for kind, items in (("bodies", t.bodies), ("couplings", t.couplings)):
         for it in items:
             if not isinstance(it.name, str) or not _NAME.match(it.name) or it.name in _RESERVED:
