@@ -57,10 +57,11 @@ def sample_function(nx: int, nc: int) -> ca.Function:
     xc_next = ca.mtimes(_mat(par, lay, "Ac"), xc) + ca.mtimes(_mat(par, lay, "Bc"), uin)
     emf = ca.mtimes(row["c_emf"], x)
     # the drive's current limit as a voltage window: the voltages whose steady current at the
-    # present speed is within +-I_max (docs/simulate.md); then the supply's +-V_max
-    hi = ca.fmin(p["V_max"], p["RI_max"] + emf)
-    lo = ca.fmax(-p["V_max"], -p["RI_max"] + emf)
-    V = ca.fmin(ca.fmax(out[0], lo), hi)
+    # present speed is within +-I_max (docs/simulate.md); then the supply's +-V_max, last, so that
+    # it holds also where the back-EMF puts the whole window outside it (a window below -V_max
+    # gave a voltage beyond the supply when both were merged into one clip)
+    V_I = ca.fmin(ca.fmax(out[0], -p["RI_max"] + emf), p["RI_max"] + emf)
+    V = ca.fmin(ca.fmax(V_I, -p["V_max"]), p["V_max"])
     sat = ca.if_else(V == out[0], 0, 1)
     y = ca.vertcat(theta, ca.mtimes(row["c_v"], x), T, out[1], V, ca.mtimes(row["c_I"], x), sat)
     u = ca.vertcat(V, e["T_dist"])

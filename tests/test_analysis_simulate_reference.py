@@ -89,12 +89,11 @@ def hand_simulation(params, P, D, lim: Limits, n, *, T_ff=0.0, T_dist=0.0, jitte
         integ += Ts * e
         V = P_t * e + I_t * integ + VC * v
         emf = kw * x[2]
-        hi, lo = math.inf, -math.inf
-        if lim.V_max:
-            hi, lo = min(hi, lim.V_max), max(lo, -lim.V_max)
+        # the current window first, then the supply (which wins where the window lies outside it)
         if lim.I_max:
-            hi, lo = min(hi, R * lim.I_max + emf), max(lo, -R * lim.I_max + emf)
-        V = min(max(V, lo), hi)
+            V = min(max(V, -R * lim.I_max + emf), R * lim.I_max + emf)
+        if lim.V_max:
+            V = min(max(V, -lim.V_max), lim.V_max)
         out["theta"][k], out["velocity"][k], out["torque"][k] = th, x[6], T
         out["voltage"][k], out["current"][k] = V, x[0]
         t1 = (k + 1) * Ts + (0.0 if jitter_eps is None else jitter_eps[k + 1])

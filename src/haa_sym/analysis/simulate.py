@@ -38,6 +38,7 @@ from haa_sym.analysis.sweep import blas_limits
 from haa_sym.compiled import layout as L
 from haa_sym.compiled.generated import evaluators
 from haa_sym.errors import ParameterError
+from haa_sym.io.budget import BYTES_PER_SAMPLE, check_memory
 from haa_sym.loop import loop_first
 from haa_sym.loop.plant import continuous_plant
 from haa_sym.loop.statespace import controller_batch
@@ -71,7 +72,8 @@ LEVELS = 13                  # friction substeps per sample: 1, 2, 4, ..., 4096
 # number of friction entries (1, 2, 3, 4): len(SLOPES)^n tables of LEVELS levels each
 SLOPES = ((0.0, 0.03, 0.06, 0.125, 0.25, 0.5, 0.75, 1.0), (0.0, 0.03, 0.06, 0.125, 0.25, 0.5, 0.75, 1.0),
           (0.0, 0.1, 0.3, 1.0), (0.0, 1.0))
-MAX_SAMPLES = 50_000_000     # 7 columns of float64: 2.8 GB
+# a hard cap whatever the memory; the memory budget (io.budget.BYTES_PER_SAMPLE) refuses earlier
+MAX_SAMPLES = 50_000_000
 CHIRP_F0 = 0.1               # Hz
 JITTER_CLIP = 3.0            # the sample offsets are Gaussian clipped to +-3 sigma
 # |lambda_max delta| / n_sub of each jitter substep's series (codegen/sim_kernels.py)
@@ -195,9 +197,12 @@ class _Setup:
         if n > MAX_SAMPLES:
             raise ParameterError(f"duration = {duration!r} s is {n} samples at Ts = {Ts} s; allowed: at most "
                                  f"{MAX_SAMPLES} samples ({MAX_SAMPLES * Ts:g} s)")
+        check_memory(n * BYTES_PER_SAMPLE, f"duration = {duration!r} s ({n} samples at Ts = {Ts:g} s)")
         if not isinstance(seed, (int, np.integer)) or isinstance(seed, bool) or seed < 0:
             raise ParameterError(f"seed = {seed!r}; allowed: an integer >= 0")
         lim = params.limits if limits is None else limits
+        # the file's [limits] are named by the file, as parse_limits names them
+        where = f"{params.source} [limits]" if limits is None else "limits"
         if not isinstance(lim, Limits):
             raise ParameterError(f"limits = {lim!r}; allowed: a haa_sym.model.limits.Limits or None "
                                  "(the parameter file's [limits])")
@@ -226,10 +231,10 @@ class _Setup:
         friction = {b: v for b, v in lim.friction.items() if v > 0}
         jitter = lim.jitter or 0.0
         if friction and jitter:
-            raise ParameterError("[limits]: jitter together with Coulomb friction is not supported; allowed: "
+            raise ParameterError(f"{where}: jitter together with Coulomb friction is not supported; allowed: "
                                  "one of them (docs/simulate.md)")
         if jitter and JITTER_CLIP * jitter >= Ts / 2:
-            raise ParameterError(f"[limits]: jitter = {jitter!r} s rms; allowed: < Ts / {2 * JITTER_CLIP:g} = "
+            raise ParameterError(f"{where}: jitter = {jitter!r} s rms; allowed: < Ts / {2 * JITTER_CLIP:g} = "
                                  f"{Ts / (2 * JITTER_CLIP):g} s (the sample instants must stay ordered)")
         # exogenous inputs
         rng = np.random.default_rng(seed)
@@ -281,7 +286,7 @@ class _Setup:
             rho = np.abs(np.linalg.eigvals(A)).max()
             self.n_sub0 = max(1, int(math.ceil(rho * 2 * JITTER_CLIP * jitter / JITTER_STEP_BOUND)))
             if self.n_sub0 > MAX_SUBSTEPS:
-                raise ParameterError(f"[limits]: jitter = {jitter!r} s rms needs {self.n_sub0} substeps for this "
+                raise ParameterError(f"{where}: jitter = {jitter!r} s rms needs {self.n_sub0} substeps for this "
                                      f"plant; allowed: a jitter below {MAX_SUBSTEPS * JITTER_STEP_BOUND / (2 * JITTER_CLIP * rho):g} s")
             h = Ts / self.n_sub0
             Phi, Gam = _zoh(A, Bu, h)

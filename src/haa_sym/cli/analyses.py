@@ -29,6 +29,7 @@ from haa_sym.io.outputs import Transaction, csv_text
 from haa_sym.io.progress import message
 from haa_sym.loop import ClosedLoop, LoopOptions
 from haa_sym.loop.options import ALLOWED as OPTION_ALLOWED
+from haa_sym.model.limits import limit_units
 from haa_sym.model.params import ALIASES, actuator_path, bundled_actuators, load_params, set_keys
 from haa_sym.paper.reproduce import reproduce
 
@@ -98,15 +99,21 @@ def _nonlinear_regions(args, loop, out, plot, P, D) -> int:
     def figure():
         b = boundaries(loop, P_range=(P.min(), P.max()), D_range=(D.min(), D.max())) \
             if loop.options.conventions.pm_loop == "impedance" else None
+        # the title says what was simulated: the classes depend on the limits, the experiment and the runs' length
         return _plots().plot_nonlinear_region(m, nl.P_gain, nl.D_gain, nl.class_names,
-                                              title=args.figure_title, boundary=b)
-    _write_outputs(out, plot, write, figure)
+                                              title=f"{args.figure_title}\nsimulated: {runs}; limits: {lim}",
+                                              boundary=b)
     counts = ", ".join(f"{n} {c}" for c, n in nl.counts().items())
-    lim = ", ".join(f"{k} = {v:g}" if isinstance(v, (int, float)) else f"{k} = {v}"
+    units = limit_units(loop.params.plant.topology.body_names)
+    lim = ", ".join((f"{k} = {v:g}" + (f" {units[k]}" if units.get(k) not in (None, "-") else ""))
+                    if isinstance(v, (int, float)) else f"{k} = {v}"
                     for k, v in nl.meta["limits"].items()) or "none"
+    unit = "rad" if nl.meta["experiment"] in ("impedance-step", "deflection") else "Nm"
+    runs = (f"{nl.meta['experiment']}, A = {nl.meta['amplitude']:g} {unit}, {nl.meta['duration']:g} s each"
+            + (f" (reruns up to {nl.meta['max_duration']:g} s)" if nl.meta["max_duration"] > nl.meta["duration"] else ""))
+    _write_outputs(out, plot, write, figure)
     print(f"{m.stable.size} points, linear ({m.meta['method']}): {m.stable.sum()} stable; simulated with "
-          f"{lim} ({nl.meta['experiment']}, A = {nl.meta['amplitude']:g}, {nl.meta['duration']:g} s each): {counts}"
-          + _wrote(out))
+          f"{lim} ({runs}): {counts}" + _wrote(out))
     if nl.counts()["growing"]:
         message(f"growing: still growing when the runs ended (up to {nl.meta['max_duration']:g} s); a longer "
                 "--max-duration may show limit cycles there (docs/simulate.md, Nonlinear maps)")

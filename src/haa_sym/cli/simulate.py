@@ -1,13 +1,17 @@
 """``haa-sym simulate``: the nonlinear sampled-data simulation of one gain point (docs/simulate.md)."""
 from __future__ import annotations
 
+import math
+
 import numpy as np
 
 from haa_sym.analysis.describing import describing_function, limit_cycles, limit_nonlinearities
 from haa_sym.analysis.oscillation import limit_cycle
 from haa_sym.analysis.simulate import CSV_COLUMNS, DEFAULT_AMPLITUDE, EXPERIMENTS, simulate
+from haa_sym.io.budget import CSV_BYTES_PER_SAMPLE, check_memory
 from haa_sym.io.outputs import csv_text
 from haa_sym.loop import ClosedLoop
+from haa_sym.model.limits import limit_units
 
 from haa_sym.cli.common import (TITLE_HELP, _check_out, _common, _gain_flags, _loaded, _params,
                                 _parse_options, _plots, _points, _write_outputs, _wrote, figure_title)
@@ -24,10 +28,26 @@ def _cmd_simulate(args) -> int:
         _plots().check_title(args.title, "--title")
     P, D = _points(args, "simulate")
     loop = ClosedLoop(params, options)
+    if out or plot:
+        # the CSV's formatted rows and the figure cost about 5x the simulation itself: refused
+        # here, before the run (a bad duration is left to simulate's own message)
+        d, Ts = args.duration, params.controller.Ts
+        if math.isfinite(d) and d > 0:
+            n = int(math.ceil(d / Ts - 1e-9)) + 1
+            check_memory(n * CSV_BYTES_PER_SAMPLE, f"--duration {d:g} ({n} samples at Ts = {Ts:g} s, "
+                                                   "written to --out / --plot)")
     title = figure_title(loop, file_params, args.configuration, args.title)
     s = simulate(loop, float(P[0]), float(D[0]), experiment=args.experiment, amplitude=args.amplitude,
                  duration=args.duration, seed=args.seed)
     cols = s.columns()
+    # the figure says what was run: the base title names only the actuator and its overrides
+    unit = "rad" if args.experiment in ("impedance-step", "deflection") else "Nm"
+    units = limit_units(loop.params.plant.topology.body_names)
+    lim = ", ".join((f"{k} = {v:g}" + (f" {units[k]}" if units.get(k) not in (None, "-") else ""))
+                    if isinstance(v, (int, float)) else f"{k} = {v}"
+                    for k, v in s.meta["limits"].items()) or "none (the linear loop)"
+    title += (f"\n{args.experiment}, A = {s.meta['amplitude']:g} {unit}; P_gain = {float(P[0]):g} Nm/rad, "
+              f"D_gain = {float(D[0]):g} Nms/rad; limits: {lim}")
     rows = [{c: f"{cols[c][k]:.12g}" for c in CSV_COLUMNS} for k in range(len(s.time))]
     cycle = (f"limit cycle: amplitude {s.cycle_amplitude:.6g} Nm, frequency {s.cycle_frequency:.6g} Hz"
              if s.limit_cycle else "no limit cycle")
@@ -39,9 +59,7 @@ def _cmd_simulate(args) -> int:
     integ = m["integrator"] + (f", {m['n_sub']:.3g} substeps per sample" if m["n_sub"] > 1 else "")
     if "n_sub_max" in m:
         integ += f" (at most {m['n_sub_max']}; rtol {m['rtol']:g})"
-    lim = ", ".join(f"{k} = {v:g}" if isinstance(v, (int, float)) else f"{k} = {v}"
-                    for k, v in m["limits"].items()) or "none (the linear loop)"
-    print(f"{args.experiment} (A = {s.meta['amplitude']:g}), {len(s.time)} samples over {s.time[-1]:.6g} s; "
+    print(f"{args.experiment} (A = {s.meta['amplitude']:g} {unit}), {len(s.time)} samples over {s.time[-1]:.6g} s; "
           f"limits: {lim}; {integ}")
     print(f"time in saturation: {s.saturation_time:.6g} s ({100 * s.saturation_time / max(args.duration, 1e-300):.3g} %); "
           f"{cycle} (torque signal, last half of the run)" + _wrote(out))

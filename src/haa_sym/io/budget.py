@@ -9,7 +9,10 @@ e.g. ``HAA_SYM_MEMORY_BUDGET=2G``). The estimates are peak bytes measured with `
   frequency (the 7 x 7 complex resolvent of every frequency dominates);
 * a sweep over gain points (:mod:`haa_sym.analysis.sweep`): 30-32 B per point and frequency of the block
   evaluated at once (``regions.CHUNK`` points in a region map, every point in ``passivity``),
-  plus 44 B per point for the result arrays of a region map.
+  plus 44 B per point for the result arrays of a region map;
+* a simulation (:mod:`haa_sym.analysis.simulate`): 167-238 B per sample (the inputs, the state
+  trace, the columns; the friction integrator's the most), and ``haa-sym simulate`` 1.04-1.14 kB
+  per sample with its CSV text and figure (the rows are formatted strings).
 
 Example
 -------
@@ -25,11 +28,13 @@ import re
 from haa_sym.errors import ParameterError
 
 __all__ = ["MEMORY_BUDGET_BYTES", "memory_budget", "check_memory", "sweep_bytes", "BYTES_PER_OMEGA",
-           "BYTES_PER_POINT", "BYTES_PER_CELL"]
+           "BYTES_PER_POINT", "BYTES_PER_CELL", "BYTES_PER_SAMPLE", "CSV_BYTES_PER_SAMPLE"]
 
 BYTES_PER_OMEGA = 2048      # loop coefficients, per frequency (measured 1.6-1.7 kB)
 BYTES_PER_POINT = 64        # result arrays of a region map, per gain point (measured 44 B)
 BYTES_PER_CELL = 40         # sweep products, per gain point x frequency (measured 30-32 B)
+BYTES_PER_SAMPLE = 256      # a simulation, per sample (measured 167-238 B)
+CSV_BYTES_PER_SAMPLE = 1280  # haa-sym simulate with --out and --plot, per sample (measured 1.04-1.14 kB)
 
 
 def _physical_memory() -> int:

@@ -616,7 +616,7 @@ def plot_simulation(time, columns: dict, saturated=None, title: str = "", cycle:
     voltage (saturated samples marked) and current over ``time`` (s). ``columns`` maps the CSV
     names to arrays; ``cycle`` is a note on a detected limit cycle (shown in the torque panel)."""
     t = np.asarray(time)
-    fig, axes = plt.subplots(4, 1, figsize=(6.4, 8.0 + (0.6 if title else 0)), sharex=True,
+    fig, axes = plt.subplots(4, 1, figsize=(6.4, 8.0 + (0.6 if title else 0) + 0.12 * cycle.count("\n")), sharex=True,
                              constrained_layout=True)
     axes[0].plot(t, columns["theta"], color="k", label="theta (encoder)")
     axes[0].set_ylabel("theta (rad)")
@@ -626,7 +626,10 @@ def plot_simulation(time, columns: dict, saturated=None, title: str = "", cycle:
     axes[1].plot(t, columns["torque"], color="k", label="torque (read by the loop)")
     axes[1].plot(t, columns["torque_ref"], color="tab:orange", lw=0.8, label="torque reference")
     axes[1].set_ylabel("torque (Nm)")
-    axes[1].legend(fontsize=8, title=cycle or None, title_fontsize=8)
+    axes[1].legend(fontsize=8)
+    if cycle:
+        # above the panel, not in its legend: a legend this long covered the trace it describes
+        axes[1].set_title(cycle, fontsize=7, loc="left")
     axes[2].plot(t, columns["voltage"], color="k")
     if saturated is not None and np.any(saturated):
         sat = np.asarray(saturated, bool)

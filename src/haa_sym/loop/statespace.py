@@ -19,6 +19,8 @@ from __future__ import annotations
 
 import numpy as np
 
+from haa_sym.errors import ParameterError
+
 __all__ = ["CUTS", "INPUT_NAMES", "OUTPUT_NAMES", "CONTROLLER_INPUTS", "CONTROLLER_OUTPUTS",
            "closed_loop_batch", "closed_loop_eigenvalues", "controller_batch", "to_statespace"]
 
@@ -175,6 +177,13 @@ def closed_loop_eigenvalues(loop, points, chunk_bytes: int = 64 << 20) -> np.nda
     for c in range(0, pts.shape[1], step):
         sl = slice(c, c + step)
         A = closed_loop_batch(loop, *pts[:, sl])[0]
+        bad = ~np.isfinite(A).all(axis=(1, 2))
+        if bad.any():
+            # finite inputs whose products overflow (beta = 1e308): numpy's LinAlgError named nothing
+            P, D, b, a = pts[:, sl][:, np.argmax(bad)]
+            raise ParameterError(f"the closed loop at P_gain = {P:g}, D_gain = {D:g}, beta = {b:g}, alpha = {a:g} "
+                                 "overflows (its state matrix is not finite); allowed: gains and parameters "
+                                 "whose closed loop is finite")
         out[sl] = np.linalg.eigvals(A)
     return out
 
