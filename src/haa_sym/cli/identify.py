@@ -110,7 +110,7 @@ def run(args) -> int:
         if not (lo > 0 and np.isfinite(hi)):
             raise ParameterError(f"--fit {k}: these logs do not determine it (fitted {v:.6g}, ci95 {lo:.3g} .. "
                                  f"{hi:.3g}); allowed: keys the logs observe (fit fewer keys, log more outputs, a "
-                                 "richer input)")
+                                 "richer input; the time column in s)")
     date = result.meta["date"]
     text = fitted_text(Path(path).read_text(encoding="utf-8"), str(path), file_params, result, date)
     with Transaction() as tx:

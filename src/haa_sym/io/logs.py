@@ -65,6 +65,9 @@ def _read_rows(path: Path, label: str) -> tuple[list[str], np.ndarray, bytes]:
     if not lines:
         raise ParameterError(f"{label}: empty file; allowed: a CSV with a header line (time and signals)")
     header = [h.strip() for h in next(csv.reader(lines[:1]))]
+    if len(header) == 1 and any(sep in header[0] for sep in ";\t"):
+        # a spreadsheet's ';' or a tab export would otherwise be named as a number that fails to parse
+        raise ParameterError(f"{label}: header {header[0]!r} is one column; allowed: comma-separated columns")
     data = _fast_body(lines[1:], len(header))
     if data is not None:
         return header, data, raw
@@ -144,8 +147,8 @@ def read_log(path: str | Path, inputs: tuple[str, ...], outputs: tuple[str, ...]
     dt = np.diff(t)
     if np.any(dt <= 0):
         i = int(np.flatnonzero(dt <= 0)[0])
-        raise ParameterError(f"{label}: time is not increasing at data row {i + 2} (t = {t[i + 1]!r} after "
-                             f"{t[i]!r}); allowed: strictly increasing time stamps (s)")
+        raise ParameterError(f"{label}: time is not increasing at data row {i + 2} (t = {float(t[i + 1])!r} after "
+                             f"{float(t[i])!r}); allowed: strictly increasing time stamps (s)")
     mean = float((t[-1] - t[0]) / (t.size - 1))
     jitter = float(np.max(np.abs(dt - mean)) / mean)
     sampling = {"mean_period": mean, "jitter": jitter, "jitter_rms": float(np.std(dt) / mean),
