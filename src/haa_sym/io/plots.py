@@ -680,11 +680,18 @@ def plot_identify(result, title: str = "", max_points: int = 4000):
         mag, ph, coh = axes[1, i], axes[2, i], axes[3, i]
         # H1 only where the coherence says the measurement carries the input (>= 0.5)
         H1 = np.where(bode["coherence"][i] >= 0.5, bode["H1"][i], np.nan)
-        for G, style in ((H1, dict(color="0.75", lw=3.0, label="H1 (Welch), coherence >= 0.5")),
-                         (bode["initial"][i], dict(color="C3", lw=0.8, ls="--", label="model, initial")),
-                         (bode["fitted"][i], dict(color="C0", lw=0.8, label="model, fitted"))):
+        # H1's phase as its angle from the fitted model's, added to that model's unwrapped phase:
+        # np.unwrap over the NaN gaps of the coherence mask turns every later point into NaN (the
+        # measured phase vanished), and unwrapping noisy H1 alone can land 360 deg off the model
+        fitted_ph = np.unwrap(np.angle(bode["fitted"][i]))
+        for G, style, phase in (
+                (H1, dict(color="0.75", lw=3.0, label="H1 (Welch), coherence >= 0.5"),
+                 fitted_ph + np.angle(H1 / bode["fitted"][i])),
+                (bode["initial"][i], dict(color="C3", lw=0.8, ls="--", label="model, initial"),
+                 np.unwrap(np.angle(bode["initial"][i]))),
+                (bode["fitted"][i], dict(color="C0", lw=0.8, label="model, fitted"), fitted_ph)):
             mag.loglog(w, np.abs(G), **style)
-            ph.semilogx(w, np.degrees(np.unwrap(np.angle(G))), **style)
+            ph.semilogx(w, np.degrees(phase), **style)
         mag.set_ylabel(f"|{o} / {result.inputs[0]}|")
         mag.legend(fontsize=7)
         ph.set_ylabel("phase (deg)")
