@@ -159,15 +159,18 @@ def read_log(path: str | Path, inputs: tuple[str, ...], outputs: tuple[str, ...]
     if jitter > UNIFORM_JITTER:
         grid = t[0] + mean * np.arange(t.size)
         grid[-1] = min(grid[-1], t[-1])
-        held = np.clip(np.searchsorted(t, grid, side="right") - 1, 0, t.size - 1)
-        # an input is held between its stamps (the zero-order hold); an output is a sample of a
-        # continuous signal, interpolated
+        # an input is held between its stamps (the zero-order hold): the grid interval [g_k, g_k+1)
+        # takes the value in effect at its middle, the one that covers most of it. (The value in
+        # effect at g_k itself is the previous sample's whenever stamp k lands a hair after g_k,
+        # about half of them: the input shifted by one sample, which biased a fit even at 1e-5
+        # jitter.) An output is a sample of a continuous signal, interpolated
+        held = np.clip(np.searchsorted(t, grid + 0.5 * mean, side="right") - 1, 0, t.size - 1)
         cols = {k: v[held] if k in inputs else np.interp(grid, t, v) for k, v in cols.items()}
         sampling["resampled"] = True
     for k in inputs[:1]:           # the drive's input must excite it; a port torque may stay 0
         v = cols[k]
         if np.ptp(v) <= 1e-12 * max(1.0, float(np.max(np.abs(v)))):
-            raise ParameterError(f"{label}: input {k} is constant ({v[0]!r}); allowed: an input that "
+            raise ParameterError(f"{label}: input {k} is constant ({float(v[0])!r}); allowed: an input that "
                                  "excites the drive (a band-limited random signal or a chirp)")
     return Log(path.name, mean, {k: np.ascontiguousarray(cols[k]) for k in needed}, sampling,
                hashlib.sha256(raw).hexdigest(), str(path))
