@@ -42,8 +42,9 @@ def test_small_jitter_is_resampled_inputs_held_outputs_interpolated(tmp_path):
     grid = 1e-3 * np.arange(n)
     # outputs: linear interpolation of the samples onto the uniform grid (independent: numpy.interp)
     np.testing.assert_allclose(log.signals["torque"], np.interp(grid, t, y), rtol=0, atol=1e-12)
-    # inputs: the value held since the last stamp at or before each grid time
-    idx = np.array([np.max(np.flatnonzero(t <= g)) for g in grid])
+    # inputs: the value in effect at the middle of each grid interval (held since the last stamp
+    # at or before g + Ts/2: the sample that covers most of [g, g + Ts))
+    idx = np.array([np.max(np.flatnonzero(t <= g + 0.5e-3)) for g in grid])
     np.testing.assert_array_equal(log.signals["voltage"], v[idx])
 
 

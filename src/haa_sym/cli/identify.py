@@ -10,8 +10,11 @@ import argparse
 import sys
 from pathlib import Path
 
+import numpy as np
+
 from haa_sym.errors import ParameterError
 from haa_sym.fit.fitted_file import fitted_text
+from haa_sym.design.tune import NOMINAL
 from haa_sym.fit.identify import INPUT_MODES, Experiment, FitOptions, identify
 from haa_sym.io.formats import save_json
 from haa_sym.io.logs import MAX_JITTER, OUTPUTS, read_log
@@ -87,6 +90,9 @@ def run(args) -> int:
         raise ParameterError(f"--configuration given {len(confs)} times for {len(args.log)} logs; allowed: once "
                              "(every log) or once per --log")
     per_log = confs * len(args.log) if len(confs) == 1 else (confs or [None] * len(args.log))
+    # "nominal" names the file's own values, as in tune and the reports: pairs a nominal log with
+    # a configuration's log (--configuration nominal --configuration heavy)
+    per_log = [None if c == NOMINAL else c for c in per_log]
     loop_options = _parse_options(args.option) if inputs[0] == "torque_ref" else None
     experiments = []
     for log_path, conf in zip(args.log, per_log):
@@ -98,6 +104,13 @@ def run(args) -> int:
     loop = ClosedLoop(experiments[0].params, loop_options, basis=False)
     result = identify(experiments, keys, inputs, outputs, FitOptions(), loop_options,
                       provenance={**loop.provenance(), "params_file": str(path)}, figure_data=plot is not None)
+    for k, v, (lo, hi) in zip(result.keys, result.value, result.ci95):
+        # an interval reaching 0 or infinity: the logs do not determine the key (a fitted file cannot
+        # carry it, and a zero-width one from a dropped direction would claim the opposite)
+        if not (lo > 0 and np.isfinite(hi)):
+            raise ParameterError(f"--fit {k}: these logs do not determine it (fitted {v:.6g}, ci95 {lo:.3g} .. "
+                                 f"{hi:.3g}); allowed: keys the logs observe (fit fewer keys, log more outputs, a "
+                                 "richer input; the time column in s)")
     date = result.meta["date"]
     text = fitted_text(Path(path).read_text(encoding="utf-8"), str(path), file_params, result, date)
     with Transaction() as tx:
@@ -117,6 +130,10 @@ def run(args) -> int:
         print(f"haa-sym: warning: the fitted keys are nearly indistinguishable in these logs (condition number "
               f"{result.meta['condition_number']:.3g} of the scaled normal matrix): the intervals are not reliable; "
               "fit fewer keys or log more outputs", file=sys.stderr)
+    if not result.meta["converged"]:
+        print(f"haa-sym: warning: the fit stopped at the iteration limit ({FitOptions().max_iterations} per pass) "
+              "while the error still fell: the values and intervals are not a minimum (check the log's time unit, "
+              "seconds, and the start values)", file=sys.stderr)
     for k, v, v0, (lo, hi) in zip(result.keys, result.value, result.initial, result.ci95):
         print(f"{k} = {v:.6g} (ci95 {lo:.6g} .. {hi:.6g}; initial {v0:.6g})")
     rms = ", ".join(f"{o} {result.rms_initial[o]:.3g} -> {result.rms_fitted[o]:.3g}" for o in outputs)

@@ -454,7 +454,8 @@ def tune(params, options: LoopOptions | None = None, tune_options: TuneOptions |
         raise ParameterError(
             f"tune: no PI of the search grid meets the targets (pm_deg = {opts.pm_deg:g}, gm_db = {opts.gm_db:g}) at every "
             f"configuration; most often missed: {what} at {prob.name(k)}; allowed: looser targets, a wider "
-            f"integral_range / lead_range, or another beta")
+            f"integral_range / lead_range (--integral-range / --lead-range), or another beta (the file's "
+            f"[controller] beta)")
 
     best = {"obj": -np.inf}
 

@@ -49,6 +49,14 @@ class FitOptions:
         Largest change of a log-parameter per iteration (1 = a factor e).
     first_pass_tolerance : float
         The first pass (signal-scaled weights) stops at this relative decrease.
+    reweight_rtol : float
+        The noise-weighted pass is repeated, each time with the noise levels of the residuals it
+        left, until no output's level changes by more than this fraction (default 0.05): the
+        first pass stops loosely, so its residuals can still carry model error, and weights taken
+        from them alone made the values and intervals depend on the start (intervals 7x wider
+        from a start 4-40x off than from one 20 % off, on the same log).
+    max_reweights : int
+        At most this many noise-weighted passes (default 5).
     """
 
     min_periods: float = 3.0
@@ -56,6 +64,8 @@ class FitOptions:
     tolerance: float = 1e-10
     max_step: float = 1.0
     first_pass_tolerance: float = 1e-3
+    reweight_rtol: float = 0.05
+    max_reweights: int = 5
 
 
 @dataclass(frozen=True)
@@ -222,9 +232,15 @@ def identify(experiments: list[Experiment], keys: tuple[str, ...], inputs: tuple
 
         # the first pass only finds the neighbourhood (its weights are provisional); the second,
         # with the noise levels of the residuals as weights, converges
-        theta, it1 = _levenberg_marquardt(evaluate, theta0, opt, keys, tolerance=opt.first_pass_tolerance)
-        sigma = [np.maximum(np.sqrt(np.mean(err ** 2, axis=0)), 1e-12 * s) for err, s in zip(run(theta)[0], sigma)]
-        theta, it2 = _levenberg_marquardt(evaluate, theta, opt, keys)
+        theta, it1, _ = _levenberg_marquardt(evaluate, theta0, opt, keys, tolerance=opt.first_pass_tolerance)
+        it2, scale = 0, sigma
+        for n_pass in range(max(opt.max_reweights, 1)):
+            new = [np.maximum(np.sqrt(np.mean(err ** 2, axis=0)), 1e-12 * s) for err, s in zip(run(theta)[0], scale)]
+            if n_pass and all(np.all(np.abs(a / b - 1) <= opt.reweight_rtol) for a, b in zip(new, sigma)):
+                break
+            sigma = new          # evaluate() reads sigma when called: the new weights apply
+            theta, it, converged = _levenberg_marquardt(evaluate, theta, opt, keys)
+            it2 += it
         r, J = evaluate(theta)
         pred = [y - err for y, err in zip(Y, run(theta)[0])]
         pred0 = [y - err for y, err in zip(Y, run(theta0, False)[0])]
@@ -234,10 +250,15 @@ def identify(experiments: list[Experiment], keys: tuple[str, ...], inputs: tuple
     # intervals meaningless); reported in meta, warned about by the CLI
     H = J.T @ J
     d = np.sqrt(np.maximum(np.diag(H), 1e-300))
-    condition = float(np.linalg.cond(H / np.outer(d, d)))
-    cov = s2 * np.linalg.pinv(H)
+    Hs = H / np.outer(d, d)
+    condition = float(np.linalg.cond(Hs))
+    # inverted in the scaled coordinates: pinv(H) itself would drop, as below its rcond, the
+    # direction of a key the logs barely see (e.g. a damping run towards 0, where d y / d log p
+    # vanishes) and give it a zero-width interval, the opposite of the truth
+    cov = s2 * np.linalg.pinv(Hs) / np.outer(d, d)
     sd = np.sqrt(np.maximum(np.diag(cov), 0.0))
-    ci = np.exp(np.column_stack([theta - Z95 * sd, theta + Z95 * sd]))
+    with np.errstate(over="ignore"):       # an undetermined key's interval is (0, inf): said so, not warned
+        ci = np.exp(np.column_stack([theta - Z95 * sd, theta + Z95 * sd]))
 
     def rms(preds):
         return {o: float(np.sqrt(np.mean(np.concatenate([(y[:, i] - p[:, i]) ** 2 for y, p in zip(Y, preds)]))))
@@ -250,7 +271,7 @@ def identify(experiments: list[Experiment], keys: tuple[str, ...], inputs: tuple
             bode.append(_bode(e, keys, np.exp(theta0), np.exp(theta), inputs, outputs, u, y, loop_options))
     meta = {**(provenance or {}), "inputs": list(inputs), "outputs": list(outputs), "method":
             "time-domain output error, Levenberg-Marquardt on log-parameters, exact Jacobian (CasADi AD, "
-            "Van Loan ZOH derivative)", "iterations": [it1, it2], "residual_variance": s2,
+            "Van Loan ZOH derivative)", "iterations": [it1, it2], "converged": converged, "residual_variance": s2,
             "condition_number": condition,
             "logs": {e.log.name: {"sha256": e.log.sha256, "samples": e.log.samples, "configuration": e.configuration}
                      for e in experiments},
@@ -263,7 +284,8 @@ def identify(experiments: list[Experiment], keys: tuple[str, ...], inputs: tuple
 
 def _levenberg_marquardt(evaluate, theta, opt: FitOptions, keys, tolerance: float | None = None):
     """Minimise |r(theta)|^2 from ``theta``: Levenberg-Marquardt (Marquardt's diagonal scaling)
-    with the exact Jacobian. Returns (theta, iterations)."""
+    with the exact Jacobian. Returns (theta, iterations, converged): not converged when
+    ``max_iterations`` ran out while the cost still fell by more than the tolerance."""
     r, J = evaluate(theta)
     cost = float(r @ r)
     norms = np.linalg.norm(J, axis=0)
@@ -272,7 +294,7 @@ def _levenberg_marquardt(evaluate, theta, opt: FitOptions, keys, tolerance: floa
         raise ParameterError(f"--fit {dead[0]}: the logged outputs do not depend on it (zero sensitivity); "
                              "allowed: keys the chosen --input/--output observe")
     lam = 1e-3
-    it = 0
+    it, done, improved = 0, False, True
     for it in range(1, opt.max_iterations + 1):
         H, g = J.T @ J, J.T @ r
         improved = False
@@ -293,7 +315,8 @@ def _levenberg_marquardt(evaluate, theta, opt: FitOptions, keys, tolerance: floa
             lam *= 10
         if not improved or done:
             break
-    return theta, it
+    # no step lowered the cost up to lam = 1e12: a minimum to rounding, converged as well
+    return theta, it, bool(done or not improved)
 
 
 def _bode(exp, keys, v0, v1, inputs, outputs, u, y, loop_options):

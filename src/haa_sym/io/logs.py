@@ -65,6 +65,9 @@ def _read_rows(path: Path, label: str) -> tuple[list[str], np.ndarray, bytes]:
     if not lines:
         raise ParameterError(f"{label}: empty file; allowed: a CSV with a header line (time and signals)")
     header = [h.strip() for h in next(csv.reader(lines[:1]))]
+    if len(header) == 1 and any(sep in header[0] for sep in ";\t"):
+        # a spreadsheet's ';' or a tab export would otherwise be named as a number that fails to parse
+        raise ParameterError(f"{label}: header {header[0]!r} is one column; allowed: comma-separated columns")
     data = _fast_body(lines[1:], len(header))
     if data is not None:
         return header, data, raw
@@ -144,8 +147,8 @@ def read_log(path: str | Path, inputs: tuple[str, ...], outputs: tuple[str, ...]
     dt = np.diff(t)
     if np.any(dt <= 0):
         i = int(np.flatnonzero(dt <= 0)[0])
-        raise ParameterError(f"{label}: time is not increasing at data row {i + 2} (t = {t[i + 1]!r} after "
-                             f"{t[i]!r}); allowed: strictly increasing time stamps (s)")
+        raise ParameterError(f"{label}: time is not increasing at data row {i + 2} (t = {float(t[i + 1])!r} after "
+                             f"{float(t[i])!r}); allowed: strictly increasing time stamps (s)")
     mean = float((t[-1] - t[0]) / (t.size - 1))
     jitter = float(np.max(np.abs(dt - mean)) / mean)
     sampling = {"mean_period": mean, "jitter": jitter, "jitter_rms": float(np.std(dt) / mean),
@@ -156,15 +159,18 @@ def read_log(path: str | Path, inputs: tuple[str, ...], outputs: tuple[str, ...]
     if jitter > UNIFORM_JITTER:
         grid = t[0] + mean * np.arange(t.size)
         grid[-1] = min(grid[-1], t[-1])
-        held = np.clip(np.searchsorted(t, grid, side="right") - 1, 0, t.size - 1)
-        # an input is held between its stamps (the zero-order hold); an output is a sample of a
-        # continuous signal, interpolated
+        # an input is held between its stamps (the zero-order hold): the grid interval [g_k, g_k+1)
+        # takes the value in effect at its middle, the one that covers most of it. (The value in
+        # effect at g_k itself is the previous sample's whenever stamp k lands a hair after g_k,
+        # about half of them: the input shifted by one sample, which biased a fit even at 1e-5
+        # jitter.) An output is a sample of a continuous signal, interpolated
+        held = np.clip(np.searchsorted(t, grid + 0.5 * mean, side="right") - 1, 0, t.size - 1)
         cols = {k: v[held] if k in inputs else np.interp(grid, t, v) for k, v in cols.items()}
         sampling["resampled"] = True
     for k in inputs[:1]:           # the drive's input must excite it; a port torque may stay 0
         v = cols[k]
         if np.ptp(v) <= 1e-12 * max(1.0, float(np.max(np.abs(v)))):
-            raise ParameterError(f"{label}: input {k} is constant ({v[0]!r}); allowed: an input that "
+            raise ParameterError(f"{label}: input {k} is constant ({float(v[0])!r}); allowed: an input that "
                                  "excites the drive (a band-limited random signal or a chirp)")
     return Log(path.name, mean, {k: np.ascontiguousarray(cols[k]) for k in needed}, sampling,
                hashlib.sha256(raw).hexdigest(), str(path))

@@ -415,6 +415,11 @@ def save_figure(fig, path: str | Path, tx=None, field: str | None = None) -> Pat
     return path
 
 
+# a legend under the axes (below the x label): inside, at the corner, it hid the grid's markers
+# there (the whole top row of a schedule whose robust region sits at low P_gain)
+_BELOW = dict(loc="upper center", bbox_to_anchor=(0.5, -0.2), borderaxespad=0.0)
+
+
 def plot_schedule(s, title: str = ""):
     """A :class:`haa_sym.design.schedule.Schedule`: the scheduled beta over the impedance grid (no
     robust gain: grey; beta at the range's top, limited by the range and not the model: red
@@ -439,8 +444,8 @@ def plot_schedule(s, title: str = ""):
     if lim is not None and lim.any():
         # the range, not the model, sets these values: say so where they are drawn
         handles += ax.plot(PP[lim], DD[lim], "^", mfc="none", color="tab:red", ms=4,
-                           label=f"beta at the range's top ({int(lim.sum())}): limited by the range")
-    ax.legend(handles=handles, fontsize=7, loc="upper left")
+                           label=f"beta at the range's top ({int(lim.sum())} points): limited by the range")
+    ax.legend(handles=handles, fontsize=7, **_BELOW)
     ax.set_title("largest robust beta", fontsize=10)
     ax = axes[1]
     bw1 = s.meta.get("torque_bandwidth_beta_1_rad_s")
@@ -454,7 +459,7 @@ def plot_schedule(s, title: str = ""):
         # with an uncertainty box the failing configuration may be the box's, not the leg's
         where = "configuration" if s.meta.get("uncertainty") else "leg"
         handles += ax.plot(PP[bad], DD[bad], "x", color="tab:cyan", ms=4, label=f"beta = 1 unsafe for some {where}")
-    ax.legend(handles=handles, fontsize=7, loc="upper left")
+    ax.legend(handles=handles, fontsize=7, **_BELOW)
     ax.set_title("bandwidth gained by the schedule", fontsize=10)
     for ax in axes:
         _gain_axes(ax, logP)
@@ -683,11 +688,18 @@ def plot_identify(result, title: str = "", max_points: int = 4000):
         mag, ph, coh = axes[1, i], axes[2, i], axes[3, i]
         # H1 only where the coherence says the measurement carries the input (>= 0.5)
         H1 = np.where(bode["coherence"][i] >= 0.5, bode["H1"][i], np.nan)
-        for G, style in ((H1, dict(color="0.75", lw=3.0, label="H1 (Welch), coherence >= 0.5")),
-                         (bode["initial"][i], dict(color="C3", lw=0.8, ls="--", label="model, initial")),
-                         (bode["fitted"][i], dict(color="C0", lw=0.8, label="model, fitted"))):
+        # H1's phase as its angle from the fitted model's, added to that model's unwrapped phase:
+        # np.unwrap over the NaN gaps of the coherence mask turns every later point into NaN (the
+        # measured phase vanished), and unwrapping noisy H1 alone can land 360 deg off the model
+        fitted_ph = np.unwrap(np.angle(bode["fitted"][i]))
+        for G, style, phase in (
+                (H1, dict(color="0.75", lw=3.0, label="H1 (Welch), coherence >= 0.5"),
+                 fitted_ph + np.angle(H1 / bode["fitted"][i])),
+                (bode["initial"][i], dict(color="C3", lw=0.8, ls="--", label="model, initial"),
+                 np.unwrap(np.angle(bode["initial"][i]))),
+                (bode["fitted"][i], dict(color="C0", lw=0.8, label="model, fitted"), fitted_ph)):
             mag.loglog(w, np.abs(G), **style)
-            ph.semilogx(w, np.degrees(np.unwrap(np.angle(G))), **style)
+            ph.semilogx(w, np.degrees(phase), **style)
         mag.set_ylabel(f"|{o} / {result.inputs[0]}|")
         mag.legend(fontsize=7)
         ph.set_ylabel("phase (deg)")
