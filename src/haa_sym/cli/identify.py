@@ -17,7 +17,7 @@ from haa_sym.fit.fitted_file import fitted_text
 from haa_sym.design.tune import NOMINAL
 from haa_sym.fit.identify import INPUT_MODES, Experiment, FitOptions, identify
 from haa_sym.io.formats import save_json
-from haa_sym.io.logs import MAX_JITTER, OUTPUTS, read_log
+from haa_sym.io.logs import BIAS_JITTER, MAX_JITTER, OUTPUTS, read_log
 from haa_sym.io.outputs import Transaction
 from haa_sym.loop import ClosedLoop
 from haa_sym.model.params import actuator_path, load_params
@@ -126,6 +126,10 @@ def run(args) -> int:
         print(f"{e.log.name}: {e.log.samples} samples, mean period {s['mean_period']:.6g} s, jitter "
               f"{s['jitter']:.2g} (max |dt - mean| / mean)"
               + ("; resampled onto the mean period" if s["resampled"] else "; uniform"))
+        if s["jitter"] > BIAS_JITTER:
+            print(f"haa-sym: warning: {e.log.name}: resampling a jitter of {s['jitter']:.2g} biases the fitted "
+                  f"values beyond their ci95 (measured from {BIAS_JITTER:g} on; docs/identify.md, \"Sampling\")",
+                  file=sys.stderr)
     if result.meta["condition_number"] > CONDITION_WARNING:
         print(f"haa-sym: warning: the fitted keys are nearly indistinguishable in these logs (condition number "
               f"{result.meta['condition_number']:.3g} of the scaled normal matrix): the intervals are not reliable; "

@@ -25,12 +25,18 @@ import numpy as np
 
 from haa_sym.errors import ParameterError
 
-__all__ = ["INPUTS", "OUTPUTS", "UNIFORM_JITTER", "MAX_JITTER", "Log", "read_log"]
+__all__ = ["INPUTS", "OUTPUTS", "UNIFORM_JITTER", "MAX_JITTER", "BIAS_JITTER", "Log", "read_log"]
 
 INPUTS = ("voltage", "current", "T_dist", "torque_ref")
 OUTPUTS = ("torque", "theta", "current", "velocity")
 UNIFORM_JITTER = 1e-6     # relative: below this the time stamps are rounding of a uniform clock
-MAX_JITTER = 0.1          # relative: beyond this a linear resampling would invent the signal
+# relative; the resampling's bias was measured (docs/identify.md, "Sampling"): a harmonic-drive fit
+# held every key within 0.2 % up to 1e-4, but B_link fell 12 % at 1e-3 and 60 % at 1e-2, outside
+# its interval; above 1e-4 a log is refused unless --max-jitter accepts it knowingly
+MAX_JITTER = 1e-4
+# above this the summary warns that resampling biases the values (every key stayed inside its
+# ci95 at 1e-5, two fell just outside at 1e-4)
+BIAS_JITTER = 1e-5
 
 
 @dataclass(frozen=True)
@@ -155,7 +161,9 @@ def read_log(path: str | Path, inputs: tuple[str, ...], outputs: tuple[str, ...]
                 "samples_in_file": int(t.size), "resampled": False}
     if jitter > max_jitter:
         raise ParameterError(f"{label}: sampling jitter {jitter:.3g} (max |dt - mean| / mean, mean period "
-                             f"{mean:.6g} s); allowed: at most {max_jitter:g} (resampling would invent the signal)")
+                             f"{mean:.6g} s); allowed: at most {max_jitter:g}, since resampling onto the mean "
+                             "period biases the fit beyond that (docs/identify.md, \"Sampling\"; --max-jitter "
+                             "raises the limit)")
     if jitter > UNIFORM_JITTER:
         grid = t[0] + mean * np.arange(t.size)
         grid[-1] = min(grid[-1], t[-1])
