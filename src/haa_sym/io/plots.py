@@ -180,8 +180,9 @@ def draw_measured(ax, measured, P_lim, D_lim) -> list:
         for ok, (color, _) in MEASURED_COLORS.items():
             sel = inside & (out == o) & (agrees == ok)
             if sel.any():
+                # clip_on=False: a point on the map's edge (a grid's end value) is drawn whole
                 ax.plot(P[sel], D[sel], ls="none", marker=marker, ms=6, mfc="none", mec=color, mew=1.6,
-                        path_effects=halo, zorder=5)
+                        path_effects=halo, zorder=5, clip_on=False)
         if (out == o).any():
             handles.append(plt.Line2D([], [], ls="none", marker=marker, ms=6, mfc="none", mec="k", mew=1.4,
                                       label=label))
@@ -408,7 +409,9 @@ def save_figure(fig, path: str | Path, tx=None, field: str | None = None) -> Pat
     path = Path(path)
     try:
         with transaction(tx) as t, t.open(path, "wb", field) as fh:
-            fig.savefig(fh, format=path.suffix.lstrip(".").lower(), dpi=120,
+            # bbox "tight": a legend below the axes wider than the figure (the robust map's measured
+            # points) was cut at the figure's edge
+            fig.savefig(fh, format=path.suffix.lstrip(".").lower(), dpi=120, bbox_inches="tight", pad_inches=0.1,
                         metadata={"Software": None} if path.suffix.lower() == ".png" else None)
     finally:
         plt.close(fig)
