@@ -3,7 +3,7 @@ from __future__ import annotations
 
 import math
 
-from haa_sym.analysis.describing import NONLINEARITIES, limit_cycles
+from haa_sym.analysis.describing import NONLINEARITIES, limit_cycles, limit_nonlinearities
 from haa_sym.errors import ParameterError
 from haa_sym.io.formats import save_json
 from haa_sym.loop import ClosedLoop
@@ -12,14 +12,21 @@ from haa_sym.cli.common import (TITLE_HELP, _check_out, _common, _gain_flags, _l
                                 _plots, _points, _write_outputs, _wrote, figure_title)
 
 LIMIT_HELP = ("a nonlinearity and its parameter, KEY=VALUE (repeatable, each predicted alone): V_max (V, "
-              "saturation of the voltage command), T_res (Nm, rounding of the torque the loop reads), Fc_m or "
-              "Fc_<body> (Nm, Coulomb friction on the rotor or a body)")
+              "saturation of the voltage command), T_res or torque_resolution (Nm, rounding of the torque the loop "
+              "reads), Fc_m or Fc_<body> (Nm, Coulomb friction on the rotor or a body); default: those of the "
+              "file's [limits] section")
 
 
-def _limits(items: list[str]) -> list[dict]:
+def _limits(items: list[str], params) -> list[dict]:
+    """The nonlinearities of ``--limit``, else those of the file's ``[limits]`` section (one name per
+    concept: ``torque_resolution``, the [limits] key, is read as the describing function's ``T_res``)."""
     if not items:
-        raise ParameterError("--limit missing; allowed: KEY=VALUE with KEY one of "
-                             + ", ".join(NONLINEARITIES) + " (e.g. --limit V_max=24)")
+        from_file = limit_nonlinearities(params.limits)
+        if not from_file:
+            raise ParameterError("--limit missing and the parameter file's [limits] has no V_max, "
+                                 "torque_resolution or Coulomb friction; allowed: KEY=VALUE with KEY one of "
+                                 + ", ".join(NONLINEARITIES) + " (e.g. --limit V_max=24)")
+        return from_file
     out = []
     for item in items:
         key, sep, value = item.partition("=")
@@ -29,7 +36,8 @@ def _limits(items: list[str]) -> list[dict]:
             v = math.nan
         if not sep or not math.isfinite(v):
             raise ParameterError(f"--limit {item!r}; allowed: KEY=VALUE with a finite number, e.g. V_max=24")
-        out.append({key.strip(): v})
+        key = key.strip()
+        out.append({"T_res" if key == "torque_resolution" else key: v})
     return out
 
 
@@ -40,7 +48,7 @@ def _cmd_describe(args) -> int:
     plot = _check_out(args.plot, "describe", "--plot")
     if plot and args.title:
         _plots().check_title(args.title, "--title")
-    limits = _limits(args.limit)
+    limits = _limits(args.limit, params)
     P, D = (float(v[0]) for v in _points(args, one="describe predicts at one gain point"))
     loop = ClosedLoop(params, options)
     try:
