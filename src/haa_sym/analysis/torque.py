@@ -21,7 +21,7 @@ from haa_sym.errors import ParameterError
 from haa_sym.io.budget import check_memory, sweep_bytes
 from haa_sym.loop.exact import to_float, transfer_polynomials
 from haa_sym.loop.plant import continuous_plant
-from haa_sym.loop.statespace import closed_loop_batch
+from haa_sym.loop.statespace import INPUT_NAMES, OUTPUT_NAMES, closed_loop_batch
 from haa_sym.model.params import Params, gain_array
 from haa_sym.loop import loop_first
 
@@ -166,19 +166,34 @@ def step_response(loop, *, duration: float = 0.3, beta: float | None = None,
     -------
     StepResponse
     """
+    t = _step_times(loop, duration)
+    _, _, beta, alpha = loop.gain_points(0.0, 0.0, beta, alpha)
+    ss = [m[0] for m in closed_loop_batch(loop, 0.0, 0.0, beta, alpha, cut="T_ref")]
+    # cut at T_ref, the loop's input "r" is the torque reference
+    T = _unit_step(*ss, output="T_meas", input="r", n=t.size)
+    return StepResponse(t, T, dc_gain(loop, beta=beta, alpha=alpha))
+
+
+def _step_times(loop, duration: float) -> np.ndarray:
+    """The sample instants (s) of a step response of ``duration`` seconds, checked."""
     if not np.isfinite(duration) or duration <= 0:
         raise ParameterError(f"duration = {duration!r}; allowed: a finite time > 0 (s)")
-    _, _, beta, alpha = loop.gain_points(0.0, 0.0, beta, alpha)
     Ts = loop.params.controller.Ts
     n = int(round(duration / Ts)) + 1
     check_memory(16 * n, f"duration = {duration!r} s: a step response of {float(n):.4g} samples")
-    A, B, C, D = (m[0] for m in closed_loop_batch(loop, 0.0, 0.0, beta, alpha, cut="T_ref"))
+    return np.arange(n) * Ts
+
+
+def _unit_step(A, B, C, D, *, output: str, input: str, n: int) -> np.ndarray:
+    """``n`` samples of the closed loop's ``output`` after a unit step on ``input`` from rest
+    (names of :data:`haa_sym.loop.statespace.OUTPUT_NAMES` and ``INPUT_NAMES``)."""
+    i, j = OUTPUT_NAMES.index(output), INPUT_NAMES.index(input)
     x = np.zeros(A.shape[0])
-    T = np.empty(n)
+    y = np.empty(n)
     for k in range(n):
-        T[k] = C[0] @ x + D[0, 1]
-        x = A @ x + B[:, 1]
-    return StepResponse(np.arange(n) * Ts, T, dc_gain(loop, beta=beta, alpha=alpha))
+        y[k] = C[i] @ x + D[i, j]
+        x = A @ x + B[:, j]
+    return y
 
 
 @loop_first
@@ -314,22 +329,13 @@ def impedance_step(loop, P_gain: float = 0.0, D_gain: float = 0.0, *, duration: 
     -------
     ImpedanceStep
     """
-    if not np.isfinite(duration) or duration <= 0:
-        raise ParameterError(f"duration = {duration!r}; allowed: a finite time > 0 (s)")
+    t = _step_times(loop, duration)
     P, D, beta, alpha = loop.gain_points(P_gain, D_gain, beta, alpha)
     if P.size != 1:
         raise ParameterError(f"P_gain has {P.size} values; allowed: one gain point")
-    Ts = loop.params.controller.Ts
-    n = int(round(duration / Ts)) + 1
-    check_memory(16 * n, f"duration = {duration!r} s: a step response of {float(n):.4g} samples")
     A, B, C, Dm = (m[0] for m in closed_loop_batch(loop, P, D, beta, alpha))
-    i_theta = 1                                     # outputs [T_meas, theta_encoder, port velocity, y]
-    x = np.zeros(A.shape[0])
-    theta = np.empty(n)
-    for k in range(n):
-        theta[k] = C[i_theta] @ x + Dm[i_theta, 0]
-        x = A @ x + B[:, 0]
+    theta = _unit_step(A, B, C, Dm, output="theta_encoder", input="T_dist", n=t.size)
+    i, j = OUTPUT_NAMES.index("theta_encoder"), INPUT_NAMES.index("T_dist")
     stable = bool(np.all(loop.stability(P, D, beta, alpha).stable))
-    final = float(C[i_theta] @ np.linalg.solve(np.eye(A.shape[0]) - A, B[:, 0]) + Dm[i_theta, 0]) \
-        if stable else float("nan")
-    return ImpedanceStep(np.arange(n) * Ts, theta, final)
+    final = float(C[i] @ np.linalg.solve(np.eye(A.shape[0]) - A, B[:, j]) + Dm[i, j]) if stable else float("nan")
+    return ImpedanceStep(t, theta, final)
