@@ -13026,18 +13026,27 @@ CASADI_SYMBOL_EXPORT int haa_columns(void* f, void* work, casadi_int n_in,
  * one; exo holds n_steps columns of n_exo reals (delta is its last row); y receives n_steps
  * columns of n_y reals; xpeak (nx reals, or NULL) receives max_k |x_i| over the sample instants.
  * Returns 0, 1 if a function failed, 2 if out of memory. */
-CASADI_SYMBOL_EXPORT int haa_simulate(void* sample, void* sample_work, void* step, void* step_work,
-                                      casadi_int n_sub, casadi_int nx, casadi_int nc, casadi_int n_u,
-                                      casadi_real* x, casadi_real* xc, const casadi_real* exo,
-                                      casadi_int n_exo, const casadi_real* ctrl,
-                                      const casadi_real* plant, casadi_real* y, casadi_int n_y,
-                                      casadi_real* xpeak, casadi_int n_steps) {
-  casadi_int a1, r1, i1, w1, a2, r2, i2, w2, k, j, sz_arg, sz_res, sz_iw, sz_w;
-  int flag = 0;
+/* The work arrays of the sample loops: the sample function and the plant step are called in
+ * turn, so arg, res, iw and w are sized for the larger of the two; w carries `extra` more reals
+ * after the functions' own (the loop's vectors, from haa_work.extra). */
+typedef struct {
   const casadi_real** arg;
   casadi_real** res;
   casadi_int* iw;
-  casadi_real *w, *u, *x2, *xc2;
+  casadi_real* w;
+  casadi_real* extra;
+} haa_work;
+
+static void haa_work_free(haa_work* m) {
+  free(m->arg);
+  free(m->res);
+  free(m->iw);
+  free(m->w);
+}
+
+/* 0, or 2 if out of memory (what was allocated is freed) */
+static int haa_work_alloc(void* sample_work, void* step_work, casadi_int extra, haa_work* m) {
+  casadi_int a1, r1, i1, w1, a2, r2, i2, w2, sz_arg, sz_res, sz_iw, sz_w;
   ((haa_work_fn)sample_work)(&a1, &r1, &i1, &w1);
   ((haa_work_fn)step_work)(&a2, &r2, &i2, &w2);
   sz_arg = a1 > a2 ? a1 : a2;
@@ -13046,14 +13055,57 @@ CASADI_SYMBOL_EXPORT int haa_simulate(void* sample, void* sample_work, void* ste
   sz_w = w1 > w2 ? w1 : w2;
   if (sz_arg < 4) sz_arg = 4;
   if (sz_res < 3) sz_res = 3;
-  arg = (const casadi_real**)malloc(sizeof(casadi_real*) * sz_arg);
-  res = (casadi_real**)malloc(sizeof(casadi_real*) * sz_res);
-  iw = (casadi_int*)malloc(sizeof(casadi_int) * (sz_iw > 0 ? sz_iw : 1));
-  w = (casadi_real*)malloc(sizeof(casadi_real) * ((sz_w > 0 ? sz_w : 1) + n_u + nx + nc));
-  if (!arg || !res || !iw || !w) {
-    flag = 2;
-  } else {
-    u = w + (sz_w > 0 ? sz_w : 1);
+  if (sz_w < 1) sz_w = 1;
+  m->arg = (const casadi_real**)malloc(sizeof(casadi_real*) * sz_arg);
+  m->res = (casadi_real**)malloc(sizeof(casadi_real*) * sz_res);
+  m->iw = (casadi_int*)malloc(sizeof(casadi_int) * (sz_iw > 0 ? sz_iw : 1));
+  m->w = (casadi_real*)malloc(sizeof(casadi_real) * (sz_w + extra));
+  if (!m->arg || !m->res || !m->iw || !m->w) {
+    haa_work_free(m);
+    return 2;
+  }
+  m->extra = m->w + sz_w;
+  return 0;
+}
+
+/* one sample instant: sample(x, xc, e, ctrl) -> (u, xc_next, yk), then xc = xc_next (through
+ * xc2, nc reals); 1 if the function failed */
+static int haa_sample(void* sample, haa_work* m, const casadi_real* x, casadi_real* xc,
+                      casadi_real* xc2, casadi_int nc, const casadi_real* e,
+                      const casadi_real* ctrl, casadi_real* u, casadi_real* yk) {
+  casadi_int j;
+  m->arg[0] = x;
+  m->arg[1] = xc;
+  m->arg[2] = e;
+  m->arg[3] = ctrl;
+  m->res[0] = u;
+  m->res[1] = xc2;
+  m->res[2] = yk;
+  if (((haa_fn)sample)(m->arg, m->res, m->iw, m->w, 0)) return 1;
+  for (j = 0; j < nc; ++j) xc[j] = xc2[j];
+  return 0;
+}
+
+CASADI_SYMBOL_EXPORT int haa_simulate(void* sample, void* sample_work, void* step, void* step_work,
+                                      casadi_int n_sub, casadi_int nx, casadi_int nc, casadi_int n_u,
+                                      casadi_real* x, casadi_real* xc, const casadi_real* exo,
+                                      casadi_int n_exo, const casadi_real* ctrl,
+                                      const casadi_real* plant, casadi_real* y, casadi_int n_y,
+                                      casadi_real* xpeak, casadi_int n_steps) {
+  casadi_int k, j;
+  int flag;
+  haa_work m;
+  const casadi_real** arg;
+  casadi_real** res;
+  casadi_int* iw;
+  casadi_real *w, *u, *x2, *xc2;
+  flag = haa_work_alloc(sample_work, step_work, n_u + nx + nc, &m);
+  if (!flag) {
+    arg = m.arg;
+    res = m.res;
+    iw = m.iw;
+    w = m.w;
+    u = m.extra;
     x2 = u + n_u;
     xc2 = x2 + nx;
     if (xpeak)
@@ -13062,18 +13114,10 @@ CASADI_SYMBOL_EXPORT int haa_simulate(void* sample, void* sample_work, void* ste
       const casadi_real* e = exo + k * n_exo;
       if (xpeak)
         for (j = 0; j < nx; ++j) xpeak[j] = fabs(x[j]) > xpeak[j] ? fabs(x[j]) : xpeak[j];
-      arg[0] = x;
-      arg[1] = xc;
-      arg[2] = e;
-      arg[3] = ctrl;
-      res[0] = u;
-      res[1] = xc2;
-      res[2] = y + k * n_y;
-      if (((haa_fn)sample)(arg, res, iw, w, 0)) {
+      if (haa_sample(sample, &m, x, xc, xc2, nc, e, ctrl, u, y + k * n_y)) {
         flag = 1;
         break;
       }
-      for (j = 0; j < nc; ++j) xc[j] = xc2[j];
       for (j = 0; j < n_sub; ++j) {
         arg[0] = x;
         arg[1] = u;
@@ -13090,11 +13134,8 @@ CASADI_SYMBOL_EXPORT int haa_simulate(void* sample, void* sample_work, void* ste
         }
       }
     }
+    haa_work_free(&m);
   }
-  free(arg);
-  free(res);
-  free(iw);
-  free(w);
   return flag;
 }
 
@@ -13169,48 +13210,32 @@ CASADI_SYMBOL_EXPORT int haa_simulate_adaptive(
     const casadi_real* stick_rows, casadi_int n_rows, const casadi_real* slopes,
     casadi_int n_slopes, casadi_real* y,
     casadi_int n_y, casadi_real* levels, casadi_int n_steps) {
-  casadi_int a1, r1, i1, w1, a2, r2, i2, w2, k, j, i, lev = 0, sz_arg, sz_res, sz_iw, sz_w;
-  int flag = 0;
+  casadi_int k, i, lev = 0;
+  int flag;
+  haa_work m;
   const casadi_real** arg;
   casadi_real** res;
   casadi_int* iw;
   casadi_real *w, *u, *xa, *xb, *tmp, *xc2;
   casadi_real err_last = tol + 1; /* no prediction before the first sample */
   if (n_levels < 2) return 3;
-  ((haa_work_fn)sample_work)(&a1, &r1, &i1, &w1);
-  ((haa_work_fn)step_work)(&a2, &r2, &i2, &w2);
-  sz_arg = a1 > a2 ? a1 : a2;
-  sz_res = r1 > r2 ? r1 : r2;
-  sz_iw = i1 > i2 ? i1 : i2;
-  sz_w = w1 > w2 ? w1 : w2;
-  if (sz_arg < 4) sz_arg = 4;
-  if (sz_res < 3) sz_res = 3;
-  arg = (const casadi_real**)malloc(sizeof(casadi_real*) * sz_arg);
-  res = (casadi_real**)malloc(sizeof(casadi_real*) * sz_res);
-  iw = (casadi_int*)malloc(sizeof(casadi_int) * (sz_iw > 0 ? sz_iw : 1));
-  w = (casadi_real*)malloc(sizeof(casadi_real) * ((sz_w > 0 ? sz_w : 1) + n_u + 3 * nx + nc));
-  if (!arg || !res || !iw || !w) {
-    flag = 2;
-  } else {
-    u = w + (sz_w > 0 ? sz_w : 1);
+  flag = haa_work_alloc(sample_work, step_work, n_u + 3 * nx + nc, &m);
+  if (!flag) {
+    arg = m.arg;
+    res = m.res;
+    iw = m.iw;
+    w = m.w;
+    u = m.extra;
     xa = u + n_u;
     xb = xa + nx;
     tmp = xb + nx;
     xc2 = tmp + nx;
     for (k = 0; k < n_steps && !flag; ++k) {
       const casadi_real* e = exo + k * n_exo;
-      arg[0] = x;
-      arg[1] = xc;
-      arg[2] = e;
-      arg[3] = ctrl;
-      res[0] = u;
-      res[1] = xc2;
-      res[2] = y + k * n_y;
-      if (((haa_fn)sample)(arg, res, iw, w, 0)) {
+      if (haa_sample(sample, &m, x, xc, xc2, nc, e, ctrl, u, y + k * n_y)) {
         flag = 1;
         break;
       }
-      for (j = 0; j < nc; ++j) xc[j] = xc2[j];
       /* lev is the level kept last; test (lev - 1, lev), or (lev - 2, lev - 1) when the last
        * difference predicts it within tol */
       lev -= (err_last <= tol / HAA_DROP) ? 2 : 1;
@@ -13239,10 +13264,7 @@ CASADI_SYMBOL_EXPORT int haa_simulate_adaptive(
       for (i = 0; i < nx; ++i) x[i] = xb[i];
       levels[k] = (casadi_real)lev;
     }
+    haa_work_free(&m);
   }
-  free(arg);
-  free(res);
-  free(iw);
-  free(w);
   return flag;
 }
