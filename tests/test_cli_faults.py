@@ -15,7 +15,7 @@ from fractions import Fraction
 import numpy as np
 import pytest
 
-from haa_sym import ClosedLoop, ParameterError
+from haa_sym import ClosedLoop, ParameterError, load_params
 from haa_sym.cli import main
 from haa_sym.compiled.generated import Compiler
 from haa_sym.design import schedule as schedule_module
@@ -369,3 +369,45 @@ def test_exact_step_states_its_cost_for_large_plants(params, monkeypatch, capsys
     monkeypatch.setattr(closed_loop_module, "_BASES", closed_loop_module.BoundedCache())
     ClosedLoop(params)
     assert capsys.readouterr().err == ""
+
+
+def test_deeply_nested_toml_runs_no_finalizer_at_the_recursion_limit(tmp_path):
+    """Reading a file nested 5000 levels deep pauses the garbage collector: garbage waiting to be
+    collected (cycles with finalizers) is not finalized deep in the parser, where the finalizer
+    itself would hit the recursion limit (seen once in CI as "Exception ignored in ..." on stderr)."""
+    import gc
+    import sys
+    f = tmp_path / "deep.toml"
+    f.write_text("x = " + "[" * 5000 + "]" * 5000 + "\n")
+    depth = []
+
+    class Cycle:
+        def __init__(self):
+            self.me = self
+
+        def __del__(self):
+            depth.append(len(_frames()))
+
+    def _frames():
+        frame, out = sys._getframe(), []
+        while frame is not None:
+            out.append(frame)
+            frame = frame.f_back
+        return out
+    threshold = gc.get_threshold()
+    gc.disable()
+    try:
+        gc.collect()                             # the allocation count starts at 0
+        for _ in range(100):
+            Cycle()                              # garbage only the cyclic collector frees
+        # the next collection after about 1000 allocations: inside the parser, about 800 frames
+        # down (measured), near the recursion limit where the parse fails
+        gc.set_threshold(1000)
+        gc.enable()
+        with pytest.raises(ParameterError, match="nested too deeply"):
+            load_params(f)
+    finally:
+        gc.set_threshold(*threshold)
+        gc.enable()
+        gc.collect()
+    assert depth and max(depth) < 200            # finalized after the parse, not deep inside it

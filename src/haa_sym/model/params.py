@@ -22,6 +22,7 @@ Example
 """
 from __future__ import annotations
 
+import gc
 import math
 import os
 import tomllib
@@ -583,6 +584,21 @@ def parse_params(data: Mapping[str, object], source: str = "<memory>") -> Params
                   limits=limits)
 
 
+def _read_toml(fh) -> dict:
+    """``tomllib.load`` with the cyclic garbage collector paused: tomllib recurses once per
+    nesting level, and a collection that starts deep in a file nested thousands of levels runs
+    other objects' finalizers at the recursion limit, where they fail and Python prints
+    "Exception ignored in ..." to stderr beside the one-line error (seen once in CI, in
+    tests/test_cli_faults.py::test_deeply_nested_toml)."""
+    paused = gc.isenabled()
+    gc.disable()
+    try:
+        return tomllib.load(fh)
+    finally:
+        if paused:
+            gc.enable()
+
+
 def load_params(path: str | Path | None = None) -> Params:
     """Read and validate a parameter file.
 
@@ -609,7 +625,7 @@ def load_params(path: str | Path | None = None) -> Params:
     p = actuator_path(path)
     try:
         with open(p, "rb") as fh:
-            data = tomllib.load(fh)
+            data = _read_toml(fh)
     except FileNotFoundError:
         raise ParameterError(f"{p}: no such parameter file") from None
     except tomllib.TOMLDecodeError as exc:
