@@ -8,12 +8,25 @@ Every number the page shows is also in the DOM as JSON, for tests and scripts:
 ``<pre id="explore-detail" data-seq="N">`` (the clicked point). ``data-seq`` counts the page's
 updates.
 
+The server answers only its own page (:func:`request_refusal`, checked on every HTTP request and
+the websocket: Host, Origin, Sec-Fetch-Site), builds a page without computing anything or
+reading any file (the work starts when the page's own session reports it is loaded), runs all
+work through one queue (:class:`WorkQueue`: one computation at a time, a session's pending work
+superseded by its newer request and dropped when the session closes), serves at most
+:data:`MAX_SESSIONS` pages at once and reads files only where the command line allows
+(:func:`haa_sym.io.inputs.restrict_reads`). docs/explore.md, "Who may ask, and what it costs".
+
 Panel and Bokeh are imported lazily (the optional extra ``haa_sym[explore]``): importing this
 module costs nothing; :func:`serve` and :func:`page` import them.
 """
 from __future__ import annotations
 
+import asyncio
+import ctypes
+import ctypes.util
+import gc
 import html
+import logging
 import math
 import re
 import time
@@ -22,13 +35,26 @@ from pathlib import Path
 import numpy as np
 
 from haa_sym.errors import ParameterError
-from haa_sym.explore.state import (CATEGORIES, ViewState, compute_view, dumps, from_query, point_detail, resolve,
-                                   to_query, view_summary)
+from haa_sym.explore.state import (CATEGORIES, ViewState, clear_caches, compute_view, dumps, from_query,
+                                   point_detail, resolve, to_query, view_summary)
 from haa_sym.explore.export import export_view
 from haa_sym.model import filters
 from haa_sym.model.params import CONTROLLER_KEYS, CONTROLLER_UNITS, STRING_KEYS, actuator_path, load_params
 
-__all__ = ["page", "serve", "EXTRA_MISSING", "CATEGORY_COLORS", "available"]
+__all__ = ["page", "serve", "EXTRA_MISSING", "CATEGORY_COLORS", "available", "request_refusal", "WorkQueue",
+           "MAX_SESSIONS", "UNUSED_SESSION_LIFETIME_MS", "CHECK_UNUSED_SESSIONS_MS", "live_sessions"]
+
+log = logging.getLogger(__name__)
+
+# At most this many pages (browser tabs) at once; one more gets a page saying so and computes
+# nothing. A page holds its map (up to MAX_POINTS points: the categories, the decisions and the
+# Bokeh document's copy, 10-50 MB at the limit), so the bound is also the server's memory bound.
+MAX_SESSIONS = 8
+# A page whose websocket has closed (or never opened) is destroyed after this long, its memory
+# released (Bokeh's default: 15 s, checked every 17 s). The page's scripts come from this server
+# and connect within a second or two; 10 s leaves room on a loaded machine.
+UNUSED_SESSION_LIFETIME_MS = 10_000
+CHECK_UNUSED_SESSIONS_MS = 1_000
 
 EXTRA_MISSING = ("the explorer needs Panel and Bokeh, the optional extra: pip install 'haa_sym[explore]' "
                  "(or pip install 'panel>=1.4' 'bokeh>=3.4')")
@@ -93,7 +119,7 @@ class _Page:
         self.w_blend_to = W.Select(name="slide towards configuration", options=[""], value="",
                                    css_classes=["ex-blend-to"])
         self.w_blend = W.FloatSlider(name="position between them", start=0.0, end=1.0, step=0.05,
-                                     value=_float(s.blend), css_classes=["ex-blend"])
+                                     value=_slider_value(s.blend), css_classes=["ex-blend"])
         sets = dict(s.sets)
         self.w_keys = {}
         for key in _CONTROL_KEYS:
@@ -128,12 +154,23 @@ class _Page:
         self.margins_html = pn.pane.HTML("click the map or type a point", sizing_mode="stretch_width")
         self.link = pn.pane.HTML("", sizing_mode="stretch_width")
         self._figures()
-        self._actuator_panel(s.params, sets, s.configuration, s.blend_to)
+        # nothing is read or computed while the page is built (the GET that creates the
+        # document): the actuator's panel and the map are the first work of the page's session
+        # (:meth:`start`), queued like every later change
+        self._initial = (s.params, sets, s.configuration, s.blend_to)
+        # the slider's position as typed in the URL, until the slider moves: a position outside
+        # [0, 1] is refused with the CLI's message, not clamped to the slider's range
+        self.blend_text = s.blend
+        self.pending: dict[str, None] = {}
+        self.queue: WorkQueue | None = None
+        self.doc = None
+        self.closed = False
         for w in [self.w_params]:
             w.param.watch(self._on_params, "value")
-        for w in [self.w_config, self.w_blend_to, self.w_blend, self.w_filter, self.w_delay, self.w_P, self.w_D,
+        for w in [self.w_config, self.w_blend_to, self.w_filter, self.w_delay, self.w_P, self.w_D,
                   self.w_schedule, self.w_measured, self.w_robust, *self.w_keys.values()]:
             w.param.watch(self._on_change, "value")
+        self.w_blend.param.watch(self._on_blend, "value")
         self.w_point.param.watch(self._on_point, "value")
         self.w_export.on_click(self._on_export)
         self._building = False
@@ -252,7 +289,7 @@ class _Page:
         sets = [(k, w.value) for k, w in self.plant_inputs.items()] + list(self.extra_sets.items())
         sets += [(k, self.w_keys[k].value) for k in _CONTROL_KEYS] + [("velocity_filter", self.w_filter.value)]
         s = ViewState(params=self.w_params.value.strip(), configuration=self.w_config.value or "",
-                      blend_to=self.w_blend_to.value or "", blend=f"{self.w_blend.value:g}",
+                      blend_to=self.w_blend_to.value or "", blend=self.blend_text,
                       P_gain=self.w_P.value, D_gain=self.w_D.value, point=self.w_point.value,
                       schedule=self.w_schedule.value.strip(), measured=self.w_measured.value.strip(),
                       robust=self.w_robust.value.strip())
@@ -260,8 +297,6 @@ class _Page:
             s = s.with_set(k, v)
         for k, v in {**self.extra_options, "delay": self.w_delay.value}.items():
             s = s.with_option(k, v)
-        if not s.blend_to:
-            s = s.replace(blend="0")
         return s
 
     def _refused(self, exc: Exception, state: ViewState, pre_seq: bool = True):
@@ -354,25 +389,91 @@ class _Page:
                      n_poles=len(js["poles"]))
         self.detail_pre.object = _pre("explore-detail", self.detail_seq, small)
 
+    # ------------------------------------------------------------------ work
+    def start(self, error: Exception | None = None):
+        """The page's first work, once its session has loaded: the actuator's panel, then the
+        map (unless the URL was refused)."""
+        self._request("initial" if error is None else "initial-panel")
+
+    def _request(self, job: str):
+        """Ask for ``job`` (initial, initial-panel, actuator, refresh, point, export). A job
+        already pending stays once (the work reads the widgets when it runs: the newest request
+        supersedes the older); a refresh covers a pending point (it draws the point too)."""
+        if self._building or self.closed:
+            return
+        self.pending[job] = None
+        if self.queue is None:
+            self.run()                          # no server (tests): at once
+        else:
+            self.queue.request(self)
+
+    def alive(self) -> bool:
+        """Whether the page is still open: not destroyed and its websocket connected."""
+        if self.closed:
+            return False
+        ctx = self.doc.session_context if self.doc is not None else None
+        # Bokeh's ServerSession (the session context exposes no connection count of its own)
+        session = getattr(ctx, "_session", None)
+        return session is None or (not session.destroyed and session.connection_count > 0)
+
+    async def run_locked(self):
+        """Run the pending work with the page's document locked and current (as Bokeh runs a
+        browser event's callbacks)."""
+        ctx = self.doc.session_context if self.doc is not None else None
+        if ctx is None:
+            self.run()
+            return
+
+        def locked(doc):
+            from panel.io.state import set_curdoc
+            with set_curdoc(doc):
+                self.run()
+        await ctx.with_locked_document(locked)
+
+    def run(self):
+        """Do the pending work, in the order: the actuator's panel, the map, the point, the export."""
+        jobs, self.pending = self.pending, {}
+        if "initial" in jobs or "initial-panel" in jobs:
+            self._building = True
+            try:
+                self._actuator_panel(*self._initial)
+            finally:
+                self._building = False
+        if "actuator" in jobs:
+            self._building = True
+            try:
+                self._actuator_panel(self.w_params.value.strip(), {}, "", "")
+            finally:
+                self._building = False
+        if jobs.keys() & {"initial", "actuator", "refresh"}:
+            self.refresh()
+        elif "point" in jobs:
+            self._show_point()
+        if "export" in jobs:
+            self._export()
+
+    def release(self):
+        """Drop what the page holds (its map, its point): the session is gone."""
+        self.closed = True
+        self.pending = {}
+        self.good = self.view = self.detail = None
+
     # ------------------------------------------------------------------ events
     def _on_change(self, event):
-        if not self._building:
-            self.refresh()
+        self._request("refresh")
+
+    def _on_blend(self, event):
+        self.blend_text = f"{event.new:g}"
+        self._request("refresh")
 
     def _on_params(self, event):
-        if self._building:
-            return
-        self._building = True
-        try:
-            self._actuator_panel(event.new.strip(), {}, "", "")
-        finally:
-            self._building = False
-        self.refresh()
+        self._request("actuator")
 
     def _on_point(self, event):
-        if self._building:
-            return
-        s = self.state() if self.good is None else self.good.replace(point=event.new)
+        self._request("point")
+
+    def _show_point(self):
+        s = self.state() if self.good is None else self.good.replace(point=self.w_point.value)
         try:
             r = resolve(s)
         except ParameterError as exc:
@@ -395,6 +496,9 @@ class _Page:
         self.w_point.value = f"{max(event.x, 0.0):.6g},{max(event.y, 0.0):.6g}"
 
     def _on_export(self, event):
+        self._request("export")
+
+    def _export(self):
         if self.good is None or self.view is None:
             return
         try:
@@ -406,16 +510,61 @@ class _Page:
                                + "</div>")
 
 
+class WorkQueue:
+    """The server's one queue of work: every page's computation runs here, one at a time, on the
+    server's thread, in the order the pages asked. A page waits in it once, however many changes
+    it asked for meanwhile (its work reads the widgets when it runs: the newest request wins); a
+    page whose session closed is dropped unrun. Between two pages' work the event loop reads its
+    sockets (a closed tab, a newer request, another page's GET are seen before the next
+    computation starts). A computation that has started runs to its end (at most
+    :data:`haa_sym.explore.state.MAX_POINTS` points, 1-3 s)."""
+
+    def __init__(self):
+        self._waiting: dict = {}
+        self._task = None
+        self.ran = 0                            # pages whose work ran, and dropped unrun
+        self.dropped = 0
+
+    def request(self, page) -> None:
+        self._waiting.setdefault(page, None)
+        if self._task is None:
+            self._task = asyncio.get_running_loop().create_task(self._pump())
+
+    def forget(self, page) -> None:
+        if self._waiting.pop(page, 0) is None:
+            self.dropped += 1
+
+    async def _pump(self):
+        try:
+            while self._waiting:
+                page = next(iter(self._waiting))
+                del self._waiting[page]
+                if page.alive():
+                    self.ran += 1
+                    try:
+                        await page.run_locked()
+                    except Exception:           # a bug in one page's work must not stop the others'
+                        log.exception("haa-sym explore: a page's work failed")
+                else:
+                    page.pending = {}
+                    self.dropped += 1
+                await asyncio.sleep(0)
+        finally:
+            self._task = None
+
+
 def _with(options: list, value: str) -> list:
     return options if value in options else options + [value]
 
 
-def _float(text: str) -> float:
+def _slider_value(text: str) -> float:
+    """Where the slider stands for the typed position ``text``: the number when it is one in
+    [0, 1], else 0 (the state keeps the text, and the page refuses it with the CLI's message)."""
     try:
         v = float(text)
     except ValueError:
         return 0.0
-    return min(max(v, 0.0), 1.0) if math.isfinite(v) else 0.0
+    return v if 0.0 <= v <= 1.0 else 0.0
 
 
 def _title(r) -> str:
@@ -453,13 +602,30 @@ def _margins_html(d) -> str:
     return "<div id='explore-margins'>" + "<br>".join([head] + rows) + "</div>"
 
 
+_QUEUE = WorkQueue()
+_LIVE: dict = {}                # session id -> its _Page, while the session lives
+
+
+def live_sessions() -> int:
+    """The number of pages the server holds."""
+    return len(_LIVE)
+
+
 def page(initial: ViewState | None = None):
     """A new page (one per browser tab): its state from the URL's query string when it has one,
-    else ``initial``."""
+    else ``initial``. Builds the widgets only: nothing is computed and no file is read until the
+    page's own session reports it has loaded (``pn.state.onload``); beyond :data:`MAX_SESSIONS`
+    pages, a page saying so."""
     import bokeh
     import panel as pn
     state = initial or ViewState()
-    args = dict(pn.state.session_args or {}) if pn.state.curdoc is not None else {}
+    doc = pn.state.curdoc
+    ctx = doc.session_context if doc is not None else None
+    if ctx is not None and len(_LIVE) >= MAX_SESSIONS:
+        return pn.pane.HTML(f'<div id="explore-error" style="color:#b00020;font-weight:bold">haa-sym explore: '
+                            f"{len(_LIVE)} pages are open, the most this server serves at once "
+                            f"(MAX_SESSIONS = {MAX_SESSIONS}); close one and reload this page</div>")
+    args = dict(pn.state.session_args or {}) if doc is not None else {}
     error = None
     if args:
         try:
@@ -469,20 +635,118 @@ def page(initial: ViewState | None = None):
     p = _Page(state, pn, bokeh)
     if error is not None:
         p._refused(error, state)
-    else:
-        p.refresh()
+    if ctx is None:                             # no server (tests): the work at once
+        p.start(error)
+        return p.layout()
+    p.doc, p.queue = doc, _QUEUE
+    _LIVE[ctx.id] = p
+    doc.on_session_destroyed(_destroyed)
+    pn.state.onload(lambda: p.start(error))
     return p.layout()
 
 
-def serve(initial: ViewState, port: int = 5006, show: bool = True) -> None:
+def _destroyed(session_context) -> None:
+    """A page's session is gone: drop its pending work and what it holds; when it was the last,
+    the library's memoised maps too; then hand the memory back (:func:`_release_memory`)."""
+    p = _LIVE.pop(session_context.id, None)
+    if p is not None:
+        _QUEUE.forget(p)
+        p.release()
+    if not _LIVE:
+        clear_caches()
+    try:
+        asyncio.get_running_loop().call_later(0.5, _release_memory)
+    except RuntimeError:
+        _release_memory()
+
+
+def _release_memory() -> None:
+    """Collect the pages' reference cycles (widgets and their watchers) and return the freed
+    heap to the system: glibc keeps freed arrays of a few MB in its heap (its mmap threshold grows
+    after the first large frees), so without ``malloc_trim`` the server's size stays at its
+    peak."""
+    gc.collect()
+    try:
+        ctypes.CDLL(ctypes.util.find_library("c") or "libc.so.6").malloc_trim(0)
+    except (OSError, AttributeError):           # not glibc: the allocator keeps what it keeps
+        pass
+
+
+def request_refusal(headers, port: int) -> str | None:
+    """Why the server refuses a request with these ``headers`` (a mapping), or None.
+
+    Every HTTP request and the websocket's are checked (:func:`serve`):
+
+    - ``Host`` must be ``127.0.0.1:PORT`` or ``localhost:PORT``: a page of another site that
+      rebinds its own name to 127.0.0.1 (DNS rebinding) sends its own name;
+    - ``Origin``, when sent, must be ``http://127.0.0.1:PORT`` or ``http://localhost:PORT``;
+    - ``Sec-Fetch-Site``, when sent (every current browser does), must be ``same-origin`` (the
+      page's own requests) or ``none`` (an address typed, a bookmark, a link from outside the
+      browser): a page of another site or of another port of this machine that links, frames or
+      fetches the explorer sends ``cross-site`` or ``same-site``.
+    """
+    hosts = (f"127.0.0.1:{port}", f"localhost:{port}")
+    host = (headers.get("Host") or "").strip().lower()
+    if host not in hosts:
+        return f"Host {host!r}; allowed: {' or '.join(hosts)}"
+    origin = headers.get("Origin")
+    if origin is not None and origin.strip().lower() not in tuple(f"http://{h}" for h in hosts):
+        return f"Origin {origin!r}; allowed: none, or {' or '.join('http://' + h for h in hosts)}"
+    site = headers.get("Sec-Fetch-Site")
+    if site is not None and site.strip().lower() not in ("same-origin", "none"):
+        return f"Sec-Fetch-Site {site!r}; allowed: same-origin or none (this page's own requests, or an address typed)"
+    return None
+
+
+def _guard(tornado_app, port: int) -> None:
+    """Route every request that :func:`request_refusal` refuses to a 403 (before any of Bokeh's
+    or Panel's handlers sees it: no document is built, nothing read or computed). Tornado looks
+    every request's handler up through ``find_handler``, the websocket's upgrade included."""
+    from tornado.web import RequestHandler
+
+    class Refused(RequestHandler):
+        def initialize(self, reason: str):
+            self.reason = reason
+
+        def prepare(self):
+            self.set_status(403)
+            self.set_header("Content-Type", "text/plain; charset=utf-8")
+            self.finish(f"haa-sym explore: refused: {self.reason}\n")
+
+    find = tornado_app.find_handler
+
+    def find_handler(request, **kwargs):
+        reason = request_refusal(request.headers, port)
+        if reason is not None:
+            log.warning("haa-sym explore: refused %s %s: %s", request.method, request.uri[:200], reason)
+            return tornado_app.get_handler_delegate(request, Refused, {"reason": reason})
+        return find(request, **kwargs)
+
+    tornado_app.find_handler = find_handler
+
+
+def serve(initial: ViewState, port: int = 5006, show: bool = True, allowed=()) -> None:
     """Serve the page on http://127.0.0.1:``port``/ until Ctrl-C (KeyboardInterrupt propagates).
 
-    The server listens on 127.0.0.1 only and the page loads Bokeh's and Panel's scripts from the
-    server itself (no CDN)."""
+    The server listens on 127.0.0.1 only, answers only requests for its own address from its own
+    page (:func:`request_refusal`), loads Bokeh's and Panel's scripts from itself (no CDN) and
+    reads files only within ``allowed`` (files, or directories and what is below them) and the
+    bundled model directory (:func:`haa_sym.io.inputs.restrict_reads`, entered before the server
+    exists so that every callback runs under it); every file read is an input the export must not
+    replace (:func:`haa_sym.io.inputs.command_scope`)."""
     import panel as pn
+    from haa_sym.io.inputs import command_scope, restrict_reads
     origins = [f"127.0.0.1:{port}", f"localhost:{port}"]
-    pn.serve({"/": lambda: page(initial)}, port=port, address="127.0.0.1", websocket_origin=origins, show=show,
-             title="haa-sym explore", start=True, threaded=False, verbose=False)
+    with command_scope(), restrict_reads(list(allowed)):
+        server = pn.serve({"/": lambda: page(initial)}, port=port, address="127.0.0.1", websocket_origin=origins,
+                          show=False, title="haa-sym explore", start=False, threaded=False, verbose=False,
+                          unused_session_lifetime_milliseconds=UNUSED_SESSION_LIFETIME_MS,
+                          check_unused_sessions_milliseconds=CHECK_UNUSED_SESSIONS_MS)
+        _guard(server._tornado, port)           # Bokeh's Server keeps its tornado Application there
+        server.start()
+        if show:
+            server.io_loop.add_callback(server.show, "/")
+        server.io_loop.start()
 
 
 def resources_are_local(text: str) -> list[str]:

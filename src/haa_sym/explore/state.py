@@ -50,7 +50,7 @@ from haa_sym.model.params import (CONTROLLER_KEYS, actuator_path, apply_sets, ga
 
 __all__ = ["ViewState", "Resolved", "View", "Detail", "resolve", "compute_view", "point_detail", "to_query",
            "from_query", "MAX_POINTS", "CURVE_LINES", "CURVE_XTOL", "STEP_DURATION_S", "CATEGORIES", "categories", "view_summary", "dumps",
-           "parse_point", "state_dict", "plain"]
+           "parse_point", "state_dict", "plain", "blend_position", "clear_caches"]
 
 # The page's own limit on a map's points, on top of the memory budget: a map within the budget
 # can still take minutes (1e8 points), and the page answers every change; 1,000,000 points
@@ -75,6 +75,12 @@ STEP_DURATION_S = 0.3
 # 2 stable, PM < 30 deg, passive; 3 stable, PM < 30 deg, not passive; 4 unstable.
 CATEGORIES = ("stable, PM >= 30 deg, passive", "stable, PM >= 30 deg, not passive",
               "stable, PM < 30 deg, passive", "stable, PM < 30 deg, not passive", "unstable")
+
+# The memoised maps (:func:`_map_and_curves`, :func:`_robust_overlay`) hold at most this many
+# bytes of arrays each, besides at most 8 entries: eight 200 x 100 maps take 5 MB, one
+# 1000 x 1000 map 28 MB (its decisions, margins and spectral radii), so a few large maps are
+# kept, not eight (224 MB).
+CACHE_BYTES = 64_000_000
 
 _TEXT_FIELDS = ("params", "configuration", "blend_to", "blend", "P_gain", "D_gain", "point", "schedule",
                 "measured", "robust")
@@ -186,16 +192,29 @@ class Resolved:
     point: tuple[float, float] | None
 
 
-def _blend(params, file_params, a: str, b: str, text: str):
-    """``params`` with every plant key configurations ``a`` or ``b`` set moved to the position
-    ``text`` (0..1) between them; a key one end leaves unset keeps ``params``'s own value there."""
+def blend_position(text: str, a: str = "", b: str = "") -> float:
+    """The slider's position ``text`` between configurations ``a`` and ``b`` as a number in
+    [0, 1]; anything else (2, -0.1, nan, inf, text) is refused, never clamped.
+
+    Raises
+    ------
+    ParameterError
+        The position, the configurations and what is allowed.
+    """
     try:
         s = float(text)
     except ValueError:
         s = math.nan
     if not 0.0 <= s <= 1.0:
-        raise ParameterError(f"blend = {text!r}: the position between configuration {a or 'nominal'!r} and "
-                             f"{b!r}; allowed: a number from 0 to 1")
+        between = f"configuration {a or 'nominal'!r} and {b!r}" if b else "two configurations (blend_to)"
+        raise ParameterError(f"blend = {text!r}: the position between {between}; allowed: a number from 0 to 1")
+    return s
+
+
+def _blend(params, file_params, a: str, b: str, text: str):
+    """``params`` with every plant key configurations ``a`` or ``b`` set moved to the position
+    ``text`` (0..1) between them; a key one end leaves unset keeps ``params``'s own value there."""
+    s = blend_position(text, a, b)
     names = list(file_params.configurations)
     if b not in names:
         raise ParameterError(f"blend_to = {b!r}: unknown configuration; allowed: {names or 'none defined'}")
@@ -210,6 +229,7 @@ def _loop(model_key: tuple):
     """(file parameters, parameters, closed loop) of a state's model part, memoised: a change
     of the grid, the point or an overlay does not rebuild the loop."""
     name, configuration, blend_to, blend, sets, options = model_key
+    blend_position(blend, configuration, blend_to)      # refused even while no second end is chosen
     file_params = load_params(actuator_path(name or None, "--params"))
     if configuration:
         file_params = file_params.configuration(configuration)
@@ -302,7 +322,54 @@ def compute_view(state: ViewState, resolved: Resolved | None = None) -> View:
                 m.meta)
 
 
-@functools.lru_cache(maxsize=8)
+def _nbytes(value, depth: int = 0) -> int:
+    """The bytes of the numpy arrays in ``value`` (a result of the memoised functions: arrays,
+    dicts, lists, tuples, dataclasses)."""
+    if isinstance(value, np.ndarray):
+        return value.nbytes
+    if depth > 4:
+        return 0
+    if isinstance(value, dict):
+        return sum(_nbytes(v, depth + 1) for v in value.values())
+    if isinstance(value, (list, tuple)):
+        return sum(_nbytes(v, depth + 1) for v in value)
+    if hasattr(value, "__dict__"):
+        return _nbytes(vars(value), depth + 1)
+    return 0
+
+
+def _memo(max_entries: int = 8, max_bytes: int = CACHE_BYTES):
+    """functools.lru_cache bounded also by the bytes of the arrays it holds (:func:`_nbytes`):
+    the least recently used entries go until the rest fit (the newest is always kept).
+    ``f.cache_clear()`` empties it."""
+    def wrap(fn):
+        import collections
+        entries: collections.OrderedDict = collections.OrderedDict()
+
+        @functools.wraps(fn)
+        def memoised(*args):
+            if args in entries:
+                entries.move_to_end(args)
+                return entries[args][0]
+            value = fn(*args)
+            entries[args] = (value, _nbytes(value))
+            while len(entries) > 1 and (len(entries) > max_entries or
+                                        sum(n for _, n in entries.values()) > max_bytes):
+                entries.popitem(last=False)
+            return value
+        memoised.cache_clear = entries.clear
+        memoised.cache_bytes = lambda: sum(n for _, n in entries.values())
+        return memoised
+    return wrap
+
+
+def clear_caches() -> None:
+    """Forget the memoised loops, maps and robust regions (the explorer's last page closed)."""
+    for f in (_loop, _map_and_curves, _robust_overlay):
+        f.cache_clear()
+
+
+@_memo()
 def _map_and_curves(model_key: tuple, P_text: str, D_text: str):
     """The map and the exact curves of a state's model and grid, memoised: going back to a
     setting seen before (an undo, a toggled overlay, a second tab) redraws at once. The loop is
@@ -377,7 +444,7 @@ def _measured_overlay(path: str, loop) -> dict:
             "predicted_stable": np.asarray(loop.stability(P, D).stable, bool)}
 
 
-@functools.lru_cache(maxsize=8)
+@_memo()
 def _robust_overlay(model_key: tuple, P_text: str, D_text: str, text: str) -> dict:
     """The gains stable with PM >= 30 deg for every configuration of the leg range ("on": the
     file's default range; "FROM:TO": two configurations), :func:`robust_region`; memoised as
