@@ -11,7 +11,8 @@ SRC = pathlib.Path(__file__).resolve().parents[1] / "src"
 
 # bottom to top; a module may import its own layer and the layers before it
 LAYERS = (
-    ("haa_sym.errors", "haa_sym._version"),
+    # io.inputs (the one reader of users' files) sits with errors: model.params reads through it
+    ("haa_sym.errors", "haa_sym._version", "haa_sym.io.inputs"),
     ("haa_sym.model",),
     ("haa_sym.io",),
     ("haa_sym.symbolic",),

@@ -168,3 +168,19 @@ def test_fitted_entries_say_they_were_fitted_before_their_old_description(tmp_pa
 def _find(data, key):
     """The [couplings.hd] entry ``key`` (K_hd) of a parsed harmonic_drive file."""
     return data["couplings"]["hd"][key]
+
+
+def test_out_is_the_log(tmp_path, hd_log, capsys):
+    """identify --log data.toml --out data.toml replaced the log with the fitted file (issue 26)."""
+    log, _ = hd_log
+    data = tmp_path / "data.toml"
+    data.write_bytes(log.read_bytes())
+    link = tmp_path / "link.toml"
+    link.symlink_to(data)
+    for out in (data, link):
+        assert main(_argv(data, out)) == 2
+        err = capsys.readouterr().err.strip()
+        assert err == (f"haa-sym: error: --out {str(out)!r}: is one of this command's inputs"
+                       + ("" if out == data else f" (the same file as {str(data)!r})")
+                       + "; allowed: an output path that is not an input (write elsewhere, then move it)")
+    assert data.read_bytes() == log.read_bytes()

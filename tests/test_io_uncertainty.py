@@ -63,7 +63,7 @@ def test_bad_reports_are_one_line(tmp_path, change, msg):
 @pytest.mark.parametrize("text, name, msg", [("[1, 2]", "fit.json", "a JSON list"),
                                              ("{", "fit.json", "not JSON (line 1"),
                                              ("{}", "fit.txt", "not a .json file"),
-                                             (b"\xff\xfe", "fit.json", "cannot be read")])
+                                             (b"\xff\xfe", "fit.json", "not a text file (byte 0xff at offset 0")])
 def test_not_a_report(tmp_path, text, name, msg):
     path = tmp_path / name
     (path.write_bytes if isinstance(text, bytes) else path.write_text)(text)

@@ -50,6 +50,7 @@ import threading
 
 from haa_sym._version import __version__
 from haa_sym.errors import CompilerError, ParameterError, StaleGeneratedCode, Terminated
+from haa_sym.io.inputs import command_scope
 from haa_sym.io.progress import set_progress
 
 from haa_sym.cli import analyses, describe, explore, identify, simulate, tune
@@ -73,7 +74,8 @@ def main(argv: list[str] | None = None) -> int:
         _progress_flags(command, argparse.SUPPRESS)
     args = ap.parse_args(argv)
     set_progress(False if args.quiet else True if args.progress else None)
-    with _sigterm_unwinds():
+    # every input file a command reads is recorded, and no output may replace one of them
+    with _sigterm_unwinds(), command_scope():
         return _run(args, runs)
 
 

@@ -12,15 +12,16 @@ from pathlib import Path
 
 import numpy as np
 
+from haa_sym.io.inputs import read_text
 from haa_sym.errors import ParameterError
 from haa_sym.fit.fitted_file import fitted_text
 from haa_sym.design.tune import NOMINAL
 from haa_sym.fit.identify import INPUT_MODES, Experiment, FitOptions, identify
 from haa_sym.io.formats import save_json
 from haa_sym.io.logs import BIAS_JITTER, MAX_JITTER, OUTPUTS, read_log
-from haa_sym.io.outputs import Transaction
+from haa_sym.io.outputs import Transaction, check_file
 from haa_sym.loop import ClosedLoop
-from haa_sym.model.params import actuator_path, load_params
+from haa_sym.model.params import MAX_FILE_BYTES, actuator_path, load_params
 
 from haa_sym.cli.common import PARAMS_HELP, _check_out, _parse_options, _params, _plots
 
@@ -101,6 +102,11 @@ def run(args) -> int:
         params = _params(args, base)
         log = read_log(log_path, inputs, outputs, max_jitter=args.max_jitter)
         experiments.append(Experiment(log, params, conf))
+    # the inputs are known now: an output that is one of them (--out the log, a link to it) is
+    # refused before the fit's seconds, not only when the outputs are committed
+    for target, flag in ((args.out, "--out"), (args.report, "--report"), (args.plot, "--plot")):
+        if target is not None:
+            check_file(target, flag)
     loop = ClosedLoop(experiments[0].params, loop_options, basis=False)
     result = identify(experiments, keys, inputs, outputs, FitOptions(), loop_options,
                       provenance={**loop.provenance(), "params_file": str(path)}, figure_data=plot is not None)
@@ -112,7 +118,7 @@ def run(args) -> int:
                                  f"{hi:.3g}); allowed: keys the logs observe (fit fewer keys, log more outputs, a "
                                  "richer input; the time column in s)")
     date = result.meta["date"]
-    text = fitted_text(Path(path).read_text(encoding="utf-8"), str(path), file_params, result, date)
+    text = fitted_text(read_text(path, "--params", limit=MAX_FILE_BYTES), str(path), file_params, result, date)
     with Transaction() as tx:
         tx.write_text(out, text, "--out")
         if report:

@@ -5,13 +5,14 @@ from __future__ import annotations
 import math
 from pathlib import Path
 
+from haa_sym.io.inputs import read_text
 from haa_sym.analysis.torque import step_response
 from haa_sym.design.tune import GM_TARGET_DB, OBJECTIVES, PM_TARGET_DEG, TuneOptions, tune, tuned_text
 from haa_sym.errors import ParameterError
 from haa_sym.io.formats import save_json
 from haa_sym.io.outputs import Transaction
 from haa_sym.loop import ClosedLoop
-from haa_sym.model.params import actuator_path, load_params
+from haa_sym.model.params import MAX_FILE_BYTES, actuator_path, load_params
 
 from haa_sym.cli.common import PARAMS_HELP, TITLE_HELP, _check_out, _parse_options, _plots, measured_torque
 
@@ -85,7 +86,7 @@ def _cmd_tune(args) -> int:
     plot = _check_out(args.plot, "tune", "--plot")
     if plot and args.title:
         _plots().check_title(args.title, "--title")
-    text = Path(src).read_text(encoding="utf-8")
+    text = read_text(src, "--params", limit=MAX_FILE_BYTES)
     r = tune(params, options, opts)
     new = tuned_text(text, r, str(src))           # checked: it parses and gives the new gains
     b, a = r.before, r.after

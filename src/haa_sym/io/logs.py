@@ -24,6 +24,7 @@ from pathlib import Path
 import numpy as np
 
 from haa_sym.errors import ParameterError
+from haa_sym.io.inputs import read_bytes
 
 __all__ = ["INPUTS", "OUTPUTS", "UNIFORM_JITTER", "MAX_JITTER", "BIAS_JITTER", "Log", "read_log"]
 
@@ -62,11 +63,9 @@ class Log:
 
 
 def _read_rows(path: Path, label: str) -> tuple[list[str], np.ndarray, bytes]:
-    try:
-        raw = path.read_bytes()
-    except OSError as exc:
-        raise ParameterError(f"{label}: cannot read: {exc.strerror or exc}; allowed: a readable CSV file") from None
-    text = raw.decode("utf-8", errors="replace").splitlines()
+    raw = read_bytes(path, "--log", where=label)
+    # utf-8-sig: a spreadsheet's export starts with a byte-order mark, which is no part of "time"
+    text = raw.decode("utf-8-sig", errors="replace").splitlines()
     lines = [line for line in text if line.strip() and not line.lstrip().startswith("#")]
     if not lines:
         raise ParameterError(f"{label}: empty file; allowed: a CSV with a header line (time and signals)")

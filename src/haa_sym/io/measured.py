@@ -9,16 +9,18 @@ import csv
 import io
 import math
 from dataclasses import dataclass
-from pathlib import Path
 
 import numpy as np
 
 from haa_sym.errors import ParameterError
+from haa_sym.io.inputs import read_text
 
 __all__ = ["OUTCOMES", "COLUMNS", "MeasuredPoints", "read_measured"]
 
 OUTCOMES = ("stable", "unstable", "limit_cycle")
 COLUMNS = ("P_gain", "D_gain", "outcome")
+# the largest measured-points file read, bytes (a few hundred bytes a point: a million points)
+MAX_BYTES = 64 << 20
 
 
 @dataclass(frozen=True)
@@ -36,13 +38,7 @@ def read_measured(path, field: str = "--measured") -> MeasuredPoints:
     """The points of ``path``, checked (module docstring); ParameterError of one line otherwise."""
     where = f"{field} {str(path)!r}"
     allowed = f"allowed: a CSV with the header columns {list(COLUMNS)}, outcome one of {list(OUTCOMES)}"
-    p = Path(path)
-    try:
-        text = p.read_text(encoding="utf-8-sig")
-    except FileNotFoundError:
-        raise ParameterError(f"{where}: no such file; {allowed}") from None
-    except (OSError, UnicodeDecodeError) as exc:
-        raise ParameterError(f"{where}: cannot be read ({type(exc).__name__}); {allowed}") from None
+    text = read_text(path, field, encoding="utf-8-sig", limit=MAX_BYTES, where=where)
     rows = csv.reader(io.StringIO(text))
     header, P, D, out = None, [], [], []
     for row in rows:

@@ -16,6 +16,11 @@ removes again those it created that are still empty. So a failed or interrupted 
 no new directory behind; the one exception is a directory another process put a file into
 meanwhile, which is not ours to delete. Messages name the user's path, never a temporary one.
 
+No output replaces one of the command's own inputs: every file read through
+:mod:`haa_sym.io.inputs` inside a command is recorded (by device and inode, so through any
+symbolic or hard link), and :func:`check_file` (before the work and again at commit) refuses
+such a target, as :func:`check_directory` refuses a directory holding one.
+
 Replacing an existing target keeps what the user set on it:
 
 * its permission bits: the new file (or directory) gets the old one's mode (a 0600 file stays
@@ -46,6 +51,7 @@ from pathlib import Path
 from typing import Callable, Iterator
 
 from haa_sym.errors import OutputError
+from haa_sym.io.inputs import check_no_input_below, check_not_input
 
 __all__ = ["OutputError", "Transaction", "transaction", "check_file", "check_directory", "write_text",
            "csv_text"]
@@ -107,6 +113,7 @@ def check_file(path: str | Path, field: str | None = None) -> Path:
     path = _follow(shown)
     if path.is_dir():
         raise OutputError(f"{_label(shown, field)} is a directory; allowed: a file path")
+    check_not_input(path, field, shown)
     _check_writable(path, shown, field, "file")
     _check_parent(path, field)
     return path
@@ -122,6 +129,7 @@ def check_directory(path: str | Path, field: str | None = None,
     symbolic link resolved (the directory it points to is the one replaced).
     """
     path = _follow(Path(path))
+    check_no_input_below(path, field)
     if path.exists():
         if not path.is_dir():
             raise OutputError(f"{_label(path, field)} is not a directory; allowed: a new or existing "

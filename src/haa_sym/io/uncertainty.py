@@ -18,12 +18,15 @@ import math
 from pathlib import Path
 
 from haa_sym.errors import ParameterError
+from haa_sym.io.inputs import read_text
 
 __all__ = ["read_fit", "fit_box", "fit_values", "FIT_FIELDS"]
 
 # top-level field -> its JSON type (the schema)
 FIT_FIELDS = {"parameters": dict, "rms_error": dict, "samples": int, "sampling": dict, "meta": dict}
 ENTRY_FIELDS = ("value", "initial", "ci95")
+# the largest report read, bytes (identify writes a few kilobytes)
+MAX_BYTES = 16 << 20
 
 
 def _number(x) -> bool:
@@ -49,13 +52,7 @@ def read_fit(path, field: str = "--uncertainty", keys=None) -> dict:
     where = f"{field} {str(path)!r}"
     if p.suffix.lower() != ".json":
         raise ParameterError(f"{where}: not a .json file; allowed: the report of haa-sym identify (fit.json)")
-    try:
-        text = p.read_text(encoding="utf-8")
-    except FileNotFoundError:
-        raise ParameterError(f"{where}: no such file; allowed: the report of haa-sym identify (fit.json)") from None
-    except (OSError, UnicodeDecodeError) as exc:
-        raise ParameterError(f"{where}: cannot be read ({type(exc).__name__}); allowed: a readable UTF-8 "
-                             "JSON file") from None
+    text = read_text(path, field, limit=MAX_BYTES, where=where)
     twice = []
 
     def unique(pairs):

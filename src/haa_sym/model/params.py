@@ -33,6 +33,7 @@ from typing import Mapping
 import numpy as np
 
 from haa_sym.errors import ParameterError
+from haa_sym.io.inputs import read_bytes
 from haa_sym.model.actuator import (ACTUATOR_SECTIONS, HYQ, Actuator, Topology, check_keys, entry_values,
                               parse_actuator)
 from haa_sym.model import filters
@@ -87,6 +88,9 @@ _DOMAIN_TEXT = {
 # capacity (N_av <= 56 with the bundled code), so an absurd N_av would first fill the memory;
 # 10000 samples (10 s at 1 kHz) is far above any generated capacity and costs milliseconds.
 INT_MAX = 10_000
+# the largest parameter file read, bytes: the bundled ones are a few kilobytes; a path to a log or
+# a disk image by mistake is refused with its size, not parsed
+MAX_FILE_BYTES = 16 << 20
 # Gain points of every analysis: the impedance gains of Eq. (8) and the torque-loop gains, whose
 # rule is the controller file's (beta = 0 switches the torque PI off; negative gains are positive
 # feedback, which the analysis, the paper and the generated sign conventions do not cover).
@@ -584,7 +588,7 @@ def parse_params(data: Mapping[str, object], source: str = "<memory>") -> Params
                   limits=limits)
 
 
-def _read_toml(fh) -> dict:
+def _read_toml(raw: bytes) -> dict:
     """``tomllib.load`` with the cyclic garbage collector paused: tomllib recurses once per
     nesting level, and a collection that starts deep in a file nested thousands of levels runs
     other objects' finalizers at the recursion limit, where they fail and Python prints
@@ -593,7 +597,7 @@ def _read_toml(fh) -> dict:
     paused = gc.isenabled()
     gc.disable()
     try:
-        return tomllib.load(fh)
+        return tomllib.loads(raw.decode("utf-8"))
     finally:
         if paused:
             gc.enable()
@@ -623,11 +627,11 @@ def load_params(path: str | Path | None = None) -> Params:
                              "(str or os.PathLike), a bundled actuator's name or None (the bundled "
                              "model/hyq_haa.toml)")
     p = actuator_path(path)
+    if not Path(p).exists():
+        raise ParameterError(f"{p}: no such parameter file")
+    raw = read_bytes(p, "parameter file", limit=MAX_FILE_BYTES, where=str(p))
     try:
-        with open(p, "rb") as fh:
-            data = _read_toml(fh)
-    except FileNotFoundError:
-        raise ParameterError(f"{p}: no such parameter file") from None
+        data = _read_toml(raw)
     except tomllib.TOMLDecodeError as exc:
         raise ParameterError(f"{p}: not valid TOML ({exc}); allowed: a TOML parameter file") from None
     except RecursionError:
@@ -638,8 +642,6 @@ def load_params(path: str | Path | None = None) -> Params:
     except UnicodeDecodeError as exc:
         raise ParameterError(f"{p}: not a text file (byte 0x{exc.object[exc.start]:02x} at offset "
                              f"{exc.start} is not UTF-8); allowed: a TOML parameter file") from None
-    except OSError as exc:
-        raise ParameterError(f"{p}: cannot read the parameter file ({exc.strerror or exc})") from None
     return parse_params(data, source=str(p))
 
 
