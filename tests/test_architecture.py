@@ -30,12 +30,13 @@ LAYERS = (
 # calls, the sympy layer (the numeric runtime never imports sympy) and the plotting module (it
 # imports matplotlib: a command that draws nothing does not pay for it); pint (0.75 s to import
 # and build its registry) only for a file written in units other than SI (haa_sym.model.units);
-# panel and bokeh (the optional extra haa_sym[explore], 0.6 s to import) only by the explorer's page;
+# panel and bokeh (the optional extra haa_sym[explore], 0.6 s to import; tornado is Bokeh's server) only
+# by the explorer's page;
 # scipy.signal (about 0.7 s, it pulls scipy.stats), scipy.stats and scipy.optimize (0.25-0.5 s) only
 # by the few functions that use them (the cross-check's reference, a fit's figure, root finding),
 # so that a command which does not need them starts without them (tests/test_cli_startup.py)
 LAZY_ALLOWED = ("sympy", "dask", "distributed", "control", "matplotlib", "pint", "haa_sym.symbolic",
-                "haa_sym.io.plots", "panel", "bokeh", "scipy.signal", "scipy.stats", "scipy.optimize")
+                "haa_sym.io.plots", "panel", "bokeh", "tornado", "scipy.signal", "scipy.stats", "scipy.optimize")
 
 
 def _modules():

@@ -38,6 +38,7 @@ from haa_sym.errors import ParameterError
 from haa_sym.explore.state import (CATEGORIES, ViewState, clear_caches, compute_view, dumps, from_query,
                                    point_detail, resolve, to_query, view_summary)
 from haa_sym.explore.export import export_view
+from haa_sym.io.inputs import command_scope, restrict_reads
 from haa_sym.model import filters
 from haa_sym.model.params import CONTROLLER_KEYS, CONTROLLER_UNITS, STRING_KEYS, actuator_path, load_params
 
@@ -61,7 +62,13 @@ EXTRA_MISSING = ("the explorer needs Panel and Bokeh, the optional extra: pip in
 # one colour per state.CATEGORIES entry: io.plots' region colours (white stable, grey PM < 30 deg,
 # dark unstable), tinted blue where the port is not passive
 CATEGORY_COLORS = ("#ffffff", "#cfe0f3", "#c8c8c8", "#9fb4cc", "#3a3a3a")
-CURVE_STYLES = {"stability": ("#d62728", "solid"), "pm": ("#2ca02c", "dashed"), "passivity": ("#17becf", "solid")}
+# each family of state.CURVE_FAMILIES: colour, dash, legend (the frequency-range edges of the
+# passivity boundary in the boundary's colour, dotted, and named as what they are)
+CURVE_STYLES = {"stability": ("#d62728", "solid", "stability boundary"),
+                "pm": ("#2ca02c", "dashed", "PM = 30 deg"),
+                "passivity": ("#17becf", "solid", "passivity boundary (|phase Z| = 90 deg)"),
+                "passivity_omega_min": ("#17becf", "dotted", "passivity: judged-range edge at omega_min"),
+                "passivity_nyquist": ("#17becf", "dotdash", "passivity: judged-range edge at Nyquist")}
 # controller keys with their own control (the rest of the file's keys are in the actuator panel)
 _CONTROL_KEYS = ("beta", "alpha", "Ts") + tuple(filters.PARAMETERS)
 
@@ -103,16 +110,32 @@ def _pre(pid: str, seq: int, data) -> str:
 class _Page:
     """One browser tab: its widgets, figures and the last good state."""
 
-    def __init__(self, initial: ViewState, pn, bk):
+    def __init__(self, initial: ViewState, pn, bk, error: Exception | None = None):
         self.pn, self.bk = pn, bk
         self.seq = 0
         self.detail_seq = 0
         self.good: ViewState | None = None
         self.view = None
         self.detail = None
+        self._building = False
+        self.built = False
+        self._state0, self._error0 = initial, error
+        self.pending: dict[str, None] = {}
+        self.queue: WorkQueue | None = None
+        self.doc = None
+        self.closed = False
+        # what the GET that creates the document sends: this column, empty but for a line; the
+        # page's widgets and figures are built as the session's first work (:meth:`run`), so a
+        # GET costs a few milliseconds whatever its URL says
+        self.root = pn.Column(pn.pane.HTML('<div id="explore-loading">loading the explorer ...</div>'),
+                              sizing_mode="stretch_width")
+
+    def _build(self):
+        """The widgets and figures of the page, for the state of its URL."""
+        pn = self.pn
         self._building = True
         W = pn.widgets
-        s = initial
+        s = self._state0
         self.w_params = W.TextInput(name="actuator (bundled name or TOML file)", value=s.params,
                                     css_classes=["ex-params"])
         self.w_config = W.Select(name="configuration", options=[""], value="", css_classes=["ex-configuration"])
@@ -154,17 +177,11 @@ class _Page:
         self.margins_html = pn.pane.HTML("click the map or type a point", sizing_mode="stretch_width")
         self.link = pn.pane.HTML("", sizing_mode="stretch_width")
         self._figures()
-        # nothing is read or computed while the page is built (the GET that creates the
-        # document): the actuator's panel and the map are the first work of the page's session
-        # (:meth:`start`), queued like every later change
+        # the actuator's panel reads the file: after the widgets, in the same first job
         self._initial = (s.params, sets, s.configuration, s.blend_to)
         # the slider's position as typed in the URL, until the slider moves: a position outside
         # [0, 1] is refused with the CLI's message, not clamped to the slider's range
         self.blend_text = s.blend
-        self.pending: dict[str, None] = {}
-        self.queue: WorkQueue | None = None
-        self.doc = None
-        self.closed = False
         for w in [self.w_params]:
             w.param.watch(self._on_params, "value")
         for w in [self.w_config, self.w_blend_to, self.w_filter, self.w_delay, self.w_P, self.w_D,
@@ -178,7 +195,7 @@ class _Page:
     # ------------------------------------------------------------------ layout
     def _figures(self):
         from bokeh.events import Tap
-        from bokeh.models import ColumnDataSource, LinearColorMapper, Span
+        from bokeh.models import ColumnDataSource, Legend, LegendItem, LinearColorMapper, Span
         from bokeh.plotting import figure
         # a uniform grid (log or linear, as the axis) is one image, drawn fast; any other grid quads
         self.image_src = ColumnDataSource({"image": [], "x": [], "y": [], "dw": [], "dh": []})
@@ -190,30 +207,9 @@ class _Page:
         self.point_src = ColumnDataSource({"x": [], "y": []})
         self.mapper = LinearColorMapper(palette=list(CATEGORY_COLORS), low=-0.5, high=len(CATEGORY_COLORS) - 0.5)
         self.figs = {}
-        for log in (True, False):
-            f = figure(width=640, height=440, x_axis_type="log" if log else "linear", tools="pan,wheel_zoom,reset,save",
-                       x_axis_label="P_gain (Nm/rad)", y_axis_label="D_gain (Nms/rad)", toolbar_location="above")
-            f.image(image="image", x="x", y="y", dw="dw", dh="dh", source=self.image_src, color_mapper=self.mapper)
-            f.quad(left="left", right="right", bottom="bottom", top="top", source=self.map_src, line_width=0,
-                   fill_color={"field": "cat", "transform": self.mapper})
-            f.quad(left="left", right="right", bottom="bottom", top="top", source=self.robust_src, line_width=0,
-                   fill_color="#2ca02c", fill_alpha=0.25, legend_label="robust over the leg range")
-            for fam, (color, dash) in CURVE_STYLES.items():
-                f.multi_line(xs="xs", ys="ys", source=self.curve_src[fam], line_color=color, line_dash=dash,
-                             line_width=2, legend_label={"stability": "stability boundary", "pm": "PM = 30 deg",
-                                                         "passivity": "passivity boundary"}[fam])
-            f.scatter("x", "y", source=self.sched_src, marker="triangle", size=6, color="#9467bd",
-                      legend_label="schedule: robust beta exists")
-            f.scatter("x", "y", source=self.meas_src, marker="circle", size=8, fill_color="color",
-                      line_color="black", legend_label="measured")
-            f.scatter("x", "y", source=self.point_src, marker="x", size=16, line_width=3, color="#ff7f0e")
-            f.legend.location = "top_left"
-            f.legend.label_text_font_size = "8pt"
-            f.legend.background_fill_alpha = 0.6
-            f.on_event(Tap, self._on_tap)
-            self.figs[log] = f
+        self.legend_items = {}                  # legend item -> the source whose data it names
         self.map_log = True
-        self.map_pane = self.pn.pane.Bokeh(self.figs[True])
+        self.map_pane = self.pn.pane.Bokeh(self._map_figure(True))
         self.phase_src = ColumnDataSource({"x": [], "y": []})
         self.tstep_src = ColumnDataSource({"x": [], "y": []})
         self.zstep_src = ColumnDataSource({"x": [], "y": []})
@@ -232,6 +228,40 @@ class _Page:
         fo.line(np.cos(th), np.sin(th), line_color="gray")
         fo.scatter("x", "y", source=self.poles_src, marker="x", size=8, color="#d62728")
         self.detail_figs = (fp, ft, fz, fo)
+
+    def _map_figure(self, log: bool):
+        """The map's figure with a log (or linear) P_gain axis, built when first shown (a page
+        starts with the log one: building a figure is most of a page's cost)."""
+        if log in self.figs:
+            return self.figs[log]
+        from bokeh.events import Tap
+        from bokeh.models import Legend, LegendItem
+        from bokeh.plotting import figure
+        f = figure(width=900, height=440, x_axis_type="log" if log else "linear", tools="pan,wheel_zoom,reset,save",
+                   x_axis_label="P_gain (Nm/rad)", y_axis_label="D_gain (Nms/rad)", toolbar_location="above")
+        f.image(image="image", x="x", y="y", dw="dw", dh="dh", source=self.image_src, color_mapper=self.mapper)
+        f.quad(left="left", right="right", bottom="bottom", top="top", source=self.map_src, line_width=0,
+               fill_color={"field": "cat", "transform": self.mapper})
+        named = [(f.quad(left="left", right="right", bottom="bottom", top="top", source=self.robust_src,
+                         line_width=0, fill_color="#2ca02c", fill_alpha=0.25), "robust over the leg range",
+                  self.robust_src)]
+        for fam, (color, dash, label) in CURVE_STYLES.items():
+            named.append((f.multi_line(xs="xs", ys="ys", source=self.curve_src[fam], line_color=color,
+                                       line_dash=dash, line_width=2), label, self.curve_src[fam]))
+        named.append((f.scatter("x", "y", source=self.sched_src, marker="triangle", size=6, color="#9467bd"),
+                      "schedule: robust beta exists", self.sched_src))
+        named.append((f.scatter("x", "y", source=self.meas_src, marker="circle", size=8, fill_color="color",
+                                line_color="black"), "measured (green stable, red otherwise)", self.meas_src))
+        named.append((f.scatter("x", "y", source=self.point_src, marker="x", size=16, line_width=3,
+                                color="#ff7f0e"), "the point", self.point_src))
+        # the legend beside the map, never over it; an entry only while its layer holds data
+        items = [LegendItem(label=label, renderers=[rend], visible=False) for rend, label, _ in named]
+        self.legend_items.update({item: src for item, (_, _, src) in zip(items, named)})
+        f.add_layout(Legend(items=items, label_text_font_size="8pt", spacing=0, padding=4,
+                            location="top_left"), "right")
+        f.on_event(Tap, self._on_tap)
+        self.figs[log] = f
+        return f
 
     def layout(self):
         pn = self.pn
@@ -326,7 +356,7 @@ class _Page:
         with self.pn.io.hold():
             if log != self.map_log:
                 self.map_log = log
-                self.map_pane.object = self.figs[log]
+                self.map_pane.object = self._map_figure(log)
             if _uniform(v.P_gain, log) and _uniform(v.D_gain, False):
                 # the categories as bytes: a quarter of float32's payload, mapped to colours alike
                 self.image_src.data = {"image": [np.ascontiguousarray(v.category.T, dtype=np.uint8)],
@@ -361,6 +391,7 @@ class _Page:
             # the server's share of a change's latency (the browser test reports the rest)
             summary.update(seq=self.seq, query=to_query(s), overlays=_overlay_summary(ov),
                            compute_ms=round(1e3 * (time.perf_counter() - t0), 1))
+            summary["legend"] = self._update_legend()
             self.view_pre.object = _pre("explore-view", self.seq, summary)
             q = to_query(s)
             self.link.object = f'<a id="explore-link" href="?{html.escape(q)}">link to this view</a>'
@@ -368,6 +399,17 @@ class _Page:
                 self.pn.state.location.search = f"?{q}" if q else ""
             if r.point is not None:
                 self._detail(s, r, *r.point)
+
+    def _update_legend(self) -> list[str]:
+        """Show the legend entries of the layers that hold data, hide the others; returns the
+        labels shown (each once)."""
+        shown = []
+        for item, src in self.legend_items.items():
+            data = next(iter(src.data.values()), [])
+            item.visible = len(data) > 0
+            if item.visible and item.label.value not in shown:
+                shown.append(item.label.value)
+        return shown
 
     def _detail(self, s: ViewState, r, P: float, D: float):
         try:
@@ -381,6 +423,7 @@ class _Page:
         self.tstep_src.data = {"x": d.torque_step["t_s"], "y": d.torque_step["T_Nm"]}
         self.zstep_src.data = {"x": d.impedance_step["t_s"], "y": d.impedance_step["theta_rad"]}
         self.poles_src.data = {"x": d.poles.real, "y": d.poles.imag}
+        self._update_legend()
         self.margins_html.object = _margins_html(d)
         self.detail_seq += 1
         js = d.to_dict()
@@ -390,13 +433,13 @@ class _Page:
         self.detail_pre.object = _pre("explore-detail", self.detail_seq, small)
 
     # ------------------------------------------------------------------ work
-    def start(self, error: Exception | None = None):
-        """The page's first work, once its session has loaded: the actuator's panel, then the
-        map (unless the URL was refused)."""
-        self._request("initial" if error is None else "initial-panel")
+    def start(self):
+        """The page's first work, once its session has loaded: its widgets and figures, the
+        actuator's panel, then the map (unless the URL was refused)."""
+        self._request("initial")
 
     def _request(self, job: str):
-        """Ask for ``job`` (initial, initial-panel, actuator, refresh, point, export). A job
+        """Ask for ``job`` (initial, actuator, refresh, point, export). A job
         already pending stays once (the work reads the widgets when it runs: the newest request
         supersedes the older); a refresh covers a pending point (it draws the point too)."""
         if self._building or self.closed:
@@ -433,12 +476,20 @@ class _Page:
     def run(self):
         """Do the pending work, in the order: the actuator's panel, the map, the point, the export."""
         jobs, self.pending = self.pending, {}
-        if "initial" in jobs or "initial-panel" in jobs:
+        if not self.built:
+            if "initial" not in jobs:
+                return
+            self._build()
+            self.built = True
+            self.root.objects = [self.layout()]
             self._building = True
             try:
                 self._actuator_panel(*self._initial)
             finally:
                 self._building = False
+            if self._error0 is not None:
+                self._refused(self._error0, self._state0)
+                jobs.pop("initial")
         if "actuator" in jobs:
             self._building = True
             try:
@@ -632,17 +683,15 @@ def page(initial: ViewState | None = None):
             state = from_query(args)
         except ParameterError as exc:
             error = exc
-    p = _Page(state, pn, bokeh)
-    if error is not None:
-        p._refused(error, state)
+    p = _Page(state, pn, bokeh, error)
     if ctx is None:                             # no server (tests): the work at once
-        p.start(error)
-        return p.layout()
+        p.start()
+        return p.root
     p.doc, p.queue = doc, _QUEUE
     _LIVE[ctx.id] = p
     doc.on_session_destroyed(_destroyed)
-    pn.state.onload(lambda: p.start(error))
-    return p.layout()
+    pn.state.onload(p.start)
+    return p.root
 
 
 def _destroyed(session_context) -> None:
@@ -735,7 +784,6 @@ def serve(initial: ViewState, port: int = 5006, show: bool = True, allowed=()) -
     exists so that every callback runs under it); every file read is an input the export must not
     replace (:func:`haa_sym.io.inputs.command_scope`)."""
     import panel as pn
-    from haa_sym.io.inputs import command_scope, restrict_reads
     origins = [f"127.0.0.1:{port}", f"localhost:{port}"]
     with command_scope(), restrict_reads(list(allowed)):
         server = pn.serve({"/": lambda: page(initial)}, port=port, address="127.0.0.1", websocket_origin=origins,

@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import json
 import math
+import os
 import tomllib
 from pathlib import Path
 
@@ -20,12 +21,15 @@ from haa_sym.errors import ParameterError
 from haa_sym.explore.state import ViewState, point_detail, resolve, to_query, view_summary, plain
 from haa_sym.io.formats import save_json
 from haa_sym.io.outputs import Transaction, check_file
-from haa_sym.model.params import CONTROLLER_UNITS
+from haa_sym.io.inputs import command_scope, protect, read_text
+from haa_sym.model.params import CONTROLLER_UNITS, MAX_FILE_BYTES
 
-__all__ = ["actuator_toml", "export_view", "EXPORT_NAMES"]
+__all__ = ["actuator_toml", "export_view", "export_paths", "EXPORT_NAMES", "MAX_EXPORTS"]
 
-# the files export_view writes into its directory
+# the files export_view writes into its directory (numbered when they exist: export_paths)
 EXPORT_NAMES = ("actuator.toml", "view.png", "view.json")
+# the most numbered exports in one directory
+MAX_EXPORTS = 999
 
 
 def _locations(data: dict) -> dict:
@@ -57,8 +61,10 @@ def _set_entry(table: dict, name: str, value, si_unit: str | None) -> None:
 def actuator_toml(params) -> str:
     """The text of an actuator file holding ``params``'s values (see the module docstring)."""
     try:
-        data = tomllib.loads(Path(params.source).read_text())
-    except (OSError, tomllib.TOMLDecodeError) as exc:
+        data = tomllib.loads(read_text(params.source, "export: the source file", limit=MAX_FILE_BYTES))
+    except ParameterError as exc:
+        raise ParameterError(f"{exc}; the export needs a setting loaded from a TOML file") from None
+    except tomllib.TOMLDecodeError as exc:
         raise ParameterError(f"export: the source file {params.source!r} cannot be read ({exc}); allowed: a "
                              "setting loaded from a TOML file") from None
     top = params.plant.topology
@@ -122,28 +128,47 @@ def _toml(data: dict, path: tuple = ()) -> str:
     return text.strip("\n") + "\n" if not path else text
 
 
+def export_paths(directory: str | Path) -> list[Path]:
+    """Where :func:`export_view` writes into ``directory``: :data:`EXPORT_NAMES`, or, when any of
+    them exists there already (a file, a directory or a link, even a dangling one), the first
+    numbered set of which none exists (``actuator-2.toml``, ``view-2.png``, ``view-2.json``;
+    then -3, ...): an export never replaces a file, and the three files of one export share
+    their number."""
+    d = Path(directory)
+    for n in range(1, MAX_EXPORTS + 1):
+        paths = [d / (name if n == 1 else f"{Path(name).stem}-{n}{Path(name).suffix}") for name in EXPORT_NAMES]
+        if not any(os.path.lexists(p) for p in paths):
+            return paths
+    raise ParameterError(f"export directory {str(directory)!r}: holds {MAX_EXPORTS} exports already; allowed: a "
+                         "directory with fewer (choose another)")
+
+
 def export_view(state: ViewState, directory: str, view=None) -> list[Path]:
     """Write :data:`EXPORT_NAMES` of ``state`` into ``directory`` (created if missing), all or
-    nothing; returns the paths. ``view``: the page's :class:`haa_sym.explore.state.View` (its
-    summary goes into the JSON; default recomputed)."""
+    nothing, under new names when those exist (:func:`export_paths`); returns the paths. The
+    actuator file explored, and every file the command has read, is never written over
+    (:func:`haa_sym.io.inputs.protect`, checked through links). ``view``: the page's
+    :class:`haa_sym.explore.state.View` (its summary goes into the JSON; default recomputed)."""
     from haa_sym.io import plots
     if not directory:
         raise ParameterError("export directory = ''; allowed: a directory path")
     r = resolve(state)
     loop, P, D = r.loop, r.P_gain, r.D_gain
-    paths = [check_file(Path(directory) / name, "export directory") for name in EXPORT_NAMES]
-    m = region_map(loop, P, D, progress=False)
-    b = boundaries(loop, P_range=(float(P.min()), float(P.max())), D_range=(float(D.min()), float(D.max()))) \
-        if loop.options.conventions.pm_loop == "impedance" else None
-    summary = view_summary(view) if view is not None else None
-    data = {"query": to_query(state), "state": {k: v for k, v in state.__dict__.items()},
-            "map": summary, "counts": {"stable": int(m.stable.sum()), "low_pm": int(m.low_pm.sum()),
-                                       "passive": int(m.passive.sum())},
-            "point": point_detail(state, *r.point, r).to_dict() if r.point is not None else None,
-            "meta": m.meta}
-    with Transaction() as tx:
-        tx.write_text(paths[0], actuator_toml(r.params), "export directory")
-        plots.save_figure(plots.plot_region(m, title=to_query(state) or "the file's values", boundary=b),
-                          paths[1], tx, "export directory")
-        save_json(paths[2], plain(data), tx, "export directory")
+    with command_scope():
+        protect(r.params.source)
+        paths = [check_file(p, "export directory") for p in export_paths(directory)]
+        m = region_map(loop, P, D, progress=False)
+        b = boundaries(loop, P_range=(float(P.min()), float(P.max())), D_range=(float(D.min()), float(D.max()))) \
+            if loop.options.conventions.pm_loop == "impedance" else None
+        summary = view_summary(view) if view is not None else None
+        data = {"query": to_query(state), "state": {k: v for k, v in state.__dict__.items()},
+                "map": summary, "counts": {"stable": int(m.stable.sum()), "low_pm": int(m.low_pm.sum()),
+                                           "passive": int(m.passive.sum())},
+                "point": point_detail(state, *r.point, r).to_dict() if r.point is not None else None,
+                "meta": m.meta}
+        with Transaction() as tx:
+            tx.write_text(paths[0], actuator_toml(r.params), "export directory")
+            plots.save_figure(plots.plot_region(m, title=to_query(state) or "the file's values", boundary=b),
+                              paths[1], tx, "export directory")
+            save_json(paths[2], plain(data), tx, "export directory")
     return paths

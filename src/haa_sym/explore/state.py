@@ -24,6 +24,7 @@ from __future__ import annotations
 
 import csv
 import functools
+import io
 import json
 import math
 from dataclasses import asdict, dataclass, field, fields, replace
@@ -42,6 +43,7 @@ from haa_sym.analysis.sweep import BLAS_THREADS, blas_limits
 from haa_sym.analysis.torque import impedance_step, step_response
 from haa_sym.errors import ParameterError
 from haa_sym.io.gridspec import gain_axis
+from haa_sym.io.inputs import read_text
 from haa_sym.loop import ClosedLoop
 from haa_sym.loop.options import parse_options
 from haa_sym.loop.statespace import closed_loop_eigenvalues
@@ -50,7 +52,7 @@ from haa_sym.model.params import (CONTROLLER_KEYS, actuator_path, apply_sets, ga
 
 __all__ = ["ViewState", "Resolved", "View", "Detail", "resolve", "compute_view", "point_detail", "to_query",
            "from_query", "MAX_POINTS", "CURVE_LINES", "CURVE_XTOL", "STEP_DURATION_S", "CATEGORIES", "categories", "view_summary", "dumps",
-           "parse_point", "state_dict", "plain", "blend_position", "clear_caches"]
+           "parse_point", "state_dict", "plain", "blend_position", "clear_caches", "CURVE_FAMILIES"]
 
 # The page's own limit on a map's points, on top of the memory budget: a map within the budget
 # can still take minutes (1e8 points), and the page answers every change; 1,000,000 points
@@ -76,11 +78,23 @@ STEP_DURATION_S = 0.3
 CATEGORIES = ("stable, PM >= 30 deg, passive", "stable, PM >= 30 deg, not passive",
               "stable, PM < 30 deg, passive", "stable, PM < 30 deg, not passive", "unstable")
 
+# The largest overlay CSV read, bytes: a schedule of the page's default 200 x 100 grid is 2 MB,
+# 16 MiB about 200,000 rows (each row becomes a dict: about 100 MB of memory at this bound).
+MAX_CSV_BYTES = 16 << 20
 # The memoised maps (:func:`_map_and_curves`, :func:`_robust_overlay`) hold at most this many
 # bytes of arrays each, besides at most 8 entries: eight 200 x 100 maps take 5 MB, one
 # 1000 x 1000 map 28 MB (its decisions, margins and spectral radii), so a few large maps are
 # kept, not eight (224 MB).
 CACHE_BYTES = 64_000_000
+
+# The drawn curves' families. The passivity boundary's pieces are of two natures
+# (analysis.boundaries.passivity): where the corrected phase of Z touches +-90 deg inside the
+# judged frequency range (kind "passivity"), and where the set of passive gains is bounded by the
+# range's own end, the phase reaching +-90 deg exactly at omega_min or at Nyquist (kinds
+# "passivity (omega_min)", "passivity (Nyquist)"): a limit of the analysis, drawn and named apart.
+CURVE_FAMILIES = ("stability", "pm", "passivity", "passivity_omega_min", "passivity_nyquist")
+PASSIVITY_FAMILIES = {"passivity": "passivity", "passivity (omega_min)": "passivity_omega_min",
+                      "passivity (Nyquist)": "passivity_nyquist"}
 
 _TEXT_FIELDS = ("params", "configuration", "blend_to", "blend", "P_gain", "D_gain", "point", "schedule",
                 "measured", "robust")
@@ -286,7 +300,7 @@ def resolve(state: ViewState) -> Resolved:
 class View:
     """What the page's map shows: the axes (Nm/rad, Nms/rad), the decisions (n_P, n_D) of
     :func:`haa_sym.analysis.regions.region_map`, ``category`` (:data:`CATEGORIES`), the exact
-    curves (``curves``: dicts of ``family`` in stability / pm / passivity, ``kind``, ``P_gain``,
+    curves (``curves``: dicts of ``family`` in :data:`CURVE_FAMILIES`, ``kind``, ``P_gain``,
     ``D_gain``), the overlays (``overlays``: schedule, measured, robust; plain data or None) and
     ``meta`` (the loop's provenance)."""
 
@@ -389,20 +403,20 @@ def _map_and_curves(model_key: tuple, P_text: str, D_text: str):
         m = region_map(loop, P, D, progress=False, boundary=st)
         b = boundaries(loop, **box, n_lines=CURVE_LINES, stability=st, passivity_xtol=CURVE_XTOL)
         for family, cs in (("stability", b.stability.curves), ("pm", b.phase_margin), ("passivity", b.passivity)):
-            curves += [{"family": family, "kind": c.kind, "P_gain": np.asarray(c.P_gain, float),
+            curves += [{"family": PASSIVITY_FAMILIES.get(c.kind, family) if family == "passivity" else family,
+                        "kind": c.kind, "P_gain": np.asarray(c.P_gain, float),
                         "D_gain": np.asarray(c.D_gain, float)} for c in cs]
     return m, curves
 
 
 def _read_csv(path: str, field: str, required: tuple[str, ...]) -> list[dict]:
-    p = Path(path).expanduser()
+    """The rows of the CSV ``path`` (a regular file of at most :data:`MAX_CSV_BYTES`, read through
+    :func:`haa_sym.io.inputs.read_text`: on the explorer's server only where it may read)."""
+    text = read_text(path, field, limit=MAX_CSV_BYTES, encoding="utf-8-sig")
     try:
-        with open(p, newline="") as f:
-            rows = list(csv.DictReader(f))
-            header = rows[0].keys() if rows else []
-    except OSError as exc:
-        raise ParameterError(f"{field} {path!r}: {exc.strerror or exc}; allowed: a readable CSV file") from None
-    except (UnicodeDecodeError, csv.Error) as exc:
+        rows = list(csv.DictReader(io.StringIO(text, newline="")))
+        header = rows[0].keys() if rows else []
+    except csv.Error as exc:
         raise ParameterError(f"{field} {path!r}: not a CSV file ({exc}); allowed: a CSV file") from None
     missing = [c for c in required if c not in header]
     if not rows or missing:
@@ -544,7 +558,7 @@ def view_summary(view: View) -> dict:
             "category": "".join(map(str, view.category.ravel().tolist())),
             "counts": {"stable": int(view.stable.sum()), "low_pm": int(view.low_pm.sum()),
                        "passive": int(view.passive.sum())},
-            "curves": {f: sum(1 for c in view.curves if c["family"] == f) for f in ("stability", "pm", "passivity")}}
+            "curves": {f: sum(1 for c in view.curves if c["family"] == f) for f in CURVE_FAMILIES}}
 
 
 def dumps(data) -> str:
