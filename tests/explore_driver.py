@@ -65,11 +65,12 @@ class Server:
             self.proc.communicate()
 
 
-def start_server(timeout_s: float = 60.0, env: dict | None = None) -> Server:
-    """``haa-sym explore`` on a free port (this interpreter, ``--no-browser``), once it answers."""
+def start_server(timeout_s: float = 60.0, env: dict | None = None, args=(), cwd=None) -> Server:
+    """``haa-sym explore`` on a free port (this interpreter, ``--no-browser``, then ``args``,
+    e.g. ``--allow DIR``; started in ``cwd``), once it answers."""
     port = free_port()
-    proc = subprocess.Popen([sys.executable, "-m", "haa_sym.cli", "explore", "--port", str(port), "--no-browser"],
-                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, env=env)
+    proc = subprocess.Popen([sys.executable, "-m", "haa_sym.cli", "explore", "--port", str(port), "--no-browser",
+                             *args], stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, env=env, cwd=cwd)
     url = f"http://127.0.0.1:{port}/"
     deadline = time.monotonic() + timeout_s
     while True:

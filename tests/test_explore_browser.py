@@ -30,9 +30,9 @@ pytestmark = pytest.mark.slow
 
 
 @pytest.fixture(scope="module")
-def server():
+def server(outdir):
     try:
-        s = start_server()
+        s = start_server(args=["--allow", str(outdir)])         # the overlays' CSV is written there
     except DriverError as exc:
         pytest.fail(str(exc))
     yield {"proc": s.proc, "url": s.url, "html": s.html}

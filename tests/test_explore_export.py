@@ -43,3 +43,46 @@ def test_export_refuses_before_writing(tmp_path):
     with pytest.raises(ParameterError, match="J_L2 = -1"):
         export_view(ViewState().with_set("J_L2", "-1"), str(tmp_path / "out"))
     assert not (tmp_path / "out").exists()
+
+
+SMALL = ViewState(P_gain="log:1:20000:10", D_gain="lin:1:50:5")
+
+
+def test_export_never_replaces_a_file(tmp_path):
+    """Issue 26 item 2: an existing view.json was replaced without a word; now the export takes
+    the first numbered set of names none of which exists."""
+    out = tmp_path / "out"
+    out.mkdir()
+    (out / "view.json").write_text("mine\n")
+    (out / "view-3.png").symlink_to(tmp_path / "nowhere")             # a dangling link is a file too
+    first = export_view(SMALL, str(out))
+    assert [p.name for p in first] == ["actuator-2.toml", "view-2.png", "view-2.json"]
+    assert (out / "view.json").read_text() == "mine\n"
+    second = export_view(SMALL.with_set("beta", "2"), str(out))
+    assert [p.name for p in second] == ["actuator-4.toml", "view-4.png", "view-4.json"]
+    assert json.loads((out / "view-2.json").read_text())["query"] == to_query(SMALL)
+    assert sorted(p.name for p in out.iterdir()) == sorted(
+        ["view.json", "view-3.png"] + [p.name for p in first + second])
+
+
+def test_export_never_replaces_the_file_explored(tmp_path, monkeypatch):
+    """The export overwrote the actuator file being explored (its comments lost): it is kept,
+    and writing over it is refused even if the names pointed at it (a hard link included)."""
+    from haa_sym.errors import OutputError
+    from haa_sym.explore import export
+    out = tmp_path / "out"
+    out.mkdir()
+    source = out / "actuator.toml"
+    text = "# my notes on this drive\n" + bundled_actuators()["sea"].read_text()
+    source.write_text(text)
+    state = SMALL.replace(params=str(source)).with_set("beta", "2")
+    paths = export_view(state, str(out))
+    assert source.read_text() == text and paths[0].name == "actuator-2.toml"
+    assert load_params(paths[0]).controller.beta == 2.0
+    link = tmp_path / "link.toml"
+    link.hardlink_to(source)
+    for target in (source, link):
+        monkeypatch.setattr(export, "export_paths", lambda d, t=target: [t, out / "x.png", out / "x.json"])
+        with pytest.raises(OutputError, match="is one of this command's inputs"):
+            export_view(state, str(out))
+        assert source.read_text() == text

@@ -56,6 +56,9 @@ MAX_SESSIONS = 8
 # and connect within a second or two; 10 s leaves room on a loaded machine.
 UNUSED_SESSION_LIFETIME_MS = 10_000
 CHECK_UNUSED_SESSIONS_MS = 1_000
+# Bokeh pings every websocket this often (its default: 37 s): a connection whose browser vanished
+# without closing it is noticed, and its page destroyed, within seconds
+KEEP_ALIVE_MS = 5_000
 
 EXTRA_MISSING = ("the explorer needs Panel and Bokeh, the optional extra: pip install 'haa_sym[explore]' "
                  "(or pip install 'panel>=1.4' 'bokeh>=3.4')")
@@ -789,7 +792,8 @@ def serve(initial: ViewState, port: int = 5006, show: bool = True, allowed=()) -
         server = pn.serve({"/": lambda: page(initial)}, port=port, address="127.0.0.1", websocket_origin=origins,
                           show=False, title="haa-sym explore", start=False, threaded=False, verbose=False,
                           unused_session_lifetime_milliseconds=UNUSED_SESSION_LIFETIME_MS,
-                          check_unused_sessions_milliseconds=CHECK_UNUSED_SESSIONS_MS)
+                          check_unused_sessions_milliseconds=CHECK_UNUSED_SESSIONS_MS,
+                          keep_alive_milliseconds=KEEP_ALIVE_MS)
         _guard(server._tornado, port)           # Bokeh's Server keeps its tornado Application there
         server.start()
         if show:
