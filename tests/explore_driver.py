@@ -39,7 +39,7 @@ CHANGES = tuple(("type", ".ex-set-beta", b) for b in BETAS) + (
     ("type", ".ex-set-f_c", "60"),
     ("type", ".ex-set-Ts", "0.0005"),
     ("select", ".ex-option-delay", "1"))
-# where the map is clicked, fractions of its canvas (from its left and top)
+# where the map is clicked, fractions of its frame (the plotted area, from its left and top)
 CLICKS = ((0.5, 0.5), (0.62, 0.3), (0.7, 0.6), (0.4, 0.75), (0.8, 0.2))
 
 
@@ -122,6 +122,24 @@ MARK_JS = """() => { window.__exT0 = null;
                               {capture: true, once: true}); }"""
 
 
+# the map's frame (its plotted area; the legend stands beside it) in page pixels: left, top,
+# width, height, from Bokeh's views (the figure whose x axis is P_gain)
+FRAME_JS = """() => {
+  const roots = Bokeh.index.roots ? [...Bokeh.index.roots] : Object.values(Bokeh.index);
+  function walk(v, d) {
+    if (v == null || d > 40) return null;
+    if (v.frame && v.canvas_view && (v.model.below ?? []).some(a => (a.axis_label ?? '').startsWith('P_gain'))) {
+      const r = v.canvas_view.el.getBoundingClientRect(), b = v.frame.bbox;
+      return [r.left + b.left, r.top + b.top, b.width, b.height];
+    }
+    for (const c of (v.child_views ?? [])) { const f = walk(c, d + 1); if (f) return f; }
+    return null;
+  }
+  for (const r of roots) { const f = walk(r, 0); if (f) return f; }
+  return null;
+}"""
+
+
 class Tab:
     """One browser tab on the page; reads the JSON the page exposes."""
 
@@ -173,11 +191,11 @@ class Tab:
         return getattr(self, action)(css, value)
 
     def click_map(self, fx, fy):
-        """Click the map at fractions (fx, fy) of its canvas; returns the seconds from the pointer
-        going down to the painted detail."""
-        bb = self.page.locator(".bk-Canvas").first.bounding_box()
+        """Click the map at fractions (fx, fy) of its frame (:data:`FRAME_JS`); returns the
+        seconds from the pointer going down to the painted detail."""
+        x, y, w, h = self.page.evaluate(FRAME_JS)
         self.page.wait_for_timeout(600)        # two clicks in quick succession are a double tap
-        self.page.mouse.move(bb["x"] + bb["width"] * fx, bb["y"] + bb["height"] * fy)
+        self.page.mouse.move(x + w * fx, y + h * fy)
         self.mark()
         self.page.mouse.down()
         self.page.mouse.up()

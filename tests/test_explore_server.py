@@ -278,3 +278,27 @@ def test_closed_pages_stop_working_and_give_memory_back(server):
     assert idle_cpu < 0.2
     assert rss1 - rss0 < 40_000, (rss0, rss_peak, rss1)
     assert _get(server.port, "/")[0] == 200
+
+
+@pytest.mark.slow                                   # two maps of the default 200 x 100 grid: 1-3 s
+def test_page_says_what_is_in_force_and_switching_the_actuator_resets_it():
+    """Item 15: the drop-downs name their empty choice (the file's filter, nominal, the
+    default delay); the detail panels say what to do before a point; another actuator brings its
+    own keys, configurations and the default map, not the last file's overrides, axes or point."""
+    pytest.importorskip("panel")
+    import bokeh
+    import panel
+    state = ViewState(configuration="retracted", P_gain="log:1:20000:12", D_gain="lin:1:50:6",
+                      point="200,10").with_set("beta", "3").with_set("J_L2", "0.2")
+    p = app._Page(state, panel, bokeh)
+    p.start()
+    assert p.detail is not None and p.w_keys["beta"].value == "3"
+    assert p.w_filter.options["the file's (average)"] == "" and p.w_config.options[app.NOMINAL] == ""
+    assert p.w_delay.options["default (0)"] == ""
+    p.w_params.value = "sea"
+    assert p.w_keys["beta"].value == "" and p.plant_inputs["J_m"].value == ""
+    assert (p.w_P.value, p.w_D.value, p.w_point.value) == (ViewState().P_gain, ViewState().D_gain, "")
+    assert p.w_config.value == "" and set(p.w_config.options.values()) == {""} | set(
+        resolve(ViewState(params="sea", P_gain="1", D_gain="1")).file_params.configurations)
+    assert p.detail is None and "Click the map" in p.margins_html.object and not p.phase_src.data["x"]
+    assert p.good == ViewState(params="sea") and p.view.P_gain.size == 200

@@ -42,6 +42,11 @@ from haa_sym.io.inputs import command_scope, restrict_reads
 from haa_sym.model import filters
 from haa_sym.model.params import CONTROLLER_KEYS, CONTROLLER_UNITS, STRING_KEYS, actuator_path, load_params
 
+NOMINAL = "nominal (no configuration)"
+# what the detail panels say before a point is chosen
+_NO_POINT = ("<div id='explore-margins'><b>Click the map</b> (or type a point, left) to see that gain point's "
+             "margins, the corrected phase of Z, the torque and impedance steps and the closed-loop poles below.</div>")
+
 __all__ = ["page", "serve", "EXTRA_MISSING", "CATEGORY_COLORS", "available", "request_refusal", "WorkQueue",
            "MAX_SESSIONS", "UNUSED_SESSION_LIFETIME_MS", "CHECK_UNUSED_SESSIONS_MS", "live_sessions"]
 
@@ -106,7 +111,8 @@ def _uniform(v: np.ndarray, log: bool) -> bool:
 
 
 def _pre(pid: str, seq: int, data) -> str:
-    return f'<pre id="{pid}" data-seq="{seq}" style="font-size:9px;max-height:120px;overflow:auto">' \
+    # the numbers as JSON for tests and scripts: in the DOM, not shown
+    return f'<pre id="{pid}" data-seq="{seq}" style="display:none">' \
            f"{html.escape(dumps(data))}</pre>"
 
 
@@ -141,8 +147,9 @@ class _Page:
         s = self._state0
         self.w_params = W.TextInput(name="actuator (bundled name or TOML file)", value=s.params,
                                     css_classes=["ex-params"])
-        self.w_config = W.Select(name="configuration", options=[""], value="", css_classes=["ex-configuration"])
-        self.w_blend_to = W.Select(name="slide towards configuration", options=[""], value="",
+        self.w_config = W.Select(name="configuration", options=_with([""], "", NOMINAL), value="",
+                                 css_classes=["ex-configuration"])
+        self.w_blend_to = W.Select(name="slide towards configuration", options=_with([""], "", "none"), value="",
                                    css_classes=["ex-blend-to"])
         self.w_blend = W.FloatSlider(name="position between them", start=0.0, end=1.0, step=0.05,
                                      value=_slider_value(s.blend), css_classes=["ex-blend"])
@@ -153,11 +160,13 @@ class _Page:
         # a value from the URL that is not a choice stays selectable, so that the page refuses it
         # with the CLI's message rather than dropping it
         vf = sets.get("velocity_filter", "")
-        self.w_filter = W.Select(name="velocity_filter", options=_with([""] + list(filters.names()), vf), value=vf,
+        self.w_filter = W.Select(name="velocity_filter", options=_with([""] + list(filters.names()), vf, "the file's"),
+                                 value=vf,
                                  css_classes=["ex-set-velocity_filter"])
         opts = dict(s.options)
         delay = opts.get("delay", "")
-        self.w_delay = W.Select(name="delay (samples)", options=_with(["", "0", "1"], delay), value=delay,
+        self.w_delay = W.Select(name="delay (samples)", options=_with(["", "0", "1"], delay, "default (0)"),
+                                value=delay,
                                 css_classes=["ex-option-delay"])
         self.extra_options = {k: v for k, v in opts.items() if k != "delay"}
         self.w_P = W.TextInput(name="P_gain axis (Nm/rad)", value=s.P_gain, css_classes=["ex-P_gain"])
@@ -177,7 +186,7 @@ class _Page:
         self.message = pn.pane.HTML("", css_classes=["ex-message"], sizing_mode="stretch_width")
         self.view_pre = pn.pane.HTML(_pre("explore-view", 0, {}), sizing_mode="stretch_width")
         self.detail_pre = pn.pane.HTML(_pre("explore-detail", 0, {}), sizing_mode="stretch_width")
-        self.margins_html = pn.pane.HTML("click the map or type a point", sizing_mode="stretch_width")
+        self.margins_html = pn.pane.HTML(_NO_POINT, sizing_mode="stretch_width")
         self.link = pn.pane.HTML("", sizing_mode="stretch_width")
         self._figures()
         # the actuator's panel reads the file: after the widgets, in the same first job
@@ -212,7 +221,7 @@ class _Page:
         self.figs = {}
         self.legend_items = {}                  # legend item -> the source whose data it names
         self.map_log = True
-        self.map_pane = self.pn.pane.Bokeh(self._map_figure(True))
+        self.map_pane = self.pn.pane.Bokeh(self._map_figure(True), sizing_mode="stretch_width")
         self.phase_src = ColumnDataSource({"x": [], "y": []})
         self.tstep_src = ColumnDataSource({"x": [], "y": []})
         self.zstep_src = ColumnDataSource({"x": [], "y": []})
@@ -240,7 +249,8 @@ class _Page:
         from bokeh.events import Tap
         from bokeh.models import Legend, LegendItem
         from bokeh.plotting import figure
-        f = figure(width=900, height=440, x_axis_type="log" if log else "linear", tools="pan,wheel_zoom,reset,save",
+        # as wide as the window leaves it (the legend takes about 260 px of it)
+        f = figure(sizing_mode="stretch_width", min_width=600, height=460, x_axis_type="log" if log else "linear", tools="pan,wheel_zoom,reset,save",
                    x_axis_label="P_gain (Nm/rad)", y_axis_label="D_gain (Nms/rad)", toolbar_location="above")
         f.image(image="image", x="x", y="y", dw="dw", dh="dh", source=self.image_src, color_mapper=self.mapper)
         f.quad(left="left", right="right", bottom="bottom", top="top", source=self.map_src, line_width=0,
@@ -268,8 +278,10 @@ class _Page:
 
     def layout(self):
         pn = self.pn
-        legend = "".join(f'<span style="background:{c};border:1px solid #888;padding:0 8px;margin:0 4px"></span>'
-                         f"{html.escape(t)}<br>" for c, t in zip(CATEGORY_COLORS, CATEGORIES))
+        # the categories' colours in one line above the map (the curves' legend is beside it)
+        legend = "<div id='explore-categories' style='font-size:12px'>" + " ".join(
+            f'<span style="white-space:nowrap"><span style="background:{c};border:1px solid #888;padding:0 8px;'
+            f'margin:0 4px"></span>{html.escape(t)}</span>' for c, t in zip(CATEGORY_COLORS, CATEGORIES)) + "</div>"
         controls = pn.Column(
             "### Actuator and controller", self.w_params, self.w_config, self.w_blend_to, self.w_blend,
             self.w_keys["beta"], self.w_keys["alpha"], self.w_filter,
@@ -280,10 +292,10 @@ class _Page:
             pn.Card(self.w_schedule, self.w_measured, self.w_robust, title="overlays", collapsed=True, width=300),
             pn.Card(self.w_export_dir, self.w_export, title="export", collapsed=True, width=300),
             width=320)
-        main = pn.Column(self.message, pn.Row(self.map_pane, pn.pane.HTML(legend, width=260)), self.margins_html,
-                         pn.Row(*self.detail_figs[:2]), pn.Row(*self.detail_figs[2:]), self.link,
-                         self.view_pre, self.detail_pre)
-        return pn.Row(controls, main)
+        main = pn.Column(self.message, pn.pane.HTML(legend, sizing_mode="stretch_width"), self.map_pane,
+                         self.margins_html, pn.Row(*self.detail_figs[:2]), pn.Row(*self.detail_figs[2:]), self.link,
+                         self.view_pre, self.detail_pre, sizing_mode="stretch_width")
+        return pn.Row(controls, main, sizing_mode="stretch_width")
 
     def _actuator_panel(self, name: str, sets: dict, configuration: str, blend_to: str):
         """The file's configurations and one input per plant key (placeholder: the file's value)."""
@@ -292,9 +304,9 @@ class _Page:
         except ParameterError:
             return
         names = [""] + list(p.configurations)
-        self.w_config.options = _with(names, configuration)
+        self.w_config.options = _with(names, configuration, NOMINAL)
         self.w_config.value = configuration
-        self.w_blend_to.options = _with(names, blend_to)
+        self.w_blend_to.options = _with(names, blend_to, "none")
         self.w_blend_to.value = blend_to
         for w in self.plant_inputs.values():
             w.param.unwatch(w._ex_watcher)
@@ -315,7 +327,8 @@ class _Page:
         for key in ("beta", "alpha", "Ts") + tuple(filters.PARAMETERS):
             v = getattr(p.controller, key, None)
             self.w_keys[key].placeholder = "" if v is None else f"{v:g}"
-        self.w_filter.options = _with([""] + list(filters.names()), self.w_filter.value)
+        self.w_filter.options = _with([""] + list(filters.names()), self.w_filter.value,
+                                      f"the file's ({p.controller.velocity_filter})")
 
     # ------------------------------------------------------------------ state
     def state(self) -> ViewState:
@@ -402,6 +415,13 @@ class _Page:
                 self.pn.state.location.search = f"?{q}" if q else ""
             if r.point is not None:
                 self._detail(s, r, *r.point)
+
+    def _clear_detail(self):
+        """No point: the detail panels empty, saying what to do."""
+        self.detail = None
+        for src in (self.point_src, self.phase_src, self.tstep_src, self.zstep_src, self.poles_src):
+            src.data = {"x": [], "y": []}
+        self.margins_html.object = _NO_POINT
 
     def _update_legend(self) -> list[str]:
         """Show the legend entries of the layers that hold data, hide the others; returns the
@@ -494,8 +514,17 @@ class _Page:
                 self._refused(self._error0, self._state0)
                 jobs.pop("initial")
         if "actuator" in jobs:
+            # another actuator: its own values and the default map, not the last file's
+            # overrides, configuration, axes or point
             self._building = True
             try:
+                base = ViewState()
+                for w in self.w_keys.values():
+                    w.value = ""
+                self.w_filter.value = self.w_delay.value = ""
+                self.w_P.value, self.w_D.value, self.w_point.value = base.P_gain, base.D_gain, base.point
+                self.w_blend.value, self.blend_text = 0.0, base.blend
+                self._clear_detail()
                 self._actuator_panel(self.w_params.value.strip(), {}, "", "")
             finally:
                 self._building = False
@@ -536,6 +565,7 @@ class _Page:
         self.message.object = ""
         self.good = s
         if r.point is None:
+            self._clear_detail()
             return
         with self.pn.io.hold():
             self._detail(s, r, *r.point)
@@ -607,8 +637,13 @@ class WorkQueue:
             self._task = None
 
 
-def _with(options: list, value: str) -> list:
-    return options if value in options else options + [value]
+def _with(options: list, value: str, empty: str) -> dict:
+    """A drop-down's choices, label -> value: ``options`` and ``value`` when it is none of them
+    (a URL's value stays selectable, so that the page refuses it with the CLI's message rather
+    than dropping it); the empty value (the file's own, or none) labelled ``empty``, so that the
+    drop-down always says what is in force."""
+    values = options if value in options else options + [value]
+    return {(empty if v == "" else v): v for v in values}
 
 
 def _slider_value(text: str) -> float:
