@@ -216,8 +216,39 @@ def test_a_get_computes_and_reads_nothing(server, tmp_path):
     assert _get(port, "/")[0] == 200 and server.proc.poll() is None
 
 
+@pytest.fixture
+def own_server(tmp_path):
+    """A server of the test's own (its sessions and memory are the test's alone)."""
+    from explore_driver import DriverError, start_server
+    try:
+        s = start_server(cwd=tmp_path)
+    except DriverError as exc:
+        pytest.fail(str(exc))
+    s.port = int(s.url.rsplit(":", 1)[1].strip("/"))
+    yield s
+    s.stop()
+
+
 @pytest.mark.slow
-def test_closed_pages_stop_working_and_give_memory_back(server):
+def test_at_most_max_sessions_pages(own_server):
+    """Beyond MAX_SESSIONS live pages, a page says so and computes nothing (each GET above is a
+    session until it expires; a page is the websocket's document, read here with bokeh.client)."""
+    pytest.importorskip("panel")
+    import panel.models  # noqa: F401  (the page's models, for the client to read the document)
+    from bokeh.client import pull_session
+    pid = own_server.proc.pid
+    for _ in range(app.MAX_SESSIONS - 1):        # start_server's own GET was the first
+        assert _get(own_server.port, "/?P_gain=log:1:20000:1000&D_gain=lin:1:50:1000")[0] == 200
+    cpu0 = _cpu_s(pid)
+    with pull_session(url=own_server.url) as session:
+        text = " ".join(str(getattr(m, "text", "")) for m in session.document.roots)
+    assert f"{app.MAX_SESSIONS} pages are open" in text and "close one" in text
+    assert _cpu_s(pid) - cpu0 < 1.0
+    assert own_server.proc.poll() is None
+
+
+@pytest.mark.slow
+def test_closed_pages_stop_working_and_give_memory_back(own_server):
     """Item 1 (d): pages each asking a 1000 x 1000 map, closed while the work queue holds
     them: the server stops computing within a second of the queue's current map, and its memory
     returns near where it was once the sessions are destroyed (UNUSED_SESSION_LIFETIME_MS)."""
@@ -227,7 +258,7 @@ def test_closed_pages_stop_working_and_give_memory_back(server):
     except ImportError:
         from explore_driver import INSTALL
         pytest.fail(INSTALL)
-    pid = server.proc.pid
+    pid = own_server.proc.pid
     with sync_playwright() as p:
         try:
             browser = launch(p)
@@ -236,7 +267,7 @@ def test_closed_pages_stop_working_and_give_memory_back(server):
         # one small page first: the baseline holds what any page costs (the imports of the
         # page's models, the actuator's compiled loop)
         page = browser.new_page()
-        page.goto(server.url)
+        page.goto(own_server.url)
         page.wait_for_selector('#explore-view[data-seq="1"]', state="attached", timeout=60000)
         page.close()
         rss0 = _rss_kb(pid)
@@ -244,7 +275,7 @@ def test_closed_pages_stop_working_and_give_memory_back(server):
         pages = []
         for i in range(n):
             pg = browser.new_page()
-            pg.goto(server.url + f"?P_gain=log:1:20000:1000&D_gain=lin:1:50:1000&set.beta={2 + i / 10}",
+            pg.goto(own_server.url + f"?P_gain=log:1:20000:1000&D_gain=lin:1:50:1000&set.beta={2 + i / 10}",
                     wait_until="commit")
             pages.append(pg)
         # until the first map is drawn: the queue holds the others
@@ -277,7 +308,7 @@ def test_closed_pages_stop_working_and_give_memory_back(server):
           f"worked {work_after:.2f} s of CPU and was idle from {idle_after:.1f} s ({idle_cpu:.2f} s CPU in 2 s)")
     assert idle_cpu < 0.2
     assert rss1 - rss0 < 40_000, (rss0, rss_peak, rss1)
-    assert _get(server.port, "/")[0] == 200
+    assert _get(own_server.port, "/")[0] == 200
 
 
 @pytest.mark.slow                                   # two maps of the default 200 x 100 grid: 1-3 s
