@@ -48,7 +48,7 @@ _NO_POINT = ("<div id='explore-margins'><b>Click the map</b> (or type a point, l
              "margins, the corrected phase of Z, the torque and impedance steps and the closed-loop poles below.</div>")
 
 __all__ = ["page", "serve", "EXTRA_MISSING", "CATEGORY_COLORS", "available", "request_refusal", "WorkQueue",
-           "MAX_SESSIONS", "UNUSED_SESSION_LIFETIME_MS", "CHECK_UNUSED_SESSIONS_MS", "live_sessions"]
+           "MAX_SESSIONS", "UNUSED_SESSION_LIFETIME_MS", "CHECK_UNUSED_SESSIONS_MS", "KEEP_ALIVE_MS", "live_sessions"]
 
 log = logging.getLogger(__name__)
 
@@ -206,8 +206,7 @@ class _Page:
 
     # ------------------------------------------------------------------ layout
     def _figures(self):
-        from bokeh.events import Tap
-        from bokeh.models import ColumnDataSource, Legend, LegendItem, LinearColorMapper, Span
+        from bokeh.models import ColumnDataSource, LinearColorMapper, Span
         from bokeh.plotting import figure
         # a uniform grid (log or linear, as the axis) is one image, drawn fast; any other grid quads
         self.image_src = ColumnDataSource({"image": [], "x": [], "y": [], "dw": [], "dh": []})
@@ -250,8 +249,9 @@ class _Page:
         from bokeh.models import Legend, LegendItem
         from bokeh.plotting import figure
         # as wide as the window leaves it (the legend takes about 260 px of it)
-        f = figure(sizing_mode="stretch_width", min_width=600, height=460, x_axis_type="log" if log else "linear", tools="pan,wheel_zoom,reset,save",
-                   x_axis_label="P_gain (Nm/rad)", y_axis_label="D_gain (Nms/rad)", toolbar_location="above")
+        f = figure(sizing_mode="stretch_width", min_width=600, height=460, x_axis_type="log" if log else "linear",
+                   tools="pan,wheel_zoom,reset,save", x_axis_label="P_gain (Nm/rad)", y_axis_label="D_gain (Nms/rad)",
+                   toolbar_location="above")
         f.image(image="image", x="x", y="y", dw="dw", dh="dh", source=self.image_src, color_mapper=self.mapper)
         f.quad(left="left", right="right", bottom="bottom", top="top", source=self.map_src, line_width=0,
                fill_color={"field": "cat", "transform": self.mapper})

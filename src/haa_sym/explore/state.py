@@ -28,7 +28,6 @@ import io
 import json
 import math
 from dataclasses import asdict, dataclass, field, fields, replace
-from pathlib import Path
 from urllib.parse import parse_qsl, urlencode
 
 import numpy as np
@@ -51,8 +50,9 @@ from haa_sym.model.params import (CONTROLLER_KEYS, actuator_path, apply_sets, ga
                                   parse_set)
 
 __all__ = ["ViewState", "Resolved", "View", "Detail", "resolve", "compute_view", "point_detail", "to_query",
-           "from_query", "MAX_POINTS", "CURVE_LINES", "CURVE_XTOL", "STEP_DURATION_S", "CATEGORIES", "categories", "view_summary", "dumps",
-           "parse_point", "state_dict", "plain", "blend_position", "clear_caches", "CURVE_FAMILIES"]
+           "from_query", "MAX_POINTS", "CURVE_LINES", "CURVE_XTOL", "STEP_DURATION_S", "CATEGORIES", "categories",
+           "view_summary", "dumps", "parse_point", "state_dict", "plain", "blend_position", "clear_caches",
+           "CURVE_FAMILIES", "PASSIVITY_FAMILIES", "MAX_CSV_BYTES", "CACHE_BYTES"]
 
 # The page's own limit on a map's points, on top of the memory budget: a map within the budget
 # can still take minutes (1e8 points), and the page answers every change; 1,000,000 points
