@@ -47,7 +47,7 @@ def _ad_function(topology: Actuator) -> ca.Function:
     if entry is not None:
         f = ca.Function.deserialize((ev.code.dir / f"{entry['function']}.casadi").read_text())
     else:
-        f = ca.Function.deserialize(compile_actuator(topology, "vm", quiet=True).casadi_file.read_text())
+        f = compile_actuator(topology, "vm", quiet=True).function()
     p = ca.MX.sym("p", len(topology.parameter_keys))
     A, B, C, VC0 = f(p)
     jac = [ca.jacobian(ca.vec(M), p) for M in (A, B, C, VC0)]
