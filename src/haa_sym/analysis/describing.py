@@ -250,9 +250,16 @@ def _check(nonlinearity) -> tuple[str, float]:
     except (TypeError, ValueError):
         v = math.nan
     unit = NONLINEARITIES.get(key, NONLINEARITIES["Fc_<body>"])[2]
-    if not (math.isfinite(v) and v > 0):
-        raise ParameterError(f"{key} = {value!r}; allowed: a finite number > 0 ({unit})")
+    if not (math.isfinite(v) and VALUE_RANGE[0] <= v <= VALUE_RANGE[1]):
+        raise ParameterError(f"{key} = {value!r}; allowed: a number from {VALUE_RANGE[0]:g} to {VALUE_RANGE[1]:g} "
+                             f"({unit})")
     return key, v
+
+
+# The nonlinearity's parameter, in its unit: the amplitudes searched are multiples of it (up to
+# amplitude_max) and the root finding's tolerances relative to it, so a value near the ends of
+# the floating-point range (T_res = 1e-310, subnormal) left them no digits (xtol 0: a traceback)
+VALUE_RANGE = (1e-100, 1e100)
 
 
 def _amplitudes(kind: str, value: float, N_target: float, A_max: float) -> list[float]:
