@@ -184,3 +184,24 @@ def test_out_is_the_log(tmp_path, hd_log, capsys):
                        + ("" if out == data else f" (the same file as {str(data)!r})")
                        + "; allowed: an output path that is not an input (write elsewhere, then move it)")
     assert data.read_bytes() == log.read_bytes()
+
+
+def test_memory_gate_before_reading_and_before_fitting(tmp_path, hd_log, capsys, monkeypatch):
+    """A 10 M-row log reached 9.9 GB and died (issue 26, item 10): the read and the fit are
+    gated by what they allocate (io.budget: 6 B per file byte; fit_bytes per sample)."""
+    from haa_sym.io.budget import LOG_BYTES_PER_FILE_BYTE, fit_bytes
+    log, _ = hd_log
+    size = log.stat().st_size
+    monkeypatch.setenv("HAA_SYM_MEMORY_BUDGET", str(size * LOG_BYTES_PER_FILE_BYTE - 1))
+    assert main(_argv(log, tmp_path / "f.toml")) == 2
+    err = capsys.readouterr().err.strip()
+    assert f"reading its {size} bytes would need about" in err and len(err.splitlines()) == 1
+    need = fit_bytes(6000, 5, 2, len(KEYS))
+    monkeypatch.setenv("HAA_SYM_MEMORY_BUDGET", str(need - 1))
+    assert need - 1 > size * LOG_BYTES_PER_FILE_BYTE
+    assert main(_argv(log, tmp_path / "f.toml")) == 2
+    err = capsys.readouterr().err.strip()
+    assert err.startswith("haa-sym: error: fitting 4 key(s) to 6000 samples would need about")
+    monkeypatch.setenv("HAA_SYM_MEMORY_BUDGET", str(need))
+    assert main(_argv(log, tmp_path / "f.toml")) == 0
+    assert (tmp_path / "f.toml").exists()

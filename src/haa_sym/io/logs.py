@@ -19,12 +19,14 @@ from __future__ import annotations
 import collections
 import csv
 import hashlib
+import os
 from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
 
 from haa_sym.errors import ParameterError
+from haa_sym.io.budget import LOG_BYTES_PER_FILE_BYTE, check_memory
 from haa_sym.io.inputs import read_bytes
 
 __all__ = ["INPUTS", "OUTPUTS", "UNIFORM_JITTER", "MAX_JITTER", "BIAS_JITTER", "Log", "read_log"]
@@ -64,6 +66,11 @@ class Log:
 
 
 def _read_rows(path: Path, label: str) -> tuple[list[str], np.ndarray, bytes]:
+    try:
+        size = os.stat(path).st_size
+    except OSError:
+        size = 0                        # read_bytes says what is wrong with the path
+    check_memory(size * LOG_BYTES_PER_FILE_BYTE, f"{label}: reading its {size} bytes")
     raw = read_bytes(path, "--log", where=label)
     # utf-8-sig: a spreadsheet's export starts with a byte-order mark, which is no part of "time"
     text = raw.decode("utf-8-sig", errors="replace").splitlines()
