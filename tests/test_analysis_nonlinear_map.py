@@ -87,7 +87,8 @@ def test_a_dask_cluster_gives_the_same_classes():
     P, D = np.geomspace(300.0, 20000.0, 6), np.array([1.0, 10.0, 40.0])
     lim = Limits(V_max=24.0, torque_resolution=0.01)
     local = nonlinear_map(loop, P, D, limits=lim, progress=False, points_per_task=4)
-    with distributed.LocalCluster(n_workers=2, threads_per_worker=1, processes=True, dashboard_address=None) as cl:
+    with distributed.LocalCluster(n_workers=2, threads_per_worker=1, processes=True, host="127.0.0.1",
+                                  dashboard_address=None) as cl:
         remote = nonlinear_map(loop, P, D, limits=lim, progress=False, points_per_task=4,
                                scheduler=cl.scheduler_address)
     assert len(set(local.class_names.ravel())) >= 2
