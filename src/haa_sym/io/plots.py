@@ -204,12 +204,14 @@ def _region_legend(grid_contour: bool = True):
         [Patch(facecolor="none", edgecolor="tab:blue", hatch="////", label="stable, not passive")]
 
 
-#: Markers of the nonlinear classes (haa_sym.analysis.nonlinear_map.CLASSES) over a map.
+#: Markers of the nonlinear classes (haa_sym.analysis.oscillation.VERDICTS) over a map.
 NONLINEAR_MARKERS = {"converging": dict(marker=".", color="tab:green", ms=3),
                      "limit cycle": dict(marker="o", mfc="none", color="tab:red", ms=5),
                      "saturating": dict(marker="s", mfc="none", color="tab:purple", ms=5),
                      "growing": dict(marker="x", color="k", ms=5),
-                     "undecided": dict(marker="d", mfc="none", color="tab:orange", ms=5)}
+                     "undecided": dict(marker="d", mfc="none", color="tab:orange", ms=5),
+                     "diverged": dict(marker="+", color="tab:red", ms=6),
+                     "forced response": dict(marker="v", mfc="none", color="tab:gray", ms=5)}
 
 
 def plot_nonlinear_region(m, P_gain, D_gain, class_names, title: str | None = None, boundary=None,
