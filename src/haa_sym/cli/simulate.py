@@ -51,7 +51,6 @@ def _cmd_simulate(args) -> int:
                     for k, v in s.meta["limits"].items()) or "none (the linear loop)"
     title += (f"\n{args.experiment}, A = {s.meta['amplitude']:g} {unit}; P_gain = {float(P[0]):g} Nm/rad, "
               f"D_gain = {float(D[0]):g} Nms/rad; limits: {lim}")
-    rows = [{c: f"{cols[c][k]:.12g}" for c in CSV_COLUMNS} for k in range(len(s.time))]
     verdict = verdict_line(s)
     predicted = _predictions(loop, float(P[0]), float(D[0]), s, cols)
     note = "\n".join([verdict] + [f"{p}\n  {q}" if q else p for p, q, _ in predicted])
@@ -59,8 +58,11 @@ def _cmd_simulate(args) -> int:
     m["describing_functions"] = [c for _, _, c in predicted]
 
     def write_csv(path, tx):
-        # a run that diverged at once has no row: the header alone
+        # formatted only when written: the rows' strings are 5x the run's own memory (1 kB a
+        # sample; CSV_BYTES_PER_SAMPLE); a run that diverged at once has no row: the header alone
+        rows = [{c: f"{cols[c][k]:.12g}" for c in CSV_COLUMNS} for k in range(len(s.time))]
         text = csv_text(rows) if rows else ",".join(CSV_COLUMNS) + "\n"
+        del rows
         tx.write_text(path, text, "--out")
 
     with Transaction() as tx:
