@@ -151,7 +151,8 @@ def _predictions(loop, P, D, s, cols) -> list[tuple[str, str, dict | None]]:
             c["untrusted"] = []
         elif c["simulated_kind"] == "sustained":
             amp = "" if c["simulated_amplitude"] is None else \
-                f"{c['simulated_amplitude']:.4g} {r.unit} (error {100 * c['amplitude_error']:.3g} %) "
+                (("fundamental " if c["signal"] == "voltage" else "")
+                 + f"{c['simulated_amplitude']:.4g} {r.unit} (error {100 * c['amplitude_error']:.3g} %) ")
             sim = (f"simulated {c['signal']}: {amp}at {c['simulated_frequency_hz']:.4g} Hz (error "
                    f"{100 * c['frequency_error']:.3g} %): {'agrees' if c['agrees'] else 'DISAGREES'} within "
                    f"{100 * c['tolerance']:.3g} %")
