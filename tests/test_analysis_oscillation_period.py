@@ -70,3 +70,16 @@ def test_a_million_samples_of_short_cycles():
     y = np.sin(2 * np.pi * tt / (7.3 * T_S))
     r = limit_cycle(tt, y)
     assert r.kind == "sustained" and r.period == pytest.approx(7.3 * T_S, rel=1e-5)
+
+
+def test_a_persistent_aperiodic_chatter_is_irregular_not_none():
+    # a random telegraph of +-1 (switching every 5-40 samples): beyond any band, never repeating;
+    # the crossing count called such a trace a cycle at a made-up frequency, the autocorrelation
+    # alone would call it "none" (and a linearly stable loop "converging")
+    rng = np.random.default_rng(7)
+    y = np.repeat(np.tile([1.0, -1.0], 1000), rng.integers(5, 40, 2000))[:t.size]
+    r = limit_cycle(t, y)
+    assert r.kind == "irregular" and np.isnan(r.frequency_hz)
+    assert r.amplitude == pytest.approx(1.0)
+    from haa_sym.analysis.oscillation import VERDICTS, classify
+    assert VERDICTS[classify([r.kind], [0.0], [True], True)[0]] == "limit cycle"

@@ -485,7 +485,7 @@ def compare_cycle(r: LimitCycles, k: int, columns: dict, Ts: float, *, port: str
     out["simulated_kind"] = o.kind
     if o.kind != "sustained":
         why += [strong] if strong else []
-        why.append(f"the simulation shows no sustained oscillation ({o.kind})")
+        why.append(f"the simulation shows no sustained periodic oscillation ({o.kind})")
         return out
     sim_amp = o.fundamental if side == "output" else o.amplitude
     out.update(simulated_frequency_hz=o.frequency_hz, frequency_error=abs(o.frequency_hz - f) / f)

@@ -18,9 +18,10 @@ import numpy as np
 from haa_sym.errors import ParameterError
 
 __all__ = ["Oscillation", "limit_cycle", "theil_sen_slope", "classify", "OSCILLATION_KINDS", "VERDICTS",
-           "SATURATING_FRACTION", "THEIL_SEN_MAX_POINTS", "ACF_PEAK_FRACTION", "ACF_MIN"]
+           "SATURATING_FRACTION", "THEIL_SEN_MAX_POINTS", "ACF_PEAK_FRACTION", "ACF_MIN", "IRREGULAR_CHUNKS",
+           "IRREGULAR_GROWTH_TOL"]
 
-OSCILLATION_KINDS = ("none", "decaying", "sustained", "growing")
+OSCILLATION_KINDS = ("none", "decaying", "sustained", "growing", "irregular")
 
 
 @dataclass(frozen=True)
@@ -31,7 +32,11 @@ class Oscillation:
     ----------
     kind : str
         "none" (fewer than ``min_cycles`` cycles above the hysteresis in the tail: converged,
-        constant or drifting), "decaying", "sustained" or "growing".
+        constant or drifting), "decaying", "sustained" or "growing"; "irregular": the tail
+        leaves the band often enough and its swing neither grows nor decays, but no period
+        repeats (autocorrelation below :data:`ACF_MIN`: a quantised loop's chatter); its
+        ``amplitude`` is the half peak-to-peak of the last of :data:`IRREGULAR_CHUNKS` equal
+        parts, its frequency NaN. Also a periodic-looking tail with a quiet period (bursts).
     amplitude : float
         Half the peak-to-peak of the tail's whole periods (median over the last ``min_cycles``),
         in the trace's unit; NaN for "none".
@@ -94,8 +99,14 @@ THEIL_SEN_MAX_POINTS = 256
 #: harmonic drive's spiky cycle: 0.03 at the spikes' spacing, 0.92 at its period)
 ACF_PEAK_FRACTION = 0.8
 #: ... and at least this (normalised autocorrelation, 1 at lag 0): below it the tail repeats
-#: nothing (an aperiodic or drifting trace with a few crossings): kind "none"
+#: nothing (an aperiodic chatter, a drift with a few crossings): kind "irregular" or "none"
 ACF_MIN = 0.3
+#: Without a period, the tail's swing is judged on this many equal parts (half peak-to-peak
+#: each, Theil-Sen slope of their logs): "irregular" when it changes by less than
+#: IRREGULAR_GROWTH_TOL a part (a factor 2 over the 8 parts: a chatter's swing fluctuates by tens of
+#: per cent from part to part), else growing or decaying
+IRREGULAR_CHUNKS = 8
+IRREGULAR_GROWTH_TOL = 0.1
 
 
 def theil_sen_slope(y, max_points: int = THEIL_SEN_MAX_POINTS) -> float:
@@ -255,16 +266,30 @@ def limit_cycle(t, y, *, settle: float = 0.5, min_cycles: int = 3, growth_tol: f
         return none
     # its period: from the whole tail's autocorrelation (a cycle with several spikes crosses
     # the mean several times a period: counting crossings took each spike for a cycle)
+    def irregular():
+        # beyond the band often enough, but no period holds over the tail: a persistent irregular
+        # or intermittent swing (a quantised loop's chatter: HyQ at beta 3 with a 4096-count
+        # encoder and a 0.01 Nm quantum, P 100, D 25.5: 0.4-0.8 Nm in every eighth of the tail,
+        # autocorrelation below ACF_MIN), unless its swing grows or decays from part to part (a
+        # quiet part counts as the hysteresis band's half width)
+        e = np.linspace(0, x.size, IRREGULAR_CHUNKS + 1).astype(np.int64)
+        swing = 0.5 * (np.maximum.reduceat(x, e[:-1]) - np.minimum.reduceat(x, e[:-1]))
+        g = float(np.expm1(theil_sen_slope(np.log(np.maximum(swing, max(h, 1e-300))))))
+        kind = "irregular" if abs(g) < IRREGULAR_GROWTH_TOL else "growing" if g > 0 else "decaying"
+        return Oscillation(kind, float(swing[-1]), np.nan, np.nan, np.nan, np.nan, g, 0, offset, float(h), noise)
+
     Ps = _period(x, x.size // min_cycles)
     if Ps is None:
-        return none
+        return irregular()
     # whole periods counted back from the end; each one's half peak-to-peak
     n_win = int(x.size // Ps)
     edges = np.round(x.size - Ps * np.arange(n_win, -1, -1)).astype(np.int64)
     edges[0] = max(edges[0], 0)
     amps = 0.5 * (np.maximum.reduceat(x, edges[:-1]) - np.minimum.reduceat(x, edges[:-1]))
-    if n_win < min_cycles or np.any(amps <= 0):
+    if n_win < min_cycles:
         return none
+    if np.any(amps <= 0):            # a quiet period between bursts: no cycle of constant shape
+        return irregular()
     if n_win >= 3:
         slope = theil_sen_slope(np.log(amps))
     else:
@@ -299,7 +324,8 @@ def classify(kind, tail_saturation, linear_stable, always_acting: bool,
        ``converging`` if the linear loop is stable, ``growing`` if not. A forced run
        (``forced``, the chirp) in this regime: ``forced response`` if stable.
     3. a forced run: ``forced response`` (its oscillation is the input's, never a limit cycle).
-    4. ``limit cycle``: a sustained oscillation.
+    4. ``limit cycle``: a sustained oscillation, periodic or irregular (``kind`` "irregular":
+       persistent, beyond the band, no period).
     5. ``saturating``: at least ``saturating_fraction`` of the last half in saturation.
     6. ``growing``: an oscillation growing by more than ``growth_tol`` a cycle.
     7. ``converging``: the linear loop is stable.
@@ -337,7 +363,7 @@ def classify(kind, tail_saturation, linear_stable, always_acting: bool,
              (linear_regime & st, c("forced response") if forced else c("converging")),
              (linear_regime & un, c("growing")),
              (np.full(kind.shape, bool(forced)), c("forced response")),
-             (kind == "sustained", c("limit cycle")),
+             ((kind == "sustained") | (kind == "irregular"), c("limit cycle")),
              (ts >= saturating_fraction, c("saturating")),
              (kind == "growing", c("growing")),
              (st, c("converging"))]

@@ -462,7 +462,7 @@ def _result(loop, setup, P_gain, D_gain, y, info, linear=None):
     sat_time = float(dt[sat].sum())
     forced = setup.experiment in FORCED_EXPERIMENTS
     osc = None if k < setup.n else trace_oscillation(setup, col["torque"])
-    amp, freq = (osc.amplitude, osc.frequency_hz) if osc is not None and osc.kind == "sustained" \
+    amp, freq = (osc.amplitude, osc.frequency_hz) if osc is not None and osc.kind in ("sustained", "irregular") \
         and not forced else (math.nan, math.nan)
     stable, radius = linear if linear is not None else (math.nan, math.nan)
     tail_sat = float(sat[setup.n // 2:].mean()) if k == setup.n else math.nan
@@ -474,7 +474,8 @@ def _result(loop, setup, P_gain, D_gain, y, info, linear=None):
         experiment_definition=EXPERIMENTS[setup.experiment], amplitude=setup.amplitude,
         duration=setup.duration, seed=setup.seed, limits=setup.limits.active, **info,
         saturation_time=sat_time, limit_cycle=None if not np.isfinite(amp) else
-        {"amplitude_Nm": amp, "frequency_Hz": freq, "signal": "torque"},
+        {"amplitude_Nm": amp, "frequency_Hz": None if math.isnan(freq) else freq, "signal": "torque",
+         "periodic": osc.kind == "sustained"},
         verdict=verdict, diverged_at_s=None if math.isnan(diverged_at) else diverged_at,
         samples_written=k, linear={"stable": lin, "spectral_radius": None if np.isnan(radius) else float(radius)},
         verdict_rules="docs/simulate.md, The verdict of a run")

@@ -109,7 +109,7 @@ def _confirmation(c: dict) -> str:
                 f"{100 * c['frequency_error']:.3g} %): {'agrees' if c['agrees'] else 'DISAGREES'} within "
                 f"{100 * c['tolerance']:.3g} %")
     else:
-        text = f"{run}: no sustained oscillation of the {c['signal']} ({c['simulated_kind'] or 'no usable trace'})"
+        text = f"{run}: no sustained periodic oscillation of the {c['signal']} ({c['simulated_kind'] or 'no usable trace'})"
     if c["untrusted"]:
         text += "; do not trust this prediction: " + "; ".join(c["untrusted"])
     return text

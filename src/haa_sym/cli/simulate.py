@@ -97,6 +97,9 @@ def verdict_line(s) -> str:
     if s.verdict == "diverged":
         text += (f" (a state overflowed at t = {s.diverged_at:.6g} s; the run stops there, "
                  f"{len(s.time)} samples kept)")
+    elif s.verdict == "limit cycle" and s.oscillation.kind == "irregular":
+        text += (f" (irregular: no period repeats; torque half peak-to-peak {s.cycle_amplitude:.6g} Nm, "
+                 f"{100 * s.oscillation.growth_per_cycle:+.3g} % an eighth of the last half)")
     elif s.verdict == "limit cycle":
         text += f" (torque: amplitude {s.cycle_amplitude:.6g} Nm, frequency {s.cycle_frequency:.6g} Hz)"
     elif s.oscillation is not None and s.oscillation.kind != "none":
@@ -157,7 +160,7 @@ def _predictions(loop, P, D, s, cols) -> list[tuple[str, str, dict | None]]:
                    f"{100 * c['frequency_error']:.3g} %): {'agrees' if c['agrees'] else 'DISAGREES'} within "
                    f"{100 * c['tolerance']:.3g} %")
         else:
-            sim = f"simulated {c['signal']}: no sustained oscillation ({c['simulated_kind'] or 'no usable trace'})"
+            sim = f"simulated {c['signal']}: no sustained periodic oscillation ({c['simulated_kind'] or 'no usable trace'})"
         if c["untrusted"]:
             sim += "; the prediction cannot be trusted here: " + "; ".join(c["untrusted"])
         out.append((text, sim, dict(c, nonlinearity=key, value=value)))
