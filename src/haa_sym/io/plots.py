@@ -626,6 +626,7 @@ def plot_simulation(time, columns: dict, saturated=None, title: str = "", cycle:
     voltage (saturated samples marked) and current over ``time`` (s). ``columns`` maps the CSV
     names to arrays; ``cycle`` is a note on a detected limit cycle (shown in the torque panel)."""
     t = np.asarray(time)
+    cycle = _wrap(cycle, 5.4, 7)            # the panel's width, not the figure's
     fig, axes = plt.subplots(4, 1, figsize=(6.4, 8.0 + (0.6 if title else 0) + 0.12 * cycle.count("\n")), sharex=True,
                              constrained_layout=True)
     axes[0].plot(t, columns["theta"], color="k", label="theta (encoder)")
