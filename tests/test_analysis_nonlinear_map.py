@@ -63,9 +63,15 @@ def test_rules_in_order():
     ts = [0.0, 0.5, 0.95, 0.1, 0.1, 0.1, 0.1, 0.0]
     st = [True, False, True, False, True, True, False, True]
     got = [CLASSES[c] for c in classify(kinds, ts, st, False)]
-    assert got == ["growing", "limit cycle", "saturating", "undecided", "growing", "converging", "undecided",
+    assert got == ["diverged", "limit cycle", "saturating", "undecided", "growing", "converging", "undecided",
                    "converging"]       # the last: no saturation, no always-acting limit: the linear decision
     assert CLASSES[classify(["sustained"], [0.0], [True], True)[0]] == "limit cycle"
+    # a forced run (the chirp) is never a limit cycle; it may still diverge or grow
+    forced = [CLASSES[c] for c in classify(["sustained", "sustained", "non-finite", "none"], [0.5, 0.0, 0.0, 0.0],
+                                           [True, False, True, True], False, forced=True)]
+    assert forced == ["forced response", "growing", "diverged", "forced response"]
+    # the linear decision unknown (NaN): the rules that need it do not apply
+    assert CLASSES[classify(["none"], [0.0], [np.nan], False)[0]] == "undecided"
 
 
 @pytest.mark.parametrize("kw, field", [

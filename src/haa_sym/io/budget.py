@@ -10,9 +10,13 @@ e.g. ``HAA_SYM_MEMORY_BUDGET=2G``). The estimates are peak bytes measured with `
 * a sweep over gain points (:mod:`haa_sym.analysis.sweep`): 30-32 B per point and frequency of the block
   evaluated at once (``regions.CHUNK`` points in a region map, every point in ``passivity``),
   plus 44 B per point for the result arrays of a region map;
-* a simulation (:mod:`haa_sym.analysis.simulate`): 167-238 B per sample (the inputs, the state
-  trace, the columns; the friction integrator's the most), and ``haa-sym simulate`` 1.04-1.14 kB
-  per sample with its CSV text and figure (the rows are formatted strings);
+* a simulation (:mod:`haa_sym.analysis.simulate`) with its limit-cycle check: 188-214 B per
+  sample (the inputs, the state trace, the columns, and the check's autocorrelation, 58-81 B of
+  that: FFT buffers of 2 to 4 times the trace's last half; measured 2026-11-26 at 1 M samples
+  with the supply and quantisers, 50,000 with friction), and ``haa-sym simulate`` 1.04-1.14 kB
+  per sample with its CSV text and figure (the rows are formatted strings). The check used to
+  take the Theil-Sen slope over every pair of cycles (6.9 GB at 1 M samples, not counted); it
+  now uses at most :data:`haa_sym.analysis.oscillation.THEIL_SEN_MAX_POINTS` cycles;
 * reading a CSV log (:mod:`haa_sym.io.logs`): 5.1 B per byte of the file;
 * an identification's fit (:func:`fit_bytes`): 1.1-2.3 kB per sample, by states, outputs and keys.
 
@@ -36,7 +40,7 @@ __all__ = ["MEMORY_BUDGET_BYTES", "memory_budget", "check_memory", "sweep_bytes"
 BYTES_PER_OMEGA = 2048      # loop coefficients, per frequency (measured 1.6-1.7 kB)
 BYTES_PER_POINT = 64        # result arrays of a region map, per gain point (measured 44 B)
 BYTES_PER_CELL = 40         # sweep products, per gain point x frequency (measured 30-32 B)
-BYTES_PER_SAMPLE = 256      # a simulation, per sample (measured 167-238 B)
+BYTES_PER_SAMPLE = 256      # a simulation with its limit-cycle check, per sample (measured 188-214 B)
 CSV_BYTES_PER_SAMPLE = 1280  # haa-sym simulate with --out and --plot, per sample (measured 1.04-1.14 kB)
 # reading a CSV log, per byte of the file: its text, the lines and numpy's parse (measured 5.1 B on
 # a 33 MB, 1,000,000-row log)

@@ -204,12 +204,14 @@ def _region_legend(grid_contour: bool = True):
         [Patch(facecolor="none", edgecolor="tab:blue", hatch="////", label="stable, not passive")]
 
 
-#: Markers of the nonlinear classes (haa_sym.analysis.nonlinear_map.CLASSES) over a map.
+#: Markers of the nonlinear classes (haa_sym.analysis.oscillation.VERDICTS) over a map.
 NONLINEAR_MARKERS = {"converging": dict(marker=".", color="tab:green", ms=3),
                      "limit cycle": dict(marker="o", mfc="none", color="tab:red", ms=5),
                      "saturating": dict(marker="s", mfc="none", color="tab:purple", ms=5),
                      "growing": dict(marker="x", color="k", ms=5),
-                     "undecided": dict(marker="d", mfc="none", color="tab:orange", ms=5)}
+                     "undecided": dict(marker="d", mfc="none", color="tab:orange", ms=5),
+                     "diverged": dict(marker="+", color="tab:red", ms=6),
+                     "forced response": dict(marker="v", mfc="none", color="tab:gray", ms=5)}
 
 
 def plot_nonlinear_region(m, P_gain, D_gain, class_names, title: str | None = None, boundary=None,
@@ -624,6 +626,7 @@ def plot_simulation(time, columns: dict, saturated=None, title: str = "", cycle:
     voltage (saturated samples marked) and current over ``time`` (s). ``columns`` maps the CSV
     names to arrays; ``cycle`` is a note on a detected limit cycle (shown in the torque panel)."""
     t = np.asarray(time)
+    cycle = _wrap(cycle, 5.4, 7)            # the panel's width, not the figure's
     fig, axes = plt.subplots(4, 1, figsize=(6.4, 8.0 + (0.6 if title else 0) + 0.12 * cycle.count("\n")), sharex=True,
                              constrained_layout=True)
     axes[0].plot(t, columns["theta"], color="k", label="theta (encoder)")
