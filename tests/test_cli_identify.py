@@ -205,3 +205,15 @@ def test_memory_gate_before_reading_and_before_fitting(tmp_path, hd_log, capsys,
     monkeypatch.setenv("HAA_SYM_MEMORY_BUDGET", str(need))
     assert main(_argv(log, tmp_path / "f.toml")) == 0
     assert (tmp_path / "f.toml").exists()
+
+
+def test_time_column_far_from_seconds(tmp_path, hd_log, capsys):
+    """Time stamps near 1e100 (a sample every 1e94 s) were a LinAlgError traceback (issue 26)."""
+    log, _ = hd_log
+    lines = log.read_text().splitlines()
+    far = tmp_path / "far.csv"
+    far.write_text("\n".join([lines[0]] + [",".join([repr(float(r.split(",")[0]) * 1e97)] + r.split(",")[1:])
+                                           for r in lines[1:]]) + "\n")
+    assert main(_argv(far, tmp_path / "f.toml")) == 2
+    err = capsys.readouterr().err.strip()
+    assert len(err.splitlines()) == 1 and "mean sampling period 1e+94 s: the plant sampled at it overflows" in err
