@@ -9,6 +9,7 @@ import shutil
 import signal
 import socket
 import subprocess
+import threading
 import sys
 import time
 from pathlib import Path
@@ -159,3 +160,39 @@ def test_schedule_on_a_real_scheduler_and_worker_gives_the_in_process_bytes(tmp_
     assert "impedances" in proc.stdout and "12 impedances" in capsys.readouterr().out
     assert remote.read_bytes() == local.read_bytes()
     assert local.read_text().startswith("P_gain,D_gain,beta,alpha,torque_bandwidth_rad_s,feasible,beta_at_limit\n")
+
+
+@pytest.mark.slow
+def test_a_dead_worker_stops_the_run_with_one_line(tmp_path):
+    """The last worker killed mid-run: the command waited for ever (issue 26, item 11); now it
+    stops with one line once the cluster has had no worker for no_worker_timeout s."""
+    from haa_sym.errors import ParameterError
+    from haa_sym.io.tasks import TaskRunner
+    port = free_port()
+    address = f"tcp://127.0.0.1:{port}"
+    env = {**os.environ, "PYTHONPATH": str(ROOT / "src")}
+    sched = subprocess.Popen(dask_cli() + ["scheduler", "--host", "127.0.0.1", "--port", str(port), "--no-dashboard",
+                                           "--dashboard-address", "127.0.0.1:0"],
+                             stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL, start_new_session=True, env=env)
+    worker = None
+    try:
+        worker = subprocess.Popen(dask_cli() + ["worker", address, "--host", "127.0.0.1", "--no-nanny",
+                                                "--no-dashboard", "--nthreads", "1"],
+                                  stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL, start_new_session=True,
+                                  env=env)
+        runner = TaskRunner(address, False, connect_timeout=20, no_worker_timeout=3)
+        deadline = time.monotonic() + 30
+        while not runner.client.scheduler_info().get("workers"):
+            assert time.monotonic() < deadline, "the worker never joined"
+            time.sleep(0.2)
+        killer = threading.Timer(1.0, lambda: os.killpg(worker.pid, signal.SIGKILL))
+        killer.start()
+        t0 = time.monotonic()
+        with pytest.raises(ParameterError, match=r"no worker for 3 s with \d+ of 8 tasks pending"):
+            runner.run(time.sleep, [(1.0,)] * 8, "sleeping")
+        assert time.monotonic() - t0 < 15
+        runner.close()
+    finally:
+        for p in (worker, sched):
+            if p is not None:
+                stop(p)
