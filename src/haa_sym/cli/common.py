@@ -19,6 +19,7 @@ from haa_sym.io.outputs import Transaction, check_file
 from haa_sym.loop import ClosedLoop, LoopOptions
 from haa_sym.loop.options import parse_options
 from haa_sym.model import filters
+from haa_sym.model.motor import motor_constants_warning
 from haa_sym.model.params import (CONTROLLER_KEYS, CONTROLLER_UNITS, actuator_path, apply_sets,
                                   load_params, parse_set)
 
@@ -68,7 +69,19 @@ def _params(args, params=None):
     ``--set`` applied."""
     params = _loaded(args) if params is None else params
     sets = _parse_set(args.set, tuple(params.plant.topology.parameter_keys) + CONTROLLER_KEYS)
-    return apply_sets(params, sets)
+    params = apply_sets(params, sets)
+    _warn_motor_constants(args, params)
+    return params
+
+
+def _warn_motor_constants(args, params) -> None:
+    """The plausibility of k_t against k_w (haa_sym.model.actuator.motor_constants_warning) on
+    the values the command analyses (the file's, a configuration's, --set's), once a command."""
+    text = motor_constants_warning(params.plant.as_dict(), params.motor_convention, params.source)
+    warned = vars(args).setdefault("_warned", set())
+    if text and text not in warned:
+        warned.add(text)
+        print(f"haa-sym: warning: {text}", file=sys.stderr)
 
 
 def _check_out(path: str | None, cmd: str, flag: str = "--out", suffixes: tuple[str, ...] | None = None) -> Path | None:
