@@ -259,3 +259,33 @@ def test_figure_title_says_what_differs(params):
     # the file's own options (port, torque_damping resolved from [sensors]) are not differences
     assert figure_title(ClosedLoop(params, LoopOptions(port="dtheta_L2")), params, "retracted") == \
         "HyQ HAA joint, retracted configuration\nthe file's values, default options"
+
+
+def test_range_edge_drawn_and_named_as_what_it_is(region):
+    """A passivity set bounded by the edge of the judged frequency range (kinds "passivity
+    (omega_min)", "passivity (Nyquist)" of analysis.boundaries.passivity) was drawn and named as
+    the |phase Z| = 90 deg boundary (issue 26, item 9): now its own line style and name, in every
+    figure that draws curves; a kind without a point to draw gets no legend entry."""
+    b = _boundary()
+    edge = SimpleNamespace(P_gain=np.geomspace(2.0, 100.0, 10), D_gain=np.linspace(0.5, 6, 10),
+                           kind="passivity (omega_min)")
+    empty = SimpleNamespace(P_gain=np.array([]), D_gain=np.array([]), kind="passivity (Nyquist)")
+    b.curves += [edge, empty]
+    tangency = "passivity boundary (|phase Z| = 90 deg)"
+    named = "edge of the judged frequency range (omega_min)"
+    fig = plots.plot_boundary(b)
+    (ax,) = fig.axes
+    by_label = {ln.get_label(): ln for ln in ax.lines}
+    assert named in by_label and tangency in by_label
+    assert "edge of the judged frequency range (Nyquist)" not in by_label and len(ax.lines) == 6
+    assert by_label[named].get_linestyle() != by_label[tangency].get_linestyle()
+    np.testing.assert_array_equal(by_label[named].get_xdata(), edge.P_gain)
+    legend = [t.get_text() for t in ax.get_legend().get_texts()]
+    assert legend.count(tangency) == 1 and named in legend and not any("Nyquist" in t for t in legend)
+    plt.close(fig)
+    for fig in (plots.plot_region(region, boundary=b),
+                plots.plot_region_panels([region, region], ["a", "b"], boundaries=[b, b]),
+                plots.plot_nonlinear_region(region, P, D, np.full((P.size, D.size), "converging"), boundary=b)):
+        texts = [t.get_text() for t in fig.legends[0].get_texts()]
+        assert texts.count(named) == 1 and texts.count(tangency) == 1 and not any("Nyquist" in t for t in texts)
+        plt.close(fig)

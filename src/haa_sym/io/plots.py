@@ -106,16 +106,30 @@ def plot_region(m, ax=None, title: str | None = None, passivity: bool = True, bo
 _CURVE_STYLES = {"complex": dict(color="tab:red", lw=1.4), "z=1": dict(color="tab:orange", lw=1.4, ls="-."),
                  "z=-1": dict(color="tab:purple", lw=1.4, ls=":"),
                  "pm": dict(color="tab:green", lw=1.1, ls="--"),
-                 "passivity": dict(color="tab:cyan", lw=1.2, ls="-")}
+                 "passivity": dict(color="tab:cyan", lw=1.2, ls="-"),
+                 # where the judged frequency range (omega_min to Nyquist) ends, not |phase Z| = 90
+                 # deg: the same colour (it bounds the same passive set), dash-dot-dot
+                 "range edge": dict(color="tab:cyan", lw=1.6, ls=(0, (6, 2, 1.5, 2, 1.5, 2)))}
+
+# haa_sym.analysis.boundaries.passivity's kinds of a range edge -> which edge
+_RANGE_EDGES = {"passivity (omega_min)": "omega_min", "passivity (Nyquist)": "Nyquist"}
 
 
 def _curve_label(kind: str) -> tuple[str, str]:
     """(style key, legend label) of a curve kind."""
     if kind.startswith("pm="):
         return "pm", f"phase margin {kind[3:]} deg"
+    if kind in _RANGE_EDGES:
+        return "range edge", f"edge of the judged frequency range ({_RANGE_EDGES[kind]})"
     if kind.startswith("passivity"):
         return "passivity", "passivity boundary (|phase Z| = 90 deg)"
     return kind, f"stability boundary ({kind})"
+
+
+def _drawn(curve) -> bool:
+    """Whether a curve has a point to draw (a legend names only what is drawn)."""
+    P, D = np.asarray(curve.P_gain, float), np.asarray(curve.D_gain, float)
+    return bool(np.any(np.isfinite(P) & np.isfinite(D)))
 
 
 def plot_boundary(boundary, ax=None, title: str | None = None):
@@ -134,6 +148,8 @@ def plot_boundary(boundary, ax=None, title: str | None = None):
         ax.set_ylim(*st.meta.get("D_range", (0, 1)))
     seen = set()
     for c in boundary.curves:
+        if not _drawn(c):
+            continue
         key, label = _curve_label(c.kind)
         ax.plot(c.P_gain, c.D_gain, label=None if label in seen else label, **_CURVE_STYLES[key])
         seen.add(label)
@@ -149,7 +165,7 @@ def curve_legend(boundary) -> list:
     out, seen = [], set()
     for c in boundary.curves:
         key, label = _curve_label(c.kind)
-        if label not in seen:
+        if label not in seen and _drawn(c):
             seen.add(label)
             out.append(plt.Line2D([], [], label=label, **_CURVE_STYLES[key]))
     return out
