@@ -162,6 +162,12 @@ def _cmd_boundary(args) -> int:
     return 0
 
 
+def _beta_alpha(loop) -> tuple[float, float]:
+    """The torque-gain scale and velocity compensation a loop is analysed at (the file's or --set's)."""
+    c = loop.params.controller
+    return float(c.beta), float(c.alpha)
+
+
 def _cmd_contact(args) -> int:
     loop, out, plot = _setup(args, "contact")
     (P,), (D,) = _points(args, "contact scans the environment stiffness at one impedance")
@@ -187,7 +193,8 @@ def _cmd_contact(args) -> int:
                    lambda path, tx: save_json(path, {**data, "meta": loop.provenance()}, tx, "--out"),
                    lambda: _plots().plot_contact(r.K_env, r.spectral_radius, unstable=r.unstable, key=r.key,
                                                  excess=r.phase_excess_deg, not_passive=r.not_passive,
-                                                 tol=r.passivity_tol_deg, title=args.figure_title))
+                                                 tol=r.passivity_tol_deg, title=args.figure_title,
+                                                 gains=_plots().gains_text(float(P), float(D), *_beta_alpha(loop))))
 
     def ends(iv):
         return ", ".join(f"{a:.10g}-{b:.10g}" for a, b in iv) + " Nm/rad" if iv else "none"
