@@ -10,7 +10,8 @@ from pathlib import Path
 import numpy as np
 
 from haa_sym.analysis.measured import agreement
-from haa_sym.analysis.robust import check_uncertainty, leg_ends, leg_text, leg_values, uncertainty_text
+from haa_sym.analysis.robust import (UNCERTAINTY_ON_LEG, UNCERTAINTY_ON_LEG_DEFAULT, check_uncertainty, leg_ends,
+                                     leg_text, leg_values, uncertainty_box, uncertainty_text)
 from haa_sym.errors import ParameterError
 from haa_sym.io.gridspec import gain_axis
 from haa_sym.io.measured import read_measured
@@ -229,13 +230,16 @@ def _say_leg(params, leg, leg_mode, fit=None) -> str:
     them. Returns the line saying which configurations and values it analyses, a progress
     message the command shows once its input has passed every check (a refused command prints
     one line only)."""
-    box = fit_box(fit) if fit is not None else None
+    box = fit["box"] if fit is not None else None
     line, warning = leg_text(leg_values(params, leg, leg_mode, box))
     lines, warnings = [line], [warning]
-    if fit is not None:
+    if fit is not None and box:
         u_line, u_warning = uncertainty_text(params, fit_values(fit), box)
         lines.append(f"{u_line} (from {fit['source']})")
         warnings.append(u_warning)
+    if fit is not None and fit["dropped"]:
+        lines.append(f"the fit's interval of {', '.join(fit['dropped'])} not analysed: the leg range sets "
+                     f"{'it' if len(fit['dropped']) == 1 else 'them'} (--uncertainty-on-leg unset)")
     for w in warnings:
         if w:
             print(f"haa-sym: warning: {w}", file=sys.stderr)
@@ -251,7 +255,12 @@ def _uncertainty(args, params, leg):
     fit = read_fit(args.uncertainty, "--uncertainty", keys=tuple(params.plant.topology.parameter_keys))
     leg_ends(params, leg)            # a bad --leg is the leg's mistake, not the report's
     try:
-        check_uncertainty(params, fit_box(fit), leg)
+        # fit["box"]: what the analyses take (a key the range sets by --uncertainty-on-leg);
+        # fit["dropped"]: the keys left out ("unset")
+        fit["box"], fit["dropped"] = uncertainty_box(params, fit_box(fit), fit_values(fit), leg,
+                                                     args.uncertainty_on_leg)
+        if fit["box"]:
+            check_uncertainty(params, fit["box"], leg)
     except ParameterError as exc:
         raise ParameterError(f"--uncertainty {args.uncertainty!r}: {exc}") from None
     return fit
@@ -333,5 +342,9 @@ def _leg_args(parser) -> None:
                         help="the report of haa-sym identify: the gains must hold for every value in the 95 %% "
                              "confidence box of its fitted keys too (a box, combined with the leg range; "
                              "docs/uncertainty.md)")
+    parser.add_argument("--uncertainty-on-leg", choices=UNCERTAINTY_ON_LEG, default=UNCERTAINTY_ON_LEG_DEFAULT,
+                        help="a fitted key the leg range also sets: 'relative' (default) the fit's interval "
+                             "relative to its value, around each leg configuration's value; 'unset' left out (the "
+                             "box on the other keys); 'refuse' refused")
 
 

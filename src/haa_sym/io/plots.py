@@ -526,8 +526,11 @@ def _leg_line(meta: dict) -> str:
     own = ", ".join(f"{k} {v:.4g}" for k, v in lv["own"].items())
     text = f"{ends}\nanalysed instead of the parameters' {own}" + (" (outside the range)" if lv["outside"] else "")
     if lv.get("uncertainty"):
+        # analysis.robust.uncertainty_meta: [lo, hi], or {"relative": [lo, hi]} (factors of each
+        # leg configuration's value of a key the range sets)
         text += "\nand every value of the uncertainty box " + ", ".join(
-            f"{k} {lo:.4g}..{hi:.4g}" for k, (lo, hi) in lv["uncertainty"].items())
+            f"{k} x {v['relative'][0]:.4g}..{v['relative'][1]:.4g} of each configuration's value"
+            if isinstance(v, dict) else f"{k} {v[0]:.4g}..{v[1]:.4g}" for k, v in lv["uncertainty"].items())
         # the box replaces the file's values too (as the range does): a figure alone must say so
         own_box = lv.get("uncertainty_own") or {}
         if own_box:
