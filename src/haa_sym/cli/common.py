@@ -203,12 +203,16 @@ def _plots():
     return plots
 
 
-def _write_outputs(out, plot, write_out, figure) -> None:
+def _write_outputs(out, plot, write_out, figure, extra=()) -> None:
     """``--out`` through ``write_out(path, tx)`` and ``--plot`` from ``figure()``, all or nothing
-    (:mod:`haa_sym.io.outputs`): a failure leaves both as they were."""
+    (:mod:`haa_sym.io.outputs`): a failure leaves both as they were; ``extra``: more outputs,
+    ``(path or None, write(path, tx))`` each, in the same transaction."""
     with Transaction() as tx:
         if out:
             write_out(out, tx)
+        for path, write in extra:
+            if path:
+                write(path, tx)
         if plot:
             _plots().save_figure(figure(), plot, tx, "--plot")
 
