@@ -49,7 +49,7 @@ def _corners(p, leg_keys_relative: bool, Rs=(3.32,)):
 def test_relative_box_around_each_configuration(tmp_path, capsys):
     arrays, meta = _run(tmp_path, keys=("J_L2",))        # one key: 4 corners, then 9, 25 configurations
     err = capsys.readouterr().err
-    assert "J_L2 x 0.88..1.12 of each configuration's value" in err and "error" not in err
+    assert "J_L2 x 0.87995..1.12 of each configuration's value" in err and "error" not in err
     p = load_params().with_values(beta=3.0)
     corners, n = _corners(p, True)
     # the first level of the doubling is exactly the corners: the same configurations, the same map

@@ -106,7 +106,7 @@ def uncertainty_meta(box: dict) -> dict:
 
 def box_text(box: dict) -> str:
     """``R 2.3..4.3, J_L2 x 0.98..1.02 of each configuration's value``: a box for people."""
-    return ", ".join(f"{k} x {v.lo:.4g}..{v.hi:.4g} of each configuration's value" if isinstance(v, Relative)
+    return ", ".join(f"{k} x {v.lo:.5g}..{v.hi:.5g} of each configuration's value" if isinstance(v, Relative)
                      else f"{k} {v[0]:.6g}..{v[1]:.6g}" for k, v in box.items())
 
 

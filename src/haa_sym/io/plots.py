@@ -529,7 +529,7 @@ def _leg_line(meta: dict) -> str:
         # analysis.robust.uncertainty_meta: [lo, hi], or {"relative": [lo, hi]} (factors of each
         # leg configuration's value of a key the range sets)
         text += "\nand every value of the uncertainty box " + ", ".join(
-            f"{k} x {v['relative'][0]:.4g}..{v['relative'][1]:.4g} of each configuration's value"
+            f"{k} x {v['relative'][0]:.5g}..{v['relative'][1]:.5g} of each configuration's value"
             if isinstance(v, dict) else f"{k} {v[0]:.4g}..{v[1]:.4g}" for k, v in lv["uncertainty"].items())
         # the box replaces the file's values too (as the range does): a figure alone must say so
         own_box = lv.get("uncertainty_own") or {}
