@@ -183,7 +183,7 @@ def test_contact_titled_with_its_gains(tmp_path, monkeypatch):
     assert main(["contact", "--P-gain", "200", "--D-gain", "10", "--set", "beta=2", "--n-scan", "12",
                  "--plot", str(tmp_path / "contact.png"), "-q"]) == 0
     (title,) = titles
-    assert title.splitlines()[-1] == "contact at P_gain = 200 Nm/rad, D_gain = 10 Nms/rad, beta = 2, alpha = 0.94"
+    assert title.splitlines()[-1] == "gains: P_gain = 200 Nm/rad, D_gain = 10 Nms/rad, beta = 2, alpha = 0.94"
 
 
 def test_plot_schedule(tmp_path):

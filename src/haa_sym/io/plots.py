@@ -340,7 +340,7 @@ def plot_contact(K, rho, paper_range=None, unstable=(), key: str = "K_L2", exces
     ``excess`` (deg, NaN where unstable) a second panel: the phase excess of Z beyond +-90 deg,
     the tolerance ``tol`` and the exact ends of the stable, non-passive intervals. ``gains``
     (:func:`gains_text`): the gains the scan was made at, a line of the title."""
-    title = "\n".join(x for x in (title, f"contact at {gains}" if gains else "") if x)
+    title = "\n".join(x for x in (title, f"gains: {gains}" if gains else "") if x)
     two = excess is not None
     fig, axes = plt.subplots(2 if two else 1, 1, figsize=(6.4, 5.6 if two else 3.2), sharex=True,
                              constrained_layout=True, squeeze=False)
