@@ -217,3 +217,20 @@ def test_time_column_far_from_seconds(tmp_path, hd_log, capsys):
     assert main(_argv(far, tmp_path / "f.toml")) == 2
     err = capsys.readouterr().err.strip()
     assert len(err.splitlines()) == 1 and "mean sampling period 1e+94 s: the plant sampled at it overflows" in err
+
+
+@pytest.mark.parametrize("how", ["same path", "other spelling", "symlink", "hard link", "copy"])
+def test_repeated_log_refused(tmp_path, hd_log, assert_refused, how):
+    """The same experiment given twice (issue 26, item 8): 40 copies of one log narrowed every ci95
+    6.3x (sqrt 40) with no warning. Refused whether it is the same file (path, link, inode) or a copy."""
+    import os
+    import shutil
+    log = hd_log[0]
+    second = {"same path": lambda: log,
+              "other spelling": lambda: log.parent / "." / log.name,
+              "symlink": lambda: os.symlink(log, tmp_path / "link.csv") or tmp_path / "link.csv",
+              "hard link": lambda: os.link(log, tmp_path / "hard.csv") or tmp_path / "hard.csv",
+              "copy": lambda: shutil.copy(log, tmp_path / "copy.csv")}[how]()
+    how_said = "identical content (sha256)" if how == "copy" else "the same file"
+    assert_refused(_argv(log, "fitted.toml", "--log", str(second)),
+                   (f"--log {second}: {how_said} as --log {log}", "allowed: each experiment once"))

@@ -198,7 +198,7 @@ def _number(name, value, allowed, test):
 class _Setup:
     """Everything of one simulation but the gains' controller: plant matrices, limits, inputs."""
 
-    def __init__(self, loop, limits, experiment, amplitude, duration, seed, chirp_f1):
+    def __init__(self, loop, limits, experiment, amplitude, duration, seed, chirp_f1, excitation=None):
         params, ctrl = loop.params, loop.params.controller
         self.Ts = Ts = ctrl.Ts
         if experiment not in EXPERIMENTS:
@@ -267,6 +267,12 @@ class _Setup:
             T_end = max(t_nom[-1], Ts)
             exo[k("T_ff")] = A_ * np.sin(2 * np.pi * (CHIRP_F0 * t_nom + (f1 - CHIRP_F0) * t_nom ** 2 / (2 * T_end)))
             self.chirp = (CHIRP_F0, f1)
+        if excitation is not None:
+            u = np.asarray(excitation, float)
+            if experiment != "chirp" or u.shape != (n,) or not np.all(np.isfinite(u)):
+                raise ParameterError(f"excitation: shape {u.shape} with experiment {experiment!r}; allowed: {n} "
+                                     "finite samples (one per sample of the run) with experiment 'chirp'")
+            exo[k("T_ff")] = A_ * u
         self.x0 = np.zeros(nx)
         if experiment == "deflection":
             self.x0[states.index(f"theta_{top.port}")] = A_
@@ -497,7 +503,7 @@ def trace_oscillation(setup, torque) -> Oscillation | None:
 def simulate(loop, P_gain: float, D_gain: float, *, limits: Limits | None = None,
              experiment: str = "disturbance-step", amplitude: float | None = None,
              duration: float = 1.0, seed: int = 0, rtol: float = DEFAULT_RTOL,
-             chirp_f1: float | None = None) -> Simulation:
+             chirp_f1: float | None = None, excitation=None) -> Simulation:
     """Simulate the sampled-data loop with the limits at one gain point.
 
     Parameters
@@ -523,6 +529,10 @@ def simulate(loop, P_gain: float, D_gain: float, *, limits: Limits | None = None
         ``rtol`` x :data:`SAMPLE_TOL_FRACTION`.
     chirp_f1 : float, optional
         End frequency of the chirp, Hz (default 0.1 / Ts); it starts at :data:`CHIRP_F0`.
+    excitation : (n,) array, optional
+        With ``experiment = "chirp"``: the torque reference's shape instead of the sweep, one
+        value per sample (peak 1 by :func:`haa_sym.analysis.excitation.excitation_signal`),
+        times ``amplitude``.
 
     Returns
     -------
@@ -533,7 +543,7 @@ def simulate(loop, P_gain: float, D_gain: float, *, limits: Limits | None = None
     # small matrices only: BLAS threads cost more than they give (16 ms vs 30 us for one
     # expm of HyQ's plant on the 2-core machine under load)
     with blas_limits(1):
-        setup = _Setup(loop, limits, experiment, amplitude, duration, seed, chirp_f1)
+        setup = _Setup(loop, limits, experiment, amplitude, duration, seed, chirp_f1, excitation)
         setup.rtol = _number("rtol", rtol, "a number in (0, 0.1)", lambda v: 0 < v < 0.1)
         y, info = _run(loop, setup, P, D)
         st, rad = linear_verdict(loop, P, D)

@@ -136,16 +136,25 @@ class StepResponse:
 
 def describe_step(s: StepResponse) -> str:
     """One line of step metrics for people, saying "not reached" / "not settled" where
-    :func:`step_info` gives NaN, and the window they refer to."""
+    :func:`step_info` gives NaN, and the window they refer to. An unsettled response that has
+    already passed its final value has an overshoot of at least its peak so far (a later peak may
+    be higher): said as a lower bound; "undefined" only when it has not passed the final value."""
     info, end = s.info, f"{s.t[-1]:g} s"
 
     def ms(x, never):
         return f"{x * 1e3:.1f} ms" if np.isfinite(x) else never
+    yf = s.final_value
+    above = 100.0 * (np.max(np.sign(yf) * s.T) - abs(yf)) / abs(yf) if np.isfinite(yf) and yf != 0 else np.nan
+    if np.isfinite(info["Overshoot"]):
+        overshoot = f"{info['Overshoot']:.1f} %"
+    elif above > 0:
+        overshoot = f"at least {above:.1f} % (the peak within {end}; not settled)"
+    else:
+        overshoot = f"undefined (below the final value until {end}; not settled)"
     return (f"final value (DC gain) {s.final_value:.4f}; rise time (10-90 %) "
             f"{ms(info['RiseTime'], 'not reached within ' + end)}, settling time (2 %) "
-            f"{ms(info['SettlingTime'], 'not settled within ' + end)}, overshoot "
-            + (f"{info['Overshoot']:.1f} %" if np.isfinite(info["Overshoot"]) else "undefined (not settled)")
-            + f"; T at {end} = {s.T[-1]:.4f}")
+            f"{ms(info['SettlingTime'], 'not settled within ' + end)}, overshoot {overshoot}"
+            f"; T at {end} = {s.T[-1]:.4f}")
 
 
 @loop_first

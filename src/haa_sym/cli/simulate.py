@@ -7,7 +7,9 @@ import warnings
 import numpy as np
 
 from haa_sym.analysis.describing import compare_cycle, limit_cycles, limit_nonlinearities
+from haa_sym.analysis.excitation import EXCITATIONS, excitation_signal
 from haa_sym.analysis.simulate import CSV_COLUMNS, DEFAULT_AMPLITUDE, EXPERIMENTS, FORCED_EXPERIMENTS, simulate
+from haa_sym.errors import ParameterError
 from haa_sym.io.budget import CSV_BYTES_PER_SAMPLE, check_memory
 from haa_sym.io.formats import save_json
 from haa_sym.io.outputs import csv_text
@@ -30,6 +32,7 @@ def _cmd_simulate(args) -> int:
     if plot and args.title:
         _plots().check_title(args.title, "--title")
     P, D = _points(args, "simulate")
+    log_out, excitation = _log_args(args, params)
     loop = ClosedLoop(params, options)
     if out or plot:
         # the CSV's formatted rows and the figure cost about 5x the simulation itself: refused
@@ -41,7 +44,7 @@ def _cmd_simulate(args) -> int:
                                                    "written to --out / --plot)")
     title = figure_title(loop, file_params, args.configuration, args.title)
     s = simulate(loop, float(P[0]), float(D[0]), experiment=args.experiment, amplitude=args.amplitude,
-                 duration=args.duration, seed=args.seed)
+                 duration=args.duration, seed=args.seed, excitation=excitation)
     cols = s.columns()
     # the figure says what was run: the base title names only the actuator and its overrides
     unit = "rad" if args.experiment in ("impedance-step", "deflection") else "Nm"
@@ -70,6 +73,8 @@ def _cmd_simulate(args) -> int:
             write_csv(out, tx)
         if meta_out:
             save_json(meta_out, _plain(m), tx, "--meta")
+        if log_out:
+            tx.write_text(log_out, _log_text(args, loop, P, D, s), "--log-out")
         if plot:
             with warnings.catch_warnings():
                 # a run near overflow (|values| ~ 1e307) makes matplotlib's tick arithmetic
@@ -87,6 +92,8 @@ def _cmd_simulate(args) -> int:
     for line, sim, _ in predicted:
         print(f"{line}; {sim}" if sim else line)
     print(verdict)
+    if log_out:
+        print(f"wrote {log_out}: the run as a log for haa-sym identify")
     return 0
 
 
@@ -109,6 +116,58 @@ def verdict_line(s) -> str:
         return text + "; linear loop at this point: not decided"
     return (text + f"; linear loop at this point: {'stable' if s.linear_stable else 'UNSTABLE'} "
             f"(spectral radius {s.spectral_radius:.6g})")
+
+
+# identify's log columns (docs/identify.md, "Logs") a run writes with --log-out: the inputs it can
+# be driven by and every output; the simulation's own names are identify's
+LOG_COLUMNS = ("time", "voltage", "current", "torque_ref", "torque", "theta", "velocity")
+LOG_OUTPUTS = ("torque", "theta", "velocity", "current")
+
+
+def _log_args(args, params):
+    """``(--log-out path or None, the excitation's samples or None)``, checked before the run."""
+    log_out = _check_out(args.log_out, "simulate", "--log-out", (".csv",))
+    if not (args.log_noise >= 0 and math.isfinite(args.log_noise)):
+        raise ParameterError(f"--log-noise {args.log_noise!r}; allowed: a fraction >= 0 of each output's standard "
+                             "deviation")
+    if args.log_noise and not log_out:
+        raise ParameterError("--log-noise applies to the log; allowed: with --log-out")
+    if args.excitation is None:
+        return log_out, None
+    if args.experiment != "chirp":
+        raise ParameterError(f"--excitation {args.excitation}: a torque reference of the forced experiment; "
+                             f"allowed: with --experiment chirp (not {args.experiment})")
+    Ts, d = params.controller.Ts, args.duration
+    if not (math.isfinite(d) and d > 0):
+        return log_out, None                      # simulate's own message names --duration
+    n = int(math.ceil(d / Ts - 1e-9)) + 1
+    return log_out, excitation_signal(args.excitation, n, Ts, args.seed)
+
+
+def _log_text(args, loop, P, D, s) -> str:
+    """The run as identify's CSV log: ``#`` lines saying how it was made, then ``time`` and the
+    signals; the outputs with Gaussian noise of ``--log-noise`` times each one's standard
+    deviation (seeded by --seed, after the run's own draws), the inputs exact (as logged)."""
+    cols = s.columns()
+    rng = np.random.default_rng([args.seed, 1])
+    data = {}
+    for c in LOG_COLUMNS:
+        v = np.asarray(cols[c], float)
+        if c in LOG_OUTPUTS and args.log_noise:
+            v = v + args.log_noise * np.std(v) * rng.standard_normal(v.size)
+        data[c] = v
+    how = args.excitation or ("the sweep of --experiment chirp" if args.experiment == "chirp" else "none")
+    head = [f"# haa-sym simulate --log-out: {loop.params.source}"
+            + (f" --configuration {args.configuration}" if args.configuration else "")
+            + "".join(f" --set {x}" for x in args.set),
+            f"# P_gain = {float(P[0]):g} Nm/rad, D_gain = {float(D[0]):g} Nms/rad; {args.experiment}, excitation "
+            f"{how}, amplitude {s.meta['amplitude']:g}; duration {args.duration:g} s; seed {args.seed}; "
+            f"output noise {args.log_noise:g} x std",
+            "# units: time s, voltage V, current A, torque_ref Nm, torque Nm, theta rad, velocity rad/s "
+            "(docs/identify.md, Logs)"]
+    rows = [",".join(LOG_COLUMNS)] + [",".join(f"{data[c][k]:.12g}" for c in LOG_COLUMNS) for k in range(len(s.time))]
+    return "\n".join(head + rows) + "\n"
+
 
 
 def _plain(x):
@@ -184,4 +243,12 @@ def register(sub) -> dict:
     p.add_argument("--meta", help="the run's metadata as JSON (.json): the verdict, the linear verdict, the "
                                   "limits, the integrator, the describing-function comparisons")
     p.add_argument("--title", help=TITLE_HELP)
+    p.add_argument("--excitation", metavar="SPEC",
+                   help="with --experiment chirp: the torque reference's shape instead of the sweep, peak "
+                        "--amplitude: " + "; ".join(EXCITATIONS.values()))
+    p.add_argument("--log-out", metavar="LOG.csv",
+                   help="the run as a log for haa-sym identify (time, voltage, current, torque_ref, torque, theta, "
+                        "velocity; docs/simulate.md)")
+    p.add_argument("--log-noise", type=float, default=0.0, metavar="FRACTION",
+                   help="Gaussian noise on the log's outputs, FRACTION x each one's standard deviation (default 0)")
     return {"simulate": _cmd_simulate}
