@@ -70,7 +70,7 @@ def _cmd_describe(args) -> int:
         for A, w, s, d, c in zip(r.amplitude, r.omega, r.stable, r.distortion, conf):
             print(f"{head} limit cycle A = {A:.6g} {r.unit} at {w:.6g} rad/s ({w / (2 * math.pi):.6g} Hz), "
                   f"{'stable' if s else 'unstable'} (Loeb), distortion {d:.3g}"
-                  + (f"  (strong harmonics, not confirmed by a simulation: do not trust it without one)"
+                  + ("  (strong harmonics, not confirmed by a simulation: do not trust it without one)"
                      if c is None and s and d > DISTORTION_STRONG else ""))
             if c is not None:
                 if several:
