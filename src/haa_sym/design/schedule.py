@@ -76,6 +76,7 @@ from haa_sym.design.schedule_table import ScheduleTable
 from haa_sym.errors import ParameterError
 from haa_sym.io.gridspec import grid
 from haa_sym.io.outputs import write_text
+from haa_sym.io.progress import message
 from haa_sym.io.tasks import DEFAULT_CONNECT_TIMEOUT, TaskRunner
 from haa_sym.loop import ClosedLoop, loop_first
 from haa_sym.model.params import Params, gain_array
@@ -286,6 +287,7 @@ def _check_cells(runner, params, configs, P, D, fine, K, alpha_pt, req, options,
         return {q: all(decided[key] for key in pts) for q, pts in keys.items()}
 
     todo = {(int(i), int(j)) for i, j in np.argwhere(safe)}
+    rounds = 0
     while todo:
         ok = holds({(i, j, 0) for i, j in todo})
         failing = sorted((i, j) for (i, j, _), o in ok.items() if not o)
@@ -320,6 +322,11 @@ def _check_cells(runner, params, configs, P, D, fine, K, alpha_pt, req, options,
                     hi[c] = mid[c]
                 else:
                     lo[c] = mid[c]
+        rounds += 1
+        if failing:
+            message(f"schedule: cell check round {rounds}: {len(todo)} cells checked, {len(failing)} failed, "
+                    f"{len(failing) - len(hi)} given up, drops of {sorted(set(hi.values()))} beta steps; "
+                    f"{passes[0]} passes so far")
         drop = np.zeros(K.shape, int)
         for c, d in hi.items():
             ci, cj = corners(*c)
