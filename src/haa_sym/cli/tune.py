@@ -131,6 +131,9 @@ def _cmd_tune(args) -> int:
             print(f"  load mode dominates: {modes}")
     if r.unchanged:
         print("after: already at the optimum (no change): the tuned gains are the file's")
+    elif r.within_tolerance:
+        print(f"note: the file's PI was already at the optimum within the search's tolerance (--rtol {opts.rtol:g}): "
+              "the tuned gains differ from it by no more than that")
     print(f"active constraint: {r.active}" + ("; the optimum lies on the search range's edge (widen "
                                              "--lead-range / --integral-range)" if r.at_range_edge else ""))
 

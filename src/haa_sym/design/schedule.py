@@ -33,7 +33,10 @@ Where a cell fails, its four corner values are lowered together by a number of b
 bisected between the last failing and the last holding drop (a few passes, not one pass per
 step: the README's harmonic-drive schedule needed over 125 one-step passes); shared corners take
 the largest drop of their cells, the neighbouring cells are re-checked at the final corners, and
-the lookup stays continuous. A cell that still fails with a corner at the range's bottom, and
+the lookup stays continuous. In round ``cell_rounds`` (default 3) the cells that still fail are
+given up instead (no corner lowered, so nothing else changes): where feasibility is not monotone
+in beta (passivity at intermediate beta), lowering a corner can make the next cell fail, a chain
+that crossed the grid one cell a round. A cell that still fails with a corner at the range's bottom, and
 every cell with an infeasible corner, has no safe gain (``cell_safe`` False; the C lookup answers ``HAA_SCHEDULE_NO_SAFE_GAIN``). This
 is sampling: points between the sub-grid's are not verified.
 
@@ -93,6 +96,11 @@ COARSE_RATIO = 1.25
 # at 5 x 5 the off-grid test (tests/test_design_schedule_safety.py) finds no unsafe beta, and the check
 # costs about half the schedule's own time on the default HyQ grid (docs/model.md).
 CELL_SUBDIVISIONS = 4
+# Rounds of the cell check (module docstring, "Between grid points"): in the last one, cells that
+# still fail are given up instead of lowering corners that other cells share. The README's
+# harmonic-drive schedule (passivity required) needed 2 rounds for its own failures, then ran a
+# chain of single cells, one round (about 9 passes, 40-90 s) each (docs/schedule.md).
+CELL_ROUNDS = 3
 
 
 def beta_grid(beta_range=(0.1, 8.0), beta_tol: float = 0.02) -> tuple[np.ndarray, np.ndarray]:
@@ -223,7 +231,7 @@ def _verify(params, configs, P, D, fine, alphas, best_k, req, options):
     return best_k, len(lowered)
 
 
-def _check_cells(runner, params, configs, P, D, fine, K, alpha_pt, req, options, n_sub):
+def _check_cells(runner, params, configs, P, D, fine, K, alpha_pt, req, options, n_sub, max_rounds=None):
     """The cell check (module docstring, "Between grid points"). ``K`` (n_P, n_D): beta-grid
     index per grid point (-1 infeasible), ``alpha_pt`` its alpha. Returns the lowered indices,
     the safe cells, how many cells failed the check at first, how many grid points were lowered,
@@ -237,7 +245,10 @@ def _check_cells(runner, params, configs, P, D, fine, K, alpha_pt, req, options,
     then takes the largest drop of the failing cells it is a corner of, and every cell touching
     a lowered point is checked again in the next round: a cell is safe only when it held at
     its final corners, whatever the search found. A drop of 125 steps costs about 9 passes
-    instead of 125."""
+    instead of 125. In round ``max_rounds`` (:data:`CELL_ROUNDS`; None: no bound) the cells
+    that fail are given up without lowering anything, so no other cell changes and the check
+    ends: where feasibility is not monotone in beta (passivity), a lowered corner can make the
+    next cell fail, and such chains crossed the grid one cell a round."""
     K = K.copy()
     safe = (K[:-1, :-1] >= 0) & (K[1:, :-1] >= 0) & (K[:-1, 1:] >= 0) & (K[1:, 1:] >= 0)
     s = np.arange(n_sub + 1) / n_sub
@@ -292,6 +303,15 @@ def _check_cells(runner, params, configs, P, D, fine, K, alpha_pt, req, options,
         ok = holds({(i, j, 0) for i, j in todo})
         failing = sorted((i, j) for (i, j, _), o in ok.items() if not o)
         failed_once.update(failing)
+        rounds += 1
+        if max_rounds is not None and rounds >= max_rounds:
+            for c in failing:
+                safe[c] = False
+            given_up += len(failing)
+            if failing:
+                message(f"schedule: cell check round {rounds} (the last, cell_rounds): {len(todo)} cells checked, "
+                        f"{len(failing)} failed and given up (no safe gain); {passes[0]} passes")
+            break
         # bisection of each failing cell's drop: lo fails, hi holds (None: not found yet)
         lo = {c: 0 for c in failing}
         bottom = {c: int(K[corners(*c)].min()) for c in failing}
@@ -322,7 +342,6 @@ def _check_cells(runner, params, configs, P, D, fine, K, alpha_pt, req, options,
                     hi[c] = mid[c]
                 else:
                     lo[c] = mid[c]
-        rounds += 1
         if failing:
             message(f"schedule: cell check round {rounds}: {len(todo)} cells checked, {len(failing)} failed, "
                     f"{len(failing) - len(hi)} given up, drops of {sorted(set(hi.values()))} beta steps; "
@@ -351,7 +370,8 @@ def _free_in_the_air(params: Params) -> Params:
 def schedule(loop, P_gain=None, D_gain=None, *, beta_range=(0.1, 8.0), beta_tol: float = 0.02,
              alpha=None, alpha_values=None, requirements=("stable", "pm"), leg=None,
              leg_mode: str = "segment", uncertainty=None, scheduler=None, progress: bool | None = None,
-             max_per_axis: int = MAX_LEG_POINTS, cell_subdivisions: int = CELL_SUBDIVISIONS) -> Schedule:
+             max_per_axis: int = MAX_LEG_POINTS, cell_subdivisions: int = CELL_SUBDIVISIONS,
+             cell_rounds: int | None = CELL_ROUNDS) -> Schedule:
     """The largest robust beta (and alpha) for every impedance of the grid.
 
     Parameters
@@ -385,6 +405,10 @@ def schedule(loop, P_gain=None, D_gain=None, *, beta_range=(0.1, 8.0), beta_tol:
     cell_subdivisions : int
         Density of the cell check (module docstring, "Between grid points"): each cell is
         checked on (cell_subdivisions + 1)^2 points; default :data:`CELL_SUBDIVISIONS` (5 x 5).
+    cell_rounds : int or None
+        Rounds of the cell check; in the last, cells that still fail are given up (no safe
+        gain) instead of lowering shared corners; default :data:`CELL_ROUNDS` (3); None: until
+        no cell fails.
 
     Returns
     -------
@@ -403,6 +427,10 @@ def schedule(loop, P_gain=None, D_gain=None, *, beta_range=(0.1, 8.0), beta_tol:
             or not 1 <= cell_subdivisions <= 64:
         raise ParameterError(f"cell_subdivisions = {cell_subdivisions!r}; allowed: an integer 1..64 (sub-grid "
                              "intervals per cell side of the cell check)")
+    if cell_rounds is not None and (isinstance(cell_rounds, bool) or not isinstance(cell_rounds, (int, np.integer))
+                                    or not 1 <= cell_rounds <= 10_000):
+        raise ParameterError(f"cell_rounds (--cell-rounds) = {cell_rounds!r}; allowed: an integer 1..10000 or None (rounds of the "
+                             "cell check)")
     fine, coarse = beta_grid(beta_range, beta_tol)
     ctrl = params.controller
     if alpha_values is None:
@@ -512,7 +540,7 @@ def schedule(loop, P_gain=None, D_gain=None, *, beta_range=(0.1, 8.0), beta_tol:
     try:
         K_table, cell_safe, n_failed, n_lowered_pts, n_given_up, n_passes = _check_cells(
             runner, params, configs, P, D, fine, K, np.nan_to_num(alpha_out.reshape(shape)), req, options,
-            int(cell_subdivisions))
+            int(cell_subdivisions), None if cell_rounds is None else int(cell_rounds))
     finally:
         runner.close()
     table_beta = np.where(K_table >= 0, fine[np.maximum(K_table, 0)], np.nan)
@@ -531,6 +559,7 @@ def schedule(loop, P_gain=None, D_gain=None, *, beta_range=(0.1, 8.0), beta_tol:
             "cell_subdivisions": int(cell_subdivisions), "cells_failed_check": n_failed,
             "grid_points_lowered_by_cell_check": n_lowered_pts, "cells_given_up": n_given_up,
             "cells_safe": int(cell_safe.sum()), "cells": int(cell_safe.size), "cell_check_passes": n_passes,
+            "cell_rounds": cell_rounds,
             "beta_at_limit": int(at_limit.sum()),
             "cell_check": f"Each cell with four feasible corners was checked on a {cell_subdivisions + 1} x "
                           f"{cell_subdivisions + 1} sub-grid (corners and edges included) at {len(configs)} leg "
@@ -539,7 +568,8 @@ def schedule(loop, P_gain=None, D_gain=None, *, beta_range=(0.1, 8.0), beta_tol:
                           f"{fine[1] / fine[0]:.4g}), with the requirements {'+'.join(req)} decided exactly "
                           "(haa_sym.analysis.decide.decide_points); a failing cell's corner values were "
                           "lowered together by a drop bisected between a failing and a holding one, and every "
-                          "cell was checked again at its final corners. Points between the sub-grid's are not verified: sampling "
+                          "cell was checked again at its final corners; cells still failing in round "
+                          f"{cell_rounds} were given up. Points between the sub-grid's are not verified: sampling "
                           "cannot guarantee them.",
             "options": options.to_dict()}
     return Schedule(P, D, beta_out.reshape(shape), alpha_out.reshape(shape), bw_out.reshape(shape),

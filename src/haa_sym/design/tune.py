@@ -275,6 +275,14 @@ class TuneResult:
         """The file's PI is already the optimum found: the tuned gains equal the file's."""
         return self.after.P_t0 == self.before.P_t0 and self.after.I_t0 == self.before.I_t0
 
+    @property
+    def within_tolerance(self) -> bool:
+        """The tuned gains differ from the file's by at most the search's tolerance (``rtol``,
+        relative, each gain): the file was already at the optimum the search can resolve."""
+        tol = self.options.rtol
+        return all(abs(a - b) <= tol * max(abs(a), abs(b)) for a, b in
+                   ((self.after.P_t0, self.before.P_t0), (self.after.I_t0, self.before.I_t0)))
+
     def to_json(self) -> dict:
         """Plain JSON data (NaN and inf as null)."""
         def num(x):
@@ -299,7 +307,7 @@ class TuneResult:
                                          "text": BANDWIDTH_DEFINITIONS[self.options.bandwidth]},
                 "step_figures": "t90: from then on at or above 90 % of the final value; rise time: the last "
                                 "10 % before it to it; settling: last leaving +-5 % (s, unit torque step)",
-                "unchanged": self.unchanged,
+                "unchanged": self.unchanged, "within_tolerance_of_the_file": self.within_tolerance,
                 "targets": {"pm_deg": self.options.pm_deg, "gm_db": self.options.gm_db,
                             "stable_alpha": None if self.options.stable_alpha is None else list(self.options.stable_alpha),
                             "passive_at": [list(q) for q in self.options.passive_at],
