@@ -86,3 +86,12 @@ def test_the_written_file_round_trips(tmp_path, capsys):
     assert r["bandwidth_definition"]["name"] == "tracking"
     assert all("settling_time_5pct_s" in c and "load_mode" in c for c in r["after"]["configurations"].values())
     assert np.isfinite(load_params(out2).controller.I_t0)
+
+
+@pytest.mark.slow
+def test_a_pm_target_met_only_below_the_band_is_not_met(assert_refused):
+    """issue 26: `--pm 179` on HyQ wrote a PI whose crossover lay at 0.0999 rad/s, just below the
+    analysed band, and reported "PM n/a" with the targets met; the crossover is found now, and
+    no PI of the grid has PM >= 179 deg."""
+    assert_refused(["tune", "--pm", "179", "--out", "x.toml"],
+                   ("no PI of the search grid meets the targets", "pm_deg = 179", "most often missed: pm"))
