@@ -146,11 +146,11 @@ def _cmd_tune(args) -> int:
             s = step_response(ClosedLoop(params.with_values(P_t0=g.P_t0, I_t0=g.I_t0), options),
                               duration=opts.step_duration)
             steps.append((s.t, s.T, f"{label} (nominal values)", ls))
-            mode = g.load_modes[0]
+            modes = _load_modes(r, g)
             notes.append(f"{label}, nominal: bandwidth ({opts.bandwidth}) {fmt(g.bandwidth_rad_s[0], 'rad/s')}, "
                          f"t90 {fmt(g.t90_s[0], 's', '.3f', 'not held')}, settling (5 %) "
                          f"{fmt(g.settling_time_s[0], 's', '.3f', 'not settled')}"
-                         + ("" if mode is None else f"; load mode dominates: {mode.describe()}"))
+                         + (f"; load mode dominates: {modes}" if modes else ""))
         name = str(params.about.get("name") or Path(src).stem)
         title = "\n".join(([args.title] if args.title else []) + [
             f"{name}: torque PI tuned for PM >= {opts.pm_deg:g} deg, GM >= {opts.gm_db:g} dB at every configuration"])
