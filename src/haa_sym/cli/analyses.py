@@ -19,7 +19,7 @@ from haa_sym.analysis.torque import STEP_CONVENTION, describe_step, step_respons
 from haa_sym.check.verify import main as verify_main
 from haa_sym.compiled.generated import evaluators
 from haa_sym.compiled.plant_code import compile_topology
-from haa_sym.design.schedule import schedule
+from haa_sym.design.schedule import CELL_ROUNDS, schedule
 from haa_sym.design.schedule_c import check_c_directory, write_c
 from haa_sym.errors import ParameterError
 from haa_sym.io.formats import result_arrays, save_json, save_npz
@@ -223,7 +223,8 @@ def _cmd_schedule(args) -> int:
     leg_line = _say_leg(loop.params, _leg(args, loop.params), args.leg_mode, fit)
     s = schedule(loop, P, D, beta_range=beta_range, beta_tol=args.beta_tol, alpha_values=alphas,
                  requirements=_requirements(args), leg=_leg(args, loop.params), leg_mode=args.leg_mode,
-                 uncertainty=(fit["box"] or None) if fit else None, scheduler=args.scheduler)
+                 uncertainty=(fit["box"] or None) if fit else None, scheduler=args.scheduler,
+                 cell_rounds=args.cell_rounds)
     message(leg_line)
     if not s.feasible.any():
         with_alpha = f" with --alpha-values {args.alpha_values}" if args.alpha_values is not None else ""
@@ -472,6 +473,9 @@ def register(sub) -> dict:
     sc.add_argument("--alpha-values", help="schedule alpha too, from these values (grid spec, e.g. 0,0.5,0.94)")
     _leg_args(sc)
     sc.add_argument("--scheduler", help="address of a dask.distributed scheduler (default: in-process)")
+    sc.add_argument("--cell-rounds", type=int, default=CELL_ROUNDS, metavar="N",
+                    help=f"rounds of the cell check between grid points; cells still failing in the last are given "
+                         f"up (no safe gain) instead of lowering shared corners (default {CELL_ROUNDS}; docs/schedule.md)")
     sc.add_argument("--out", help="output .csv")
     sc.add_argument("--c-out", help="directory for haa_schedule.h and haa_schedule.c")
     sc.add_argument("--plot", help="output figure (.png/.pdf/.svg)")

@@ -625,11 +625,13 @@ def plot_describing(panels, title: str = ""):
 
 
 def plot_tune(lead_s, integral, grid_objective, before, after, steps, title: str = "",
-              ylabel: str = "torque (Nm)"):
+              ylabel: str = "torque (Nm)", notes: str = "", band: float | None = None):
     """``haa-sym tune``: left, the coarse search grid, the objective (rad/s) where every target is
     met (blank: some target missed) over the PI's lead time tau = P_t0 / I_t0 (s; the first row,
     tau = 0, the pure integrator, drawn at the bottom) and I_t0 (V/(Nm s)), with the file's and
-    the tuned PI marked; right, unit torque steps ``steps`` = [(t, T, label, linestyle)]."""
+    the tuned PI marked; right, unit torque steps ``steps`` = [(t, T, label, linestyle)], the
+    settling band +-``band`` around 1 if given, and ``notes`` (the torque-loop figures, one
+    line each) above the step panel."""
     lead_s, integral, obj = (np.asarray(a, float) for a in (lead_s, integral, grid_objective))
     fig, (ax, ax2) = plt.subplots(1, 2, figsize=(11, 4.4 + (0.6 if title else 0)), constrained_layout=True)
     # tau = 0 cannot sit on a log axis: its row is drawn one grid step below the smallest tau
@@ -656,9 +658,14 @@ def plot_tune(lead_s, integral, grid_objective, before, after, steps, title: str
         ax2.plot(t, T, ls, label=label)
     ax2.axhline(1.0, color="0.6", lw=0.8)
     ax2.axhline(0.9, color="0.6", lw=0.8, ls=":")
+    if band:
+        ax2.axhspan(1 - band, 1 + band, color="0.85", alpha=0.5, lw=0, label=f"+-{100 * band:g} % (settling)")
     ax2.set_xlabel("t (s)")
     ax2.set_ylabel(ylabel)
-    ax2.set_title("unit torque step, impedance loop open", fontsize=10)
+    # one wrapped block per note: a line wider than the panel ran off the figure
+    notes = "\n".join(textwrap.fill(n, 90, subsequent_indent="  ") for n in notes.splitlines())
+    ax2.set_title("unit torque step, impedance loop open" + (f"\n{notes}" if notes else ""),
+                  fontsize=10 if not notes else 7, loc="center" if not notes else "left")
     ax2.legend(fontsize=8)
     ax2.grid(True, alpha=0.3)
     if title:
