@@ -4,14 +4,14 @@ VENV   := .venv
 PY     := $(VENV)/bin/python
 STAMP  := $(VENV)/.installed
 
-.PHONY: all venv derive verify test test-slow browser check-generated paper bench bench-readme clean
+.PHONY: all venv derive verify test test-slow browser check-generated paper bench bench-readme docs clean
 
 all: verify
 
 $(STAMP): pyproject.toml
 	$(PYTHON) -m venv $(VENV)
 	$(PY) -m pip install --quiet --upgrade pip
-	$(PY) -m pip install --quiet -e '.[test]'
+	$(PY) -m pip install --quiet -e '.[test,docs]'
 	touch $(STAMP)
 
 venv: $(STAMP)
@@ -42,10 +42,16 @@ bench: $(STAMP)
 	HAA_SYM_BENCH_DIR=$(BENCH_DIR) $(PY) benchmarks/bench_identify.py
 	HAA_SYM_BENCH_DIR=$(BENCH_DIR) $(PY) benchmarks/bench_explore.py
 
-## Rewrite the README's benchmark block (between <!-- bench:start --> and <!-- bench:end -->)
-## from the JSON of `make bench`; `make bench-readme BENCH_ARGS=--check` only compares.
+## Rewrite the benchmark block of docs/benchmarks.md (between <!-- bench:start --> and
+## <!-- bench:end -->) from the JSON of `make bench`; `make bench-readme BENCH_ARGS=--check` only compares.
 bench-readme:
 	$(PYTHON) benchmarks/render_readme.py --results $(BENCH_DIR) $(BENCH_ARGS)
+
+## The documentation site from docs/ (Sphinx + myst-parser, the API from the numpydoc docstrings)
+## into docs/_build/html; warnings are errors (CI runs it).
+docs: $(STAMP)
+	$(PY) -m sphinx -W --keep-going -q -b html docs docs/_build/html
+	@echo "docs/_build/html/index.html"
 
 ## The test suite without the tests marked slow (under 2 min); `make test-slow` runs those.
 test: $(STAMP)
@@ -70,4 +76,4 @@ check-generated: $(STAMP)
 	  echo "generated/ is up to date"
 
 clean:
-	rm -rf $(VENV) build src/*.egg-info
+	rm -rf $(VENV) build src/*.egg-info docs/_build

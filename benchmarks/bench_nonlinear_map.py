@@ -53,7 +53,7 @@ def main() -> int:
           f"the linear map {t_lin:.3f} s; classes {m.counts()}; same classes: {same}")
     if "--cluster" in sys.argv[1:]:
         import distributed
-        with distributed.LocalCluster(n_workers=2, threads_per_worker=1, processes=True,
+        with distributed.LocalCluster(n_workers=2, threads_per_worker=1, processes=True, host="127.0.0.1",
                                       dashboard_address=None) as cl:
             t0 = time.perf_counter()
             mc = nonlinear_map(loop, P, D, limits=LIMITS, progress=False, scheduler=cl.scheduler_address)

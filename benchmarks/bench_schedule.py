@@ -33,7 +33,7 @@ def main() -> int:
     run = Run("bench_schedule.py")
     loop = ClosedLoop(load_params())
     results = {"rows": []}
-    with distributed.LocalCluster(n_workers=2, threads_per_worker=1, processes=True,
+    with distributed.LocalCluster(n_workers=2, threads_per_worker=1, processes=True, host="127.0.0.1",
                                   dashboard_address=None) as cluster, distributed.Client(cluster) as client:
         client.run(lambda: __import__("haa_sym.design.schedule"))          # warm the workers' imports
         for n_P, n_D in GRIDS:

@@ -1,6 +1,7 @@
-"""Render the README's benchmark block from the JSON files of ``make bench``.
+"""Render the benchmark page's block (docs/benchmarks.md) from the JSON files of ``make bench``.
 
-The block is everything between ``<!-- bench:start -->`` and ``<!-- bench:end -->`` in README.md:
+The block is everything between ``<!-- bench:start -->`` and ``<!-- bench:end -->`` in
+docs/benchmarks.md (it was the README's until issue 26 moved the tables to a page of their own):
 the sentence naming the machine, the date and the load of the run, the table, and the paragraph
 on agreement and targets. Every number in it comes from the JSON files (``results_baselines.json``,
 ``results_regions.json``, ``results_boundary.json``, ``results_schedule.json``, and for the second
@@ -8,8 +9,8 @@ table ``results_identify.json``, ``results_simulate.json``, ``results_nonlinear_
 ``results_explore.json`` in ``$HAA_SYM_BENCH_DIR``, default ``bench-results/``); a file that is missing leaves its cells as
 "not measured". Nothing outside the markers is touched.
 
-Usage: python benchmarks/render_readme.py [--results DIR] [--readme README.md] [--check]
-``--check`` writes nothing and exits 1 if the README's block differs from what the JSON gives.
+Usage: python benchmarks/render_readme.py [--results DIR] [--page docs/benchmarks.md] [--check]
+``--check`` writes nothing and exits 1 if the page's block differs from what the JSON gives.
 Standard library only (``make bench-readme`` runs it with the system python).
 """
 from __future__ import annotations
@@ -361,22 +362,24 @@ def render(data) -> str:
     return "\n".join(lines) + "\n"
 
 
-def splice(readme: str, block: str) -> str:
-    i, j = readme.find(START), readme.find(END)
+def splice(page: str, block: str, name: str = "the page") -> str:
+    i, j = page.find(START), page.find(END)
     if i < 0 or j < i:
-        raise SystemExit(f"README has no {START} ... {END} block")
-    return readme[:i] + block.rstrip("\n") + readme[j + len(END):]
+        raise SystemExit(f"{name} has no {START} ... {END} block")
+    return page[:i] + block.rstrip("\n") + page[j + len(END):]
 
 
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--results", type=Path,
                     default=Path(os.environ.get("HAA_SYM_BENCH_DIR") or ROOT / "bench-results"))
-    ap.add_argument("--readme", type=Path, default=ROOT / "README.md")
-    ap.add_argument("--check", action="store_true", help="exit 1 if the README's block is not what the JSON gives")
+    # --readme: the option's name before the block moved from README.md to docs/benchmarks.md
+    ap.add_argument("--page", "--readme", dest="readme", type=Path, default=ROOT / "docs" / "benchmarks.md",
+                    help="the Markdown file holding the block (default docs/benchmarks.md)")
+    ap.add_argument("--check", action="store_true", help="exit 1 if the page's block is not what the JSON gives")
     args = ap.parse_args(argv)
     old = args.readme.read_text()
-    new = splice(old, render(load(args.results)))
+    new = splice(old, render(load(args.results)), str(args.readme))
     if args.check:
         if new != old:
             sys.stdout.writelines(difflib.unified_diff(old.splitlines(True), new.splitlines(True),

@@ -63,9 +63,15 @@ def test_rules_in_order():
     ts = [0.0, 0.5, 0.95, 0.1, 0.1, 0.1, 0.1, 0.0]
     st = [True, False, True, False, True, True, False, True]
     got = [CLASSES[c] for c in classify(kinds, ts, st, False)]
-    assert got == ["growing", "limit cycle", "saturating", "undecided", "growing", "converging", "undecided",
+    assert got == ["diverged", "limit cycle", "saturating", "undecided", "growing", "converging", "undecided",
                    "converging"]       # the last: no saturation, no always-acting limit: the linear decision
     assert CLASSES[classify(["sustained"], [0.0], [True], True)[0]] == "limit cycle"
+    # a forced run (the chirp) is never a limit cycle; it may still diverge or grow
+    forced = [CLASSES[c] for c in classify(["sustained", "sustained", "non-finite", "none"], [0.5, 0.0, 0.0, 0.0],
+                                           [True, False, True, True], False, forced=True)]
+    assert forced == ["forced response", "growing", "diverged", "forced response"]
+    # the linear decision unknown (NaN): the rules that need it do not apply
+    assert CLASSES[classify(["none"], [0.0], [np.nan], False)[0]] == "undecided"
 
 
 @pytest.mark.parametrize("kw, field", [
@@ -87,7 +93,8 @@ def test_a_dask_cluster_gives_the_same_classes():
     P, D = np.geomspace(300.0, 20000.0, 6), np.array([1.0, 10.0, 40.0])
     lim = Limits(V_max=24.0, torque_resolution=0.01)
     local = nonlinear_map(loop, P, D, limits=lim, progress=False, points_per_task=4)
-    with distributed.LocalCluster(n_workers=2, threads_per_worker=1, processes=True, dashboard_address=None) as cl:
+    with distributed.LocalCluster(n_workers=2, threads_per_worker=1, processes=True, host="127.0.0.1",
+                                  dashboard_address=None) as cl:
         remote = nonlinear_map(loop, P, D, limits=lim, progress=False, points_per_task=4,
                                scheduler=cl.scheduler_address)
     assert len(set(local.class_names.ravel())) >= 2

@@ -92,7 +92,11 @@ def test_batch_summarises_each_point_like_single_runs():
         s = simulate(loop, P, 5.0, limits=lim, experiment="disturbance-step", duration=0.2)
         assert b.saturation_time[i] == s.saturation_time
         assert b.final_theta[i] == pytest.approx(s.theta[-20:].mean(), rel=1e-12)
-    assert list(b.status) == ["no limit cycle", "no limit cycle"]
+        assert b.status[i] == s.verdict
+    # basis=False: the linear decision is unknown, and a 24 V supply that never acts cannot tell
+    assert list(b.status) == ["undecided", "undecided"]
+    known = simulate_batch(ClosedLoop(load_params()), [200.0, 400.0], 5.0, limits=lim, duration=0.2)
+    assert list(known.status) == ["converging", "converging"]
 
 
 def test_batch_tells_growth_from_a_limit_cycle():

@@ -83,3 +83,18 @@ def test_numeric_p1_roots_match_the_paper_polynomial(params):
             num = p1_roots(pc)
             assert num.size == exact.size == 4
             np.testing.assert_allclose(num, exact, rtol=1e-6, atol=1e-9)
+
+
+def test_describe_step_overshoot_undefined_only_when_none_to_define():
+    """Issue 26, item 16: "overshoot undefined (not settled)" was printed for HyQ's step, whose
+    torque had passed its final value by 3.1 % within the window: an unsettled response past its
+    final value has an overshoot of at least that peak; "undefined" only below the final value."""
+    from haa_sym.analysis.torque import StepResponse, describe_step
+    t = np.linspace(0.0, 0.3, 301)
+    rising_past = StepResponse(t, 1.08 * (1 - np.exp(-t / 0.03)))         # 1.08 at the end: not settled
+    assert "overshoot at least 8.0 % (the peak within 0.3 s; not settled)" in describe_step(rising_past)
+    below = StepResponse(t, 0.5 * (1 - np.exp(-t / 0.03)))
+    assert "overshoot undefined (below the final value until 0.3 s; not settled)" in describe_step(below)
+    settled = StepResponse(t, 1 - np.exp(-t / 0.01) * np.cos(t / 0.01))
+    line = describe_step(settled)
+    assert "overshoot " in line and "undefined" not in line and "at least" not in line

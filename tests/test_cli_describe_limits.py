@@ -38,3 +38,10 @@ def test_no_limit_anywhere_is_one_line(capsys):
     assert main(["describe", "--P-gain", "3000", "--D-gain", "1"]) == 2
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 1 and "[limits]" in err[0] and "--limit" in err[0]
+
+
+def test_subnormal_quantum_is_one_line(capsys):
+    """T_res = 1e-310 (subnormal) left the root finding no digits: xtol 0, a ValueError traceback."""
+    assert main(["describe", "--P-gain", "1000", "--D-gain", "10", "--set", "beta=3", "--limit", "T_res=1e-310"]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert err == ["haa-sym: error: --limit: T_res = 1e-310; allowed: a number from 1e-100 to 1e+100 (Nm)"]

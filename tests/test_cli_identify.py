@@ -184,3 +184,53 @@ def test_out_is_the_log(tmp_path, hd_log, capsys):
                        + ("" if out == data else f" (the same file as {str(data)!r})")
                        + "; allowed: an output path that is not an input (write elsewhere, then move it)")
     assert data.read_bytes() == log.read_bytes()
+
+
+def test_memory_gate_before_reading_and_before_fitting(tmp_path, hd_log, capsys, monkeypatch):
+    """A 10 M-row log reached 9.9 GB and died (issue 26, item 10): the read and the fit are
+    gated by what they allocate (io.budget: 6 B per file byte; fit_bytes per sample)."""
+    from haa_sym.io.budget import LOG_BYTES_PER_FILE_BYTE, fit_bytes
+    log, _ = hd_log
+    size = log.stat().st_size
+    monkeypatch.setenv("HAA_SYM_MEMORY_BUDGET", str(size * LOG_BYTES_PER_FILE_BYTE - 1))
+    assert main(_argv(log, tmp_path / "f.toml")) == 2
+    err = capsys.readouterr().err.strip()
+    assert f"reading its {size} bytes would need about" in err and len(err.splitlines()) == 1
+    need = fit_bytes(6000, 5, 2, len(KEYS))
+    monkeypatch.setenv("HAA_SYM_MEMORY_BUDGET", str(need - 1))
+    assert need - 1 > size * LOG_BYTES_PER_FILE_BYTE
+    assert main(_argv(log, tmp_path / "f.toml")) == 2
+    err = capsys.readouterr().err.strip()
+    assert err.startswith("haa-sym: error: fitting 4 key(s) to 6000 samples would need about")
+    monkeypatch.setenv("HAA_SYM_MEMORY_BUDGET", str(need))
+    assert main(_argv(log, tmp_path / "f.toml")) == 0
+    assert (tmp_path / "f.toml").exists()
+
+
+def test_time_column_far_from_seconds(tmp_path, hd_log, capsys):
+    """Time stamps near 1e100 (a sample every 1e94 s) were a LinAlgError traceback (issue 26)."""
+    log, _ = hd_log
+    lines = log.read_text().splitlines()
+    far = tmp_path / "far.csv"
+    far.write_text("\n".join([lines[0]] + [",".join([repr(float(r.split(",")[0]) * 1e97)] + r.split(",")[1:])
+                                           for r in lines[1:]]) + "\n")
+    assert main(_argv(far, tmp_path / "f.toml")) == 2
+    err = capsys.readouterr().err.strip()
+    assert len(err.splitlines()) == 1 and "mean sampling period 1e+94 s: the plant sampled at it overflows" in err
+
+
+@pytest.mark.parametrize("how", ["same path", "other spelling", "symlink", "hard link", "copy"])
+def test_repeated_log_refused(tmp_path, hd_log, assert_refused, how):
+    """The same experiment given twice (issue 26, item 8): 40 copies of one log narrowed every ci95
+    6.3x (sqrt 40) with no warning. Refused whether it is the same file (path, link, inode) or a copy."""
+    import os
+    import shutil
+    log = hd_log[0]
+    second = {"same path": lambda: log,
+              "other spelling": lambda: log.parent / "." / log.name,
+              "symlink": lambda: os.symlink(log, tmp_path / "link.csv") or tmp_path / "link.csv",
+              "hard link": lambda: os.link(log, tmp_path / "hard.csv") or tmp_path / "hard.csv",
+              "copy": lambda: shutil.copy(log, tmp_path / "copy.csv")}[how]()
+    how_said = "identical content (sha256)" if how == "copy" else "the same file"
+    assert_refused(_argv(log, "fitted.toml", "--log", str(second)),
+                   (f"--log {second}: {how_said} as --log {log}", "allowed: each experiment once"))

@@ -77,7 +77,7 @@ def test_simulate_prints_the_describing_function_next_to_the_simulated_cycle(tmp
                       nonlinearity={"V_max": 24.0})
     assert f"A = {df.amplitude[0]:.4g} V at {df.frequency_hz[0]:.4g} Hz" in line
     fund_pred, fund_sim, f_sim = (float(x) for x in re.search(
-        r"N\(A\) A = ([\d.]+) V\); simulated voltage: fundamental ([\d.]+) V at ([\d.]+) Hz", line).groups())
+        r"N\(A\) A = ([\d.]+) V\); simulated voltage: fundamental ([\d.]+) V \(error [\d.]+ %\) at ([\d.]+) Hz", line).groups())
     # the harmonic balance and the simulation agree within a few per cent here (distortion 4 %)
     assert fund_sim == pytest.approx(fund_pred, rel=0.03)
     assert f_sim == pytest.approx(df.frequency_hz[0], rel=0.01)

@@ -37,7 +37,7 @@ def test_simulate_writes_the_issue_columns(tmp_path, capsys):
                  duration=0.3)
     assert np.allclose(data[:, 3], s.torque, rtol=1e-11, atol=1e-12)
     assert f"time in saturation: {s.saturation_time:.6g} s" in text
-    assert "limits: V_max = 6" in text and "no limit cycle" in text
+    assert "limits: V_max = 6" in text and "\nverdict: " in text
 
 
 def test_simulate_reports_a_limit_cycle_and_plots(tmp_path, capsys):
@@ -47,7 +47,7 @@ def test_simulate_reports_a_limit_cycle_and_plots(tmp_path, capsys):
                "--plot", str(tmp_path / "s.png")])
     assert rc == 0
     text = capsys.readouterr().out
-    assert "limit cycle: amplitude" in text and " Hz" in text
+    assert "verdict: limit cycle (torque: amplitude" in text and " Hz" in text
     assert (tmp_path / "s.png").stat().st_size > 10_000
 
 

@@ -94,4 +94,5 @@ def test_figure_says_what_was_run_and_the_note_does_not_cover_the_trace(tmp_path
     torque_ax = seen["fig"].axes[1]
     assert torque_ax.get_ylabel() == "torque (Nm)"
     assert torque_ax.get_legend().get_title().get_text() == ""
-    assert torque_ax.get_title(loc="left").startswith("simulated no limit cycle\ndescribing function, V_max = 6 V")
+    assert torque_ax.get_title(loc="left").startswith("verdict: saturating; linear loop at this point: stable")
+    assert "\ndescribing function, V_max = 6 V" in torque_ax.get_title(loc="left")

@@ -31,8 +31,11 @@ SMALL = ["--n-lead", "2", "--n-integral", "3", "--rtol", "0.2", "--step-duration
     (["--out", "x.toml", "--params", "no_such_actuator"], ("no_such_actuator",)),
     (["--out", "x.toml", "--passive-at", "100"], ("--passive-at '100'", "P_GAIN:D_GAIN")),
     (["--out", "x.toml", "--passive-at", "100:-1"], ("--passive-at: passive_at",)),
-    (["--out", "x.toml", "--params", "harmonic_drive", "--passive-configurations", "nominal,retracted"],
-     ("--passive-configurations", "['retracted']", "low_damping")),
+    (["--out", "x.toml", "--params", "harmonic_drive", "--passive-at", "100:10", "--passive-configurations",
+      "nominal,retracted"], ("--passive-configurations", "['retracted']", "low_damping")),
+    # issue 26: without --passive-at the configurations were ignored silently
+    (["--out", "x.toml", "--params", "harmonic_drive", "--passive-configurations", "nominal,heavy"],
+     ("--passive-configurations 'nominal,heavy' without --passive-at", "allowed: --passive-at")),
 ])
 def test_bad_input_is_one_line_exit_2_nothing_written(assert_refused, argv, match):
     assert_refused(["tune", *argv], match)
@@ -72,7 +75,23 @@ def test_the_written_file_round_trips(tmp_path, capsys):
     assert plot.stat().st_size > 10_000
     assert "active constraint:" in printed and f"wrote {out}" in printed
     # tuning the tuned file again from its own gains: they are the before of the new run
-    out2 = tmp_path / "again.toml"
-    assert main(["tune", "--params", str(out), "--out", str(out2), *SMALL]) == 0
-    assert f"before: P_t0 = {tuned.controller.P_t0:.6g}" in capsys.readouterr().out
+    out2, report2 = tmp_path / "again.toml", tmp_path / "again.json"
+    assert main(["tune", "--params", str(out), "--out", str(out2), "--report", str(report2), *SMALL]) == 0
+    again = capsys.readouterr().out
+    assert f"before: P_t0 = {tuned.controller.P_t0:.6g}" in again
+    # issue 26: the same search finds the same PI, and says so instead of printing before = after
+    assert "already at the optimum (no change)" in again and "after: P_t0" not in again
+    assert json.loads(report2.read_text())["unchanged"] is True and r["unchanged"] is False
+    # the figures are the engineer's, named in the report
+    assert r["bandwidth_definition"]["name"] == "tracking"
+    assert all("settling_time_5pct_s" in c and "load_mode" in c for c in r["after"]["configurations"].values())
     assert np.isfinite(load_params(out2).controller.I_t0)
+
+
+@pytest.mark.slow
+def test_a_pm_target_met_only_below_the_band_is_not_met(assert_refused):
+    """issue 26: `--pm 179` on HyQ wrote a PI whose crossover lay at 0.0999 rad/s, just below the
+    analysed band, and reported "PM n/a" with the targets met; the crossover is found now, and
+    no PI of the grid has PM >= 179 deg."""
+    assert_refused(["tune", "--pm", "179", "--out", "x.toml"],
+                   ("no PI of the search grid meets the targets", "pm_deg = 179", "most often missed: pm"))

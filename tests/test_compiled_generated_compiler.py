@@ -115,3 +115,54 @@ def test_unwritable_cache_names_the_variable(tmp_path):
     assert proc.stderr == (f"haa-sym: error: the compiled-code cache {tmp_path / 'file' / 'cache'} "
                            "(HAA_SYM_CACHE, default ~/.cache/haa_sym) cannot be created: Not a "
                            "directory; allowed: a writable directory\n")
+
+
+SLOW_CC = """#!/bin/sh
+# a compiler whose child (cc1's stand-in) runs long and leaves a temporary in $TMPDIR
+[ "$1" = --version ] && { echo slowcc 1.0; exit 0; }
+touch "$TMPDIR/ccTEMP.s"
+sleep 60 &
+echo $! > "$PROBE_PIDFILE"
+wait
+"""
+
+
+def test_sigterm_during_compile_stops_the_compiler_group(tmp_path, tiny):
+    """SIGTERM during the first compile left cc1 running and its temporaries behind (issue 26):
+    the compiler's whole process group is stopped and its TMPDIR removed."""
+    import signal
+    import time
+    cc = tmp_path / "slowcc"
+    cc.write_text(SLOW_CC)
+    cc.chmod(0o755)
+    pidfile, cache = tmp_path / "child.pid", tmp_path / "cache"
+    code = ("import signal, sys\nfrom haa_sym.errors import Terminated\n"
+            "def term(*a): raise Terminated()\nsignal.signal(signal.SIGTERM, term)\n"
+            "from haa_sym.compiled.generated import Compiler\n"
+            "try:\n    Compiler(cc=sys.argv[1], cache_dir=sys.argv[2]).build(__import__('pathlib').Path(sys.argv[3]))\n"
+            "except Terminated:\n    sys.exit(143)\n")
+    p = subprocess.Popen([sys.executable, "-c", code, str(cc), str(cache), str(tiny)],
+                         env={**os.environ, "PROBE_PIDFILE": str(pidfile)})
+    try:
+        deadline = time.monotonic() + 30
+        while not (pidfile.exists() and pidfile.read_text().strip()):
+            assert p.poll() is None and time.monotonic() < deadline, "the compiler never started"
+            time.sleep(0.05)
+        child = int(pidfile.read_text())
+        p.send_signal(signal.SIGTERM)
+        assert p.wait(10) == 143
+    finally:
+        if p.poll() is None:
+            p.kill()
+    deadline = time.monotonic() + 5
+    while time.monotonic() < deadline:
+        try:
+            os.kill(child, 0)
+        except ProcessLookupError:
+            break
+        time.sleep(0.05)
+    else:
+        os.kill(child, 9)
+        pytest.fail("the compiler's child kept running after SIGTERM")
+    left = [q.name for q in cache.rglob("*")] if cache.exists() else []
+    assert not [n for n in left if n.startswith("cc-tmp") or n.endswith((".s", ".so"))], left

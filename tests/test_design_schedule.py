@@ -129,7 +129,8 @@ def test_distributed_cluster_gives_the_same_bytes():
     p = load_params()
     P, D = np.geomspace(5.0, 2000.0, 4), np.linspace(1.0, 50.0, 3)
     local = schedule(ClosedLoop(p), P, D, beta_tol=0.05, progress=False).csv_text()
-    with distributed.LocalCluster(n_workers=2, threads_per_worker=1, processes=True, dashboard_address=None) as cl:
+    with distributed.LocalCluster(n_workers=2, threads_per_worker=1, processes=True, host="127.0.0.1",
+                                  dashboard_address=None) as cl:
         # by address, as `haa-sym schedule --scheduler ADDRESS` does
         remote = schedule(ClosedLoop(p), P, D, beta_tol=0.05, progress=False, scheduler=cl.scheduler_address).csv_text()
     assert remote.encode() == local.encode()

@@ -1,5 +1,5 @@
 """The runnable examples: the docstrings' (the ones not marked +SKIP) of every module and the
-README's Python example run and are right."""
+Python example of docs/python.md run and are right."""
 import doctest
 import importlib
 import pkgutil
@@ -23,13 +23,13 @@ def test_docstring_examples(name):
     assert result.failed == 0
 
 
-# --- the README's Python example runs and is consistent -----------------------------------------
-def test_readme_python_example(tmp_path, monkeypatch):
-    blocks = re.findall(r"```python\n(.*?)```", (ROOT / "README.md").read_text(), re.S)
+# --- the Python example of docs/python.md (the README's before issue 26) runs and is consistent ---
+def test_docs_python_example(tmp_path, monkeypatch):
+    blocks = re.findall(r"```python\n(.*?)```", (ROOT / "docs" / "python.md").read_text(), re.S)
     assert len(blocks) == 1
     monkeypatch.chdir(tmp_path)
     ns: dict = {}
-    exec(compile(blocks[0], "README.md", "exec"), ns)
+    exec(compile(blocks[0], "docs/python.md", "exec"), ns)
     m, res = ns["m"], ns["res"]
     np.testing.assert_array_equal(m.stable, res.stable)
     # the map is computed with the loop's options, and those are the documented defaults with

@@ -137,12 +137,53 @@ def test_plot_torque_bandwidth(tmp_path):
     fig.canvas.draw()
     ticks = [t.get_text() for t in fig.axes[1].get_yticklabels() if t.get_text()]
     assert ticks and all(re.fullmatch(r"[0-9.]+", t) for t in ticks)                # bandwidths, not log10
-    # dark is low bandwidth; the unstable cells are hatched and the legend says so
+    # the unstable cells are hatched and the legend says so, and nothing else (the colour bar says
+    # dark is low bandwidth)
     texts = [t.get_text() for t in fig.legends[0].get_texts()]
-    assert texts == ["torque loop unstable", "dark: low bandwidth", "bright: high bandwidth"]
+    assert texts == ["torque loop unstable (bandwidth meaningless)"]
     assert any(list(getattr(c, "hatches", None) or []) == ["xxx"] for c in ax.collections)
     assert fig._suptitle.get_text() == "torque bandwidth"
     _saved(fig, tmp_path)
+
+
+def test_torque_bandwidth_no_overlapping_labels_no_legend_for_what_is_not_drawn(tmp_path):
+    """Issue 26, item 16: torque_bandwidth.png had its contour labels piled on each other where
+    the contours bunch (the stability cliff) and a legend entry "torque loop stable everywhere"
+    (a red patch drawn nowhere) with "dark"/"bright" swatches repeating the colour bar. Now the
+    contours are marked on the colour bar (no text on the map) and a panel without unstable
+    cells says so in its title; no legend."""
+    B, A = np.linspace(0.1, 8, 25), np.linspace(0, 1.2, 13)
+    # a cliff: the bandwidth jumps from 2 to 300 rad/s across a line, every contour level on it
+    bw = np.where(B[:, None] + 4 * A[None, :] > 5, 300.0, 2.0) * (1 + 0.1 * A[None, :])
+    fig = plots.plot_torque_bandwidth([("extended leg", B, A, bw, np.ones_like(bw, bool)),
+                                       ("retracted leg", B, A, bw, np.ones_like(bw, bool))], title="t")
+    panels = [ax for ax in fig.axes if ax.get_xlabel().startswith("beta")]
+    assert [ax.get_title() for ax in panels] == ["extended leg (torque loop stable in every cell)",
+                                                 "retracted leg (torque loop stable in every cell)"]
+    assert not fig.legends
+    for ax in panels:
+        assert not ax.texts                                  # no contour labels to overlap
+        assert not any("xxx" in (getattr(c, "hatches", None) or []) for c in ax.collections)
+    bars = [ax for ax in fig.axes if ax.get_ylabel() == "torque bandwidth (rad/s, log scale)"]
+    assert len(bars) == 2 and all(len(b.collections) + len(b.lines) > 1 for b in bars)   # the contour levels
+    _saved(fig, tmp_path)
+
+
+def test_contact_titled_with_its_gains(tmp_path, monkeypatch):
+    """Issue 26, item 16: contact.png did not say at which gains the environment was scanned."""
+    assert plots.gains_text(200, 10, 1.0, 0.94) == "P_gain = 200 Nm/rad, D_gain = 10 Nms/rad, beta = 1, alpha = 0.94"
+    assert plots.gains_text(0, 0, 2.0).startswith("torque loop alone (P_gain = 0 Nm/rad, D_gain = 0 Nms/rad")
+    titles = []
+    save = plots.save_figure
+
+    def keep(fig, *a, **k):
+        titles.append(fig._suptitle.get_text() if fig._suptitle else "")
+        return save(fig, *a, **k)
+    monkeypatch.setattr(plots, "save_figure", keep)
+    assert main(["contact", "--P-gain", "200", "--D-gain", "10", "--set", "beta=2", "--n-scan", "12",
+                 "--plot", str(tmp_path / "contact.png"), "-q"]) == 0
+    (title,) = titles
+    assert title.splitlines()[-1] == "gains: P_gain = 200 Nm/rad, D_gain = 10 Nms/rad, beta = 2, alpha = 0.94"
 
 
 def test_plot_schedule(tmp_path):
@@ -259,3 +300,33 @@ def test_figure_title_says_what_differs(params):
     # the file's own options (port, torque_damping resolved from [sensors]) are not differences
     assert figure_title(ClosedLoop(params, LoopOptions(port="dtheta_L2")), params, "retracted") == \
         "HyQ HAA joint, retracted configuration\nthe file's values, default options"
+
+
+def test_range_edge_drawn_and_named_as_what_it_is(region):
+    """A passivity set bounded by the edge of the judged frequency range (kinds "passivity
+    (omega_min)", "passivity (Nyquist)" of analysis.boundaries.passivity) was drawn and named as
+    the |phase Z| = 90 deg boundary (issue 26, item 9): now its own line style and name, in every
+    figure that draws curves; a kind without a point to draw gets no legend entry."""
+    b = _boundary()
+    edge = SimpleNamespace(P_gain=np.geomspace(2.0, 100.0, 10), D_gain=np.linspace(0.5, 6, 10),
+                           kind="passivity (omega_min)")
+    empty = SimpleNamespace(P_gain=np.array([]), D_gain=np.array([]), kind="passivity (Nyquist)")
+    b.curves += [edge, empty]
+    tangency = "passivity boundary (|phase Z| = 90 deg)"
+    named = "edge of the judged frequency range (omega_min)"
+    fig = plots.plot_boundary(b)
+    (ax,) = fig.axes
+    by_label = {ln.get_label(): ln for ln in ax.lines}
+    assert named in by_label and tangency in by_label
+    assert "edge of the judged frequency range (Nyquist)" not in by_label and len(ax.lines) == 6
+    assert by_label[named].get_linestyle() != by_label[tangency].get_linestyle()
+    np.testing.assert_array_equal(by_label[named].get_xdata(), edge.P_gain)
+    legend = [t.get_text() for t in ax.get_legend().get_texts()]
+    assert legend.count(tangency) == 1 and named in legend and not any("Nyquist" in t for t in legend)
+    plt.close(fig)
+    for fig in (plots.plot_region(region, boundary=b),
+                plots.plot_region_panels([region, region], ["a", "b"], boundaries=[b, b]),
+                plots.plot_nonlinear_region(region, P, D, np.full((P.size, D.size), "converging"), boundary=b)):
+        texts = [t.get_text() for t in fig.legends[0].get_texts()]
+        assert texts.count(named) == 1 and texts.count(tangency) == 1 and not any("Nyquist" in t for t in texts)
+        plt.close(fig)

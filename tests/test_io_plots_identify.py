@@ -25,7 +25,7 @@ def test_h1_phase_drawn_after_a_low_coherence_gap():
         bode=[{"name": "x.csv", "omega": w, "H1": [H1], "coherence": [coherence], "initial": [model],
                "fitted": [model]}])
     fig = plot_identify(result)
-    phase_axis = fig.axes[2]
+    (phase_axis,) = [ax for ax in fig.axes if ax.get_ylabel() == "phase (deg)"]
     h1_line = next(ln for ln in phase_axis.get_lines() if ln.get_label().startswith("H1"))
     fitted_line = next(ln for ln in phase_axis.get_lines() if ln.get_label() == "model, fitted")
     shown = np.isfinite(h1_line.get_ydata())
@@ -34,3 +34,31 @@ def test_h1_phase_drawn_after_a_low_coherence_gap():
     expected = np.degrees(np.unwrap(np.angle(model))) + 5.0
     assert np.allclose(h1_line.get_ydata()[shown], expected[shown], atol=1e-9)
     assert np.allclose(fitted_line.get_ydata(), expected - 5.0, atol=1e-9)
+
+
+def test_time_panels_whole_log_and_a_readable_zoom():
+    """Issue 26, item 16: fit.png's time panel showed the last 2 s of a broadband log (a solid
+    band of 250 oscillations). Now a row with the whole log and a row zoomed on its last
+    ZOOM_CROSSINGS crossings of the mean, every sample drawn there; one legend below."""
+    from haa_sym.io.plots import ZOOM_CROSSINGS
+    t = np.arange(6000) * 1e-3
+    y = np.sin(2 * np.pi * 60 * t)[:, None]             # 120 mean crossings a second
+    w = np.logspace(0, 3, 50)
+    result = SimpleNamespace(
+        outputs=("torque",), inputs=("voltage",), rms_initial={"torque": 1.0}, rms_fitted={"torque": 0.1},
+        traces=[{"name": "x.csv", "t": t, "u": y, "measured": y, "initial": 1.1 * y, "fitted": y}],
+        bode=[{"name": "x.csv", "omega": w, "H1": [1 / (1j * w)], "coherence": [np.ones_like(w)],
+               "initial": [1 / (1j * w)], "fitted": [1 / (1j * w)]}])
+    fig = plot_identify(result)
+    whole, zoom = fig.axes[0], fig.axes[1]
+    assert whole.get_xlim() == (0.0, t[-1]) and whole.get_xlabel() == "t (s), the whole log"
+    lo, hi = zoom.get_xlim()
+    assert hi == t[-1]
+    # ZOOM_CROSSINGS crossings of a 60 Hz sine: ZOOM_CROSSINGS / 120 s, to a sample
+    assert abs((hi - lo) - ZOOM_CROSSINGS / 120) <= 1.5e-3
+    zoomed = next(ln for ln in zoom.get_lines() if ln.get_label() == "measured")
+    assert np.array_equal(zoomed.get_xdata(), t[t >= lo])               # every sample of the window
+    assert not any(ax.get_legend() for ax in fig.axes)
+    labels = [x.get_text() for x in fig.legends[0].get_texts()]
+    assert labels == ["measured; Bode: H1 (Welch) where the coherence >= 0.5", "model, initial", "model, fitted",
+                      "the zoomed window"]

@@ -63,3 +63,38 @@ def test_progress_bar_appears_on_a_terminal(monkeypatch, capsys, reset_progress)
     tty.truncate()
     assert main(["-q", *REGIONS]) == 0
     assert tty.getvalue() == "" and capsys.readouterr().out == out
+
+
+# --- a non-terminal (a log, CI, nohup): periodic plain lines ----------------------------------------
+def test_non_terminal_gets_periodic_plain_lines(monkeypatch, reset_progress):
+    """Default mode, stderr not a terminal: long work writes 'desc: done/total unit, elapsed s'
+    lines every PERIOD_S (0.05 s here instead of 10 s) and a last line; work shorter than the
+    period writes nothing; --quiet (set_progress(False)) writes nothing either."""
+    import time
+    log = io.StringIO()
+    monkeypatch.setattr(sys, "stderr", log)
+    monkeypatch.setattr(progress, "PERIOD_S", 0.05)
+    with progress.progress(4, "schedule: cells (pass 2)", "task") as bar:
+        for _ in range(4):
+            time.sleep(0.06)
+            bar.update(1)
+    lines = log.getvalue().splitlines()
+    assert len(lines) >= 3, lines
+    assert all(ln.startswith("schedule: cells (pass 2): ") and ln.endswith(" s") and "\r" not in ln
+               for ln in lines)
+    assert "/4 task, elapsed " in lines[0]
+    assert lines[-1].startswith("schedule: cells (pass 2): 4/4 task, elapsed ")
+    done = [int(ln.split(": ")[-1].split("/")[0]) for ln in lines]
+    assert done == sorted(done)
+    log.seek(0)
+    log.truncate()
+    monkeypatch.setattr(progress, "PERIOD_S", 5.0)
+    with progress.progress(2, "quick", "task") as bar:
+        bar.update(2)
+    assert log.getvalue() == ""
+    monkeypatch.setattr(progress, "PERIOD_S", 0.01)
+    progress.set_progress(False)
+    with progress.progress(2, "quiet", "task") as bar:
+        time.sleep(0.05)
+        bar.update(2)
+    assert log.getvalue() == ""

@@ -118,6 +118,9 @@ def test_bundled_files_read_without_pint_and_unchanged():
         p = load_params(f)
         for sec in ("motor",):
             for k, e in data[sec].items():
+                if k == "convention":          # a name, not an entry (docs/model.md, "Motor constants")
+                    assert p.motor_convention == e
+                    continue
                 assert getattr(p.plant, k) == e["value"]
 
 

@@ -63,6 +63,11 @@ def test_reproduce_quick(tmp_path, capsys):
     for heading in ("## Table 2: passivity", "## Quantitative claims", "## Qualitative trends",
                     "![Fig. 8: varying beta](fig08.png)", "Quick mode"):
         assert heading in report
+    # issue 26: "the paper says / we compute" first, Table 2 next, the option table (108 rows at
+    # paper scale) after both
+    order = [report.index(h) for h in ("## Quantitative claims: the paper says / we compute",
+                                       "## Table 2: passivity", "## Modelling options", "## Qualitative trends")]
+    assert order == sorted(order)
     # the report's Table 2 count is the computed one
     n = sum(c["agrees"] for c in claims["table2"])
     assert f"The defaults reproduce **{n}/45**" in report

@@ -35,14 +35,19 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from haa_sym.analysis.oscillation import limit_cycle
+from haa_sym.analysis.simulate import simulate
 from haa_sym.analysis.sweep import BLAS_THREADS, blas_limits
 from haa_sym.errors import ParameterError
 from haa_sym.loop import ClosedLoop, loop_first
 from haa_sym.loop.plant import continuous_plant
+from haa_sym.model.limits import Limits
 from haa_sym.model.params import gain_array
 
 __all__ = ["LimitCycles", "NONLINEARITIES", "describing_function", "df_harmonics", "limit_cycles", "limit_nonlinearities",
-           "linear_part", "nonlinearity_output"]
+           "linear_part", "nonlinearity_output", "compare_cycle", "confirm_cycles", "CONFIRM_TOL_FLOOR",
+           "DISTORTION_STRONG", "SUBHARMONIC_TOL", "CONFIRM_CYCLES", "CONFIRM_MIN_DURATION", "CONFIRM_MAX_DURATION",
+           "CONFIRM_EXPERIMENT"]
 
 # key (or prefix) -> (what the nonlinearity sees, the unit of that signal, the unit of the parameter)
 NONLINEARITIES = {
@@ -250,9 +255,16 @@ def _check(nonlinearity) -> tuple[str, float]:
     except (TypeError, ValueError):
         v = math.nan
     unit = NONLINEARITIES.get(key, NONLINEARITIES["Fc_<body>"])[2]
-    if not (math.isfinite(v) and v > 0):
-        raise ParameterError(f"{key} = {value!r}; allowed: a finite number > 0 ({unit})")
+    if not (math.isfinite(v) and VALUE_RANGE[0] <= v <= VALUE_RANGE[1]):
+        raise ParameterError(f"{key} = {value!r}; allowed: a number from {VALUE_RANGE[0]:g} to {VALUE_RANGE[1]:g} "
+                             f"({unit})")
     return key, v
+
+
+# The nonlinearity's parameter, in its unit: the amplitudes searched are multiples of it (up to
+# amplitude_max) and the root finding's tolerances relative to it, so a value near the ends of
+# the floating-point range (T_res = 1e-310, subnormal) left them no digits (xtol 0: a traceback)
+VALUE_RANGE = (1e-100, 1e100)
 
 
 def _amplitudes(kind: str, value: float, N_target: float, A_max: float) -> list[float]:
@@ -398,4 +410,133 @@ def limit_nonlinearities(limits) -> list[dict]:
     if limits.torque_resolution:
         out.append({"T_res": float(limits.torque_resolution)})
     out += [{f"Fc_{b}": float(v)} for b, v in limits.friction.items() if v > 0]
+    return out
+
+
+# --- is a prediction borne out? (issue 26, item 6) -------------------------------------------------
+
+#: A predicted cycle agrees with a simulated one when the amplitude's and the frequency's relative
+#: errors are both within max(its distortion, CONFIRM_TOL_FLOOR): the distortion is the first
+#: neglected term of the harmonic balance (docs/describing.md, "How good is the prediction"),
+#: the floor what the sampled cycle's locking to whole samples adds (0.4 % in the 24 V case)
+CONFIRM_TOL_FLOOR = 0.02
+#: Above this distortion the harmonics are strong: the DF is not to be trusted without a
+#: simulation (the harmonic drive at 2 V: 0.166 predicted 3.27 Hz, the loop cycles at 1.31 Hz)
+DISTORTION_STRONG = 0.1
+#: A simulated frequency within this relative distance of f_pred / k (k = 2, 3, ...) is a
+#: sub-harmonic cycle, which a describing function of the fundamental cannot predict
+SUBHARMONIC_TOL = 0.05
+#: The confirming simulation: CONFIRM_CYCLES periods of the predicted frequency, at least
+#: CONFIRM_MIN_DURATION and at most CONFIRM_MAX_DURATION seconds, from CONFIRM_EXPERIMENT
+CONFIRM_CYCLES = 60
+CONFIRM_MIN_DURATION = 2.0
+CONFIRM_MAX_DURATION = 30.0
+CONFIRM_EXPERIMENT = "deflection"
+
+
+def _signal_column(key: str, port: str):
+    """(CSV column of ``haa-sym simulate`` carrying the nonlinearity's signal, "input" or
+    "output"), or (None, None): the supply's command is not a column, its held output is; the
+    rotor's velocity is not a column."""
+    if key == "V_max":
+        return "voltage", "output"
+    if key == "T_res":
+        return "torque", "input"
+    if key == f"Fc_{port}":
+        return "velocity", "input"
+    return None, None
+
+
+def compare_cycle(r: LimitCycles, k: int, columns: dict, Ts: float, *, port: str, n_limits: int = 1) -> dict:
+    """The predicted cycle ``k`` of ``r`` against a simulated run (``columns``: the CSV's columns
+    of :func:`haa_sym.analysis.simulate.simulate`, on the nominal instants k ``Ts``).
+
+    The compared signal: the held voltage's fundamental against N(A) A for ``V_max``, the torque
+    signal's amplitude against A for ``T_res`` (``resolution`` its quantum), the port body's
+    velocity for its friction; for the rotor's friction the torque signal's frequency only. The
+    trace classifier runs without the torque quantum as hysteresis here: a quantiser's predicted
+    cycle of A near half a step is a one-step toggle of the torque read.
+
+    Parameters
+    ----------
+    port : str
+        The port body's name (its velocity is the CSV's ``velocity``).
+    n_limits : int
+        How many limits acted in the run: more than one, and the prediction (one nonlinearity
+        alone) is not the run's loop.
+
+    Returns
+    -------
+    dict
+        ``signal``, ``predicted_amplitude``, ``predicted_frequency_hz``, ``simulated_kind``,
+        ``simulated_amplitude``, ``simulated_frequency_hz``, ``amplitude_error``,
+        ``frequency_error`` (relative; None when not comparable), ``tolerance``, ``agrees``
+        (bool) and ``untrusted`` (the reasons, plain sentences; empty when it can be trusted).
+    """
+    col, side = _signal_column(r.nonlinearity, port)
+    A, f, d = float(r.amplitude[k]), float(r.frequency_hz[k]), float(r.distortion[k])
+    pred_amp = float(describing_function("saturation", r.value, A)[0]) * A if side == "output" else A
+    out = {"signal": col or "torque (frequency only)", "predicted_amplitude": pred_amp, "predicted_frequency_hz": f,
+           "simulated_kind": None, "simulated_amplitude": None, "simulated_frequency_hz": None,
+           "amplitude_error": None, "frequency_error": None, "tolerance": max(d, CONFIRM_TOL_FLOOR),
+           "agrees": False, "untrusted": []}
+    why = out["untrusted"]
+    if n_limits > 1:
+        why.append(f"{n_limits} limits act at once (the prediction cuts out one)")
+    strong = f"strong harmonics (distortion {d:.3g} > {DISTORTION_STRONG:g})" if d > DISTORTION_STRONG else None
+    y = columns.get(col or "torque")
+    if y is None or len(y) < 8 or not np.all(np.isfinite(y)):
+        why.append("the simulation has no usable trace (it diverged or is too short)")
+        return out
+    o = limit_cycle(np.arange(len(y)) * Ts, y)
+    out["simulated_kind"] = o.kind
+    if o.kind != "sustained":
+        why += [strong] if strong else []
+        why.append(f"the simulation shows no sustained periodic oscillation ({o.kind})")
+        return out
+    sim_amp = o.fundamental if side == "output" else o.amplitude
+    out.update(simulated_frequency_hz=o.frequency_hz, frequency_error=abs(o.frequency_hz - f) / f)
+    if col is not None:
+        out.update(simulated_amplitude=sim_amp, amplitude_error=abs(sim_amp - pred_amp) / pred_amp)
+    tol = out["tolerance"]
+    out["agrees"] = bool(out["frequency_error"] <= tol and (col is None or out["amplitude_error"] <= tol))
+    ratio = f / o.frequency_hz
+    if round(ratio) >= 2 and abs(ratio / round(ratio) - 1) <= SUBHARMONIC_TOL:
+        why.append(f"a sub-harmonic cycle (simulated at 1/{round(ratio)} of the predicted frequency)")
+    if not out["agrees"] and strong:
+        why.append(strong)
+    if not out["agrees"]:
+        why.append("the simulation disagrees (error beyond the tolerance "
+                   f"{tol:.3g}: amplitude {_pct(out['amplitude_error'])}, frequency {_pct(out['frequency_error'])})")
+    return out
+
+
+def _pct(x) -> str:
+    return "n/a" if x is None else f"{100 * x:.3g} %"
+
+
+def confirm_cycles(loop, P_gain: float, D_gain: float, r: LimitCycles, *, seed: int = 0) -> list[dict]:
+    """Confirm every stable predicted cycle of ``r`` by a short simulation of the loop with that
+    one nonlinearity (:func:`haa_sym.analysis.simulate.simulate`, experiment
+    :data:`CONFIRM_EXPERIMENT` at its default amplitude, :data:`CONFIRM_CYCLES` predicted periods
+    within [:data:`CONFIRM_MIN_DURATION`, :data:`CONFIRM_MAX_DURATION`] s) and compare
+    (:func:`compare_cycle`). One list entry per predicted cycle (None for an unstable one: no
+    simulation settles on it). A run from one initial state confirms only the cycle it reaches."""
+    key = r.nonlinearity
+    if key == "V_max":
+        lim = Limits(V_max=r.value)
+    elif key == "T_res":
+        lim = Limits(torque_resolution=r.value)
+    else:
+        lim = Limits(friction={key[3:]: r.value})
+    out = []
+    for k in range(r.amplitude.size):
+        if not r.stable[k]:
+            out.append(None)
+            continue
+        dur = min(max(CONFIRM_CYCLES / float(r.frequency_hz[k]), CONFIRM_MIN_DURATION), CONFIRM_MAX_DURATION)
+        s = simulate(loop, P_gain, D_gain, limits=lim, experiment=CONFIRM_EXPERIMENT, duration=dur, seed=seed)
+        c = compare_cycle(r, k, s.columns(), loop.params.controller.Ts, port=loop.params.plant.topology.port)
+        c.update(duration_s=dur, experiment=CONFIRM_EXPERIMENT, verdict=s.verdict)
+        out.append(c)
     return out

@@ -607,13 +607,14 @@ def _phase_crossovers(poly: LoopPolynomials, x: np.ndarray):
 
 @loop_first
 def margins(loop, P_gain: float = 0.0, D_gain: float = 0.0, beta=None, alpha=None, *,
-            which: str | None = None) -> Margins:
+            which: str | None = None, omega=None) -> Margins:
     """Every gain and phase crossover of the loop ``which`` (default the options' ``pm_loop``)
     at one gain point, located exactly (:func:`crossovers`; the phase crossovers by Illinois on
-    Im L between samples of the same augmented grid)."""
+    Im L between samples of the same augmented grid), in the band of ``omega`` (rad/s; default
+    the options' grid, :func:`crossovers`)."""
     P, D, beta, alpha = loop.gain_points(P_gain, D_gain, beta, alpha)
     if P.size != 1:
         raise ParameterError(f"P_gain has {P.size} values; allowed: one gain point")
-    c = crossovers(loop, P, D, beta, alpha, which=which)
-    wp, magp = _phase_crossovers(loop_polynomials(loop, beta, alpha, which), np.array([1.0, P[0], D[0]]))
+    c = crossovers(loop, P, D, beta, alpha, which=which, omega=omega)
+    wp, magp = _phase_crossovers(loop_polynomials(loop, beta, alpha, which, omega), np.array([1.0, P[0], D[0]]))
     return Margins(c.omega, c.pm_deg, wp, -20 * np.log10(magp))

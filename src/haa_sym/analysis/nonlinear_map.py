@@ -6,25 +6,12 @@ the same experiment, limits and duration at each point) and classed by the rules
 order; the first that applies decides. The linear model decides what it can decide exactly
 (the certified stability test of the linear loop, :meth:`ClosedLoop.stability`); the simulation
 decides what only it can tell (a limit cycle and its amplitude, saturation on every step).
+The rules are :func:`haa_sym.analysis.oscillation.classify`'s, the one verdict of a run that
+``haa-sym simulate`` prints too (docs/simulate.md, "The verdict of a run"): diverged, the linear
+regime (converging / growing), forced response (the chirp), limit cycle, saturating, growing,
+converging, undecided.
 
-1. ``growing``: a state overflowed (non-finite).
-2. The **linear regime**: no sample of the run's last half was in saturation and no limit acts
-   on every step (no Coulomb friction, quantisation, torque noise or jitter): from the last
-   half on the run *is* the linear loop, so the linear decision holds exactly: ``converging``
-   if the linear loop is stable, else ``growing`` (its unstable mode grows until a limit
-   catches it, later than the run lasted).
-3. ``limit cycle``: the torque signal's last half holds a sustained oscillation
-   (:func:`haa_sym.analysis.oscillation.limit_cycle`: at least 3 cycles beyond the hysteresis
-   of the noise and the torque quantum, amplitude changing by less than 1 % per cycle).
-4. ``saturating``: at least ``saturating_fraction`` of the last half's samples in saturation
-   (supply or current window), without a sustained oscillation.
-5. ``growing``: an oscillation still growing through the last half (> 1 % per cycle).
-6. ``converging``: the linear loop is stable and the last half holds no sustained or growing
-   oscillation beyond the hysteresis (friction or quantisation may leave a residue below it).
-7. ``undecided``: the linear loop is unstable but the run shows neither a cycle, saturation nor
-   growth (a limit, e.g. friction at stick, holds it, or the run was too short to see growth).
-
-Points classed ``growing`` (not overflowed) or ``undecided`` are run again, ``EXTEND_FACTOR``
+Points classed ``growing`` or ``undecided`` are run again, ``EXTEND_FACTOR``
 times longer each time, up to ``max_duration``: their class is that of their longest run.
 
 Runs are independent tasks (``points_per_task`` points each) (:class:`haa_sym.io.tasks.TaskRunner`):
@@ -45,7 +32,8 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from haa_sym.analysis.simulate import DEFAULT_RTOL, _Setup, simulate_batch
+from haa_sym.analysis.oscillation import SATURATING_FRACTION, VERDICTS, classify
+from haa_sym.analysis.simulate import DEFAULT_RTOL, FORCED_EXPERIMENTS, _Setup, limits_act_every_step, simulate_batch
 from haa_sym.errors import ParameterError
 from haa_sym.io.formats import save_npz
 from haa_sym.io.tasks import TaskRunner
@@ -56,8 +44,8 @@ from haa_sym.model.params import gain_array
 __all__ = ["NonlinearMap", "nonlinear_map", "classify", "CLASSES", "DEFAULT_DURATION", "DEFAULT_MAX_DURATION",
            "EXTEND_FACTOR", "SATURATING_FRACTION", "POINTS_PER_TASK"]
 
-#: The classes, by their code in ``NonlinearMap.nonlinear_class``.
-CLASSES = ("converging", "limit cycle", "saturating", "growing", "undecided")
+#: The classes, by their code in ``NonlinearMap.nonlinear_class``: the verdicts of a run.
+CLASSES = VERDICTS
 #: Seconds simulated per point: the HyQ limit cycle (beta 3, P 20000, D 10, 24 V) settles within
 #: 0.6 s; the linear regime's decision does not depend on the run's length.
 DEFAULT_DURATION = 1.0
@@ -66,8 +54,6 @@ DEFAULT_DURATION = 1.0
 #: (HyQ at beta 3 with 24 V: the growing points fall from 120 at 1 s to 27 at 10 s).
 DEFAULT_MAX_DURATION = 10.0
 EXTEND_FACTOR = 3.0
-#: Fraction of the last half's samples in saturation from which a point is "saturating".
-SATURATING_FRACTION = 0.9
 #: Gain points per task (a task's overhead on dask is about a millisecond; a point at 1 s and
 #: 1 ms about a millisecond too).
 POINTS_PER_TASK = 250
@@ -128,43 +114,12 @@ class NonlinearMap:
         return save_npz(path, self.arrays(), self.meta, tx, field)
 
 
-def _task(params, options, backend, limits, P, D, experiment, amplitude, duration, seed, rtol):
+def _task(params, options, backend, limits, P, D, experiment, amplitude, duration, seed, rtol, stable):
     """One task of plain data (what a dask worker runs): the loop is built here."""
     loop = ClosedLoop(params, options, basis=False, backend=backend)
     b = simulate_batch(loop, P, D, limits=limits, experiment=experiment, amplitude=amplitude,
-                       duration=duration, seed=seed, rtol=rtol)
+                       duration=duration, seed=seed, rtol=rtol, linear_stable=stable)
     return b.oscillation, b.tail_saturation, b.cycle_amplitude, b.cycle_frequency
-
-
-def _always_acting(lim: Limits) -> bool:
-    return bool(any(v > 0 for v in lim.friction.values()) or lim.encoder_counts or lim.torque_resolution
-                or lim.torque_noise or lim.jitter)
-
-
-def classify(kind, tail_saturation, linear_stable, always_acting: bool,
-             saturating_fraction: float = SATURATING_FRACTION) -> np.ndarray:
-    """Class codes (into :data:`CLASSES`) by the module's rules 1-7, elementwise.
-
-    ``kind``: the oscillation kind of each run (:data:`haa_sym.analysis.oscillation.OSCILLATION_KINDS`
-    or "non-finite"), ``tail_saturation`` the fraction of the last half in saturation,
-    ``linear_stable`` the linear decision; ``always_acting``: a limit acts on every step."""
-    kind = np.asarray(kind, str)
-    ts, st = np.asarray(tail_saturation, float), np.asarray(linear_stable, bool)
-    c = CLASSES.index
-    out = np.full(kind.shape, c("undecided"), np.int8)
-    rules = [(kind == "non-finite", c("growing")),
-             ((ts == 0) & (not always_acting) & st, c("converging")),
-             ((ts == 0) & (not always_acting) & ~st, c("growing")),
-             (kind == "sustained", c("limit cycle")),
-             (ts >= saturating_fraction, c("saturating")),
-             (kind == "growing", c("growing")),
-             (st, c("converging"))]
-    decided = np.zeros(kind.shape, bool)
-    for cond, code in rules:
-        new = cond & ~decided
-        out[new] = code
-        decided |= new
-    return out
 
 
 @loop_first
@@ -194,7 +149,7 @@ def nonlinear_map(loop, P_gain, D_gain, *, limits: Limits | None = None, experim
         times longer each time, up to this many seconds; default ``max(DEFAULT_MAX_DURATION,
         duration)``; ``max_duration = duration`` runs every point once.
     saturating_fraction : float
-        Rule 4's threshold, in (0, 1]; default :data:`SATURATING_FRACTION`.
+        The saturating rule's threshold (:func:`classify`), in (0, 1]; default :data:`SATURATING_FRACTION`.
     scheduler : None, str or distributed.Client
         None: in-process; an address or a Client: that dask.distributed cluster.
     progress : bool or None
@@ -233,7 +188,8 @@ def nonlinear_map(loop, P_gain, D_gain, *, limits: Limits | None = None, experim
     _Setup(loop, limits, experiment, amplitude, max_duration, seed, None)     # its sample count checked
     PP, DD = (a.ravel() for a in np.meshgrid(P, D, indexing="ij"))
     stable = np.asarray(loop.stability(PP, DD).stable, bool)
-    always = _always_acting(limits)
+    always = limits_act_every_step(limits)
+    forced = experiment in FORCED_EXPERIMENTS
     runner = TaskRunner(scheduler, progress, threads=IN_PROCESS_THREADS)
 
     simulated = [0]                     # controller steps over every run
@@ -242,19 +198,18 @@ def nonlinear_map(loop, P_gain, D_gain, *, limits: Limits | None = None, experim
         simulated[0] += idx.size * (int(np.ceil(seconds / setup.Ts - 1e-9)) + 1)
         chunks = [idx[a:a + points_per_task] for a in range(0, idx.size, points_per_task)]
         res = runner.run(_task, [(loop.params, loop.options, loop.backend, limits, PP[c], DD[c], experiment,
-                                  setup.amplitude, seconds, seed, rtol) for c in chunks],
+                                  setup.amplitude, seconds, seed, rtol, stable[c].astype(float)) for c in chunks],
                          f"regions --nonlinear: {seconds:g} s runs")
         return [np.concatenate([r[i] for r in res]) for i in range(4)]
     try:
         everything = np.arange(PP.size)
         kind, ts, amp, freq = simulate_points(everything, setup.duration)
         kind = kind.astype(object)          # a later run's kind may be a longer string
-        cls = classify(kind, ts, stable, always, saturating_fraction)
+        cls = classify(kind, ts, stable, always, saturating_fraction, forced)
         run_s = np.full(PP.size, setup.duration)
         seconds, rounds = setup.duration, 0
         while seconds < max_duration:
-            again = np.flatnonzero(((cls == CLASSES.index("growing")) & (kind != "non-finite"))
-                                   | (cls == CLASSES.index("undecided")))
+            again = np.flatnonzero((cls == CLASSES.index("growing")) | (cls == CLASSES.index("undecided")))
             if not again.size:
                 break
             seconds = min(seconds * EXTEND_FACTOR, max_duration)
@@ -262,7 +217,7 @@ def nonlinear_map(loop, P_gain, D_gain, *, limits: Limits | None = None, experim
             k2, t2, a2, f2 = simulate_points(again, seconds)
             kind[again], ts[again], amp[again], freq[again] = k2, t2, a2, f2
             run_s[again] = seconds
-            cls[again] = classify(kind[again], ts[again], stable[again], always, saturating_fraction)
+            cls[again] = classify(kind[again], ts[again], stable[again], always, saturating_fraction, forced)
     finally:
         runner.close()
     shape = (P.size, D.size)

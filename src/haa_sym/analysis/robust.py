@@ -19,7 +19,11 @@ data, e.g. the 95 % confidence intervals of an identification) adds one axis per
 interval, combined with every leg configuration (the product), sampled at the same ``n``
 points per axis and refined by the same doubling. A key with ``lo == hi`` is fixed at that
 value. The interval replaces the parameters' own value of the key (the fit's value is inside
-it, not the file's); a key the leg range sets is refused (its value is the range's).
+it, not the file's). A key the leg range sets takes its interval as a :class:`Relative` one:
+factors (lo / value, hi / value) of the fit, applied to each leg configuration's own value of
+the key (one more axis of factors); an absolute interval of such a key is refused (its value is
+the range's). :func:`uncertainty_box` turns a fit into that mapping, by
+:data:`UNCERTAINTY_ON_LEG` (docs/uncertainty.md, "Keys the leg range sets").
 
 Example
 -------
@@ -32,6 +36,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass, field
 from itertools import product
+from typing import NamedTuple
 
 import numpy as np
 
@@ -42,7 +47,8 @@ from haa_sym.io.budget import check_memory, sweep_bytes
 from haa_sym.model.params import Params, gain_array
 
 __all__ = ["LEG_MODES", "REQUIREMENTS", "meets", "leg_ends", "leg_values", "leg_text", "leg_configurations", "feasible_map",
-           "RobustRegion", "robust_region", "check_uncertainty", "uncertainty_text"]
+           "RobustRegion", "robust_region", "check_uncertainty", "uncertainty_text", "Relative", "UNCERTAINTY_ON_LEG",
+           "UNCERTAINTY_ON_LEG_DEFAULT", "uncertainty_box", "uncertainty_meta", "box_text"]
 
 LEG_MODES = ("segment", "box")
 # what a gain point must satisfy: closed loop stable, impedance-loop PM >= 30 deg, passive port
@@ -50,6 +56,58 @@ REQUIREMENTS = ("stable", "pm", "passive")
 NOMINAL = "nominal"
 # doubling the number of leg intervals up to this many configurations per axis
 MAX_LEG_POINTS = 33
+# What a fitted key that the leg range also sets becomes (uncertainty_box): "relative" (default)
+# the fit's interval relative to its value, applied to each leg configuration's value of the key
+# (an identification's relative precision carries over, the range keeps its values); "unset" the
+# key's interval left out, the range's values as they are (the box on the other keys only);
+# "refuse" the command refused, naming the key (the behaviour before issue 26).
+UNCERTAINTY_ON_LEG = ("relative", "unset", "refuse")
+UNCERTAINTY_ON_LEG_DEFAULT = "relative"
+
+
+class Relative(NamedTuple):
+    """An uncertainty interval of a key the leg range sets: the factors ``lo`` <= ``hi`` (> 0)
+    each leg configuration's value of the key is multiplied by (a fit's ci95 over its value)."""
+
+    lo: float
+    hi: float
+
+
+def uncertainty_box(params: Params, box: dict, values: dict, leg=None,
+                    on_leg: str = UNCERTAINTY_ON_LEG_DEFAULT) -> tuple[dict, list[str]]:
+    """The uncertainty mapping the analyses take, from a fit's ``box`` ({key: (lo, hi)}) and its
+    ``values`` ({key: value}, the centres), and the keys left out: a key the leg range sets
+    becomes :class:`Relative` (lo / value, hi / value) with ``on_leg = "relative"``, is left out
+    with ``"unset"``, and stays absolute with ``"refuse"`` (:func:`check_uncertainty` refuses it).
+    Keys the range does not set stay as they are."""
+    if on_leg not in UNCERTAINTY_ON_LEG:
+        raise ParameterError(f"uncertainty on the leg's keys = {on_leg!r}; allowed: {list(UNCERTAINTY_ON_LEG)}")
+    leg_keys = _span(params, leg)[2]
+    out, dropped = {}, []
+    for k, (lo, hi) in box.items():
+        if k not in leg_keys or on_leg == "refuse":
+            out[k] = (lo, hi)
+        elif on_leg == "unset":
+            dropped.append(k)
+        else:
+            v = float(values[k])
+            if not (np.isfinite(v) and v > 0):
+                raise ParameterError(f"uncertainty {k}: fitted value {v!r}; allowed: a value > 0 to take the "
+                                     "interval relative to (or --uncertainty-on-leg unset)")
+            out[k] = Relative(float(lo) / v, float(hi) / v)
+    return out, dropped
+
+
+def uncertainty_meta(box: dict) -> dict:
+    """A checked uncertainty mapping as plain data: {key: [lo, hi]}, or for a :class:`Relative`
+    interval {key: {"relative": [lo, hi]}} (factors of each leg configuration's value)."""
+    return {k: {"relative": [v.lo, v.hi]} if isinstance(v, Relative) else list(v) for k, v in box.items()}
+
+
+def box_text(box: dict) -> str:
+    """``R 2.3..4.3, J_L2 x 0.98..1.02 of each configuration's value``: a box for people."""
+    return ", ".join(f"{k} x {v.lo:.5g}..{v.hi:.5g} of each configuration's value" if isinstance(v, Relative)
+                     else f"{k} {v[0]:.6g}..{v[1]:.6g}" for k, v in box.items())
 
 
 def leg_ends(params: Params, leg: tuple[str, str] | None = None) -> tuple[str, str]:
@@ -114,28 +172,49 @@ def leg_values(params: Params, leg=None, leg_mode: str = "segment", uncertainty=
     out = {"leg": [a, b], "leg_mode": leg_mode, "ends": {a: lo, b: hi}, "own": own, "outside": outside}
     if uncertainty:
         box = check_uncertainty(params, uncertainty, leg)
-        out["uncertainty"] = {k: list(v) for k, v in box.items()}
-        out["uncertainty_own"] = {k: float(getattr(params.plant, k)) for k in box}
+        out["uncertainty"] = uncertainty_meta(box)
+        out["uncertainty_own"] = {k: float(getattr(params.plant, k)) for k in box if not isinstance(box[k], Relative)}
     return out
 
 
 def check_uncertainty(params: Params, uncertainty, leg=None) -> dict:
     """``uncertainty`` ({key: (lo, hi)}, SI units) checked against ``params``: keys of the
     actuator's plant that the leg range does not set, finite ``lo <= hi``, both ends allowed
-    values of the key. Returns {key: (lo, hi)} as floats, keys sorted; one-line ParameterError
-    naming the key otherwise."""
+    values of the key; a key the range sets only as :class:`Relative` factors (0 < lo <= hi,
+    allowed values at both ends of the range). Returns {key: (lo, hi) as floats, or Relative},
+    keys sorted; one-line ParameterError naming the key otherwise."""
     if not isinstance(uncertainty, dict) or not uncertainty:
         raise ParameterError(f"uncertainty = {uncertainty!r}; allowed: a non-empty mapping {{key: (lo, hi)}} of "
                              "plant keys")
     keys = list(params.plant.topology.parameter_keys)
-    a, b, leg_keys, *_ = _span(params, leg)
+    a, b, leg_keys, _, lo_end, hi_end = _span(params, leg)
     box = {}
     for k in sorted(uncertainty):
         if k not in keys:
             raise ParameterError(f"uncertainty key {k!r} is not a plant key of {params.source}; allowed: {keys}")
-        if k in leg_keys:
+        relative = isinstance(uncertainty[k], Relative)
+        if k in leg_keys and not relative:
             raise ParameterError(f"uncertainty key {k!r} is set by the leg range {a}..{b}, which gives its values; "
-                                 f"allowed: keys the range does not set, {[x for x in keys if x not in leg_keys]}")
+                                 f"allowed: keys the range does not set, {[x for x in keys if x not in leg_keys]}, "
+                                 "or the interval relative to each configuration's value (--uncertainty-on-leg "
+                                 "relative, docs/uncertainty.md)")
+        if relative and k not in leg_keys:
+            raise ParameterError(f"uncertainty {k} = {uncertainty[k]!r}: a relative interval applies to a key the "
+                                 f"leg range {a}..{b} sets, {leg_keys}; allowed: (lo, hi) in the key's unit")
+        if relative:
+            f_lo, f_hi = (float(x) for x in uncertainty[k])
+            if not (np.isfinite(f_lo) and np.isfinite(f_hi) and 0 < f_lo <= f_hi):
+                raise ParameterError(f"uncertainty {k} = x ({f_lo:g}, {f_hi:g}) of each configuration's value; "
+                                     "allowed: finite factors 0 < lo <= hi")
+            for end in (lo_end[k], hi_end[k]):
+                for f in (f_lo, f_hi):
+                    try:
+                        params.with_values(**{k: end * f})
+                    except ParameterError as exc:
+                        raise ParameterError(f"uncertainty {k} = x ({f_lo:g}, {f_hi:g}) of the leg's {end:g}: "
+                                             f"{exc}") from None
+            box[k] = Relative(f_lo, f_hi)
+            continue
         try:
             lo, hi = (float(v) for v in uncertainty[k])
         except (TypeError, ValueError):
@@ -155,10 +234,12 @@ def uncertainty_text(params: Params, values: dict | None, box: dict) -> tuple[st
     """One line saying which box the uncertainty analyses, and a warning line (or None) when
     the parameters' own value of a key differs from the fit's value ``values`` ({key: value},
     the centre the box was estimated around; None: not known)."""
-    line = "uncertainty box " + ", ".join(f"{k} {lo:.6g}..{hi:.6g}" for k, (lo, hi) in box.items()) + \
-        "; it replaces the parameters' own " + _values_text({k: float(getattr(params.plant, k)) for k in box})
+    absolute = {k: v for k, v in box.items() if not isinstance(v, Relative)}
+    line = "uncertainty box " + box_text(box) + \
+        ("; it replaces the parameters' own " + _values_text({k: float(getattr(params.plant, k)) for k in absolute})
+         if absolute else "")
     differ = {k: (float(getattr(params.plant, k)), float(v)) for k, v in (values or {}).items()
-              if k in box and not np.isclose(float(getattr(params.plant, k)), float(v), rtol=1e-9, atol=0.0)}
+              if k in absolute and not np.isclose(float(getattr(params.plant, k)), float(v), rtol=1e-9, atol=0.0)}
     if not differ:
         return line, None
     what = ", ".join(f"{k} = {own:.6g} (the fit's {fit:.6g})" for k, (own, fit) in differ.items())
@@ -208,9 +289,16 @@ def leg_configurations(params: Params, n: int, *, leg=None, leg_mode: str = "seg
     if not uncertainty:
         return configs
     box = check_uncertainty(params, uncertainty, leg)
-    # the same formula as the leg's axes: the ends are exactly lo and hi
+    # the same formula as the leg's axes: the ends are exactly lo and hi (factors for a Relative
+    # key, times the configuration's value of the key: the range's, constant if it does not vary)
     axes = [[(k, u0 + s * (u1 - u0)) for s in (t if u0 < u1 else t[:1])] for k, (u0, u1) in box.items()]
-    return [{**c, **dict(vals)} for c in configs for vals in product(*axes)]
+    relative = [k for k, v in box.items() if isinstance(v, Relative)]
+    out = []
+    for c in configs:
+        for vals in product(*axes):
+            v = dict(vals)
+            out.append({**c, **v, **{k: c.get(k, lo[k]) * v[k] for k in relative}})
+    return out
 
 
 def _check_requirements(requirements) -> tuple[str, ...]:
@@ -288,8 +376,9 @@ def robust_region(loop, P_gain, D_gain, *, beta: float | None = None, alpha: flo
     leg_mode : {"segment", "box"}
     uncertainty : dict, optional
         ``{key: (lo, hi)}``, plant keys in SI units (e.g. an identification's 95 % confidence
-        intervals): the gains must meet the requirements for every value in the box too
-        (module docstring; :func:`check_uncertainty` says what is allowed).
+        intervals), or :class:`Relative` factors for a key the leg range sets
+        (:func:`uncertainty_box`): the gains must meet the requirements for every value in the
+        box too (module docstring; :func:`check_uncertainty` says what is allowed).
     max_per_axis : int
         Stop doubling at this many configurations per axis (``converged`` says whether the
         last doubling changed nothing).
@@ -338,8 +427,7 @@ def robust_region(loop, P_gain, D_gain, *, beta: float | None = None, alpha: flo
         if same:
             converged = True
             break
-    extra = {"uncertainty": {k: list(v) for k, v in check_uncertainty(params, uncertainty, leg).items()}} \
-        if uncertainty else {}
+    extra = {"uncertainty": uncertainty_meta(check_uncertainty(params, uncertainty, leg))} if uncertainty else {}
     return RobustRegion(P, D, current, len(configs), n, converged, history, configs,
                         loop.provenance(leg=list(leg_ends(params, leg)), leg_mode=leg_mode,
                                         leg_values=leg_values(params, leg, leg_mode, uncertainty),

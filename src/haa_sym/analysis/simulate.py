@@ -33,7 +33,7 @@ from dataclasses import dataclass, field
 import numpy as np
 import scipy.linalg
 
-from haa_sym.analysis.oscillation import Oscillation, limit_cycle
+from haa_sym.analysis.oscillation import SATURATING_FRACTION, VERDICTS, Oscillation, classify, limit_cycle
 from haa_sym.analysis.sweep import blas_limits
 from haa_sym.compiled import layout as L
 from haa_sym.compiled.generated import evaluators
@@ -44,8 +44,8 @@ from haa_sym.loop.plant import continuous_plant
 from haa_sym.loop.statespace import controller_batch
 from haa_sym.model.limits import Limits
 
-__all__ = ["EXPERIMENTS", "CSV_COLUMNS", "Simulation", "SimulationBatch", "simulate", "simulate_batch",
-           "DEFAULT_RTOL", "MAX_SAMPLES"]
+__all__ = ["EXPERIMENTS", "FORCED_EXPERIMENTS", "CSV_COLUMNS", "Simulation", "SimulationBatch", "simulate",
+           "simulate_batch", "DEFAULT_RTOL", "MAX_SAMPLES", "limits_act_every_step", "linear_verdict"]
 
 #: The experiments (docs/simulate.md): what ``amplitude`` A is and where it enters.
 EXPERIMENTS = {
@@ -55,6 +55,9 @@ EXPERIMENTS = {
     "deflection": "an initial angle of A rad of the port body, every other state at rest",
     "chirp": "a torque reference A sin(2 pi (f0 t + (f1 - f0) t^2 / (2 T))) Nm, f0 -> f1 over T",
 }
+#: Experiments that drive the loop for the whole run: their oscillation is the input's, so their
+#: verdict is "forced response" (or diverged / growing), never "limit cycle"
+FORCED_EXPERIMENTS = ("chirp",)
 DEFAULT_AMPLITUDE = {"disturbance-step": 1.0, "torque-step": 1.0, "impedance-step": 0.1,
                      "deflection": 0.1, "chirp": 1.0}
 #: The CSV's columns: time (s), theta (rad), velocity (rad/s), torque, torque_ref (Nm),
@@ -82,11 +85,17 @@ JITTER_STEP_BOUND = 0.5
 
 @dataclass(frozen=True)
 class Simulation:
-    """One simulated run: the CSV's columns (one row per sample instant), the saturation flags,
-    the time spent in saturation (s) and a detected limit cycle of the torque signal
-    (``cycle_amplitude`` Nm, half peak-to-peak; ``cycle_frequency`` Hz; NaN when none: the
-    ``oscillation`` :func:`haa_sym.analysis.oscillation.limit_cycle` found in the torque signal's
-    last half is not "sustained"; ``oscillation`` is None when a state overflowed)."""
+    """One simulated run: the CSV's columns (one row per sample instant; a run that overflowed
+    ends before its first non-finite sample), the saturation flags, the time spent in saturation
+    (s) and a detected limit cycle of the torque signal (``cycle_amplitude`` Nm, half
+    peak-to-peak; ``cycle_frequency`` Hz; NaN when none: the ``oscillation``
+    :func:`haa_sym.analysis.oscillation.limit_cycle` found in the torque signal's last half is not
+    "sustained", or the experiment is forced; ``oscillation`` is None when a state overflowed).
+
+    ``verdict`` is the run's one verdict (:data:`haa_sym.analysis.oscillation.VERDICTS`, the rules
+    of :func:`haa_sym.analysis.oscillation.classify`); ``diverged_at`` the time (s) of the first
+    non-finite sample (NaN if none); ``linear_stable`` and ``spectral_radius`` the linear loop's
+    certified decision at the gain point (None and NaN for a loop built with ``basis=False``)."""
 
     time: np.ndarray
     theta: np.ndarray
@@ -101,6 +110,10 @@ class Simulation:
     cycle_frequency: float
     meta: dict = field(repr=False)
     oscillation: Oscillation | None = field(repr=False, default=None)
+    verdict: str = "undecided"
+    diverged_at: float = math.nan
+    linear_stable: bool | None = None
+    spectral_radius: float = math.nan
 
     def columns(self) -> dict[str, np.ndarray]:
         """The CSV columns by name, in :data:`CSV_COLUMNS` order."""
@@ -118,10 +131,10 @@ class SimulationBatch:
     (the torque's peak-to-peak swing over the last quarter of the run over the quarter's before),
     ``oscillation`` (the kind :func:`haa_sym.analysis.oscillation.limit_cycle` found in the torque's
     last half: none, decaying, sustained, growing; "non-finite"), ``tail_saturation`` (the fraction
-    of the last half's samples in saturation) and ``status``: "non-finite" (a state overflowed),
-    else "limit cycle" (a sustained oscillation), else "saturating" (in saturation over half the run), else "no
-    limit cycle". Whether a point converges is left to the caller: a run shorter than the loop's
-    slowest mode (HyQ: 11 s) cannot tell slow convergence from slow growth by itself."""
+    of the last half's samples in saturation) and ``status``: each point's verdict
+    (:data:`haa_sym.analysis.oscillation.VERDICTS`, by :func:`haa_sym.analysis.oscillation.classify`
+    from the run and the linear loop's decision; "undecided" where that is unknown and the run
+    cannot tell)."""
 
     P_gain: np.ndarray
     D_gain: np.ndarray
@@ -185,7 +198,7 @@ def _number(name, value, allowed, test):
 class _Setup:
     """Everything of one simulation but the gains' controller: plant matrices, limits, inputs."""
 
-    def __init__(self, loop, limits, experiment, amplitude, duration, seed, chirp_f1):
+    def __init__(self, loop, limits, experiment, amplitude, duration, seed, chirp_f1, excitation=None):
         params, ctrl = loop.params, loop.params.controller
         self.Ts = Ts = ctrl.Ts
         if experiment not in EXPERIMENTS:
@@ -254,6 +267,12 @@ class _Setup:
             T_end = max(t_nom[-1], Ts)
             exo[k("T_ff")] = A_ * np.sin(2 * np.pi * (CHIRP_F0 * t_nom + (f1 - CHIRP_F0) * t_nom ** 2 / (2 * T_end)))
             self.chirp = (CHIRP_F0, f1)
+        if excitation is not None:
+            u = np.asarray(excitation, float)
+            if experiment != "chirp" or u.shape != (n,) or not np.all(np.isfinite(u)):
+                raise ParameterError(f"excitation: shape {u.shape} with experiment {experiment!r}; allowed: {n} "
+                                     "finite samples (one per sample of the run) with experiment 'chirp'")
+            exo[k("T_ff")] = A_ * u
         self.x0 = np.zeros(nx)
         if experiment == "deflection":
             self.x0[states.index(f"theta_{top.port}")] = A_
@@ -415,22 +434,60 @@ def _run(loop, setup: _Setup, P_gain, D_gain, controller=None):
                "sample_tol": setup.rtol * SAMPLE_TOL_FRACTION}
 
 
-def _result(loop, setup, P_gain, D_gain, y, info):
+def limits_act_every_step(lim: Limits) -> bool:
+    """Whether a limit acts on every step whatever the amplitude (Coulomb friction, either
+    quantiser, torque noise, jitter): then no stretch of a run is the linear loop."""
+    return bool(any(v > 0 for v in lim.friction.values()) or lim.encoder_counts or lim.torque_resolution
+                or lim.torque_noise or lim.jitter)
+
+
+def linear_verdict(loop, P_gain, D_gain) -> tuple[np.ndarray, np.ndarray]:
+    """The linear loop's certified stability (float: 1 stable, 0 not) and spectral radius at the
+    gain points; NaN for a loop built with ``basis=False`` (no stability evaluator)."""
+    P, D = np.atleast_1d(P_gain).astype(float), np.atleast_1d(D_gain).astype(float)
+    if getattr(loop, "basis", None) is None:
+        return np.full(P.shape, np.nan), np.full(P.shape, np.nan)
+    r = loop.stability(P, D, radius=True)
+    return np.asarray(r.stable, float), np.asarray(r.spectral_radius, float)
+
+
+def _first_non_finite(y) -> int:
+    """Index of the first sample (row) with a non-finite value, or the number of rows."""
+    bad = ~np.isfinite(y).all(axis=1)
+    return int(np.argmax(bad)) if bad.any() else y.shape[0]
+
+
+def _result(loop, setup, P_gain, D_gain, y, info, linear=None):
+    # a run that overflowed ends at its first non-finite sample: what follows is not data
+    k = _first_non_finite(y)
+    diverged_at = float(setup.time[k]) if k < y.shape[0] else math.nan
+    y, time = y[:k], setup.time[:k]
     col = {c: y[:, i] for i, c in enumerate(L.SIM_COLUMNS)}
     sat = col["saturated"] > 0.5
-    dt = np.diff(np.append(setup.time, setup.time[-1] + setup.Ts))
+    dt = np.diff(np.append(time, time[-1] + setup.Ts)) if k else np.zeros(0)
     sat_time = float(dt[sat].sum())
-    osc = trace_oscillation(setup, col["torque"])
-    amp, freq = (osc.amplitude, osc.frequency_hz) if osc is not None and osc.kind == "sustained" \
-        else (math.nan, math.nan)
+    forced = setup.experiment in FORCED_EXPERIMENTS
+    osc = None if k < setup.n else trace_oscillation(setup, col["torque"])
+    amp, freq = (osc.amplitude, osc.frequency_hz) if osc is not None and osc.kind in ("sustained", "irregular") \
+        and not forced else (math.nan, math.nan)
+    stable, radius = linear if linear is not None else (math.nan, math.nan)
+    tail_sat = float(sat[setup.n // 2:].mean()) if k == setup.n else math.nan
+    verdict = VERDICTS[int(classify("non-finite" if osc is None else osc.kind, tail_sat, stable,
+                                    limits_act_every_step(setup.limits), SATURATING_FRACTION, forced))]
+    lin = None if np.isnan(stable) else bool(stable)
     meta = loop.provenance(
         analysis="simulate", P_gain=float(P_gain), D_gain=float(D_gain), experiment=setup.experiment,
         experiment_definition=EXPERIMENTS[setup.experiment], amplitude=setup.amplitude,
         duration=setup.duration, seed=setup.seed, limits=setup.limits.active, **info,
         saturation_time=sat_time, limit_cycle=None if not np.isfinite(amp) else
-        {"amplitude_Nm": amp, "frequency_Hz": freq, "signal": "torque"})
-    return Simulation(setup.time.copy(), col["theta"], col["velocity"], col["torque"], col["torque_ref"],
-                      col["voltage"], col["current"], sat, sat_time, amp, freq, meta, osc)
+        {"amplitude_Nm": amp, "frequency_Hz": None if math.isnan(freq) else freq, "signal": "torque",
+         "periodic": osc.kind == "sustained"},
+        verdict=verdict, diverged_at_s=None if math.isnan(diverged_at) else diverged_at,
+        samples_written=k, linear={"stable": lin, "spectral_radius": None if np.isnan(radius) else float(radius)},
+        verdict_rules="docs/simulate.md, The verdict of a run")
+    return Simulation(time.copy(), col["theta"], col["velocity"], col["torque"], col["torque_ref"],
+                      col["voltage"], col["current"], sat, sat_time, amp, freq, meta, osc, verdict, diverged_at,
+                      lin, float(radius))
 
 
 def trace_oscillation(setup, torque) -> Oscillation | None:
@@ -446,7 +503,7 @@ def trace_oscillation(setup, torque) -> Oscillation | None:
 def simulate(loop, P_gain: float, D_gain: float, *, limits: Limits | None = None,
              experiment: str = "disturbance-step", amplitude: float | None = None,
              duration: float = 1.0, seed: int = 0, rtol: float = DEFAULT_RTOL,
-             chirp_f1: float | None = None) -> Simulation:
+             chirp_f1: float | None = None, excitation=None) -> Simulation:
     """Simulate the sampled-data loop with the limits at one gain point.
 
     Parameters
@@ -472,6 +529,10 @@ def simulate(loop, P_gain: float, D_gain: float, *, limits: Limits | None = None
         ``rtol`` x :data:`SAMPLE_TOL_FRACTION`.
     chirp_f1 : float, optional
         End frequency of the chirp, Hz (default 0.1 / Ts); it starts at :data:`CHIRP_F0`.
+    excitation : (n,) array, optional
+        With ``experiment = "chirp"``: the torque reference's shape instead of the sweep, one
+        value per sample (peak 1 by :func:`haa_sym.analysis.excitation.excitation_signal`),
+        times ``amplitude``.
 
     Returns
     -------
@@ -482,26 +543,33 @@ def simulate(loop, P_gain: float, D_gain: float, *, limits: Limits | None = None
     # small matrices only: BLAS threads cost more than they give (16 ms vs 30 us for one
     # expm of HyQ's plant on the 2-core machine under load)
     with blas_limits(1):
-        setup = _Setup(loop, limits, experiment, amplitude, duration, seed, chirp_f1)
+        setup = _Setup(loop, limits, experiment, amplitude, duration, seed, chirp_f1, excitation)
         setup.rtol = _number("rtol", rtol, "a number in (0, 0.1)", lambda v: 0 < v < 0.1)
         y, info = _run(loop, setup, P, D)
-        return _result(loop, setup, P, D, y, info)
+        st, rad = linear_verdict(loop, P, D)
+        return _result(loop, setup, P, D, y, info, (float(st[0]), float(rad[0])))
 
 
 @loop_first
 def simulate_batch(loop, P_gain, D_gain, *, limits: Limits | None = None,
                    experiment: str = "disturbance-step", amplitude: float | None = None,
-                   duration: float = 1.0, seed: int = 0, rtol: float = DEFAULT_RTOL) -> SimulationBatch:
+                   duration: float = 1.0, seed: int = 0, rtol: float = DEFAULT_RTOL,
+                   linear_stable=None) -> SimulationBatch:
     """:func:`simulate` at k gain points (``P_gain``, ``D_gain`` broadcast), summarised per point
-    (:class:`SimulationBatch`); the plant's matrices and the inputs are built once."""
+    (:class:`SimulationBatch`); the plant's matrices and the inputs are built once.
+    ``linear_stable``: the linear loop's decision per point if known (1, 0 or NaN), else
+    computed (:func:`linear_verdict`)."""
     P, D = (np.atleast_1d(np.asarray(v, float)).ravel() for v in np.broadcast_arrays(P_gain, D_gain))
     if not (np.all(np.isfinite(P)) and np.all(np.isfinite(D))):
         raise ParameterError("P_gain, D_gain: not finite; allowed: finite gains (Nm/rad, Nms/rad)")
     with blas_limits(1):
-        return _batch(loop, P, D, limits, experiment, amplitude, duration, seed, rtol)
+        if linear_stable is None:
+            linear_stable = linear_verdict(loop, P, D)[0]
+        stable = np.broadcast_to(np.asarray(linear_stable, float), P.shape)
+        return _batch(loop, P, D, limits, experiment, amplitude, duration, seed, rtol, stable)
 
 
-def _batch(loop, P, D, limits, experiment, amplitude, duration, seed, rtol):
+def _batch(loop, P, D, limits, experiment, amplitude, duration, seed, rtol, stable):
     setup = _Setup(loop, limits, experiment, amplitude, duration, seed, None)
     setup.rtol = _number("rtol", rtol, "a number in (0, 0.1)", lambda v: 0 < v < 0.1)
     k = P.size
@@ -514,16 +582,18 @@ def _batch(loop, P, D, limits, experiment, amplitude, duration, seed, rtol):
     ctrls = controller_batch(loop, P, D)
     for i in range(k):
         y, _info = _run(loop, setup, P[i], D[i], tuple(m[i] for m in ctrls))
-        r = _result(loop, setup, P[i], D[i], y, _info)
+        r = _result(loop, setup, P[i], D[i], y, _info, (stable[i], math.nan))
         sat[i], amp[i], freq[i] = r.saturation_time, r.cycle_amplitude, r.cycle_frequency
+        status[i] = r.verdict
+        kinds[i] = "non-finite" if r.oscillation is None else r.oscillation.kind
+        if r.oscillation is None:                        # diverged: no summary of a trace cut short
+            fin[i] = growth[i] = tail_sat[i] = math.nan
+            continue
         fin[i] = r.theta[-tail:].mean()
         # the torque's swing over the last quarter of the run and the quarter's before
         q = max(1, setup.n // 4)
         swing = [np.ptp(r.torque[-(j + 1) * q:len(r.torque) - j * q]) for j in (0, 1)]
         growth[i] = swing[0] / swing[1] if swing[1] > 0 else (math.inf if swing[0] > 0 else 1.0)
-        status[i] = ("non-finite" if not np.all(np.isfinite(y)) else "limit cycle" if r.limit_cycle
-                     else "saturating" if sat[i] > setup.duration / 2 else "no limit cycle")
-        kinds[i] = "non-finite" if r.oscillation is None else r.oscillation.kind
         tail_sat[i] = r.saturated[setup.n // 2:].mean()
     meta = loop.provenance(analysis="simulate_batch", experiment=experiment, amplitude=setup.amplitude,
                            duration=setup.duration, seed=seed, limits=setup.limits.active)

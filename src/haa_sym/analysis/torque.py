@@ -16,7 +16,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from haa_sym.analysis.margins import Margins, margins
+from haa_sym.analysis.margins import Margins, loop_polynomials, margins
 from haa_sym.errors import ParameterError
 from haa_sym.io.budget import check_memory, sweep_bytes
 from haa_sym.loop.exact import to_float, transfer_polynomials
@@ -26,7 +26,9 @@ from haa_sym.model.params import Params, gain_array
 from haa_sym.loop import loop_first
 
 __all__ = ["StepResponse", "step_response", "step_info", "dc_gain", "describe_step",
-           "torque_bandwidth", "STEP_CONVENTION", "ImpedanceStep", "impedance_step"]
+           "torque_bandwidth", "BANDWIDTH_DEFINITIONS", "LoadMode", "load_mode", "step_figures",
+           "STEP_CONVENTION", "ImpedanceStep", "impedance_step", "torque_loop_margins",
+           "LOW_BAND_DECADES"]
 
 
 # python-control ``step_info`` / MATLAB ``stepinfo`` defaults
@@ -136,16 +138,25 @@ class StepResponse:
 
 def describe_step(s: StepResponse) -> str:
     """One line of step metrics for people, saying "not reached" / "not settled" where
-    :func:`step_info` gives NaN, and the window they refer to."""
+    :func:`step_info` gives NaN, and the window they refer to. An unsettled response that has
+    already passed its final value has an overshoot of at least its peak so far (a later peak may
+    be higher): said as a lower bound; "undefined" only when it has not passed the final value."""
     info, end = s.info, f"{s.t[-1]:g} s"
 
     def ms(x, never):
         return f"{x * 1e3:.1f} ms" if np.isfinite(x) else never
+    yf = s.final_value
+    above = 100.0 * (np.max(np.sign(yf) * s.T) - abs(yf)) / abs(yf) if np.isfinite(yf) and yf != 0 else np.nan
+    if np.isfinite(info["Overshoot"]):
+        overshoot = f"{info['Overshoot']:.1f} %"
+    elif above > 0:
+        overshoot = f"at least {above:.1f} % (the peak within {end}; not settled)"
+    else:
+        overshoot = f"undefined (below the final value until {end}; not settled)"
     return (f"final value (DC gain) {s.final_value:.4f}; rise time (10-90 %) "
             f"{ms(info['RiseTime'], 'not reached within ' + end)}, settling time (2 %) "
-            f"{ms(info['SettlingTime'], 'not settled within ' + end)}, overshoot "
-            + (f"{info['Overshoot']:.1f} %" if np.isfinite(info["Overshoot"]) else "undefined (not settled)")
-            + f"; T at {end} = {s.T[-1]:.4f}")
+            f"{ms(info['SettlingTime'], 'not settled within ' + end)}, overshoot {overshoot}"
+            f"; T at {end} = {s.T[-1]:.4f}")
 
 
 @loop_first
@@ -210,32 +221,160 @@ def dc_gain(loop, *, beta: float | None = None, alpha: float | None = None) -> f
     return float(coef.H_T[0].real)
 
 
+#: How far below the options' ``omega_min`` (decades) the torque loop's crossovers and a slow
+#: loop's tracking bandwidth are sought.
+LOW_BAND_DECADES = 6
+
+#: The torque bandwidth's definitions (:func:`torque_bandwidth`), by name.
+BANDWIDTH_DEFINITIONS = {
+    "magnitude": "the paper's (Sec. 3.3): the lowest frequency where |H_T| falls 3 dB below its value at "
+                 "omega_min",
+    "tracking": "the engineer's: the lowest frequency where the tracking error |1 - H_T| reaches -3 dB "
+                "(1/sqrt 2)",
+}
+
+
 @loop_first
-def torque_bandwidth(loop, *, beta: float | None = None, alpha: float | None = None) -> float:
-    """Lowest frequency (rad/s) where |T/T_lref| falls 3 dB below its low-frequency value.
+def torque_bandwidth(loop, *, beta: float | None = None, alpha: float | None = None,
+                     definition: str = "magnitude") -> float:
+    """The torque loop's bandwidth, rad/s, by one of :data:`BANDWIDTH_DEFINITIONS`.
+
+    ``"magnitude"`` (default; the paper's, Sec. 3.3, used by the reproduction and the
+    schedule): the lowest frequency where |T/T_lref| falls 3 dB below its low-frequency value
+    (at ``omega_min``). On a drive whose load has an anti-resonance or a lightly damped mode
+    this is where |H_T| dips or has risen and fallen back, not where the loop stops tracking:
+    the bundled SEA's 1.78 rad/s lies above a +5.5 dB peak at 1.07 rad/s.
+
+    ``"tracking"`` (``haa-sym tune``'s default): the lowest frequency where the tracking error
+    E = 1 - H_T (the error's response to the reference) first reaches |E| = 1/sqrt 2 (-3 dB):
+    below it the loop removes at least 29 % of a sinusoidal reference's error, whatever the
+    magnitude of H_T does. A resonance peak or a notch of H_T both raise |E|, so neither can
+    push the figure past them. It is the "error (sensitivity) bandwidth" of loop-shaping texts
+    (e.g. Skogestad and Postlethwaite, Multivariable Feedback Control, Sec. 2.4.5: omega_B,
+    where |S| first crosses 1/sqrt 2 from below; E = S for a unit-feedback loop, and the loop
+    here has a filtered measurement, so E is computed from H_T directly).
 
     The paper defines the torque bandwidth with the leg free to move in the air (Sec. 3.3);
-    build the loop with K_L2 = 0 for that. NaN if |H_T| never drops 3 dB below Nyquist.
+    build the loop with K_L2 = 0 for that. Both are interpolated linearly in log-log between
+    the options' grid samples. NaN if the threshold is not reached below Nyquist; a tracking
+    bandwidth below ``omega_min`` (a slow loop) is sought :data:`LOW_BAND_DECADES` decades
+    further down, NaN if |E| is above the threshold there too.
 
     Example
     -------
     >>> torque_bandwidth(ClosedLoop(load_params().with_values(K_L2=0.0)))   # doctest: +SKIP
     30.36...
     """
+    if definition not in BANDWIDTH_DEFINITIONS:
+        raise ParameterError(f"definition = {definition!r}; allowed: {list(BANDWIDTH_DEFINITIONS)}")
     _, _, beta, alpha = loop.gain_points(0.0, 0.0, beta, alpha)
     check_memory(sweep_bytes(1, loop.options.numerics.n_omega), f"the torque loop on n_omega = {loop.options.numerics.n_omega} frequencies")
     coef = loop.loop_coefficients(None, beta, alpha)
-    mag = np.abs(coef.H_T)
-    ref = mag[0]
-    k = np.flatnonzero(mag < ref / np.sqrt(2))
-    if k.size == 0:
+    omega = coef.omega
+    if definition == "magnitude":
+        mag = np.abs(coef.H_T)
+        # falls 3 dB below the low-frequency value: ln(mag/ref) reaches -ln 2 / 2
+        level = np.log(mag / mag[0]) + 0.5 * np.log(2)
+        k = np.flatnonzero(level < 0)
+    else:
+        def tracking_level(H):
+            with np.errstate(divide="ignore"):
+                return -(np.log(np.abs(1.0 - H)) + 0.5 * np.log(2))   # <= 0 where |E| >= 1/sqrt 2
+        level = tracking_level(coef.H_T)
+        k = np.flatnonzero(level <= 0)
+        if k.size and k[0] == 0:
+            # a slow loop tracks badly already at omega_min: its bandwidth lies below the band,
+            # sought over LOW_BAND_DECADES decades below it (as its crossovers)
+            omega = omega[0] * np.logspace(-LOW_BAND_DECADES, 0, 20 * LOW_BAND_DECADES + 1)
+            level = tracking_level(loop.loop_coefficients(omega, beta, alpha, cached=False).H_T)
+            k = np.flatnonzero(level <= 0)
+    if k.size == 0 or k[0] == 0:
         return float("nan")
     k = k[0]
-    lw = np.log(coef.omega)
-    m0, m1 = np.log(mag[k - 1] / ref), np.log(mag[k] / ref)
-    target = -0.5 * np.log(2)
-    t = (target - m0) / (m1 - m0)
+    lw = np.log(omega)
+    t = level[k - 1] / (level[k - 1] - level[k])
     return float(np.exp(lw[k - 1] + t * (lw[k] - lw[k - 1])))
+
+
+#: A feature of |H_T| counts as the load's mode when it departs this far from the
+#: low-frequency value (dB) ...
+LOAD_MODE_DB = 3.0
+#: ... at a frequency below this multiple of the bandwidth (an octave above it: the loop's
+#: response there is still shaped by it).
+LOAD_MODE_FACTOR = 2.0
+
+
+@dataclass(frozen=True)
+class LoadMode:
+    """A resonance peak or anti-resonance notch of |H_T| near the torque bandwidth
+    (:func:`load_mode`): ``kind`` "peak" or "notch", ``omega`` (rad/s), ``depth_db`` (|H_T|
+    there relative to its low-frequency value, dB; > 0 a peak, < 0 a notch)."""
+
+    kind: str
+    omega: float
+    depth_db: float
+
+    def describe(self) -> str:
+        what = "resonance peak" if self.kind == "peak" else "anti-resonance notch"
+        return f"|H_T| {what} {self.depth_db:+.1f} dB at {self.omega:.3g} rad/s"
+
+
+@loop_first
+def load_mode(loop, bandwidth: float, *, beta: float | None = None, alpha: float | None = None):
+    """The load mode that dominates the torque response, or None.
+
+    The lowest local extremum of |H_T| on the options' grid that departs more than
+    :data:`LOAD_MODE_DB` (3 dB) from the low-frequency value, a resonance peak (above) or an
+    anti-resonance notch (below), when it lies below :data:`LOAD_MODE_FACTOR` (2) times
+    ``bandwidth`` (rad/s, e.g. :func:`torque_bandwidth`): the figure the bandwidth gives is then
+    the load mode's, not the loop's (a step rings at it). None also when ``bandwidth`` is NaN.
+    """
+    if not np.isfinite(bandwidth):
+        return None
+    _, _, beta, alpha = loop.gain_points(0.0, 0.0, beta, alpha)
+    coef = loop.loop_coefficients(None, beta, alpha)
+    db = 20 * np.log10(np.abs(coef.H_T) / abs(coef.H_T[0]))
+    w = coef.omega
+    inner = np.arange(1, w.size - 1)
+    peak = (db[inner] > db[inner - 1]) & (db[inner] >= db[inner + 1]) & (db[inner] > LOAD_MODE_DB)
+    notch = (db[inner] < db[inner - 1]) & (db[inner] <= db[inner + 1]) & (db[inner] < -LOAD_MODE_DB)
+    hits = inner[peak | notch]
+    if not hits.size or w[hits[0]] >= LOAD_MODE_FACTOR * bandwidth:
+        return None
+    i = hits[0]
+    return LoadMode("peak" if db[i] > 0 else "notch", float(w[i]), float(db[i]))
+
+
+#: Settling band of the torque-loop figures (+-5 % of the final value).
+SETTLING_BAND = 0.05
+
+
+def step_figures(s: StepResponse, settling_band: float = SETTLING_BAND) -> dict:
+    """The torque step's figures as an engineer reads them, where a spike cannot fake them.
+
+    ``t90_s``: the time from which the response stays at or above 90 % of the final value
+    (the last time it is below, plus one sample; NaN if it is below at the window's end);
+    ``rise_time_s``: from the last time the response is below 10 % before that to ``t90_s``
+    (a 10-90 % rise that an initial spike cannot shorten); ``settling_time_s``: the last time
+    the response leaves the +-``settling_band`` band around the final value, plus one sample
+    (:func:`step_info`'s rule with a 5 % band; NaN if not settled in the window).
+    Times in s from the step.
+    """
+    t, y, yf = s.t, s.T, s.final_value
+    nan = float("nan")
+    out = {"t90_s": nan, "rise_time_s": nan,
+           "settling_time_s": float(step_info(t, y, yf, settling_threshold=settling_band)["SettlingTime"])}
+    if not np.isfinite(yf) or yf == 0:
+        return out
+    r = np.sign(yf) * y / abs(yf)
+    below90 = np.flatnonzero(r < 0.9)
+    k90 = 0 if below90.size == 0 else below90[-1] + 1
+    if k90 >= t.size:
+        return out
+    below10 = np.flatnonzero(r[:k90] < 0.1)
+    k10 = 0 if below10.size == 0 else below10[-1]
+    out.update(t90_s=float(t[k90]), rise_time_s=float(t[k90] - t[k10]))
+    return out
 
 
 @loop_first
@@ -291,8 +430,41 @@ def p1_roots(params: Params) -> np.ndarray:
 def torque_loop_margins(loop, *, beta: float | None = None, alpha: float | None = None) -> Margins:
     """Margins of the torque loop alone (impedance gains 0), opened at the PI output (Sec. 3.2
     design targets: PM > 30 deg, GM > 12 dB at the leg-inertia and stiffness bounds), located
-    exactly (:func:`haa_sym.analysis.margins.margins`)."""
-    return margins(loop, 0.0, 0.0, beta, alpha, which="L_t")
+    exactly (:func:`haa_sym.analysis.margins.margins`).
+
+    A crossover below the options' band is still a crossover: a PI with a small integral gain
+    crosses |L_t| = 1 below ``omega_min``. |L_t| is sampled at 20 points a decade over
+    :data:`LOW_BAND_DECADES` decades below ``omega_min``; where it crosses 1 there, the band is
+    extended down to the lowest such sample (same density) and the crossovers and phase
+    crossovers are located exactly on it.
+
+    Raises
+    ------
+    ParameterError
+        |L_t| is below 1 and still rising at the bottom of that extension: a crossover may lie
+        further down, where the torque loop does nothing useful.
+    """
+    _, _, beta, alpha = loop.gain_points(0.0, 0.0, beta, alpha)
+    base = loop.options.omega(loop.params.controller.Ts)
+    x = np.array([[1.0, 0.0, 0.0]])
+    poly = loop_polynomials(loop, beta, alpha, "L_t", base)
+    n_ext = 20 * LOW_BAND_DECADES
+    low = base[0] * np.logspace(-LOW_BAND_DECADES, 0, n_ext + 1)
+    mag = np.abs(poly.gain(np.repeat(x, low.size, axis=0), low))
+    above = mag >= 1
+    change = np.flatnonzero(above[:-1] != above[1:])
+    omega = None
+    if change.size:
+        lo = low[change[0]]
+        per_decade = (base.size - 1) / np.log10(base[-1] / base[0])
+        m = max(2, int(np.ceil(per_decade * np.log10(base[0] / lo))) + 1)
+        omega = np.concatenate([np.geomspace(lo, base[0], m)[:-1], base])
+    elif not above[0] and mag[0] > mag[1]:
+        raise ParameterError(
+            f"the torque loop at beta = {beta:g}, alpha = {alpha:g}: |L_t| = {mag[0]:.3g} at {low[0]:.3g} rad/s, "
+            f"{LOW_BAND_DECADES} decades below omega_min = {base[0]:g} rad/s, and still rising below it, so its gain "
+            "crossover is lower still; allowed: a torque PI whose loop gain reaches 1 above that frequency")
+    return margins(loop, 0.0, 0.0, beta, alpha, which="L_t", omega=omega)
 
 
 @dataclass(frozen=True)

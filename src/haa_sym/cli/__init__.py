@@ -44,9 +44,11 @@ from __future__ import annotations
 import argparse
 import contextlib
 import os
+import re
 import signal
 import sys
 import threading
+import warnings
 
 from haa_sym._version import __version__
 from haa_sym.errors import CompilerError, ParameterError, StaleGeneratedCode, Terminated
@@ -75,8 +77,37 @@ def main(argv: list[str] | None = None) -> int:
     args = ap.parse_args(argv)
     set_progress(False if args.quiet else True if args.progress else None)
     # every input file a command reads is recorded, and no output may replace one of them
-    with _sigterm_unwinds(), command_scope():
-        return _run(args, runs)
+    with _sigterm_unwinds(), command_scope(), _condensed_warnings() as floating:
+        status = _run(args, runs)
+    if status == 0 and floating:
+        print(f"haa-sym: warning: floating-point {', '.join(floating)} during the computation (in "
+              f"{', '.join(sorted(set(floating.values())))}): inputs near the ends of double precision; "
+              "check the result, or use values of physical size", file=sys.stderr)
+    return status
+
+
+# numpy's floating-point RuntimeWarnings ("overflow encountered in multiply")
+_FLOATING = re.compile(r"^(overflow|underflow|invalid value|divide by zero) encountered")
+
+
+@contextlib.contextmanager
+def _condensed_warnings():
+    """Warnings as one line each, never Python's two lines with a source line from deep inside
+    the library; numpy's floating-point warnings are collected instead ({kind: where}) and
+    summarised by main() in one line when the command succeeds (when it fails, its error says
+    why; an overflow that was caught and refused is not news)."""
+    floating: dict[str, str] = {}
+
+    def show(message, category, filename, lineno, file=None, line=None):
+        text = str(message)
+        m = _FLOATING.match(text)
+        if issubclass(category, RuntimeWarning) and m:
+            floating.setdefault(m.group(1), f"{os.path.basename(filename)}:{lineno}")
+        else:
+            print(f"haa-sym: warning: {text.removeprefix('haa_sym: ')}", file=sys.stderr)
+    with warnings.catch_warnings():
+        warnings.showwarning = show
+        yield floating
 
 
 @contextlib.contextmanager

@@ -14,17 +14,16 @@ from haa_sym.analysis.passivity import bands_beyond, corrected_phase, passivity
 from haa_sym.analysis.nonlinear_map import CLASSES, DEFAULT_DURATION, DEFAULT_MAX_DURATION, EXTEND_FACTOR, nonlinear_map
 from haa_sym.analysis.regions import region_map
 from haa_sym.analysis.simulate import EXPERIMENTS
-from haa_sym.analysis.robust import robust_region
+from haa_sym.analysis.robust import box_text, robust_region
 from haa_sym.analysis.torque import STEP_CONVENTION, describe_step, step_response, torque_bandwidth
 from haa_sym.check.verify import main as verify_main
 from haa_sym.compiled.generated import evaluators
 from haa_sym.compiled.plant_code import compile_topology
-from haa_sym.design.schedule import schedule
+from haa_sym.design.schedule import CELL_ROUNDS, schedule
 from haa_sym.design.schedule_c import check_c_directory, write_c
 from haa_sym.errors import ParameterError
 from haa_sym.io.formats import result_arrays, save_json, save_npz
 from haa_sym.io.gridspec import GRID_SYNTAX, grid
-from haa_sym.io.uncertainty import fit_box
 from haa_sym.io.outputs import Transaction, csv_text
 from haa_sym.io.progress import message
 from haa_sym.loop import ClosedLoop, LoopOptions
@@ -124,7 +123,7 @@ def _robust_regions(args, loop, out, plot, P, D) -> int:
     fit, points = _uncertainty(args, loop.params, _leg(args, loop.params)), _measured(args)
     leg_line = _say_leg(loop.params, _leg(args, loop.params), args.leg_mode, fit)
     r = robust_region(loop, P, D, requirements=_requirements(args), leg=_leg(args, loop.params),
-                      leg_mode=args.leg_mode, uncertainty=None if fit is None else fit_box(fit))
+                      leg_mode=args.leg_mode, uncertainty=(fit["box"] or None) if fit else None)
     message(leg_line)
     counts, drawn = _agreement(loop, points, P, D, r.configurations)
     meta = {**r.meta, "n_configurations": r.n_configurations, "converged": r.converged, "history": r.history,
@@ -134,8 +133,7 @@ def _robust_regions(args, loop, out, plot, P, D) -> int:
                    lambda path, tx: save_npz(path, {"P_gain": r.P_gain, "D_gain": r.D_gain, "feasible": r.feasible},
                                              meta, tx, "--out"),
                    lambda: _plots().plot_robust(r, title=args.figure_title, measured=drawn))
-    box = "" if fit is None else " and every value of " + ", ".join(
-        f"{k} {lo:.4g}..{hi:.4g}" for k, (lo, hi) in r.meta["uncertainty"].items())
+    box = "" if not (fit and fit["box"]) else " and every value of " + box_text(fit["box"])
     print(f"{r.feasible.size} points: {int(r.feasible.sum())} meet {'+'.join(r.meta['requirements'])} for every leg "
           f"configuration ({r.meta['leg'][0]}..{r.meta['leg'][1]}, {r.meta['leg_mode']}){box}: {r.n_configurations} "
           f"configurations{'' if r.converged else ', NOT converged'}" + _agreement_text(counts) + _wrote(out))
@@ -160,6 +158,12 @@ def _cmd_boundary(args) -> int:
           f"stability {summary(b.stability.curves)}; PM = {b.pm_deg:g} deg {summary(b.phase_margin)}; "
           f"passivity {summary(b.passivity)}" + _wrote(out))
     return 0
+
+
+def _beta_alpha(loop) -> tuple[float, float]:
+    """The torque-gain scale and velocity compensation a loop is analysed at (the file's or --set's)."""
+    c = loop.params.controller
+    return float(c.beta), float(c.alpha)
 
 
 def _cmd_contact(args) -> int:
@@ -187,7 +191,8 @@ def _cmd_contact(args) -> int:
                    lambda path, tx: save_json(path, {**data, "meta": loop.provenance()}, tx, "--out"),
                    lambda: _plots().plot_contact(r.K_env, r.spectral_radius, unstable=r.unstable, key=r.key,
                                                  excess=r.phase_excess_deg, not_passive=r.not_passive,
-                                                 tol=r.passivity_tol_deg, title=args.figure_title))
+                                                 tol=r.passivity_tol_deg, title=args.figure_title,
+                                                 gains=_plots().gains_text(float(P), float(D), *_beta_alpha(loop))))
 
     def ends(iv):
         return ", ".join(f"{a:.10g}-{b:.10g}" for a, b in iv) + " Nm/rad" if iv else "none"
@@ -218,7 +223,8 @@ def _cmd_schedule(args) -> int:
     leg_line = _say_leg(loop.params, _leg(args, loop.params), args.leg_mode, fit)
     s = schedule(loop, P, D, beta_range=beta_range, beta_tol=args.beta_tol, alpha_values=alphas,
                  requirements=_requirements(args), leg=_leg(args, loop.params), leg_mode=args.leg_mode,
-                 uncertainty=None if fit is None else fit_box(fit), scheduler=args.scheduler)
+                 uncertainty=(fit["box"] or None) if fit else None, scheduler=args.scheduler,
+                 cell_rounds=args.cell_rounds)
     message(leg_line)
     if not s.feasible.any():
         with_alpha = f" with --alpha-values {args.alpha_values}" if args.alpha_values is not None else ""
@@ -467,6 +473,9 @@ def register(sub) -> dict:
     sc.add_argument("--alpha-values", help="schedule alpha too, from these values (grid spec, e.g. 0,0.5,0.94)")
     _leg_args(sc)
     sc.add_argument("--scheduler", help="address of a dask.distributed scheduler (default: in-process)")
+    sc.add_argument("--cell-rounds", type=int, default=CELL_ROUNDS, metavar="N",
+                    help=f"rounds of the cell check between grid points; cells still failing in the last are given "
+                         f"up (no safe gain) instead of lowering shared corners (default {CELL_ROUNDS}; docs/schedule.md)")
     sc.add_argument("--out", help="output .csv")
     sc.add_argument("--c-out", help="directory for haa_schedule.h and haa_schedule.c")
     sc.add_argument("--plot", help="output figure (.png/.pdf/.svg)")

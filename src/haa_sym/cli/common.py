@@ -10,7 +10,8 @@ from pathlib import Path
 import numpy as np
 
 from haa_sym.analysis.measured import agreement
-from haa_sym.analysis.robust import check_uncertainty, leg_ends, leg_text, leg_values, uncertainty_text
+from haa_sym.analysis.robust import (UNCERTAINTY_ON_LEG, UNCERTAINTY_ON_LEG_DEFAULT, check_uncertainty, leg_ends,
+                                     leg_text, leg_values, uncertainty_box, uncertainty_text)
 from haa_sym.errors import ParameterError
 from haa_sym.io.gridspec import gain_axis
 from haa_sym.io.measured import read_measured
@@ -19,6 +20,7 @@ from haa_sym.io.outputs import Transaction, check_file
 from haa_sym.loop import ClosedLoop, LoopOptions
 from haa_sym.loop.options import parse_options
 from haa_sym.model import filters
+from haa_sym.model.motor import motor_constants_warning
 from haa_sym.model.params import (CONTROLLER_KEYS, CONTROLLER_UNITS, actuator_path, apply_sets,
                                   load_params, parse_set)
 
@@ -68,7 +70,19 @@ def _params(args, params=None):
     ``--set`` applied."""
     params = _loaded(args) if params is None else params
     sets = _parse_set(args.set, tuple(params.plant.topology.parameter_keys) + CONTROLLER_KEYS)
-    return apply_sets(params, sets)
+    params = apply_sets(params, sets)
+    _warn_motor_constants(args, params)
+    return params
+
+
+def _warn_motor_constants(args, params) -> None:
+    """The plausibility of k_t against k_w (haa_sym.model.actuator.motor_constants_warning) on
+    the values the command analyses (the file's, a configuration's, --set's), once a command."""
+    text = motor_constants_warning(params.plant.as_dict(), params.motor_convention, params.source)
+    warned = vars(args).setdefault("_warned", set())
+    if text and text not in warned:
+        warned.add(text)
+        print(f"haa-sym: warning: {text}", file=sys.stderr)
 
 
 def _check_out(path: str | None, cmd: str, flag: str = "--out", suffixes: tuple[str, ...] | None = None) -> Path | None:
@@ -189,12 +203,16 @@ def _plots():
     return plots
 
 
-def _write_outputs(out, plot, write_out, figure) -> None:
+def _write_outputs(out, plot, write_out, figure, extra=()) -> None:
     """``--out`` through ``write_out(path, tx)`` and ``--plot`` from ``figure()``, all or nothing
-    (:mod:`haa_sym.io.outputs`): a failure leaves both as they were."""
+    (:mod:`haa_sym.io.outputs`): a failure leaves both as they were; ``extra``: more outputs,
+    ``(path or None, write(path, tx))`` each, in the same transaction."""
     with Transaction() as tx:
         if out:
             write_out(out, tx)
+        for path, write in extra:
+            if path:
+                write(path, tx)
         if plot:
             _plots().save_figure(figure(), plot, tx, "--plot")
 
@@ -216,13 +234,16 @@ def _say_leg(params, leg, leg_mode, fit=None) -> str:
     them. Returns the line saying which configurations and values it analyses, a progress
     message the command shows once its input has passed every check (a refused command prints
     one line only)."""
-    box = fit_box(fit) if fit is not None else None
+    box = fit["box"] if fit is not None else None
     line, warning = leg_text(leg_values(params, leg, leg_mode, box))
     lines, warnings = [line], [warning]
-    if fit is not None:
+    if fit is not None and box:
         u_line, u_warning = uncertainty_text(params, fit_values(fit), box)
         lines.append(f"{u_line} (from {fit['source']})")
         warnings.append(u_warning)
+    if fit is not None and fit["dropped"]:
+        lines.append(f"the fit's interval of {', '.join(fit['dropped'])} not analysed: the leg range sets "
+                     f"{'it' if len(fit['dropped']) == 1 else 'them'} (--uncertainty-on-leg unset)")
     for w in warnings:
         if w:
             print(f"haa-sym: warning: {w}", file=sys.stderr)
@@ -238,7 +259,12 @@ def _uncertainty(args, params, leg):
     fit = read_fit(args.uncertainty, "--uncertainty", keys=tuple(params.plant.topology.parameter_keys))
     leg_ends(params, leg)            # a bad --leg is the leg's mistake, not the report's
     try:
-        check_uncertainty(params, fit_box(fit), leg)
+        # fit["box"]: what the analyses take (a key the range sets by --uncertainty-on-leg);
+        # fit["dropped"]: the keys left out ("unset")
+        fit["box"], fit["dropped"] = uncertainty_box(params, fit_box(fit), fit_values(fit), leg,
+                                                     args.uncertainty_on_leg)
+        if fit["box"]:
+            check_uncertainty(params, fit["box"], leg)
     except ParameterError as exc:
         raise ParameterError(f"--uncertainty {args.uncertainty!r}: {exc}") from None
     return fit
@@ -320,5 +346,9 @@ def _leg_args(parser) -> None:
                         help="the report of haa-sym identify: the gains must hold for every value in the 95 %% "
                              "confidence box of its fitted keys too (a box, combined with the leg range; "
                              "docs/uncertainty.md)")
+    parser.add_argument("--uncertainty-on-leg", choices=UNCERTAINTY_ON_LEG, default=UNCERTAINTY_ON_LEG_DEFAULT,
+                        help="a fitted key the leg range also sets: 'relative' (default) the fit's interval "
+                             "relative to its value, around each leg configuration's value; 'unset' left out (the "
+                             "box on the other keys); 'refuse' refused")
 
 

@@ -3,7 +3,7 @@ from __future__ import annotations
 
 import math
 
-from haa_sym.analysis.describing import NONLINEARITIES, limit_cycles, limit_nonlinearities
+from haa_sym.analysis.describing import DISTORTION_STRONG, NONLINEARITIES, confirm_cycles, limit_cycles, limit_nonlinearities
 from haa_sym.errors import ParameterError
 from haa_sym.io.formats import save_json
 from haa_sym.loop import ClosedLoop
@@ -59,14 +59,23 @@ def _cmd_describe(args) -> int:
     # unstable point it means the harmonic balance bounds nothing
     lin = loop.stability([P], [D], radius=True)
     lin_stable, radius = bool(lin.stable[0]), float(lin.spectral_radius[0])
-    for r in results:
+    # every stable predicted cycle checked by a short simulation with that nonlinearity alone
+    confirmed = [confirm_cycles(loop, P, D, r) if args.confirm else [None] * r.amplitude.size for r in results]
+    several = len(results) > 1 or len([k for k in params.limits.active
+                                       if k not in ("friction_model", "friction_velocity")]) > 1
+    for r, conf in zip(results, confirmed):
         head = f"{r.nonlinearity} = {r.value:g} {r.value_unit} on the {r.signal}:"
         if not r.amplitude.size:
             print(f"{head} no limit cycle predicted (no phase crossover of G meets -1/N(A))")
-        for A, w, s, d in zip(r.amplitude, r.omega, r.stable, r.distortion):
+        for A, w, s, d, c in zip(r.amplitude, r.omega, r.stable, r.distortion, conf):
             print(f"{head} limit cycle A = {A:.6g} {r.unit} at {w:.6g} rad/s ({w / (2 * math.pi):.6g} Hz), "
                   f"{'stable' if s else 'unstable'} (Loeb), distortion {d:.3g}"
-                  + ("  (large: the prediction is rough)" if d > 0.2 else ""))
+                  + ("  (strong harmonics, not confirmed by a simulation: do not trust it without one)"
+                     if c is None and s and d > DISTORTION_STRONG else ""))
+            if c is not None:
+                if several:
+                    c["untrusted"].insert(0, "several nonlinearities at once (each predicted alone)")
+                print("  " + _confirmation(c))
 
     unbounded = [r.nonlinearity for r in results if not r.stable.any()]
     print(f"linear loop at this point: {'stable' if lin_stable else 'UNSTABLE'} (spectral radius {radius:.6g})"
@@ -76,7 +85,8 @@ def _cmd_describe(args) -> int:
 
     def write(path, tx):
         save_json(path, {"P_gain": P, "D_gain": D, "linear": {"stable": lin_stable, "spectral_radius": radius},
-                         "predictions": [r.to_dict() for r in results]}, tx, "--out")
+                         "predictions": [_with_confirmation(r.to_dict(), conf) for r, conf in zip(results, confirmed)]},
+                  tx, "--out")
 
     def figure():
         panels = [dict(label=f"{r.nonlinearity} = {r.value:g} {r.value_unit} on the {r.signal}", G=r.G_curve, minus_inv_N=r.minus_inv_N,
@@ -89,12 +99,36 @@ def _cmd_describe(args) -> int:
     return 0
 
 
+def _confirmation(c: dict) -> str:
+    """One line: how the confirming simulation bears a predicted cycle out."""
+    run = f"simulation ({c['experiment']}, {c['duration_s']:.3g} s; verdict {c['verdict']})"
+    if c["simulated_kind"] == "sustained":
+        amp = "" if c["amplitude_error"] is None else \
+            f"{c['simulated_amplitude']:.4g} (error {100 * c['amplitude_error']:.3g} %) "
+        text = (f"{run}: {c['signal']} {amp}at {c['simulated_frequency_hz']:.4g} Hz (error "
+                f"{100 * c['frequency_error']:.3g} %): {'agrees' if c['agrees'] else 'DISAGREES'} within "
+                f"{100 * c['tolerance']:.3g} %")
+    else:
+        text = f"{run}: no sustained periodic oscillation of the {c['signal']} ({c['simulated_kind'] or 'no usable trace'})"
+    if c["untrusted"]:
+        text += "; do not trust this prediction: " + "; ".join(c["untrusted"])
+    return text
+
+
+def _with_confirmation(d: dict, conf: list) -> dict:
+    for cycle, c in zip(d["limit_cycles"], conf):
+        cycle["simulation"] = c
+    return d
+
+
 def register(sub) -> dict:
     p = sub.add_parser("describe", help="describing-function predictions of limit cycles (saturation, "
                                         "quantisation, Coulomb friction) at one gain point")
     _common(p)
     _gain_flags(p, "0", "0", "one gain point (0 and 0: the torque loop alone)")
     p.add_argument("--limit", action="append", default=[], metavar="KEY=VALUE", help=LIMIT_HELP)
+    p.add_argument("--no-confirm", dest="confirm", action="store_false",
+                   help="skip the short simulation that checks every stable predicted cycle (default: run it)")
     p.add_argument("--out", help="the predictions as JSON (.json)")
     p.add_argument("--plot", help="Nyquist-type figure of G and -1/N(A) with the predicted cycles (.png, .pdf, .svg)")
     p.add_argument("--title", help=TITLE_HELP)

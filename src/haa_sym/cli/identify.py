@@ -7,6 +7,7 @@
 from __future__ import annotations
 
 import argparse
+import hashlib
 import sys
 from pathlib import Path
 
@@ -69,6 +70,35 @@ def _split(text: str, flag: str) -> tuple[str, ...]:
     return items
 
 
+def _refuse_repeated_logs(logs: list[str]) -> None:
+    """Refuse a log given twice: the fit would count its samples twice and narrow every ci95 by
+    sqrt(n) as if the copies were independent experiments (40 copies: 6.3x) with nothing to show it.
+    The same file (by resolved path or by device and inode: a link, a second spelling) and a copy
+    (the same bytes, by sha256) are both the same experiment. Only regular files are hashed; a
+    missing or special file is left to read_log's refusal."""
+    seen: dict = {}
+    for text in logs:
+        path = Path(text)
+        try:
+            st = path.stat()
+        except OSError:
+            continue
+        keys = [("the same file", str(path.resolve())), ("the same file", (st.st_dev, st.st_ino))]
+        if path.is_file():
+            digest = hashlib.sha256()
+            with open(path, "rb") as f:
+                for block in iter(lambda: f.read(1 << 20), b""):
+                    digest.update(block)
+            keys.append(("identical content (sha256)", digest.hexdigest()))
+        for how, key in keys:
+            if key in seen:
+                raise ParameterError(f"--log {text}: {how} as --log {seen[key]}; allowed: each experiment once (a "
+                                     "repeated log counts its samples twice and narrows the ci95 as if it were new "
+                                     "data)")
+        for _, key in keys:
+            seen.setdefault(key, text)
+
+
 def run(args) -> int:
     inputs, outputs, keys = _split(args.input, "--input"), _split(args.output, "--output"), _split(args.fit, "--fit")
     out = _check_out(args.out, "identify", "--out", (".toml",))
@@ -84,6 +114,7 @@ def run(args) -> int:
     if args.option and inputs[0] != "torque_ref":
         raise ParameterError(f"--option {args.option[0]}: the loop options apply to the closed torque loop; "
                              "allowed: with --input torque_ref")
+    _refuse_repeated_logs(args.log)
     path = actuator_path(args.params, "--params")
     file_params = load_params(path)
     confs = args.configuration

@@ -6,7 +6,7 @@ import math
 from pathlib import Path
 
 from haa_sym.io.inputs import read_text
-from haa_sym.analysis.torque import step_response
+from haa_sym.analysis.torque import BANDWIDTH_DEFINITIONS, SETTLING_BAND, step_response
 from haa_sym.design.tune import GM_TARGET_DB, OBJECTIVES, PM_TARGET_DEG, TuneOptions, tune, tuned_text
 from haa_sym.errors import ParameterError
 from haa_sym.io.formats import save_json
@@ -35,7 +35,8 @@ def _range(text: str, flag: str):
 FLAGS = {"pm_deg": "--pm", "gm_db": "--gm", "objective": "--objective", "stable_alpha": "--stable-alpha",
          "lead_range": "--lead-range", "integral_range": "--integral-range", "n_lead": "--n-lead",
          "n_integral": "--n-integral", "rtol": "--rtol", "step_duration": "--step-duration",
-         "passive_at": "--passive-at", "passive_configurations": "--passive-configurations"}
+         "passive_at": "--passive-at", "passive_configurations": "--passive-configurations",
+         "bandwidth": "--bandwidth"}
 
 
 def _points(text: str | None) -> tuple:
@@ -56,19 +57,35 @@ def _points(text: str | None) -> tuple:
 
 
 def _tune_options(args) -> TuneOptions:
+    if args.passive_configurations is not None and not args.passive_at:
+        raise ParameterError(f"--passive-configurations {args.passive_configurations!r} without --passive-at: it says "
+                             "where the port must be passive, and no impedance gains say at which; allowed: "
+                             "--passive-at P:D[,P:D...] with it, or neither")
     values = {"pm_deg": args.pm, "gm_db": args.gm, "objective": args.objective,
               "stable_alpha": _range(args.stable_alpha, "--stable-alpha"),
               "lead_range": _range(args.lead_range, "--lead-range"),
               "integral_range": _range(args.integral_range, "--integral-range"),
               "n_lead": args.n_lead, "n_integral": args.n_integral, "rtol": args.rtol,
               "step_duration": args.step_duration, "passive_at": _points(args.passive_at),
-              "passive_configurations": tuple(c.strip() for c in args.passive_configurations.split(",") if c.strip())}
+              "passive_configurations": tuple(c.strip() for c in (args.passive_configurations or "nominal").split(",")
+                                             if c.strip()),
+              "bandwidth": args.bandwidth}
     try:
         return TuneOptions(**values)
     except ParameterError as exc:
         msg = str(exc)
         name = msg.split(" = ", 1)[0]
         raise ParameterError(f"{FLAGS.get(name, name)}: {msg}") from None
+
+
+def _load_modes(r, g) -> str:
+    """'feature (configurations); ...' for the configurations whose |H_T| has a load mode near
+    the bandwidth, grouped by identical text ('' if none)."""
+    groups: dict = {}
+    for c, m in zip(r.configurations, g.load_modes):
+        if m is not None:
+            groups.setdefault(m.describe(), []).append(c)
+    return "; ".join(f"{text} ({', '.join(cs)}), below twice the bandwidth" for text, cs in groups.items())
 
 
 def _cmd_tune(args) -> int:
@@ -95,30 +112,52 @@ def _cmd_tune(args) -> int:
           + ("" if not opts.passive_at else ", passive at (P_gain, D_gain) " + " ".join(
               f"({p:g}, {d:g})" for p, d in opts.passive_at) + " at " + ", ".join(opts.passive_configurations))
           + f"; objective: {opts.objective} bandwidth; {r.evaluations} PIs decided")
+    print(f"bandwidth: {opts.bandwidth}, {BANDWIDTH_DEFINITIONS[opts.bandwidth]}; t90: from then on >= 90 % of the "
+          f"final value; settling: last leaving +-{100 * SETTLING_BAND:g} % ({opts.step_duration:g} s step)")
 
-    def fmt(x, unit, spec=".4g"):
-        return f"{x:{spec}} {unit}" if math.isfinite(x) else "n/a"
-    for label, g in (("before", b), ("after", a)):
+    def fmt(x, unit, spec=".4g", none="n/a"):
+        return f"{x:{spec}} {unit}" if math.isfinite(x) else none
+    reports = (("before", b),) if r.unchanged else (("before", b), ("after", a))
+    for label, g in reports:
         print(f"{label}: P_t0 = {g.P_t0:.6g} V/Nm, I_t0 = {g.I_t0:.6g} V/(Nm s); worst-case bandwidth "
               f"{fmt(g.worst_bandwidth, 'rad/s')}; targets met at {int(g.meets.sum())} of {g.meets.size}")
         for i, c in enumerate(r.configurations):
-            print(f"  {c:14s} bandwidth {fmt(g.bandwidth_rad_s[i], 'rad/s'):>13s}  PM {fmt(g.pm_deg[i], 'deg', '.2f'):>11s}  "
-                  f"GM {fmt(g.gm_db[i], 'dB', '.2f'):>9s}  t90 {fmt(g.t90_s[i], 's', '.3f'):>9s}"
+            print(f"  {c:14s} bandwidth {fmt(g.bandwidth_rad_s[i], 'rad/s'):>13s}  "
+                  f"PM {fmt(g.pm_deg[i], 'deg', '.2f', 'no crossover'):>11s}  "
+                  f"GM {fmt(g.gm_db[i], 'dB', '.2f', 'none'):>9s}  t90 {fmt(g.t90_s[i], 's', '.3f', 'not held'):>9s}  "
+                  f"settling {fmt(g.settling_time_s[i], 's', '.3f', 'not settled'):>9s}"
                   + ("" if g.meets[i] else "  (misses a target)"))
+        modes = _load_modes(r, g)
+        if modes:
+            print(f"  load mode dominates: {modes}")
+    if r.unchanged:
+        print("after: already at the optimum (no change): the tuned gains are the file's")
+    elif r.within_tolerance:
+        print(f"note: the file's PI was already at the optimum within the search's tolerance (--rtol {opts.rtol:g}): "
+              "the tuned gains differ from it by no more than that")
     print(f"active constraint: {r.active}" + ("; the optimum lies on the search range's edge (widen "
                                              "--lead-range / --integral-range)" if r.at_range_edge else ""))
 
     def figure():
-        steps = []
+        steps, notes = [], []
         for label, g, ls in (("file's PI", b, "--"), ("tuned PI", a, "-")):
+            if r.unchanged and label == "tuned PI":
+                notes.append("tuned PI: already at the optimum (no change)")
+                continue
             s = step_response(ClosedLoop(params.with_values(P_t0=g.P_t0, I_t0=g.I_t0), options),
                               duration=opts.step_duration)
             steps.append((s.t, s.T, f"{label} (nominal values)", ls))
+            modes = _load_modes(r, g)
+            notes.append(f"{label}, nominal: bandwidth ({opts.bandwidth}) {fmt(g.bandwidth_rad_s[0], 'rad/s')}, "
+                         f"t90 {fmt(g.t90_s[0], 's', '.3f', 'not held')}, settling (5 %) "
+                         f"{fmt(g.settling_time_s[0], 's', '.3f', 'not settled')}"
+                         + (f"; load mode dominates: {modes}" if modes else ""))
         name = str(params.about.get("name") or Path(src).stem)
         title = "\n".join(([args.title] if args.title else []) + [
             f"{name}: torque PI tuned for PM >= {opts.pm_deg:g} deg, GM >= {opts.gm_db:g} dB at every configuration"])
         return _plots().plot_tune(r.lead_s, r.integral, r.grid_objective, (b.P_t0, b.I_t0), (a.P_t0, a.I_t0),
-                                  steps, title, ylabel=measured_torque(params.plant.topology)[0])
+                                  steps, title, ylabel=measured_torque(params.plant.topology)[0],
+                                  notes="\n".join(notes), band=SETTLING_BAND)
 
     with Transaction() as tx:
         tx.write_text(out, new, "--out")
@@ -166,6 +205,10 @@ def register(sub) -> dict:
     t.add_argument("--passive-at", metavar="P:D[,P:D...]",
                    help="impedance gains (P_gain Nm/rad : D_gain Nms/rad) where the port must also be passive at "
                         "configuration of --passive-configurations (default: none, as Sec. 3.2)")
-    t.add_argument("--passive-configurations", default="nominal", metavar="NAME[,NAME...]",
-                   help="where --passive-at is required: nominal and/or the file's configurations (default nominal)")
+    t.add_argument("--passive-configurations", default=None, metavar="NAME[,NAME...]",
+                   help="where --passive-at is required: nominal and/or the file's configurations (default nominal; "
+                        "only with --passive-at)")
+    t.add_argument("--bandwidth", choices=tuple(BANDWIDTH_DEFINITIONS), default=d.bandwidth,
+                   help="the bandwidth maximised and reported: tracking (default), where the tracking error "
+                        "|1 - H_T| first reaches -3 dB; magnitude, the paper's -3 dB of |H_T| (Sec. 3.3)")
     return {"tune": _cmd_tune}

@@ -12,6 +12,7 @@ compiler is found (one warning, never silently).
 """
 from __future__ import annotations
 
+import contextlib
 import ctypes
 import functools
 import hashlib
@@ -19,6 +20,7 @@ import json
 import os
 import shlex
 import shutil
+import signal
 import subprocess
 import tempfile
 import warnings
@@ -255,8 +257,7 @@ class Compiler:
         os.close(fd)
         try:
             try:
-                proc = subprocess.run([*self.argv, *CFLAGS, str(c_file), "-o", tmp, "-lm"],
-                                      capture_output=True, text=True)
+                proc = _run_compiler([*self.argv, *CFLAGS, str(c_file), "-o", tmp, "-lm"], target.parent)
             except OSError as exc:
                 raise CompilerError(f"cannot run the C compiler CC = {self.cc!r}: {exc}") from None
             if proc.returncode != 0:
@@ -281,6 +282,43 @@ class Compiler:
             f.write(digest + "\n")
         os.replace(tmp, self.digest_path(target))
         return target
+
+
+def _run_compiler(argv: list[str], workdir: Path) -> subprocess.CompletedProcess:
+    """Run the C compiler ``argv`` so that an interrupted build leaves nothing behind.
+
+    The compiler runs in a process group of its own and with ``TMPDIR`` set to a fresh
+    directory below ``workdir``: on Ctrl-C or SIGTERM (:class:`haa_sym.errors.Terminated`) the
+    whole group (the driver, ``cc1``, ``as``, ``ld``) gets SIGTERM (gcc's driver then deletes its
+    temporaries), SIGKILL after :data:`COMPILER_GRACE_S`, and the directory is removed. Without
+    this, killing the driver alone left ``cc1`` running and its ``/tmp/cc*.s`` files behind."""
+    tmpdir = tempfile.mkdtemp(dir=workdir, prefix="cc-tmp.")
+    try:
+        with subprocess.Popen(argv, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
+                              start_new_session=True, env={**os.environ, "TMPDIR": tmpdir}) as proc:
+            try:
+                out, err = proc.communicate()
+            except BaseException:
+                _stop_group(proc)
+                raise
+        return subprocess.CompletedProcess(argv, proc.returncode, out, err)
+    finally:
+        shutil.rmtree(tmpdir, ignore_errors=True)
+
+
+# how long an interrupted compiler group has to exit on SIGTERM before SIGKILL, s
+COMPILER_GRACE_S = 2.0
+
+
+def _stop_group(proc: subprocess.Popen) -> None:
+    """SIGTERM to the compiler's process group, then SIGKILL to whatever of it is left."""
+    with contextlib.suppress(ProcessLookupError, PermissionError):
+        os.killpg(proc.pid, signal.SIGTERM)
+    with contextlib.suppress(subprocess.TimeoutExpired):
+        proc.wait(COMPILER_GRACE_S)
+    with contextlib.suppress(ProcessLookupError, PermissionError):
+        os.killpg(proc.pid, signal.SIGKILL)
+    proc.wait()
 
 
 class Evaluators:

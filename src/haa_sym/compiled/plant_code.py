@@ -48,6 +48,10 @@ class CompiledTopology:
         name = self.topology.function_name
         if self.library is not None:
             return ca.external(name, str(self.library))
+        if not _verified(self.casadi_file):
+            # damaged since it was generated (a disk fault, an edit): derived again, as a damaged
+            # library is rebuilt, rather than handed to CasADi's parser
+            _generate(self.topology, self.casadi_file.parent, quiet=True)
         return ca.Function.deserialize(self.casadi_file.read_text())
 
 

@@ -29,10 +29,15 @@ safe in general. Every cell with four feasible corners is therefore checked on a
 ``(cell_subdivisions + 1)^2`` points (corners and edges included) at every leg configuration, at
 the interpolated alpha and at the two values of the beta grid that bracket the interpolated beta
 (both must meet the requirements: the check resolves beta to the stated tolerance, not finer).
-Where a cell fails, its four corner values are lowered one step of the beta grid (shared corners:
-the neighbouring cells are re-checked, and the lookup stays continuous) until it holds; a cell
-that still fails with a corner at the range's bottom, and every cell with an infeasible corner,
-has no safe gain (``cell_safe`` False; the C lookup answers ``HAA_SCHEDULE_NO_SAFE_GAIN``). This
+Where a cell fails, its four corner values are lowered together by a number of beta-grid steps
+bisected between the last failing and the last holding drop (a few passes, not one pass per
+step: the README's harmonic-drive schedule needed over 125 one-step passes); shared corners take
+the largest drop of their cells, the neighbouring cells are re-checked at the final corners, and
+the lookup stays continuous. In round ``cell_rounds`` (default 3) the cells that still fail are
+given up instead (no corner lowered, so nothing else changes): where feasibility is not monotone
+in beta (passivity at intermediate beta), lowering a corner can make the next cell fail, a chain
+that crossed the grid one cell a round. A cell that still fails with a corner at the range's bottom, and
+every cell with an infeasible corner, has no safe gain (``cell_safe`` False; the C lookup answers ``HAA_SCHEDULE_NO_SAFE_GAIN``). This
 is sampling: points between the sub-grid's are not verified.
 
 At the range's limit
@@ -74,6 +79,7 @@ from haa_sym.design.schedule_table import ScheduleTable
 from haa_sym.errors import ParameterError
 from haa_sym.io.gridspec import grid
 from haa_sym.io.outputs import write_text
+from haa_sym.io.progress import message
 from haa_sym.io.tasks import DEFAULT_CONNECT_TIMEOUT, TaskRunner
 from haa_sym.loop import ClosedLoop, loop_first
 from haa_sym.model.params import Params, gain_array
@@ -90,6 +96,11 @@ COARSE_RATIO = 1.25
 # at 5 x 5 the off-grid test (tests/test_design_schedule_safety.py) finds no unsafe beta, and the check
 # costs about half the schedule's own time on the default HyQ grid (docs/model.md).
 CELL_SUBDIVISIONS = 4
+# Rounds of the cell check (module docstring, "Between grid points"): in the last one, cells that
+# still fail are given up instead of lowering corners that other cells share. The README's
+# harmonic-drive schedule (passivity required) needed 2 rounds for its own failures, then ran a
+# chain of single cells, one round (about 9 passes, 40-90 s) each (docs/schedule.md).
+CELL_ROUNDS = 3
 
 
 def beta_grid(beta_range=(0.1, 8.0), beta_tol: float = 0.02) -> tuple[np.ndarray, np.ndarray]:
@@ -220,11 +231,24 @@ def _verify(params, configs, P, D, fine, alphas, best_k, req, options):
     return best_k, len(lowered)
 
 
-def _check_cells(runner, params, configs, P, D, fine, K, alpha_pt, req, options, n_sub):
+def _check_cells(runner, params, configs, P, D, fine, K, alpha_pt, req, options, n_sub, max_rounds=None):
     """The cell check (module docstring, "Between grid points"). ``K`` (n_P, n_D): beta-grid
     index per grid point (-1 infeasible), ``alpha_pt`` its alpha. Returns the lowered indices,
     the safe cells, how many cells failed the check at first, how many grid points were lowered,
-    and how many cells were given up."""
+    how many cells were given up, and the passes (task lists run).
+
+    A round checks the cells to check at the current corners. Each failing cell then searches
+    its own drop ``s`` (beta-grid steps, the four corners lowered together, as one step a pass
+    used to): ``s = 1`` and the bottom (the lowest corner at the range's end) are tried in one
+    pass; a cell failing at the bottom has no safe gain; otherwise ``s`` is bisected between
+    the last failing and the last holding drop, all cells in the same passes. Each grid point
+    then takes the largest drop of the failing cells it is a corner of, and every cell touching
+    a lowered point is checked again in the next round: a cell is safe only when it held at
+    its final corners, whatever the search found. A drop of 125 steps costs about 9 passes
+    instead of 125. In round ``max_rounds`` (:data:`CELL_ROUNDS`; None: no bound) the cells
+    that fail are given up without lowering anything, so no other cell changes and the check
+    ends: where feasibility is not monotone in beta (passivity), a lowered corner can make the
+    next cell fail, and such chains crossed the grid one cell a round."""
     K = K.copy()
     safe = (K[:-1, :-1] >= 0) & (K[1:, :-1] >= 0) & (K[:-1, 1:] >= 0) & (K[1:, 1:] >= 0)
     s = np.arange(n_sub + 1) / n_sub
@@ -233,11 +257,14 @@ def _check_cells(runner, params, configs, P, D, fine, K, alpha_pt, req, options,
     log_step = np.log(P[1:] / P[:-1])
     decided: dict = {}                       # (k, alpha, P, D) -> meets at every configuration
     failed_once, lowered_pts, given_up = set(), set(), 0
-    todo = {(int(i), int(j)) for i, j in np.argwhere(safe)}
+    passes = [0]
 
-    def sub_points(i, j):
-        ci, cj = [i, i + 1, i, i + 1], [j, j, j + 1, j + 1]
-        b, a = W @ fine[K[ci, cj]], W @ alpha_pt[ci, cj]
+    def corners(i, j):
+        return [i, i + 1, i, i + 1], [j, j, j + 1, j + 1]
+
+    def sub_points(i, j, drop=0):
+        ci, cj = corners(i, j)
+        b, a = W @ fine[K[ci, cj] - drop], W @ alpha_pt[ci, cj]
         if np.all(alpha_pt[ci, cj] == alpha_pt[i, j]):
             a = np.full(tt.size, alpha_pt[i, j])   # one alpha exactly: one decision call per beta
         # edges exactly the grid's, so neighbouring cells share their edge points' decisions
@@ -249,38 +276,87 @@ def _check_cells(runner, params, configs, P, D, fine, K, alpha_pt, req, options,
         return [(int(k), float(x), float(p), float(d)) for kk in (klo, khi)
                 for k, x, p, d in zip(kk, a, Ps, Ds)]
 
-    while todo:
-        keys = {c: sub_points(*c) for c in sorted(todo)}
+    def holds(probes):
+        """{(i, j, drop): the cell's sub-grid meets the requirements with its corners lowered
+        by ``drop``}, deciding what is not decided yet in one pass (one task list)."""
+        keys = {q: sub_points(*q) for q in sorted(probes)}
         need: dict = {}
         for pts in keys.values():
             for key in pts:
                 if key not in decided:
                     need.setdefault(key[:2], set()).add(key[2:])
-        groups = [(k, a, sorted(pd)) for (k, a), pd in sorted(need.items())]
-        tasks = [(params, c, np.array([p for p, _ in pd]), np.array([d for _, d in pd]), float(fine[k]), a, req,
-                  options) for k, a, pd in groups for c in configs]
-        res = runner.run(_task_points, tasks, "schedule: cells")
-        for g, (k, a, pd) in enumerate(groups):
-            ok = np.logical_and.reduce([np.asarray(r, bool) for r in res[g * len(configs):(g + 1) * len(configs)]])
-            decided.update({(k, a, p, d): bool(o) for (p, d), o in zip(pd, ok)})
-        lower = set()
-        for (i, j), pts in keys.items():
-            if all(decided[key] for key in pts):
-                continue
-            failed_once.add((i, j))
-            corners = [(i, j), (i + 1, j), (i, j + 1), (i + 1, j + 1)]
-            if min(K[c] for c in corners) == 0:     # nothing left to lower: no safe gain here
-                safe[i, j] = False
+        if need:
+            passes[0] += 1
+            groups = [(k, a, sorted(pd)) for (k, a), pd in sorted(need.items())]
+            tasks = [(params, c, np.array([p for p, _ in pd]), np.array([d for _, d in pd]), float(fine[k]), a,
+                      req, options) for k, a, pd in groups for c in configs]
+            res = runner.run(_task_points, tasks, f"schedule: cells (pass {passes[0]})")
+            for g, (k, a, pd) in enumerate(groups):
+                ok = np.logical_and.reduce([np.asarray(r, bool)
+                                            for r in res[g * len(configs):(g + 1) * len(configs)]])
+                decided.update({(k, a, p, d): bool(o) for (p, d), o in zip(pd, ok)})
+        return {q: all(decided[key] for key in pts) for q, pts in keys.items()}
+
+    todo = {(int(i), int(j)) for i, j in np.argwhere(safe)}
+    rounds = 0
+    while todo:
+        ok = holds({(i, j, 0) for i, j in todo})
+        failing = sorted((i, j) for (i, j, _), o in ok.items() if not o)
+        failed_once.update(failing)
+        rounds += 1
+        if max_rounds is not None and rounds >= max_rounds:
+            for c in failing:
+                safe[c] = False
+            given_up += len(failing)
+            if failing:
+                message(f"schedule: cell check round {rounds} (the last, cell_rounds): {len(todo)} cells checked, "
+                        f"{len(failing)} failed and given up (no safe gain); {passes[0]} passes")
+            break
+        # bisection of each failing cell's drop: lo fails, hi holds (None: not found yet)
+        lo = {c: 0 for c in failing}
+        bottom = {c: int(K[corners(*c)].min()) for c in failing}
+        hi: dict = {}
+        for c in failing:
+            if bottom[c] == 0:                      # nothing left to lower: no safe gain here
+                safe[c] = False
                 given_up += 1
-            else:
-                lower.update(corners)
+        search = [c for c in failing if bottom[c] > 0]
+        if search:
+            ok = holds({(*c, d) for c in search for d in {1, bottom[c]}})
+            for c in search:
+                if ok[(*c, 1)]:
+                    hi[c] = 1
+                elif ok[(*c, bottom[c])]:
+                    lo[c], hi[c] = 1, bottom[c]
+                else:
+                    safe[c] = False
+                    given_up += 1
+        while True:
+            open_ = [c for c in hi if hi[c] - lo[c] > 1]
+            if not open_:
+                break
+            mid = {c: (lo[c] + hi[c]) // 2 for c in open_}
+            ok = holds({(*c, mid[c]) for c in open_})
+            for c in open_:
+                if ok[(*c, mid[c])]:
+                    hi[c] = mid[c]
+                else:
+                    lo[c] = mid[c]
+        if failing:
+            message(f"schedule: cell check round {rounds}: {len(todo)} cells checked, {len(failing)} failed, "
+                    f"{len(failing) - len(hi)} given up, drops of {sorted(set(hi.values()))} beta steps; "
+                    f"{passes[0]} passes so far")
+        drop = np.zeros(K.shape, int)
+        for c, d in hi.items():
+            ci, cj = corners(*c)
+            drop[ci, cj] = np.maximum(drop[ci, cj], d)
+        K -= drop
         todo = set()
-        for (i, j) in lower:
-            K[i, j] -= 1
-            lowered_pts.add((i, j))
+        for i, j in np.argwhere(drop > 0):
+            lowered_pts.add((int(i), int(j)))
             todo.update((a, b) for a in (i - 1, i) for b in (j - 1, j)
                         if 0 <= a < safe.shape[0] and 0 <= b < safe.shape[1] and safe[a, b])
-    return K, safe, len(failed_once), len(lowered_pts), given_up
+    return K, safe, len(failed_once), len(lowered_pts), given_up, passes[0]
 
 
 def _free_in_the_air(params: Params) -> Params:
@@ -294,7 +370,8 @@ def _free_in_the_air(params: Params) -> Params:
 def schedule(loop, P_gain=None, D_gain=None, *, beta_range=(0.1, 8.0), beta_tol: float = 0.02,
              alpha=None, alpha_values=None, requirements=("stable", "pm"), leg=None,
              leg_mode: str = "segment", uncertainty=None, scheduler=None, progress: bool | None = None,
-             max_per_axis: int = MAX_LEG_POINTS, cell_subdivisions: int = CELL_SUBDIVISIONS) -> Schedule:
+             max_per_axis: int = MAX_LEG_POINTS, cell_subdivisions: int = CELL_SUBDIVISIONS,
+             cell_rounds: int | None = CELL_ROUNDS) -> Schedule:
     """The largest robust beta (and alpha) for every impedance of the grid.
 
     Parameters
@@ -328,6 +405,10 @@ def schedule(loop, P_gain=None, D_gain=None, *, beta_range=(0.1, 8.0), beta_tol:
     cell_subdivisions : int
         Density of the cell check (module docstring, "Between grid points"): each cell is
         checked on (cell_subdivisions + 1)^2 points; default :data:`CELL_SUBDIVISIONS` (5 x 5).
+    cell_rounds : int or None
+        Rounds of the cell check; in the last, cells that still fail are given up (no safe
+        gain) instead of lowering shared corners; default :data:`CELL_ROUNDS` (3); None: until
+        no cell fails.
 
     Returns
     -------
@@ -346,6 +427,10 @@ def schedule(loop, P_gain=None, D_gain=None, *, beta_range=(0.1, 8.0), beta_tol:
             or not 1 <= cell_subdivisions <= 64:
         raise ParameterError(f"cell_subdivisions = {cell_subdivisions!r}; allowed: an integer 1..64 (sub-grid "
                              "intervals per cell side of the cell check)")
+    if cell_rounds is not None and (isinstance(cell_rounds, bool) or not isinstance(cell_rounds, (int, np.integer))
+                                    or not 1 <= cell_rounds <= 10_000):
+        raise ParameterError(f"cell_rounds (--cell-rounds) = {cell_rounds!r}; allowed: an integer 1..10000 or None (rounds of the "
+                             "cell check)")
     fine, coarse = beta_grid(beta_range, beta_tol)
     ctrl = params.controller
     if alpha_values is None:
@@ -453,9 +538,9 @@ def schedule(loop, P_gain=None, D_gain=None, *, beta_range=(0.1, 8.0), beta_tol:
     K = K.reshape(shape)
     runner = _Runner(scheduler, progress)
     try:
-        K_table, cell_safe, n_failed, n_lowered_pts, n_given_up = _check_cells(
+        K_table, cell_safe, n_failed, n_lowered_pts, n_given_up, n_passes = _check_cells(
             runner, params, configs, P, D, fine, K, np.nan_to_num(alpha_out.reshape(shape)), req, options,
-            int(cell_subdivisions))
+            int(cell_subdivisions), None if cell_rounds is None else int(cell_rounds))
     finally:
         runner.close()
     table_beta = np.where(K_table >= 0, fine[np.maximum(K_table, 0)], np.nan)
@@ -473,15 +558,18 @@ def schedule(loop, P_gain=None, D_gain=None, *, beta_range=(0.1, 8.0), beta_tol:
             "torque_bandwidth_beta_1_rad_s": bw_1, "lowered_by_point_check": lowered,
             "cell_subdivisions": int(cell_subdivisions), "cells_failed_check": n_failed,
             "grid_points_lowered_by_cell_check": n_lowered_pts, "cells_given_up": n_given_up,
-            "cells_safe": int(cell_safe.sum()), "cells": int(cell_safe.size),
+            "cells_safe": int(cell_safe.sum()), "cells": int(cell_safe.size), "cell_check_passes": n_passes,
+            "cell_rounds": cell_rounds,
             "beta_at_limit": int(at_limit.sum()),
             "cell_check": f"Each cell with four feasible corners was checked on a {cell_subdivisions + 1} x "
                           f"{cell_subdivisions + 1} sub-grid (corners and edges included) at {len(configs)} leg "
                           f"configurations ({ends[0]}..{ends[1]}, {leg_mode}), at the interpolated alpha and "
                           "at the two beta-grid values bracketing the interpolated beta (ratio "
                           f"{fine[1] / fine[0]:.4g}), with the requirements {'+'.join(req)} decided exactly "
-                          "(haa_sym.analysis.decide.decide_points); failing cells had their corner values "
-                          "lowered until it held. Points between the sub-grid's are not verified: sampling "
+                          "(haa_sym.analysis.decide.decide_points); a failing cell's corner values were "
+                          "lowered together by a drop bisected between a failing and a holding one, and every "
+                          "cell was checked again at its final corners; cells still failing in round "
+                          f"{cell_rounds} were given up. Points between the sub-grid's are not verified: sampling "
                           "cannot guarantee them.",
             "options": options.to_dict()}
     return Schedule(P, D, beta_out.reshape(shape), alpha_out.reshape(shape), bw_out.reshape(shape),

@@ -17,8 +17,9 @@ configuration of the actuator file and at its nominal values:
   which the torque does not see, is allowed, as in :func:`haa_sym.analysis.torque.torque_bandwidth_map`),
   and, as the paper also required, stable for every velocity-compensation gain alpha in
   ``stable_alpha`` (default 0 to 1, sampled at 11 values; margins are not required there);
-* the -3 dB bandwidth of T / T_ref (:func:`haa_sym.analysis.torque.torque_bandwidth`) exists
-  below Nyquist;
+* the bandwidth (:func:`haa_sym.analysis.torque.torque_bandwidth`, by ``bandwidth``: the
+  tracking error's -3 dB point by default, the paper's -3 dB of |T / T_ref| as an option)
+  exists below Nyquist;
 * optionally (``passive_at``, default none: Sec. 3.2 has no such target) the port impedance Z is
   passive (:func:`haa_sym.analysis.passivity.passivity`: stable, corrected phase within +-90 deg)
   at the given impedance gains (P_gain, D_gain), at the configurations ``passive_configurations``
@@ -69,7 +70,8 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from haa_sym.analysis.passivity import passivity
-from haa_sym.analysis.torque import step_response, torque_bandwidth, torque_loop_margins
+from haa_sym.analysis.torque import (BANDWIDTH_DEFINITIONS, load_mode, step_figures, step_response, torque_bandwidth,
+                                     torque_loop_margins)
 from haa_sym.errors import ParameterError
 from haa_sym.loop import ClosedLoop, LoopOptions
 from haa_sym.model.params import parse_params
@@ -122,6 +124,11 @@ class TuneOptions:
     passive_configurations : tuple of str
         Where ``passive_at`` is required: ``"nominal"`` and / or configuration names of the file
         (default ("nominal",)).
+    bandwidth : {"tracking", "magnitude"}
+        The bandwidth maximised and reported (:data:`haa_sym.analysis.torque.BANDWIDTH_DEFINITIONS`):
+        ``"tracking"`` (default), where the tracking error |1 - H_T| first reaches -3 dB;
+        ``"magnitude"``, the paper's -3 dB of |H_T| (which a load's anti-resonance or resonance
+        can place at the load's mode instead of where the loop stops tracking).
     """
 
     pm_deg: float = PM_TARGET_DEG
@@ -137,6 +144,7 @@ class TuneOptions:
     step_duration: float = 5.0
     passive_at: tuple = ()
     passive_configurations: tuple = (NOMINAL,)
+    bandwidth: str = "tracking"
 
     def __post_init__(self):
         def bad(name, allowed):
@@ -149,6 +157,8 @@ class TuneOptions:
             bad("pm_deg", "below 180 deg")
         if self.objective not in OBJECTIVES:
             bad("objective", list(OBJECTIVES))
+        if self.bandwidth not in BANDWIDTH_DEFINITIONS:
+            bad("bandwidth", list(BANDWIDTH_DEFINITIONS))
         for name in ("lead_range", "integral_range"):
             r = getattr(self, name)
             if (not isinstance(r, tuple) or len(r) != 2 or not all(isinstance(x, (int, float)) for x in r)
@@ -187,12 +197,15 @@ class GainReport:
     """One PI (``P_t0`` V/Nm, ``I_t0`` V/(Nm s), at the file's beta) judged at every configuration.
 
     Arrays are per configuration (the order of :attr:`TuneResult.configurations`):
-    ``bandwidth_rad_s`` (-3 dB of T/T_ref; NaN unstable / undefined), ``pm_deg`` (min |PM| over
-    the gain crossovers, deg; inf: none), ``gm_db`` (min |GM| over the phase crossovers, dB; inf:
-    none), ``stable`` (the torque loop alone, and over ``stable_alpha``), ``meets`` (every
-    target), ``rise_time_s`` (10-90 %) and ``t90_s`` (first reaching 90 % of the final value) of
-    the unit torque step in ``step_duration`` (NaN: not reached), ``passive`` (the port passive at
-    every point of ``passive_at``; True when there are none).
+    ``bandwidth_rad_s`` (by :attr:`TuneOptions.bandwidth`; NaN unstable / undefined), ``pm_deg``
+    (min |PM| over the gain crossovers, those below the analysed band included, deg; inf: none),
+    ``gm_db`` (min |GM| over the phase crossovers, dB; inf: none), ``stable`` (the torque loop
+    alone, and over ``stable_alpha``), ``meets`` (every target); of the unit torque step in
+    ``step_duration`` (:func:`haa_sym.analysis.torque.step_figures`; NaN: not reached / not
+    settled): ``t90_s`` (from then on at or above 90 % of the final value), ``rise_time_s``
+    (the last 10 % before it to it), ``settling_time_s`` (last leaving +-5 %); ``passive`` (the
+    port passive at every point of ``passive_at``; True when there are none); ``load_modes``
+    (per configuration a :class:`haa_sym.analysis.torque.LoadMode` near the bandwidth, or None).
     """
 
     P_t0: float
@@ -205,6 +218,8 @@ class GainReport:
     rise_time_s: np.ndarray
     t90_s: np.ndarray
     passive: np.ndarray
+    settling_time_s: np.ndarray = None
+    load_modes: tuple = ()
 
     @property
     def worst_bandwidth(self) -> float:
@@ -255,11 +270,28 @@ class TuneResult:
     options: TuneOptions
     meta: dict = field(default_factory=dict)
 
+    @property
+    def unchanged(self) -> bool:
+        """The file's PI is already the optimum found: the tuned gains equal the file's."""
+        return self.after.P_t0 == self.before.P_t0 and self.after.I_t0 == self.before.I_t0
+
+    @property
+    def within_tolerance(self) -> bool:
+        """The tuned gains differ from the file's by at most the search's tolerance (``rtol``,
+        relative, each gain): the file was already at the optimum the search can resolve."""
+        tol = self.options.rtol
+        return all(abs(a - b) <= tol * max(abs(a), abs(b)) for a, b in
+                   ((self.after.P_t0, self.before.P_t0), (self.after.I_t0, self.before.I_t0)))
+
     def to_json(self) -> dict:
         """Plain JSON data (NaN and inf as null)."""
         def num(x):
             x = float(x)
             return x if math.isfinite(x) else None
+
+        def mode(m):
+            return None if m is None else {"kind": m.kind, "omega_rad_s": m.omega, "depth_db": m.depth_db,
+                                           "text": m.describe()}
 
         def report(g: GainReport) -> dict:
             return {"P_t0_V_per_Nm": g.P_t0, "I_t0_V_per_Nm_s": g.I_t0,
@@ -267,9 +299,16 @@ class TuneResult:
                     "configurations": {c: {"bandwidth_rad_s": num(g.bandwidth_rad_s[i]), "pm_deg": num(g.pm_deg[i]),
                                            "gm_db": num(g.gm_db[i]), "stable": bool(g.stable[i]),
                                            "meets_targets": bool(g.meets[i]), "rise_time_s": num(g.rise_time_s[i]),
-                                           "t90_s": num(g.t90_s[i]), "passive_at_points": bool(g.passive[i])}
+                                           "t90_s": num(g.t90_s[i]), "settling_time_5pct_s": num(g.settling_time_s[i]),
+                                           "load_mode": mode(g.load_modes[i]),
+                                           "passive_at_points": bool(g.passive[i])}
                                        for i, c in enumerate(self.configurations)}}
-        return {"targets": {"pm_deg": self.options.pm_deg, "gm_db": self.options.gm_db,
+        return {"bandwidth_definition": {"name": self.options.bandwidth,
+                                         "text": BANDWIDTH_DEFINITIONS[self.options.bandwidth]},
+                "step_figures": "t90: from then on at or above 90 % of the final value; rise time: the last "
+                                "10 % before it to it; settling: last leaving +-5 % (s, unit torque step)",
+                "unchanged": self.unchanged, "within_tolerance_of_the_file": self.within_tolerance,
+                "targets": {"pm_deg": self.options.pm_deg, "gm_db": self.options.gm_db,
                             "stable_alpha": None if self.options.stable_alpha is None else list(self.options.stable_alpha),
                             "passive_at": [list(q) for q in self.options.passive_at],
                             "passive_configurations": list(self.options.passive_configurations)},
@@ -330,7 +369,7 @@ class _Problem:
             fail = self._fails(k, tau, b)
             if fail:
                 return False, float("nan"), fail
-            bws[k] = torque_bandwidth(self.loop(k, tau), beta=b)
+            bws[k] = torque_bandwidth(self.loop(k, tau), beta=b, definition=self.opts.bandwidth)
             if not np.isfinite(bws[k]):
                 return False, float("nan"), ("bandwidth undefined", k)
         per_cfg = bws[self.index]
@@ -342,7 +381,10 @@ class _Problem:
         st = loop.stability(0.0, 0.0, b)
         if not bool((st.stable | st.marginal).all()):
             return ("stability", k)
-        m = torque_loop_margins(loop, beta=b)
+        try:
+            m = torque_loop_margins(loop, beta=b)
+        except ParameterError:          # a crossover below the extended band: no use as a torque loop
+            return ("pm", k)
         if m.distance_deg < self.opts.pm_deg:
             return ("pm", k)
         if m.gain_margins_db.size and float(np.abs(m.gain_margins_db).min()) < self.opts.gm_db:
@@ -370,7 +412,8 @@ def evaluate_gains(params, P_t0: float, I_t0: float, options: LoopOptions | None
             raise ParameterError(f"{name} = {v!r}; allowed: a finite gain >= 0")
     prob = _Problem(params, options, opts)
     n = len(prob.configurations)
-    out = {k: np.full(n, np.nan) for k in ("bw", "pm", "gm", "rise", "t90")}
+    out = {k: np.full(n, np.nan) for k in ("bw", "pm", "gm", "rise", "t90", "settle")}
+    modes = [None] * n
     stable, meets, passive = np.zeros(n, bool), np.zeros(n, bool), np.ones(n, bool)
     for i, p in enumerate([params] + [params.configuration(c) for c in params.configurations]):
         loop = ClosedLoop(p.with_values(P_t0=float(P_t0), I_t0=float(I_t0)), options)
@@ -384,18 +427,17 @@ def evaluate_gains(params, P_t0: float, I_t0: float, options: LoopOptions | None
         out["pm"][i] = m.distance_deg
         out["gm"][i] = float(np.abs(m.gain_margins_db).min()) if m.gain_margins_db.size else np.inf
         if bool((st.stable | st.marginal).all()):
-            out["bw"][i] = torque_bandwidth(loop)
-            s = step_response(loop, duration=opts.step_duration)
-            out["rise"][i] = s.rise_time
-            reached = np.flatnonzero(s.T >= 0.9 * s.final_value)
-            out["t90"][i] = s.t[reached[0]] if reached.size else np.nan
+            out["bw"][i] = torque_bandwidth(loop, definition=opts.bandwidth)
+            modes[i] = load_mode(loop, out["bw"][i])
+            f = step_figures(step_response(loop, duration=opts.step_duration))
+            out["rise"][i], out["t90"][i], out["settle"][i] = f["rise_time_s"], f["t90_s"], f["settling_time_s"]
         if prob.passive_P.size:
             passive[i] = bool(passivity(loop, prob.passive_P, prob.passive_D, progress=False).passive.all())
         meets[i] = (ok and out["pm"][i] >= opts.pm_deg and out["gm"][i] >= opts.gm_db
                     and np.isfinite(out["bw"][i])
                     and (passive[i] or prob.configurations[i] not in opts.passive_configurations))
     return GainReport(float(P_t0), float(I_t0), out["bw"], out["pm"], out["gm"], stable, meets, out["rise"],
-                      out["t90"], passive)
+                      out["t90"], passive, out["settle"], tuple(modes))
 
 
 # ----------------------------------------------------------------------------- the search
@@ -573,7 +615,8 @@ def rule_text(result: TuneResult, key: str, was: str) -> str:
     shape = ("a pure integrator (P_t0 = 0)" if a.P_t0 == 0 else f"PI zero I_t0/P_t0 = {_num(1 / tau, 'rad/s')}")
     return (f"Rule (haa-sym tune, {result.meta.get('tuned_utc', '')[:10]}): the torque PI (at beta = "
             f"{result.meta['params']['controller']['beta']:g}, alpha = {result.meta['params']['controller']['alpha']:g}) "
-            f"of widest {'worst-case' if o.objective == 'worst' else 'nominal'} -3 dB torque bandwidth, impedance "
+            f"of widest {'worst-case' if o.objective == 'worst' else 'nominal'} torque bandwidth ({o.bandwidth}: "
+            f"{BANDWIDTH_DEFINITIONS[o.bandwidth]}), impedance "
             f"loop open, with PM >= {o.pm_deg:g} deg and GM >= {o.gm_db:g} dB (focchi2016 Sec. 3.2){alpha} at the "
             f"nominal values and every configuration{passive}; {shape}. Achieved: {per}; active constraint: {result.active}. "
             f"Before: worst-case bandwidth {_num(b.worst_bandwidth, 'rad/s')}, targets met at "

@@ -23,6 +23,7 @@ from haa_sym.analysis.sweep import blas_limits
 from haa_sym.errors import ParameterError
 from haa_sym.fit.closed import torque_loop_model
 from haa_sym.fit.model import open_loop_model, sample, simulate
+from haa_sym.io.budget import check_memory, fit_bytes
 from haa_sym.io.logs import OUTPUTS, Log
 
 __all__ = ["FitOptions", "FitResult", "Experiment", "identify", "INPUT_MODES"]
@@ -202,6 +203,11 @@ def identify(experiments: list[Experiment], keys: tuple[str, ...], inputs: tuple
                 raise ParameterError(f"--log {e.log.name!r}: {e.log.duration:.3g} s long, {opt.min_periods:g} periods "
                                      f"of the model's slowest mode are {opt.min_periods * slow:.3g} s; allowed: a "
                                      "longer log")
+        # before the fit allocates its trajectories and sensitivities (a 10 M-row log reached
+        # 9.9 GB and died): refused in one line when over the memory budget
+        check_memory(sum(fit_bytes(e.log.samples, m.Phi.shape[0], len(outputs), len(keys))
+                         for e, m in zip(experiments, models0)), f"fitting {len(keys)} key(s) to "
+                     f"{sum(e.log.samples for e in experiments)} samples")
         U = [np.column_stack([e.log.signals[i] for i in inputs]) for e in experiments]
         Y = [np.column_stack([e.log.signals[o] for o in outputs]) for e in experiments]
         sigma = [np.maximum(np.std(y, axis=0), 1e-300) for y in Y]

@@ -25,6 +25,7 @@ the port torque. ``torque_ref`` is the file's torque loop closed around the plan
 from __future__ import annotations
 
 import functools
+import math
 from dataclasses import dataclass
 
 import casadi as ca
@@ -47,7 +48,7 @@ def _ad_function(topology: Actuator) -> ca.Function:
     if entry is not None:
         f = ca.Function.deserialize((ev.code.dir / f"{entry['function']}.casadi").read_text())
     else:
-        f = ca.Function.deserialize(compile_actuator(topology, "vm", quiet=True).casadi_file.read_text())
+        f = compile_actuator(topology, "vm", quiet=True).function()
     p = ca.MX.sym("p", len(topology.parameter_keys))
     A, B, C, VC0 = f(p)
     jac = [ca.jacobian(ca.vec(M), p) for M in (A, B, C, VC0)]
@@ -177,7 +178,14 @@ def sample(model: PlantModel, Ts: float) -> Sampled:
     k = n + m
     X = np.zeros((k, k))
     X[:n, :n], X[:n, n:] = model.A, model.B
-    E = scipy.linalg.expm(X * Ts)
+    with np.errstate(over="ignore", invalid="ignore"):
+        E = scipy.linalg.expm(X * Ts) if np.all(np.isfinite(X * Ts)) else np.full((k, k), np.nan)
+    if not np.all(np.isfinite(E)):
+        # time stamps far from seconds (1e97 s a sample): the exponential overflows; LAPACK
+        # would refuse the next step with a LinAlgError traceback
+        raise ParameterError(f"--log: mean sampling period {Ts:.6g} s: the plant sampled at it overflows (the "
+                             f"modes decay in about {_slowest(model.A):.3g} s); allowed: a log whose time column "
+                             "is in seconds")
     p = model.dA.shape[0]
     dPhi, dGamma = np.zeros((p, n, n)), np.zeros((p, n, m))
     for j in range(p):
@@ -187,6 +195,13 @@ def sample(model: PlantModel, Ts: float) -> Sampled:
         F = scipy.linalg.expm(M * Ts)
         dPhi[j], dGamma[j] = F[:n, k:k + n], F[:n, k + n:]
     return Sampled(E[:n, :n], E[:n, n:], model.C, model.D, dPhi, dGamma, model.dC, model.dD, Ts)
+
+
+def _slowest(A: np.ndarray) -> float:
+    """The slowest stable mode's time constant of ``A``, s (inf for none)."""
+    re = -np.linalg.eigvals(A).real
+    re = re[re > 0]
+    return float(1 / re.min()) if re.size else math.inf
 
 
 def _first_order(a: complex, d: np.ndarray) -> np.ndarray:

@@ -10,9 +10,15 @@ e.g. ``HAA_SYM_MEMORY_BUDGET=2G``). The estimates are peak bytes measured with `
 * a sweep over gain points (:mod:`haa_sym.analysis.sweep`): 30-32 B per point and frequency of the block
   evaluated at once (``regions.CHUNK`` points in a region map, every point in ``passivity``),
   plus 44 B per point for the result arrays of a region map;
-* a simulation (:mod:`haa_sym.analysis.simulate`): 167-238 B per sample (the inputs, the state
-  trace, the columns; the friction integrator's the most), and ``haa-sym simulate`` 1.04-1.14 kB
-  per sample with its CSV text and figure (the rows are formatted strings).
+* a simulation (:mod:`haa_sym.analysis.simulate`) with its limit-cycle check: 188-214 B per
+  sample (the inputs, the state trace, the columns, and the check's autocorrelation, 58-81 B of
+  that: FFT buffers of 2 to 4 times the trace's last half; measured 2026-11-26 at 1 M samples
+  with the supply and quantisers, 50,000 with friction), and ``haa-sym simulate`` 1.04-1.14 kB
+  per sample with its CSV text and figure (the rows are formatted strings). The check used to
+  take the Theil-Sen slope over every pair of cycles (6.9 GB at 1 M samples, not counted); it
+  now uses at most :data:`haa_sym.analysis.oscillation.THEIL_SEN_MAX_POINTS` cycles;
+* reading a CSV log (:mod:`haa_sym.io.logs`): 5.1 B per byte of the file;
+* an identification's fit (:func:`fit_bytes`): 1.1-2.3 kB per sample, by states, outputs and keys.
 
 Example
 -------
@@ -28,13 +34,23 @@ import re
 from haa_sym.errors import ParameterError
 
 __all__ = ["MEMORY_BUDGET_BYTES", "memory_budget", "check_memory", "sweep_bytes", "BYTES_PER_OMEGA",
-           "BYTES_PER_POINT", "BYTES_PER_CELL", "BYTES_PER_SAMPLE", "CSV_BYTES_PER_SAMPLE"]
+           "BYTES_PER_POINT", "BYTES_PER_CELL", "BYTES_PER_SAMPLE", "CSV_BYTES_PER_SAMPLE", "fit_bytes",
+           "LOG_BYTES_PER_FILE_BYTE"]
 
 BYTES_PER_OMEGA = 2048      # loop coefficients, per frequency (measured 1.6-1.7 kB)
 BYTES_PER_POINT = 64        # result arrays of a region map, per gain point (measured 44 B)
 BYTES_PER_CELL = 40         # sweep products, per gain point x frequency (measured 30-32 B)
-BYTES_PER_SAMPLE = 256      # a simulation, per sample (measured 167-238 B)
+BYTES_PER_SAMPLE = 256      # a simulation with its limit-cycle check, per sample (measured 188-214 B)
 CSV_BYTES_PER_SAMPLE = 1280  # haa-sym simulate with --out and --plot, per sample (measured 1.04-1.14 kB)
+# reading a CSV log, per byte of the file: its text, the lines and numpy's parse (measured 5.1 B on
+# a 33 MB, 1,000,000-row log)
+LOG_BYTES_PER_FILE_BYTE = 6
+# an output-error fit, per sample: FIT_BYTES_PER_SAMPLE + FIT_BYTES_PER_TERM x (states + outputs)
+# x (1 + keys), the simulated states and outputs with their sensitivities to every key. Peak RSS
+# measured (haa-sym identify, 300,000 samples): harmonic drive (5 states) 1 output 2 keys 1.09 kB,
+# 2 outputs 4 keys 2.26 kB; HyQ (7 states) 1 output 2 keys 1.40 kB; the estimate is 1.3-1.5x above
+FIT_BYTES_PER_SAMPLE = 200
+FIT_BYTES_PER_TERM = 80
 
 
 def _physical_memory() -> int:
@@ -82,6 +98,12 @@ def check_memory(nbytes: float, what: str) -> None:
     if nbytes > budget:
         raise ParameterError(f"{what} would need about {_human(nbytes)} of memory; allowed: at most "
                              f"{_human(budget)} (the memory budget; set {_ENV} to change it)")
+
+
+def fit_bytes(n_samples: int, n_states: int, n_outputs: int, n_keys: int) -> int:
+    """Peak bytes of an output-error fit (:mod:`haa_sym.fit.identify`) of ``n_keys`` keys over
+    ``n_samples`` samples of a model with ``n_states`` states and ``n_outputs`` outputs."""
+    return n_samples * (FIT_BYTES_PER_SAMPLE + FIT_BYTES_PER_TERM * (n_states + n_outputs) * (1 + n_keys))
 
 
 def sweep_bytes(n_points: int, n_omega: int, chunk: int | None = None) -> int:

@@ -16,14 +16,17 @@ field, the value and what is allowed.
 """
 from __future__ import annotations
 
+import collections
 import csv
 import hashlib
+import os
 from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
 
 from haa_sym.errors import ParameterError
+from haa_sym.io.budget import LOG_BYTES_PER_FILE_BYTE, check_memory
 from haa_sym.io.inputs import read_bytes
 
 __all__ = ["INPUTS", "OUTPUTS", "UNIFORM_JITTER", "MAX_JITTER", "BIAS_JITTER", "Log", "read_log"]
@@ -63,6 +66,11 @@ class Log:
 
 
 def _read_rows(path: Path, label: str) -> tuple[list[str], np.ndarray, bytes]:
+    try:
+        size = os.stat(path).st_size
+    except OSError:
+        size = 0                        # read_bytes says what is wrong with the path
+    check_memory(size * LOG_BYTES_PER_FILE_BYTE, f"{label}: reading its {size} bytes")
     raw = read_bytes(path, "--log", where=label)
     # utf-8-sig: a spreadsheet's export starts with a byte-order mark, which is no part of "time"
     text = raw.decode("utf-8-sig", errors="replace").splitlines()
@@ -76,17 +84,39 @@ def _read_rows(path: Path, label: str) -> tuple[list[str], np.ndarray, bytes]:
     data = _fast_body(lines[1:], len(header))
     if data is not None:
         return header, data, raw
-    rows = list(csv.reader(lines))
+    reader = csv.reader(lines)
+    try:
+        rows = list(reader)
+    except csv.Error as exc:        # e.g. a field over csv's 128 KiB limit: no number is that long
+        raise ParameterError(f"{label}: line {reader.line_num} is not CSV ({exc}); allowed: comma-separated "
+                             "numbers") from None
     body = rows[1:]
     for i, r in enumerate(body):
         if len(r) != len(header):
             raise ParameterError(f"{label}: data row {i + 1} has {len(r)} fields, the header {len(header)}; "
                                  "allowed: one value per column")
-    try:
-        data = np.array([[float(x) if x.strip() else np.nan for x in r] for r in body], dtype=float)
-    except ValueError as exc:
-        raise ParameterError(f"{label}: {exc}; allowed: numbers (empty or nan fields are refused as NaN rows)") from None
-    return header, data.reshape(len(body), len(header)), raw
+    data = np.empty((len(body), len(header)))
+    for i, r in enumerate(body):
+        for j, x in enumerate(r):
+            try:
+                data[i, j] = float(x) if x.strip() else np.nan
+            except ValueError:
+                raise ParameterError(f"{label}: data row {i + 1}, column {header[j]!r}: {_short(x)!r} is not a "
+                                     "number; allowed: numbers (empty or nan fields are refused as NaN rows)") from None
+    return header, data, raw
+
+
+def _short(text: str, n: int = 40) -> str:
+    """``text`` cut to ``n`` characters for a message (a 1 MB field is not quoted whole)."""
+    return text if len(text) <= n else text[:n] + f"... ({len(text)} characters)"
+
+
+def _names(items, n: int = 10) -> str:
+    """The first ``n`` of ``items`` for a message, and how many more: a 100,000-column header is
+    not one 1 MB line."""
+    items = list(items)
+    shown = ", ".join(repr(_short(str(x))) for x in items[:n])
+    return f"[{shown}{f', ... ({len(items) - n} more)' if len(items) > n else ''}]"
 
 
 def _fast_body(lines: list[str], width: int) -> np.ndarray | None:
@@ -131,13 +161,14 @@ def read_log(path: str | Path, inputs: tuple[str, ...], outputs: tuple[str, ...]
     allowed = ("time",) + INPUTS + tuple(o for o in OUTPUTS if o not in INPUTS)
     unknown = [h for h in header if h not in allowed]
     if unknown:
-        raise ParameterError(f"{label}: unknown column(s) {unknown}; allowed: {list(allowed)}")
-    dup = sorted({h for h in header if header.count(h) > 1})
+        raise ParameterError(f"{label}: unknown column(s) {_names(unknown)}; allowed: {list(allowed)}")
+    # counted once (header.count per column is quadratic: minutes for a 100,000-column header)
+    dup = sorted(h for h, n in collections.Counter(header).items() if n > 1)
     if dup:
         raise ParameterError(f"{label}: column(s) {dup} given twice; allowed: each column once")
     missing = [c for c in ("time",) + needed if c not in header]
     if missing:
-        raise ParameterError(f"{label}: missing column(s) {missing} (it has {header}); allowed: a header "
+        raise ParameterError(f"{label}: missing column(s) {missing} (it has {_names(header)}); allowed: a header "
                              f"with time and {list(needed)}")
     cols = {h: data[:, i] for i, h in enumerate(header) if h in ("time",) + needed}
     bad = np.flatnonzero(~np.all(np.isfinite(np.column_stack(list(cols.values()))), axis=1))

@@ -41,7 +41,7 @@ def read_measured(path, field: str = "--measured") -> MeasuredPoints:
     text = read_text(path, field, encoding="utf-8-sig", limit=MAX_BYTES, where=where)
     rows = csv.reader(io.StringIO(text))
     header, P, D, out = None, [], [], []
-    for row in rows:
+    for row in _rows(rows, where, allowed):
         line = rows.line_num
         if not any(c.strip() for c in row):
             continue
@@ -49,10 +49,10 @@ def read_measured(path, field: str = "--measured") -> MeasuredPoints:
             header = [c.strip() for c in row]
             missing = [c for c in COLUMNS if c not in header]
             if missing:
-                raise ParameterError(f"{where} line {line}: header {header} lacks {missing}; {allowed}")
+                raise ParameterError(f"{where} line {line}: header {_short(header)} lacks {missing}; {allowed}")
             twice = [c for c in COLUMNS if header.count(c) > 1]
             if twice:                       # which of the two is the experiment's is not ours to guess
-                raise ParameterError(f"{where} line {line}: header {header} names {twice[0]} "
+                raise ParameterError(f"{where} line {line}: header {_short(header)} names {twice[0]} "
                                      f"{header.count(twice[0])} times; {allowed}, each once")
             idx = [header.index(c) for c in COLUMNS]
             continue
@@ -66,11 +66,27 @@ def read_measured(path, field: str = "--measured") -> MeasuredPoints:
                 x = math.nan
             if not (math.isfinite(x) and x >= 0):
                 unit = "Nm/rad" if name == "P_gain" else "Nms/rad"
-                raise ParameterError(f"{where} line {line}: {name} = {v!r}; allowed: a finite number >= 0 ({unit})")
+                raise ParameterError(f"{where} line {line}: {name} = {_short(v)!r}; allowed: a finite number >= 0 ({unit})")
             lst.append(x)
         if vals[2] not in OUTCOMES:
-            raise ParameterError(f"{where} line {line}: outcome = {vals[2]!r}; allowed: one of {list(OUTCOMES)}")
+            raise ParameterError(f"{where} line {line}: outcome = {_short(vals[2])!r}; allowed: one of {list(OUTCOMES)}")
         out.append(vals[2])
     if header is None or not out:
         raise ParameterError(f"{where}: no {'header' if header is None else 'rows'}; {allowed} and at least one row")
     return MeasuredPoints(np.array(P), np.array(D), np.array(out), str(path))
+
+
+def _rows(reader, where: str, allowed: str):
+    """The rows of ``reader``; a line that is not CSV (a field over csv's 128 KiB limit, a NUL)
+    is one line naming it."""
+    try:
+        yield from reader
+    except csv.Error as exc:
+        raise ParameterError(f"{where} line {reader.line_num}: not CSV ({exc}); {allowed}") from None
+
+
+def _short(v, n: int = 200):
+    """``v`` (a text or a header list) cut for a message: a 1 MB field is not quoted whole."""
+    if isinstance(v, list):
+        return v if len(v) <= 10 else v[:10] + [f"... ({len(v) - 10} more)"]
+    return v if len(v) <= n else v[:n] + f"... ({len(v)} characters)"

@@ -18,7 +18,7 @@ from haa_sym.errors import ParameterError  # noqa: E402
 from haa_sym.io.outputs import transaction  # noqa: E402
 
 __all__ = ["plot_region", "plot_region_panels", "plot_corrected_phase", "plot_steps",
-           "plot_contact", "plot_describing", "save_figure", "check_title", "plot_identify"]
+           "plot_contact", "gains_text", "plot_torque_bandwidth", "STYLE", "plot_describing", "save_figure", "check_title", "plot_identify"]
 
 # Figs. 8-11: white stable, light grey stable with PM < 30 deg, dark unstable.
 REGION_COLORS = ListedColormap(["#ffffff", "#c8c8c8", "#3a3a3a"])
@@ -26,6 +26,18 @@ REGION_COLORS = ListedColormap(["#ffffff", "#c8c8c8", "#3a3a3a"])
 
 # Where a result is infeasible (no robust gain, fails a requirement): one colour in every panel.
 INFEASIBLE_COLOR = "#9a9a9a"
+
+# One visual language for every figure: the measured / simulated trace black, a reference signal
+# tab:orange, what is unstable or exceeds a bound tab:red, a derived second signal tab:blue, the
+# recorded data under a model wide light grey, a model before a change (fit, tuning) red dashed
+# and after it blue, reference levels mid grey; a figure's title 11 pt (smaller when it has
+# several lines), a panel's 9 pt, legends 8 pt, below the axes ("outside lower center") when
+# they list more than one panel's curves.
+STYLE = {"measured": "k", "prediction": "tab:orange", "unstable": "tab:red", "second": "tab:blue",
+         "data": "0.75", "reference": "0.6", "before": "tab:red", "after": "tab:blue", "title_size": 11,
+         "panel_title_size": 9, "legend_size": 8, "legend_loc": "outside lower center"}
+# The torque-bandwidth contours (rad/s) of plot_torque_bandwidth, marked on its colour bar.
+BANDWIDTH_CONTOURS = (10, 20, 50, 100, 200)
 
 
 def _wrap(title: str, width_in: float, size: float = 10) -> str:
@@ -106,16 +118,30 @@ def plot_region(m, ax=None, title: str | None = None, passivity: bool = True, bo
 _CURVE_STYLES = {"complex": dict(color="tab:red", lw=1.4), "z=1": dict(color="tab:orange", lw=1.4, ls="-."),
                  "z=-1": dict(color="tab:purple", lw=1.4, ls=":"),
                  "pm": dict(color="tab:green", lw=1.1, ls="--"),
-                 "passivity": dict(color="tab:cyan", lw=1.2, ls="-")}
+                 "passivity": dict(color="tab:cyan", lw=1.2, ls="-"),
+                 # where the judged frequency range (omega_min to Nyquist) ends, not |phase Z| = 90
+                 # deg: the same colour (it bounds the same passive set), dash-dot-dot
+                 "range edge": dict(color="tab:cyan", lw=1.6, ls=(0, (6, 2, 1.5, 2, 1.5, 2)))}
+
+# haa_sym.analysis.boundaries.passivity's kinds of a range edge -> which edge
+_RANGE_EDGES = {"passivity (omega_min)": "omega_min", "passivity (Nyquist)": "Nyquist"}
 
 
 def _curve_label(kind: str) -> tuple[str, str]:
     """(style key, legend label) of a curve kind."""
     if kind.startswith("pm="):
         return "pm", f"phase margin {kind[3:]} deg"
+    if kind in _RANGE_EDGES:
+        return "range edge", f"edge of the judged frequency range ({_RANGE_EDGES[kind]})"
     if kind.startswith("passivity"):
         return "passivity", "passivity boundary (|phase Z| = 90 deg)"
     return kind, f"stability boundary ({kind})"
+
+
+def _drawn(curve) -> bool:
+    """Whether a curve has a point to draw (a legend names only what is drawn)."""
+    P, D = np.asarray(curve.P_gain, float), np.asarray(curve.D_gain, float)
+    return bool(np.any(np.isfinite(P) & np.isfinite(D)))
 
 
 def plot_boundary(boundary, ax=None, title: str | None = None):
@@ -134,6 +160,8 @@ def plot_boundary(boundary, ax=None, title: str | None = None):
         ax.set_ylim(*st.meta.get("D_range", (0, 1)))
     seen = set()
     for c in boundary.curves:
+        if not _drawn(c):
+            continue
         key, label = _curve_label(c.kind)
         ax.plot(c.P_gain, c.D_gain, label=None if label in seen else label, **_CURVE_STYLES[key])
         seen.add(label)
@@ -149,7 +177,7 @@ def curve_legend(boundary) -> list:
     out, seen = [], set()
     for c in boundary.curves:
         key, label = _curve_label(c.kind)
-        if label not in seen:
+        if label not in seen and _drawn(c):
             seen.add(label)
             out.append(plt.Line2D([], [], label=label, **_CURVE_STYLES[key]))
     return out
@@ -204,12 +232,14 @@ def _region_legend(grid_contour: bool = True):
         [Patch(facecolor="none", edgecolor="tab:blue", hatch="////", label="stable, not passive")]
 
 
-#: Markers of the nonlinear classes (haa_sym.analysis.nonlinear_map.CLASSES) over a map.
+#: Markers of the nonlinear classes (haa_sym.analysis.oscillation.VERDICTS) over a map.
 NONLINEAR_MARKERS = {"converging": dict(marker=".", color="tab:green", ms=3),
                      "limit cycle": dict(marker="o", mfc="none", color="tab:red", ms=5),
                      "saturating": dict(marker="s", mfc="none", color="tab:purple", ms=5),
                      "growing": dict(marker="x", color="k", ms=5),
-                     "undecided": dict(marker="d", mfc="none", color="tab:orange", ms=5)}
+                     "undecided": dict(marker="d", mfc="none", color="tab:orange", ms=5),
+                     "diverged": dict(marker="+", color="tab:red", ms=6),
+                     "forced response": dict(marker="v", mfc="none", color="tab:gray", ms=5)}
 
 
 def plot_nonlinear_region(m, P_gain, D_gain, class_names, title: str | None = None, boundary=None,
@@ -296,12 +326,23 @@ def plot_steps(panels, title: str = "", ylabel: str = "T_l (Nm)"):
     return fig
 
 
+def gains_text(P_gain: float, D_gain: float, beta: float | None = None, alpha: float | None = None) -> str:
+    """The gains a figure was computed at, as its title says them: ``P_gain = 200 Nm/rad, D_gain
+    = 10 Nms/rad, beta = 1, alpha = 0.94``; both impedance gains 0 is the torque loop alone."""
+    text = f"P_gain = {P_gain:g} Nm/rad, D_gain = {D_gain:g} Nms/rad"
+    if P_gain == 0 and D_gain == 0:
+        text = f"torque loop alone ({text}: impedance loop open)"
+    return text + "".join(f", {k} = {v:g}" for k, v in (("beta", beta), ("alpha", alpha)) if v is not None)
+
+
 def plot_contact(K, rho, paper_range=None, unstable=(), key: str = "K_L2", excess=None,
-                 not_passive=(), tol: float | None = None, title: str = ""):
+                 not_passive=(), tol: float | None = None, title: str = "", gains: str | None = None):
     """Spectral radius of the loop against the environment stiffness, with the exact ends of the
     unstable intervals (:func:`haa_sym.analysis.contact.contact_intervals`) and the paper's range; with
     ``excess`` (deg, NaN where unstable) a second panel: the phase excess of Z beyond +-90 deg,
-    the tolerance ``tol`` and the exact ends of the stable, non-passive intervals."""
+    the tolerance ``tol`` and the exact ends of the stable, non-passive intervals. ``gains``
+    (:func:`gains_text`): the gains the scan was made at, a line of the title."""
+    title = "\n".join(x for x in (title, f"gains: {gains}" if gains else "") if x)
     two = excess is not None
     fig, axes = plt.subplots(2 if two else 1, 1, figsize=(6.4, 5.6 if two else 3.2), sharex=True,
                              constrained_layout=True, squeeze=False)
@@ -343,38 +384,41 @@ def plot_contact(K, rho, paper_range=None, unstable=(), key: str = "K_L2", exces
 
 def plot_torque_bandwidth(panels, title: str = ""):
     """Torque bandwidth over (beta, alpha), one panel per ``(label, beta, alpha, bandwidth,
-    stable)``: colour the bandwidth on a log scale (dark: low, bright: high; white contours at
-    10-200 rad/s), cells whose torque loop is unstable hatched red (their bandwidth means nothing)."""
+    stable)``: colour the bandwidth on a log scale (dark: low, bright: high), white contours at
+    :data:`BANDWIDTH_CONTOURS` marked on the colour bar (labels on the map overlapped where the
+    contours bunch at the stability cliff), cells whose torque loop is unstable hatched red (their
+    bandwidth means nothing). The legend has the hatch only when a cell is hatched; a panel
+    without one says so in its title."""
     from matplotlib.ticker import FuncFormatter
     fig, axes = plt.subplots(1, len(panels), figsize=(4.4 * len(panels), 3.9), squeeze=False,
                              constrained_layout=True)
     for ax, (label, B, A, bw, stable) in zip(axes[0], panels):
         with np.errstate(divide="ignore", invalid="ignore"):
-            cs = ax.contourf(B, A, np.log10(bw).T, levels=20, cmap="viridis")
-        cl = ax.contour(B, A, bw.T, levels=[10, 20, 30, 50, 100, 200], colors="w", linewidths=0.6)
-        ax.clabel(cl, fmt="%g rad/s", fontsize=6)
+            logbw = np.log10(bw).T
+        cs = ax.contourf(B, A, logbw, levels=20, cmap="viridis")
+        lo, hi = cs.get_clim()
+        levels = [v for v in np.log10(BANDWIDTH_CONTOURS) if lo < v < hi]
+        cb = fig.colorbar(cs, ax=ax, label="torque bandwidth (rad/s, log scale)")
+        if levels:
+            cl = ax.contour(B, A, logbw, levels=levels, colors="w", linewidths=0.6)
+            cb.add_lines(cl)
         if (~stable).any():
             hs = ax.contourf(B, A, (~stable).T.astype(float), levels=[0.5, 1.5], colors="none", hatches=["xxx"])
-            hs.set_edgecolor("tab:red")
+            hs.set_edgecolor(STYLE["unstable"])
             hs.set_linewidth(0)
-        cb = fig.colorbar(cs, ax=ax, label="torque bandwidth (rad/s, log scale)")
-        lo, hi = cs.get_clim()
         nice = [np.log10(m * 10.0 ** k) for k in range(-3, 6) for m in (1, 2, 5)]
         cb.set_ticks([v for v in nice if lo - 1e-9 <= v <= hi + 1e-9] or [lo, hi])
         cb.ax.yaxis.set_major_formatter(FuncFormatter(lambda v, _: f"{10 ** v:.3g}"))
         ax.set_xlabel("beta, torque-gain scale (-)")
         ax.set_ylabel("alpha, velocity compensation (-)")
-        ax.set_title(label, fontsize=9)
-    unstable = any((~p[4]).any() for p in panels)
-    fig.legend(handles=[Patch(facecolor="none", edgecolor="tab:red", hatch="xxx" if unstable else "",
-                              label="torque loop unstable" if unstable else "torque loop stable everywhere"),
-                        plt.Line2D([], [], color="w", marker="s", mfc="#440154", mec="#440154", ls="",
-                                   label="dark: low bandwidth"),
-                        plt.Line2D([], [], color="w", marker="s", mfc="#fde725", mec="#fde725", ls="",
-                                   label="bright: high bandwidth")],
-               loc="outside lower center", ncol=3, fontsize=8)
+        ax.set_title(label if (~stable).any() else f"{label} (torque loop stable in every cell)",
+                     fontsize=STYLE["panel_title_size"])
+    if any((~p[4]).any() for p in panels):
+        fig.legend(handles=[Patch(facecolor="none", edgecolor=STYLE["unstable"], hatch="xxx",
+                                  label="torque loop unstable (bandwidth meaningless)")],
+                   loc=STYLE["legend_loc"], fontsize=STYLE["legend_size"])
     if title:
-        fig.suptitle(_wrap(title, 4.4 * len(panels)), fontsize=_title_size(title, 10))
+        fig.suptitle(_wrap(title, 4.4 * len(panels)), fontsize=_title_size(title, STYLE["title_size"]))
     return fig
 
 
@@ -484,8 +528,11 @@ def _leg_line(meta: dict) -> str:
     own = ", ".join(f"{k} {v:.4g}" for k, v in lv["own"].items())
     text = f"{ends}\nanalysed instead of the parameters' {own}" + (" (outside the range)" if lv["outside"] else "")
     if lv.get("uncertainty"):
+        # analysis.robust.uncertainty_meta: [lo, hi], or {"relative": [lo, hi]} (factors of each
+        # leg configuration's value of a key the range sets)
         text += "\nand every value of the uncertainty box " + ", ".join(
-            f"{k} {lo:.4g}..{hi:.4g}" for k, (lo, hi) in lv["uncertainty"].items())
+            f"{k} x {v['relative'][0]:.5g}..{v['relative'][1]:.5g} of each configuration's value"
+            if isinstance(v, dict) else f"{k} {v[0]:.4g}..{v[1]:.4g}" for k, v in lv["uncertainty"].items())
         # the box replaces the file's values too (as the range does): a figure alone must say so
         own_box = lv.get("uncertainty_own") or {}
         if own_box:
@@ -578,11 +625,13 @@ def plot_describing(panels, title: str = ""):
 
 
 def plot_tune(lead_s, integral, grid_objective, before, after, steps, title: str = "",
-              ylabel: str = "torque (Nm)"):
+              ylabel: str = "torque (Nm)", notes: str = "", band: float | None = None):
     """``haa-sym tune``: left, the coarse search grid, the objective (rad/s) where every target is
     met (blank: some target missed) over the PI's lead time tau = P_t0 / I_t0 (s; the first row,
     tau = 0, the pure integrator, drawn at the bottom) and I_t0 (V/(Nm s)), with the file's and
-    the tuned PI marked; right, unit torque steps ``steps`` = [(t, T, label, linestyle)]."""
+    the tuned PI marked; right, unit torque steps ``steps`` = [(t, T, label, linestyle)], the
+    settling band +-``band`` around 1 if given, and ``notes`` (the torque-loop figures, one
+    line each) above the step panel."""
     lead_s, integral, obj = (np.asarray(a, float) for a in (lead_s, integral, grid_objective))
     fig, (ax, ax2) = plt.subplots(1, 2, figsize=(11, 4.4 + (0.6 if title else 0)), constrained_layout=True)
     # tau = 0 cannot sit on a log axis: its row is drawn one grid step below the smallest tau
@@ -609,9 +658,14 @@ def plot_tune(lead_s, integral, grid_objective, before, after, steps, title: str
         ax2.plot(t, T, ls, label=label)
     ax2.axhline(1.0, color="0.6", lw=0.8)
     ax2.axhline(0.9, color="0.6", lw=0.8, ls=":")
+    if band:
+        ax2.axhspan(1 - band, 1 + band, color="0.85", alpha=0.5, lw=0, label=f"+-{100 * band:g} % (settling)")
     ax2.set_xlabel("t (s)")
     ax2.set_ylabel(ylabel)
-    ax2.set_title("unit torque step, impedance loop open", fontsize=10)
+    # one wrapped block per note: a line wider than the panel ran off the figure
+    notes = "\n".join(textwrap.fill(n, 90, subsequent_indent="  ") for n in notes.splitlines())
+    ax2.set_title("unit torque step, impedance loop open" + (f"\n{notes}" if notes else ""),
+                  fontsize=10 if not notes else 7, loc="center" if not notes else "left")
     ax2.legend(fontsize=8)
     ax2.grid(True, alpha=0.3)
     if title:
@@ -624,6 +678,7 @@ def plot_simulation(time, columns: dict, saturated=None, title: str = "", cycle:
     voltage (saturated samples marked) and current over ``time`` (s). ``columns`` maps the CSV
     names to arrays; ``cycle`` is a note on a detected limit cycle (shown in the torque panel)."""
     t = np.asarray(time)
+    cycle = _wrap(cycle, 5.4, 7)            # the panel's width, not the figure's
     fig, axes = plt.subplots(4, 1, figsize=(6.4, 8.0 + (0.6 if title else 0) + 0.12 * cycle.count("\n")), sharex=True,
                              constrained_layout=True)
     axes[0].plot(t, columns["theta"], color="k", label="theta (encoder)")
@@ -658,37 +713,61 @@ def plot_simulation(time, columns: dict, saturated=None, title: str = "", cycle:
 _UNITS = {"torque": "Nm", "theta": "rad", "current": "A", "velocity": "rad/s"}
 
 
+# The zoomed time panel of plot_identify: the log's last stretch with this many crossings of the
+# measured output's mean (about a dozen oscillations: each one readable at a panel's width; the
+# whole log of a broadband excitation is a solid band, docs/identify.md, "Outputs").
+ZOOM_CROSSINGS = 24
+
+
+def _zoom_start(t: np.ndarray, y: np.ndarray, crossings: int = ZOOM_CROSSINGS, min_samples: int = 50) -> int:
+    """Index where the zoom window of a trace begins: the last ``crossings`` crossings of its mean
+    (at least ``min_samples`` samples, at most the whole trace)."""
+    s = np.signbit(y - np.mean(y))
+    idx = np.flatnonzero(s[1:] != s[:-1])
+    start = int(idx[-crossings]) if idx.size >= crossings else 0
+    return max(0, min(start, t.size - min_samples))
+
+
 def plot_identify(result, title: str = "", max_points: int = 4000):
     """``haa-sym identify --plot``: per output, the first log's measured trace against the
-    model's prediction before (initial values) and after the fit; below, the Bode magnitude and
+    model's prediction before (initial values) and after the fit, over the whole log (every
+    ``len // max_points``-th sample) and zoomed on its last :data:`ZOOM_CROSSINGS` crossings of
+    the mean (every sample; the zoom is shaded on the whole log); below, the Bode magnitude and
     phase of the Welch H1 estimate (first input to the output) with the model's before and
     after, and the coherence. ``result`` is a :class:`haa_sym.fit.identify.FitResult` computed
     with ``figure_data=True``."""
     tr = result.traces[0]
     bode = result.bode[0] if result.bode else None
     outs = result.outputs
-    rows = 1 + (3 if bode is not None else 0)
-    fig, axes = plt.subplots(rows, len(outs), figsize=(6 * len(outs), 2.6 * rows), squeeze=False)
-    # a window of the log (its last 2 s: past the start from rest), every sample of it up to max_points
+    rows = 2 + (3 if bode is not None else 0)
+    fig, axes = plt.subplots(rows, len(outs), figsize=(6 * len(outs), 2.5 * rows), squeeze=False,
+                             layout="constrained")
     t = tr["t"]
-    sel = slice(int(np.searchsorted(t, t[-1] - 2.0)), None)
-    step = max(1, (len(t) - sel.start) // max_points)
-    sel = slice(sel.start, None, step)
+    whole = slice(None, None, max(1, len(t) // max_points))
+    # wide and light underneath: where the fit is good the model lies on the measurement
+    styles = (("measured", dict(color=STYLE["data"], lw=3.0, label="measured")),
+              ("initial", dict(color=STYLE["before"], lw=0.8, ls="--", label="model, initial")),
+              ("fitted", dict(color=STYLE["after"], lw=0.8, label="model, fitted")))
     for i, o in enumerate(outs):
-        ax = axes[0, i]
-        # wide and light underneath: where the fit is good the model lies on the measurement
-        ax.plot(t[sel], tr["measured"][sel, i], color="0.75", lw=3.0, label="measured")
-        ax.plot(t[sel], tr["initial"][sel, i], color="C3", lw=0.8, ls="--", label="model, initial")
-        ax.plot(t[sel], tr["fitted"][sel, i], color="C0", lw=0.8, label="model, fitted")
-        ax.set_xlabel("t (s), the log's last 2 s")
-        ax.set_ylabel(f"{o} ({_UNITS[o]})")
+        ax, zoom = axes[0, i], axes[1, i]
+        k0 = _zoom_start(t, tr["measured"][:, i])
+        near = slice(k0, None, max(1, (len(t) - k0) // max_points))
+        for key, style in styles:
+            ax.plot(t[whole], tr[key][whole, i], **style)
+            zoom.plot(t[near], tr[key][near, i], **style)
+        ax.axvspan(t[k0], t[-1], color=STYLE["reference"], alpha=0.25, lw=0, label="zoomed below")
+        ax.set_xlim(t[0], t[-1])
+        zoom.set_xlim(t[k0], t[-1])
+        ax.set_xlabel("t (s), the whole log")
+        zoom.set_xlabel(f"t (s), the log's last {t[-1] - t[k0]:.3g} s")
+        for a in (ax, zoom):
+            a.set_ylabel(f"{o} ({_UNITS[o]})")
         ax.set_title(f"{tr['name']}: {o}, rms error {result.rms_initial[o]:.3g} -> {result.rms_fitted[o]:.3g}",
-                     fontsize=9)
-        ax.legend(fontsize=7, loc="upper right")
+                     fontsize=STYLE["panel_title_size"])
         if bode is None:
             continue
         w = bode["omega"]
-        mag, ph, coh = axes[1, i], axes[2, i], axes[3, i]
+        mag, ph, coh = axes[2, i], axes[3, i], axes[4, i]
         # H1 only where the coherence says the measurement carries the input (>= 0.5)
         H1 = np.where(bode["coherence"][i] >= 0.5, bode["H1"][i], np.nan)
         # H1's phase as its angle from the fitted model's, added to that model's unwrapped phase:
@@ -696,21 +775,25 @@ def plot_identify(result, title: str = "", max_points: int = 4000):
         # measured phase vanished), and unwrapping noisy H1 alone can land 360 deg off the model
         fitted_ph = np.unwrap(np.angle(bode["fitted"][i]))
         for G, style, phase in (
-                (H1, dict(color="0.75", lw=3.0, label="H1 (Welch), coherence >= 0.5"),
+                (H1, dict(color=STYLE["data"], lw=3.0, label="H1 (Welch), coherence >= 0.5"),
                  fitted_ph + np.angle(H1 / bode["fitted"][i])),
-                (bode["initial"][i], dict(color="C3", lw=0.8, ls="--", label="model, initial"),
+                (bode["initial"][i], dict(color=STYLE["before"], lw=0.8, ls="--", label="model, initial"),
                  np.unwrap(np.angle(bode["initial"][i]))),
-                (bode["fitted"][i], dict(color="C0", lw=0.8, label="model, fitted"), fitted_ph)):
+                (bode["fitted"][i], dict(color=STYLE["after"], lw=0.8, label="model, fitted"), fitted_ph)):
             mag.loglog(w, np.abs(G), **style)
             ph.semilogx(w, np.degrees(phase), **style)
         mag.set_ylabel(f"|{o} / {result.inputs[0]}|")
-        mag.legend(fontsize=7)
         ph.set_ylabel("phase (deg)")
         coh.semilogx(w, bode["coherence"][i], color="k", lw=0.8)
         coh.set_ylim(0, 1.05)
         coh.set_ylabel("coherence")
         coh.set_xlabel("omega (rad/s)")
+    # one legend for every panel, below them (the traces' legends covered the whole-log data)
+    data_label = "measured" + ("; Bode: H1 (Welch) where the coherence >= 0.5" if bode is not None else "")
+    handles = [plt.Line2D([], [], **{**styles[0][1], "label": data_label}),
+               plt.Line2D([], [], **styles[1][1]), plt.Line2D([], [], **styles[2][1]),
+               Patch(color=STYLE["reference"], alpha=0.25, lw=0, label="the zoomed window")]
+    fig.legend(handles=handles, loc=STYLE["legend_loc"], ncol=4, fontsize=STYLE["legend_size"])
     if title:
-        fig.suptitle(_wrap(title, 6 * len(outs)), fontsize=_title_size(title, 11))
-    fig.tight_layout()
+        fig.suptitle(_wrap(title, 6 * len(outs)), fontsize=_title_size(title, STYLE["title_size"]))
     return fig

@@ -25,6 +25,11 @@ __all__ = ["TaskRunner", "connect", "DEFAULT_CONNECT_TIMEOUT", "THREADS"]
 DEFAULT_CONNECT_TIMEOUT = 5.0
 #: Threads of the in-process scheduler (the machines this runs on have 2 cores).
 THREADS = 2
+#: Seconds a cluster may have no worker while tasks are pending before the command stops (a
+#: worker that died mid-run, and no other: dask would wait for a new one for ever).
+NO_WORKER_TIMEOUT = 30.0
+#: Seconds between two looks at the cluster while waiting for results.
+POLL_S = 0.5
 
 
 def connect(Client, address: str, timeout: float = DEFAULT_CONNECT_TIMEOUT):
@@ -78,9 +83,11 @@ class TaskRunner:
     """
 
     def __init__(self, scheduler, progress, connect_timeout: float = DEFAULT_CONNECT_TIMEOUT,
-                 threads: int = THREADS):
+                 threads: int = THREADS, no_worker_timeout: float = NO_WORKER_TIMEOUT):
         self.client, self.own = None, False
         self.progress, self.threads = progress, threads
+        self.no_worker_timeout = no_worker_timeout
+        self.address = scheduler if isinstance(scheduler, str) else None
         if scheduler is None:
             return
         try:
@@ -103,11 +110,12 @@ class TaskRunner:
             return []
         with progress_bar(len(args_list), label, unit, self.progress) as bar:
             if self.client is not None:
-                from distributed import as_completed
                 futures = [self.client.submit(fn, *a, pure=False) for a in args_list]
-                for _ in as_completed(futures):
-                    bar.update(1)
-                return self.client.gather(futures)
+                try:
+                    self._wait(futures, bar)
+                    return self.client.gather(futures)
+                finally:
+                    self.client.cancel([f for f in futures if not f.done()])
             if self.threads == 1:
                 out = []
                 for a in args_list:
@@ -124,3 +132,40 @@ class TaskRunner:
             tasks = [dask.delayed(fn, pure=False)(*a, dask_key_name=f"task-{k}") for k, a in enumerate(args_list)]
             with _Bar():
                 return list(dask.compute(*tasks, scheduler="threads", num_workers=self.threads))
+
+    def _wait(self, futures, bar) -> None:
+        """Wait for ``futures``, updating ``bar``; stop with one line when the cluster has had no
+        worker for :attr:`no_worker_timeout` s, or when a task killed the workers it ran on
+        (dask's ``KilledWorker``, after its allowed failures): never wait for ever."""
+        import time
+        from distributed import wait
+        from distributed.scheduler import KilledWorker
+        where = f"--scheduler {self.address!r}" if self.address else "the dask cluster"
+        pending, idle_since = set(futures), None
+        while pending:
+            try:
+                done, pending = wait(pending, timeout=POLL_S, return_when="FIRST_COMPLETED")
+            except TimeoutError:
+                done = set()
+            bar.update(len(done))
+            for f in done:
+                if f.status == "error":
+                    exc = f.exception()
+                    if isinstance(exc, KilledWorker):
+                        raise ParameterError(f"{where}: a task ended {exc.__class__.__name__} (the worker "
+                                             "process running it died, each time it was retried: out of "
+                                             "memory, or killed); allowed: workers that stay up (check "
+                                             "their memory and logs)") from None
+            if not pending:
+                return
+            workers = len(self.client.scheduler_info().get("workers", {}))
+            now = time.monotonic()
+            if workers:
+                idle_since = None
+            elif idle_since is None:
+                idle_since = now
+            elif now - idle_since > self.no_worker_timeout:
+                raise ParameterError(f"{where}: no worker for {self.no_worker_timeout:g} s with {len(pending)} "
+                                     f"of {len(futures)} tasks pending (did the last worker die?); allowed: a "
+                                     "cluster with at least one running worker")
+

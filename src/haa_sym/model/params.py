@@ -36,6 +36,7 @@ from haa_sym.errors import ParameterError
 from haa_sym.io.inputs import read_bytes
 from haa_sym.model.actuator import (ACTUATOR_SECTIONS, HYQ, Actuator, Topology, check_keys, entry_values,
                               parse_actuator)
+from haa_sym.model.motor import MOTOR_CONVENTION_DEFAULT, split_convention
 from haa_sym.model import filters
 from haa_sym.model.filters import PARAMETERS as FILTER_PARAMETERS
 from haa_sym.model.limits import Limits, parse_limits
@@ -264,6 +265,9 @@ class Params:
     # the nonlinear simulation's limits ([limits], haa_sym.model.limits); the linear analyses
     # ignore them, so they take no part in equality (nor in the memos keyed by Params)
     limits: Limits = field(default_factory=Limits, compare=False)
+    # [motor] convention (haa_sym.model.actuator.MOTOR_CONVENTIONS): how k_t and k_w are compared
+    # for the plausibility warning only; the model uses both values as given
+    motor_convention: str = field(default=MOTOR_CONVENTION_DEFAULT, compare=False)
 
     def __post_init__(self):
         if not isinstance(self.plant, Plant):
@@ -562,6 +566,7 @@ def parse_params(data: Mapping[str, object], source: str = "<memory>") -> Params
         hint = " (a file with [plant] is the legacy HyQ format: no [motor], [bodies], [couplings], " \
                "[sensors])" if legacy else ""
         raise ParameterError(f"{source}: unknown table(s) {top}; allowed: {list(allowed)}{hint}")
+    data, convention = split_convention(data, source)
     topology, raw, about = parse_actuator(data, source)
     values = {}
     for key, dom in topology.domain.items():
@@ -585,7 +590,7 @@ def parse_params(data: Mapping[str, object], source: str = "<memory>") -> Params
         configs[name] = entry_values(overrides, where, refs, topology.units)
     limits = parse_limits(data["limits"], topology.body_names, source, refs) if "limits" in data else Limits()
     return Params(plant=plant, controller=controller, configurations=configs, source=source, about=about,
-                  limits=limits)
+                  limits=limits, motor_convention=convention)
 
 
 def _read_toml(raw: bytes) -> dict:

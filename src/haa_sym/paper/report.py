@@ -72,40 +72,8 @@ def write_report(out: Path, r: dict, spec: dict, options: LoopOptions, verify_te
     add("\nNominal: beta = {beta:g}, alpha = {alpha:g}, N_av = {N_av}, Ts = {Ts:g} s, P_t0 = {P_t0:g}, "
         "I_t0 = {I_t0:g}; extended leg J_L2 = {J:g} kg m^2, K_L2 = {K:g} Nm/rad.".format(
             J=meta["params"]["plant"]["J_L2"], K=meta["params"]["plant"]["K_L2"], **ctrl))
-    add("\n## Modelling options\n")
-    add("Options used (defaults of `haa_sym.LoopOptions`, see `docs/model.md`): " +
-        ", ".join(f"`{k}={v}`" for k, v in options.to_dict().items()) + ".\n")
-    scores = r["option_scores"]
-    best = scores[0]["agree"]
-    add(f"Cells of Table 2 reproduced by every combination of the options that change Table 2 "
-        f"(`pm_loop`/`pm_rule` only change the maps). The defaults reproduce "
-        f"**{sum(x['agrees'] for x in r['table2'])}/{len(r['table2'])}**; the best combination reproduces "
-        f"{best}/{scores[0]['cells']}.\n")
-    keys = list(scores[0]["options"])
-    add(_table(keys + ["cells reproduced"],
-               [[s["options"][k] for k in keys] + [f"{s['agree']}/{s['cells']}"] for s in scores]))
-    add("\nHow each option moves the nominal map (Fig. 8a grid; cells out of "
-        f"{r['option_sensitivity'][0]['cells']}):\n")
-    add(option_sensitivity_markdown(r["option_sensitivity"]))
-    add("\n## Table 2: passivity\n")
-    add("Status per cell: Yes (passive), No (stable, not passive), Unstable. The excess is the "
-        "worst corrected phase of Z beyond +-90 deg (<= 0: within). Passive cells touch -90 deg at "
-        "Nyquist (Z is real at z = -1 and the correction is -90 deg there), so their excess is 0.\n")
-    add(table2_markdown(r["table2"], spec))
-    diffs = [x for x in r["table2"] if not x["agrees"]]
-    if diffs:
-        add("\nCells that differ, with the most likely cause:\n")
-        for x in diffs:
-            add(f"- {x['row']}, {x['column']}: paper {x['paper']}, computed {x['computed']} "
-                f"(excess {x['phase_excess_deg']} deg at {x['omega_worst_rad_s']} rad/s). " + _cause(x, meta))
-            rescue = r["differing_cells_rescued_by"].get(f"{x['row']} | {x['column']}")
-            if rescue:
-                diff = {k: v for k, v in rescue["options"].items() if getattr(options, k) != v}
-                add("  The best-scoring option set that reproduces this cell changes "
-                    + ", ".join(f"`{k}={v}`" for k, v in diff.items())
-                    + f" and reproduces {rescue['agree']}/{rescue['cells']} cells in all; the defaults stay.")
-            else:
-                add("  No scored option set reproduces this cell.")
+    # Issue 26: what the paper says against what we compute comes first; Table 2 cell by cell next,
+    # then the options scored on it (the long table of every option combination) after both.
     add("\n## Quantitative claims: the paper says / we compute\n")
     bc = r["beta_check"]
     fig7 = {(s["K_L2"], s["alpha"]): s for s in r["fig7"]}
@@ -155,6 +123,40 @@ def write_report(out: Path, r: dict, spec: dict, options: LoopOptions, verify_te
     add(f"\nStep metrics of Fig. 7 ({STEP_CONVENTION}), computed on the simulated "
         f"{c['fig7_duration_s']:g} s: \"not reached\" / \"not settled\" mean not within that window; "
         "all of them, with the overshoot, in `fig07_step_info.csv` (empty cell: undefined).")
+    add("\n## Table 2: passivity\n")
+    add("Status per cell: Yes (passive), No (stable, not passive), Unstable. The excess is the "
+        "worst corrected phase of Z beyond +-90 deg (<= 0: within). Passive cells touch -90 deg at "
+        "Nyquist (Z is real at z = -1 and the correction is -90 deg there), so their excess is 0.\n")
+    add(table2_markdown(r["table2"], spec))
+    diffs = [x for x in r["table2"] if not x["agrees"]]
+    if diffs:
+        add("\nCells that differ, with the most likely cause:\n")
+        for x in diffs:
+            add(f"- {x['row']}, {x['column']}: paper {x['paper']}, computed {x['computed']} "
+                f"(excess {x['phase_excess_deg']} deg at {x['omega_worst_rad_s']} rad/s). " + _cause(x, meta))
+            rescue = r["differing_cells_rescued_by"].get(f"{x['row']} | {x['column']}")
+            if rescue:
+                diff = {k: v for k, v in rescue["options"].items() if getattr(options, k) != v}
+                add("  The best-scoring option set that reproduces this cell changes "
+                    + ", ".join(f"`{k}={v}`" for k, v in diff.items())
+                    + f" and reproduces {rescue['agree']}/{rescue['cells']} cells in all; the defaults stay.")
+            else:
+                add("  No scored option set reproduces this cell.")
+    add("\n## Modelling options\n")
+    add("Options used (defaults of `haa_sym.LoopOptions`, see `docs/model.md`): " +
+        ", ".join(f"`{k}={v}`" for k, v in options.to_dict().items()) + ".\n")
+    scores = r["option_scores"]
+    best = scores[0]["agree"]
+    add(f"Cells of Table 2 reproduced by every combination of the options that change Table 2 "
+        f"(`pm_loop`/`pm_rule` only change the maps). The defaults reproduce "
+        f"**{sum(x['agrees'] for x in r['table2'])}/{len(r['table2'])}**; the best combination reproduces "
+        f"{best}/{scores[0]['cells']}.\n")
+    keys = list(scores[0]["options"])
+    add(_table(keys + ["cells reproduced"],
+               [[s["options"][k] for k in keys] + [f"{s['agree']}/{s['cells']}"] for s in scores]))
+    add("\nHow each option moves the nominal map (Fig. 8a grid; cells out of "
+        f"{r['option_sensitivity'][0]['cells']}):\n")
+    add(option_sensitivity_markdown(r["option_sensitivity"]))
     add("\n## Qualitative trends of Sec. 4 (region maps)\n")
     add("Counted on the computed maps (cells of the grid). \"Low\" and \"large\" stiffness are split "
         "two ways, both shown: at the top of the locomotion range the paper gives in Sec. 3.4 "

@@ -354,7 +354,7 @@ def _contact(job: _Job) -> dict:
     """Stability and passivity against the environment stiffness (Sec. 5): the torque loop alone,
     which the paper finds not passive and unstable for 72-3500 Nm/rad, and the impedance loop
     closed at the gains of Fig. 12, which it finds passive (so stable with any passive spring)."""
-    from haa_sym.io.plots import plot_contact, save_figure
+    from haa_sym.io.plots import gains_text, plot_contact, save_figure
     K = grid(job.claims["contact_K_L2_grid"] if not job.quick else "log:1:100000:80", "K_L2")
     # the scan brackets every change of stability and passivity; Brent's method locates each end
     loop = ClosedLoop(job.params, job.options, basis=False)
@@ -371,7 +371,9 @@ def _contact(job: _Job) -> dict:
         for k, rho, ex, rho_i, ex_i in zip(r.K_env, r.spectral_radius, r.phase_excess_deg,
                                            ri.spectral_radius, ri.phase_excess_deg)]))
     save_figure(plot_contact(r.K_env, r.spectral_radius, job.claims["contact_unstable_K_L2"], r.unstable,
-                             excess=r.phase_excess_deg, not_passive=r.not_passive, tol=r.passivity_tol_deg),
+                             excess=r.phase_excess_deg, not_passive=r.not_passive, tol=r.passivity_tol_deg,
+                             title="Contact with an environment spring (Sec. 5)",
+                             gains=gains_text(0.0, 0.0, job.params.controller.beta, job.params.controller.alpha)),
                 job.out / "contact.png")
     return {"contact_K_L2_range": [float(K.min()), float(K.max())],
             "contact_unstable_K_L2": r.unstable, "contact_not_passive_K_L2": r.not_passive,
