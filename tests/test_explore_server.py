@@ -80,11 +80,11 @@ def test_page_names_the_frequency_range_edges():
     p = app._Page(state, panel, bokeh)
     p.start()
     shown = [item.label.value for item, src in p.legend_items.items() if item.visible]
-    assert "passivity: judged-range edge at omega_min" in shown
+    assert "edge of the judged frequency range (omega_min)" in shown
     assert "passivity boundary (|phase Z| = 90 deg)" in shown
     # the legend lists only what is drawn: no schedule, measured or robust layer here
     assert not any(s.startswith(("schedule", "measured", "robust")) for s in shown)
-    edge = [r for item in p.legend_items if item.label.value.endswith("omega_min") for r in item.renderers]
+    edge = [r for item in p.legend_items if item.label.value.endswith("(omega_min)") for r in item.renderers]
     assert edge and all(r.data_source.data["xs"] for r in edge)
 
 

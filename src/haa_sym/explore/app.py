@@ -70,13 +70,15 @@ EXTRA_MISSING = ("the explorer needs Panel and Bokeh, the optional extra: pip in
 # one colour per state.CATEGORIES entry: io.plots' region colours (white stable, grey PM < 30 deg,
 # dark unstable), tinted blue where the port is not passive
 CATEGORY_COLORS = ("#ffffff", "#cfe0f3", "#c8c8c8", "#9fb4cc", "#3a3a3a")
+_EDGE_DASH = "6 2 2 2 2 2"                 # dash-dot-dot, as io.plots' range edge (Bokeh: whole pixels)
 # each family of state.CURVE_FAMILIES: colour, dash, legend (the frequency-range edges of the
-# passivity boundary in the boundary's colour, dotted, and named as what they are)
+# passivity boundary in the boundary's colour, dash-dotted, and named as what they are: the
+# figures' style and words, haa_sym.io.plots' "range edge")
 CURVE_STYLES = {"stability": ("#d62728", "solid", "stability boundary"),
                 "pm": ("#2ca02c", "dashed", "PM = 30 deg"),
                 "passivity": ("#17becf", "solid", "passivity boundary (|phase Z| = 90 deg)"),
-                "passivity_omega_min": ("#17becf", "dotted", "passivity: judged-range edge at omega_min"),
-                "passivity_nyquist": ("#17becf", "dotdash", "passivity: judged-range edge at Nyquist")}
+                "passivity_omega_min": ("#17becf", _EDGE_DASH, "edge of the judged frequency range (omega_min)"),
+                "passivity_nyquist": ("#17becf", _EDGE_DASH, "edge of the judged frequency range (Nyquist)")}
 # controller keys with their own control (the rest of the file's keys are in the actuator panel)
 _CONTROL_KEYS = ("beta", "alpha", "Ts") + tuple(filters.PARAMETERS)
 
