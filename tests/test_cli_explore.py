@@ -7,7 +7,7 @@ from haa_sym.explore import app
 
 def test_without_the_extra_says_what_to_install(assert_refused, monkeypatch):
     monkeypatch.setattr(app, "available", lambda: False)
-    assert_refused(["explore", "--no-browser"], "pip install 'haa_sym[explore]'")
+    assert_refused(["explore", "--no-browser"], "pip install -e '.[explore]' in a checkout")
 
 
 def test_bad_params_and_ports_are_refused(assert_refused):

@@ -65,7 +65,8 @@ CHECK_UNUSED_SESSIONS_MS = 1_000
 # without closing it is noticed, and its page destroyed, within seconds
 KEEP_ALIVE_MS = 5_000
 
-EXTRA_MISSING = ("the explorer needs Panel and Bokeh, the optional extra: pip install 'haa_sym[explore]' "
+# the package is on no index: the extra installs from a checkout
+EXTRA_MISSING = ("the explorer needs Panel and Bokeh, the optional extra: pip install -e '.[explore]' in a checkout "
                  "(or pip install 'panel>=1.4' 'bokeh>=3.4')")
 # one colour per state.CATEGORIES entry: io.plots' region colours (white stable, grey PM < 30 deg,
 # dark unstable), tinted blue where the port is not passive
