@@ -225,7 +225,9 @@ def check_no_input_below(directory: str | os.PathLike, field: str | None = None)
 def restrict_reads(roots: Iterable[str | os.PathLike]) -> Iterator[tuple[Path, ...]]:
     """Allow reads only of the files in ``roots`` and of files in or below its directories
     (resolved: a link out of them is refused) while the block runs; restrictions nest (a read
-    must satisfy every one in force). Yields the resolved roots."""
+    must satisfy every one in force). Yields the resolved roots. Nothing is allowed implicitly:
+    the explorer passes the bundled model directory among its roots (this module sits below
+    :mod:`haa_sym.model.resources`, which knows where that is)."""
     resolved = tuple(Path(r).expanduser().resolve() for r in roots)
     with _lock:
         _roots.append(resolved)
