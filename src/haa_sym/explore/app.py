@@ -67,7 +67,7 @@ KEEP_ALIVE_MS = 5_000
 
 # the package is on no index: the extra installs from a checkout
 EXTRA_MISSING = ("the explorer needs Panel and Bokeh, the optional extra: pip install -e '.[explore]' in a checkout "
-                 "(or pip install 'panel>=1.4' 'bokeh>=3.4')")
+                 "(or pip install 'panel>=1.9' 'bokeh>=3.4')")
 # one colour per state.CATEGORIES entry: io.plots' region colours (white stable, grey PM < 30 deg,
 # dark unstable), tinted blue where the port is not passive
 CATEGORY_COLORS = ("#ffffff", "#cfe0f3", "#c8c8c8", "#9fb4cc", "#3a3a3a")
@@ -148,41 +148,41 @@ class _Page:
         self._building = True
         W = pn.widgets
         s = self._state0
-        self.w_params = W.TextInput(name="actuator (bundled name or TOML file)", value=s.params,
+        self.w_params = W.TextInput(label="actuator (bundled name or TOML file)", value=s.params,
                                     css_classes=["ex-params"])
-        self.w_config = W.Select(name="configuration", options=_with([""], "", NOMINAL), value="",
+        self.w_config = W.Select(label="configuration", options=_with([""], "", NOMINAL), value="",
                                  css_classes=["ex-configuration"])
-        self.w_blend_to = W.Select(name="slide towards configuration", options=_with([""], "", "none"), value="",
+        self.w_blend_to = W.Select(label="slide towards configuration", options=_with([""], "", "none"), value="",
                                    css_classes=["ex-blend-to"])
-        self.w_blend = W.FloatSlider(name="position between them", start=0.0, end=1.0, step=0.05,
+        self.w_blend = W.FloatSlider(label="position between them", start=0.0, end=1.0, step=0.05,
                                      value=_slider_value(s.blend), css_classes=["ex-blend"])
         sets = dict(s.sets)
         self.w_keys = {}
         for key in _CONTROL_KEYS:
-            self.w_keys[key] = W.TextInput(name=key, value=sets.get(key, ""), css_classes=[f"ex-set-{key}"])
+            self.w_keys[key] = W.TextInput(label=key, value=sets.get(key, ""), css_classes=[f"ex-set-{key}"])
         # a value from the URL that is not a choice stays selectable, so that the page refuses it
         # with the CLI's message rather than dropping it
         vf = sets.get("velocity_filter", "")
-        self.w_filter = W.Select(name="velocity_filter", options=_with([""] + list(filters.names()), vf, "the file's"),
+        self.w_filter = W.Select(label="velocity_filter", options=_with([""] + list(filters.names()), vf, "the file's"),
                                  value=vf,
                                  css_classes=["ex-set-velocity_filter"])
         opts = dict(s.options)
         delay = opts.get("delay", "")
-        self.w_delay = W.Select(name="delay (samples)", options=_with(["", "0", "1"], delay, "default (0)"),
+        self.w_delay = W.Select(label="delay (samples)", options=_with(["", "0", "1"], delay, "default (0)"),
                                 value=delay,
                                 css_classes=["ex-option-delay"])
         self.extra_options = {k: v for k, v in opts.items() if k != "delay"}
-        self.w_P = W.TextInput(name="P_gain axis (Nm/rad)", value=s.P_gain, css_classes=["ex-P_gain"])
-        self.w_D = W.TextInput(name="D_gain axis (Nms/rad)", value=s.D_gain, css_classes=["ex-D_gain"])
-        self.w_point = W.TextInput(name="point P_gain,D_gain (or click the map)", value=s.point,
+        self.w_P = W.TextInput(label="P_gain axis (Nm/rad)", value=s.P_gain, css_classes=["ex-P_gain"])
+        self.w_D = W.TextInput(label="D_gain axis (Nms/rad)", value=s.D_gain, css_classes=["ex-D_gain"])
+        self.w_point = W.TextInput(label="point P_gain,D_gain (or click the map)", value=s.point,
                                    css_classes=["ex-point"])
-        self.w_schedule = W.TextInput(name="schedule CSV (haa-sym schedule --out)", value=s.schedule,
+        self.w_schedule = W.TextInput(label="schedule CSV (haa-sym schedule --out)", value=s.schedule,
                                       css_classes=["ex-schedule"])
-        self.w_measured = W.TextInput(name="measured points CSV (P_gain,D_gain,outcome)", value=s.measured,
+        self.w_measured = W.TextInput(label="measured points CSV (P_gain,D_gain,outcome)", value=s.measured,
                                       css_classes=["ex-measured"])
-        self.w_robust = W.TextInput(name="robust region: on or FROM:TO", value=s.robust, css_classes=["ex-robust"])
-        self.w_export_dir = W.TextInput(name="export directory", value="explore-export", css_classes=["ex-export-dir"])
-        self.w_export = W.Button(name="export actuator file + PNG + JSON", css_classes=["ex-export"])
+        self.w_robust = W.TextInput(label="robust region: on or FROM:TO", value=s.robust, css_classes=["ex-robust"])
+        self.w_export_dir = W.TextInput(label="export directory", value="explore-export", css_classes=["ex-export-dir"])
+        self.w_export = W.Button(label="export actuator file + PNG + JSON", css_classes=["ex-export"])
         self.actuator_box = pn.Column()
         self.plant_inputs: dict = {}
         self.extra_sets: dict = {}
@@ -320,7 +320,7 @@ class _Page:
         keys = list(top.parameter_keys) + [k for k in CONTROLLER_KEYS if k not in _CONTROL_KEYS + STRING_KEYS]
         for key in keys:
             v = getattr(p.plant, key) if key in top.parameter_keys else getattr(p.controller, key)
-            w = self.pn.widgets.TextInput(name=f"{key} ({units.get(key, '')})", value=str(sets.get(key, "")),
+            w = self.pn.widgets.TextInput(label=f"{key} ({units.get(key, '')})", value=str(sets.get(key, "")),
                                           placeholder=f"{v:g}", css_classes=[f"ex-set-{key}"], width=260)
             w._ex_watcher = w.param.watch(self._on_change, "value")
             self.plant_inputs[key] = w
