@@ -83,3 +83,16 @@ def test_a_persistent_aperiodic_chatter_is_irregular_not_none():
     assert r.amplitude == pytest.approx(1.0)
     from haa_sym.analysis.oscillation import VERDICTS, classify
     assert VERDICTS[classify([r.kind], [0.0], [True], True)[0]] == "limit cycle"
+
+
+@pytest.mark.parametrize("seconds", [100, 150, 300])
+def test_exponentially_growing_sine_far_beyond_physical_values(seconds):
+    """A sine growing 9.61 % a cycle at 7.066 Hz (HyQ at P 2000, D 10) for up to 300 s reaches
+    1e84: its mean absorbed the early cycles (swing 0: "irregular") and its energies overflowed;
+    the rate and the frequency are the construction's at every length."""
+    t = np.arange(int(seconds / 1e-3)) * 1e-3
+    f, g = 7.066, 0.0961
+    y = np.exp(np.log1p(g) * f * t) * np.sin(2 * np.pi * f * t)
+    o = limit_cycle(t, y)
+    assert o.kind == "growing"
+    assert o.frequency_hz == pytest.approx(f, rel=1e-4) and o.growth_per_cycle == pytest.approx(g, rel=1e-3)

@@ -28,12 +28,24 @@ def test_binary_params_file(tmp_path, assert_refused):
 
 
 @pytest.mark.parametrize("setting,key", [("K_hd=1e300", "K_hd = 1e+300"), ("J_m=1e-300", "J_m = 1e-300"),
-                                         ("K_hd=1e308", "K_hd = 1e+308"), ("Ts=1e300", "Ts = 1e+300")])
+                                         ("K_hd=1e308", "K_hd = 1e+308")])
 def test_overflowing_plant_names_the_key(tmp_path, assert_refused, setting, key):
     rc, err = run(tmp_path, assert_refused, "step", "--set", setting)
     assert rc == 2
     assert err.startswith(f"haa-sym: error: {key}: the plant matrices of Eq. (1)-(2)")
     assert "overflow to non-finite values; allowed: " in err
+
+
+@pytest.mark.parametrize("value", ["1e300", "1e-300", "2", "5e-7"])
+def test_sampling_time_outside_the_checked_range(tmp_path, assert_refused, value):
+    """Ts = 1e-300 gave "stable: True, spectral radius 1" (the poles within rounding of z = 1)
+    and Ts = 1e300 an overflow: Ts is refused outside 1 us .. 1 s (the decisions are checked
+    against eigenvalues from 10 us to 8 ms)."""
+    rc, err = run(tmp_path, assert_refused, "stability", "--P-gain", "2000", "--D-gain", "10", "--set", f"Ts={value}")
+    assert rc == 2
+    line = err.strip()
+    assert line.startswith("haa-sym: error: --set Ts=") and len(line.splitlines()) == 1
+    assert line.endswith("is out of range; allowed: a sampling time from 1e-06 to 1 s")
 
 
 @pytest.mark.parametrize("argv,size", [

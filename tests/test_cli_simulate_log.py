@@ -102,3 +102,14 @@ def test_bad_flags_refused(tmp_path, assert_refused):
     assert_refused(base + ["--experiment", "chirp", "--log-out", "x.txt"], "--log-out 'x.txt'")
     assert_refused(base + ["--experiment", "chirp", "--excitation", "multisine:1:2:50", "--log-out", "x.csv"],
                    "50 sines between 1 and 2 Hz need a run of more than")
+
+
+def test_too_many_sines_refused_before_any_work(capsys):
+    """multisine:1:100:100000000 was refused after 42 s (a Python loop over the sines)."""
+    import time
+    t0 = time.perf_counter()
+    assert main(["simulate", "--P-gain", "200", "--D-gain", "5", "--duration", "1", "--experiment", "chirp",
+                 "--excitation", "multisine:1:100:100000000"]) == 2
+    assert time.perf_counter() - t0 < 5
+    err = capsys.readouterr().err.strip()
+    assert len(err.splitlines()) == 1 and "100000000 sines between 1 and 100 Hz need a run of more than" in err

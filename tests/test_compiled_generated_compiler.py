@@ -46,8 +46,27 @@ def _flip_byte(lib):
     lib.write_bytes(bytes(data))
 
 
+def _replace(path, how):
+    path.unlink()
+    if how == "fifo":
+        os.mkfifo(path)
+    elif how == "dir":
+        path.mkdir()
+    else:
+        path.write_bytes(bytes(range(256)) + b"\xab" * 44)     # not UTF-8, not a digest
+
+
 @pytest.mark.parametrize("damage", [_truncate, _flip_byte, lambda lib: lib.unlink(),
-                                    lambda lib: Compiler.digest_path(lib).unlink()])
+                                    lambda lib: Compiler.digest_path(lib).unlink(),
+                                    # what lies in the cache may not be a file (issue 26's prober): a FIFO blocked
+                                    # the process for ever, binary bytes were a UnicodeDecodeError, a directory a
+                                    # message naming a temporary file left behind
+                                    lambda lib: _replace(lib, "fifo"),
+                                    lambda lib: _replace(Compiler.digest_path(lib), "fifo"),
+                                    lambda lib: _replace(Compiler.digest_path(lib), "binary"),
+                                    lambda lib: _replace(Compiler.digest_path(lib), "dir")],
+                         ids=["truncated", "flipped", "no-library", "no-digest", "library-fifo", "digest-fifo",
+                              "digest-binary", "digest-dir"])
 def test_damaged_library_is_rebuilt(tmp_path, tiny, damage):
     comp = Compiler(cc=GCC, cache_dir=tmp_path / "cache")
     lib = comp.build(tiny)

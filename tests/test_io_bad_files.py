@@ -68,3 +68,41 @@ def test_report_nested_and_many_keys(tmp_path):
     t0 = time.perf_counter()
     assert read_fit(many)["parameters"]["J_link"]["value"] == 1.0
     assert time.perf_counter() - t0 < 5            # names.count per name: minutes
+
+
+def test_header_field_over_csv_limit(tmp_path):
+    p = tmp_path / "longname.csv"
+    p.write_text("time,voltage,torque," + "z" * 1_000_000 + "\n" + BODY.replace("\n", ",0\n"))
+    with pytest.raises(ParameterError, match=r"the header is not CSV \(field larger than field limit") as e:
+        _log(p)
+    assert len(str(e.value)) < 400
+
+
+@pytest.mark.parametrize("period", [1e-310, 1e-9, 1e94])
+def test_time_column_not_in_seconds(tmp_path, period):
+    """Subnormal steps blamed "--fit K_hd: zero sensitivity"; steps of 1e94 s overflowed."""
+    p = tmp_path / "t.csv"
+    p.write_text("time,voltage,torque\n" + "".join(f"{k * period!r},{np.sin(0.1 * k)},{0.5 * np.sin(0.1 * k)}\n"
+                                                    for k in range(50)))
+    with pytest.raises(ParameterError, match=r"^--log '.*t.csv': mean sampling period .* s; allowed: 1e-07 to 10 s "
+                                             r"\(the time column in seconds\)$"):
+        _log(p)
+
+
+def test_report_with_a_huge_integer_or_a_bom(tmp_path):
+    big = tmp_path / "big.json"
+    big.write_text('{"parameters": {}, "rms_error": {}, "samples": ' + "9" * 100_000 + ', "sampling": {}, "meta": {}}')
+    with pytest.raises(ParameterError, match=r"not a report \(Exceeds the limit \(4300 digits\)"):
+        read_fit(big)
+    bom = tmp_path / "bom.json"
+    bom.write_text(json.dumps({"parameters": {"J_link": {"value": 1.0, "initial": 1.0, "ci95": [0.9, 1.1]}},
+                               "rms_error": {}, "samples": 10, "sampling": {}, "meta": {}}), encoding="utf-8-sig")
+    assert read_fit(bom)["samples"] == 10
+
+
+def test_measured_header_name_bounded(tmp_path):
+    p = tmp_path / "m.csv"
+    p.write_text("P_gain,D_gain," + "q" * 100_000 + "\n1,2,stable\n")
+    with pytest.raises(ParameterError, match="lacks") as e:
+        read_measured(p)
+    assert len(str(e.value)) < 600

@@ -125,3 +125,44 @@ def test_params_from_dev_zero_and_fifo(tmp_path, capsys):
         assert time.perf_counter() - t0 < 2
         err = capsys.readouterr().err.strip()
         assert "allowed: a regular file" in err and len(err.splitlines()) == 1
+
+
+@pytest.mark.parametrize("kind", ["fifo", "fifo-link"])
+def test_output_that_is_not_a_regular_file_is_refused(tmp_path, kind):
+    """--out naming a FIFO or a device (or a link to one) replaced it with a regular file (as
+    root, /dev/full became a 96 KB file)."""
+    fifo = tmp_path / "ff.csv"
+    os.mkfifo(fifo)
+    target = fifo
+    if kind == "fifo-link":
+        target = tmp_path / "link.csv"
+        target.symlink_to(fifo)
+    with pytest.raises(OutputError, match="is not a regular file .*allowed: a new path or an existing regular file"):
+        check_file(target, "--out")
+    assert stat_is_fifo(fifo)
+
+
+def stat_is_fifo(p):
+    import stat
+    return stat.S_ISFIFO(os.lstat(p).st_mode)
+
+
+def test_two_outputs_in_one_file_refused(tmp_path):
+    """simulate --out same.csv --log-out same.csv kept only the log."""
+    a = tmp_path / "same.csv"
+    link = tmp_path / "link.csv"
+    link.symlink_to(a)
+    for second in (a, link):
+        with pytest.raises(OutputError, match="the same file as another output of this command"):
+            with Transaction() as tx:
+                tx.write_text(a, "one", "--out")
+                tx.write_text(second, "two", "--log-out")
+        assert not a.exists()
+    a.write_text("old")
+    hard = tmp_path / "hard.csv"
+    os.link(a, hard)
+    with pytest.raises(OutputError, match="the same file as another output"):
+        with Transaction() as tx:
+            tx.write_text(a, "one", "--out")
+            tx.write_text(hard, "two", "--log-out")
+    assert a.read_text() == "old"

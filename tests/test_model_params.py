@@ -36,8 +36,8 @@ def test_bundled_file_matches_table1(params):
 @pytest.mark.parametrize("old,new,pieces", [
     ("J_m  = { value = 5.72e-5", "J_m  = { value = -5.72e-5", ["[plant]", "J_m", "-5.72e-05", "> 0"]),
     ("J_L1 = { value = 1e-4", "J_L1 = { value = 0.0", ["J_L1", "0.0", "> 0"]),
-    ("Ts    = { value = 1e-3", "Ts    = { value = 0.0", ["[controller]", "Ts", "0.0", "> 0"]),
-    ("Ts    = { value = 1e-3", "Ts    = { value = -1e-3", ["Ts", "-0.001", "> 0"]),
+    ("Ts    = { value = 1e-3", "Ts    = { value = 0.0", ["[controller]", "Ts", "0.0", "a sampling time from 1e-06 to 1 s"]),
+    ("Ts    = { value = 1e-3", "Ts    = { value = -1e-3", ["Ts", "-0.001", "a sampling time from 1e-06 to 1 s"]),
     ("N_av  = { value = 4,", "N_av  = { value = 0,", ["N_av", "0", "integer >= 1"]),
     ("N_av  = { value = 4,", "N_av  = { value = 2.5,", ["N_av", "2.5", "not an integer"]),
     ("alpha = { value = 0.94", "alpha = { value = nan", ["alpha", "nan", "not finite"]),

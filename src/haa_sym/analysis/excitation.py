@@ -28,6 +28,7 @@ import math
 import numpy as np
 
 from haa_sym.errors import ParameterError
+from haa_sym.io.budget import check_memory
 
 __all__ = ["EXCITATIONS", "MULTISINE_N", "parse_excitation", "excitation_signal"]
 
@@ -83,15 +84,20 @@ def excitation_signal(spec: str, n: int, Ts: float, seed: int = 0, field: str = 
         return np.repeat(levels, hold)[:n]
     f0, f1, count = p
     period = n * Ts
+    too_many = ParameterError(f"{field} {spec!r}: {count} sines between {f0:g} and {f1:g} Hz need a run of more "
+                              f"than {period:g} s (its frequency grid is 1 / {period:g} Hz); allowed: fewer sines, a "
+                              "wider band or a longer --duration")
+    if count > f1 * period + 1:          # more sines than grid lines below F1: refused before any work
+        raise too_many
+    check_memory(16.0 * n * count, f"{field} {spec!r}: {count} sines over {n} samples")
     # on the run's grid (k / period): log-spaced, each at least one grid step above the one
-    # before (the grid is coarser than the log spacing at the low end of a short run)
+    # before (the grid is coarser than the log spacing at the low end of a short run):
+    # k_i = max(k_i, k_(i-1) + 1) for every i is a running maximum of k_i - i
     k = np.maximum(np.round(np.geomspace(f0, f1, count) * period), 1.0)
-    for i in range(1, k.size):
-        k[i] = max(k[i], k[i - 1] + 1)
+    i = np.arange(k.size, dtype=float)
+    k = np.maximum.accumulate(k - i) + i
     if k[-1] > math.floor(f1 * period + 0.5) or k[-1] / period > 0.5 / Ts:
-        raise ParameterError(f"{field} {spec!r}: {count} sines between {f0:g} and {f1:g} Hz need a run of more "
-                             f"than {period:g} s (its frequency grid is 1 / {period:g} Hz); allowed: fewer sines, a "
-                             "wider band or a longer --duration")
+        raise too_many
     m = np.arange(1, k.size + 1)
     phases = -np.pi * m * (m - 1) / k.size                   # Schroeder (1970)
     u = np.sin(2 * np.pi * np.outer(t, k / period) + phases).sum(axis=1)

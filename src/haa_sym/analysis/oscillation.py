@@ -273,19 +273,24 @@ def limit_cycle(t, y, *, settle: float = 0.5, min_cycles: int = 3, growth_tol: f
         # autocorrelation below ACF_MIN), unless its swing grows or decays from part to part (a
         # quiet part counts as the hysteresis band's half width)
         e = np.linspace(0, x.size, IRREGULAR_CHUNKS + 1).astype(np.int64)
-        swing = 0.5 * (np.maximum.reduceat(x, e[:-1]) - np.minimum.reduceat(x, e[:-1]))
+        swing = 0.5 * (np.maximum.reduceat(yy, e[:-1]) - np.minimum.reduceat(yy, e[:-1]))
         g = float(np.expm1(theil_sen_slope(np.log(np.maximum(swing, max(h, 1e-300))))))
         kind = "irregular" if abs(g) < IRREGULAR_GROWTH_TOL else "growing" if g > 0 else "decaying"
         return Oscillation(kind, float(swing[-1]), np.nan, np.nan, np.nan, np.nan, g, 0, offset, float(h), noise)
 
-    Ps = _period(x, x.size // min_cycles)
+    # scaled to |x| <= 1: the period does not depend on the scale, and the energies' products of
+    # its refinement overflowed for a trace grown past 1e77 (300 s of a growing HyQ loop)
+    Ps = _period(x / float(np.abs(x).max()), x.size // min_cycles)
     if Ps is None:
         return irregular()
     # whole periods counted back from the end; each one's half peak-to-peak
     n_win = int(x.size // Ps)
     edges = np.round(x.size - Ps * np.arange(n_win, -1, -1)).astype(np.int64)
     edges[0] = max(edges[0], 0)
-    amps = 0.5 * (np.maximum.reduceat(x, edges[:-1]) - np.minimum.reduceat(x, edges[:-1]))
+    # the swings of yy itself, not of x = yy - offset: the same numbers, except that a growing
+    # trace's mean (1e39 at 150 s of HyQ at P 2000, D 10) absorbed its early cycles (1e21) when
+    # subtracted, so their swing came out 0 and the trace "irregular" with a growth of 1700 %
+    amps = 0.5 * (np.maximum.reduceat(yy, edges[:-1]) - np.minimum.reduceat(yy, edges[:-1]))
     if n_win < min_cycles:
         return none
     if np.any(amps <= 0):            # a quiet period between bursts: no cycle of constant shape

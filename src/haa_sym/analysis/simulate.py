@@ -459,7 +459,7 @@ def _first_non_finite(y) -> int:
 
 def _result(loop, setup, P_gain, D_gain, y, info, linear=None):
     # a run that overflowed ends at its first non-finite sample: what follows is not data
-    k = _first_non_finite(y)
+    k, y_rows = _first_non_finite(y), y.shape[0]
     diverged_at = float(setup.time[k]) if k < y.shape[0] else math.nan
     y, time = y[:k], setup.time[:k]
     col = {c: y[:, i] for i, c in enumerate(L.SIM_COLUMNS)}
@@ -467,12 +467,16 @@ def _result(loop, setup, P_gain, D_gain, y, info, linear=None):
     dt = np.diff(np.append(time, time[-1] + setup.Ts)) if k else np.zeros(0)
     sat_time = float(dt[sat].sum())
     forced = setup.experiment in FORCED_EXPERIMENTS
-    osc = None if k < setup.n else trace_oscillation(setup, col["torque"])
+    diverged = k < y_rows
+    osc = None if diverged else trace_oscillation(setup, col["torque"])
     amp, freq = (osc.amplitude, osc.frequency_hz) if osc is not None and osc.kind in ("sustained", "irregular") \
         and not forced else (math.nan, math.nan)
     stable, radius = linear if linear is not None else (math.nan, math.nan)
-    tail_sat = float(sat[setup.n // 2:].mean()) if k == setup.n else math.nan
-    verdict = VERDICTS[int(classify("non-finite" if osc is None else osc.kind, tail_sat, stable,
+    tail_sat = float(sat[k // 2:].mean()) if not diverged and k else math.nan
+    # a run too short to judge its trace (trace_oscillation gives None) is no oscillation: the
+    # linear-regime and saturation rules decide it, else it is undecided (it was "diverged at nan")
+    kind = "non-finite" if diverged else ("too short" if osc is None else osc.kind)
+    verdict = VERDICTS[int(classify(kind, tail_sat, stable,
                                     limits_act_every_step(setup.limits), SATURATING_FRACTION, forced))]
     lin = None if np.isnan(stable) else bool(stable)
     meta = loop.provenance(

@@ -111,7 +111,13 @@ def verdict_line(s) -> str:
         text += f" (torque: amplitude {s.cycle_amplitude:.6g} Nm, frequency {s.cycle_frequency:.6g} Hz)"
     elif s.oscillation is not None and s.oscillation.kind != "none":
         o = s.oscillation
-        text += f" (torque oscillation {o.kind}, {100 * o.growth_per_cycle:+.3g} % a cycle at {o.frequency_hz:.6g} Hz)"
+        # a rate or a period the trace does not determine is not printed as nan
+        periodic = math.isfinite(o.frequency_hz)
+        # without a period, the growth is the swing's from one eighth of the last half to the next
+        rate = (f", {100 * o.growth_per_cycle:+.3g} % {'a cycle' if periodic else 'an eighth of the last half'}"
+                if math.isfinite(o.growth_per_cycle) else "")
+        at = f" at {o.frequency_hz:.6g} Hz" if periodic else ", no period measured"
+        text += f" (torque oscillation {o.kind}{rate}{at})"
     if s.linear_stable is None:
         return text + "; linear loop at this point: not decided"
     return (text + f"; linear loop at this point: {'stable' if s.linear_stable else 'UNSTABLE'} "

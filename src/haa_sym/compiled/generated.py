@@ -21,6 +21,7 @@ import os
 import shlex
 import shutil
 import signal
+import stat
 import subprocess
 import tempfile
 import warnings
@@ -50,12 +51,39 @@ def default_cache_dir() -> Path:
                 or Path(os.environ.get("XDG_CACHE_HOME", Path.home() / ".cache")) / "haa_sym")
 
 
+def _read_regular(path: str | Path, limit: int | None = None) -> bytes:
+    """The bytes of the regular file ``path`` (at most ``limit``); OSError for anything else.
+
+    The cache is ours, but what lies in it may not be: a FIFO in a library's place blocked the
+    process for ever, a directory or a device must not be read either. Opened without blocking
+    and checked before a byte is read."""
+    fd = os.open(path, os.O_RDONLY | getattr(os, "O_NONBLOCK", 0) | getattr(os, "O_CLOEXEC", 0))
+    try:
+        if not stat.S_ISREG(os.fstat(fd).st_mode):
+            raise OSError(f"{path}: not a regular file")
+        os.set_blocking(fd, True)
+        with os.fdopen(os.dup(fd), "rb") as f:
+            return f.read() if limit is None else f.read(limit)
+    finally:
+        os.close(fd)
+
+
 def _sha256(path: str | Path) -> str:
-    h = hashlib.sha256()
-    with open(path, "rb") as f:
-        for block in iter(lambda: f.read(1 << 20), b""):
-            h.update(block)
-    return h.hexdigest()
+    return hashlib.sha256(_read_regular(path)).hexdigest()
+
+
+def _clear_odd(path: Path) -> None:
+    """Remove what stands at ``path`` in our cache if it is not a regular file (a directory, a
+    FIFO, a socket): the next write renames a regular file there."""
+    try:
+        mode = os.lstat(path).st_mode
+    except OSError:
+        return
+    if stat.S_ISDIR(mode):
+        shutil.rmtree(path, ignore_errors=True)
+    elif not stat.S_ISREG(mode):
+        with contextlib.suppress(OSError):
+            os.unlink(path)
 
 
 class GeneratedCode:
@@ -202,9 +230,9 @@ class Compiler:
     def verified(self, library: Path) -> bool:
         """True if ``library`` exists and matches its recorded SHA-256."""
         try:
-            recorded = self.digest_path(library).read_text().strip()
+            recorded = _read_regular(self.digest_path(library), 4096).decode("ascii").strip()
             return _sha256(library) == recorded
-        except OSError:
+        except (OSError, UnicodeDecodeError):      # missing, not a regular file, or garbage
             return False
 
     @staticmethod
@@ -240,9 +268,10 @@ class Compiler:
         target = self.cache / key / (c_file.stem + ".so")
         if self.verified(target) and self._load_error(target, symbols) is None:
             return target
-        if target.is_dir() and not target.is_symlink():
-            # something else took the library's name in our cache: the cache is ours to repair
-            shutil.rmtree(target, ignore_errors=True)
+        # something else took the library's or its digest's name in our cache (a directory, a
+        # FIFO): the cache is ours to repair
+        for odd in (target, self.digest_path(target)):
+            _clear_odd(odd)
         try:
             target.parent.mkdir(parents=True, exist_ok=True)
         except OSError as exc:

@@ -27,7 +27,7 @@ import casadi as ca
 
 from haa_sym.model.actuator import Actuator, Topology
 from haa_sym.errors import CompilerError, NoCompiler
-from haa_sym.compiled.generated import Compiler, _sha256, default_cache_dir, evaluators
+from haa_sym.compiled.generated import Compiler, _read_regular, _sha256, default_cache_dir, evaluators
 from haa_sym.io.progress import message
 
 __all__ = ["plant_function", "compile_actuator", "compile_topology", "CompiledTopology"]
@@ -65,8 +65,8 @@ def _code_key(topology: Actuator) -> str:
 
 def _verified(path: Path) -> bool:
     try:
-        return _sha256(path) == path.with_name(path.name + ".sha256").read_text().strip()
-    except OSError:
+        return _sha256(path) == _read_regular(path.with_name(path.name + ".sha256"), 4096).decode("ascii").strip()
+    except (OSError, UnicodeDecodeError):
         return False
 
 

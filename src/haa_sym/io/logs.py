@@ -38,6 +38,8 @@ UNIFORM_JITTER = 1e-6     # relative: below this the time stamps are rounding of
 # held every key within 0.2 % up to 1e-4, but B_link fell 12 % at 1e-3 and 60 % at 1e-2, outside
 # its interval; above 1e-4 a log is refused unless --max-jitter accepts it knowingly
 MAX_JITTER = 1e-4
+# the mean sampling periods a log may have, s: 10 MHz to 0.1 Hz, far beyond any drive's logger
+PERIOD_RANGE = (1e-7, 10.0)
 # above this the summary warns that resampling biases the values (every key stayed inside its
 # ci95 at 1e-5, two fell just outside at 1e-4)
 BIAS_JITTER = 1e-5
@@ -77,7 +79,11 @@ def _read_rows(path: Path, label: str) -> tuple[list[str], np.ndarray, bytes]:
     lines = [line for line in text if line.strip() and not line.lstrip().startswith("#")]
     if not lines:
         raise ParameterError(f"{label}: empty file; allowed: a CSV with a header line (time and signals)")
-    header = [h.strip() for h in next(csv.reader(lines[:1]))]
+    try:
+        header = [h.strip() for h in next(csv.reader(lines[:1]))]
+    except csv.Error as exc:        # a header field over csv's 128 KiB limit
+        raise ParameterError(f"{label}: the header is not CSV ({exc}); allowed: comma-separated column "
+                             "names") from None
     if len(header) == 1 and any(sep in header[0] for sep in ";\t"):
         # a spreadsheet's ';' or a tab export would otherwise be named as a number that fails to parse
         raise ParameterError(f"{label}: header {header[0]!r} is one column; allowed: comma-separated columns")
@@ -174,7 +180,8 @@ def read_log(path: str | Path, inputs: tuple[str, ...], outputs: tuple[str, ...]
     bad = np.flatnonzero(~np.all(np.isfinite(np.column_stack(list(cols.values()))), axis=1))
     if bad.size:
         rows = ", ".join(str(i + 1) for i in bad[:5]) + (" ..." if bad.size > 5 else "")
-        raise ParameterError(f"{label}: {bad.size} row(s) with NaN or missing values (data rows {rows}); "
+        raise ParameterError(f"{label}: {bad.size} row(s) with NaN, infinite (beyond 1.8e308) or missing values "
+                             f"(data rows {rows}); "
                              "allowed: finite numbers in every used column (cut or repair the log)")
     t = cols.pop("time")
     if t.size < 3:
@@ -186,6 +193,11 @@ def read_log(path: str | Path, inputs: tuple[str, ...], outputs: tuple[str, ...]
         raise ParameterError(f"{label}: time is not increasing at data row {i + 2} (t = {float(t[i + 1])!r} after "
                              f"{float(t[i])!r}); allowed: strictly increasing time stamps (s)")
     mean = float((t[-1] - t[0]) / (t.size - 1))
+    if not PERIOD_RANGE[0] <= mean <= PERIOD_RANGE[1]:
+        # a time column in another unit (ms, us, ticks) or stamps near the ends of the float range:
+        # the sampled model would overflow or lose every digit
+        raise ParameterError(f"{label}: mean sampling period {mean:.6g} s; allowed: {PERIOD_RANGE[0]:g} to "
+                             f"{PERIOD_RANGE[1]:g} s (the time column in seconds)")
     jitter = float(np.max(np.abs(dt - mean)) / mean)
     sampling = {"mean_period": mean, "jitter": jitter, "jitter_rms": float(np.std(dt) / mean),
                 "samples_in_file": int(t.size), "resampled": False}

@@ -88,5 +88,6 @@ def _rows(reader, where: str, allowed: str):
 def _short(v, n: int = 200):
     """``v`` (a text or a header list) cut for a message: a 1 MB field is not quoted whole."""
     if isinstance(v, list):
+        v = [_short(x, 40) for x in v]
         return v if len(v) <= 10 else v[:10] + [f"... ({len(v) - 10} more)"]
     return v if len(v) <= n else v[:n] + f"... ({len(v)} characters)"

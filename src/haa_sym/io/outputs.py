@@ -113,6 +113,14 @@ def check_file(path: str | Path, field: str | None = None) -> Path:
     path = _follow(shown)
     if path.is_dir():
         raise OutputError(f"{_label(shown, field)} is a directory; allowed: a file path")
+    try:
+        mode = path.stat().st_mode
+    except OSError:
+        mode = None                                # a new file
+    if mode is not None and not stat.S_ISREG(mode):
+        # os.replace would put a regular file where a device or a FIFO was (/dev/full, as root)
+        raise OutputError(f"{_label(shown, field)} is not a regular file (a device, FIFO or socket); allowed: a "
+                          "new path or an existing regular file")
     check_not_input(path, field, shown)
     _check_writable(path, shown, field, "file")
     _check_parent(path, field)
@@ -140,6 +148,17 @@ def check_directory(path: str | Path, field: str | None = None,
             raise OutputError(f"{_label(path, field)}: {why}")
     _check_parent(path, field)
     return path
+
+
+def _same_file(a: Path, b: Path) -> bool:
+    """Whether the targets ``a`` and ``b`` (links resolved) name one file: the same path, or
+    an existing file under two names (a hard link)."""
+    if os.path.abspath(a) == os.path.abspath(b):
+        return True
+    try:
+        return os.path.samefile(a, b)
+    except OSError:
+        return False
 
 
 def _sibling(target: Path, tag: str) -> Path:
@@ -220,6 +239,11 @@ class Transaction:
     def open(self, path: str | Path, mode: str = "wb", field: str | None = None) -> Iterator:
         """A file object writing the staged content of ``path`` (``mode`` "w" or "wb")."""
         target = check_file(path, field)
+        same = next((t for _, t, _ in self._staged if _same_file(t, target)), None)
+        if same is not None:
+            # two outputs of one command in one file: the second would replace the first silently
+            raise OutputError(f"{_label(Path(path), field)}: the same file as another output of this command "
+                              f"({str(same)!r}); allowed: a path of its own for each output")
         self._make_parents(target, field)
         # 0o666 & ~umask, as open() gives a new file (mkstemp would force 0600)
         flags = os.O_WRONLY | os.O_CREAT | os.O_EXCL | getattr(os, "O_CLOEXEC", 0)

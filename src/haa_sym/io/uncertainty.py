@@ -53,7 +53,7 @@ def read_fit(path, field: str = "--uncertainty", keys=None) -> dict:
     where = f"{field} {str(path)!r}"
     if p.suffix.lower() != ".json":
         raise ParameterError(f"{where}: not a .json file; allowed: the report of haa-sym identify (fit.json)")
-    text = read_text(path, field, limit=MAX_BYTES, where=where)
+    text = read_text(path, field, limit=MAX_BYTES, where=where, encoding="utf-8-sig")
     twice = []
 
     def unique(pairs):
@@ -67,6 +67,9 @@ def read_fit(path, field: str = "--uncertainty", keys=None) -> dict:
     except json.JSONDecodeError as exc:
         raise ParameterError(f"{where}: not JSON (line {exc.lineno}, column {exc.colno}: {exc.msg}); allowed: "
                              "the report of haa-sym identify") from None
+    except ValueError as exc:       # an integer of more than 4,300 digits (Python's int limit)
+        raise ParameterError(f"{where}: not a report ({str(exc).splitlines()[0][:120]}); allowed: the report of "
+                             "haa-sym identify") from None
     except RecursionError:          # json recurses once per nesting level
         raise ParameterError(f"{where}: arrays or objects nested too deeply to be a report; allowed: the report "
                              "of haa-sym identify") from None

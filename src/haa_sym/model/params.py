@@ -65,21 +65,27 @@ __all__ = [
 ]
 
 
-# Domain of every key: ">0" strictly positive, ">=0" non-negative, "int>=1" integer >= 1,
+# Domain of every key: "Ts" the sampling range TS_RANGE, ">0" strictly positive, ">=0" non-negative, "int>=1" integer >= 1,
 # "filter" a registered velocity filter (haa_sym.model.filters). The plant's domains are per topology
 # (haa_sym.model.actuator: inertias, couplings, L, R, k_t, N > 0; frictions, dampings, k_w and stiffness
 # to ground >= 0). Ts sets the sampling, N_av the state dimension; alpha = 0 switches velocity
 # compensation off (Fig. 9a). The velocity filters' keys (N_av, f_c) take their domains from the
 # registry, which says which filter reads them (Controller checks).
 _CONTROLLER_DOMAIN: dict[str, str] = {
-    "Ts": ">0", "N_av": FILTER_PARAMETERS["N_av"].domain, "alpha": ">=0", "beta": ">0", "P_t0": ">=0",
+    "Ts": "Ts", "N_av": FILTER_PARAMETERS["N_av"].domain, "alpha": ">=0", "beta": ">0", "P_t0": ">=0",
     "I_t0": ">=0", "velocity_filter": "filter", "f_c": FILTER_PARAMETERS["f_c"].domain,
 }
 # The velocity estimate is a modelling choice with a stated default (the paper's average); a
 # filter's keys are optional in a file unless the chosen filter reads them without a default.
 _CONTROLLER_OPTIONAL = {"velocity_filter": filters.DEFAULT, **{k: None for k in FILTER_PARAMETERS}}
 STRING_KEYS = ("velocity_filter",)   # keys whose value is a name, not a number
+# The sampling times accepted, s: the maps' decisions are checked against the eigenvalues of the
+# explicit closed loop from 10 us to 8 ms (docs/model.md); 1 us to 1 s leaves room on either side,
+# and beyond it the closed-loop poles sit within rounding of z = 1 (Ts = 1e-300 gave "stable,
+# spectral radius 1") or the sampled plant overflows.
+TS_RANGE = (1e-6, 1.0)
 _DOMAIN_TEXT = {
+    "Ts": f"a sampling time from {TS_RANGE[0]:g} to {TS_RANGE[1]:g} s",
     ">0": "a finite number > 0",
     ">=0": "a finite number >= 0",
     "int>=1": "an integer >= 1",
@@ -457,7 +463,8 @@ def _check_value(key: str, value: object, domain: str, where: str | None = None)
             raise ParameterError(f"{prefix}{key} = {value!r} is out of range; allowed: {allowed}"
                                  + (f" and <= {INT_MAX}" if value > INT_MAX else ""))
         return int(value)
-    if (domain == ">0" and not value > 0) or (domain == ">=0" and not value >= 0):
+    if (domain == ">0" and not value > 0) or (domain == ">=0" and not value >= 0) or \
+            (domain == "Ts" and not TS_RANGE[0] <= value <= TS_RANGE[1]):
         raise ParameterError(f"{prefix}{key} = {value!r} is out of range; allowed: {allowed}")
     return float(value)
 
