@@ -166,3 +166,17 @@ def test_two_outputs_in_one_file_refused(tmp_path):
             tx.write_text(a, "one", "--out")
             tx.write_text(hard, "two", "--log-out")
     assert a.read_text() == "old"
+
+
+def test_schedule_c_out_holding_its_params_refused_before_work(tmp_path, capsys):
+    """--params DIR/haa_schedule.c --c-out DIR was refused only at commit, after the work."""
+    d = tmp_path / "c"
+    d.mkdir()
+    src = d / "haa_schedule.c"
+    shutil.copy(actuator_path("hyq_haa"), src)
+    t0 = time.perf_counter()
+    assert main(["schedule", "--params", str(src), "--P-gain", "log:10:2000:5", "--D-gain", "lin:1:30:4",
+                 "--c-out", str(d), "-q"]) == 2
+    assert time.perf_counter() - t0 < 3
+    assert "is one of this command's inputs" in capsys.readouterr().err
+    assert src.read_bytes() == actuator_path("hyq_haa").read_bytes()

@@ -278,7 +278,8 @@ def check_c_directory(directory: str | Path, field: str = "--c-out") -> Path:
         raise OutputError(f"{field} {str(d)!r} is not a directory; allowed: a directory (created if missing)")
     if d.is_dir() and not os.access(d, os.W_OK | os.X_OK):
         raise OutputError(f"{field} {str(d)!r} is not writable; allowed: a writable directory")
-    check_file(d / HEADER, field)          # missing: its existing ancestors must allow creating it
+    for name in (HEADER, SOURCE):          # missing: its existing ancestors must allow creating it;
+        check_file(d / name, field)        # existing: not one of the command's inputs
     return d
 
 
