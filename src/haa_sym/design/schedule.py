@@ -61,6 +61,8 @@ Example
 """
 from __future__ import annotations
 
+import contextlib
+
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -74,7 +76,7 @@ from haa_sym.design.schedule_table import ScheduleTable
 from haa_sym.errors import ParameterError
 from haa_sym.io.gridspec import grid
 from haa_sym.io.outputs import write_text
-from haa_sym.io.tasks import DEFAULT_CONNECT_TIMEOUT, TaskRunner
+from haa_sym.io.tasks import DEFAULT_CONNECT_TIMEOUT, TaskRunner, cluster
 from haa_sym.loop import ClosedLoop, loop_first
 from haa_sym.model.params import Params, gain_array
 
@@ -356,108 +358,114 @@ def schedule(loop, P_gain=None, D_gain=None, *, beta_range=(0.1, 8.0), beta_tol:
             raise ParameterError("alpha_values is empty; allowed: at least one value >= 0")
     ends = leg_ends(params, leg)
     leg_configurations(params, 2, leg=leg, leg_mode=leg_mode, uncertainty=uncertainty)   # checks them now
-    runner = _Runner(scheduler, progress)
-    maps: dict = {}                     # (config key, beta index, alpha index) -> (n_P, n_D) bool
-    points: dict = {}                   # (config key, beta index, alpha index) -> {flat index: bool}
-
-    def key_of(c):
-        return tuple(sorted(c.items()))
-
-    def coarse_maps(configs):
-        todo = [(c, k, a) for c in configs for k in coarse for a in range(alphas.size)
-                if (key_of(c), k, a) not in maps]
-        res = runner.run(_task_map, [(params, c, P, D, float(fine[k]), float(alphas[a]), req, options)
-                                     for c, k, a in todo], "schedule: maps")
-        for (c, k, a), r in zip(todo, res):
-            maps[(key_of(c), k, a)] = np.asarray(r, bool)
-
-    def solve(configs):
-        coarse_maps(configs)
-        n_pts = P.size * D.size
-        best_k = np.full((alphas.size, n_pts), -1)
-        for a in range(alphas.size):
-            F = np.ones((coarse.size, n_pts), bool)
-            for c in configs:
-                F &= np.stack([maps[(key_of(c), k, a)].ravel() for k in coarse])
-            any_ok = F.any(axis=0)
-            top = coarse.size - 1 - np.argmax(F[::-1], axis=0)          # largest feasible coarse
-            kc = np.where(any_ok, top, -1)
-            best_k[a] = np.where(any_ok, coarse[np.maximum(kc, 0)], -1)
-            # fine values inside each point's bracket (coarse[kc], coarse[kc + 1])
-            need: dict = {}
-            for p in np.flatnonzero(any_ok & (kc < coarse.size - 1)):
-                for k in range(coarse[kc[p]] + 1, coarse[kc[p] + 1]):
-                    need.setdefault(k, []).append(p)
-            todo = []
-            for c in configs:
-                for k, pts in need.items():
-                    done = points.setdefault((key_of(c), k, a), {})
-                    missing = [p for p in pts if p not in done]
-                    if missing:
-                        todo.append((c, k, missing))
-            PP, DD = np.meshgrid(P, D, indexing="ij")
-            PP, DD = PP.ravel(), DD.ravel()
-            res = runner.run(_task_points, [(params, c, PP[m], DD[m], float(fine[k]), float(alphas[a]), req, options)
-                                            for c, k, m in todo], "schedule: refine")
-            for (c, k, m), r in zip(todo, res):
-                points[(key_of(c), k, a)].update(zip(m, np.asarray(r, bool).tolist()))
-            for k in sorted(need):
-                ok = np.array([all(points[(key_of(c), k, a)][p] for c in configs) for p in need[k]])
-                pts = np.array(need[k])
-                best_k[a, pts[ok]] = np.maximum(best_k[a, pts[ok]], k)
-        return best_k
-
+    # local:N: one cluster for the whole schedule (both runners below), stopped whatever happens
+    local = contextlib.ExitStack()
+    spec, scheduler = scheduler, local.enter_context(cluster(scheduler))
     try:
-        n = 2
-        configs = leg_configurations(params, n, leg=leg, leg_mode=leg_mode, uncertainty=uncertainty)
-        current = solve(configs)
-        history = [(len(configs), int((current.max(axis=0) >= 0).sum()))]
-        converged = False
-        while 2 * n - 1 <= max_per_axis:
-            n = 2 * n - 1
+        runner = _Runner(scheduler, progress)
+        maps: dict = {}                     # (config key, beta index, alpha index) -> (n_P, n_D) bool
+        points: dict = {}                   # (config key, beta index, alpha index) -> {flat index: bool}
+
+        def key_of(c):
+            return tuple(sorted(c.items()))
+
+        def coarse_maps(configs):
+            todo = [(c, k, a) for c in configs for k in coarse for a in range(alphas.size)
+                    if (key_of(c), k, a) not in maps]
+            res = runner.run(_task_map, [(params, c, P, D, float(fine[k]), float(alphas[a]), req, options)
+                                         for c, k, a in todo], "schedule: maps")
+            for (c, k, a), r in zip(todo, res):
+                maps[(key_of(c), k, a)] = np.asarray(r, bool)
+
+        def solve(configs):
+            coarse_maps(configs)
+            n_pts = P.size * D.size
+            best_k = np.full((alphas.size, n_pts), -1)
+            for a in range(alphas.size):
+                F = np.ones((coarse.size, n_pts), bool)
+                for c in configs:
+                    F &= np.stack([maps[(key_of(c), k, a)].ravel() for k in coarse])
+                any_ok = F.any(axis=0)
+                top = coarse.size - 1 - np.argmax(F[::-1], axis=0)          # largest feasible coarse
+                kc = np.where(any_ok, top, -1)
+                best_k[a] = np.where(any_ok, coarse[np.maximum(kc, 0)], -1)
+                # fine values inside each point's bracket (coarse[kc], coarse[kc + 1])
+                need: dict = {}
+                for p in np.flatnonzero(any_ok & (kc < coarse.size - 1)):
+                    for k in range(coarse[kc[p]] + 1, coarse[kc[p] + 1]):
+                        need.setdefault(k, []).append(p)
+                todo = []
+                for c in configs:
+                    for k, pts in need.items():
+                        done = points.setdefault((key_of(c), k, a), {})
+                        missing = [p for p in pts if p not in done]
+                        if missing:
+                            todo.append((c, k, missing))
+                PP, DD = np.meshgrid(P, D, indexing="ij")
+                PP, DD = PP.ravel(), DD.ravel()
+                res = runner.run(_task_points, [(params, c, PP[m], DD[m], float(fine[k]), float(alphas[a]), req, options)
+                                                for c, k, m in todo], "schedule: refine")
+                for (c, k, m), r in zip(todo, res):
+                    points[(key_of(c), k, a)].update(zip(m, np.asarray(r, bool).tolist()))
+                for k in sorted(need):
+                    ok = np.array([all(points[(key_of(c), k, a)][p] for c in configs) for p in need[k]])
+                    pts = np.array(need[k])
+                    best_k[a, pts[ok]] = np.maximum(best_k[a, pts[ok]], k)
+            return best_k
+
+        try:
+            n = 2
             configs = leg_configurations(params, n, leg=leg, leg_mode=leg_mode, uncertainty=uncertainty)
-            nxt = solve(configs)
-            history.append((len(configs), int((nxt.max(axis=0) >= 0).sum())))
-            same = np.array_equal(nxt, current)
-            current = nxt
-            if same:
-                converged = True
-                break
-        current, lowered = _verify(params, configs, P, D, fine, alphas, current, req, options)
-        # beta = 1 (the file's own torque gains) at the file's alpha, for the comparison
-        res = runner.run(_task_map, [(params, c, P, D, 1.0, float(ctrl.alpha if alpha is None else alpha), req,
-                                      options) for c in configs], "schedule: beta = 1")
-        fixed = np.logical_and.reduce([np.asarray(r, bool) for r in res])
-    finally:
-        runner.close()
+            current = solve(configs)
+            history = [(len(configs), int((current.max(axis=0) >= 0).sum()))]
+            converged = False
+            while 2 * n - 1 <= max_per_axis:
+                n = 2 * n - 1
+                configs = leg_configurations(params, n, leg=leg, leg_mode=leg_mode, uncertainty=uncertainty)
+                nxt = solve(configs)
+                history.append((len(configs), int((nxt.max(axis=0) >= 0).sum())))
+                same = np.array_equal(nxt, current)
+                current = nxt
+                if same:
+                    converged = True
+                    break
+            current, lowered = _verify(params, configs, P, D, fine, alphas, current, req, options)
+            # beta = 1 (the file's own torque gains) at the file's alpha, for the comparison
+            res = runner.run(_task_map, [(params, c, P, D, 1.0, float(ctrl.alpha if alpha is None else alpha), req,
+                                          options) for c in configs], "schedule: beta = 1")
+            fixed = np.logical_and.reduce([np.asarray(r, bool) for r in res])
+        finally:
+            runner.close()
 
-    # per point: the alpha with the largest beta, ties to the larger torque bandwidth
-    free = ClosedLoop(_free_in_the_air(params), options, loop.backend, basis=False)
-    bw_cache: dict = {}
+        # per point: the alpha with the largest beta, ties to the larger torque bandwidth
+        free = ClosedLoop(_free_in_the_air(params), options, loop.backend, basis=False)
+        bw_cache: dict = {}
 
-    def bandwidth(k, a):
-        if (k, a) not in bw_cache:
-            bw_cache[(k, a)] = torque_bandwidth(free, beta=float(fine[k]), alpha=float(alphas[a]))
-        return bw_cache[(k, a)]
-    n_pts = P.size * D.size
-    beta_out, alpha_out, bw_out = np.full(n_pts, np.nan), np.full(n_pts, np.nan), np.full(n_pts, np.nan)
-    feasible = current.max(axis=0) >= 0
-    for p in np.flatnonzero(feasible):
-        kmax = current[:, p].max()
-        cand = [a for a in range(alphas.size) if current[a, p] == kmax]
-        a = max(cand, key=lambda a: (bandwidth(kmax, a), -a)) if len(cand) > 1 else cand[0]
-        beta_out[p], alpha_out[p], bw_out[p] = fine[kmax], alphas[a], bandwidth(kmax, a)
-    shape = (P.size, D.size)
-    K = np.full(n_pts, -1)
-    K[feasible] = current.max(axis=0)[feasible]
-    K = K.reshape(shape)
-    runner = _Runner(scheduler, progress)
-    try:
-        K_table, cell_safe, n_failed, n_lowered_pts, n_given_up = _check_cells(
-            runner, params, configs, P, D, fine, K, np.nan_to_num(alpha_out.reshape(shape)), req, options,
-            int(cell_subdivisions))
+        def bandwidth(k, a):
+            if (k, a) not in bw_cache:
+                bw_cache[(k, a)] = torque_bandwidth(free, beta=float(fine[k]), alpha=float(alphas[a]))
+            return bw_cache[(k, a)]
+        n_pts = P.size * D.size
+        beta_out, alpha_out, bw_out = np.full(n_pts, np.nan), np.full(n_pts, np.nan), np.full(n_pts, np.nan)
+        feasible = current.max(axis=0) >= 0
+        for p in np.flatnonzero(feasible):
+            kmax = current[:, p].max()
+            cand = [a for a in range(alphas.size) if current[a, p] == kmax]
+            a = max(cand, key=lambda a: (bandwidth(kmax, a), -a)) if len(cand) > 1 else cand[0]
+            beta_out[p], alpha_out[p], bw_out[p] = fine[kmax], alphas[a], bandwidth(kmax, a)
+        shape = (P.size, D.size)
+        K = np.full(n_pts, -1)
+        K[feasible] = current.max(axis=0)[feasible]
+        K = K.reshape(shape)
+        runner = _Runner(scheduler, progress)
+        try:
+            K_table, cell_safe, n_failed, n_lowered_pts, n_given_up = _check_cells(
+                runner, params, configs, P, D, fine, K, np.nan_to_num(alpha_out.reshape(shape)), req, options,
+                int(cell_subdivisions))
+        finally:
+            runner.close()
     finally:
-        runner.close()
+        local.close()
     table_beta = np.where(K_table >= 0, fine[np.maximum(K_table, 0)], np.nan)
     at_limit = feasible.reshape(shape) & (K == fine.size - 1)
     bw_1 = torque_bandwidth(free, beta=1.0, alpha=float(ctrl.alpha if alpha is None else alpha))
@@ -469,7 +477,7 @@ def schedule(loop, P_gain=None, D_gain=None, *, beta_range=(0.1, 8.0), beta_tol:
             "uncertainty": {k: list(v) for k, v in check_uncertainty(params, uncertainty, leg).items()}
             if uncertainty else None,
             "haa_sym": __version__,
-            "scheduler": "dask threads (in-process)" if scheduler is None else "dask.distributed",
+            "scheduler": "dask threads (in-process)" if spec is None else "dask.distributed",
             "torque_bandwidth_beta_1_rad_s": bw_1, "lowered_by_point_check": lowered,
             "cell_subdivisions": int(cell_subdivisions), "cells_failed_check": n_failed,
             "grid_points_lowered_by_cell_check": n_lowered_pts, "cells_given_up": n_given_up,

@@ -1,6 +1,10 @@
 """Lists of independent tasks run on dask: in-process (dask's threaded scheduler) or on a
 dask.distributed cluster (``--scheduler ADDRESS``), with a progress bar (:mod:`haa_sym.io.progress`).
 
+``--scheduler local:N`` starts a ``distributed.LocalCluster`` of N one-thread worker processes on
+127.0.0.1 for the duration of one call (:func:`cluster`), and stops it, also on an error, Ctrl-C
+or SIGTERM.
+
 A task is a module-level function of plain data (parameters, options, gain points): a worker
 process builds what it needs itself (the compiled library is loaded per process, never shipped).
 Used by the torque-gain scheduler (:mod:`haa_sym.design.schedule`) and the nonlinear maps
@@ -14,12 +18,16 @@ Example
 """
 from __future__ import annotations
 
+import contextlib
+import logging
+import os
+import sys
 import threading
 
 from haa_sym.errors import ParameterError
 from haa_sym.io.progress import progress as progress_bar
 
-__all__ = ["TaskRunner", "connect", "DEFAULT_CONNECT_TIMEOUT", "THREADS"]
+__all__ = ["TaskRunner", "connect", "cluster", "local_workers", "DEFAULT_CONNECT_TIMEOUT", "THREADS"]
 
 #: Seconds to connect to a --scheduler and finish dask's handshake.
 DEFAULT_CONNECT_TIMEOUT = 5.0
@@ -30,6 +38,64 @@ THREADS = 2
 NO_WORKER_TIMEOUT = 30.0
 #: Seconds between two looks at the cluster while waiting for results.
 POLL_S = 0.5
+
+
+#: The form of a local cluster's --scheduler value: ``local:N``.
+LOCAL = "local:"
+#: Seconds for a local cluster's N workers to start and register.
+LOCAL_START_TIMEOUT = 120.0
+
+
+def local_workers(spec) -> int | None:
+    """N of a ``--scheduler local:N`` value, None for any other value (an address, a Client,
+    None); ParameterError unless N is an integer >= 1."""
+    if not isinstance(spec, str) or not spec.startswith(LOCAL):
+        return None
+    text = spec[len(LOCAL):]
+    n = int(text) if text.isascii() and text.isdigit() else 0
+    if n < 1:
+        raise ParameterError(f"--scheduler {spec!r}: the number of worker processes is not an integer >= 1; "
+                             "allowed: local:N with N >= 1 (e.g. local:2), or the address of a running "
+                             "dask.distributed scheduler (tcp://127.0.0.1:8786)")
+    return n
+
+
+@contextlib.contextmanager
+def cluster(spec):
+    """What :class:`TaskRunner` takes for ``spec``: ``spec`` itself, except for ``local:N``: a
+    ``distributed.Client`` of a ``LocalCluster`` started here (N worker processes of one thread
+    each, every service on 127.0.0.1: the scheduler's and workers' comm ports, no dashboard)
+    and stopped on leaving, whatever ends the block (an error, KeyboardInterrupt, or
+    :class:`haa_sym.errors.Terminated` on SIGTERM).
+
+    One thread per process: a point's Python part holds the GIL (see
+    :data:`haa_sym.analysis.nonlinear_map.IN_PROCESS_THREADS`), so cores are used by processes.
+    """
+    n = local_workers(spec)
+    if n is None:
+        yield spec
+        return
+    cores = os.cpu_count() or 1
+    if n > cores:
+        # allowed (a test of the scheduling), but more processes than cores share them
+        print(f"haa-sym: warning: --scheduler {spec}: {n} worker processes on {cores} cores; they share the "
+              f"cores (no faster than local:{cores})", file=sys.stderr)
+    from distributed import Client, LocalCluster
+    cl = client = None
+    try:
+        # dashboard_address=None: no HTTP server at all (a dashboard would listen on every
+        # interface unless given 127.0.0.1; docs/schedule.md); the workers' too
+        cl = LocalCluster(n_workers=n, threads_per_worker=1, processes=True, host="127.0.0.1",
+                          dashboard_address=None, worker_dashboard_address=None,
+                          silence_logs=logging.ERROR)
+        client = Client(cl)
+        client.wait_for_workers(n, timeout=LOCAL_START_TIMEOUT)
+        yield client
+    finally:
+        if client is not None:
+            client.close()
+        if cl is not None:
+            cl.close()
 
 
 def connect(Client, address: str, timeout: float = DEFAULT_CONNECT_TIMEOUT):
@@ -72,7 +138,8 @@ class TaskRunner:
     ----------
     scheduler : None, str or distributed.Client
         None: dask's threaded scheduler in this process (:data:`THREADS` threads); an address
-        ("tcp://host:port"): connect to it (closed by :meth:`close`); a Client: use it.
+        ("tcp://host:port"): connect to it (closed by :meth:`close`); ``"local:N"``: a local
+        cluster of N workers (:func:`cluster`; stopped by :meth:`close`); a Client: use it.
     progress : bool or None
         The progress bar's setting (:func:`haa_sym.io.progress.progress`).
     connect_timeout : float
@@ -84,11 +151,15 @@ class TaskRunner:
 
     def __init__(self, scheduler, progress, connect_timeout: float = DEFAULT_CONNECT_TIMEOUT,
                  threads: int = THREADS, no_worker_timeout: float = NO_WORKER_TIMEOUT):
-        self.client, self.own = None, False
+        self.client, self.own, self._local = None, False, None
         self.progress, self.threads = progress, threads
         self.no_worker_timeout = no_worker_timeout
         self.address = scheduler if isinstance(scheduler, str) else None
         if scheduler is None:
+            return
+        if local_workers(scheduler) is not None:
+            self._local = contextlib.ExitStack()
+            self.client = self._local.enter_context(cluster(scheduler))
             return
         try:
             from distributed import Client
@@ -103,6 +174,9 @@ class TaskRunner:
     def close(self):
         if self.own and self.client is not None:
             self.client.close()
+        if self._local is not None:
+            self._local.close()
+            self._local = None
 
     def run(self, fn, args_list: list, label: str, unit: str = "task") -> list:
         """``[fn(*a) for a in args_list]``, in that order, the tasks run concurrently."""
