@@ -38,6 +38,11 @@ THREADS = 2
 NO_WORKER_TIMEOUT = 30.0
 #: Seconds between two looks at the cluster while waiting for results.
 POLL_S = 0.5
+#: None, or a list to which every task submitted to a cluster is appended as ``{"key": ...,
+#: "after": [keys]}``: the tasks it waited for (the previous :meth:`TaskRunner.run` call's, a
+#: barrier; or the task whose result asked for it, :meth:`TaskRunner.stream`). The chains of
+#: this graph bound the speedup (benchmarks/bench_scale.py reads it).
+TRACE: list | None = None
 
 
 #: The form of a local cluster's --scheduler value: ``local:N``.
@@ -152,6 +157,7 @@ class TaskRunner:
     def __init__(self, scheduler, progress, connect_timeout: float = DEFAULT_CONNECT_TIMEOUT,
                  threads: int = THREADS, no_worker_timeout: float = NO_WORKER_TIMEOUT):
         self.client, self.own, self._local = None, False, None
+        self._before: list = []                 # keys of the last barrier's tasks (TRACE)
         self.progress, self.threads = progress, threads
         self.no_worker_timeout = no_worker_timeout
         self.address = scheduler if isinstance(scheduler, str) else None
@@ -185,6 +191,8 @@ class TaskRunner:
         with progress_bar(len(args_list), label, unit, self.progress) as bar:
             if self.client is not None:
                 futures = [self.client.submit(fn, *a, pure=False) for a in args_list]
+                self._trace(futures, self._before)
+                self._before = [f.key for f in futures]
                 try:
                     self._wait(futures, bar)
                     return self.client.gather(futures)
@@ -207,15 +215,90 @@ class TaskRunner:
             with _Bar():
                 return list(dask.compute(*tasks, scheduler="threads", num_workers=self.threads))
 
-    def _wait(self, futures, bar) -> None:
-        """Wait for ``futures``, updating ``bar``; stop with one line when the cluster has had no
-        worker for :attr:`no_worker_timeout` s, or when a task killed the workers it ran on
-        (dask's ``KilledWorker``, after its allowed failures): never wait for ever."""
+    def workers(self) -> int:
+        """How many tasks run at once: the cluster's worker threads, else the in-process threads."""
+        if self.client is None:
+            return max(1, self.threads)
+        return max(1, sum(self.client.nthreads().values()))
+
+    def stream(self, fn, first: list, then, label: str, unit: str = "task") -> None:
+        """Run ``fn(*a)`` for every ``a`` of ``first``, and what the results ask for, with no
+        barrier between rounds: as each task finishes, ``then(a, result)`` is called (in this
+        thread) and returns ``(args, priority)`` pairs of further tasks, submitted at once
+        while the others run (a higher ``priority`` is started first by a cluster). ``then``
+        must not depend on the order results arrive in: it is the completion order."""
+        with progress_bar(len(first), label, unit, self.progress) as bar:
+            def more(a, result):
+                new = list(then(a, result))
+                if new:
+                    bar.total += len(new)
+                    bar.refresh()
+                return new
+            if self.client is not None:
+                futures = {}
+
+                keys: list = []
+
+                def submit(items, after):
+                    new = [self.client.submit(fn, *a, pure=False, priority=prio) for a, prio in items]
+                    futures.update(zip(new, (a for a, _ in items)))
+                    self._trace(new, after)
+                    keys.extend(f.key for f in new)
+                    return new
+
+                def on_done(f):
+                    a = futures.pop(f)
+                    return submit(more(a, f.result()), [f.key])
+                submit([(a, 0) for a in first], self._before)
+                self._before = keys
+                try:
+                    self._wait(list(futures), bar, on_done)
+                finally:
+                    self.client.cancel([f for f in futures if not f.done()])
+                return
+            if self.threads == 1:
+                import heapq
+                import itertools
+                order = itertools.count()
+                queue = [(0, next(order), a) for a in first]
+                heapq.heapify(queue)
+                while queue:
+                    _, _, a = heapq.heappop(queue)
+                    r = fn(*a)
+                    bar.update(1)
+                    for b, prio in more(a, r):
+                        heapq.heappush(queue, (-prio, next(order), b))
+                return
+            from concurrent.futures import FIRST_COMPLETED, ThreadPoolExecutor, wait
+            with ThreadPoolExecutor(self.threads, thread_name_prefix="haa_sym-task") as pool:
+                running = {pool.submit(fn, *a): a for a in first}
+                try:
+                    while running:
+                        done, _ = wait(running, return_when=FIRST_COMPLETED)
+                        for f in done:
+                            a = running.pop(f)
+                            bar.update(1)
+                            for b, _prio in more(a, f.result()):
+                                running[pool.submit(fn, *b)] = b
+                finally:
+                    for f in running:
+                        f.cancel()
+
+    @staticmethod
+    def _trace(futures, after) -> None:
+        if TRACE is not None:
+            TRACE.extend({"key": f.key, "after": list(after)} for f in futures)
+
+    def _wait(self, futures, bar, on_done=None) -> None:
+        """Wait for ``futures``, updating ``bar``; ``on_done(future)`` (if given) is called on
+        each finished one and returns new futures to wait for too. Stop with one line when the
+        cluster has had no worker for :attr:`no_worker_timeout` s, or when a task killed the
+        workers it ran on (dask's ``KilledWorker``, after its allowed failures): never wait for ever."""
         import time
         from distributed import wait
         from distributed.scheduler import KilledWorker
         where = f"--scheduler {self.address!r}" if self.address else "the dask cluster"
-        pending, idle_since = set(futures), None
+        pending, idle_since, total = set(futures), None, len(futures)
         while pending:
             try:
                 done, pending = wait(pending, timeout=POLL_S, return_when="FIRST_COMPLETED")
@@ -230,6 +313,10 @@ class TaskRunner:
                                              "process running it died, each time it was retried: out of "
                                              "memory, or killed); allowed: workers that stay up (check "
                                              "their memory and logs)") from None
+                if on_done is not None:
+                    new = on_done(f)             # raises the task's own error, if any
+                    pending |= set(new)
+                    total += len(new)
             if not pending:
                 return
             workers = len(self.client.scheduler_info().get("workers", {}))
@@ -240,6 +327,6 @@ class TaskRunner:
                 idle_since = now
             elif now - idle_since > self.no_worker_timeout:
                 raise ParameterError(f"{where}: no worker for {self.no_worker_timeout:g} s with {len(pending)} "
-                                     f"of {len(futures)} tasks pending (did the last worker die?); allowed: a "
+                                     f"of {total} tasks pending (did the last worker die?); allowed: a "
                                      "cluster with at least one running worker")
 
