@@ -48,9 +48,12 @@ scheduled beta and alpha, the file's nominal plant otherwise.
 Large sweeps
 ------------
 Every map is one task (one call of the evaluators on a whole gain grid; a task ships a few
-numbers and returns one boolean array). Tasks run on dask: in-process (dask's threaded
-scheduler) by default, or on an existing dask.distributed cluster (``scheduler`` = its address
-or a ``distributed.Client``). The result is the same, byte for byte.
+numbers and returns one boolean array); so are the point check's decisions (one per beta and
+leg configuration) and the torque bandwidths. Tasks run on dask: in-process (dask's threaded
+scheduler) by default, on a local cluster of N processes (``scheduler="local:N"``), or on an
+existing dask.distributed cluster (``scheduler`` = its address or a ``distributed.Client``),
+where small calls go in groups, a few per worker (:meth:`haa_sym.io.tasks.TaskRunner.run`). The
+result is the same, byte for byte.
 
 Example
 -------
@@ -195,12 +198,12 @@ def _Runner(scheduler, progress):
     return TaskRunner(scheduler, progress, connect_timeout=CONNECT_TIMEOUT)
 
 
-def _verify(params, configs, P, D, fine, alphas, best_k, req, options):
+def _verify(runner, params, configs, P, D, fine, alphas, best_k, req, options):
     """Re-decide every answer point by point (:func:`haa_sym.analysis.decide.decide_points`, the
     maps' own rule with exactly located crossovers) at every leg configuration, and lower a
-    point's beta until it holds: the maps decide whole segments from a few probes. Returns the
-    new indices and how many points were lowered."""
-    loops = [ClosedLoop(params.with_values(**c), options) for c in configs]
+    point's beta until it holds: the maps decide whole segments from a few probes. Every
+    (beta, configuration) group of a round is a task (:func:`_task_points`). Returns the new
+    indices and how many points were lowered."""
     PP, DD = np.meshgrid(P, D, indexing="ij")
     PP, DD = PP.ravel(), DD.ravel()
     best_k = best_k.copy()
@@ -209,17 +212,21 @@ def _verify(params, configs, P, D, fine, alphas, best_k, req, options):
         todo = np.flatnonzero(best_k[a] >= 0)
         while todo.size:
             bad = np.zeros(best_k.shape[1], bool)
-            for k in np.unique(best_k[a, todo]):
-                pts = todo[best_k[a, todo] == k]
-                for loop in loops:
-                    d = decide_points(loop, PP[pts], DD[pts], float(fine[k]), float(alphas[a]),
-                                      passivity="passive" in req)
-                    bad[pts[~meets(d, req)]] = True
+            groups = [(k, todo[best_k[a, todo] == k]) for k in np.unique(best_k[a, todo])]
+            res = runner.run(_task_points, [(params, c, PP[pts], DD[pts], float(fine[k]), float(alphas[a]), req,
+                                             options) for k, pts in groups for c in configs], "schedule: point check")
+            for g, (k, pts) in enumerate(groups):
+                for r in res[g * len(configs):(g + 1) * len(configs)]:
+                    bad[pts[~np.asarray(r, bool)]] = True
             todo = np.flatnonzero(bad)
             lowered.update(todo.tolist())
             best_k[a, todo] -= 1                # -1: no beta of the range is left
             todo = todo[best_k[a, todo] >= 0]
     return best_k, len(lowered)
+
+
+def _task_bandwidth(params, options, backend, beta, alpha):
+    return torque_bandwidth(ClosedLoop(params, options, backend, basis=False), beta=beta, alpha=alpha)
 
 
 def _check_cells(runner, params, configs, P, D, fine, K, alpha_pt, req, options, n_sub):
@@ -429,21 +436,28 @@ def schedule(loop, P_gain=None, D_gain=None, *, beta_range=(0.1, 8.0), beta_tol:
                 if same:
                     converged = True
                     break
-            current, lowered = _verify(params, configs, P, D, fine, alphas, current, req, options)
+            current, lowered = _verify(runner, params, configs, P, D, fine, alphas, current, req, options)
             # beta = 1 (the file's own torque gains) at the file's alpha, for the comparison
-            res = runner.run(_task_map, [(params, c, P, D, 1.0, float(ctrl.alpha if alpha is None else alpha), req,
-                                          options) for c in configs], "schedule: beta = 1")
+            alpha_1 = float(ctrl.alpha if alpha is None else alpha)
+            res = runner.run(_task_map, [(params, c, P, D, 1.0, alpha_1, req, options) for c in configs],
+                             "schedule: beta = 1")
             fixed = np.logical_and.reduce([np.asarray(r, bool) for r in res])
+            # the torque bandwidths the table reports (and ties between alphas need), as tasks:
+            # the leg free in the air, at each point's largest beta and every alpha reaching it,
+            # and at beta = 1
+            free_params = _free_in_the_air(params)
+            pairs = sorted({(int(current[:, p].max()), a) for p in np.flatnonzero(current.max(axis=0) >= 0)
+                            for a in range(alphas.size) if current[a, p] == current[:, p].max()})
+            res = runner.run(_task_bandwidth, [(free_params, options, loop.backend, float(fine[k]),
+                                                float(alphas[a])) for k, a in pairs]
+                             + [(free_params, options, loop.backend, 1.0, alpha_1)], "schedule: bandwidths")
+            bw_cache = dict(zip(pairs, res[:-1]))
+            bw_1 = res[-1]
         finally:
             runner.close()
 
         # per point: the alpha with the largest beta, ties to the larger torque bandwidth
-        free = ClosedLoop(_free_in_the_air(params), options, loop.backend, basis=False)
-        bw_cache: dict = {}
-
         def bandwidth(k, a):
-            if (k, a) not in bw_cache:
-                bw_cache[(k, a)] = torque_bandwidth(free, beta=float(fine[k]), alpha=float(alphas[a]))
             return bw_cache[(k, a)]
         n_pts = P.size * D.size
         beta_out, alpha_out, bw_out = np.full(n_pts, np.nan), np.full(n_pts, np.nan), np.full(n_pts, np.nan)
@@ -468,7 +482,6 @@ def schedule(loop, P_gain=None, D_gain=None, *, beta_range=(0.1, 8.0), beta_tol:
         local.close()
     table_beta = np.where(K_table >= 0, fine[np.maximum(K_table, 0)], np.nan)
     at_limit = feasible.reshape(shape) & (K == fine.size - 1)
-    bw_1 = torque_bandwidth(free, beta=1.0, alpha=float(ctrl.alpha if alpha is None else alpha))
     meta = {"actuator": str((getattr(params, "about", None) or {}).get("name", params.source)),
             "source": str(params.source), "requirements": list(req), "beta_range": [float(fine[0]), float(fine[-1])],
             "beta_tol": float(beta_tol), "beta_grid": int(fine.size), "coarse_values": int(coarse.size),

@@ -136,6 +136,17 @@ def connect(Client, address: str, timeout: float = DEFAULT_CONNECT_TIMEOUT):
     raise ParameterError(f"--scheduler {address!r}: {why}; {allowed}")
 
 
+#: Tasks a :meth:`TaskRunner.run` call gives each worker of a cluster at most: the calls are
+#: grouped (:func:`_call_each`) so that a map of many small calls does not pay a cluster task's
+#: milliseconds for each.
+CHUNKS_PER_WORKER = 4
+
+
+def _call_each(fn, args_list: list) -> list:
+    """``[fn(*a) for a in args_list]``: a group of calls as one cluster task."""
+    return [fn(*a) for a in args_list]
+
+
 class TaskRunner:
     """Runs task lists on dask (threaded, in-process) or on a dask.distributed cluster.
 
@@ -190,12 +201,17 @@ class TaskRunner:
             return []
         with progress_bar(len(args_list), label, unit, self.progress) as bar:
             if self.client is not None:
-                futures = [self.client.submit(fn, *a, pure=False) for a in args_list]
+                # a cluster task costs milliseconds of scheduling and transfer: small tasks go
+                # in groups, CHUNKS_PER_WORKER a worker (the slowest group then decides little)
+                n = max(1, min(len(args_list), CHUNKS_PER_WORKER * self.workers()))
+                bounds = [len(args_list) * i // n for i in range(n + 1)]
+                groups = [args_list[a:b] for a, b in zip(bounds, bounds[1:])]
+                futures = [self.client.submit(_call_each, fn, g, pure=False) for g in groups]
                 self._trace(futures, self._before)
                 self._before = [f.key for f in futures]
                 try:
-                    self._wait(futures, bar)
-                    return self.client.gather(futures)
+                    self._wait(futures, bar, sizes={f: len(g) for f, g in zip(futures, groups)})
+                    return [r for rs in self.client.gather(futures) for r in rs]
                 finally:
                     self.client.cancel([f for f in futures if not f.done()])
             if self.threads == 1:
@@ -289,7 +305,7 @@ class TaskRunner:
         if TRACE is not None:
             TRACE.extend({"key": f.key, "after": list(after)} for f in futures)
 
-    def _wait(self, futures, bar, on_done=None) -> None:
+    def _wait(self, futures, bar, on_done=None, sizes=None) -> None:
         """Wait for ``futures``, updating ``bar``; ``on_done(future)`` (if given) is called on
         each finished one and returns new futures to wait for too. Stop with one line when the
         cluster has had no worker for :attr:`no_worker_timeout` s, or when a task killed the
@@ -298,13 +314,15 @@ class TaskRunner:
         from distributed import wait
         from distributed.scheduler import KilledWorker
         where = f"--scheduler {self.address!r}" if self.address else "the dask cluster"
-        pending, idle_since, total = set(futures), None, len(futures)
+        sizes = {} if sizes is None else sizes             # calls per cluster task (run's groups)
+        pending, idle_since = set(futures), None
+        total = sum(sizes.get(f, 1) for f in futures)
         while pending:
             try:
                 done, pending = wait(pending, timeout=POLL_S, return_when="FIRST_COMPLETED")
             except TimeoutError:
                 done = set()
-            bar.update(len(done))
+            bar.update(sum(sizes.get(f, 1) for f in done))
             for f in done:
                 if f.status == "error":
                     exc = f.exception()
@@ -326,7 +344,8 @@ class TaskRunner:
             elif idle_since is None:
                 idle_since = now
             elif now - idle_since > self.no_worker_timeout:
-                raise ParameterError(f"{where}: no worker for {self.no_worker_timeout:g} s with {len(pending)} "
+                left = sum(sizes.get(f, 1) for f in pending)
+                raise ParameterError(f"{where}: no worker for {self.no_worker_timeout:g} s with {left} "
                                      f"of {total} tasks pending (did the last worker die?); allowed: a "
                                      "cluster with at least one running worker")
 
