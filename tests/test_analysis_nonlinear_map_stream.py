@@ -7,7 +7,6 @@ import threading
 import time
 
 import numpy as np
-import pytest
 
 import haa_sym.analysis.nonlinear_map as nm
 from haa_sym import ClosedLoop, load_params
