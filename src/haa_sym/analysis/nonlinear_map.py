@@ -269,7 +269,11 @@ def nonlinear_map(loop, P_gain, D_gain, *, limits: Limits | None = None, experim
                 seconds, seed, rtol, stable[idx].astype(float))
 
     def chunks(idx, per):
-        return [idx[a:a + per] for a in range(0, idx.size, per)]
+        # strided, not contiguous: a point's cost grows with its gains (the friction integrator's
+        # substeps), so contiguous chunks of the P-major grid differ up to tenfold in time, and
+        # the slowest would decide the map's end on many workers
+        n = -(-idx.size // per)
+        return [idx[k::n] for k in range(n)]
 
     # No barrier between the first runs and the longer ones: a task's points still growing or
     # undecided are run again as soon as its result arrives, while the other tasks run (each
