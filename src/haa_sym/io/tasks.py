@@ -201,17 +201,21 @@ class TaskRunner:
             return []
         with progress_bar(len(args_list), label, unit, self.progress) as bar:
             if self.client is not None:
-                # a cluster task costs milliseconds of scheduling and transfer: small tasks go
-                # in groups, CHUNKS_PER_WORKER a worker (the slowest group then decides little)
+                # a cluster task costs milliseconds of scheduling and transfer: small calls go in
+                # groups, CHUNKS_PER_WORKER a worker; every n-th call to a group (neighbouring
+                # calls cost alike, e.g. one leg configuration's maps), so the groups take about
+                # the same time and the slowest decides little
                 n = max(1, min(len(args_list), CHUNKS_PER_WORKER * self.workers()))
-                bounds = [len(args_list) * i // n for i in range(n + 1)]
-                groups = [args_list[a:b] for a, b in zip(bounds, bounds[1:])]
+                groups = [args_list[g::n] for g in range(n)]
                 futures = [self.client.submit(_call_each, fn, g, pure=False) for g in groups]
                 self._trace(futures, self._before)
                 self._before = [f.key for f in futures]
                 try:
                     self._wait(futures, bar, sizes={f: len(g) for f, g in zip(futures, groups)})
-                    return [r for rs in self.client.gather(futures) for r in rs]
+                    out = [None] * len(args_list)
+                    for g, rs in enumerate(self.client.gather(futures)):
+                        out[g::n] = rs
+                    return out
                 finally:
                     self.client.cancel([f for f in futures if not f.done()])
             if self.threads == 1:
