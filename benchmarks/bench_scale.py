@@ -8,18 +8,18 @@ started and warmed (haa_sym imported) before the timing; the cluster's start is 
 (``--scheduler local:N`` pays it on every command). Every run's output must have the bytes of the
 first (the npz's arrays; a CSV whole), else the script fails.
 
-From the run on 1 worker (the tasks' own durations, not sharing a core) unless said otherwise:
+The prediction for M workers (``--predict``, default 16) comes from one more run, on 1 worker (the
+tasks' own durations, not sharing a core) with the tasks sized as for M workers (tasks are
+sized to the workers: more workers, smaller tasks, shorter chains):
 
 - work W: the sum of the tasks' compute times;
 - serial S: the time in which no task ran (the command's own computation between and around the
-  tasks, the scheduling latency);
-- longest chain C (from the run on the most workers: tasks are sized to the workers, so the
-  chains are shorter with more, and the prediction for more workers than measured errs long):
-  the heaviest chain of tasks that waited for one another
+  tasks, the scheduling latency; on one worker also each task's dispatch, so S errs long);
+- longest chain C: the heaviest chain of tasks that waited for one another
   (:data:`haa_sym.io.tasks.TRACE`: a ``run`` waits for the previous ``run``'s tasks; a
   ``stream`` follow-up for the task that asked for it);
 - predicted time on M workers: ``S + max(C, W / M)``, and the bound on the speedup
-  ``T(1) / (S + C)`` however many workers.
+  ``T(1) / (S + C)`` however many workers (the critical path S + C).
 
 Before each run it measures how many of n cores are free now (:func:`capacity`: n spinning
 processes against one; the load average of a shared virtual machine does not say it).
@@ -120,10 +120,19 @@ def analyse(trace: list, stream: list, t0: float, t1: float) -> dict:
             "longest_task_s": max(dur.values(), default=0.0)}
 
 
-def run_once(argv: list[str], n: int, out: Path) -> dict:
+def run_once(argv: list[str], n: int, out: Path, sized_for: int | None = None) -> dict:
+    """One timed run of the command on a warm cluster of ``n`` workers; ``sized_for``: its tasks
+    sized as for that many workers (:meth:`TaskRunner.workers` patched in this process)."""
     import distributed
     from haa_sym.cli import main
     from haa_sym.io import tasks
+    if sized_for is not None:
+        real = tasks.TaskRunner.workers
+        tasks.TaskRunner.workers = lambda self: sized_for
+        try:
+            return run_once(argv, n, out)
+        finally:
+            tasks.TaskRunner.workers = real
     t = time.perf_counter()
     with distributed.LocalCluster(n_workers=n, threads_per_worker=1, processes=True, host="127.0.0.1",
                                   dashboard_address=None, worker_dashboard_address=None,
@@ -183,31 +192,35 @@ def main() -> int:
                   f"chain {best['longest_chain_s']:.2f} s; load {best['load_1min_before']:.2f} -> "
                   f"{best['load_1min_after']:.2f}, cores available before {best['cores_available_before']:.2f} "
                   f"of {n}", flush=True)
-    same = all(r["output"] == rows[0]["output"] for r in rows)
-    for r in rows:
+        # the chains of the predicted cluster: tasks sized for --predict workers, run on one
+        chain = run_once(argv, 1, out, sized_for=args.predict)
+        print(f" 1 worker, tasks sized for {args.predict}: {chain['seconds']:.2f} s, work {chain['work_s']:.2f} s "
+              f"in {chain['tasks']} tasks, serial {chain['serial_s']:.2f} s, longest chain "
+              f"{chain['longest_chain_s']:.2f} s", flush=True)
+    same = all(r["output"] == rows[0]["output"] for r in rows + [chain])
+    for r in rows + [chain]:
         del r["output"]
     one = rows[0]
     for r in rows:
         r["speedup"] = one["seconds"] / r["seconds"]
         r["efficiency"] = r["speedup"] / r["workers"]
-    # S and W from the run on one worker (task durations not inflated by sharing the cores); C
-    # from the run on the most workers: tasks are sized to the workers (more workers, smaller
-    # tasks, shorter chains), so on more workers than measured it overestimates the time
-    S, W, C = one["serial_s"], one["work_s"], rows[-1]["longest_chain_s"]
+    # the prediction for M workers from the run on one worker with tasks sized for M (task
+    # durations not inflated by sharing the cores; the chains of M's task sizes)
+    S, W, C = chain["serial_s"], chain["work_s"], chain["longest_chain_s"]
     critical = S + C
-    predict = {m: S + max(C, W / m) for m in sorted({1, 2, 4, 8, args.predict})}
+    M = args.predict
+    predict = {M: S + max(C, W / M)}
     print()
     print(f"{'workers':>7} {'seconds':>8} {'speedup':>8} {'efficiency':>10}")
     for r in rows:
         print(f"{r['workers']:7d} {r['seconds']:8.2f} {r['speedup']:8.2f} {r['efficiency']:10.2f}")
-    print(f"critical path: serial {S:.2f} s (1 worker) + longest task chain {C:.2f} s ({rows[-1]['workers']} "
-          f"workers) = {critical:.2f} s; work "
-          f"{W:.2f} s; speedup bound T(1) / critical path = {one['seconds'] / critical:.1f}")
-    print("predicted S + max(C, W / M): " + ", ".join(f"{m} workers {t:.1f} s ({one['seconds'] / t:.1f}x)"
-                                                      for m, t in predict.items()))
+    print(f"critical path (tasks sized for {M} workers): serial {S:.2f} s + longest task chain {C:.2f} s = "
+          f"{critical:.2f} s; work {W:.2f} s; speedup bound T(1) / critical path = {one['seconds'] / critical:.1f}")
+    print(f"predicted on {M} workers: S + max(C, W / {M}) = {predict[M]:.1f} s, {one['seconds'] / predict[M]:.1f}x "
+          f"the measured 1 worker")
     print(f"same output at every worker count: {same}; machine: {bench.info['cpu_model']}, "
           f"{bench.info['cpu_count']} cores")
-    res = {"command": ["haa-sym", *argv], "preset": name, "rows": rows, "same_output": same,
+    res = {"command": ["haa-sym", *argv], "preset": name, "rows": rows, "chain_run": chain, "same_output": same,
            "critical_path_s": critical, "serial_s": S, "longest_chain_s": C, "work_s": W,
            "predicted_s": {str(m): t for m, t in predict.items()},
            "speedup_bound": one["seconds"] / critical}
