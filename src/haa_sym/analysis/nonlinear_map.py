@@ -14,9 +14,25 @@ converging, undecided.
 Points classed ``growing`` or ``undecided`` are run again, ``EXTEND_FACTOR``
 times longer each time, up to ``max_duration``: their class is that of their longest run.
 
-Runs are independent tasks (``points_per_task`` points each) (:class:`haa_sym.io.tasks.TaskRunner`):
-in-process one after the other (:data:`IN_PROCESS_THREADS`), or on a dask.distributed cluster whose workers build the loop from the parameters and options
-themselves. The classes are the same either way.
+Runs are independent tasks (:class:`haa_sym.io.tasks.TaskRunner`): in-process one after the other
+(:data:`IN_PROCESS_THREADS`), or on a dask.distributed cluster (``--scheduler local:N`` or an
+address) whose workers build the loop and the simulation setup from the parameters and options
+themselves, once per process (:func:`_warm`). There is no barrier between the first runs and the
+longer ones: a task's points still growing or undecided are submitted again as soon as its result
+arrives (:meth:`TaskRunner.stream`), ahead of the first runs still waiting. Tasks are sized to the
+workers (:func:`task_size`). Each point's runs depend on that point alone, so the classes, and every
+array of the map, are the same bytes whatever the order, the task size or the scheduler.
+
+A longer run starts again from t = 0 rather than continuing from the state where the shorter
+one stopped, although the C loop returns that state: a continued run would not be the same run.
+The friction integrator's error bound is relative to each state's peak over the whole run
+without friction (:func:`haa_sym.analysis.simulate._run`), which a longer run raises, so the
+substeps it chooses, and the trace, would differ in the last bits; the chirp's sweep rate
+depends on the run's length; and the verdict reads the last half of the whole run (its
+saturation and oscillation), which a continuation would have to ship back from the first part.
+The price: HyQ with 24 V and 0.02 Nm rotor friction, 60 x 40 points, runs 162 of its 2,400 points
+again, 58 % of the simulated samples; continuing would cut a point run up to 10 s from 1 + 3 + 9
++ 10 = 23 simulated seconds to 10, about a third of the map's work, but give other bytes.
 
 Example
 -------
@@ -28,12 +44,14 @@ Example
 """
 from __future__ import annotations
 
+import pickle
 from dataclasses import dataclass, field
 
 import numpy as np
 
 from haa_sym.analysis.oscillation import SATURATING_FRACTION, VERDICTS, classify
-from haa_sym.analysis.simulate import DEFAULT_RTOL, FORCED_EXPERIMENTS, _Setup, limits_act_every_step, simulate_batch
+from haa_sym.analysis.simulate import (DEFAULT_RTOL, FORCED_EXPERIMENTS, _Setup, batch_setup, limits_act_every_step,
+                                       simulate_batch)
 from haa_sym.errors import ParameterError
 from haa_sym.io.formats import save_npz
 from haa_sym.io.tasks import TaskRunner
@@ -42,7 +60,7 @@ from haa_sym.model.limits import Limits
 from haa_sym.model.params import gain_array
 
 __all__ = ["NonlinearMap", "nonlinear_map", "classify", "CLASSES", "DEFAULT_DURATION", "DEFAULT_MAX_DURATION",
-           "EXTEND_FACTOR", "SATURATING_FRACTION", "POINTS_PER_TASK"]
+           "EXTEND_FACTOR", "SATURATING_FRACTION", "POINTS_PER_TASK", "task_size"]
 
 #: The classes, by their code in ``NonlinearMap.nonlinear_class``: the verdicts of a run.
 CLASSES = VERDICTS
@@ -54,9 +72,15 @@ DEFAULT_DURATION = 1.0
 #: (HyQ at beta 3 with 24 V: the growing points fall from 120 at 1 s to 27 at 10 s).
 DEFAULT_MAX_DURATION = 10.0
 EXTEND_FACTOR = 3.0
-#: Gain points per task (a task's overhead on dask is about a millisecond; a point at 1 s and
-#: 1 ms about a millisecond too).
+#: Most gain points per first-run task (a task's overhead on dask is about a millisecond; a
+#: point at 1 s and 1 ms about a millisecond too).
 POINTS_PER_TASK = 250
+#: First-run tasks per worker (the automatic task size, :func:`task_size`): with 8, the last
+#: task to finish adds at most about 1/8 of a worker's share to the time.
+CHUNKS_PER_WORKER = 8
+#: Fewest gain points per automatic task (tens of milliseconds of work against a task's
+#: millisecond of overhead).
+MIN_POINTS_PER_TASK = 8
 #: Threads of an in-process map: one. Most of a point's time is Python holding the GIL (the
 #: controller, the trace classifier; the C loop is about a quarter), and two dask threads were
 #: slower than one in benchmarks/bench_nonlinear_map.py (7.5 s vs 4.3 s on 100 x 50, load 4.5).
@@ -114,12 +138,49 @@ class NonlinearMap:
         return save_npz(path, self.arrays(), self.meta, tx, field)
 
 
+#: Loops and simulation setups a process keeps for its next tasks (a dask worker builds the loop
+#: and the setup of each run length once, not per task), keyed by the task's plain inputs pickled;
+#: the least recently used dropped beyond WARM_ENTRIES.
+_LOOPS: dict = {}
+_SETUPS: dict = {}
+WARM_ENTRIES = 8
+
+
+def _recent(cache: dict, key, make):
+    value = cache.pop(key) if key in cache else make()
+    cache[key] = value
+    while len(cache) > WARM_ENTRIES:
+        cache.pop(next(iter(cache)))
+    return value
+
+
+def _warm(params, options, backend, limits, experiment, amplitude, duration, seed, rtol):
+    """(loop, setup) of these inputs: built at this process's first task of them, then reused."""
+    lk = pickle.dumps((params, options, backend))
+    loop = _recent(_LOOPS, lk, lambda: ClosedLoop(params, options, basis=False, backend=backend))
+    sk = (lk, pickle.dumps((limits, experiment, amplitude, duration, seed, rtol)))
+    setup = _recent(_SETUPS, sk, lambda: batch_setup(loop, limits, experiment, amplitude, duration, seed, rtol))
+    return loop, setup
+
+
 def _task(params, options, backend, limits, P, D, experiment, amplitude, duration, seed, rtol, stable):
-    """One task of plain data (what a dask worker runs): the loop is built here."""
-    loop = ClosedLoop(params, options, basis=False, backend=backend)
+    """One task of plain data (what a dask worker runs); the loop and the setup come from the
+    process's :func:`_warm` cache."""
+    loop, setup = _warm(params, options, backend, limits, experiment, amplitude, duration, seed, rtol)
     b = simulate_batch(loop, P, D, limits=limits, experiment=experiment, amplitude=amplitude,
-                       duration=duration, seed=seed, rtol=rtol, linear_stable=stable)
+                       duration=duration, seed=seed, rtol=rtol, linear_stable=stable, setup=setup)
     return b.oscillation, b.tail_saturation, b.cycle_amplitude, b.cycle_frequency
+
+
+def task_size(points: int, workers: int, given: int | None = None) -> int:
+    """Gain points per first-run task: ``given``, else enough tasks for
+    :data:`CHUNKS_PER_WORKER` per worker (the slowest task then decides little of the time),
+    at most :data:`POINTS_PER_TASK` and at least :data:`MIN_POINTS_PER_TASK` (a task's
+    overhead stays below a few percent)."""
+    if given is not None:
+        return given
+    want = -(-points // (CHUNKS_PER_WORKER * max(1, workers)))
+    return int(min(POINTS_PER_TASK, max(MIN_POINTS_PER_TASK, want)))
 
 
 @loop_first
@@ -128,7 +189,7 @@ def nonlinear_map(loop, P_gain, D_gain, *, limits: Limits | None = None, experim
                   max_duration: float | None = None, seed: int = 0,
                   rtol: float = DEFAULT_RTOL, saturating_fraction: float = SATURATING_FRACTION,
                   scheduler=None, progress: bool | None = None,
-                  points_per_task: int = POINTS_PER_TASK) -> NonlinearMap:
+                  points_per_task: int | None = None) -> NonlinearMap:
     """Class every point of the P_gain x D_gain grid from a simulation with the limits.
 
     Parameters
@@ -154,8 +215,9 @@ def nonlinear_map(loop, P_gain, D_gain, *, limits: Limits | None = None, experim
         None: in-process; an address or a Client: that dask.distributed cluster.
     progress : bool or None
         The progress bar (:func:`haa_sym.io.progress.progress`).
-    points_per_task : int
-        Gain points per task (>= 1).
+    points_per_task : int, optional
+        Gain points per first-run task (>= 1); default: sized to the workers
+        (:func:`task_size`). The classes do not depend on it.
 
     Returns
     -------
@@ -173,7 +235,8 @@ def nonlinear_map(loop, P_gain, D_gain, *, limits: Limits | None = None, experim
     if isinstance(saturating_fraction, bool) or not isinstance(saturating_fraction, (int, float)) \
             or not 0 < saturating_fraction <= 1:
         raise ParameterError(f"saturating_fraction = {saturating_fraction!r}; allowed: a number in (0, 1]")
-    if isinstance(points_per_task, bool) or not isinstance(points_per_task, int) or points_per_task < 1:
+    if points_per_task is not None and (isinstance(points_per_task, bool) or not isinstance(points_per_task, int)
+                                        or points_per_task < 1):
         raise ParameterError(f"points_per_task = {points_per_task!r}; allowed: an integer >= 1")
     # every argument checked here, before any task runs (a worker's error would not be one line)
     setup = _Setup(loop, limits, experiment, amplitude, duration, seed, None)
@@ -190,36 +253,64 @@ def nonlinear_map(loop, P_gain, D_gain, *, limits: Limits | None = None, experim
     stable = np.asarray(loop.stability(PP, DD).stable, bool)
     always = limits_act_every_step(limits)
     forced = experiment in FORCED_EXPERIMENTS
-    runner = TaskRunner(scheduler, progress, threads=IN_PROCESS_THREADS)
 
-    simulated = [0]                     # controller steps over every run
+    n_pts = PP.size
+    kind = np.empty(n_pts, dtype=object)    # a later run's kind may be a longer string
+    ts, amp, freq = np.empty(n_pts), np.empty(n_pts), np.empty(n_pts)
+    cls = np.empty(n_pts, dtype=np.int8)
+    run_s = np.full(n_pts, setup.duration)
+    depth = np.zeros(n_pts, int)            # how many times a point was run again
+    simulated = [0]                         # controller steps over every run
+    again = (CLASSES.index("growing"), CLASSES.index("undecided"))
 
-    def simulate_points(idx, seconds):
+    def task(idx, seconds):
         simulated[0] += idx.size * (int(np.ceil(seconds / setup.Ts - 1e-9)) + 1)
-        chunks = [idx[a:a + points_per_task] for a in range(0, idx.size, points_per_task)]
-        res = runner.run(_task, [(loop.params, loop.options, loop.backend, limits, PP[c], DD[c], experiment,
-                                  setup.amplitude, seconds, seed, rtol, stable[c].astype(float)) for c in chunks],
-                         f"regions --nonlinear: {seconds:g} s runs")
-        return [np.concatenate([r[i] for r in res]) for i in range(4)]
+        return (loop.params, loop.options, loop.backend, limits, PP[idx], DD[idx], experiment, setup.amplitude,
+                seconds, seed, rtol, stable[idx].astype(float))
+
+    def chunks(idx, per):
+        # strided, not contiguous: a point's cost grows with its gains (the friction integrator's
+        # substeps), so contiguous chunks of the P-major grid differ up to tenfold in time, and
+        # the slowest would decide the map's end on many workers
+        n = -(-idx.size // per)
+        return [idx[k::n] for k in range(n)]
+
+    # No barrier between the first runs and the longer ones: a task's points still growing or
+    # undecided are run again as soon as its result arrives, while the other tasks run (each
+    # point's run depends on that point alone, so the classes do not depend on the order).
+    # Longer runs cost more per point: their tasks hold proportionally fewer points, and a
+    # cluster starts them first (priority = the round), so that the chains of reruns, the
+    # critical path, start early.
+    runner = TaskRunner(scheduler, progress, threads=IN_PROCESS_THREADS)
     try:
-        everything = np.arange(PP.size)
-        kind, ts, amp, freq = simulate_points(everything, setup.duration)
-        kind = kind.astype(object)          # a later run's kind may be a longer string
-        cls = classify(kind, ts, stable, always, saturating_fraction, forced)
-        run_s = np.full(PP.size, setup.duration)
-        seconds, rounds = setup.duration, 0
-        while seconds < max_duration:
-            again = np.flatnonzero((cls == CLASSES.index("growing")) | (cls == CLASSES.index("undecided")))
-            if not again.size:
-                break
-            seconds = min(seconds * EXTEND_FACTOR, max_duration)
-            rounds += 1
-            k2, t2, a2, f2 = simulate_points(again, seconds)
-            kind[again], ts[again], amp[again], freq[again] = k2, t2, a2, f2
-            run_s[again] = seconds
-            cls[again] = classify(kind[again], ts[again], stable[again], always, saturating_fraction, forced)
+        per = task_size(n_pts, runner.workers(), points_per_task)
+        first = [task(c, setup.duration) for c in chunks(np.arange(n_pts), per)]
+        where = {id(a): c for a, c in zip(first, chunks(np.arange(n_pts), per))}
+        seconds_of = {id(a): setup.duration for a in first}
+
+        def then(a, result):
+            idx, seconds = where.pop(id(a)), seconds_of.pop(id(a))
+            k2, t2, a2, f2 = result
+            kind[idx], ts[idx], amp[idx], freq[idx] = k2, t2, a2, f2
+            run_s[idx] = seconds
+            cls[idx] = classify(kind[idx], ts[idx], stable[idx], always, saturating_fraction, forced)
+            if seconds >= max_duration:
+                return []
+            longer = idx[np.isin(cls[idx], again)]
+            if not longer.size:
+                return []
+            nxt = min(seconds * EXTEND_FACTOR, max_duration)
+            depth[longer] += 1
+            out = []
+            for c in chunks(longer, max(1, int(round(per * setup.duration / nxt)))):
+                b = task(c, nxt)
+                where[id(b)], seconds_of[id(b)] = c, nxt
+                out.append((b, int(depth[c[0]])))
+            return out
+        runner.stream(_task, first, then, "regions --nonlinear: runs", "task")
     finally:
         runner.close()
+    rounds = int(depth.max()) if n_pts else 0
     shape = (P.size, D.size)
     meta = loop.provenance(
         analysis="nonlinear_map", classes=list(CLASSES), experiment=experiment, amplitude=setup.amplitude,

@@ -558,11 +558,12 @@ def simulate(loop, P_gain: float, D_gain: float, *, limits: Limits | None = None
 def simulate_batch(loop, P_gain, D_gain, *, limits: Limits | None = None,
                    experiment: str = "disturbance-step", amplitude: float | None = None,
                    duration: float = 1.0, seed: int = 0, rtol: float = DEFAULT_RTOL,
-                   linear_stable=None) -> SimulationBatch:
+                   linear_stable=None, setup: _Setup | None = None) -> SimulationBatch:
     """:func:`simulate` at k gain points (``P_gain``, ``D_gain`` broadcast), summarised per point
     (:class:`SimulationBatch`); the plant's matrices and the inputs are built once.
     ``linear_stable``: the linear loop's decision per point if known (1, 0 or NaN), else
-    computed (:func:`linear_verdict`)."""
+    computed (:func:`linear_verdict`). ``setup``: :func:`batch_setup` of the same loop and
+    arguments, if already built (a worker keeps it for its next tasks)."""
     P, D = (np.atleast_1d(np.asarray(v, float)).ravel() for v in np.broadcast_arrays(P_gain, D_gain))
     if not (np.all(np.isfinite(P)) and np.all(np.isfinite(D))):
         raise ParameterError("P_gain, D_gain: not finite; allowed: finite gains (Nm/rad, Nms/rad)")
@@ -570,12 +571,21 @@ def simulate_batch(loop, P_gain, D_gain, *, limits: Limits | None = None,
         if linear_stable is None:
             linear_stable = linear_verdict(loop, P, D)[0]
         stable = np.broadcast_to(np.asarray(linear_stable, float), P.shape)
-        return _batch(loop, P, D, limits, experiment, amplitude, duration, seed, rtol, stable)
+        return _batch(loop, P, D, limits, experiment, amplitude, duration, seed, rtol, stable, setup)
 
 
-def _batch(loop, P, D, limits, experiment, amplitude, duration, seed, rtol, stable):
-    setup = _Setup(loop, limits, experiment, amplitude, duration, seed, None)
+def batch_setup(loop, limits, experiment, amplitude, duration, seed, rtol) -> _Setup:
+    """The setup :func:`simulate_batch` builds for its runs (plant matrices, inputs, the friction
+    integrator's tables once built): reusable for further batches of the same arguments."""
+    with blas_limits(1):
+        setup = _Setup(loop, limits, experiment, amplitude, duration, seed, None)
     setup.rtol = _number("rtol", rtol, "a number in (0, 0.1)", lambda v: 0 < v < 0.1)
+    return setup
+
+
+def _batch(loop, P, D, limits, experiment, amplitude, duration, seed, rtol, stable, setup=None):
+    if setup is None:
+        setup = batch_setup(loop, limits, experiment, amplitude, duration, seed, rtol)
     k = P.size
     sat, amp, freq, fin, growth = (np.empty(k) for _ in range(5))
     status, kinds = np.empty(k, dtype=object), np.empty(k, dtype=object)

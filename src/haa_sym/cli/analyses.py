@@ -26,6 +26,7 @@ from haa_sym.io.formats import result_arrays, save_json, save_npz
 from haa_sym.io.gridspec import GRID_SYNTAX, grid
 from haa_sym.io.outputs import Transaction, csv_text
 from haa_sym.io.progress import message
+from haa_sym.io.tasks import local_workers
 from haa_sym.loop import ClosedLoop, LoopOptions
 from haa_sym.loop.options import ALLOWED as OPTION_ALLOWED
 from haa_sym.model.limits import limit_units
@@ -38,11 +39,17 @@ from haa_sym.cli.common import (MAP_D_GAIN, PARAMS_HELP, POINTS_ROLE, TITLE_HELP
                                 _agreement, _agreement_text, _measured, _uncertainty, measured_torque)
 
 
+SCHEDULER_HELP = ("local:N starts a cluster of N worker processes on this machine (127.0.0.1, stopped at the "
+                  "end; N up to the cores), or the address of a running dask.distributed scheduler, e.g. "
+                  "tcp://127.0.0.1:8786 (docs/schedule.md); default: in-process")
+
+
 def _cmd_verify(args) -> int:
     return verify_main(["--params", str(actuator_path(args.params, "--params"))] if args.params else [])
 
 
 def _cmd_regions(args) -> int:
+    local_workers(args.scheduler)            # a bad local:N is refused before any work
     loop, out, plot = _setup(args, "regions")
     P, D = _axis(args, "P_gain"), _axis(args, "D_gain")
     robust_only = [f for f, given in (("--require", args.require != "stable,pm"), ("--leg", args.leg is not None),
@@ -213,6 +220,7 @@ def _range(text: str, flag: str, what: str) -> tuple[float, float]:
 
 
 def _cmd_schedule(args) -> int:
+    local_workers(args.scheduler)            # a bad local:N is refused before any work
     loop, out, plot = _setup(args, "schedule")
     if args.c_out is not None:
         check_c_directory(args.c_out)
@@ -457,8 +465,7 @@ def register(sub) -> dict:
     r.add_argument("--max-duration", type=float, metavar="S",
                    help=f"with --nonlinear: points still growing or undecided are run again, {EXTEND_FACTOR:g}x longer "
                         f"each time, up to S seconds (default max({DEFAULT_MAX_DURATION:g}, --duration))")
-    r.add_argument("--scheduler", help="with --nonlinear: address of a dask.distributed scheduler (default: "
-                                       "in-process)")
+    r.add_argument("--scheduler", help="with --nonlinear: " + SCHEDULER_HELP)
     bd = sub.add_parser("boundary", help="exact stability, phase-margin and passivity boundaries in the "
                         "(P_gain, D_gain) plane (parameter-space method)")
     _common(bd)
@@ -472,7 +479,7 @@ def register(sub) -> dict:
     sc.add_argument("--beta-tol", type=float, default=0.02, help="relative step of the beta grid (default 0.02)")
     sc.add_argument("--alpha-values", help="schedule alpha too, from these values (grid spec, e.g. 0,0.5,0.94)")
     _leg_args(sc)
-    sc.add_argument("--scheduler", help="address of a dask.distributed scheduler (default: in-process)")
+    sc.add_argument("--scheduler", help=SCHEDULER_HELP)
     sc.add_argument("--cell-rounds", type=int, default=CELL_ROUNDS, metavar="N",
                     help=f"rounds of the cell check between grid points; cells still failing in the last are given "
                          f"up (no safe gain) instead of lowering shared corners (default {CELL_ROUNDS}; docs/schedule.md)")

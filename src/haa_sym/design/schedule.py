@@ -53,9 +53,12 @@ scheduled beta and alpha, the file's nominal plant otherwise.
 Large sweeps
 ------------
 Every map is one task (one call of the evaluators on a whole gain grid; a task ships a few
-numbers and returns one boolean array). Tasks run on dask: in-process (dask's threaded
-scheduler) by default, or on an existing dask.distributed cluster (``scheduler`` = its address
-or a ``distributed.Client``). The result is the same, byte for byte.
+numbers and returns one boolean array); so are the point check's decisions (one per beta and
+leg configuration) and the torque bandwidths. Tasks run on dask: in-process (dask's threaded
+scheduler) by default, on a local cluster of N processes (``scheduler="local:N"``), or on an
+existing dask.distributed cluster (``scheduler`` = its address or a ``distributed.Client``),
+where small calls go in groups, a few per worker (:meth:`haa_sym.io.tasks.TaskRunner.run`). The
+result is the same, byte for byte.
 
 Example
 -------
@@ -65,6 +68,8 @@ Example
 >>> s.beta                                                                   # doctest: +SKIP
 """
 from __future__ import annotations
+
+import contextlib
 
 from dataclasses import dataclass, field
 
@@ -80,7 +85,7 @@ from haa_sym.errors import ParameterError
 from haa_sym.io.gridspec import grid
 from haa_sym.io.outputs import write_text
 from haa_sym.io.progress import message
-from haa_sym.io.tasks import DEFAULT_CONNECT_TIMEOUT, TaskRunner
+from haa_sym.io.tasks import DEFAULT_CONNECT_TIMEOUT, TaskRunner, cluster
 from haa_sym.loop import ClosedLoop, loop_first
 from haa_sym.model.params import Params, gain_array
 
@@ -204,12 +209,12 @@ def _Runner(scheduler, progress):
     return TaskRunner(scheduler, progress, connect_timeout=CONNECT_TIMEOUT)
 
 
-def _verify(params, configs, P, D, fine, alphas, best_k, req, options):
+def _verify(runner, params, configs, P, D, fine, alphas, best_k, req, options):
     """Re-decide every answer point by point (:func:`haa_sym.analysis.decide.decide_points`, the
     maps' own rule with exactly located crossovers) at every leg configuration, and lower a
-    point's beta until it holds: the maps decide whole segments from a few probes. Returns the
-    new indices and how many points were lowered."""
-    loops = [ClosedLoop(params.with_values(**c), options) for c in configs]
+    point's beta until it holds: the maps decide whole segments from a few probes. Every
+    (beta, configuration) group of a round is a task (:func:`_task_points`). Returns the new
+    indices and how many points were lowered."""
     PP, DD = np.meshgrid(P, D, indexing="ij")
     PP, DD = PP.ravel(), DD.ravel()
     best_k = best_k.copy()
@@ -218,17 +223,21 @@ def _verify(params, configs, P, D, fine, alphas, best_k, req, options):
         todo = np.flatnonzero(best_k[a] >= 0)
         while todo.size:
             bad = np.zeros(best_k.shape[1], bool)
-            for k in np.unique(best_k[a, todo]):
-                pts = todo[best_k[a, todo] == k]
-                for loop in loops:
-                    d = decide_points(loop, PP[pts], DD[pts], float(fine[k]), float(alphas[a]),
-                                      passivity="passive" in req)
-                    bad[pts[~meets(d, req)]] = True
+            groups = [(k, todo[best_k[a, todo] == k]) for k in np.unique(best_k[a, todo])]
+            res = runner.run(_task_points, [(params, c, PP[pts], DD[pts], float(fine[k]), float(alphas[a]), req,
+                                             options) for k, pts in groups for c in configs], "schedule: point check")
+            for g, (k, pts) in enumerate(groups):
+                for r in res[g * len(configs):(g + 1) * len(configs)]:
+                    bad[pts[~np.asarray(r, bool)]] = True
             todo = np.flatnonzero(bad)
             lowered.update(todo.tolist())
             best_k[a, todo] -= 1                # -1: no beta of the range is left
             todo = todo[best_k[a, todo] >= 0]
     return best_k, len(lowered)
+
+
+def _task_bandwidth(params, options, backend, beta, alpha):
+    return torque_bandwidth(ClosedLoop(params, options, backend, basis=False), beta=beta, alpha=alpha)
 
 
 def _check_cells(runner, params, configs, P, D, fine, K, alpha_pt, req, options, n_sub, max_rounds=None):
@@ -441,111 +450,123 @@ def schedule(loop, P_gain=None, D_gain=None, *, beta_range=(0.1, 8.0), beta_tol:
             raise ParameterError("alpha_values is empty; allowed: at least one value >= 0")
     ends = leg_ends(params, leg)
     leg_configurations(params, 2, leg=leg, leg_mode=leg_mode, uncertainty=uncertainty)   # checks them now
-    runner = _Runner(scheduler, progress)
-    maps: dict = {}                     # (config key, beta index, alpha index) -> (n_P, n_D) bool
-    points: dict = {}                   # (config key, beta index, alpha index) -> {flat index: bool}
-
-    def key_of(c):
-        return tuple(sorted(c.items()))
-
-    def coarse_maps(configs):
-        todo = [(c, k, a) for c in configs for k in coarse for a in range(alphas.size)
-                if (key_of(c), k, a) not in maps]
-        res = runner.run(_task_map, [(params, c, P, D, float(fine[k]), float(alphas[a]), req, options)
-                                     for c, k, a in todo], "schedule: maps")
-        for (c, k, a), r in zip(todo, res):
-            maps[(key_of(c), k, a)] = np.asarray(r, bool)
-
-    def solve(configs):
-        coarse_maps(configs)
-        n_pts = P.size * D.size
-        best_k = np.full((alphas.size, n_pts), -1)
-        for a in range(alphas.size):
-            F = np.ones((coarse.size, n_pts), bool)
-            for c in configs:
-                F &= np.stack([maps[(key_of(c), k, a)].ravel() for k in coarse])
-            any_ok = F.any(axis=0)
-            top = coarse.size - 1 - np.argmax(F[::-1], axis=0)          # largest feasible coarse
-            kc = np.where(any_ok, top, -1)
-            best_k[a] = np.where(any_ok, coarse[np.maximum(kc, 0)], -1)
-            # fine values inside each point's bracket (coarse[kc], coarse[kc + 1])
-            need: dict = {}
-            for p in np.flatnonzero(any_ok & (kc < coarse.size - 1)):
-                for k in range(coarse[kc[p]] + 1, coarse[kc[p] + 1]):
-                    need.setdefault(k, []).append(p)
-            todo = []
-            for c in configs:
-                for k, pts in need.items():
-                    done = points.setdefault((key_of(c), k, a), {})
-                    missing = [p for p in pts if p not in done]
-                    if missing:
-                        todo.append((c, k, missing))
-            PP, DD = np.meshgrid(P, D, indexing="ij")
-            PP, DD = PP.ravel(), DD.ravel()
-            res = runner.run(_task_points, [(params, c, PP[m], DD[m], float(fine[k]), float(alphas[a]), req, options)
-                                            for c, k, m in todo], "schedule: refine")
-            for (c, k, m), r in zip(todo, res):
-                points[(key_of(c), k, a)].update(zip(m, np.asarray(r, bool).tolist()))
-            for k in sorted(need):
-                ok = np.array([all(points[(key_of(c), k, a)][p] for c in configs) for p in need[k]])
-                pts = np.array(need[k])
-                best_k[a, pts[ok]] = np.maximum(best_k[a, pts[ok]], k)
-        return best_k
-
+    # local:N: one cluster for the whole schedule (both runners below), stopped whatever happens
+    local = contextlib.ExitStack()
+    spec, scheduler = scheduler, local.enter_context(cluster(scheduler))
     try:
-        n = 2
-        configs = leg_configurations(params, n, leg=leg, leg_mode=leg_mode, uncertainty=uncertainty)
-        current = solve(configs)
-        history = [(len(configs), int((current.max(axis=0) >= 0).sum()))]
-        converged = False
-        while 2 * n - 1 <= max_per_axis:
-            n = 2 * n - 1
+        runner = _Runner(scheduler, progress)
+        maps: dict = {}                     # (config key, beta index, alpha index) -> (n_P, n_D) bool
+        points: dict = {}                   # (config key, beta index, alpha index) -> {flat index: bool}
+
+        def key_of(c):
+            return tuple(sorted(c.items()))
+
+        def coarse_maps(configs):
+            todo = [(c, k, a) for c in configs for k in coarse for a in range(alphas.size)
+                    if (key_of(c), k, a) not in maps]
+            res = runner.run(_task_map, [(params, c, P, D, float(fine[k]), float(alphas[a]), req, options)
+                                         for c, k, a in todo], "schedule: maps")
+            for (c, k, a), r in zip(todo, res):
+                maps[(key_of(c), k, a)] = np.asarray(r, bool)
+
+        def solve(configs):
+            coarse_maps(configs)
+            n_pts = P.size * D.size
+            best_k = np.full((alphas.size, n_pts), -1)
+            for a in range(alphas.size):
+                F = np.ones((coarse.size, n_pts), bool)
+                for c in configs:
+                    F &= np.stack([maps[(key_of(c), k, a)].ravel() for k in coarse])
+                any_ok = F.any(axis=0)
+                top = coarse.size - 1 - np.argmax(F[::-1], axis=0)          # largest feasible coarse
+                kc = np.where(any_ok, top, -1)
+                best_k[a] = np.where(any_ok, coarse[np.maximum(kc, 0)], -1)
+                # fine values inside each point's bracket (coarse[kc], coarse[kc + 1])
+                need: dict = {}
+                for p in np.flatnonzero(any_ok & (kc < coarse.size - 1)):
+                    for k in range(coarse[kc[p]] + 1, coarse[kc[p] + 1]):
+                        need.setdefault(k, []).append(p)
+                todo = []
+                for c in configs:
+                    for k, pts in need.items():
+                        done = points.setdefault((key_of(c), k, a), {})
+                        missing = [p for p in pts if p not in done]
+                        if missing:
+                            todo.append((c, k, missing))
+                PP, DD = np.meshgrid(P, D, indexing="ij")
+                PP, DD = PP.ravel(), DD.ravel()
+                res = runner.run(_task_points, [(params, c, PP[m], DD[m], float(fine[k]), float(alphas[a]), req, options)
+                                                for c, k, m in todo], "schedule: refine")
+                for (c, k, m), r in zip(todo, res):
+                    points[(key_of(c), k, a)].update(zip(m, np.asarray(r, bool).tolist()))
+                for k in sorted(need):
+                    ok = np.array([all(points[(key_of(c), k, a)][p] for c in configs) for p in need[k]])
+                    pts = np.array(need[k])
+                    best_k[a, pts[ok]] = np.maximum(best_k[a, pts[ok]], k)
+            return best_k
+
+        try:
+            n = 2
             configs = leg_configurations(params, n, leg=leg, leg_mode=leg_mode, uncertainty=uncertainty)
-            nxt = solve(configs)
-            history.append((len(configs), int((nxt.max(axis=0) >= 0).sum())))
-            same = np.array_equal(nxt, current)
-            current = nxt
-            if same:
-                converged = True
-                break
-        current, lowered = _verify(params, configs, P, D, fine, alphas, current, req, options)
-        # beta = 1 (the file's own torque gains) at the file's alpha, for the comparison
-        res = runner.run(_task_map, [(params, c, P, D, 1.0, float(ctrl.alpha if alpha is None else alpha), req,
-                                      options) for c in configs], "schedule: beta = 1")
-        fixed = np.logical_and.reduce([np.asarray(r, bool) for r in res])
-    finally:
-        runner.close()
+            current = solve(configs)
+            history = [(len(configs), int((current.max(axis=0) >= 0).sum()))]
+            converged = False
+            while 2 * n - 1 <= max_per_axis:
+                n = 2 * n - 1
+                configs = leg_configurations(params, n, leg=leg, leg_mode=leg_mode, uncertainty=uncertainty)
+                nxt = solve(configs)
+                history.append((len(configs), int((nxt.max(axis=0) >= 0).sum())))
+                same = np.array_equal(nxt, current)
+                current = nxt
+                if same:
+                    converged = True
+                    break
+            current, lowered = _verify(runner, params, configs, P, D, fine, alphas, current, req, options)
+            # beta = 1 (the file's own torque gains) at the file's alpha, for the comparison
+            alpha_1 = float(ctrl.alpha if alpha is None else alpha)
+            res = runner.run(_task_map, [(params, c, P, D, 1.0, alpha_1, req, options) for c in configs],
+                             "schedule: beta = 1")
+            fixed = np.logical_and.reduce([np.asarray(r, bool) for r in res])
+            # the torque bandwidths the table reports (and ties between alphas need), as tasks:
+            # the leg free in the air, at each point's largest beta and every alpha reaching it,
+            # and at beta = 1
+            free_params = _free_in_the_air(params)
+            pairs = sorted({(int(current[:, p].max()), a) for p in np.flatnonzero(current.max(axis=0) >= 0)
+                            for a in range(alphas.size) if current[a, p] == current[:, p].max()})
+            res = runner.run(_task_bandwidth, [(free_params, options, loop.backend, float(fine[k]),
+                                                float(alphas[a])) for k, a in pairs]
+                             + [(free_params, options, loop.backend, 1.0, alpha_1)], "schedule: bandwidths")
+            bw_cache = dict(zip(pairs, res[:-1]))
+            bw_1 = res[-1]
+        finally:
+            runner.close()
 
-    # per point: the alpha with the largest beta, ties to the larger torque bandwidth
-    free = ClosedLoop(_free_in_the_air(params), options, loop.backend, basis=False)
-    bw_cache: dict = {}
-
-    def bandwidth(k, a):
-        if (k, a) not in bw_cache:
-            bw_cache[(k, a)] = torque_bandwidth(free, beta=float(fine[k]), alpha=float(alphas[a]))
-        return bw_cache[(k, a)]
-    n_pts = P.size * D.size
-    beta_out, alpha_out, bw_out = np.full(n_pts, np.nan), np.full(n_pts, np.nan), np.full(n_pts, np.nan)
-    feasible = current.max(axis=0) >= 0
-    for p in np.flatnonzero(feasible):
-        kmax = current[:, p].max()
-        cand = [a for a in range(alphas.size) if current[a, p] == kmax]
-        a = max(cand, key=lambda a: (bandwidth(kmax, a), -a)) if len(cand) > 1 else cand[0]
-        beta_out[p], alpha_out[p], bw_out[p] = fine[kmax], alphas[a], bandwidth(kmax, a)
-    shape = (P.size, D.size)
-    K = np.full(n_pts, -1)
-    K[feasible] = current.max(axis=0)[feasible]
-    K = K.reshape(shape)
-    runner = _Runner(scheduler, progress)
-    try:
-        K_table, cell_safe, n_failed, n_lowered_pts, n_given_up, n_passes = _check_cells(
-            runner, params, configs, P, D, fine, K, np.nan_to_num(alpha_out.reshape(shape)), req, options,
-            int(cell_subdivisions), None if cell_rounds is None else int(cell_rounds))
+        # per point: the alpha with the largest beta, ties to the larger torque bandwidth
+        def bandwidth(k, a):
+            return bw_cache[(k, a)]
+        n_pts = P.size * D.size
+        beta_out, alpha_out, bw_out = np.full(n_pts, np.nan), np.full(n_pts, np.nan), np.full(n_pts, np.nan)
+        feasible = current.max(axis=0) >= 0
+        for p in np.flatnonzero(feasible):
+            kmax = current[:, p].max()
+            cand = [a for a in range(alphas.size) if current[a, p] == kmax]
+            a = max(cand, key=lambda a: (bandwidth(kmax, a), -a)) if len(cand) > 1 else cand[0]
+            beta_out[p], alpha_out[p], bw_out[p] = fine[kmax], alphas[a], bandwidth(kmax, a)
+        shape = (P.size, D.size)
+        K = np.full(n_pts, -1)
+        K[feasible] = current.max(axis=0)[feasible]
+        K = K.reshape(shape)
+        runner = _Runner(scheduler, progress)
+        try:
+            K_table, cell_safe, n_failed, n_lowered_pts, n_given_up, n_passes = _check_cells(
+                runner, params, configs, P, D, fine, K, np.nan_to_num(alpha_out.reshape(shape)), req, options,
+                int(cell_subdivisions), None if cell_rounds is None else int(cell_rounds))
+        finally:
+            runner.close()
     finally:
-        runner.close()
+        local.close()
     table_beta = np.where(K_table >= 0, fine[np.maximum(K_table, 0)], np.nan)
     at_limit = feasible.reshape(shape) & (K == fine.size - 1)
-    bw_1 = torque_bandwidth(free, beta=1.0, alpha=float(ctrl.alpha if alpha is None else alpha))
     meta = {"actuator": str((getattr(params, "about", None) or {}).get("name", params.source)),
             "source": str(params.source), "requirements": list(req), "beta_range": [float(fine[0]), float(fine[-1])],
             "beta_tol": float(beta_tol), "beta_grid": int(fine.size), "coarse_values": int(coarse.size),
@@ -554,7 +575,7 @@ def schedule(loop, P_gain=None, D_gain=None, *, beta_range=(0.1, 8.0), beta_tol:
             "uncertainty": {k: list(v) for k, v in check_uncertainty(params, uncertainty, leg).items()}
             if uncertainty else None,
             "haa_sym": __version__,
-            "scheduler": "dask threads (in-process)" if scheduler is None else "dask.distributed",
+            "scheduler": "dask threads (in-process)" if spec is None else "dask.distributed",
             "torque_bandwidth_beta_1_rad_s": bw_1, "lowered_by_point_check": lowered,
             "cell_subdivisions": int(cell_subdivisions), "cells_failed_check": n_failed,
             "grid_points_lowered_by_cell_check": n_lowered_pts, "cells_given_up": n_given_up,

@@ -65,7 +65,7 @@ class PeriodicLines:
     ``period`` seconds while the work runs (from a daemon thread, so a single long task still
     shows the clock running), and a last line at the end if any line was written. Work shorter
     than ``period`` writes nothing. The subset of tqdm's interface the package uses
-    (``update``, ``n``, ``total``, a context manager)."""
+    (``update``, ``refresh``, ``n``, ``total``, a context manager)."""
 
     def __init__(self, total: int, desc: str, unit: str, file, period: float):
         self.total, self.desc, self.unit, self.file, self.period = total, desc, unit, file, period
@@ -91,6 +91,9 @@ class PeriodicLines:
     def update(self, n: int = 1) -> None:
         with self._lock:
             self.n += n
+
+    def refresh(self) -> None:
+        """tqdm's redraw after ``total`` changed: the next periodic line shows the new total."""
 
     def close(self) -> None:
         if self._stop.is_set():

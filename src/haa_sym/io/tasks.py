@@ -1,6 +1,10 @@
 """Lists of independent tasks run on dask: in-process (dask's threaded scheduler) or on a
 dask.distributed cluster (``--scheduler ADDRESS``), with a progress bar (:mod:`haa_sym.io.progress`).
 
+``--scheduler local:N`` starts a ``distributed.LocalCluster`` of N one-thread worker processes on
+127.0.0.1 for the duration of one call (:func:`cluster`), and stops it, also on an error, Ctrl-C
+or SIGTERM.
+
 A task is a module-level function of plain data (parameters, options, gain points): a worker
 process builds what it needs itself (the compiled library is loaded per process, never shipped).
 Used by the torque-gain scheduler (:mod:`haa_sym.design.schedule`) and the nonlinear maps
@@ -14,12 +18,16 @@ Example
 """
 from __future__ import annotations
 
+import contextlib
+import logging
+import os
+import sys
 import threading
 
 from haa_sym.errors import ParameterError
 from haa_sym.io.progress import progress as progress_bar
 
-__all__ = ["TaskRunner", "connect", "DEFAULT_CONNECT_TIMEOUT", "THREADS"]
+__all__ = ["TaskRunner", "connect", "cluster", "local_workers", "DEFAULT_CONNECT_TIMEOUT", "THREADS"]
 
 #: Seconds to connect to a --scheduler and finish dask's handshake.
 DEFAULT_CONNECT_TIMEOUT = 5.0
@@ -30,6 +38,69 @@ THREADS = 2
 NO_WORKER_TIMEOUT = 30.0
 #: Seconds between two looks at the cluster while waiting for results.
 POLL_S = 0.5
+#: None, or a list to which every task submitted to a cluster is appended as ``{"key": ...,
+#: "after": [keys]}``: the tasks it waited for (the previous :meth:`TaskRunner.run` call's, a
+#: barrier; or the task whose result asked for it, :meth:`TaskRunner.stream`). The chains of
+#: this graph bound the speedup (benchmarks/bench_scale.py reads it).
+TRACE: list | None = None
+
+
+#: The form of a local cluster's --scheduler value: ``local:N``.
+LOCAL = "local:"
+#: Seconds for a local cluster's N workers to start and register.
+LOCAL_START_TIMEOUT = 120.0
+
+
+def local_workers(spec) -> int | None:
+    """N of a ``--scheduler local:N`` value, None for any other value (an address, a Client,
+    None); ParameterError unless N is an integer >= 1."""
+    if not isinstance(spec, str) or not spec.startswith(LOCAL):
+        return None
+    text = spec[len(LOCAL):]
+    n = int(text) if text.isascii() and text.isdigit() else 0
+    if n < 1:
+        raise ParameterError(f"--scheduler {spec!r}: the number of worker processes is not an integer >= 1; "
+                             "allowed: local:N with N >= 1 (e.g. local:2), or the address of a running "
+                             "dask.distributed scheduler (tcp://127.0.0.1:8786)")
+    return n
+
+
+@contextlib.contextmanager
+def cluster(spec):
+    """What :class:`TaskRunner` takes for ``spec``: ``spec`` itself, except for ``local:N``: a
+    ``distributed.Client`` of a ``LocalCluster`` started here (N worker processes of one thread
+    each, every service on 127.0.0.1: the scheduler's and workers' comm ports, no dashboard)
+    and stopped on leaving, whatever ends the block (an error, KeyboardInterrupt, or
+    :class:`haa_sym.errors.Terminated` on SIGTERM).
+
+    One thread per process: a point's Python part holds the GIL (see
+    :data:`haa_sym.analysis.nonlinear_map.IN_PROCESS_THREADS`), so cores are used by processes.
+    """
+    n = local_workers(spec)
+    if n is None:
+        yield spec
+        return
+    cores = os.cpu_count() or 1
+    if n > cores:
+        # allowed (a test of the scheduling), but more processes than cores share them
+        print(f"haa-sym: warning: --scheduler {spec}: {n} worker processes on {cores} cores; they share the "
+              f"cores (no faster than local:{cores})", file=sys.stderr)
+    from distributed import Client, LocalCluster
+    cl = client = None
+    try:
+        # dashboard_address=None: no HTTP server at all (a dashboard would listen on every
+        # interface unless given 127.0.0.1; docs/schedule.md); the workers' too
+        cl = LocalCluster(n_workers=n, threads_per_worker=1, processes=True, host="127.0.0.1",
+                          dashboard_address=None, worker_dashboard_address=None,
+                          silence_logs=logging.ERROR)
+        client = Client(cl)
+        client.wait_for_workers(n, timeout=LOCAL_START_TIMEOUT)
+        yield client
+    finally:
+        if client is not None:
+            client.close()
+        if cl is not None:
+            cl.close()
 
 
 def connect(Client, address: str, timeout: float = DEFAULT_CONNECT_TIMEOUT):
@@ -65,6 +136,17 @@ def connect(Client, address: str, timeout: float = DEFAULT_CONNECT_TIMEOUT):
     raise ParameterError(f"--scheduler {address!r}: {why}; {allowed}")
 
 
+#: Tasks a :meth:`TaskRunner.run` call gives each worker of a cluster at most: the calls are
+#: grouped (:func:`_call_each`) so that a map of many small calls does not pay a cluster task's
+#: milliseconds for each.
+CHUNKS_PER_WORKER = 4
+
+
+def _call_each(fn, args_list: list) -> list:
+    """``[fn(*a) for a in args_list]``: a group of calls as one cluster task."""
+    return [fn(*a) for a in args_list]
+
+
 class TaskRunner:
     """Runs task lists on dask (threaded, in-process) or on a dask.distributed cluster.
 
@@ -72,7 +154,8 @@ class TaskRunner:
     ----------
     scheduler : None, str or distributed.Client
         None: dask's threaded scheduler in this process (:data:`THREADS` threads); an address
-        ("tcp://host:port"): connect to it (closed by :meth:`close`); a Client: use it.
+        ("tcp://host:port"): connect to it (closed by :meth:`close`); ``"local:N"``: a local
+        cluster of N workers (:func:`cluster`; stopped by :meth:`close`); a Client: use it.
     progress : bool or None
         The progress bar's setting (:func:`haa_sym.io.progress.progress`).
     connect_timeout : float
@@ -84,11 +167,16 @@ class TaskRunner:
 
     def __init__(self, scheduler, progress, connect_timeout: float = DEFAULT_CONNECT_TIMEOUT,
                  threads: int = THREADS, no_worker_timeout: float = NO_WORKER_TIMEOUT):
-        self.client, self.own = None, False
+        self.client, self.own, self._local = None, False, None
+        self._before: list = []                 # keys of the last barrier's tasks (TRACE)
         self.progress, self.threads = progress, threads
         self.no_worker_timeout = no_worker_timeout
         self.address = scheduler if isinstance(scheduler, str) else None
         if scheduler is None:
+            return
+        if local_workers(scheduler) is not None:
+            self._local = contextlib.ExitStack()
+            self.client = self._local.enter_context(cluster(scheduler))
             return
         try:
             from distributed import Client
@@ -103,6 +191,9 @@ class TaskRunner:
     def close(self):
         if self.own and self.client is not None:
             self.client.close()
+        if self._local is not None:
+            self._local.close()
+            self._local = None
 
     def run(self, fn, args_list: list, label: str, unit: str = "task") -> list:
         """``[fn(*a) for a in args_list]``, in that order, the tasks run concurrently."""
@@ -110,10 +201,21 @@ class TaskRunner:
             return []
         with progress_bar(len(args_list), label, unit, self.progress) as bar:
             if self.client is not None:
-                futures = [self.client.submit(fn, *a, pure=False) for a in args_list]
+                # a cluster task costs milliseconds of scheduling and transfer: small calls go in
+                # groups, CHUNKS_PER_WORKER a worker; every n-th call to a group (neighbouring
+                # calls cost alike, e.g. one leg configuration's maps), so the groups take about
+                # the same time and the slowest decides little
+                n = max(1, min(len(args_list), CHUNKS_PER_WORKER * self.workers()))
+                groups = [args_list[g::n] for g in range(n)]
+                futures = [self.client.submit(_call_each, fn, g, pure=False) for g in groups]
+                self._trace(futures, self._before)
+                self._before = [f.key for f in futures]
                 try:
-                    self._wait(futures, bar)
-                    return self.client.gather(futures)
+                    self._wait(futures, bar, sizes={f: len(g) for f, g in zip(futures, groups)})
+                    out = [None] * len(args_list)
+                    for g, rs in enumerate(self.client.gather(futures)):
+                        out[g::n] = rs
+                    return out
                 finally:
                     self.client.cancel([f for f in futures if not f.done()])
             if self.threads == 1:
@@ -133,21 +235,98 @@ class TaskRunner:
             with _Bar():
                 return list(dask.compute(*tasks, scheduler="threads", num_workers=self.threads))
 
-    def _wait(self, futures, bar) -> None:
-        """Wait for ``futures``, updating ``bar``; stop with one line when the cluster has had no
-        worker for :attr:`no_worker_timeout` s, or when a task killed the workers it ran on
-        (dask's ``KilledWorker``, after its allowed failures): never wait for ever."""
+    def workers(self) -> int:
+        """How many tasks run at once: the cluster's worker threads, else the in-process threads."""
+        if self.client is None:
+            return max(1, self.threads)
+        return max(1, sum(self.client.nthreads().values()))
+
+    def stream(self, fn, first: list, then, label: str, unit: str = "task") -> None:
+        """Run ``fn(*a)`` for every ``a`` of ``first``, and what the results ask for, with no
+        barrier between rounds: as each task finishes, ``then(a, result)`` is called (in this
+        thread) and returns ``(args, priority)`` pairs of further tasks, submitted at once
+        while the others run (a higher ``priority`` is started first by a cluster). ``then``
+        must not depend on the order results arrive in: it is the completion order."""
+        with progress_bar(len(first), label, unit, self.progress) as bar:
+            def more(a, result):
+                new = list(then(a, result))
+                if new:
+                    bar.total += len(new)
+                    bar.refresh()
+                return new
+            if self.client is not None:
+                futures = {}
+
+                keys: list = []
+
+                def submit(items, after):
+                    new = [self.client.submit(fn, *a, pure=False, priority=prio) for a, prio in items]
+                    futures.update(zip(new, (a for a, _ in items)))
+                    self._trace(new, after)
+                    keys.extend(f.key for f in new)
+                    return new
+
+                def on_done(f):
+                    a = futures.pop(f)
+                    return submit(more(a, f.result()), [f.key])
+                submit([(a, 0) for a in first], self._before)
+                self._before = keys
+                try:
+                    self._wait(list(futures), bar, on_done)
+                finally:
+                    self.client.cancel([f for f in futures if not f.done()])
+                return
+            if self.threads == 1:
+                import heapq
+                import itertools
+                order = itertools.count()
+                queue = [(0, next(order), a) for a in first]
+                heapq.heapify(queue)
+                while queue:
+                    _, _, a = heapq.heappop(queue)
+                    r = fn(*a)
+                    bar.update(1)
+                    for b, prio in more(a, r):
+                        heapq.heappush(queue, (-prio, next(order), b))
+                return
+            from concurrent.futures import FIRST_COMPLETED, ThreadPoolExecutor, wait
+            with ThreadPoolExecutor(self.threads, thread_name_prefix="haa_sym-task") as pool:
+                running = {pool.submit(fn, *a): a for a in first}
+                try:
+                    while running:
+                        done, _ = wait(running, return_when=FIRST_COMPLETED)
+                        for f in done:
+                            a = running.pop(f)
+                            bar.update(1)
+                            for b, _prio in more(a, f.result()):
+                                running[pool.submit(fn, *b)] = b
+                finally:
+                    for f in running:
+                        f.cancel()
+
+    @staticmethod
+    def _trace(futures, after) -> None:
+        if TRACE is not None:
+            TRACE.extend({"key": f.key, "after": list(after)} for f in futures)
+
+    def _wait(self, futures, bar, on_done=None, sizes=None) -> None:
+        """Wait for ``futures``, updating ``bar``; ``on_done(future)`` (if given) is called on
+        each finished one and returns new futures to wait for too. Stop with one line when the
+        cluster has had no worker for :attr:`no_worker_timeout` s, or when a task killed the
+        workers it ran on (dask's ``KilledWorker``, after its allowed failures): never wait for ever."""
         import time
         from distributed import wait
         from distributed.scheduler import KilledWorker
         where = f"--scheduler {self.address!r}" if self.address else "the dask cluster"
+        sizes = {} if sizes is None else sizes             # calls per cluster task (run's groups)
         pending, idle_since = set(futures), None
+        total = sum(sizes.get(f, 1) for f in futures)
         while pending:
             try:
                 done, pending = wait(pending, timeout=POLL_S, return_when="FIRST_COMPLETED")
             except TimeoutError:
                 done = set()
-            bar.update(len(done))
+            bar.update(sum(sizes.get(f, 1) for f in done))
             for f in done:
                 if f.status == "error":
                     exc = f.exception()
@@ -156,6 +335,10 @@ class TaskRunner:
                                              "process running it died, each time it was retried: out of "
                                              "memory, or killed); allowed: workers that stay up (check "
                                              "their memory and logs)") from None
+                if on_done is not None:
+                    new = on_done(f)             # raises the task's own error, if any
+                    pending |= set(new)
+                    total += len(new)
             if not pending:
                 return
             workers = len(self.client.scheduler_info().get("workers", {}))
@@ -165,7 +348,8 @@ class TaskRunner:
             elif idle_since is None:
                 idle_since = now
             elif now - idle_since > self.no_worker_timeout:
-                raise ParameterError(f"{where}: no worker for {self.no_worker_timeout:g} s with {len(pending)} "
-                                     f"of {len(futures)} tasks pending (did the last worker die?); allowed: a "
+                left = sum(sizes.get(f, 1) for f in pending)
+                raise ParameterError(f"{where}: no worker for {self.no_worker_timeout:g} s with {left} "
+                                     f"of {total} tasks pending (did the last worker die?); allowed: a "
                                      "cluster with at least one running worker")
 

@@ -1,0 +1,232 @@
+"""How a command scales with dask workers (issue 27, item 4): time, speedup, efficiency, and the
+critical path that bounds the speedup.
+
+The command (a preset or any ``haa-sym`` command line after ``--``) is run in this process
+(``haa_sym.cli.main``) against a dask.distributed ``LocalCluster`` of 1, 2, ..., N worker
+processes (one thread each, 127.0.0.1, no dashboard; N the machine's cores unless given),
+started and warmed (haa_sym imported) before the timing; the cluster's start is timed apart
+(``--scheduler local:N`` pays it on every command). Every run's output must have the bytes of the
+first (the npz's arrays; a CSV whole), else the script fails.
+
+The prediction for M workers (``--predict``, default 16) comes from one more run, on 1 worker (the
+tasks' own durations, not sharing a core) with the tasks sized as for M workers (tasks are
+sized to the workers: more workers, smaller tasks, shorter chains):
+
+- work W: the sum of the tasks' compute times;
+- serial S: the time in which no task ran (the command's own computation between and around the
+  tasks, the scheduling latency; on one worker also each task's dispatch, so S errs long);
+- longest chain C: the heaviest chain of tasks that waited for one another
+  (:data:`haa_sym.io.tasks.TRACE`: a ``run`` waits for the previous ``run``'s tasks; a
+  ``stream`` follow-up for the task that asked for it);
+- predicted time on M workers: ``S + max(C, W / M)``, and the bound on the speedup
+  ``T(1) / (S + C)`` however many workers (the critical path S + C).
+
+Before each run it measures how many of n cores are free now (:func:`capacity`: n spinning
+processes against one; the load average of a shared virtual machine does not say it).
+
+Prints a table and writes ``results_scale_<preset>.json`` into ``$HAA_SYM_BENCH_DIR`` (default
+bench-results/). Not part of ``make bench``.
+
+Usage: python benchmarks/bench_scale.py [--workers N] [--predict M] [--preset nonlinear|schedule]
+       [--repeats R] [-- haa-sym ARGS ...]
+"""
+from __future__ import annotations
+
+import argparse
+import logging
+import os
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+import numpy as np
+
+from timing import ROOT, Run
+
+# the issue's nonlinear map: HyQ with a 24 V supply and 0.02 Nm of rotor friction, 60 x 40 points
+LIMITS = "\n[limits]\nV_max = 24.0\nFc_m = 0.02\n"
+PRESETS = {
+    "nonlinear": ["regions", "--params", "{limits_file}", "--P-gain", "log:10:20000:60", "--D-gain", "lin:1:50:40",
+                  "--nonlinear", "--out", "{out}.npz"],
+    "schedule": ["schedule", "--out", "{out}.csv"],
+}
+
+
+def _spin(_=None) -> float:
+    """Seconds of a fixed pure-Python loop (about 0.5 s on an idle core)."""
+    t, s = time.perf_counter(), 0
+    for i in range(5_000_000):
+        s += i
+    return time.perf_counter() - t
+
+
+def capacity(n: int) -> float:
+    """How many cores this process gets now: n processes spinning at once, their speed summed,
+    against one alone (2.0 on two idle cores; less when other jobs use them). The load average
+    alone does not say it on a shared or virtual machine."""
+    import multiprocessing as mp
+    with mp.get_context("spawn").Pool(n) as pool:
+        pool.map(_spin, range(n))                         # the processes started
+        one = min(pool.apply(_spin) for _ in range(2))
+        times = pool.map(_spin, range(n), chunksize=1)
+    return min(float(n), sum(one / t for t in times))
+
+
+def _warm(client) -> None:
+    """Import haa_sym's task modules on every worker (the first task would do it, timed)."""
+    def imports():
+        import haa_sym.analysis.nonlinear_map  # noqa: F401
+        import haa_sym.design.schedule  # noqa: F401
+    client.run(imports)
+
+
+def _output_bytes(path: Path) -> bytes:
+    """What must not change with the workers: an npz's arrays (its meta names the scheduler), a
+    CSV's bytes."""
+    if path.suffix == ".npz":
+        z = np.load(path)
+        return b"".join(k.encode() + z[k].tobytes() for k in sorted(z.files) if k != "meta")
+    return path.read_bytes()
+
+
+def _union(intervals) -> float:
+    total, end = 0.0, -np.inf
+    for a, b in sorted(intervals):
+        if b <= end:
+            continue
+        total += b - max(a, end)
+        end = b
+    return total
+
+
+def analyse(trace: list, stream: list, t0: float, t1: float) -> dict:
+    """Work, serial part and longest chain of one run (module docstring)."""
+    dur, span = {}, {}
+    for rec in stream:
+        for ss in rec.get("startstops", ()):
+            if ss.get("action") == "compute":
+                dur[rec["key"]] = dur.get(rec["key"], 0.0) + ss["stop"] - ss["start"]
+                span.setdefault(rec["key"], []).append((ss["start"], ss["stop"]))
+    keys = [r["key"] for r in trace]
+    missing = [k for k in keys if k not in dur]
+    longest: dict = {}
+    for r in trace:                        # submission order: every "after" key came earlier
+        longest[r["key"]] = dur.get(r["key"], 0.0) + max((longest.get(k, 0.0) for k in r["after"]), default=0.0)
+    intervals = [iv for k in keys for iv in span.get(k, ())]
+    busy = _union([(max(a, t0), min(b, t1)) for a, b in intervals if b > t0 and a < t1])
+    return {"tasks": len(keys), "tasks_missing_from_stream": len(missing), "work_s": float(sum(dur.values())),
+            "busy_s": busy, "serial_s": (t1 - t0) - busy, "longest_chain_s": max(longest.values(), default=0.0),
+            "longest_task_s": max(dur.values(), default=0.0)}
+
+
+def run_once(argv: list[str], n: int, out: Path, sized_for: int | None = None) -> dict:
+    """One timed run of the command on a warm cluster of ``n`` workers; ``sized_for``: its tasks
+    sized as for that many workers (:meth:`TaskRunner.workers` patched in this process)."""
+    import distributed
+    from haa_sym.cli import main
+    from haa_sym.io import tasks
+    if sized_for is not None:
+        real = tasks.TaskRunner.workers
+        tasks.TaskRunner.workers = lambda self: sized_for
+        try:
+            return run_once(argv, n, out)
+        finally:
+            tasks.TaskRunner.workers = real
+    t = time.perf_counter()
+    with distributed.LocalCluster(n_workers=n, threads_per_worker=1, processes=True, host="127.0.0.1",
+                                  dashboard_address=None, worker_dashboard_address=None,
+                                  silence_logs=logging.ERROR) as cl, distributed.Client(cl) as client:
+        client.wait_for_workers(n)
+        _warm(client)
+        start_s = time.perf_counter() - t
+        tasks.TRACE = []
+        client.get_task_stream()                       # start recording
+        t0 = time.time()
+        p0 = time.perf_counter()
+        rc = main([*argv, "-q", "--scheduler", cl.scheduler_address])
+        wall = time.perf_counter() - p0
+        t1 = time.time()
+        stream = client.get_task_stream(start=t0 - 1)
+        trace, tasks.TRACE = tasks.TRACE, None
+    if rc != 0:
+        raise SystemExit(f"the command failed (exit {rc}): {' '.join(argv)}")
+    return {"workers": n, "seconds": wall, "cluster_start_s": start_s, **analyse(trace, stream, t0, t1),
+            "output": _output_bytes(out)}
+
+
+def main() -> int:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--workers", type=int, default=os.cpu_count() or 1, help="up to N workers (default: the cores)")
+    ap.add_argument("--predict", type=int, default=16, help="predict the time on M workers (default 16)")
+    ap.add_argument("--preset", choices=sorted(PRESETS), default="nonlinear")
+    ap.add_argument("--repeats", type=int, default=1, help="runs per worker count, the fastest kept")
+    ap.add_argument("command", nargs=argparse.REMAINDER, help="-- haa-sym ARGS (with --out FILE)")
+    args = ap.parse_args()
+    bench = Run("bench_scale.py")
+    with tempfile.TemporaryDirectory() as tmp:
+        limits_file = Path(tmp) / "hyq_haa_limits.toml"
+        limits_file.write_text((ROOT / "model" / "hyq_haa.toml").read_text() + LIMITS)
+        command = args.command[1:] if args.command[:1] == ["--"] else args.command
+        if command:
+            argv, name = command, "custom"
+            out = Path(argv[argv.index("--out") + 1])
+        else:
+            name = args.preset
+            argv = [a.format(limits_file=limits_file, out=Path(tmp) / "out") for a in PRESETS[name]]
+            out = Path(argv[argv.index("--out") + 1])
+        rows = []
+        for n in range(1, args.workers + 1):
+            best = None
+            for _ in range(max(1, args.repeats)):
+                load, cores = os.getloadavg()[0], capacity(n)
+                r = run_once(argv, n, out)
+                r["cores_available_before"] = round(cores, 2)
+                r["load_1min_before"] = round(load, 2)
+                r["load_1min_after"] = round(os.getloadavg()[0], 2)
+                if best is None or r["seconds"] < best["seconds"]:
+                    best = r
+            rows.append(best)
+            print(f"{n:2d} worker(s): {best['seconds']:7.2f} s (cluster start {best['cluster_start_s']:.1f} s), "
+                  f"work {best['work_s']:.2f} s in {best['tasks']} tasks, serial {best['serial_s']:.2f} s, longest "
+                  f"chain {best['longest_chain_s']:.2f} s; load {best['load_1min_before']:.2f} -> "
+                  f"{best['load_1min_after']:.2f}, cores available before {best['cores_available_before']:.2f} "
+                  f"of {n}", flush=True)
+        # the chains of the predicted cluster: tasks sized for --predict workers, run on one
+        chain = run_once(argv, 1, out, sized_for=args.predict)
+        print(f" 1 worker, tasks sized for {args.predict}: {chain['seconds']:.2f} s, work {chain['work_s']:.2f} s "
+              f"in {chain['tasks']} tasks, serial {chain['serial_s']:.2f} s, longest chain "
+              f"{chain['longest_chain_s']:.2f} s", flush=True)
+    same = all(r["output"] == rows[0]["output"] for r in rows + [chain])
+    for r in rows + [chain]:
+        del r["output"]
+    one = rows[0]
+    for r in rows:
+        r["speedup"] = one["seconds"] / r["seconds"]
+        r["efficiency"] = r["speedup"] / r["workers"]
+    # the prediction for M workers from the run on one worker with tasks sized for M (task
+    # durations not inflated by sharing the cores; the chains of M's task sizes)
+    S, W, C = chain["serial_s"], chain["work_s"], chain["longest_chain_s"]
+    critical = S + C
+    M = args.predict
+    predict = {M: S + max(C, W / M)}
+    print()
+    print(f"{'workers':>7} {'seconds':>8} {'speedup':>8} {'efficiency':>10}")
+    for r in rows:
+        print(f"{r['workers']:7d} {r['seconds']:8.2f} {r['speedup']:8.2f} {r['efficiency']:10.2f}")
+    print(f"critical path (tasks sized for {M} workers): serial {S:.2f} s + longest task chain {C:.2f} s = "
+          f"{critical:.2f} s; work {W:.2f} s; speedup bound T(1) / critical path = {one['seconds'] / critical:.1f}")
+    print(f"predicted on {M} workers: S + max(C, W / {M}) = {predict[M]:.1f} s, {one['seconds'] / predict[M]:.1f}x "
+          f"the measured 1 worker")
+    print(f"same output at every worker count: {same}; machine: {bench.info['cpu_model']}, "
+          f"{bench.info['cpu_count']} cores")
+    res = {"command": ["haa-sym", *argv], "preset": name, "rows": rows, "chain_run": chain, "same_output": same,
+           "critical_path_s": critical, "serial_s": S, "longest_chain_s": C, "work_s": W,
+           "predicted_s": {str(m): t for m, t in predict.items()},
+           "speedup_bound": one["seconds"] / critical}
+    print(f"wrote {bench.write(f'results_scale_{name}.json', res)}")
+    return 0 if same else 1
+
+
+if __name__ == "__main__":
+    sys.exit(main())

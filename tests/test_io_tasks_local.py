@@ -1,0 +1,180 @@
+"""``--scheduler local:N`` (issue 27, item 3): a LocalCluster of N worker processes on 127.0.0.1,
+started and stopped by the command. Refused values are one line; the cluster's every listening
+socket is on loopback; the results are the in-process bytes; no process is left behind, also
+when the command is ended by SIGTERM."""
+import json
+import os
+import signal
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+import psutil
+import pytest
+
+import haa_sym
+from haa_sym.cli import main
+from haa_sym.errors import ParameterError
+from haa_sym.io import tasks
+
+from conftest import ROOT
+
+SMALL = ["--P-gain", "log:5:2000:4", "--D-gain", "lin:1:50:3", "--beta-tol", "0.1"]
+ENV = {**os.environ, "PYTHONPATH": os.pathsep.join(
+    [str(Path(haa_sym.__file__).parents[1])] + [p for p in [os.environ.get("PYTHONPATH")] if p])}
+
+
+@pytest.mark.parametrize("cmd", [["schedule"], ["regions", "--nonlinear"]])
+@pytest.mark.parametrize("value", ["local:0", "local:x", "local:", "local:1.5", "local:-2", "local: 2"])
+def test_a_bad_worker_count_is_one_line(cmd, value, capsys, tmp_path):
+    out = tmp_path / ("s.csv" if cmd[0] == "schedule" else "m.npz")
+    assert main([*cmd, "--scheduler", value, "--out", str(out)]) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and err.startswith(f"haa-sym: error: --scheduler {value!r}: ")
+    assert "allowed: local:N with N >= 1" in err
+    assert not out.exists()
+
+
+def test_more_workers_than_cores_warns_in_one_line(monkeypatch, capsys):
+    started = []
+
+    class Refuse(Exception):
+        pass
+
+    class FakeCluster:                     # records the arguments, starts nothing
+        def __init__(self, **kw):
+            started.append(kw)
+            raise Refuse()
+    import distributed
+    monkeypatch.setattr(tasks.os, "cpu_count", lambda: 2)
+    monkeypatch.setattr(distributed, "LocalCluster", FakeCluster)
+    with pytest.raises(Refuse):
+        with tasks.cluster("local:3"):
+            pass
+    err = capsys.readouterr().err
+    assert err == "haa-sym: warning: --scheduler local:3: 3 worker processes on 2 cores; they share the cores " \
+                  "(no faster than local:2)\n"
+    # loopback, no dashboard (nor the workers'), one thread per worker process
+    assert started == [dict(n_workers=3, threads_per_worker=1, processes=True, host="127.0.0.1",
+                            dashboard_address=None, worker_dashboard_address=None,
+                            silence_logs=started[0]["silence_logs"])]
+    with pytest.raises(Refuse):
+        with tasks.cluster("local:2"):
+            pass
+    assert capsys.readouterr().err == ""      # N = the cores: no warning
+
+
+def test_other_values_pass_through():
+    for spec in (None, "tcp://127.0.0.1:8786"):
+        with tasks.cluster(spec) as s:
+            assert s == spec
+        assert tasks.local_workers(spec) is None
+    assert tasks.local_workers("local:4") == 4
+    with pytest.raises(ParameterError, match="local:0"):
+        tasks.local_workers("local:0")
+
+
+def _tree(root: psutil.Process) -> set[int]:
+    try:
+        return {root.pid} | {c.pid for c in root.children(recursive=True)}
+    except psutil.NoSuchProcess:
+        return set()
+
+
+def _listening(pids: set[int]) -> set[tuple[int, str]]:
+    return {(c.pid, c.laddr.ip) for c in psutil.net_connections("tcp")
+            if c.status == psutil.CONN_LISTEN and c.pid in pids}
+
+
+def _watch(proc: subprocess.Popen, until=None):
+    """Every process of ``proc``'s tree and every listening socket of it, seen while it runs;
+    ``until(pids)`` True ends the watch early (the process keeps running)."""
+    root, seen, sockets = psutil.Process(proc.pid), set(), set()
+    while proc.poll() is None:
+        pids = _tree(root)
+        seen |= pids
+        sockets |= _listening(pids)
+        if until is not None and until(pids, sockets):
+            break
+        time.sleep(0.1)
+    return seen, sockets
+
+
+def _gone(pids: set[int], timeout: float = 10.0) -> list[int]:
+    deadline = time.monotonic() + timeout
+    while time.monotonic() < deadline:
+        alive = [p for p in pids if psutil.pid_exists(p) and psutil.Process(p).status() != psutil.STATUS_ZOMBIE]
+        if not alive:
+            return []
+        time.sleep(0.2)
+    return alive
+
+
+def _params_file(tmp_path) -> Path:
+    p = tmp_path / "hyq_limits.toml"
+    p.write_text((ROOT / "model" / "hyq_haa.toml").read_text() + "\n[limits]\nV_max = 24.0\n")
+    return p
+
+
+@pytest.mark.slow
+def test_regions_nonlinear_on_local_2_listens_on_loopback_gives_the_bytes_and_leaves_nothing(tmp_path):
+    p = _params_file(tmp_path)
+    argv = ["regions", "--params", str(p), "--set", "beta=3", "--P-gain", "log:300:20000:6",
+            "--D-gain", "lin:1:40:4", "--nonlinear", "--duration", "0.4", "--max-duration", "1.2", "-q"]
+    remote = tmp_path / "remote.npz"
+    proc = subprocess.Popen([sys.executable, "-m", "haa_sym.cli", *argv, "--scheduler", "local:2",
+                             "--out", str(remote)], stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
+                            env=ENV, cwd=tmp_path, start_new_session=True)
+    try:
+        seen, sockets = _watch(proc)
+        out, err = proc.communicate(timeout=300)
+    finally:
+        if proc.poll() is None:
+            os.killpg(proc.pid, signal.SIGKILL)
+    assert proc.returncode == 0, err
+    assert err == ""                                  # no log lines of the cluster
+    # the command, its scheduler (in the command's process) and the two worker processes
+    assert len(seen) >= 3, seen
+    assert len({pid for pid, _ in sockets}) >= 3, sockets   # the scheduler's and each worker's port
+    assert {ip for _, ip in sockets} == {"127.0.0.1"}, sockets
+    assert _gone(seen) == []
+    local = tmp_path / "local.npz"
+    assert main([*argv, "--out", str(local)]) == 0
+    a, b = np.load(local), np.load(remote)
+    assert set(a.files) == set(b.files)
+    for k in a.files:
+        if k != "meta":
+            assert a[k].tobytes() == b[k].tobytes(), k
+    ma, mb = json.loads(str(a["meta"])), json.loads(str(b["meta"]))
+    assert mb["nonlinear"].pop("scheduler") == "dask.distributed"
+    assert ma["nonlinear"].pop("scheduler") == "in-process"
+    assert ma == mb
+    assert len(set(a["nonlinear_class"].ravel())) >= 2
+
+
+@pytest.mark.slow
+def test_sigterm_stops_the_local_cluster(tmp_path):
+    # the default grid: long enough to be running when the signal comes
+    out = tmp_path / "s.csv"
+    proc = subprocess.Popen([sys.executable, "-m", "haa_sym.cli", "schedule", "-q", "--scheduler", "local:2",
+                             "--out", str(out)], stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
+                            env=ENV, cwd=tmp_path, start_new_session=True)
+    try:
+        # until both workers listen (the cluster is up and the command is computing)
+        seen, sockets = _watch(proc, until=lambda pids, s: len({pid for pid, _ in s} - {proc.pid}) >= 2)
+        assert proc.poll() is None, proc.communicate()
+        time.sleep(1.0)
+        t0 = time.monotonic()
+        proc.send_signal(signal.SIGTERM)
+        _, err = proc.communicate(timeout=60)
+    finally:
+        if proc.poll() is None:
+            os.killpg(proc.pid, signal.SIGKILL)
+    assert proc.returncode == 143, err
+    assert err.strip().splitlines()[-1] == "haa-sym: terminated (SIGTERM); no output written"
+    assert time.monotonic() - t0 < 30
+    assert {ip for _, ip in sockets} == {"127.0.0.1"}, sockets
+    assert _gone(seen) == [], "processes of the local cluster left behind"
+    assert not out.exists()

@@ -1,0 +1,71 @@
+"""The schedule's work on the task runner, in cluster-sized tasks (issue 27, items 1 and 2): the
+point check and the torque bandwidths run as tasks (not in the command's own thread, where they
+were the serial part on a cluster), a cluster's ``run`` groups small calls into a few tasks per
+worker, and the task graph is recorded for benchmarks/bench_scale.py."""
+import threading
+
+import pytest
+
+import haa_sym.design.schedule as sch
+from haa_sym import ClosedLoop, load_params
+from haa_sym.io import tasks
+from haa_sym.io.tasks import TaskRunner
+
+
+def test_the_point_check_and_the_bandwidths_run_as_tasks(monkeypatch):
+    threads = {"decide": set(), "bandwidth": set()}
+    decide, bandwidth = sch.decide_points, sch.torque_bandwidth
+
+    def decide_where(*a, **kw):
+        threads["decide"].add(threading.current_thread() is threading.main_thread())
+        return decide(*a, **kw)
+
+    def bandwidth_where(*a, **kw):
+        threads["bandwidth"].add(threading.current_thread() is threading.main_thread())
+        return bandwidth(*a, **kw)
+    monkeypatch.setattr(sch, "decide_points", decide_where)
+    monkeypatch.setattr(sch, "torque_bandwidth", bandwidth_where)
+    s = sch.schedule(ClosedLoop(load_params()), [5.0, 300.0], [1.0, 20.0], beta_range=(0.5, 4.0), beta_tol=0.25,
+                     progress=False)
+    assert s.feasible.any()
+    # every call on the runner's threads, none in the command's own (before: _verify and the
+    # bandwidths ran in the main thread, one after the other)
+    assert threads == {"decide": {False}, "bandwidth": {False}}
+
+
+def test_a_cluster_run_groups_small_calls_and_keeps_their_order():
+    distributed = pytest.importorskip("distributed")
+    with distributed.LocalCluster(n_workers=2, threads_per_worker=1, processes=False,
+                                  dashboard_address=None) as cl, distributed.Client(cl) as client:
+        r = TaskRunner(client, False)
+        tasks.TRACE = []
+        try:
+            out = r.run(pow, [(k, 2) for k in range(100)], "squares")
+            again = r.run(pow, [(k, 3) for k in range(5)], "cubes")
+            trace = tasks.TRACE
+        finally:
+            tasks.TRACE = None
+    assert out == [k ** 2 for k in range(100)] and again == [k ** 3 for k in range(5)]
+    first = tasks.CHUNKS_PER_WORKER * 2
+    assert len(trace) == first + 5                  # 100 calls in 8 tasks; 5 calls in 5
+    # the second run waited for every task of the first (a barrier), the first for nothing
+    assert all(t["after"] == [] for t in trace[:first])
+    assert all(sorted(t["after"]) == sorted(x["key"] for x in trace[:first]) for t in trace[first:])
+
+
+def test_stream_records_which_task_asked_for_which():
+    distributed = pytest.importorskip("distributed")
+    with distributed.LocalCluster(n_workers=1, threads_per_worker=1, processes=False,
+                                  dashboard_address=None) as cl, distributed.Client(cl) as client:
+        r = TaskRunner(client, False)
+        tasks.TRACE, seen = [], []
+        try:
+            r.stream(pow, [(2, 1), (3, 1)], lambda a, res: (seen.append(res) or [((res, 2), 1)] if a[1] == 1 else []),
+                     "powers")
+            trace = tasks.TRACE
+        finally:
+            tasks.TRACE = None
+    assert sorted(seen) == [2, 3] and len(trace) == 4
+    firsts = {t["key"] for t in trace[:2]}
+    assert all(t["after"] == [] for t in trace[:2])
+    assert all(len(t["after"]) == 1 and t["after"][0] in firsts for t in trace[2:])
