@@ -161,15 +161,20 @@ def _get(port: int, path: str, headers: dict | None = None, timeout: float = 10.
     return r.status, body, time.monotonic() - t0
 
 
-@pytest.fixture(scope="module")
-def server(tmp_path_factory):
+def _start(cwd):
+    """A server started in ``cwd``, with its port."""
     from explore_driver import DriverError, start_server
-    cwd = tmp_path_factory.mktemp("explore_cwd")
     try:
         s = start_server(cwd=cwd)
     except DriverError as exc:
         pytest.fail(str(exc))
     s.port = int(s.url.rsplit(":", 1)[1].strip("/"))
+    return s
+
+
+@pytest.fixture(scope="module")
+def server(tmp_path_factory):
+    s = _start(tmp_path_factory.mktemp("explore_cwd"))
     yield s
     s.stop()
 
@@ -219,12 +224,7 @@ def test_a_get_computes_and_reads_nothing(server, tmp_path):
 @pytest.fixture
 def own_server(tmp_path):
     """A server of the test's own (its sessions and memory are the test's alone)."""
-    from explore_driver import DriverError, start_server
-    try:
-        s = start_server(cwd=tmp_path)
-    except DriverError as exc:
-        pytest.fail(str(exc))
-    s.port = int(s.url.rsplit(":", 1)[1].strip("/"))
+    s = _start(tmp_path)
     yield s
     s.stop()
 

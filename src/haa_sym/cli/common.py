@@ -352,3 +352,21 @@ def _leg_args(parser) -> None:
                              "box on the other keys); 'refuse' refused")
 
 
+def cycle_comparison(c: dict, head: str, unit: str = "") -> str:
+    """One line: how a simulation bears out a describing function's predicted cycle (the dict of
+    :func:`haa_sym.analysis.describing.compare_cycle`), after ``head``; ``unit`` of the signal
+    (the voltage's simulated amplitude is its fundamental's, as the prediction's)."""
+    if c["simulated_kind"] == "sustained":
+        amp = "" if c["simulated_amplitude"] is None or c["amplitude_error"] is None else \
+            (("fundamental " if c["signal"] == "voltage" else "") + f"{c['simulated_amplitude']:.4g}"
+             + (f" {unit}" if unit else "") + f" (error {100 * c['amplitude_error']:.3g} %) ")
+        text = (f"{head} {c['signal']}: {amp}at {c['simulated_frequency_hz']:.4g} Hz (error "
+                f"{100 * c['frequency_error']:.3g} %): {'agrees' if c['agrees'] else 'DISAGREES'} within "
+                f"{100 * c['tolerance']:.3g} %")
+    else:
+        text = (f"{head} {c['signal']}: no sustained periodic oscillation "
+                f"({c['simulated_kind'] or 'no usable trace'})")
+    if c["untrusted"]:
+        text += "; the prediction cannot be trusted here: " + "; ".join(c["untrusted"])
+    return text
+

@@ -9,6 +9,7 @@ from haa_sym.io.formats import save_json
 from haa_sym.loop import ClosedLoop
 
 from haa_sym.cli.common import (TITLE_HELP, _check_out, _common, _gain_flags, _loaded, _params, _parse_options,
+                                cycle_comparison,
                                 _plots, _points, _write_outputs, _wrote, figure_title)
 
 LIMIT_HELP = ("a nonlinearity and its parameter, KEY=VALUE (repeatable, each predicted alone): V_max (V, "
@@ -101,18 +102,7 @@ def _cmd_describe(args) -> int:
 
 def _confirmation(c: dict) -> str:
     """One line: how the confirming simulation bears a predicted cycle out."""
-    run = f"simulation ({c['experiment']}, {c['duration_s']:.3g} s; verdict {c['verdict']})"
-    if c["simulated_kind"] == "sustained":
-        amp = "" if c["amplitude_error"] is None else \
-            f"{c['simulated_amplitude']:.4g} (error {100 * c['amplitude_error']:.3g} %) "
-        text = (f"{run}: {c['signal']} {amp}at {c['simulated_frequency_hz']:.4g} Hz (error "
-                f"{100 * c['frequency_error']:.3g} %): {'agrees' if c['agrees'] else 'DISAGREES'} within "
-                f"{100 * c['tolerance']:.3g} %")
-    else:
-        text = f"{run}: no sustained periodic oscillation of the {c['signal']} ({c['simulated_kind'] or 'no usable trace'})"
-    if c["untrusted"]:
-        text += "; do not trust this prediction: " + "; ".join(c["untrusted"])
-    return text
+    return cycle_comparison(c, f"simulation ({c['experiment']}, {c['duration_s']:.3g} s; verdict {c['verdict']}),")
 
 
 def _with_confirmation(d: dict, conf: list) -> dict:

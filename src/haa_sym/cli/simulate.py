@@ -16,7 +16,7 @@ from haa_sym.io.outputs import csv_text
 from haa_sym.loop import ClosedLoop
 from haa_sym.model.limits import limit_units
 
-from haa_sym.cli.common import (TITLE_HELP, _check_out, _common, _gain_flags, _loaded, _params,
+from haa_sym.cli.common import (TITLE_HELP, _check_out, _common, _gain_flags, _loaded, _params, cycle_comparison,
                                 _parse_options, _plots, _points, _wrote, figure_title)
 from haa_sym.io.outputs import Transaction
 
@@ -217,17 +217,8 @@ def _predictions(loop, P, D, s, cols) -> list[tuple[str, str, dict | None]]:
         if s.meta["experiment"] in FORCED_EXPERIMENTS:
             sim = f"not compared: the {s.meta['experiment']} forces the loop (its oscillation is the input's)"
             c["untrusted"] = []
-        elif c["simulated_kind"] == "sustained":
-            amp = "" if c["simulated_amplitude"] is None else \
-                (("fundamental " if c["signal"] == "voltage" else "")
-                 + f"{c['simulated_amplitude']:.4g} {r.unit} (error {100 * c['amplitude_error']:.3g} %) ")
-            sim = (f"simulated {c['signal']}: {amp}at {c['simulated_frequency_hz']:.4g} Hz (error "
-                   f"{100 * c['frequency_error']:.3g} %): {'agrees' if c['agrees'] else 'DISAGREES'} within "
-                   f"{100 * c['tolerance']:.3g} %")
         else:
-            sim = f"simulated {c['signal']}: no sustained periodic oscillation ({c['simulated_kind'] or 'no usable trace'})"
-        if c["untrusted"]:
-            sim += "; the prediction cannot be trusted here: " + "; ".join(c["untrusted"])
+            sim = cycle_comparison(c, "simulated", r.unit)
         out.append((text, sim, dict(c, nonlinearity=key, value=value)))
     return out
 
