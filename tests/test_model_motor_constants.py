@@ -78,3 +78,12 @@ def test_unknown_convention_refused(tmp_path, assert_refused):
     with pytest.raises(ParameterError, match=r"\[motor\]: convention = 'ac'; allowed: one of \['dc', "):
         load_params(path)
     assert_refused(["margins", "--params", str(path), "--P-gain", "200", "--D-gain", "10"], "convention = 'ac'")
+
+
+def test_tune_checks_the_motor_constants_too(tmp_path, capsys):
+    """tune loads its file without _params: it did not warn (the helper's noted gap)."""
+    path = _file(tmp_path, k_t=45.3)
+    assert main(["tune", "--params", str(path), "--out", str(tmp_path / "t.toml"),
+                 "--passive-configurations", "nominal"]) == 2          # refused at once, after the check
+    err = capsys.readouterr().err
+    assert sum("is 1000x k_w = 0.0453 V s/rad" in ln for ln in err.splitlines()) == 1, err

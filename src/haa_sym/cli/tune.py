@@ -14,7 +14,8 @@ from haa_sym.io.outputs import Transaction
 from haa_sym.loop import ClosedLoop
 from haa_sym.model.params import MAX_FILE_BYTES, actuator_path, load_params
 
-from haa_sym.cli.common import PARAMS_HELP, TITLE_HELP, _check_out, _parse_options, _plots, measured_torque
+from haa_sym.cli.common import (PARAMS_HELP, TITLE_HELP, _check_out, _parse_options, _plots, _warn_motor_constants,
+                                measured_torque)
 
 
 def _range(text: str, flag: str):
@@ -91,6 +92,7 @@ def _load_modes(r, g) -> str:
 def _cmd_tune(args) -> int:
     src = actuator_path(args.params, "--params")
     params = load_params(src)
+    _warn_motor_constants(args, params)        # as every command that takes --params
     options = _parse_options(args.option)
     opts = _tune_options(args)
     names = ["nominal", *params.configurations]
