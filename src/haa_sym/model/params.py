@@ -39,6 +39,7 @@ from haa_sym.model.actuator import (ACTUATOR_SECTIONS, HYQ, Actuator, Topology, 
 from haa_sym.model.motor import MOTOR_CONVENTION_DEFAULT, split_convention
 from haa_sym.model import filters
 from haa_sym.model.filters import PARAMETERS as FILTER_PARAMETERS
+from haa_sym.model.drive import DRIVE_KEYS, DRIVE_UNITS, Drive, drive_allowed, parse_drive
 from haa_sym.model.limits import Limits, parse_limits
 from haa_sym.model.resources import data_dir
 from haa_sym.model.units import CONTROLLER_UNITS
@@ -117,11 +118,12 @@ def domain_text(domain: str) -> str:
 def set_keys(params: "Params") -> list[tuple[str, str, str, object]]:
     """Every key ``--set`` / :meth:`Params.with_values` accepts for ``params``:
     ``(key, unit, allowed, current value)``, the plant's (its topology's order) then the
-    controller's."""
+    controller's, then the drive's."""
     top = params.plant.topology
     rows = [(k, top.units[k], domain_text(d), params.plant.as_dict()[k]) for k, d in top.domain.items()]
     rows += [(k, CONTROLLER_UNITS.get(k, "name"), domain_text(d), getattr(params.controller, k))
              for k, d in _CONTROLLER_DOMAIN.items()]
+    rows += [(k, DRIVE_UNITS[k], drive_allowed(k), getattr(params.drive, k)) for k in DRIVE_KEYS]
     return rows
 
 
@@ -274,12 +276,17 @@ class Params:
     # [motor] convention (haa_sym.model.actuator.MOTOR_CONVENTIONS): how k_t and k_w are compared
     # for the plausibility warning only; the model uses both values as given
     motor_convention: str = field(default=MOTOR_CONVENTION_DEFAULT, compare=False)
+    # the drive between command and motor ([drive], haa_sym.model.drive): it changes the sampled
+    # plant, so it takes part in equality and in every memo keyed by Params
+    drive: Drive = field(default_factory=Drive)
 
     def __post_init__(self):
         if not isinstance(self.plant, Plant):
             raise ParameterError(f"{self.source}: plant = {self.plant!r}; allowed: a haa_sym.Plant")
         if not isinstance(self.controller, Controller):
             raise ParameterError(f"{self.source}: controller = {self.controller!r}; allowed: a haa_sym.Controller")
+        if not isinstance(self.drive, Drive):
+            raise ParameterError(f"{self.source}: drive = {self.drive!r}; allowed: a haa_sym.model.drive.Drive")
         if not isinstance(self.configurations, Mapping):
             raise ParameterError(f"{self.source}: [configurations] must be a table of tables")
         configs = {}
@@ -356,19 +363,21 @@ class Params:
         return replace(self, plant=self.plant.replace(**self.configurations[name]))
 
     def with_values(self, **changes: float) -> "Params":
-        """A copy with any plant or controller keys changed (what ``--set KEY=VALUE`` does)."""
+        """A copy with any plant, controller or drive keys changed (what ``--set KEY=VALUE`` does)."""
         keys = self.plant.topology.parameter_keys
         plant_changes = {k: v for k, v in changes.items() if k in keys}
         ctrl_changes = {k: v for k, v in changes.items() if k in _CONTROLLER_DOMAIN}
-        unknown = sorted(set(changes) - set(plant_changes) - set(ctrl_changes))
+        drive_changes = {k: v for k, v in changes.items() if k in DRIVE_KEYS}
+        unknown = sorted(set(changes) - set(plant_changes) - set(ctrl_changes) - set(drive_changes))
         if unknown:
             raise ParameterError(
-                f"unknown parameter key(s) {unknown}; allowed: {list(keys + CONTROLLER_KEYS)}"
+                f"unknown parameter key(s) {unknown}; allowed: {list(keys + CONTROLLER_KEYS + DRIVE_KEYS)}"
             )
         return replace(
             self,
             plant=self.plant.replace(**plant_changes) if plant_changes else self.plant,
             controller=self.controller.replace(**ctrl_changes) if ctrl_changes else self.controller,
+            drive=self.drive.replace(**drive_changes) if drive_changes else self.drive,
         )
 
     def to_dict(self) -> dict:
@@ -379,6 +388,7 @@ class Params:
             "topology": {**top.structure(), "fingerprint": top.fingerprint},
             "controller": dict(self.controller.__dict__),
             "configurations": {k: dict(v) for k, v in self.configurations.items()},
+            "drive": self.drive.as_dict(),
             "source": self.source,
         }
 
@@ -555,7 +565,7 @@ def gain_points(P_gain=0.0, D_gain=0.0, beta=None, alpha=None):
             None if alpha is None else gain_array("alpha", alpha))
 
 
-_FILE_SECTIONS = ACTUATOR_SECTIONS + ("controller", "configurations", "limits")
+_FILE_SECTIONS = ACTUATOR_SECTIONS + ("controller", "configurations", "limits", "drive")
 _LEGACY_SECTIONS = ("about", "plant", "controller", "configurations", "limits")
 
 
@@ -596,8 +606,9 @@ def parse_params(data: Mapping[str, object], source: str = "<memory>") -> Params
             raise ParameterError(f"{where}: must be a table of plant keys")
         configs[name] = entry_values(overrides, where, refs, topology.units)
     limits = parse_limits(data["limits"], topology.body_names, source, refs) if "limits" in data else Limits()
+    drive = parse_drive(data["drive"], source, refs) if "drive" in data else Drive()
     return Params(plant=plant, controller=controller, configurations=configs, source=source, about=about,
-                  limits=limits, motor_convention=convention)
+                  limits=limits, motor_convention=convention, drive=drive)
 
 
 def _read_toml(raw: bytes) -> dict:
