@@ -49,7 +49,7 @@ from haa_sym.model.filters import controller_filter
 from haa_sym.compiled.layout import (COEF_FORMS, COEF_OUTPUTS, COEF_TERMS, FREQ_COLUMN, N_BASIS, TORQUE_GAINS,
                             gain_monomials)
 from haa_sym.loop.options import LoopOptions
-from haa_sym.loop.plant import DiscretePlant, continuous_plant, discretize
+from haa_sym.loop.plant import DiscretePlant, continuous_plant, discretize, drive_states, with_lag
 from haa_sym.loop.statespace import closed_loop_eigenvalues, to_statespace
 
 __all__ = ["LoopCoefficients", "ClosedLoop", "StabilityResult", "FrequencyResponse", "FREQ_OUTPUTS", "loop_first"]
@@ -174,9 +174,13 @@ class ClosedLoop:
         # filter beyond every generated capacity would cost minutes of symbolic and exact
         # arithmetic (N_av = 10**6, a 50-body chain) only to be refused at the end
         self._check_reach(params, evaluators(backend).capacities)
+        # the drive's lag (a continuous state) and dead time (the delay line) are part of the
+        # sampled plant (haa_sym.loop.plant.discretize): every analysis of this loop sees them
+        drive = params.drive
         self.plant: DiscretePlant = _PLANTS.get(
-            (params.plant, ctrl.Ts, backend),
-            lambda: discretize(continuous_plant(params.plant, backend), ctrl.Ts))
+            (params.plant, ctrl.Ts, backend, drive),
+            lambda: discretize(with_lag(continuous_plant(params.plant, backend), drive.tau_drive), ctrl.Ts,
+                               drive.delay_drive))
         # chi = (z - 1) z^delay z^N_av d(z) + ...: integrator, delay, filter, plant states
         el = self.elements
         filter_order = common_denominator(el["F_d"], el["F_vc"])[0].__len__() - 1
@@ -214,7 +218,7 @@ class ClosedLoop:
         """
         top, ctrl, d = params.plant.topology, params.controller, self.options.structure.delay
         cap = max(capacities)
-        n_x = len(top.state_names)
+        n_x = len(top.state_names) + drive_states(params.drive, ctrl.Ts)
         n_f = filters.controller_filter_order(ctrl)
         if n_x + 1 + d + 1 > cap:       # even the smallest filter (order 1) does not fit
             bodies = (cap - 1 - d - 1 - 3) // 2

@@ -18,7 +18,16 @@ from haa_sym.errors import ParameterError
 from haa_sym.model.params import Plant, load_params
 from haa_sym.compiled.plant_code import plant_function
 
-__all__ = ["ContinuousPlant", "DiscretePlant", "continuous_plant", "discretize"]
+__all__ = ["ContinuousPlant", "DiscretePlant", "continuous_plant", "discretize", "with_lag", "delay_split",
+           "drive_states", "LAG_STATE", "DELAY_STATE"]
+
+#: The names of the drive's states (haa_sym.model.drive): the lag's output (the command as the
+#: motor receives it) and the delay line's held commands u[k-1], u[k-2], ...
+LAG_STATE = "u_lag"
+DELAY_STATE = "u_delay_{}"
+# a fractional part of the delay below this fraction of Ts is a whole number of samples
+# (rounding of delay_drive / Ts, e.g. 0.003 / 0.001 = 2.9999999999999996)
+_WHOLE = 1e-9
 
 
 def _index(names: tuple[str, ...], wanted, kind: str) -> list[int]:
@@ -85,18 +94,95 @@ def continuous_plant(plant: Plant, backend: str = "auto") -> ContinuousPlant:
     return cont
 
 
-def discretize(cont: ContinuousPlant, Ts: float) -> DiscretePlant:
-    """Zero-order hold at ``Ts`` (s): expm of the augmented matrix [[A, B], [0, 0]] Ts."""
+def with_lag(cont: ContinuousPlant, tau_drive: float) -> ContinuousPlant:
+    """The plant behind the drive's first-order lag 1 / (tau_drive s + 1) on its command input
+    (the first, ``V_m``): one more state, :data:`LAG_STATE`, u_lag' = (u - u_lag) / tau_drive,
+    which drives the plant through the command's old column. The torques (T_fr, T_dist) still
+    act directly. ``tau_drive = 0`` returns ``cont`` itself (no lag: the paper's model)."""
+    if not tau_drive > 0:
+        return cont
+    n, m = cont.B.shape
+    A = np.zeros((n + 1, n + 1))
+    A[:n, :n], A[:n, n], A[n, n] = cont.A, cont.B[:, 0], -1.0 / tau_drive
+    B = np.zeros((n + 1, m))
+    B[:n, 1:], B[n, 0] = cont.B[:, 1:], 1.0 / tau_drive
+    C = np.hstack([cont.C, np.zeros((cont.C.shape[0], 1))])
+    return ContinuousPlant(A, B, C, cont.VC0, cont.plant, cont.state_names + (LAG_STATE,), cont.input_names,
+                           cont.output_names)
+
+
+def delay_split(delay_drive: float, Ts: float) -> tuple[int, float]:
+    """``delay_drive = whole Ts + frac`` with ``whole`` an integer >= 0 and 0 <= frac < Ts (s);
+    a remainder within 1e-9 Ts of a whole sample counts as that whole sample."""
+    q = delay_drive / Ts
+    whole = int(np.floor(q + _WHOLE))
+    frac = (q - whole) * Ts
+    return whole, (0.0 if frac < _WHOLE * Ts else float(frac))
+
+
+def drive_states(drive, Ts: float) -> int:
+    """States the drive adds to the sampled plant at ``Ts``: 1 for a lag, and the delay line's
+    ``whole`` (+1 with a fractional part) held commands (:func:`delay_split`)."""
+    whole, frac = delay_split(drive.delay_drive, Ts)
+    return int(drive.tau_drive > 0) + whole + int(frac > 0)
+
+
+def discretize(cont: ContinuousPlant, Ts: float, delay_drive: float = 0.0) -> DiscretePlant:
+    """Zero-order hold at ``Ts`` (s): expm of the augmented matrix [[A, B], [0, 0]] Ts; with the
+    drive's dead time ``delay_drive`` (s) on the command input (the first column), exactly.
+
+    The delay d = l Ts + f (0 <= f < Ts, :func:`delay_split`) is the modified z-transform's
+    augmentation (Astrom and Wittenmark, Computer-Controlled Systems, Sec. 2.3): over one period
+    the held command is u[k-l-1] for the first f seconds and u[k-l] for the rest, so
+    x[k+1] = Phi x[k] + Gamma_0 u[k-l] + Gamma_1 u[k-l-1] with
+    Gamma_0 = int_0^{Ts-f} e^{A s} ds b and Gamma_1 = e^{A (Ts-f)} int_0^f e^{A s} ds b, and the
+    past commands are states (:data:`DELAY_STATE`, u[k-1] first). Exact for any d, not only whole
+    samples; the new states sit at z = 0.
+    """
     if not (isinstance(Ts, (int, float)) and np.isfinite(Ts) and Ts > 0):
         raise ParameterError(f"Ts = {Ts!r}; allowed: a finite number > 0 (seconds)")
     Phi, Gamma = _zoh(cont.A, cont.B, Ts)
     if not _finite(Phi, Gamma):
         raise _overflow(cont.plant, Ts)
     C = cont.C.copy()
+    states = cont.state_names
+    whole, frac = delay_split(delay_drive, Ts)
+    if whole or frac:
+        Phi, Gamma, C, states = _delayed(cont, Ts, Phi, Gamma, C, whole, frac)
     for arr in (Phi, Gamma, C):          # shared by every ClosedLoop of this plant (memoised)
         arr.setflags(write=False)
-    return DiscretePlant(Phi, Gamma, C, float(Ts), cont.VC0, cont.state_names, cont.input_names,
+    return DiscretePlant(Phi, Gamma, C, float(Ts), cont.VC0, states, cont.input_names,
                          cont.output_names)
+
+
+def _delayed(cont: ContinuousPlant, Ts: float, Phi, Gamma, C, whole: int, frac: float):
+    """The sampled plant with the command delayed by ``whole`` Ts + ``frac`` (see discretize)."""
+    n, m = Gamma.shape
+    b = cont.B[:, :1]
+    if frac:
+        Phi_late, G_late = _zoh(cont.A, b, Ts - frac)       # e^{A (Ts-f)}, int_0^{Ts-f}
+        _, G_early = _zoh(cont.A, b, frac)
+        g0, g1 = G_late[:, 0], Phi_late @ G_early[:, 0]
+    else:
+        g0, g1 = Gamma[:, 0], None
+    L = whole + int(bool(frac))
+    N = n + L
+    P = np.zeros((N, N))
+    G = np.zeros((N, m))
+    P[:n, :n] = Phi
+    G[:n, 1:] = Gamma[:, 1:]
+    G[n, 0] = 1.0                                           # u_delay_1[k+1] = u[k]
+    for i in range(1, L):                                   # u_delay_{i+1}[k+1] = u_delay_i[k]
+        P[n + i, n + i - 1] = 1.0
+    if whole == 0:
+        G[:n, 0] = g0
+    else:
+        P[:n, n + whole - 1] = g0                           # u[k - whole]
+    if frac:
+        P[:n, n + whole] = g1                               # u[k - whole - 1]
+    Cd = np.hstack([C, np.zeros((C.shape[0], L))])
+    names = cont.state_names + tuple(DELAY_STATE.format(i + 1) for i in range(L))
+    return P, G, Cd, names
 
 
 def _evaluate(plant: Plant, backend: str = "auto") -> ContinuousPlant:
