@@ -1,11 +1,15 @@
-"""``haa-sym identify`` against scipy, side by side in one run: a four-parameter fit of a
-30,000-sample log, whole process (start, imports, reading the CSV, the fit, writing the file).
+"""``haa-sym identify`` against scipy, side by side in one run: a four-parameter fit, whole process
+(start, imports, reading the CSV, the fit, writing the file), for every drive of ``CASES``:
 
-The log: the bundled harmonic drive (model/harmonic_drive.toml) driven by a band-limited Gaussian
-voltage (a quarter of Nyquist), simulated independently (tests/identify_synthetic.py: the
-equations written by hand, scipy ``cont2discrete`` + ``dlsim``), 1 % sensor noise on the torque
-and the link angle, 30 s at 1 kHz. Fitted: J_link, B_link, K_hd, D_hd from the same start
-(+29 %, +19 %, -19 %, -37 %).
+* the bundled harmonic drive (model/harmonic_drive.toml), voltage-driven, 30 s at 1 kHz
+  (30,000 samples; fitted J_link, B_link, K_hd, D_hd from +29 %, +19 %, -19 %, -37 %);
+* the bundled SEA (model/sea.toml), current-driven, 20 s at 0.5 ms (40,000 samples): its slowest
+  mode is far slower than its spring mode (issue 23 measured 2.9x there against 5.5x on the
+  harmonic drive); fitted J_link, B_link, K_bar, D_bar from +27 %, +20 %, -17 %, -30 %.
+
+Each log: a band-limited Gaussian input (a quarter of Nyquist) simulated independently
+(tests/identify_synthetic.py: the equations written by hand, scipy ``cont2discrete`` +
+``dlsim``), 1 % sensor noise on the torque and the link angle.
 
 The baseline, a competent scipy user's script run as its own process: ``np.loadtxt`` of the log,
 the same hand-written model, exact ZOH by ``scipy.signal.cont2discrete``, the output error by
@@ -15,8 +19,9 @@ haa_sym: ``python -m haa_sym.cli identify ... -q`` (exact Jacobian, Schur-basis 
 Each is timed as the best of ``REPEATS`` runs, interleaved (wall time, ``perf_counter`` around the
 process); the same two fits are also timed in this process (imports done: the fit alone).
 
-Prints the times and the ratio and writes ``results_identify.json`` into ``$HAA_SYM_BENCH_DIR``
-(default ``bench-results/``, git-ignored). Usage: python benchmarks/bench_identify.py
+Prints the times and the ratios and writes ``results_identify.json`` into ``$HAA_SYM_BENCH_DIR``
+(default ``bench-results/``, git-ignored): the first case's fields at the top (as before) and
+every case under ``cases``. Usage: python benchmarks/bench_identify.py
 """
 from __future__ import annotations
 
@@ -33,21 +38,27 @@ from pathlib import Path
 from timing import ROOT, Run, best
 
 sys.path.insert(0, str(ROOT / "tests"))
-from identify_synthetic import HD_TRUTH, experiment, two_mass, write_csv  # noqa: E402
+from identify_synthetic import HD_TRUTH, SEA_TRUTH, experiment, sea, two_mass, write_csv  # noqa: E402
 from haa_sym.cli import main as cli_main  # noqa: E402
 from haa_sym.model.params import actuator_path, load_params  # noqa: E402
 
-START = {"J_link": 0.45, "B_link": 2.5, "K_hd": 2.5e4, "D_hd": 40.0}
 REPEATS = 3
+# name -> (bundled actuator, model of identify_synthetic, input, Ts (s), duration (s), truth, start)
+CASES = {
+    "harmonic drive, voltage, 1 kHz": ("harmonic_drive", "two_mass", "voltage", 1e-3, 30.0, HD_TRUTH,
+                                       {"J_link": 0.45, "B_link": 2.5, "K_hd": 2.5e4, "D_hd": 40.0}),
+    "SEA, current, 0.5 ms": ("sea", "sea", "current", 5e-4, 20.0, SEA_TRUTH,
+                             {"J_link": 0.11, "B_link": 0.12, "K_bar": 1900.0, "D_bar": 0.35}),
+}
+MODELS = {"two_mass": two_mass, "sea": sea}
 
 BASELINE = textwrap.dedent("""
     import json, sys
     import numpy as np, scipy.optimize, scipy.signal
-    from identify_synthetic import two_mass
+    import identify_synthetic
 
-    KEYS = ("J_link", "B_link", "K_hd", "D_hd")
-
-    def fit(path, p):
+    def fit(path, p, model, keys, current):
+        model = getattr(identify_synthetic, model)
         data = np.loadtxt(path, delimiter=",", skiprows=1)
         t, u, y = data[:, 0], data[:, 1], data[:, 2:4]
         Ts = (t[-1] - t[0]) / (len(t) - 1)
@@ -55,90 +66,103 @@ BASELINE = textwrap.dedent("""
         U = np.column_stack([u, np.zeros_like(u)])
 
         def residual(theta):
-            q = dict(p, **dict(zip(KEYS, np.exp(theta))))
-            A, B, C, D = two_mass(q)
+            q = dict(p, **dict(zip(keys, np.exp(theta))))
+            A, B, C, D = model(q, current)
             Phi, Gam, *_ = scipy.signal.cont2discrete((A, B, C[:2], D[:2]), Ts, "zoh")
             _, yp, _ = scipy.signal.dlsim((Phi, Gam, C[:2], D[:2], Ts), U)
             return ((y - yp) / scale).ravel()
 
-        r = scipy.optimize.least_squares(residual, np.log([p[k] for k in KEYS]), method="trf")
-        return {"values": dict(zip(KEYS, np.exp(r.x).tolist())), "nfev": int(r.nfev)}
+        r = scipy.optimize.least_squares(residual, np.log([p[k] for k in keys]), method="trf")
+        return {"values": dict(zip(keys, np.exp(r.x).tolist())), "nfev": int(r.nfev)}
 
     if __name__ == "__main__":
-        print(json.dumps(fit(sys.argv[1], json.loads(sys.argv[2]))))
+        a = json.loads(sys.argv[2])
+        print(json.dumps(fit(sys.argv[1], a["start"], a["model"], a["keys"], a["current"])))
 """)
+
+
+def bench_case(name, tmp: Path) -> dict:
+    """One drive of ``CASES``, timed side by side; returns its JSON entry."""
+    actuator, model, inp, Ts, duration, truth, START = CASES[name]
+    params = load_params(actuator_path(actuator))
+    current = inp == "current"
+    log = Path(tmp, f"{actuator}.csv")
+    t, u, y, _ = experiment(MODELS[model], params.plant.as_dict(), seed=0, duration=duration, Ts=Ts,
+                            current=current)
+    write_csv(log, t, {inp: u, "torque": y[:, 0], "theta": y[:, 1]})
+    script = Path(tmp, "baseline.py")
+    script.write_text(BASELINE)
+    start = dict(params.plant.as_dict(), **START)
+    args = {"start": start, "model": model, "keys": list(START), "current": current}
+    env = dict(os.environ, PYTHONPATH=os.pathsep.join([str(ROOT / "src"), str(ROOT / "tests"),
+                                                       os.environ.get("PYTHONPATH", "")]))
+    argv = ["identify", "--params", actuator, "--log", str(log), "--input", inp, "--output",
+            "torque,theta", "--fit", ",".join(START), "--out", str(Path(tmp, "fitted.toml")),
+            "--report", str(Path(tmp, "fit.json")), "-q"] + \
+        [a for k, v in START.items() for a in ("--set", f"{k}={v}")]
+
+    def baseline():
+        out = subprocess.run([sys.executable, str(script), str(log), json.dumps(args)],
+                             check=True, capture_output=True, text=True, env=env)
+        return json.loads(out.stdout)
+
+    def ours():
+        subprocess.run([sys.executable, "-m", "haa_sym.cli"] + argv, check=True, capture_output=True, text=True,
+                       env=env)
+        return json.loads(Path(tmp, "fit.json").read_text())
+
+    def ours_in_process():
+        with contextlib.redirect_stdout(io.StringIO()):
+            assert cli_main(argv) == 0
+        return json.loads(Path(tmp, "fit.json").read_text())
+
+    def cli_import():
+        subprocess.run([sys.executable, "-c", "import haa_sym.cli"], check=True, env=env)
+
+    namespace: dict = {}
+    exec(compile(BASELINE, "baseline.py", "exec"), namespace)
+
+    ours()                                    # warm the disk cache and the compiled-code cache
+    # interleaved, so that a change of the machine's load falls on both alike
+    times = {"ours": [], "base": [], "ours_fit": [], "base_fit": [], "cli_import": []}
+    for _ in range(REPEATS):
+        for key, fn in (("ours", ours), ("base", baseline), ("cli_import", cli_import),
+                        ("ours_fit", ours_in_process),
+                        ("base_fit", lambda: namespace["fit"](str(log), start, model, list(START), current))):
+            t_run, res = best(fn, 1)
+            times[key].append(t_run)
+            if key == "ours":
+                rep = res
+            elif key == "base":
+                base = res
+    t_ours, t_base = min(times["ours"]), min(times["base"])
+    t_ours_fit, t_base_fit = min(times["ours_fit"]), min(times["base_fit"])
+    fitted = {k: rep["parameters"][k]["value"] for k in START}
+    err = {k: fitted[k] / truth[k] - 1 for k in START}
+    err_base = {k: base["values"][k] / truth[k] - 1 for k in START}
+    data = {"case": name, "actuator": actuator, "input": inp, "Ts": Ts, "samples": len(t), "keys": list(START),
+            "start": START, "truth": truth,
+            "haa_sym_identify_s": t_ours, "scipy_least_squares_dlsim_s": t_base, "ratio": t_base / t_ours,
+            "in_process": {"haa_sym_identify_s": t_ours_fit, "scipy_least_squares_dlsim_s": t_base_fit,
+                           "ratio": t_base_fit / t_ours_fit},
+            "cli_import_s": min(times["cli_import"]), "all_times_s": times, "haa_sym_values": fitted,
+            "scipy_values": base["values"], "scipy_nfev": base["nfev"], "haa_sym_iterations": rep["meta"]["iterations"],
+            "haa_sym_relative_error": err, "scipy_relative_error": err_base, "repeats": REPEATS}
+    print(f"{name}: {len(t):,}-sample log, {len(START)} parameters, best of {REPEATS} interleaved runs: whole "
+          f"process haa-sym identify {t_ours:.2f} s, scipy least_squares over dlsim {t_base:.2f} s "
+          f"({base['nfev']} evaluations): ratio {t_base / t_ours:.1f}x; in-process (imports done) {t_ours_fit:.2f} s "
+          f"against {t_base_fit:.2f} s: ratio {t_base_fit / t_ours_fit:.1f}x; of the whole process, "
+          f"`import haa_sym.cli` alone takes {min(times['cli_import']):.2f} s")
+    print("  relative errors haa_sym " + ", ".join(f"{k} {v:+.2%}" for k, v in err.items()))
+    print("  relative errors scipy   " + ", ".join(f"{k} {v:+.2%}" for k, v in err_base.items()))
+    return data
 
 
 def main() -> int:
     run = Run("bench_identify.py")
-    params = load_params(actuator_path("harmonic_drive"))
     with tempfile.TemporaryDirectory() as tmp:
-        log = Path(tmp, "hd30.csv")
-        t, u, y, _ = experiment(two_mass, params.plant.as_dict(), seed=0, duration=30.0)
-        write_csv(log, t, {"voltage": u, "torque": y[:, 0], "theta": y[:, 1]})
-        script = Path(tmp, "baseline.py")
-        script.write_text(BASELINE)
-        start = dict(params.plant.as_dict(), **START)
-        env = dict(os.environ, PYTHONPATH=os.pathsep.join([str(ROOT / "src"), str(ROOT / "tests"),
-                                                           os.environ.get("PYTHONPATH", "")]))
-        argv = ["identify", "--params", "harmonic_drive", "--log", str(log), "--input", "voltage", "--output",
-                "torque,theta", "--fit", ",".join(START), "--out", str(Path(tmp, "fitted.toml")),
-                "--report", str(Path(tmp, "fit.json")), "-q"] + \
-            [a for k, v in START.items() for a in ("--set", f"{k}={v}")]
-
-        def baseline():
-            out = subprocess.run([sys.executable, str(script), str(log), json.dumps(start)],
-                                 check=True, capture_output=True, text=True, env=env)
-            return json.loads(out.stdout)
-
-        def ours():
-            subprocess.run([sys.executable, "-m", "haa_sym.cli"] + argv, check=True, capture_output=True, text=True,
-                           env=env)
-            return json.loads(Path(tmp, "fit.json").read_text())
-
-        def ours_in_process():
-            with contextlib.redirect_stdout(io.StringIO()):
-                assert cli_main(argv) == 0
-            return json.loads(Path(tmp, "fit.json").read_text())
-
-        def cli_import():
-            subprocess.run([sys.executable, "-c", "import haa_sym.cli"], check=True, env=env)
-
-        namespace: dict = {}
-        exec(compile(BASELINE, "baseline.py", "exec"), namespace)
-
-        ours()                                    # warm the disk cache and the compiled-code cache
-        # interleaved, so that a change of the machine's load falls on both alike
-        times = {"ours": [], "base": [], "ours_fit": [], "base_fit": [], "cli_import": []}
-        for _ in range(REPEATS):
-            for name, fn in (("ours", ours), ("base", baseline), ("cli_import", cli_import),
-                             ("ours_fit", ours_in_process),
-                             ("base_fit", lambda: namespace["fit"](str(log), start))):
-                t_run, res = best(fn, 1)
-                times[name].append(t_run)
-                if name == "ours":
-                    rep = res
-                elif name == "base":
-                    base = res
-    t_ours, t_base = min(times["ours"]), min(times["base"])
-    t_ours_fit, t_base_fit = min(times["ours_fit"]), min(times["base_fit"])
-    fitted = {k: rep["parameters"][k]["value"] for k in START}
-    err = {k: fitted[k] / HD_TRUTH[k] - 1 for k in START}
-    err_base = {k: base["values"][k] / HD_TRUTH[k] - 1 for k in START}
-    data = {"samples": len(t), "keys": list(START), "start": START, "truth": HD_TRUTH,
-            "haa_sym_identify_s": t_ours, "scipy_least_squares_dlsim_s": t_base, "ratio": t_base / t_ours,
-            "in_process": {"haa_sym_identify_s": t_ours_fit, "scipy_least_squares_dlsim_s": t_base_fit,
-                           "ratio": t_base_fit / t_ours_fit},
-            "cli_import_s": min(times["cli_import"]), "all_times_s": times, "haa_sym_values": fitted, "scipy_values": base["values"],
-            "scipy_nfev": base["nfev"], "haa_sym_iterations": rep["meta"]["iterations"],
-            "haa_sym_relative_error": err, "scipy_relative_error": err_base, "repeats": REPEATS}
-    print(f"30,000-sample log, 4 parameters, best of {REPEATS} interleaved runs: whole process haa-sym identify "
-          f"{t_ours:.2f} s, scipy least_squares over dlsim {t_base:.2f} s ({base['nfev']} evaluations): ratio "
-          f"{t_base / t_ours:.1f}x; in-process (imports done) {t_ours_fit:.2f} s against {t_base_fit:.2f} s: "
-          f"ratio {t_base_fit / t_ours_fit:.1f}x; of the whole process, `import haa_sym.cli` alone takes "
-          f"{min(times['cli_import']):.2f} s")
-    print("relative errors haa_sym " + ", ".join(f"{k} {v:+.2%}" for k, v in err.items()))
-    print("relative errors scipy   " + ", ".join(f"{k} {v:+.2%}" for k, v in err_base.items()))
+        cases = [bench_case(name, Path(tmp)) for name in CASES]
+    data = {**cases[0], "cases": cases}
     print(f"wrote {run.write('results_identify.json', data)}")
     return 0
 
