@@ -1,5 +1,5 @@
-"""haa_sym.io.logs: the sampling of a log is found and stated, resampled when the jitter is small,
-and every unusable log is one ParameterError naming the log and the field."""
+"""haa_sym.io.logs: the sampling of a log is found and stated, the log kept as measured (split at
+gaps, cut to a window), and every unusable log is one ParameterError naming the log and the field."""
 import numpy as np
 import pytest
 
@@ -24,34 +24,46 @@ def test_uniform_log_is_read_as_is(tmp_path):
     cols = _signals(500)
     log = read_log(_write(tmp_path / "a.csv", t, cols), ("voltage",), ("torque",))
     assert log.Ts == pytest.approx(1e-3, rel=1e-12)
-    assert not log.sampling["resampled"] and log.sampling["jitter"] < 1e-6
+    assert log.uniform and log.sampling["jitter"] < 1e-6 and log.starts == (0,)
     np.testing.assert_array_equal(log.signals["torque"], cols["torque"])
     assert log.samples == 500 and len(log.sha256) == 64
 
 
-def test_small_jitter_is_resampled_inputs_held_outputs_interpolated(tmp_path):
+def test_jittered_log_is_kept_as_measured_and_split_at_gaps(tmp_path):
+    """No resampling: the stamps and values are the file's; an interval above the gap threshold
+    (default 10 median periods, or --gap) starts a new segment; a window keeps START <= t < STOP."""
     rng = np.random.default_rng(1)
     n = 400
-    t = 1e-3 * np.arange(n) + 2e-5 * rng.uniform(-1, 1, n)      # 2 % jitter
-    t[0], t[-1] = 0.0, 1e-3 * (n - 1)
-    v = np.repeat(rng.standard_normal(n // 4), 4)               # a held input
-    y = np.sin(2 * np.pi * 3 * t)                               # a smooth output
-    # 2 % is above the default limit (the fit's bias, docs/identify.md): accepted knowingly here
-    log = read_log(_write(tmp_path / "j.csv", t, {"voltage": v, "torque": y}), ("voltage",), ("torque",),
-                   max_jitter=0.1)
-    s = log.sampling
-    assert s["resampled"] and 1e-6 < s["jitter"] <= 0.04
-    grid = 1e-3 * np.arange(n)
-    # outputs: linear interpolation of the samples onto the uniform grid (independent: numpy.interp)
-    np.testing.assert_allclose(log.signals["torque"], np.interp(grid, t, y), rtol=0, atol=1e-12)
-    # inputs: the value in effect at the middle of each grid interval (held since the last stamp
-    # at or before g + Ts/2: the sample that covers most of [g, g + Ts))
-    idx = np.array([np.max(np.flatnonzero(t <= g + 0.5e-3)) for g in grid])
-    np.testing.assert_array_equal(log.signals["voltage"], v[idx])
+    t = np.cumsum(rng.uniform(0.5e-3, 1.5e-3, n))
+    t[200:] += 0.05                                             # a 50 ms pause of the logger
+    t[300:] += 0.005                                            # 5 ms: a gap only for --gap 0.004
+    cols = {"voltage": rng.standard_normal(n), "torque": rng.standard_normal(n)}
+    path = _write(tmp_path / "j.csv", t, cols)
+    log = read_log(path, ("voltage",), ("torque",))
+    assert not log.uniform and log.starts == (0, 200) and log.sampling["segments"] == 2
+    np.testing.assert_array_equal(log.t, t)
+    np.testing.assert_array_equal(log.signals["voltage"], cols["voltage"])
+    assert read_log(path, ("voltage",), ("torque",), gap=0.004).starts == (0, 200, 300)
+    w = read_log(path, ("voltage",), ("torque",), window=(t[100], t[250]))
+    assert w.samples == 150 and w.t[0] == t[100] and not w.from_start and w.starts == (0, 100)
+    for bad, match in (({"gap": 0.0}, "--gap 0.0; allowed: a threshold > 0"),
+                       ({"window": (10.0, 20.0)}, "--window 10:20 s holds 0 samples")):
+        with pytest.raises(ParameterError, match=match):
+            read_log(path, ("voltage",), ("torque",), **bad)
+
+
+def test_large_angle_log_is_refused_for_its_amplitude(tmp_path):
+    """A swing-up to +-pi is refused for what makes it unfit for a linear model, before its length."""
+    t = 1e-3 * np.arange(300)
+    cols = {"current": np.sin(30 * t), "theta": 3.1 * np.sin(10 * t)}
+    path = _write(tmp_path / "swing.csv", t, cols)
+    with pytest.raises(ParameterError, match=r"theta spans 3\.1 rad .*allowed: at most 1\.5708 rad.*--max-angle"):
+        read_log(path, ("current",), ("theta",))
+    assert read_log(path, ("current",), ("theta",), max_angle=7.0).samples == 300
 
 
 @pytest.mark.parametrize("case,match", [
-    ("jitter", "sampling jitter"), ("nan", "row(s) with NaN"), ("missing", "missing column(s) ['theta']"),
+    ("nan", "row(s) with NaN"), ("missing", "missing column(s) ['theta']"),
     ("constant", "input voltage is constant"), ("time", "time is not increasing at data row"),
     ("unknown", "unknown column(s) ['speed']"), ("empty", "empty file")])
 def test_each_unusable_log_is_one_clear_error(tmp_path, case, match):
@@ -59,10 +71,7 @@ def test_each_unusable_log_is_one_clear_error(tmp_path, case, match):
     t = 1e-3 * np.arange(n)
     cols = {**_signals(n), "theta": np.zeros(n)}
     header = None
-    if case == "jitter":
-        t = t + 4e-4 * np.random.default_rng(2).uniform(-1, 1, n)
-        t.sort()
-    elif case == "nan":
+    if case == "nan":
         cols["torque"][17] = np.nan
     elif case == "missing":
         del cols["theta"]
@@ -81,16 +90,3 @@ def test_each_unusable_log_is_one_clear_error(tmp_path, case, match):
         read_log(path, ("voltage",), ("torque", "theta"))
     msg = str(exc.value)
     assert match in msg and "\n" not in msg and "bad.csv" in msg and "allowed" in msg
-
-
-def test_jitter_above_the_default_limit_is_refused_naming_the_flag(tmp_path):
-    """1e-3 jitter biased a harmonic-drive fit by 12 % (docs/identify.md): refused by default,
-    the message naming --max-jitter; accepted when the limit is raised."""
-    n = 400
-    t = 1e-3 * np.arange(n)
-    t[1:-1] += 1e-6 * np.where(np.arange(1, n - 1) % 2, 1.0, -1.0)    # 1e-3 of the period
-    v = np.sin(np.arange(n))
-    path = _write(tmp_path / "j.csv", t, {"voltage": v, "torque": np.cos(t)})
-    with pytest.raises(ParameterError, match=r"sampling jitter 0\.002.*allowed: at most 0\.0001.*--max-jitter"):
-        read_log(path, ("voltage",), ("torque",))
-    assert read_log(path, ("voltage",), ("torque",), max_jitter=1e-2).sampling["resampled"]

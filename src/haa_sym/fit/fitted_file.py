@@ -12,6 +12,7 @@ import re
 import tomllib
 
 from haa_sym.errors import ParameterError
+from haa_sym.model.drive import DRIVE_KEYS, DRIVE_UNITS
 from haa_sym.model.params import parse_params
 from haa_sym.model.units import to_si
 
@@ -37,6 +38,8 @@ def reference_text(result, date: str) -> str:
 
 
 def _section_and_key(topology, legacy: bool, key: str) -> tuple[str, str]:
+    if key in DRIVE_KEYS:                 # the drive's keys live in [drive] (haa_sym.model.drive)
+        return ("drive", key)
     return ("plant", key) if legacy else topology.section_of(key)
 
 
@@ -79,7 +82,8 @@ def fitted_text(text: str, source: str, params, result, date: str) -> str:
         flat, v, ci, v0 = targets[(section, m.group(2))]
         entry = _entry_of(data, section, m.group(2))
         unit = entry.get("unit") if isinstance(entry, dict) else None
-        factor = to_si(1.0, unit, top.units[flat], source, flat) if unit else 1.0
+        si_unit = DRIVE_UNITS[flat] if flat in DRIVE_KEYS else top.units[flat]
+        factor = to_si(1.0, unit, si_unit, source, flat) if unit else 1.0
         val, lo, hi = v / factor, ci[0] / factor, ci[1] / factor
         rest = m.group(4)
         if isinstance(entry, dict):
@@ -127,7 +131,7 @@ def fitted_text(text: str, source: str, params, result, date: str) -> str:
     new = "".join(lines)
     check = parse_params(tomllib.loads(new), source)
     for k, v in zip(result.keys, result.value):
-        got = getattr(check.plant, k)
+        got = getattr(check.drive if k in DRIVE_KEYS else check.plant, k)
         if not abs(got - v) <= 1e-8 * abs(v):
             raise ParameterError(f"--out: the written {k} reads back as {got!r}, not {v!r}; allowed: an "
                                  "entry this editor can rewrite")

@@ -22,11 +22,12 @@ import numpy as np
 from haa_sym.analysis.sweep import blas_limits
 from haa_sym.errors import ParameterError
 from haa_sym.fit.closed import torque_loop_model
-from haa_sym.fit.model import open_loop_model, sample, simulate
+from haa_sym.fit.model import modal_check, open_loop_model, sample, simulate, simulate_stamps
 from haa_sym.io.budget import check_memory, fit_bytes
 from haa_sym.io.logs import OUTPUTS, Log
+from haa_sym.model.drive import DRIVE_KEYS
 
-__all__ = ["FitOptions", "FitResult", "Experiment", "identify", "INPUT_MODES"]
+__all__ = ["FitOptions", "FitResult", "Experiment", "identify", "simulate_log", "INPUT_MODES", "INITIAL_STATES"]
 
 INPUT_MODES = ("voltage", "current", "torque_ref")
 Z95 = 1.959963984540054          # the two-sided 95 % point of the normal distribution
@@ -58,6 +59,11 @@ class FitOptions:
         from a start 4-40x off than from one 20 % off, on the same log).
     max_reweights : int
         At most this many noise-weighted passes (default 5).
+    initial_state : str
+        ``"rest"`` (default): a log's first segment starts at rest (x = 0; a log whose outputs do
+        not start within :data:`REST_FRACTION` of their rms of zero is refused); ``"estimate"``:
+        its initial state is estimated too. Segments after a gap, and a window that does not
+        start at the log's first sample, always start from an estimated state.
     """
 
     min_periods: float = 3.0
@@ -67,6 +73,13 @@ class FitOptions:
     first_pass_tolerance: float = 1e-3
     reweight_rtol: float = 0.05
     max_reweights: int = 5
+    initial_state: str = "rest"
+
+
+#: A log fitted from rest must start there: each output's first sample within this fraction of
+#: the output's rms (a log started mid-motion gave k_t 30 % high with no word, issue 23).
+REST_FRACTION = 0.1
+INITIAL_STATES = ("rest", "estimate")
 
 
 @dataclass(frozen=True)
@@ -76,6 +89,7 @@ class Experiment:
     log: Log
     params: object
     configuration: str | None = None
+    outputs: tuple | None = None           # this log's outputs (default: the fit's)
 
 
 @dataclass(frozen=True)
@@ -109,11 +123,40 @@ class FitResult:
 
 
 def _model(exp: Experiment, keys, values, inputs, outputs, options=None):
-    """The sampled model of ``exp`` with ``keys`` at ``values``."""
+    """The model of ``exp`` with ``keys`` at ``values``: the sampled closed torque loop
+    (``torque_ref``), else the continuous open-loop plant behind the file's drive."""
     params = exp.params.with_values(**dict(zip(keys, values)))
     if inputs[0] == "torque_ref":
         return torque_loop_model(params, keys, inputs, outputs, options)
-    return sample(open_loop_model(params.plant, keys, inputs, outputs), exp.log.Ts)
+    return open_loop_model(params.plant, keys, inputs, outputs, params.drive)
+
+
+def _estimated(exp: Experiment, opt) -> tuple:
+    """Per segment of ``exp``'s log: whether its initial state is estimated."""
+    first = opt.initial_state == "estimate" or not exp.log.from_start
+    return (first,) + (True,) * (len(exp.log.starts) - 1)
+
+
+def _uniform_path(exp: Experiment, keys, opt) -> bool:
+    """Whether ``exp`` is simulated at one period (uniform stamps, one segment, from rest, no
+    delay): the fast path of :func:`haa_sym.fit.model.simulate`; else on its own intervals."""
+    return (exp.log.uniform and not any(_estimated(exp, opt)) and exp.params.drive.delay_drive == 0
+            and "delay_drive" not in keys)
+
+
+def _predict(exp, keys, values, inputs, outputs, loop_options, opt, u, y, scale, sens):
+    """The outputs of ``exp`` with ``keys`` at ``values`` (and d y / d p), and the number of
+    initial-state values estimated."""
+    model = _model(exp, keys, values, inputs, outputs, loop_options)
+    if not hasattr(model, "A"):                                     # the sampled torque loop
+        return simulate(model, u, sens) + (0,)
+    if _uniform_path(exp, keys, opt):
+        return simulate(sample(model, exp.log.Ts), u, sens) + (0,)
+    log = exp.log
+    delay = dict(zip(keys, values)).get("delay_drive", exp.params.drive.delay_drive)
+    return simulate_stamps(model, log.t, u, delay=delay, delay_key=keys.index("delay_drive") if "delay_drive" in keys
+                           else None, starts=log.starts, estimate=_estimated(exp, opt), y=y, weights=scale,
+                           sensitivities=sens)
 
 
 def _check_keys(exps, keys, inputs):
@@ -124,9 +167,12 @@ def _check_keys(exps, keys, inputs):
     if dup:
         raise ParameterError(f"--fit {','.join(keys)}: {dup} given twice; allowed: each key once")
     for k in keys:
+        if k in DRIVE_KEYS:
+            _check_drive_key(exps, k, inputs)
+            continue
         if k not in top.parameter_keys:
             raise ParameterError(f"--fit {k}: not a plant parameter of {top.source}; allowed: "
-                                 f"{list(top.parameter_keys)}")
+                                 f"{list(top.parameter_keys) + list(DRIVE_KEYS)}")
         for e in exps:
             v = getattr(e.params.plant, k)
             if not v > 0:
@@ -141,6 +187,31 @@ def _check_keys(exps, keys, inputs):
             raise ParameterError(f"--fit {k}: configuration {sorted(confs)[0]} sets it (the fitted file's entry "
                                  "would not be the value the log was fitted with); allowed: keys the configurations "
                                  "leave alone")
+
+
+def _check_drive_key(exps, k, inputs):
+    """A drive key is fitted only where the file's ``[drive]`` declares it (the fitted file writes
+    it there), from a positive start (fitted as a logarithm), around an open-loop model."""
+    if inputs[0] == "torque_ref":
+        raise ParameterError(f"--fit {k} with --input torque_ref: the closed torque loop's fit does not model the "
+                             "drive; allowed: --input current or voltage")
+    for e in exps:
+        src = e.params.source
+        if k not in e.params.drive.declared:
+            raise ParameterError(f"--fit {k}: {src} has no [drive] {k}; allowed: add [drive] {k} = <start> (s)")
+        v = getattr(e.params.drive, k)
+        if not v > 0:
+            raise ParameterError(f"--fit {k}: initial value {v!r} s; allowed: a positive start (fitted as log {k}; "
+                                 f"--set {k}=VALUE)")
+
+
+def _slow_period_continuous(A) -> float:
+    """:func:`_slow_period` from the continuous eigenvalues."""
+    lam = np.linalg.eigvals(A).astype(complex)
+    mag = np.abs(lam)
+    osc = mag[(np.abs(lam.imag) > 1e-9 * np.maximum(mag, 1e-300))]
+    use = osc if osc.size else mag[mag > 1e-9 * max(1.0, mag.max())]
+    return float(2 * np.pi / use.min()) if use.size else 0.0
 
 
 def _slow_period(model) -> float:
@@ -191,26 +262,57 @@ def identify(experiments: list[Experiment], keys: tuple[str, ...], inputs: tuple
     if not outputs or any(o not in OUTPUTS for o in outputs) or len(set(outputs)) != len(outputs):
         raise ParameterError(f"--output {','.join(outputs)}; allowed: distinct names of {list(OUTPUTS)}")
     _check_keys(experiments, keys, inputs)
-    theta0 = np.log([getattr(experiments[0].params.plant, k) for k in keys])
+    if opt.initial_state not in INITIAL_STATES:
+        raise ParameterError(f"--initial-state {opt.initial_state!r}; allowed: one of {list(INITIAL_STATES)}")
+    outs = [tuple(e.outputs or outputs) for e in experiments]
+    for e, o in zip(experiments, outs):
+        if any(x not in OUTPUTS for x in o) or len(set(o)) != len(o):
+            raise ParameterError(f"--output {','.join(o)}; allowed: distinct names of {list(OUTPUTS)}")
+    all_outputs = tuple(dict.fromkeys(x for o in outs for x in o))
+    values0 = [getattr(experiments[0].params.drive if k in DRIVE_KEYS else experiments[0].params.plant, k)
+               for k in keys]
+    theta0 = np.log(values0)
     with blas_limits(1):          # small matrices, long signals: BLAS threads only contend
-        models0 = [_model(e, keys, np.exp(theta0), inputs, outputs, loop_options) for e in experiments]
-        for e, m in zip(experiments, models0):
-            if inputs[0] == "torque_ref" and abs(e.log.Ts - m.Ts) > 1e-6 * m.Ts:
-                raise ParameterError(f"--log {e.log.name!r}: mean period {e.log.Ts:.6g} s; allowed: the torque "
-                                     f"loop's Ts = {m.Ts:g} s with --input torque_ref (the controller runs at Ts)")
-            slow = _slow_period(m)
+        models0 = [_model(e, keys, np.exp(theta0), inputs, o, loop_options) for e, o in zip(experiments, outs)]
+        for e, o, m in zip(experiments, outs, models0):
+            if inputs[0] == "torque_ref":
+                if not (e.log.uniform and e.log.from_start) or e.params.drive.active or \
+                        opt.initial_state != "rest":
+                    raise ParameterError(f"--log {e.log.name!r} with --input torque_ref: the closed loop is fitted "
+                                         "on uniform logs from rest without a [drive] lag or delay; allowed: such "
+                                         "a log (or --input current/voltage)")
+                if abs(e.log.Ts - m.Ts) > 1e-6 * m.Ts:
+                    raise ParameterError(f"--log {e.log.name!r}: mean period {e.log.Ts:.6g} s; allowed: the torque "
+                                         f"loop's Ts = {m.Ts:g} s with --input torque_ref (the controller runs at Ts)")
+                slow = _slow_period(m)
+            else:
+                if not _uniform_path(e, keys, opt):
+                    modal_check(m.A, f"--log {e.log.name!r}")
+                slow = _slow_period_continuous(m.A)
             if e.log.duration < opt.min_periods * slow:
                 raise ParameterError(f"--log {e.log.name!r}: {e.log.duration:.3g} s long, {opt.min_periods:g} periods "
                                      f"of the model's slowest mode are {opt.min_periods * slow:.3g} s; allowed: a "
-                                     "longer log")
+                                     "longer log (or --min-periods)")
+            if _estimated(e, opt)[0] is False:
+                for x in o:
+                    v = e.log.signals[x]
+                    rms = float(np.sqrt(np.mean(v ** 2)))
+                    if abs(float(v[0])) > REST_FRACTION * rms:
+                        raise ParameterError(f"--log {e.log.name!r}: {x} starts at {float(v[0]):.4g} (rms {rms:.3g}): "
+                                             "not at rest; allowed: --initial-state estimate (its initial state "
+                                             "fitted), or a log or --window that starts at rest")
         # before the fit allocates its trajectories and sensitivities (a 10 M-row log reached
         # 9.9 GB and died): refused in one line when over the memory budget
-        check_memory(sum(fit_bytes(e.log.samples, m.Phi.shape[0], len(outputs), len(keys))
-                         for e, m in zip(experiments, models0)), f"fitting {len(keys)} key(s) to "
+        n_states = [m.A.shape[0] if hasattr(m, "A") else m.Phi.shape[0] for m in models0]
+        check_memory(sum(fit_bytes(e.log.samples * (1 if _uniform_path(e, keys, opt) else 2), n, len(o), len(keys))
+                         for e, n, o in zip(experiments, n_states, outs)), f"fitting {len(keys)} key(s) to "
                      f"{sum(e.log.samples for e in experiments)} samples")
         U = [np.column_stack([e.log.signals[i] for i in inputs]) for e in experiments]
-        Y = [np.column_stack([e.log.signals[o] for o in outputs]) for e in experiments]
+        Y = [np.column_stack([e.log.signals[x] for x in o]) for e, o in zip(experiments, outs)]
         sigma = [np.maximum(np.std(y, axis=0), 1e-300) for y in Y]
+        # the initial states are estimated with these fixed weights (any positive weights give
+        # a consistent estimate; fixed, they keep a point's simulation independent of the pass)
+        scale = list(sigma)
 
         cache: dict = {}
 
@@ -219,18 +321,18 @@ def identify(experiments: list[Experiment], keys: tuple[str, ...], inputs: tuple
             point's simulation is kept so that reweighting and the reports re-run nothing."""
             key = theta.tobytes()
             if key not in cache or (sens and cache[key][1] is None):
-                errs, sens_ = [], []
-                for e, u, y in zip(experiments, U, Y):
-                    m = _model(e, keys, np.exp(theta), inputs, outputs, loop_options)
-                    yp, dy = simulate(m, u, sens)
+                errs, sens_, n0 = [], [], 0
+                for e, o, u, y, w in zip(experiments, outs, U, Y, scale):
+                    yp, dy, n_init = _predict(e, keys, np.exp(theta), inputs, o, loop_options, opt, u, y, w, sens)
                     errs.append(y - yp)
+                    n0 += n_init
                     sens_.append(None if dy is None else dy * np.exp(theta)[:, None, None])
                 cache.clear() if len(cache) > 8 else None
-                cache[key] = (errs, sens_ if sens else None)
+                cache[key] = (errs, sens_ if sens else None, n0)
             return cache[key]
 
         def evaluate(theta, sens=True):
-            errs, dys = run(theta, sens)
+            errs, dys, _ = run(theta, sens)
             r = np.concatenate([(err / s).ravel() for err, s in zip(errs, sigma)])
             if not sens:
                 return r, None
@@ -239,18 +341,21 @@ def identify(experiments: list[Experiment], keys: tuple[str, ...], inputs: tuple
         # the first pass only finds the neighbourhood (its weights are provisional); the second,
         # with the noise levels of the residuals as weights, converges
         theta, it1, _ = _levenberg_marquardt(evaluate, theta0, opt, keys, tolerance=opt.first_pass_tolerance)
-        it2, scale = 0, sigma
+        it2, scale0 = 0, sigma
         for n_pass in range(max(opt.max_reweights, 1)):
-            new = [np.maximum(np.sqrt(np.mean(err ** 2, axis=0)), 1e-12 * s) for err, s in zip(run(theta)[0], scale)]
+            new = [np.maximum(np.sqrt(np.mean(err ** 2, axis=0)), 1e-12 * s) for err, s in zip(run(theta)[0], scale0)]
             if n_pass and all(np.all(np.abs(a / b - 1) <= opt.reweight_rtol) for a, b in zip(new, sigma)):
                 break
             sigma = new          # evaluate() reads sigma when called: the new weights apply
             theta, it, converged = _levenberg_marquardt(evaluate, theta, opt, keys)
             it2 += it
         r, J = evaluate(theta)
+        n_initial = run(theta)[2]
         pred = [y - err for y, err in zip(Y, run(theta)[0])]
         pred0 = [y - err for y, err in zip(Y, run(theta0, False)[0])]
-    dof = max(r.size - len(keys), 1)
+    outputs = all_outputs
+    # the estimated initial states took their degrees of freedom too
+    dof = max(r.size - len(keys) - n_initial, 1)
     s2 = float(r @ r) / dof
     # the scaled normal matrix's condition: keys the logs cannot tell apart make it huge (and the
     # intervals meaningless); reported in meta, warned about by the CLI
@@ -267,17 +372,19 @@ def identify(experiments: list[Experiment], keys: tuple[str, ...], inputs: tuple
         ci = np.exp(np.column_stack([theta - Z95 * sd, theta + Z95 * sd]))
 
     def rms(preds):
-        return {o: float(np.sqrt(np.mean(np.concatenate([(y[:, i] - p[:, i]) ** 2 for y, p in zip(Y, preds)]))))
-                for i, o in enumerate(outputs)}
+        return {x: float(np.sqrt(np.mean(np.concatenate([(y[:, o.index(x)] - p[:, o.index(x)]) ** 2
+                                                         for y, p, o in zip(Y, preds, outs) if x in o]))))
+                for x in outputs}
     traces, bode = [], []
-    for e, u, y, p0, p1 in zip(experiments, U, Y, pred0, pred):
-        traces.append({"name": e.log.name, "t": np.arange(len(y)) * e.log.Ts, "u": u, "measured": y,
-                       "initial": p0, "fitted": p1})
+    for e, o, u, y, p0, p1 in zip(experiments, outs, U, Y, pred0, pred):
+        traces.append({"name": e.log.name, "t": e.log.t - e.log.t[0], "u": u, "measured": y,
+                       "initial": p0, "fitted": p1, "outputs": o})
         if figure_data:
-            bode.append(_bode(e, keys, np.exp(theta0), np.exp(theta), inputs, outputs, u, y, loop_options))
+            bode.append(_bode(e, keys, np.exp(theta0), np.exp(theta), inputs, o, u, y, loop_options))
     meta = {**(provenance or {}), "inputs": list(inputs), "outputs": list(outputs), "method":
             "time-domain output error, Levenberg-Marquardt on log-parameters, exact Jacobian (CasADi AD, "
             "Van Loan ZOH derivative)", "iterations": [it1, it2], "converged": converged, "residual_variance": s2,
+            "initial_state_values": n_initial,
             "condition_number": condition,
             "logs": {e.log.name: {"sha256": e.log.sha256, "samples": e.log.samples, "configuration": e.configuration}
                      for e in experiments},
@@ -286,6 +393,22 @@ def identify(experiments: list[Experiment], keys: tuple[str, ...], inputs: tuple
     return FitResult(keys, np.exp(theta), np.exp(theta0), ci, cov, rms(pred0), rms(pred), it1 + it2,
                      int(sum(len(y) for y in Y)), {e.log.name: e.log.sampling for e in experiments},
                      outputs, inputs, traces, bode, meta)
+
+
+def simulate_log(exp: Experiment, inputs: tuple[str, ...], outputs: tuple[str, ...] | None = None,
+                 options: FitOptions | None = None, loop_options=None) -> np.ndarray:
+    """The model's outputs (N, ny) for ``exp``'s log with ``exp.params`` as they are (e.g. a fitted
+    file's), simulated as a fit simulates it (its own intervals, segments restarted from
+    estimated states, the first from rest unless ``options.initial_state`` or a window says
+    otherwise): what a validation compares with the measurement."""
+    opt = options or FitOptions()
+    outs = tuple(exp.outputs or outputs)
+    u = np.column_stack([exp.log.signals[i] for i in inputs])
+    y = np.column_stack([exp.log.signals[x] for x in outs])
+    with blas_limits(1):
+        yp, _, _ = _predict(exp, (), np.zeros(0), tuple(inputs), outs, loop_options, opt, u, y,
+                            np.maximum(np.std(y, axis=0), 1e-300), False)
+    return yp
 
 
 def _levenberg_marquardt(evaluate, theta, opt: FitOptions, keys, tolerance: float | None = None):
@@ -338,12 +461,18 @@ def _bode(exp, keys, v0, v1, inputs, outputs, u, y, loop_options):
     out = {"name": exp.log.name, "omega": 2 * np.pi * f[1:], "H1": [], "coherence": [], "initial": [], "fitted": []}
     z = np.exp(1j * 2 * np.pi * f[1:] * Ts)[:, None, None]
     models = [_model(exp, keys, v, inputs, outputs, loop_options) for v in (v0, v1)]
+    delays = [dict(zip(keys, v)).get("delay_drive", exp.params.drive.delay_drive) for v in (v0, v1)]
     for i in range(y.shape[1]):
         _, Puy = scipy.signal.csd(u[:, 0], y[:, i], fs=1 / Ts, nperseg=nper)
         _, coh = scipy.signal.coherence(u[:, 0], y[:, i], fs=1 / Ts, nperseg=nper)
         out["H1"].append(Puy[1:] / Puu[1:])
         out["coherence"].append(coh[1:])
-        for name, m in zip(("initial", "fitted"), models):
+        for name, m, d in zip(("initial", "fitted"), models, delays):
+            if hasattr(m, "A"):          # the continuous plant with the drive's delay
+                s = 1j * out["omega"][:, None, None]
+                X = np.linalg.solve(s * np.eye(m.A.shape[0]) - m.A, np.broadcast_to(m.B[:, :1], (len(s),) + m.B[:, :1].shape))
+                out[name].append((X[:, :, 0] @ m.C[i] + m.D[i, 0]) * np.exp(-1j * out["omega"] * d))
+                continue
             X = np.linalg.solve(z * np.eye(m.Phi.shape[0]) - m.Phi, np.broadcast_to(m.Gamma[:, :1], (len(z),) + m.Gamma[:, :1].shape))
             out[name].append(X[:, :, 0] @ m.C[i] + m.D[i, 0])
     return out

@@ -36,6 +36,7 @@ from haa_sym.compiled.generated import evaluators
 from haa_sym.compiled.plant_code import compile_actuator
 from haa_sym.errors import ParameterError
 from haa_sym.model.actuator import Actuator
+from haa_sym.model.drive import DRIVE_KEYS
 
 __all__ = ["PlantModel", "Sampled", "plant_derivatives", "sample", "simulate", "output_rows"]
 
@@ -118,9 +119,63 @@ class PlantModel:
         return float(2 * np.pi / lam.min()) if lam.size else float("inf")
 
 
-def open_loop_model(plant, keys, inputs: tuple[str, ...], outputs: tuple[str, ...]) -> PlantModel:
+def open_loop_model(plant, keys, inputs: tuple[str, ...], outputs: tuple[str, ...], drive=None) -> PlantModel:
     """The open-loop plant for ``inputs`` (``voltage`` or ``current``, optionally ``T_dist``)
-    and ``outputs`` (log names), with derivatives along ``keys``."""
+    and ``outputs`` (log names), with derivatives along ``keys``; behind the drive's lag
+    (``drive.tau_drive`` > 0, :func:`with_drive_lag`) when ``drive`` is given. The drive's keys
+    (``tau_drive``, ``delay_drive``) may be among ``keys``: the delay does not enter these
+    matrices (its derivative is the simulation's, :func:`simulate_stamps`)."""
+    model = _open_loop(plant, tuple(k for k in keys if k not in DRIVE_KEYS), inputs, outputs)
+    model = _expand_keys(model, [k not in DRIVE_KEYS for k in keys])
+    tau = 0.0 if drive is None else drive.tau_drive
+    if tau > 0:
+        model = with_drive_lag(model, tau, keys.index("tau_drive") if "tau_drive" in keys else None)
+    return model
+
+
+def _expand_keys(model: PlantModel, plant_key: list) -> PlantModel:
+    """``model`` with zero derivatives inserted for the keys that are not plant keys (the drive's)."""
+    if all(plant_key):
+        return model
+    idx = np.cumsum(plant_key) - 1
+
+    def grow(d):
+        out = np.zeros((len(plant_key),) + d.shape[1:])
+        for j, (is_plant, i) in enumerate(zip(plant_key, idx)):
+            if is_plant:
+                out[j] = d[i]
+        return out
+    return PlantModel(model.A, model.B, model.C, model.D, *(grow(d) for d in (model.dA, model.dB, model.dC, model.dD)))
+
+
+def with_drive_lag(model: PlantModel, tau: float, key: int | None = None) -> PlantModel:
+    """``model`` behind the drive's first-order lag 1 / (tau s + 1) on its command input (the first
+    column: V_m, or the current with ``--input current``): one more state, the command as the
+    motor receives it, u_lag' = (u - u_lag) / tau, which drives the plant through the command's
+    old column (and reaches the outputs through its old feedthrough). The same augmentation as
+    :func:`haa_sym.loop.plant.with_lag`, with derivatives; ``key`` is the index of ``tau_drive``
+    among the fitted keys (d/dtau of -1/tau and 1/tau: 1/tau^2 and -1/tau^2)."""
+    n, m = model.B.shape
+    ny, p = model.C.shape[0], model.dA.shape[0]
+    A = np.zeros((n + 1, n + 1))
+    A[:n, :n], A[:n, n], A[n, n] = model.A, model.B[:, 0], -1.0 / tau
+    B = np.zeros((n + 1, m))
+    B[:n, 1:], B[n, 0] = model.B[:, 1:], 1.0 / tau
+    C = np.hstack([model.C, model.D[:, :1]])
+    D = model.D.copy()
+    D[:, 0] = 0.0
+    dA, dB = np.zeros((p, n + 1, n + 1)), np.zeros((p, n + 1, m))
+    dA[:, :n, :n], dA[:, :n, n] = model.dA, model.dB[:, :, 0]
+    dB[:, :n, 1:] = model.dB[:, :, 1:]
+    dC = np.concatenate([model.dC, model.dD[:, :, :1]], axis=2)
+    dD = model.dD.copy()
+    dD[:, :, 0] = 0.0
+    if key is not None:
+        dA[key, n, n], dB[key, n, 0] = 1.0 / tau ** 2, -1.0 / tau ** 2
+    return PlantModel(A, B, C, D, dA, dB, dC, dD)
+
+
+def _open_loop(plant, keys, inputs: tuple[str, ...], outputs: tuple[str, ...]) -> PlantModel:
     top = plant.topology
     A, B, C, dA, dB, dC = plant_derivatives(plant, keys)
     p = len(keys)
@@ -251,3 +306,172 @@ def simulate(s: Sampled, u: np.ndarray, sensitivities: bool = True):
     sx = (Q @ _triangular_run(T, drive.transpose(1, 0, 2)).transpose(1, 0, 2)).real
     dy = s.C @ sx + s.dC @ x + s.dD @ uT                                    # (p, ny, N)
     return y, dy.transpose(0, 2, 1)
+
+
+# --- logs as measured: exact ZOH on each log's own intervals ---------------------------------
+#
+# Between two stamps every input is constant (the ZOH of the log: u[k] over [t_k, t_k+1), the
+# delayed command switching at t_j + delay_drive inside an interval), so the exact solution over a
+# sub-interval of length h is x+ = e^{A h} x + int_0^h e^{A s} ds B u. In A's eigenbasis
+# (A = V diag(lam) V^-1) each mode is a first-order recursion z+ = e^{lam h} z + phi1(lam, h) beta u
+# with a coefficient per interval, which LAPACK's band solver runs as it does for a uniform log
+# (ztbtrs takes a subdiagonal per column). The derivatives of e^{X h}, X = [[A, B], [0, 0]], are
+# the Daleckii-Krein divided differences in X's eigenbasis: exact, vectorised over every interval.
+# X is diagonalisable when A is (distinct modes) and invertible (no integrator): then its
+# eigenvectors for the m zero eigenvalues are [-A^-1 B; I].
+
+#: Largest condition number of A's eigenvector matrix the per-interval simulation accepts: a
+#: nearly defective A loses that many digits in the modal coordinates.
+EIGENVECTOR_CONDITION = 1e8
+
+
+def _divided(la: np.ndarray, lb: np.ndarray, h: np.ndarray) -> np.ndarray:
+    """(e^{la h} - e^{lb h}) / (la - lb) (h e^{la h} when equal), broadcast; stable for close
+    la, lb: h e^{(la+lb) h/2} sinh(x)/x with x = (la - lb) h / 2, the direct quotient when |x| is
+    large (where the exponentials differ enough that nothing cancels)."""
+    x = 0.5 * (la - lb) * h
+    with np.errstate(over="ignore", invalid="ignore", divide="ignore", under="ignore"):
+        small = np.abs(x) < 0.5
+        xs = np.where(small, x, 0.5)
+        sinhc = np.where(xs == 0, 1.0, np.sinh(xs) / xs)
+        near = h * np.exp(0.5 * (la + lb) * h) * sinhc
+        far = (np.exp(la * h) - np.exp(lb * h)) / np.where(small, 1.0, la - lb)
+    return np.where(small, near, far)
+
+
+def _recursion(a: np.ndarray, rhs: np.ndarray) -> np.ndarray:
+    """xi[0] = rhs[0], xi[i+1] = a[i] xi[i] + rhs[i+1] along the last axis (a (N-1,), rhs
+    (..., N)): the lower bidiagonal system with -a[i] in column i, solved by ``ztbtrs``."""
+    N = rhs.shape[-1]
+    b = np.asfortranarray(rhs.reshape(-1, N).T.astype(complex))
+    band = np.zeros((2, N), complex)
+    band[0], band[1, :-1] = 1.0, -a
+    x, info = scipy.linalg.lapack.ztbtrs(band, b, uplo="L", overwrite_b=1)
+    assert info == 0, info
+    return x.T.reshape(rhs.shape)
+
+
+def modal_check(A: np.ndarray, what: str = "the model") -> None:
+    """Refuse (one line) a model the per-interval simulation cannot take: an integrator or a nearly
+    defective A (see the comment above :data:`EIGENVECTOR_CONDITION`)."""
+    lam, V = np.linalg.eig(A)
+    big = max(np.abs(lam).max(), 1e-300)
+    if np.abs(lam).min() <= 1e-12 * big or np.linalg.cond(V) > EIGENVECTOR_CONDITION:
+        raise ParameterError(f"{what}: a mode at s = 0 or coinciding modes (the per-interval simulation of a "
+                             "jittered, windowed, segmented or delayed log needs distinct, nonzero modes); "
+                             "allowed: a uniform log from rest without delay_drive, or a model with its output "
+                             "tied (a spring or stiffness to ground)")
+
+
+def simulate_stamps(model: PlantModel, t: np.ndarray, u: np.ndarray, *, delay: float = 0.0,
+                    delay_key: int | None = None, starts=(0,), estimate=(False,), y=None, weights=None,
+                    sensitivities: bool = True):
+    """Outputs of ``model`` at the log's own stamps ``t`` (s, N), inputs ``u`` (N, m) held over
+    [t_k, t_k+1), the first (command) column delayed by ``delay`` (s) and switching at
+    t_j + delay inside the intervals: exact for any stamps and delay.
+
+    Parameters
+    ----------
+    starts : sequence of int
+        First sample of each segment (``starts[0]`` = 0): the recursion restarts there (a gap).
+    estimate : sequence of bool
+        Per segment: its initial state is estimated (weighted linear least squares against ``y``
+        with ``weights`` per output, inside this call), else the segment starts at rest.
+    delay_key : int, optional
+        Index of ``delay_drive`` among the keys: its derivative is d x / d delay =
+        -(A x_c + B_c c(t)) + e^{A (t - t_s)} B_c c(t_s) (x_c the state the delayed command c
+        forces from the segment's start t_s: a shifted copy, so its derivative is minus its
+        time derivative, plus the command held into the segment from before it).
+
+    Returns
+    -------
+    y_model : (N, ny); dy : (p, N, ny) or None (at the estimated initial states, projected
+    onto the complement of the initial states' directions: variable projection with Kaufman's
+    Jacobian); rank : int, the number of initial-state values the data determined.
+    """
+    A, B = model.A, model.B
+    n, m = B.shape
+    N = t.size
+    lam, V = np.linalg.eig(A)
+    Vi = np.linalg.inv(V)
+    beta = Vi @ B                                                     # (n, m)
+    starts = np.asarray(starts, int)
+    ends = np.append(starts[1:], N)                                   # exclusive
+    tol = 1e-9 * float(np.median(np.diff(t))) if N > 1 else 0.0
+    # the grid: the stamps and the delayed command's switches inside a segment's span
+    sw = t + delay
+    seg_sw = np.searchsorted(t[starts], sw, side="right") - 1
+    keep = (seg_sw >= 0) & (sw < t[np.maximum(ends[np.maximum(seg_sw, 0)] - 1, 0)] - tol)
+    near = np.searchsorted(t, sw)
+    on_stamp = (np.abs(t[np.clip(near, 0, N - 1)] - sw) <= tol) | (np.abs(t[np.clip(near - 1, 0, N - 1)] - sw) <= tol)
+    sw = sw[keep & ~on_stamp & (delay > 0)]
+    grid = np.concatenate([t, sw])
+    order = np.argsort(grid, kind="stable")
+    grid = grid[order]
+    samp = np.flatnonzero(order < N)                                  # grid positions of the stamps, in order
+    G = grid.size
+    seg_start_grid = samp[starts]
+    cut = np.zeros(G, bool)
+    cut[seg_start_grid] = True
+    stamp_of = np.searchsorted(t, grid + tol, side="right") - 1       # the stamp whose input holds
+    cmd_of = np.clip(np.searchsorted(t, grid - delay + tol, side="right") - 1, 0, N - 1)
+    ug = u[stamp_of].copy()
+    ug[:, 0] = u[cmd_of, 0]                                           # the command as the motor gets it
+    h = np.diff(grid)                                                 # (G-1,)
+    link = ~cut[1:]                                                   # interval i joins point i to i+1
+    a = np.where(link[:, None], np.exp(np.outer(h, lam)), 0.0)        # (G-1, n)
+    phi = _divided(lam[None, :], 0.0, h[:, None])                     # phi1(lam, h)
+    bu = ug @ beta.T                                                  # (G, n)
+    drive = np.zeros((G, n), complex)
+    drive[1:] = np.where(link[:, None], phi * bu[:-1], 0.0)
+    z = np.stack([_recursion(a[:, i], drive[:, i]) for i in range(n)], axis=1)   # forced, (G, n)
+    one = np.zeros((G, n), complex)
+    one[seg_start_grid] = 1.0
+    Pi = np.stack([_recursion(a[:, i], one[:, i]) for i in range(n)], axis=1)    # free response per mode
+    CV = model.C @ V
+    seg_of = np.cumsum(cut) - 1                                       # segment of each grid point
+    ys = (z[samp] @ CV.T).real + ug[samp] @ model.D.T                 # (N, ny)
+    ny = ys.shape[1]
+    w = np.ones(ny) if weights is None else np.asarray(weights, float)
+    x0 = np.zeros((starts.size, n))
+    bases, rank = {}, 0
+    for g, (s, e) in enumerate(zip(starts, ends)):
+        if not estimate[g]:
+            continue
+        Psi = np.einsum("oa,ka,as->kos", CV, Pi[samp[s:e]], Vi).real  # (len, ny, n)
+        Pw = (Psi / w[None, :, None]).reshape(-1, n)
+        U, sv, _ = np.linalg.svd(Pw, full_matrices=False)
+        r = int(np.sum(sv > 1e-9 * max(sv.max(), 1e-300)))
+        bases[g] = U[:, :r]
+        rank += r
+        res = ((y[s:e] - ys[s:e]) / w).ravel()
+        x0[g] = np.linalg.lstsq(Pw, res, rcond=1e-9)[0]
+    z = z + Pi * (x0 @ Vi.T)[seg_of]
+    ys = (z[samp] @ CV.T).real + ug[samp] @ model.D.T
+    if not sensitivities:
+        return ys, None, rank
+    p = model.dA.shape[0]
+    AiB = np.linalg.solve(A, B)
+    F = Vi @ model.dA @ V                                             # (p, n, n)
+    H = Vi @ (model.dB - model.dA @ AiB)                              # (p, n, m)
+    wz = z[:-1] + bu[:-1] / lam                                       # X's modal coordinates of [x; u]
+    K = _divided(lam[None, :, None], lam[None, None, :], h[:, None, None])     # (G-1, n, n)
+    r = np.einsum("iab,jab,ib->jia", K, F, wz) + phi[None] * np.einsum("jam,im->jia", H, ug[:-1])
+    rhs = np.zeros((p, G, n), complex)
+    rhs[:, 1:] = np.where(link[None, :, None], r, 0.0)
+    sz = np.stack([_recursion(a[:, i], rhs[:, :, i]) for i in range(n)], axis=2)   # (p, G, n)
+    if delay_key is not None:
+        bc = np.outer(ug[:, 0], beta[:, 0])                           # B_c c(t) in modal coordinates
+        dc = np.zeros((G, n), complex)
+        dc[1:] = np.where(link[:, None], phi * bc[:-1], 0.0)
+        zc = np.stack([_recursion(a[:, i], dc[:, i]) for i in range(n)], axis=1)
+        sz[delay_key] = -(lam * zc + bc) + Pi * bc[seg_start_grid][seg_of]
+    x = (z[samp] @ V.T).real                                          # (N, n)
+    dy = (sz[:, samp] @ CV.T).real + np.einsum("joa,ka->jko", model.dC, x) + \
+        np.einsum("jom,km->jko", model.dD, ug[samp])
+    for g, U in bases.items():                                        # Kaufman: the initial state's directions out
+        s, e = starts[g], ends[g]
+        D = (dy[:, s:e] / w).reshape(p, -1)
+        D -= (D @ U) @ U.T
+        dy[:, s:e] = D.reshape(p, e - s, ny) * w
+    return ys, dy, rank

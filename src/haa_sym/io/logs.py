@@ -7,12 +7,15 @@ port), ``torque_ref`` (Nm, the reference of the file's torque loop); outputs ``t
 file's torque sensor), ``theta`` (rad, the file's encoder), ``current`` (A), ``velocity`` (rad/s,
 the port body). Outputs are sampled at t_k.
 
-Sampling: the periods ``diff(time)`` give the mean period and the jitter, max |dt - mean| / mean.
-A log whose jitter is at most :data:`UNIFORM_JITTER` is taken as uniform; up to ``max_jitter``
-(default :data:`MAX_JITTER`) it is resampled onto the uniform grid of its mean period (inputs
-held, as the zero-order hold applies them; outputs interpolated linearly) and the summary says so;
-beyond that it is refused. Every unusable log is one :class:`ParameterError` naming the log, the
-field, the value and what is allowed.
+Sampling: a log is used as measured. Its stamps give the mean and median period and the jitter
+max |dt - mean| / mean, stated in the summary; nothing is resampled: the fit simulates the model
+exactly on each interval (:func:`haa_sym.fit.model.simulate_stamps`). An interval longer than the
+gap threshold (default :data:`GAP_PERIODS` median periods) splits the log into segments
+(:attr:`Log.starts`): nothing is interpolated across a gap, and each later segment restarts from
+an estimated state. ``window`` keeps the samples with START <= t < STOP (s of the log's time
+column). A ``theta`` column spanning more than ``max_angle`` (default :data:`MAX_ANGLE`) is
+refused: the model is linear about an operating point. Every unusable log is one
+:class:`ParameterError` naming the log, the field, the value and what is allowed.
 """
 from __future__ import annotations
 
@@ -29,27 +32,29 @@ from haa_sym.errors import ParameterError
 from haa_sym.io.budget import LOG_BYTES_PER_FILE_BYTE, check_memory
 from haa_sym.io.inputs import read_bytes
 
-__all__ = ["INPUTS", "OUTPUTS", "UNIFORM_JITTER", "MAX_JITTER", "BIAS_JITTER", "Log", "read_log"]
+__all__ = ["INPUTS", "OUTPUTS", "UNIFORM_JITTER", "GAP_PERIODS", "MAX_ANGLE", "Log", "read_log", "parse_window"]
 
 INPUTS = ("voltage", "current", "T_dist", "torque_ref")
 OUTPUTS = ("torque", "theta", "current", "velocity")
 UNIFORM_JITTER = 1e-6     # relative: below this the time stamps are rounding of a uniform clock
-# relative; the resampling's bias was measured (docs/identify.md, "Sampling"): a harmonic-drive fit
-# held every key within 0.2 % up to 1e-4, but B_link fell 12 % at 1e-3 and 60 % at 1e-2, outside
-# its interval; above 1e-4 a log is refused unless --max-jitter accepts it knowingly
-MAX_JITTER = 1e-4
 # the mean sampling periods a log may have, s: 10 MHz to 0.1 Hz, far beyond any drive's logger
 PERIOD_RANGE = (1e-7, 10.0)
-# above this the summary warns that resampling biases the values (every key stayed inside its
-# ci95 at 1e-5, two fell just outside at 1e-4)
-BIAS_JITTER = 1e-5
+# an interval longer than this many median periods is a gap (the logger stalled: the ITregear
+# logs' 30-300 ms pauses of a 2 ms loop); the fit restarts there from an estimated state
+GAP_PERIODS = 10.0
+# largest span of a theta column, rad: the model is linear about an operating point. A coarse
+# guard, not a linearity test: a quarter turn (gravity's sin(theta) is already 36 % below theta
+# at pi/2) catches a swing-up to +-pi (the DFKI pendulum log) and passes the synthetic logs of the
+# tests (up to 0.57 rad of a linear model)
+MAX_ANGLE = 0.5 * np.pi
 
 
 @dataclass(frozen=True)
 class Log:
-    """One experiment on a uniform grid: ``signals[name]`` (n,), period ``Ts`` (s), and what
-    the sampling was (``sampling``: mean period, jitter, whether resampled) and the file's
-    ``sha256``."""
+    """One experiment as measured: stamps ``t`` (s), ``signals[name]`` (n,) at them, the mean
+    period ``Ts`` (s), the first sample of each segment ``starts`` (split at gaps), whether the
+    stamps are ``uniform``, whether the window starts at the log's first sample (``from_start``),
+    the sampling as stated (``sampling``) and the file's ``sha256``."""
 
     name: str
     Ts: float
@@ -57,6 +62,14 @@ class Log:
     sampling: dict
     sha256: str
     path: str = field(default="", repr=False)
+    t: np.ndarray = field(default=None, repr=False)
+    starts: tuple = (0,)
+    uniform: bool = True
+    from_start: bool = True
+
+    def __post_init__(self):
+        if self.t is None:                 # a log built in code: uniform stamps from 0
+            object.__setattr__(self, "t", self.Ts * np.arange(self.samples))
 
     @property
     def samples(self) -> int:
@@ -65,6 +78,22 @@ class Log:
     @property
     def duration(self) -> float:
         return self.samples * self.Ts
+
+
+def parse_window(text: str, flag: str = "--window") -> tuple[float, float]:
+    """``START:STOP`` in seconds of a log's time column (either may be empty: the log's start or end)."""
+    parts = text.split(":")
+    try:
+        if len(parts) != 2:
+            raise ValueError
+        lo = float(parts[0]) if parts[0].strip() else -np.inf
+        hi = float(parts[1]) if parts[1].strip() else np.inf
+    except ValueError:
+        raise ParameterError(f"{flag} {text!r}; allowed: START:STOP in seconds of the log (START or STOP may be "
+                             "empty)") from None
+    if not lo < hi or np.isnan(lo) or np.isnan(hi):
+        raise ParameterError(f"{flag} {text!r}: START must be below STOP; allowed: START:STOP in seconds")
+    return lo, hi
 
 
 def _read_rows(path: Path, label: str) -> tuple[list[str], np.ndarray, bytes]:
@@ -139,8 +168,9 @@ def _fast_body(lines: list[str], width: int) -> np.ndarray | None:
 
 
 def read_log(path: str | Path, inputs: tuple[str, ...], outputs: tuple[str, ...], *,
-             max_jitter: float = MAX_JITTER, label: str | None = None) -> Log:
-    """Read ``path`` and return the columns ``inputs`` and ``outputs`` on a uniform grid.
+             window: tuple[float, float] | None = None, gap: float | None = None,
+             max_angle: float = MAX_ANGLE, label: str | None = None) -> Log:
+    """Read ``path`` and return the columns ``inputs`` and ``outputs`` as measured.
 
     Parameters
     ----------
@@ -148,20 +178,27 @@ def read_log(path: str | Path, inputs: tuple[str, ...], outputs: tuple[str, ...]
         The CSV file.
     inputs, outputs : tuple of str
         Signal names the fit uses (:data:`INPUTS`, :data:`OUTPUTS`); each must be a column.
-    max_jitter : float
-        Largest accepted relative jitter max |dt - mean(dt)| / mean(dt) (resampled above
-        :data:`UNIFORM_JITTER`).
+    window : (float, float), optional
+        Keep START <= t < STOP (s of the log's time column); it must overlap the log.
+    gap : float, optional
+        An interval longer than this (s) splits the log into segments; default
+        :data:`GAP_PERIODS` median periods. Must be > 0.
+    max_angle : float
+        Largest span of a ``theta`` column (rad), if the log has one.
     label : str, optional
         How messages name the log (default ``--log PATH``).
 
     Raises
     ------
     ParameterError
-        A column missing or unknown, NaN rows, fewer than 3 samples, time not increasing, jitter
-        above ``max_jitter``, or a constant first input (the drive's; ``T_dist`` may be constant).
+        A column missing or unknown, NaN rows, fewer than 3 samples, time not increasing, a window
+        outside the log, a gap threshold <= 0, an angle beyond ``max_angle``, or a constant first
+        input (the drive's; ``T_dist`` may be constant).
     """
     path = Path(path)
     label = label or f"--log {str(path)!r}"
+    if gap is not None and not gap > 0:
+        raise ParameterError(f"--gap {gap!r}; allowed: a threshold > 0 (s) above which an interval splits the log")
     needed = tuple(dict.fromkeys(tuple(inputs) + tuple(outputs)))
     header, data, raw = _read_rows(path, label)
     allowed = ("time",) + INPUTS + tuple(o for o in OUTPUTS if o not in INPUTS)
@@ -176,7 +213,8 @@ def read_log(path: str | Path, inputs: tuple[str, ...], outputs: tuple[str, ...]
     if missing:
         raise ParameterError(f"{label}: missing column(s) {missing} (it has {_names(header)}); allowed: a header "
                              f"with time and {list(needed)}")
-    cols = {h: data[:, i] for i, h in enumerate(header) if h in ("time",) + needed}
+    used = ("time",) + needed + (("theta",) if "theta" in header and "theta" not in needed else ())
+    cols = {h: data[:, i] for i, h in enumerate(header) if h in used}
     bad = np.flatnonzero(~np.all(np.isfinite(np.column_stack(list(cols.values()))), axis=1))
     if bad.size:
         rows = ", ".join(str(i + 1) for i in bad[:5]) + (" ..." if bad.size > 5 else "")
@@ -192,35 +230,45 @@ def read_log(path: str | Path, inputs: tuple[str, ...], outputs: tuple[str, ...]
         i = int(np.flatnonzero(dt <= 0)[0])
         raise ParameterError(f"{label}: time is not increasing at data row {i + 2} (t = {float(t[i + 1])!r} after "
                              f"{float(t[i])!r}); allowed: strictly increasing time stamps (s)")
+    from_start = True
+    if window is not None:
+        lo, hi = window
+        inside = (t >= lo) & (t < hi)
+        if np.count_nonzero(inside) < 3:
+            raise ParameterError(f"{label}: --window {lo:g}:{hi:g} s holds {np.count_nonzero(inside)} samples of "
+                                 f"a log from {float(t[0]):g} to {float(t[-1]):g} s; allowed: a window inside the log")
+        from_start = bool(inside[0])
+        t = t[inside]
+        cols = {k: v[inside] for k, v in cols.items()}
+        dt = np.diff(t)
     mean = float((t[-1] - t[0]) / (t.size - 1))
     if not PERIOD_RANGE[0] <= mean <= PERIOD_RANGE[1]:
         # a time column in another unit (ms, us, ticks) or stamps near the ends of the float range:
         # the sampled model would overflow or lose every digit
         raise ParameterError(f"{label}: mean sampling period {mean:.6g} s; allowed: {PERIOD_RANGE[0]:g} to "
                              f"{PERIOD_RANGE[1]:g} s (the time column in seconds)")
+    median = float(np.median(dt))
+    threshold = GAP_PERIODS * median if gap is None else float(gap)
+    starts = (0,) + tuple(int(i) + 1 for i in np.flatnonzero(dt > threshold))
     jitter = float(np.max(np.abs(dt - mean)) / mean)
-    sampling = {"mean_period": mean, "jitter": jitter, "jitter_rms": float(np.std(dt) / mean),
-                "samples_in_file": int(t.size), "resampled": False}
-    if jitter > max_jitter:
-        raise ParameterError(f"{label}: sampling jitter {jitter:.3g} (max |dt - mean| / mean, mean period "
-                             f"{mean:.6g} s); allowed: at most {max_jitter:g}, since resampling onto the mean "
-                             "period biases the fit beyond that (docs/identify.md, \"Sampling\"; --max-jitter "
-                             "raises the limit)")
-    if jitter > UNIFORM_JITTER:
-        grid = t[0] + mean * np.arange(t.size)
-        grid[-1] = min(grid[-1], t[-1])
-        # an input is held between its stamps (the zero-order hold): the grid interval [g_k, g_k+1)
-        # takes the value in effect at its middle, the one that covers most of it. (The value in
-        # effect at g_k itself is the previous sample's whenever stamp k lands a hair after g_k,
-        # about half of them: the input shifted by one sample, which biased a fit even at 1e-5
-        # jitter.) An output is a sample of a continuous signal, interpolated
-        held = np.clip(np.searchsorted(t, grid + 0.5 * mean, side="right") - 1, 0, t.size - 1)
-        cols = {k: v[held] if k in inputs else np.interp(grid, t, v) for k, v in cols.items()}
-        sampling["resampled"] = True
+    uniform = jitter <= UNIFORM_JITTER and len(starts) == 1
+    sampling = {"mean_period": mean, "median_period": median, "jitter": jitter,
+                "jitter_rms": float(np.std(dt) / mean), "samples_in_file": int(data.shape[0]),
+                "gap_threshold": threshold, "segments": len(starts), "longest_interval": float(dt.max()),
+                "window": None if window is None else [float(t[0]), float(t[-1])], "uniform": uniform}
+    if "theta" in cols:
+        span = float(np.ptp(cols["theta"]))
+        if span > max_angle:
+            raise ParameterError(f"{label}: theta spans {span:.3g} rad ({float(cols['theta'].min()):.3g} .. "
+                                 f"{float(cols['theta'].max()):.3g}); allowed: at most {max_angle:g} rad: the model "
+                                 "is linear about an operating point (--max-angle lifts the limit; --window a "
+                                 "small-motion part)")
+        if "theta" not in needed:
+            cols.pop("theta")
     for k in inputs[:1]:           # the drive's input must excite it; a port torque may stay 0
         v = cols[k]
         if np.ptp(v) <= 1e-12 * max(1.0, float(np.max(np.abs(v)))):
             raise ParameterError(f"{label}: input {k} is constant ({float(v[0])!r}); allowed: an input that "
                                  "excites the drive (a band-limited random signal or a chirp)")
     return Log(path.name, mean, {k: np.ascontiguousarray(cols[k]) for k in needed}, sampling,
-               hashlib.sha256(raw).hexdigest(), str(path))
+               hashlib.sha256(raw).hexdigest(), str(path), np.ascontiguousarray(t), starts, uniform, from_start)

@@ -738,7 +738,7 @@ def plot_identify(result, title: str = "", max_points: int = 4000):
     with ``figure_data=True``."""
     tr = result.traces[0]
     bode = result.bode[0] if result.bode else None
-    outs = result.outputs
+    outs = tuple(tr.get("outputs", result.outputs))      # the first log's own outputs
     rows = 2 + (3 if bode is not None else 0)
     fig, axes = plt.subplots(rows, len(outs), figsize=(6 * len(outs), 2.5 * rows), squeeze=False,
                              layout="constrained")

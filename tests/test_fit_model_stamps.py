@@ -1,0 +1,103 @@
+"""haa_sym.fit.model.simulate_stamps (issue 23, logs as measured): the exact per-interval ZOH
+with the drive's lag and a fractional delay switching inside the intervals, a gap restarting the
+recursion, and estimated initial states, against an independent simulation (one matrix
+exponential per sub-interval, written here) and its derivatives against central differences."""
+import numpy as np
+import pytest
+import scipy.linalg
+
+from haa_sym.errors import ParameterError
+from haa_sym.fit.model import PlantModel, modal_check, simulate_stamps, with_drive_lag
+
+KEYS = ("k", "c", "tau_drive", "delay_drive")
+
+
+def _model(th):
+    """A mass on a spring-damper behind a lag; outputs the spring-damper torque and the angle."""
+    k, c, tau = th[:3]
+    A = np.array([[0.0, 1.0], [-k, -c]])
+    dA = np.zeros((4, 2, 2))
+    dA[0, 1, 0], dA[1, 1, 1] = -1.0, -1.0
+    dC = np.zeros((4, 2, 2))
+    dC[0, 0, 0], dC[1, 0, 1] = 1.0, 1.0
+    m = PlantModel(A, np.array([[0.0], [1.0]]), np.array([[k, c], [1.0, 0.0]]), np.zeros((2, 1)), dA,
+                   np.zeros((4, 2, 1)), dC, np.zeros((4, 2, 1)))
+    return with_drive_lag(m, tau, 2)
+
+
+def _reference(th, t, u, starts, x0s):
+    """Sample by sample, every switch of the delayed command inside an interval its own
+    sub-interval, each one exact by expm of [[A, B], [0, 0]]."""
+    mm, d = _model(th), th[3]
+    n = mm.A.shape[0]
+    M = np.zeros((n + 1, n + 1))
+    M[:n, :n], M[:n, n] = mm.A, mm.B[:, 0]
+    ends = list(starts[1:]) + [t.size]
+    ys = []
+    for s, e, x0 in zip(starts, ends, x0s):
+        x = np.array(x0, float)
+        for k in range(s, e):
+            ys.append(mm.C @ x)
+            if k == e - 1:
+                break
+            ev = [t[k]] + sorted(tj + d for tj in t if t[k] < tj + d < t[k + 1]) + [t[k + 1]]
+            for a0, a1 in zip(ev[:-1], ev[1:]):
+                j = max(np.searchsorted(t, a0 - d + 1e-12, side="right") - 1, 0)   # the command in effect
+                E = scipy.linalg.expm(M * (a1 - a0))
+                x = E[:n, :n] @ x + E[:n, n] * u[j, 0]
+    return np.array(ys)
+
+
+@pytest.fixture(scope="module")
+def log():
+    rng = np.random.default_rng(0)
+    n = 300
+    t = np.cumsum(rng.uniform(0.5e-3, 3e-3, n))       # 0.5-3 ms: jitter of the ITregear logs' kind
+    t -= t[0]
+    t[150:] += 0.05                                    # a 50 ms gap: a second segment
+    return t, rng.standard_normal((n, 1))
+
+
+def test_exact_against_an_independent_simulation_with_lag_delay_and_gap(log):
+    t, u = log
+    th = np.array([400.0, 3.0, 0.02, 0.0047])         # the delay 1-9 intervals: switches inside them
+    y, _, _ = simulate_stamps(_model(th), t, u, delay=th[3], starts=(0, 150), estimate=(False, False),
+                              sensitivities=False)
+    ref = _reference(th, t, u, (0, 150), (np.zeros(3), np.zeros(3)))
+    assert np.max(np.abs(y - ref)) <= 1e-12 * np.max(np.abs(ref))
+
+
+def test_sensitivities_against_central_differences(log):
+    t, u = log
+    th = np.array([400.0, 3.0, 0.02, 0.0047])
+    _, dy, _ = simulate_stamps(_model(th), t, u, delay=th[3], delay_key=3, starts=(0, 150), estimate=(False, False))
+    for j, key in enumerate(KEYS):
+        h = 1e-6 * th[j]
+        side = []
+        for sgn in (1, -1):
+            tj = th.copy()
+            tj[j] += sgn * h
+            side.append(simulate_stamps(_model(tj), t, u, delay=tj[3], starts=(0, 150), estimate=(False, False),
+                                        sensitivities=False)[0])
+        fd = (side[0] - side[1]) / (2 * h)
+        assert np.max(np.abs(dy[j] - fd)) <= 1e-6 * np.max(np.abs(fd)), key
+
+
+def test_a_segment_after_a_gap_restarts_from_its_estimated_state(log):
+    t, u = log
+    th = np.array([400.0, 3.0, 0.02, 0.0047])
+    x0 = np.array([0.01, -0.2, 0.3])
+    ref = _reference(th, t, u, (0, 150), (np.zeros(3), x0))
+    y, _, rank = simulate_stamps(_model(th), t, u, delay=th[3], starts=(0, 150), estimate=(False, True), y=ref,
+                                 sensitivities=False)
+    assert rank == 3
+    assert np.max(np.abs(y - ref)) <= 1e-9 * np.max(np.abs(ref))
+    # from rest instead, the second segment misses its initial motion
+    y0, _, _ = simulate_stamps(_model(th), t, u, delay=th[3], starts=(0, 150), estimate=(False, False),
+                               sensitivities=False)
+    assert np.max(np.abs(y0[150:] - ref[150:])) > 1e-2 * np.max(np.abs(ref))
+
+
+def test_an_integrator_is_refused_in_one_line():
+    with pytest.raises(ParameterError, match="a mode at s = 0"):
+        modal_check(np.array([[0.0, 1.0], [0.0, -1.0]]), "--log 'x.csv'")
