@@ -16,11 +16,12 @@ DRIVE = ('\n[drive]\ntau_drive = { value = 4, unit = "ms", source = "-", descrip
 SUPPLY = '\n[limits]\nV_max = { value = 5, unit = "V", source = "-", description = "supply" }\n'
 
 
-def test_simulate_log_out_and_meta_carry_the_drive(tmp_path):
+def test_simulate_log_out_and_meta_carry_the_drive(tmp_path, capsys):
     log, meta, csv = tmp_path / "run.csv", tmp_path / "m.json", tmp_path / "sim.csv"
     assert main(["simulate", "--P-gain", "200", "--D-gain", "5", "--set", "tau_drive=0.004", "--set",
                  "delay_drive=0.00237", "--experiment", "chirp", "--duration", "0.5", "--log-out", str(log),
-                 "--meta", str(meta), "--out", str(csv), "-q"]) == 0
+                 "--meta", str(meta), "--out", str(csv)]) == 0
+    assert "drive: lag 0.004 s, dead time 0.00237 s (2 samples + 0.00037 s)" in capsys.readouterr().out
     m = json.loads(meta.read_text())
     assert m["drive"]["delay_whole_samples"] == 2
     assert abs(m["drive"]["delay_fraction_s"] - 0.00037) < 1e-12

@@ -15,6 +15,13 @@ plant then runs to t_(k+1):
   torque exactly), 2^j per sample with j chosen per sample by step doubling against
   ``rtol`` x :data:`SAMPLE_TOL_FRACTION`.
 
+The drive's section (:mod:`haa_sym.model.drive`) acts between the clip and the motor: the
+clipped command goes through the dead time (whole samples: the driver's delay line; a fraction
+f: the held command switches at t_k + f, the plant step split there into two exact pieces, the
+ETDRK4 substeps of each from its own tables; with jitter at the same fraction of the stretched
+interval) and then the lag (one more continuous state, :func:`haa_sym.loop.plant.with_lag`).
+With every limit off the simulation is the linear closed loop with the drive to rounding.
+
 The loop over samples is generated C (``codegen/sim_kernels.py``, ``codegen/driver.c``).
 
 Example
