@@ -55,13 +55,21 @@ CASADI_SYMBOL_EXPORT int haa_columns(void* f, void* work, casadi_int n_in,
 
 /* haa_simulate: the nonlinear simulation's sample loop (haa_sym.analysis.simulate).
  *
- * Per sample k: sample(x, xc, exo_k, ctrl) -> (u, xc_next, y_k), then step(x, u, exo_k[delta],
- * plant) -> x applied n_sub times (the exact ZOH transition once, or n_sub integrating
- * substeps). One C call runs a whole chunk: a call of a generated function through CasADi costs
- * more than the step itself. x (nx) and xc (nc) hold the initial state and return the final
- * one; exo holds n_steps columns of n_exo reals (delta is its last row); y receives n_steps
- * columns of n_y reals; xpeak (nx reals, or NULL) receives max_k |x_i| over the sample instants.
- * Returns 0, 1 if a function failed, 2 if out of memory. */
+ * Per sample k: sample(x, xc, exo_k, ctrl) -> (u, xc_next, y_k), then the plant runs over the
+ * sample interval in n_pieces pieces (1, or 2 with a fractional drive delay), each piece p by
+ * step(x, u_p, s_p, plant + p plant_stride) applied n_sub times (the exact ZOH transition once,
+ * or n_sub integrating substeps). The drive's dead time, whole Ts + f (haa_sym.loop.plant,
+ * delay_split): the commands u[0] of the samples are a delay line (a ring of whole + n_pieces
+ * reals, zero before t = 0); piece p holds command k - whole - (n_pieces - 1 - p), so with two
+ * pieces the older command for the first f seconds and the newer for the rest (the modified
+ * z-transform's switch, exactly); every other entry of u_p is u's own (the external torque is
+ * not delayed). s_p = delta_k piece_frac[p]: the jitter stretches each piece in proportion to
+ * its length (piece_frac: f/Ts and 1 - f/Ts, or 1). One C call runs a whole chunk: a call of a
+ * generated function through CasADi costs more than the step itself. x (nx) and xc (nc) hold
+ * the initial state and return the final one; exo holds n_steps columns of n_exo reals (delta
+ * is its last row); y receives n_steps columns of n_y reals; xpeak (nx reals, or NULL) receives
+ * max_k |x_i| over the sample instants. Returns 0, 1 if a function failed, 2 if out of memory,
+ * 3 if n_pieces < 1 or whole < 0. */
 /* The work arrays of the sample loops: the sample function and the plant step are called in
  * turn, so arg, res, iw and w are sized for the larger of the two; w carries `extra` more reals
  * after the functions' own (the loop's vectors, from haa_work.extra). */
@@ -122,20 +130,56 @@ static int haa_sample(void* sample, haa_work* m, const casadi_real* x, casadi_re
   return 0;
 }
 
+/* The drive's delay line (see haa_simulate): a ring of whole + n_pieces commands, newest at head */
+typedef struct {
+  casadi_real* ring;
+  casadi_int size, head, whole, n_pieces;
+} haa_delay;
+
+/* push u[0] of this sample; then up (n_pieces x n_u) = u with its command delayed per piece and
+ * s (n_pieces) = delta piece_frac */
+static void haa_delay_pieces(haa_delay* d, const casadi_real* u, casadi_int n_u, casadi_real delta,
+                             const casadi_real* piece_frac, casadi_real* up, casadi_real* s) {
+  casadi_int p, i, j;
+  d->head = (d->head + 1) % d->size;
+  d->ring[d->head] = u[0];
+  for (p = 0; p < d->n_pieces; ++p) {
+    j = d->whole + (d->n_pieces - 1 - p);
+    for (i = 0; i < n_u; ++i) up[p * n_u + i] = u[i];
+    up[p * n_u] = d->ring[(d->head - j + d->size) % d->size];
+    s[p] = delta * piece_frac[p];
+  }
+}
+
+static void haa_delay_init(haa_delay* d, casadi_real* ring, casadi_int whole, casadi_int n_pieces) {
+  casadi_int i;
+  d->ring = ring;
+  d->size = whole + n_pieces;
+  d->head = 0;
+  d->whole = whole;
+  d->n_pieces = n_pieces;
+  for (i = 0; i < d->size; ++i) ring[i] = 0;
+}
+
 CASADI_SYMBOL_EXPORT int haa_simulate(void* sample, void* sample_work, void* step, void* step_work,
                                       casadi_int n_sub, casadi_int nx, casadi_int nc, casadi_int n_u,
                                       casadi_real* x, casadi_real* xc, const casadi_real* exo,
                                       casadi_int n_exo, const casadi_real* ctrl,
                                       const casadi_real* plant, casadi_real* y, casadi_int n_y,
-                                      casadi_real* xpeak, casadi_int n_steps) {
-  casadi_int k, j;
+                                      casadi_real* xpeak, casadi_int n_steps, casadi_int n_pieces,
+                                      casadi_int plant_stride, const casadi_real* piece_frac,
+                                      casadi_int whole) {
+  casadi_int k, j, p;
   int flag;
   haa_work m;
+  haa_delay d;
   const casadi_real** arg;
   casadi_real** res;
   casadi_int* iw;
-  casadi_real *w, *u, *x2, *xc2;
-  flag = haa_work_alloc(sample_work, step_work, n_u + nx + nc, &m);
+  casadi_real *w, *u, *x2, *xc2, *up, *sp;
+  if (n_pieces < 1 || whole < 0) return 3;
+  flag = haa_work_alloc(sample_work, step_work,
+                        n_u + nx + nc + n_pieces * (n_u + 1) + whole + n_pieces, &m);
   if (!flag) {
     arg = m.arg;
     res = m.res;
@@ -144,6 +188,9 @@ CASADI_SYMBOL_EXPORT int haa_simulate(void* sample, void* sample_work, void* ste
     u = m.extra;
     x2 = u + n_u;
     xc2 = x2 + nx;
+    up = xc2 + nc;
+    sp = up + n_pieces * n_u;
+    haa_delay_init(&d, sp + n_pieces, whole, n_pieces);
     if (xpeak)
       for (j = 0; j < nx; ++j) xpeak[j] = 0;
     for (k = 0; k < n_steps && !flag; ++k) {
@@ -154,19 +201,22 @@ CASADI_SYMBOL_EXPORT int haa_simulate(void* sample, void* sample_work, void* ste
         flag = 1;
         break;
       }
-      for (j = 0; j < n_sub; ++j) {
-        arg[0] = x;
-        arg[1] = u;
-        arg[2] = e + n_exo - 1;
-        arg[3] = plant;
-        res[0] = x2;
-        if (((haa_fn)step)(arg, res, iw, w, 0)) {
-          flag = 1;
-          break;
-        }
-        {
-          casadi_int i;
-          for (i = 0; i < nx; ++i) x[i] = x2[i];
+      haa_delay_pieces(&d, u, n_u, e[n_exo - 1], piece_frac, up, sp);
+      for (p = 0; p < n_pieces && !flag; ++p) {
+        for (j = 0; j < n_sub; ++j) {
+          arg[0] = x;
+          arg[1] = up + p * n_u;
+          arg[2] = sp + p;
+          arg[3] = plant + p * plant_stride;
+          res[0] = x2;
+          if (((haa_fn)step)(arg, res, iw, w, 0)) {
+            flag = 1;
+            break;
+          }
+          {
+            casadi_int i;
+            for (i = 0; i < nx; ++i) x[i] = x2[i];
+          }
         }
       }
     }
@@ -190,8 +240,11 @@ CASADI_SYMBOL_EXPORT int haa_simulate(void* sample, void* sample_work, void* ste
  * coarser (kept level j_kept - 1) when this sample's difference was below tol / HAA_DROP: a
  * fourth-order step's difference shrinks 16-fold per level, so the coarser pair is then
  * predicted within tol (HAA_DROP = 32, a factor 2 of margin); the test itself is unchanged.
+ * With a drive delay the sample runs in n_pieces pieces as in haa_simulate, both at the level
+ * tested (2^lev substeps each), piece p from its own tables at plant + p plant_stride: with a
+ * fractional delay the substeps end exactly at the command's switch.
  * levels receives the level used per sample (as a real). Returns as haa_simulate; 3 if
- * n_levels < 2. */
+ * n_levels < 2, n_pieces < 1 or whole < 0. */
 #define HAA_DROP 32.0
 /* the table of the friction's slopes at x (see haa_simulate_adaptive) */
 static const casadi_real* haa_table(const casadi_real* plant, casadi_int n_levels,
@@ -224,7 +277,8 @@ static int haa_advance(void* step, const casadi_real** arg, casadi_real** res, c
                        casadi_int n_rows, const casadi_real* slopes, casadi_int n_slopes,
                        casadi_int nx, casadi_real* x, casadi_real* tmp) {
   casadi_int j, i, n_sub = (casadi_int)1 << lev;
-  for (i = 0; i < nx; ++i) x[i] = x0[i];
+  if (x != x0)
+    for (i = 0; i < nx; ++i) x[i] = x0[i];
   for (j = 0; j < n_sub; ++j) {
     arg[0] = x;
     arg[1] = u;
@@ -238,6 +292,23 @@ static int haa_advance(void* step, const casadi_real** arg, casadi_real** res, c
   return 0;
 }
 
+/* x = x0 advanced over the whole sample: piece p (held input up + p n_u, jitter share s + p,
+ * tables at plant + p plant_stride) at level lev each */
+static int haa_advance_pieces(void* step, const casadi_real** arg, casadi_real** res, casadi_int* iw,
+                              casadi_real* w, const casadi_real* x0, const casadi_real* up,
+                              const casadi_real* s, const casadi_real* plant, casadi_int plant_stride,
+                              casadi_int n_pieces, casadi_int n_u, casadi_int lev, casadi_int n_levels,
+                              casadi_int plant_size, const casadi_real* rows, casadi_int n_rows,
+                              const casadi_real* slopes, casadi_int n_slopes, casadi_int nx,
+                              casadi_real* x, casadi_real* tmp) {
+  casadi_int p;
+  for (p = 0; p < n_pieces; ++p)
+    if (haa_advance(step, arg, res, iw, w, p ? x : x0, up + p * n_u, s + p, plant + p * plant_stride,
+                    lev, n_levels, plant_size, rows, n_rows, slopes, n_slopes, nx, x, tmp))
+      return 1;
+  return 0;
+}
+
 CASADI_SYMBOL_EXPORT int haa_simulate_adaptive(
     void* sample, void* sample_work, void* step, void* step_work, casadi_int n_levels,
     casadi_int plant_size, casadi_int nx, casadi_int nc, casadi_int n_u, casadi_real* x,
@@ -245,17 +316,20 @@ CASADI_SYMBOL_EXPORT int haa_simulate_adaptive(
     const casadi_real* plant, const casadi_real* scale, casadi_real tol,
     const casadi_real* stick_rows, casadi_int n_rows, const casadi_real* slopes,
     casadi_int n_slopes, casadi_real* y,
-    casadi_int n_y, casadi_real* levels, casadi_int n_steps) {
+    casadi_int n_y, casadi_real* levels, casadi_int n_steps, casadi_int n_pieces,
+    casadi_int plant_stride, const casadi_real* piece_frac, casadi_int whole) {
   casadi_int k, i, lev = 0;
   int flag;
   haa_work m;
+  haa_delay d;
   const casadi_real** arg;
   casadi_real** res;
   casadi_int* iw;
-  casadi_real *w, *u, *xa, *xb, *tmp, *xc2;
+  casadi_real *w, *u, *xa, *xb, *tmp, *xc2, *up, *sp;
   casadi_real err_last = tol + 1; /* no prediction before the first sample */
-  if (n_levels < 2) return 3;
-  flag = haa_work_alloc(sample_work, step_work, n_u + 3 * nx + nc, &m);
+  if (n_levels < 2 || n_pieces < 1 || whole < 0) return 3;
+  flag = haa_work_alloc(sample_work, step_work,
+                        n_u + 3 * nx + nc + n_pieces * (n_u + 1) + whole + n_pieces, &m);
   if (!flag) {
     arg = m.arg;
     res = m.res;
@@ -266,23 +340,29 @@ CASADI_SYMBOL_EXPORT int haa_simulate_adaptive(
     xb = xa + nx;
     tmp = xb + nx;
     xc2 = tmp + nx;
+    up = xc2 + nc;
+    sp = up + n_pieces * n_u;
+    haa_delay_init(&d, sp + n_pieces, whole, n_pieces);
     for (k = 0; k < n_steps && !flag; ++k) {
       const casadi_real* e = exo + k * n_exo;
       if (haa_sample(sample, &m, x, xc, xc2, nc, e, ctrl, u, y + k * n_y)) {
         flag = 1;
         break;
       }
+      haa_delay_pieces(&d, u, n_u, e[n_exo - 1], piece_frac, up, sp);
       /* lev is the level kept last; test (lev - 1, lev), or (lev - 2, lev - 1) when the last
        * difference predicts it within tol */
       lev -= (err_last <= tol / HAA_DROP) ? 2 : 1;
       if (lev < 0) lev = 0;
       if (lev > n_levels - 2) lev = n_levels - 2;
-      flag = haa_advance(step, arg, res, iw, w, x, u, e + n_exo - 1, plant, lev, n_levels,
-                         plant_size, stick_rows, n_rows, slopes, n_slopes, nx, xa, tmp);
+      flag = haa_advance_pieces(step, arg, res, iw, w, x, up, sp, plant, plant_stride, n_pieces, n_u,
+                                lev, n_levels, plant_size, stick_rows, n_rows, slopes, n_slopes, nx,
+                                xa, tmp);
       while (!flag) {
         casadi_real err = 0;
-        flag = haa_advance(step, arg, res, iw, w, x, u, e + n_exo - 1, plant, lev + 1, n_levels,
-                           plant_size, stick_rows, n_rows, slopes, n_slopes, nx, xb, tmp);
+        flag = haa_advance_pieces(step, arg, res, iw, w, x, up, sp, plant, plant_stride, n_pieces,
+                                  n_u, lev + 1, n_levels, plant_size, stick_rows, n_rows, slopes,
+                                  n_slopes, nx, xb, tmp);
         if (flag) break;
         for (i = 0; i < nx; ++i) {
           casadi_real d = (xa[i] - xb[i]) / scale[i];

@@ -4,7 +4,9 @@ Per sample the C driver (``codegen/driver.c``, ``haa_simulate``) calls the *samp
 (measurements with quantisation and noise, the controller's linear update, the saturation of the
 held voltage) and then a *plant step* ``n_sub`` times: the exact zero-order-hold transition
 (``zoh``), the same with the sample interval stretched by the jitter (``jitter``), or one
-exponential Runge-Kutta substep (``etd``, ETDRK4) when Coulomb friction acts between samples.
+exponential Runge-Kutta substep (``etd``, ETDRK4) when Coulomb friction acts between samples;
+with a fractional drive delay the driver runs the plant step over the two pieces of the sample
+interval in turn, each with its own held command and parameters (the kernels are unchanged).
 The matrix exponentials (Phi, Gamma; the half and full substep transitions) come in as inputs,
 computed by ``scipy.linalg.expm`` (CasADi has no code-generable expm). Every vector is laid out
 by name in ``haa_sym.compiled.layout``.

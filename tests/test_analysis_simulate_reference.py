@@ -1,7 +1,10 @@
 """The simulation against an independent one written here (issue 19's second check): the HyQ
 plant of Eq. (1)-(2) by hand, integrated by scipy's solve_ivp (Radau) from sample instant to
 sample instant with the voltage held, and the controller of Sec. 3 by hand (averaging velocity
-filter, backward-Euler PI, velocity compensation, impedance law, no delay) with the limits."""
+filter, backward-Euler PI, velocity compensation, impedance law, no delay) with the limits; and
+the drive (haa_sym.model.drive) by hand: the command clipped, then delayed (a list of past
+commands, the held one switching at t_k + f inside the interval), then lagged (one more ODE
+state u' = (V_delayed - u) / tau)."""
 import math
 
 import numpy as np
@@ -41,8 +44,11 @@ class HandPlant:
         self.vel = {"m": 2, "L1": 4, "L2": 6}
         self.J = {"m": Jm, "L1": J1, "L2": J2}
 
-    def f(self, x, V, Td, friction, vs):
-        dx = self.A @ x + self.bV * V + self.bd * Td
+    def f(self, x, V, Td, friction, vs, tau=0.0):
+        if tau:                             # the drive's lag: x[7] is what the motor receives
+            dx = np.append(self.A @ x[:7] + self.bV * x[7] + self.bd * Td, (V - x[7]) / tau)
+        else:
+            dx = self.A @ x + self.bV * V + self.bd * Td
         for b, Fc in friction.items():
             i = self.vel[b]
             dx[i] -= Fc * math.tanh(x[i] / vs) / self.J[b]
@@ -62,14 +68,21 @@ def vc0(p):
     return p.N * (p.k_w + p.R * p.B_m / p.k_t)
 
 
-def hand_simulation(params, P, D, lim: Limits, n, *, T_ff=0.0, T_dist=0.0, jitter_eps=None):
-    """Sample by sample: read, control, saturate, hold, integrate to the next instant."""
+def hand_simulation(params, P, D, lim: Limits, n, *, T_ff=0.0, T_dist=0.0, jitter_eps=None, tau=0.0,
+                    delay=0.0):
+    """Sample by sample: read, control, saturate, hold, integrate to the next instant. ``tau``,
+    ``delay``: the drive's lag and dead time (s); the clipped command V_k acts from t_k + delay
+    (with jitter: whole intervals, then the fraction of the interval it lands in)."""
     c, p = params.controller, params.plant
     plant = HandPlant(p)
     Ts, Nav = c.Ts, c.N_av
     P_t, I_t = c.beta * c.P_t0, c.beta * c.I_t0
     VC = c.alpha * vc0(p)
-    x = np.zeros(7)
+    x = np.zeros(8 if tau else 7)
+    whole = int(math.floor(delay / Ts + 1e-9))
+    frac = delay / Ts - whole              # of an interval
+    frac = 0.0 if frac < 1e-9 else frac
+    sent = []                              # the clipped commands V_0 ... V_k
     hist = [0.0] * Nav                     # theta_(k-1) ... theta_(k-N_av), at rest before t = 0
     integ = 0.0
     q_th = 2 * math.pi / lim.encoder_counts if lim.encoder_counts else 0.0
@@ -81,7 +94,7 @@ def hand_simulation(params, P, D, lim: Limits, n, *, T_ff=0.0, T_dist=0.0, jitte
     out = {k: np.empty(n) for k in ("theta", "velocity", "torque", "voltage", "current")}
     for k in range(n):
         th = quant(x[3], q_th)
-        T = quant(plant.hd @ x, q_T)
+        T = quant(plant.hd @ x[:7], q_T)
         v = (th - hist[-1]) / (Nav * Ts)
         hist = [th] + hist[:-1]
         T_ref = (T_ff[k] if np.ndim(T_ff) else T_ff) - P * th - D * v
@@ -96,10 +109,17 @@ def hand_simulation(params, P, D, lim: Limits, n, *, T_ff=0.0, T_dist=0.0, jitte
             V = min(max(V, -lim.V_max), lim.V_max)
         out["theta"][k], out["velocity"][k], out["torque"][k] = th, x[6], T
         out["voltage"][k], out["current"][k] = V, x[0]
+        sent.append(V)
         t1 = (k + 1) * Ts + (0.0 if jitter_eps is None else jitter_eps[k + 1])
-        sol = scipy.integrate.solve_ivp(lambda t, y: plant.f(y, V, T_dist, fr, lim.friction_velocity),
-                                        (times[k], t1), x, method="DOP853", rtol=RTOL_IVP, atol=1e-14)
-        x = sol.y[:, -1]
+        old = sent[k - whole - 1] if k - whole - 1 >= 0 else 0.0
+        new = sent[k - whole] if k - whole >= 0 else 0.0
+        t_switch = times[k] + frac * (t1 - times[k])
+        for Vh, (ta, tb) in ((old, (times[k], t_switch)), (new, (t_switch, t1))):
+            if tb > ta:
+                sol = scipy.integrate.solve_ivp(
+                    lambda t, y: plant.f(y, Vh, T_dist, fr, lim.friction_velocity, tau),
+                    (ta, tb), x, method="DOP853", rtol=RTOL_IVP, atol=1e-14)
+                x = sol.y[:, -1]
     return times, out
 
 
@@ -206,3 +226,33 @@ def test_saturation_limit_cycle_amplitude_and_period_agree():
     assert sim.cycle_amplitude == pytest.approx(a_ref, rel=0.02)
     assert 1 / sim.cycle_frequency == pytest.approx(T_ref, rel=0.02)
     _compare(sim, ref, 1e-6)
+
+
+@pytest.mark.parametrize("delay_samples", [0.4, 2.37])
+def test_drive_lag_and_delay_with_friction_and_supply_agree_with_solve_ivp(delay_samples):
+    # the drive's lag (4 ms) and dead time (fractional: the substeps must end at the switch)
+    # with rotor friction (the ETDRK4 pieces) and the supply clip (before the delay)
+    Ts = load_params().controller.Ts
+    params = load_params().with_values(tau_drive=0.004, delay_drive=delay_samples * Ts)
+    lim = Limits(V_max=2.0, friction={"m": 0.02}, friction_velocity=0.05)
+    n = 70
+    sim = simulate(ClosedLoop(params, basis=False), 300.0, 4.0, limits=lim, experiment="torque-step",
+                   amplitude=2.0, duration=(n - 1) * Ts, rtol=1e-7)
+    t, ref = hand_simulation(params, 300.0, 4.0, lim, n, T_ff=2.0, tau=0.004, delay=delay_samples * Ts)
+    assert sim.saturated.sum() > 20 and sim.meta["n_sub_max"] > 1
+    _compare(sim, ref, 1e-6)
+
+
+def test_drive_delay_with_jitter_switches_at_its_fraction_of_the_interval():
+    # with jitter the fractional switch sits at the same fraction of each jittered interval
+    # (docs/simulate.md, "The drive")
+    Ts, sigma, n = load_params().controller.Ts, 5e-6, 80
+    params = load_params().with_values(tau_drive=0.002, delay_drive=1.4 * Ts)
+    lim = Limits(jitter=sigma)
+    sim = simulate(ClosedLoop(params, basis=False), 300.0, 4.0, limits=lim, experiment="disturbance-step",
+                   amplitude=2.0, duration=(n - 1) * Ts, seed=7)
+    eps = np.zeros(n + 1)
+    eps[1:] = np.clip(sigma * np.random.default_rng(7).standard_normal(n), -3 * sigma, 3 * sigma)
+    t, ref = hand_simulation(params, 300.0, 4.0, lim, n, T_dist=2.0, jitter_eps=eps, tau=0.002,
+                             delay=1.4 * Ts)
+    _compare(sim, ref, 1e-8)

@@ -15,6 +15,13 @@ plant then runs to t_(k+1):
   torque exactly), 2^j per sample with j chosen per sample by step doubling against
   ``rtol`` x :data:`SAMPLE_TOL_FRACTION`.
 
+The drive's section (:mod:`haa_sym.model.drive`) acts between the clip and the motor: the
+clipped command goes through the dead time (whole samples: the driver's delay line; a fraction
+f: the held command switches at t_k + f, the plant step split there into two exact pieces, the
+ETDRK4 substeps of each from its own tables; with jitter at the same fraction of the stretched
+interval) and then the lag (one more continuous state, :func:`haa_sym.loop.plant.with_lag`).
+With every limit off the simulation is the linear closed loop with the drive to rounding.
+
 The loop over samples is generated C (``codegen/sim_kernels.py``, ``codegen/driver.c``).
 
 Example
@@ -40,7 +47,7 @@ from haa_sym.compiled.generated import evaluators
 from haa_sym.errors import ParameterError
 from haa_sym.io.budget import BYTES_PER_SAMPLE, check_memory
 from haa_sym.loop import loop_first
-from haa_sym.loop.plant import continuous_plant
+from haa_sym.loop.plant import continuous_plant, delay_split, with_lag
 from haa_sym.loop.statespace import controller_batch
 from haa_sym.model.limits import Limits
 
@@ -221,17 +228,31 @@ class _Setup:
                                  "(the parameter file's [limits])")
         self.limits, self.experiment, self.duration, self.n, self.seed = lim, experiment, duration, n, seed
         top = params.plant.topology
-        cont = _continuous(params.plant, loop.backend)
+        motor = _continuous(params.plant, loop.backend)
+        # the drive (haa_sym.model.drive; docs/simulate.md, "The drive"): its lag is one more
+        # continuous state of the plant (the linear loop's own with_lag), so every plant step
+        # below integrates it exactly; its dead time is the driver's delay line of commands
+        self.drive = drive = params.drive
+        cont = with_lag(motor, drive.tau_drive)
+        self.whole, self.frac = delay_split(drive.delay_drive, Ts)
+        # the sample interval's pieces: with a fractional delay f the held command switches at
+        # t_k + f (the older command before, the newer after), else one piece; the jitter
+        # stretches each piece in proportion (piece_frac)
+        self.spans = (self.frac, Ts - self.frac) if self.frac else (Ts,)
+        self.piece_frac = tuple(h / Ts for h in self.spans) if self.frac else (1.0,)
         A, B = cont.A, cont.B
         self.nx = nx = A.shape[0]
         states, outs = cont.state_names, cont.output_names
-        Cm = loop.plant.C
+        Cm = loop.plant.C[:, :nx]        # the delay line's states are not the plant's (driver.c)
         self.rows = {"c_theta": Cm[outs.index("theta_encoder")], "c_T": Cm[outs.index(loop.torque_output)],
                      "c_I": np.eye(nx)[states.index("I_m")], "c_v": Cm[outs.index(f"dtheta_{top.port}")]}
-        # the motor's voltage equation, row I_m of A and B: L dI/dt = V - R I - emf(x)
+        # the motor's voltage equation, row I_m of A and B of the motor without the drive's lag:
+        # L dI/dt = V - R I - emf(x) (the lag's state enters that row, not the command)
         i = states.index("I_m")
-        L_m = 1.0 / B[i, 0]
-        emf = -A[i] * L_m
+        n_m = motor.A.shape[0]
+        L_m = 1.0 / motor.B[i, 0]
+        emf = np.zeros(nx)
+        emf[:n_m] = -motor.A[i] * L_m
         R = emf[i]
         emf[i] = 0.0
         self.rows["c_emf"] = emf
@@ -307,21 +328,43 @@ class _Setup:
             if self.n_sub0 > MAX_SUBSTEPS:
                 raise ParameterError(f"{where}: jitter = {jitter!r} s rms needs {self.n_sub0} substeps for this "
                                      f"plant; allowed: a jitter below {MAX_SUBSTEPS * JITTER_STEP_BOUND / (2 * JITTER_CLIP * rho):g} s")
-            h = Ts / self.n_sub0
-            Phi, Gam = _zoh(A, Bu, h)
-            self.plant_parts = dict(Phi=Phi, Gamma=Gam, inv_n=1.0 / self.n_sub0)
+            # per piece: Phi, Gamma over span / n_sub, the interval's stretch delta span / Ts
+            self.plant_parts = [dict(zip(("Phi", "Gamma"), _zoh(A, Bu, h / self.n_sub0)), inv_n=1.0 / self.n_sub0)
+                                for h in self.spans]
         else:
             self.kind = "zoh"
             self.n_sub0 = 1
-            # the linear loop's own sampled plant: with every limit off, the same numbers
-            self.plant_parts = dict(Phi=loop.plant.Phi, Gamma=loop.plant.Gamma[:, iu])
         self.A, self.Bu = A, Bu
-        self.Bu_d = loop.plant.Gamma[:, iu]
+        self.zoh_parts = self._zoh_parts(loop, iu)
+        if self.kind == "zoh":
+            self.plant_parts = self.zoh_parts
 
-    def etd_tables(self, fractions, cx):
+    def drive_meta(self) -> dict:
+        """The drive as the run applied it (s): lag, dead time and its split into whole samples
+        and a fraction, and the order of the command's path (docs/simulate.md, "The drive")."""
+        return {"tau_drive": self.drive.tau_drive, "delay_drive": self.drive.delay_drive,
+                "delay_whole_samples": self.whole, "delay_fraction_s": self.frac,
+                "order": "clip (supply, current window) -> delay -> lag -> motor"}
+
+    def _zoh_parts(self, loop, iu):
+        """The exact ZOH transition (``Phi``, ``Gamma`` of the inputs [V, T_dist]) of each piece of
+        the sample interval. Without a fractional delay they are the linear loop's own sampled
+        plant (with every limit off the simulation then gives its numbers): its plant block, and
+        the command's column where :func:`haa_sym.loop.plant.discretize` put it (the delay line's
+        oldest state for a whole-sample delay). With one, the two pieces over f and Ts - f."""
+        nx, pl = self.nx, loop.plant
+        if self.frac:
+            return [dict(zip(("Phi", "Gamma"), _zoh(self.A, self.Bu, h))) for h in self.spans]
+        Gamma = pl.Gamma[:nx, iu].copy()
+        if self.whole:
+            Gamma[:, 0] = pl.Phi[:nx, nx + self.whole - 1]
+        return [dict(Phi=pl.Phi[:nx, :nx], Gamma=Gamma)]
+
+    def etd_tables(self, fractions, cx, span=None):
         """The packed ETDRK4 substep parameters (``sim_plant_layout("etd", cx)``) of every row of
         ``fractions`` (tables, one fraction per friction entry) and every level j = 0 .. LEVELS - 1
-        (2^j substeps per sample, h = Ts / 2^j), shape (len(fractions), LEVELS, plant size)
+        (2^j substeps per sample, h = span / 2^j; ``span`` the piece of the sample interval, default
+        Ts), shape (len(fractions), LEVELS, plant size)
         flattened: friction entry b of table c has ``fractions[c][b]`` of its slope at v = 0,
         Fc / v_s, moved into the linear part (integrated exactly) and out of the explicit stages.
 
@@ -345,7 +388,7 @@ class _Setup:
         K[:, :n, n:o], K[:, :n, o:o + m] = self.Bu, col
         K[:, o:o + m, o + m:o + 2 * m] = np.eye(m)
         K[:, o + m:o + 2 * m, o + 2 * m:] = np.eye(m)
-        h = self.Ts / 2 ** LEVELS                       # the finest level's half step
+        h = (self.Ts if span is None else span) / 2 ** LEVELS    # the finest level's half step
         E = scipy.linalg.expm(K * h)
         tops = np.empty((LEVELS + 1, nt, n, size))     # tops[i]: over Ts / 2^(LEVELS - i)
         hs = h * 2.0 ** np.arange(LEVELS + 1)
@@ -397,13 +440,16 @@ def _run(loop, setup: _Setup, P_gain, D_gain, controller=None):
     xc0 = np.zeros(cc)
 
     def run(n_sub, parts, kind=setup.kind, **kw):
-        plant = parts if isinstance(parts, np.ndarray) else _pack(L.sim_plant_layout(kind, cx), **parts)
+        # one parameter vector (or set of tables) per piece of the sample interval, in turn
+        plant = parts if isinstance(parts, np.ndarray) else \
+            np.concatenate([_pack(L.sim_plant_layout(kind, cx), **p) for p in parts])
         y, _x, _xc, extra = ev.run_simulation(names["sample"], names[kind], n_sub, x0, xc0, setup.exo,
-                                              ctrl, plant, **kw)
+                                              ctrl, plant, pieces=setup.piece_frac, whole=setup.whole, **kw)
         return y, extra
 
     if setup.kind == "jitter":      # [A, B] padded block by block: the u columns follow all cx states
-        parts = dict(setup.plant_parts, M=np.hstack([_pad(setup.A, cx, cx), _pad(setup.Bu, cx, len(L.SIM_U))]))
+        M = np.hstack([_pad(setup.A, cx, cx), _pad(setup.Bu, cx, len(L.SIM_U))])
+        parts = [dict(p, M=M) for p in setup.plant_parts]
         return run(setup.n_sub0, parts)[0], {"integrator": "jitter", "n_sub": setup.n_sub0}
     if setup.kind == "zoh":
         return run(setup.n_sub0, setup.plant_parts)[0], {"integrator": "zoh", "n_sub": 1}
@@ -412,7 +458,7 @@ def _run(loop, setup: _Setup, P_gain, D_gain, controller=None):
     # until two successive levels agree within SAMPLE_TOL_FRACTION rtol of those peaks and keeps the finer one
     # (RK4: its local error is about 1/15 of the difference; the local errors of the samples
     # add up over a run, hence the margin)
-    _y, peaks = run(1, dict(Phi=loop.plant.Phi, Gamma=setup.Bu_d), kind="zoh", peaks=True)
+    _y, peaks = run(1, setup.zoh_parts, kind="zoh", peaks=True)
     scale = np.maximum(_pad(peaks[:, None], cx, 1).ravel(), 1e-12)
     # the tanh's slope at the sample's velocity, to the nearest of SLOPES, goes into the exact
     # linear part (a table per combination over the bodies), so that the explicit stages see
@@ -423,7 +469,8 @@ def _run(loop, setup: _Setup, P_gain, D_gain, controller=None):
     if getattr(setup, "etd_cache", None) is None or setup.etd_cache[0] != cx:
         K = len(slopes)              # table index: sum_r (slope index of row r) K^r (driver.c)
         combos = [[slopes[i // K ** r % K] for r in range(nf)] for i in range(K ** nf)]
-        setup.etd_cache = (cx, setup.etd_tables(combos, cx))
+        # one set of tables per piece of the sample interval (its substeps end at the switch)
+        setup.etd_cache = (cx, np.concatenate([setup.etd_tables(combos, cx, h) for h in setup.spans]))
     rows = np.zeros((nf, cx))
     rows[np.arange(nf), setup.friction[0]] = 1.0 / setup.limits.friction_velocity
     y, lev = run(LEVELS, setup.etd_cache[1], scale=scale, tol=setup.rtol * SAMPLE_TOL_FRACTION,
@@ -482,7 +529,7 @@ def _result(loop, setup, P_gain, D_gain, y, info, linear=None):
     meta = loop.provenance(
         analysis="simulate", P_gain=float(P_gain), D_gain=float(D_gain), experiment=setup.experiment,
         experiment_definition=EXPERIMENTS[setup.experiment], amplitude=setup.amplitude,
-        duration=setup.duration, seed=setup.seed, limits=setup.limits.active, **info,
+        duration=setup.duration, seed=setup.seed, limits=setup.limits.active, drive=setup.drive_meta(), **info,
         saturation_time=sat_time, limit_cycle=None if not np.isfinite(amp) else
         {"amplitude_Nm": amp, "frequency_Hz": None if math.isnan(freq) else freq, "signal": "torque",
          "periodic": osc.kind == "sustained"},

@@ -85,6 +85,10 @@ def _cmd_simulate(args) -> int:
     integ = m["integrator"] + (f", {m['n_sub']:.3g} substeps per sample" if m["n_sub"] > 1 else "")
     if "n_sub_max" in m:
         integ += f" (at most {m['n_sub_max']}; rtol {m['rtol']:g})"
+    dr = m["drive"]
+    if dr["tau_drive"] or dr["delay_drive"]:         # docs/simulate.md, "The drive"
+        integ += (f"; drive: lag {dr['tau_drive']:g} s, dead time {dr['delay_drive']:g} s "
+                  f"({dr['delay_whole_samples']} samples + {dr['delay_fraction_s']:.6g} s)")
     print(f"{args.experiment} (A = {s.meta['amplitude']:g} {unit}), {len(s.time)} samples over "
           f"{s.time[-1] if len(s.time) else 0.0:.6g} s; limits: {lim}; {integ}")
     print(f"time in saturation: {s.saturation_time:.6g} s ({100 * s.saturation_time / max(args.duration, 1e-300):.3g} %)"

@@ -434,7 +434,7 @@ class Evaluators:
     def run_simulation(self, sample: str, step: str, n_sub: int, x: np.ndarray, xc: np.ndarray,
                        exo: np.ndarray, ctrl: np.ndarray, plant: np.ndarray, *, scale=None,
                        tol: float | None = None, peaks: bool = False, stick_rows=None,
-                       slopes=(0.0,)):
+                       slopes=(0.0,), pieces=(1.0,), whole: int = 0):
         """Run the simulation's sample loop (``codegen/driver.c``): per column of ``exo``
         (n_exo x n_steps) the generated ``sample`` function, then ``step`` n_sub times
         (``haa_simulate``); or, with ``scale`` and ``tol``, ``plant`` holding
@@ -442,6 +442,12 @@ class Evaluators:
         (2^level substeps), the table chosen per substep from the nearest entries of ``slopes``
         to 1 - tanh(stick_rows . x)^2 (one base-len(slopes) digit per row), the level per sample
         by step doubling (``haa_simulate_adaptive``).
+
+        The drive's dead time (``whole`` samples and, with two ``pieces``, a fraction): ``plant``
+        holds one parameter vector (or set of tables) per piece, the sample interval runs in
+        ``len(pieces)`` pieces, piece p holding the command (``u[0]``) of the sample
+        ``whole + len(pieces) - 1 - p`` before (0 before t = 0) and the jitter share ``delta``
+        x ``pieces[p]`` (the driver's docstring in ``codegen/driver.c``).
 
         Returns ``(y, x_final, xc_final, extra)`` with ``y`` of shape (n_steps, n_y); ``extra``
         is the level per sample (adaptive), the peak |x_i| over the sample instants
@@ -461,9 +467,13 @@ class Evaluators:
         psize = fp.numel_in(3)
         rows = np.zeros((0, x.size)) if stick_rows is None else np.ascontiguousarray(stick_rows, dtype=float)
         slopes = np.ascontiguousarray(slopes, dtype=float)
-        if adaptive and plant.size != len(slopes) ** len(rows) * levels * psize:
-            raise ValueError(f"{step}: plant table has {plant.size} values, expected "
-                             f"{len(slopes) ** len(rows)} x {levels} x {psize}")
+        pieces = np.ascontiguousarray(pieces, dtype=float)
+        n_pieces, whole = len(pieces), int(whole)
+        stride = len(slopes) ** len(rows) * levels * psize if adaptive else psize
+        if n_pieces < 1 or whole < 0 or plant.size != n_pieces * stride:
+            raise ValueError(f"{step}: plant has {plant.size} values, expected {n_pieces} pieces x "
+                             f"{len(slopes) ** len(rows) if adaptive else 1} x {max(levels, 1)} x {psize}; "
+                             f"whole = {whole} (>= 0)")
         for arr, i, f, what in ((x, 0, fs, "x"), (xc, 1, fs, "xc"), (ctrl, 3, fs, "par"),
                                 (plant[:psize], 3, fp, "plant par")):
             if arr.size != f.numel_in(i):
@@ -472,7 +482,7 @@ class Evaluators:
             raise ValueError(f"{sample}: exo has {n_exo} rows, expected {fs.numel_in(2)}")
         if self.backend != "compiled":
             return self._simulate_vm(fs, fp, n_sub, x, xc, exo, ctrl, plant, scale, tol, peaks, rows,
-                                     slopes)
+                                     slopes, pieces, whole)
         lib = self._cdll()
         y = np.empty((n, n_y))
         vp = ctypes.c_void_p
@@ -486,34 +496,40 @@ class Evaluators:
                                              ctrl.ctypes.data, plant.ctypes.data, scale.ctypes.data,
                                              float(tol), rows.ctypes.data, len(rows),
                                              slopes.ctypes.data, len(slopes), y.ctypes.data, n_y,
-                                             extra.ctypes.data, n)
+                                             extra.ctypes.data, n, n_pieces, stride,
+                                             pieces.ctypes.data, whole)
         else:
             extra = np.empty(x.size) if peaks else None
             flag = lib.haa_simulate(*fns, int(n_sub), x.size, xc.size, fp.numel_in(1),
                                     x.ctypes.data, xc.ctypes.data, exo.ctypes.data, n_exo,
                                     ctrl.ctypes.data, plant.ctypes.data, y.ctypes.data, n_y,
-                                    None if extra is None else extra.ctypes.data, n)
+                                    None if extra is None else extra.ctypes.data, n, n_pieces, stride,
+                                    pieces.ctypes.data, whole)
         if flag:
             raise RuntimeError(f"generated {sample} / {step} failed (code {flag})")
         return y, x, xc, extra
 
     @staticmethod
-    def _simulate_vm(fs, fp, n_sub, x, xc, exo, ctrl, plant, scale, tol, peaks, rows, slopes):
+    def _simulate_vm(fs, fp, n_sub, x, xc, exo, ctrl, plant, scale, tol, peaks, rows, slopes, pieces, whole):
         """:meth:`run_simulation` in Python over CasADi's VM: the C drivers' loops, line by line."""
         n = exo.shape[1]
         y = np.empty((n, fs.numel_out(2)))
         psize = fp.numel_in(3)
+        n_pieces = len(pieces)
+        stride = plant.size // n_pieces
+        ring = np.zeros(whole + n_pieces)          # the drive's delay line, newest first
         extra = np.empty(n) if scale is not None else (np.zeros(x.size) if peaks else None)
         lev, err_last = 0, tol + 1 if tol is not None else 0.0
 
-        def table(xx):
+        def table(xx, p):
             index = sum(int(np.argmin(np.abs(1 - np.tanh(rows[r] @ xx) ** 2 - slopes))) * len(slopes) ** r
                         for r in range(len(rows)))
-            return plant[index * n_sub * psize:(index + 1) * n_sub * psize]
+            return plant[p * stride + index * n_sub * psize:p * stride + (index + 1) * n_sub * psize]
 
-        def advance(x0, u, s, lev):
-            for _ in range(2 ** lev):
-                x0 = np.asarray(fp(x0, u, s, table(x0)[lev * psize:(lev + 1) * psize])).ravel()
+        def advance(x0, ups, ss, lev):
+            for p in range(n_pieces):
+                for _ in range(2 ** lev):
+                    x0 = np.asarray(fp(x0, ups[p], ss[p], table(x0, p)[lev * psize:(lev + 1) * psize])).ravel()
             return x0
         for k in range(n):
             if peaks and scale is None:
@@ -521,16 +537,22 @@ class Evaluators:
             u, xc_next, yk = fs(x, xc, exo[:, k], ctrl)
             y[k] = np.asarray(yk).ravel()
             xc = np.asarray(xc_next).ravel()
+            u = np.asarray(u, dtype=float).ravel()
+            ring = np.roll(ring, 1)
+            ring[0] = u[0]
+            ups = [np.concatenate([[ring[whole + n_pieces - 1 - p]], u[1:]]) for p in range(n_pieces)]
+            ss = [exo[-1, k] * pieces[p] for p in range(n_pieces)]
             if scale is None:
-                for _ in range(n_sub):
-                    x = np.asarray(fp(x, u, exo[-1, k], plant)).ravel()
+                for p in range(n_pieces):
+                    for _ in range(n_sub):
+                        x = np.asarray(fp(x, ups[p], ss[p], plant[p * stride:(p + 1) * stride])).ravel()
                 continue
             # driver.c's rule: the pair one level coarser than the level kept last, two when
             # the last difference was below tol / 32
             lev = min(max(lev - (2 if err_last <= tol / 32.0 else 1), 0), n_sub - 2)
-            xa = advance(x, u, exo[-1, k], lev)
+            xa = advance(x, ups, ss, lev)
             while True:
-                xb = advance(x, u, exo[-1, k], lev + 1)
+                xb = advance(x, ups, ss, lev + 1)
                 err = np.max(np.abs(xa - xb) / scale)
                 lev += 1
                 if err <= tol or lev + 1 >= n_sub:
@@ -551,10 +573,11 @@ class Evaluators:
                                         ctypes.c_void_p]
             lib.haa_simulate.restype = ctypes.c_int
             ll, vp = ctypes.c_longlong, ctypes.c_void_p
-            lib.haa_simulate.argtypes = [vp] * 4 + [ll] * 4 + [vp] * 3 + [ll] + [vp] * 3 + [ll] + [vp, ll]
+            lib.haa_simulate.argtypes = [vp] * 4 + [ll] * 4 + [vp] * 3 + [ll] + [vp] * 3 + [ll] + [vp, ll] + \
+                [ll, ll, vp, ll]
             lib.haa_simulate_adaptive.restype = ctypes.c_int
             lib.haa_simulate_adaptive.argtypes = [vp] * 4 + [ll] * 5 + [vp] * 3 + [ll] + [vp] * 3 + \
-                [ctypes.c_double, vp, ll, vp, ll, vp, ll, vp, ll]
+                [ctypes.c_double, vp, ll, vp, ll, vp, ll, vp, ll, ll, ll, vp, ll]
             self._lib = lib
         return self._lib
 

@@ -120,7 +120,8 @@ SIM_FRICTION_CAP = 4          # Coulomb friction torques: the rotor and up to th
 # feed-forward (Nm), the angle set point (rad), the torque sensor's noise sample (Nm), and the
 # offset of the sample's end from its nominal instant minus its start's (s, jitter).
 SIM_EXO = ("T_dist", "T_ff", "theta_ref", "noise_T", "delta")
-# The held plant input over one sample: the applied voltage (V) and the external torque (Nm).
+# The held plant input over one sample (over each piece of it with a fractional drive delay, the
+# command then the delayed one, codegen/driver.c): the voltage (V) and the external torque (Nm).
 SIM_U = ("V", "T_dist")
 # One row per sample, what the sample function reports (the CSV columns after ``time``, and the
 # saturation flag: 1 when the held voltage was clipped).
