@@ -40,7 +40,7 @@ from haa_sym.analysis.simulate import simulate
 from haa_sym.analysis.sweep import BLAS_THREADS, blas_limits
 from haa_sym.errors import ParameterError
 from haa_sym.loop import ClosedLoop, loop_first
-from haa_sym.loop.plant import continuous_plant
+from haa_sym.loop.plant import continuous_plant, with_lag
 from haa_sym.model.limits import Limits
 from haa_sym.model.params import gain_array
 
@@ -187,8 +187,10 @@ def _controller(loop: ClosedLoop, P: float, D: float, omega: np.ndarray):
 
 
 def _friction_input(loop: ClosedLoop, key: str):
-    """(input column of a torque on the body, velocity row) of the continuous plant for ``Fc_<body>``."""
-    cont = continuous_plant(loop.params.plant)
+    """(continuous plant, input column of a torque on the body, velocity row) for ``Fc_<body>``:
+    the plant behind the drive's lag (its states first, as in ``loop.plant``; the drive's delay
+    is applied by :func:`linear_part`)."""
+    cont = with_lag(continuous_plant(loop.params.plant, loop.backend), loop.params.drive.tau_drive)
     body = key[3:]
     names = cont.state_names
     if f"dtheta_{body}" not in names:
@@ -224,11 +226,13 @@ def linear_part(loop: ClosedLoop, P_gain: float, D_gain: float, key: str, omega)
     # the sampled-data loop's fundamental response to a torque f e^{j omega t} on the body: the
     # samples of the measurements are G_mf f + G_mV,d V (exactly, at z = exp(j omega Ts)), the
     # controller closes V = -K y, and the hold's fundamental (1 - e^{-j omega Ts})/(j omega Ts)
-    # carries V back into continuous time (the images at omega + k 2 pi/Ts are left out)
+    # carries V back into continuous time (the images at omega + k 2 pi/Ts are left out); the
+    # drive's dead time delays that held voltage by e^{-j omega delay_drive} (its lag is a state
+    # of cont, its delay line the last states of loop.plant, which the continuous plant lacks)
     cont, col, row = _friction_input(loop, key)
     Ts = loop.params.controller.Ts
-    C_m = loop.plant.C[[loop.plant_output(loop.torque_output), loop.plant_output("theta_encoder")]]
     n = cont.A.shape[0]
+    C_m = loop.plant.C[[loop.plant_output(loop.torque_output), loop.plant_output("theta_encoder")], :n]
     M = 1j * omega[:, None, None] * np.eye(n) - cont.A
     rhs = np.broadcast_to(np.stack([col, cont.B[:, cont.input_names.index("V_m")]], axis=1), (omega.size, n, 2))
     X = np.linalg.solve(M, rhs)                                   # (w, n, 2): columns f, V
@@ -238,6 +242,7 @@ def linear_part(loop: ClosedLoop, P_gain: float, D_gain: float, key: str, omega)
     V = -(K_T * G_mf[0] + K_th * G_mf[1]) / (1 + K_T * Gd[0, 0] + K_th * Gd[1, 0])
     x = omega * Ts
     hold = np.where(x > 0, -np.expm1(-1j * x) / np.where(x > 0, 1j * x, 1.0), 1.0)
+    hold = hold * np.exp(-1j * omega * loop.params.drive.delay_drive)
     # the friction torque is -n(v): G = (velocity per unit torque on the body)
     return G_vf + G_vV * hold * V
 
