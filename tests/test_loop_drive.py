@@ -269,3 +269,20 @@ def test_tune_designs_the_pi_against_the_drive(tmp_path, capsys):
     nominal = r["after"]["configurations"]["nominal"]
     pm = [v for k, v in nominal.items() if k.startswith("pm")][0]
     assert min(m.phase_margins_deg, key=abs) == pytest.approx(pm, abs=1e-6)
+
+
+def test_the_explorers_map_takes_the_drive_from_its_fields():
+    """The explorer's --set fields take the drive's keys (same parser as the CLI): its map is the
+    region map of the loop with the drive, its meta says so, and a bad value is the CLI's line."""
+    from haa_sym.errors import ParameterError
+    from haa_sym.explore.state import ViewState, compute_view
+    s = ViewState(sets=(("tau_drive", "0.003"), ("delay_drive", "0.00137")),
+                  P_gain="log:1:20000:20", D_gain="lin:1:50:6")
+    v = compute_view(s)
+    p = load_params(HYQ).with_values(tau_drive=0.003, delay_drive=0.00137)
+    m = region_map(ClosedLoop(p), v.P_gain, v.D_gain, progress=False)
+    np.testing.assert_array_equal(v.stable, m.stable)
+    assert (v.stable != compute_view(ViewState(P_gain=s.P_gain, D_gain=s.D_gain)).stable).any()
+    assert v.meta["params"]["drive"] == {"tau_drive": 0.003, "delay_drive": 0.00137}
+    with pytest.raises(ParameterError, match=r"--set tau_drive=x: 'x' is not a number"):
+        compute_view(ViewState(sets=(("tau_drive", "x"),)))
