@@ -52,7 +52,7 @@ def test_sampled_plant_equals_the_references_lifting(path, drive):
     """loop.plant (lag state + modified z-transform) == the reference's lag block + fast-rate
     lifting, for both inputs (the torque bypasses the drive) and every sensed output, from
     1 rad/s to Nyquist; the difference, normwise per channel, is the rounding of the lifting's
-    M = 100 (or 5) sub-step products (measured <= 3e-12)."""
+    M = 100 (or 5) sub-step products (measured <= 1.5e-11)."""
     p = _driven(path, drive)
     loop = ClosedLoop(p, basis=False)
     Ts = p.controller.Ts
@@ -74,15 +74,16 @@ def test_sampled_plant_equals_the_references_lifting(path, drive):
 def test_sampled_plant_is_the_continuous_one_times_the_drive_under_the_hold(drive):
     """The ZOH-sampled response of V_m -> theta_encoder equals the aliasing sum of the continuous
     plant times the drive, (1/Ts) sum_k G(j w_k) e^{-j w_k d} / (1 + j w_k tau) (1 - e^{-j w_k Ts})/(j w_k),
-    w_k = w + 2 pi k / Ts: no discretisation in it at all. The terms fall as |k|^-6 (the plant
-    to the angle is of relative degree 3, the lag and the hold add one each); |k| <= 4000 leaves
-    a tail below 1e-15 of the sum."""
+    w_k = w + 2 pi k / Ts: no discretisation in it at all. The terms fall fast (the plant to the
+    angle is of relative degree 3, the lag and the hold add one each): the sums over |k| <= 500
+    and <= 4000 agree to the last digits; the difference to the sampled plant, 1.2e-11 measured,
+    is the rounding of responses like 1/(z - 1) at 3 rad/s."""
     p = _driven(HYQ, drive)
     Ts, tau, d = p.controller.Ts, p.drive.tau_drive, p.drive.delay_drive
     cont = continuous_plant(p.plant)
     row, col = cont.C[cont.output_names.index("theta_encoder")], cont.B[:, 0]
     w = np.array([3.0, 30.0, 300.0, 1000.0, 2500.0])
-    k = np.arange(-4000, 4001)
+    k = np.arange(-1000, 1001)
     wk = w[:, None] + 2 * np.pi * k[None, :] / Ts
     s = 1j * wk.ravel()
     G = np.linalg.solve(s[:, None, None] * np.eye(cont.A.shape[0]) - cont.A,
@@ -90,7 +91,7 @@ def test_sampled_plant_is_the_continuous_one_times_the_drive_under_the_hold(driv
     terms = (G * np.exp(-s * d) / (1 + s * tau) * -np.expm1(-s * Ts) / s).reshape(wk.shape)
     expected = terms.sum(axis=1) / Ts
     got = ClosedLoop(p, basis=False).plant.frequency_response(w, outputs=("theta_encoder",), inputs=("V_m",))[0, 0]
-    np.testing.assert_allclose(got, expected, rtol=1e-9)
+    np.testing.assert_allclose(got, expected, rtol=1e-10)
     # the delay's phase is in it: the same sum without e^{-j w d} is another response
     assert np.abs(terms.sum(axis=1) / Ts - (terms * np.exp(s.reshape(wk.shape) * d)).sum(axis=1) / Ts).min() \
         > 1e-3 * np.abs(expected).min()
@@ -224,7 +225,7 @@ def test_regions_with_a_drive_file_and_with_set_are_the_same_map(tmp_path, capsy
     ["stability", "--P-gain", "300", "--D-gain", "5"],
     ["passivity", "--P-gain", "300", "--D-gain", "5"],
     ["margins", "--P-gain", "300", "--D-gain", "5"],
-    ["contact", "--P-gain", "300", "--D-gain", "5"],
+    pytest.param(["contact", "--P-gain", "300", "--D-gain", "5"], marks=pytest.mark.slow),   # ~3 s
     ["describe", "--P-gain", "300", "--D-gain", "5", "--limit", "Fc_m=0.05", "--no-confirm"],
 ], ids=lambda a: a[0])
 def test_linear_commands_see_the_drive(argv, capsys):
@@ -248,27 +249,25 @@ def test_a_delay_beyond_the_generated_capacity_is_refused_naming_the_drives_stat
     assert_refused(["regions", "--set", "tau_drive=-1", "--out", "m.npz"], ("tau_drive = -1", "allowed"))
 
 
+@pytest.mark.slow       # ~4 s: a small tuning search
 def test_tune_designs_the_pi_against_the_drive(tmp_path, capsys):
-    """The tuned PI of a file with a [drive] meets its targets on the loop with the drive (its
-    report's margins are those of ClosedLoop with the drive), differs from the PI tuned without
-    it, and the written file keeps the [drive] section."""
+    """The tuned PI of a file with a [drive] is judged on the loop with the drive (its report's
+    phase margin is that of ClosedLoop with the drive, not of the plant without it), and the
+    written file keeps the [drive] section."""
+    from haa_sym.analysis.torque import torque_loop_margins
     small = ["--n-lead", "2", "--n-integral", "3", "--rtol", "0.2", "--step-duration", "0.2"]
     f = _drive_file(tmp_path, HD, tau="3", delay="1.37")
     out, rep = tmp_path / "tuned.toml", tmp_path / "tune.json"
     assert main(["tune", "--params", str(f), "--out", str(out), "--report", str(rep), *small]) == 0
-    out0, rep0 = tmp_path / "tuned0.toml", tmp_path / "tune0.json"
-    assert main(["tune", "--params", str(HD), "--out", str(out0), "--report", str(rep0), *small]) == 0
     capsys.readouterr()
     tuned = load_params(out)
     assert tuned.drive == load_params(f).drive and tuned.drive.active
-    r, r0 = json.loads(rep.read_text()), json.loads(rep0.read_text())
-    assert (r["after"]["P_t0_V_per_Nm"], r["after"]["I_t0_V_per_Nm_s"]) != \
-        (r0["after"]["P_t0_V_per_Nm"], r0["after"]["I_t0_V_per_Nm_s"])
-    from haa_sym.analysis.torque import torque_loop_margins
-    m = torque_loop_margins(ClosedLoop(tuned))
-    nominal = r["after"]["configurations"]["nominal"]
+    nominal = json.loads(rep.read_text())["after"]["configurations"]["nominal"]
     pm = [v for k, v in nominal.items() if k.startswith("pm")][0]
-    assert min(m.phase_margins_deg, key=abs) == pytest.approx(pm, abs=1e-6)
+    with_drive = torque_loop_margins(ClosedLoop(tuned)).phase_margins_deg
+    without = torque_loop_margins(ClosedLoop(tuned.with_values(tau_drive=0.0, delay_drive=0.0))).phase_margins_deg
+    assert min(with_drive, key=abs) == pytest.approx(pm, abs=1e-6)
+    assert abs(min(without, key=abs) - pm) > 1.0
 
 
 def test_the_explorers_map_takes_the_drive_from_its_fields():
@@ -286,3 +285,18 @@ def test_the_explorers_map_takes_the_drive_from_its_fields():
     assert v.meta["params"]["drive"] == {"tau_drive": 0.003, "delay_drive": 0.00137}
     with pytest.raises(ParameterError, match=r"--set tau_drive=x: 'x' is not a number"):
         compute_view(ViewState(sets=(("tau_drive", "x"),)))
+
+
+def test_the_reference_refuses_a_delay_it_cannot_lift_exactly():
+    """A delay on no sub-step grid Ts/M (M <= 1000) is refused by name, not approximated."""
+    from haa_sym.errors import ParameterError
+    p = load_params(HYQ).with_values(delay_drive=1.2345678e-3)
+    with pytest.raises(ParameterError, match=r"delay_drive = 0.0012345678 s: the independent reference"):
+        ref.plant_matrices(p)
+    A = ref.plant_matrices(load_params(HYQ).with_values(delay_drive=1.234e-3))[0]   # 1234 Ts/1000
+    assert A.shape == ClosedLoop(load_params(HYQ).with_values(delay_drive=1.234e-3), basis=False).plant.Phi.shape
+
+
+def test_reproduce_refuses_a_delay_its_cross_check_cannot_build_before_any_work(assert_refused):
+    assert_refused(["reproduce", "--quick", "--set", "delay_drive=0.0012345678", "--out", "rep"],
+                   ("delay_drive = 0.0012345678 s: the independent reference", "Ts/1000"))

@@ -37,6 +37,7 @@ import math
 import numpy as np
 import scipy.linalg
 
+from haa_sym.errors import ParameterError
 from haa_sym.loop.plant import continuous_plant
 from haa_sym.model.actuator import CURRENT, ROTOR, Topology
 
@@ -92,12 +93,20 @@ MAX_SUBSTEPS = 1000
 
 def _substeps(delay: float, Ts: float) -> tuple[int, int]:
     """``(M, D)``: the fewest sub-steps M <= MAX_SUBSTEPS of Ts with ``delay = D Ts / M`` exactly
-    (within 1e-9 of a sub-step); ValueError when no such M exists."""
+    (within 1e-9 of a sub-step).
+
+    Raises
+    ------
+    ParameterError
+        No such M: the reference (and so a cross-check) cannot build this delay exactly.
+    """
     from fractions import Fraction
     q = Fraction(delay / Ts).limit_denominator(MAX_SUBSTEPS)
     if abs(float(q) - delay / Ts) > 1e-9 * max(1.0, delay / Ts):
-        raise ValueError(f"delay_drive = {delay!r} s is not a multiple of Ts/M for any M <= {MAX_SUBSTEPS} "
-                         f"(Ts = {Ts!r} s); the reference lifts the delay on such a sub-step grid")
+        raise ParameterError(
+            f"delay_drive = {delay!r} s: the independent reference lifts the drive's delay on sub-steps "
+            f"Ts/M (Ts = {Ts!r} s), and this delay is no whole number of them for any M <= {MAX_SUBSTEPS}; "
+            f"allowed for a cross-check: a multiple of Ts/{MAX_SUBSTEPS} (the analyses themselves take any delay)")
     return q.denominator, q.numerator
 
 
