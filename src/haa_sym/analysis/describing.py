@@ -187,9 +187,10 @@ def _controller(loop: ClosedLoop, P: float, D: float, omega: np.ndarray):
 
 
 def _friction_input(loop: ClosedLoop, key: str):
-    """(input column of a torque on the body, velocity row) of the continuous plant for ``Fc_<body>``
-    (behind the drive's lag, :func:`haa_sym.loop.plant.with_lag`, as the loop's sampled plant)."""
-    cont = with_lag(continuous_plant(loop.params.plant), loop.params.drive.tau_drive)
+    """(continuous plant, input column of a torque on the body, velocity row) for ``Fc_<body>``:
+    the plant behind the drive's lag (its states first, as in ``loop.plant``; the drive's delay
+    is applied by :func:`linear_part`)."""
+    cont = with_lag(continuous_plant(loop.params.plant, loop.backend), loop.params.drive.tau_drive)
     body = key[3:]
     names = cont.state_names
     if f"dtheta_{body}" not in names:
@@ -226,8 +227,8 @@ def linear_part(loop: ClosedLoop, P_gain: float, D_gain: float, key: str, omega)
     # samples of the measurements are G_mf f + G_mV,d V (exactly, at z = exp(j omega Ts)), the
     # controller closes V = -K y, and the hold's fundamental (1 - e^{-j omega Ts})/(j omega Ts)
     # carries V back into continuous time (the images at omega + k 2 pi/Ts are left out); the
-    # drive's dead time delays the held command by e^{-j omega delay_drive}, its lag is a state of
-    # cont (the sampled plant's extra states, the delay line, are not driven by the torque)
+    # drive's dead time delays that held voltage by e^{-j omega delay_drive} (its lag is a state
+    # of cont, its delay line the last states of loop.plant, which the continuous plant lacks)
     cont, col, row = _friction_input(loop, key)
     Ts = loop.params.controller.Ts
     n = cont.A.shape[0]
@@ -240,8 +241,8 @@ def linear_part(loop: ClosedLoop, P_gain: float, D_gain: float, key: str, omega)
     Gd = loop.plant.frequency_response(omega, outputs=(loop.torque_output, "theta_encoder"), inputs=("V_m",))
     V = -(K_T * G_mf[0] + K_th * G_mf[1]) / (1 + K_T * Gd[0, 0] + K_th * Gd[1, 0])
     x = omega * Ts
-    hold = np.where(x > 0, -np.expm1(-1j * x) / np.where(x > 0, 1j * x, 1.0), 1.0) \
-        * np.exp(-1j * omega * loop.params.drive.delay_drive)
+    hold = np.where(x > 0, -np.expm1(-1j * x) / np.where(x > 0, 1j * x, 1.0), 1.0)
+    hold = hold * np.exp(-1j * omega * loop.params.drive.delay_drive)
     # the friction torque is -n(v): G = (velocity per unit torque on the body)
     return G_vf + G_vV * hold * V
 

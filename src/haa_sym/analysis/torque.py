@@ -407,6 +407,7 @@ def p1_roots(params: Params) -> np.ndarray:
     the symbolic rows of ``python -m haa_sym.check.verify``. For another topology: the zeros of
     V_m -> T_sensor without the sensor coupling's own zero -K/D (p1 is the paper's, HyQ's, name;
     with the torque from the current, ``[sensors] torque = "current"``, all zeros of V_m -> T_sensor).
+    The plant's alone: the drive (``[drive]``) adds a pole (its lag) and a dead time, no zero.
 
     Example
     -------

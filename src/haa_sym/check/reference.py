@@ -9,7 +9,10 @@ options alone, with its own algebra:
   thing it shares with the evaluators; the tests check that against an independent assembly of
   the equations of motion), sampled by ``scipy.signal.cont2discrete(..., "zoh")``; the rows of
   the rotor-side sensors of a chain (the current estimate k_t N I_m, the motor-side encoder
-  theta_m / N) are assembled here from the state names, not read from the plant function;
+  theta_m / N) are assembled here from the state names, not read from the plant function; the
+  drive (``[drive]``: lag and dead time on the command) by its own construction, a lag block in
+  series and a fast-rate lifting of the delay on a sub-step grid (:func:`_drive_plant`), not by
+  :mod:`haa_sym.loop.plant`'s lag state and modified z-transform;
 * the velocity estimate (its own table :data:`VELOCITY_ESTIMATES`, keyed by the names of the
   registry :mod:`haa_sym.model.filters`): the average as an FIR filter; the low-pass filters as the
   backward difference followed by the analog prototype w_c/(s + w_c) or
@@ -34,10 +37,11 @@ import math
 import numpy as np
 import scipy.linalg
 
+from haa_sym.errors import ParameterError
 from haa_sym.loop.plant import continuous_plant
 from haa_sym.model.actuator import CURRENT, ROTOR, Topology
 
-__all__ = ["closed_loop_matrices", "closed_loop_eigenvalues", "spectral_radius", "frequency_response",
+__all__ = ["closed_loop_matrices", "plant_matrices", "closed_loop_eigenvalues", "spectral_radius", "frequency_response",
            "VELOCITY_ESTIMATES", "register_velocity_estimate"]
 
 
@@ -60,15 +64,101 @@ def _own_output_row(plant, cont, name):
 
 
 def _zoh_plant(params, outputs):
+    """The sampled plant as the reference builds it: ``(A, B, C, D)`` at Ts, inputs ``[V_m,
+    T_dist]``, the rows ``outputs``; with the drive of ``params.drive`` when it has one
+    (:func:`_drive_plant`)."""
     # scipy.signal takes about 0.7 s to import (docs/startup.md): only the cross-check pays it
     from scipy.signal import cont2discrete
     cont = continuous_plant(params.plant)
     C = np.array([cont.C[cont.output_names.index(o)] if (own := _own_output_row(params.plant, cont, o)) is None
                   else own for o in outputs])
     B = cont.B[:, [0, 2]]                                # V_m, T_dist
+    drive = params.drive
+    if drive.tau_drive > 0 or drive.delay_drive > 0:
+        return _drive_plant(cont.A, B, C, params.controller.Ts, drive.tau_drive, drive.delay_drive)
     Ad, Bd, Cd, Dd, _ = cont2discrete((cont.A, B, C, np.zeros((len(outputs), 2))),
                                       params.controller.Ts, method="zoh")
     return Ad, Bd, Cd, Dd
+
+
+def plant_matrices(params, outputs=("T_sensor", "theta_encoder")):
+    """The reference's sampled plant ``(A, B, C, D)`` (inputs ``[V_m, T_dist]``, rows
+    ``outputs``), drive included: what the tests compare ``ClosedLoop.plant`` with."""
+    return _zoh_plant(params, list(outputs))
+
+
+#: The largest number of sub-steps per sample the reference lifts a drive's delay on.
+MAX_SUBSTEPS = 1000
+
+
+def _substeps(delay: float, Ts: float) -> tuple[int, int]:
+    """``(M, D)``: the fewest sub-steps M <= MAX_SUBSTEPS of Ts with ``delay = D Ts / M`` exactly
+    (within 1e-9 of a sub-step).
+
+    Raises
+    ------
+    ParameterError
+        No such M: the reference (and so a cross-check) cannot build this delay exactly.
+    """
+    from fractions import Fraction
+    q = Fraction(delay / Ts).limit_denominator(MAX_SUBSTEPS)
+    if abs(float(q) - delay / Ts) > 1e-9 * max(1.0, delay / Ts):
+        raise ParameterError(
+            f"delay_drive = {delay!r} s: the independent reference lifts the drive's delay on sub-steps "
+            f"Ts/M (Ts = {Ts!r} s), and this delay is no whole number of them for any M <= {MAX_SUBSTEPS}; "
+            f"allowed for a cross-check: a multiple of Ts/{MAX_SUBSTEPS} (the analyses themselves take any delay)")
+    return q.denominator, q.numerator
+
+
+def _drive_plant(A, B, C, Ts, tau, delay):
+    """The sampled plant behind the drive, by fast-rate lifting (independent of
+    :mod:`haa_sym.loop.plant`'s lag state and modified z-transform).
+
+    1. The lag 1/(tau s + 1) is a block of its own (``scipy.signal.tf2ss``) connected in series
+       in front of the plant's command input (column 0 of ``B``); the torque input (column 1)
+       bypasses it.
+    2. The sample Ts is cut into M sub-steps h = Ts/M, M the fewest with the delay a whole
+       number D of sub-steps (:func:`_substeps`: 137 of Ts/100 for 1.37 Ts, 2 of Ts/5 for
+       0.4 Ts). The series system is sampled at h by ``scipy.signal.cont2discrete(..., "zoh")``.
+    3. Over one sample k the drive's output at sub-step i is the command of the sample that was
+       held D sub-steps earlier: ``u[k - q]``, q = ceil((D - i)/M) (0: the current command).
+       The M sub-steps are stepped one by one, each a linear map of the sample's start state,
+       the held past commands u[k-1] .. u[k-L] (L = ceil(D/M)) and the inputs (u[k], T_dist[k]);
+       their product is the sampled plant with the past commands as states (a shift register).
+
+    Exact (no approximation) for a delay on the sub-step grid; the rounding of M products is
+    what separates it from the modified z-transform (about 1e-13 measured, tests/test_loop_drive.py).
+    """
+    from scipy.signal import cont2discrete, tf2ss
+    n, m = B.shape
+    if tau > 0:
+        a_l, b_l, c_l, d_l = tf2ss([1.0], [tau, 1.0])
+        k = a_l.shape[0]
+        A = np.block([[A, B[:, :1] @ c_l], [np.zeros((k, n)), a_l]])
+        B = np.vstack([np.hstack([B[:, :1] @ d_l, B[:, 1:]]), np.hstack([b_l, np.zeros((k, m - 1))])])
+        C = np.hstack([C, np.zeros((C.shape[0], k))])
+        n += k
+    M, D = _substeps(delay, Ts) if delay > 0 else (1, 0)
+    Ad, Bd, *_ = cont2discrete((A, B, C, np.zeros((C.shape[0], m))), Ts / M, method="zoh")
+    L = -(-D // M)
+    # a row of the sub-step state over [x (n), u[k-1] .. u[k-L] (L), u[k], T_dist[k]]
+    width = n + L + m
+    X = np.zeros((n, width))
+    X[:, :n] = np.eye(n)
+    for i in range(M):
+        q = -(-(D - i) // M) if i < D else 0
+        col = n + q - 1 if q else n + L                  # the held command the drive gives now
+        U = np.zeros((m, width))
+        U[0, col] = 1.0
+        U[1:, n + L + 1:] = np.eye(m - 1)
+        X = Ad @ X + Bd @ U
+    Phi = np.zeros((n + L, n + L))
+    Gam = np.zeros((n + L, m))
+    Phi[:n], Gam[:n] = X[:, :n + L], X[:, n + L:]
+    if L:
+        Gam[n, 0] = 1.0                                  # u[k-1] at k+1 is u[k]
+        Phi[n + 1:, n:n + L - 1] = np.eye(L - 1)         # the rest shift by one sample
+    return Phi, Gam, np.hstack([C, np.zeros((C.shape[0], L))]), np.zeros((C.shape[0], m))
 
 
 def _vc0(plant) -> float:

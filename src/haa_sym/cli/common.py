@@ -21,6 +21,7 @@ from haa_sym.loop import ClosedLoop, LoopOptions
 from haa_sym.loop.options import parse_options
 from haa_sym.model import filters
 from haa_sym.model.motor import motor_constants_warning
+from haa_sym.model.drive import DRIVE_KEYS, DRIVE_UNITS
 from haa_sym.model.params import (CONTROLLER_KEYS, CONTROLLER_UNITS, actuator_path, apply_sets,
                                   load_params, parse_set)
 
@@ -69,7 +70,7 @@ def _params(args, params=None):
     """The parameters of the command: the file's (``params``, default :func:`_loaded`) with
     ``--set`` applied."""
     params = _loaded(args) if params is None else params
-    sets = _parse_set(args.set, tuple(params.plant.topology.parameter_keys) + CONTROLLER_KEYS)
+    sets = _parse_set(args.set, tuple(params.plant.topology.parameter_keys) + CONTROLLER_KEYS + DRIVE_KEYS)
     params = apply_sets(params, sets)
     _warn_motor_constants(args, params)
     return params
@@ -161,8 +162,9 @@ def figure_title(loop, file_params, configuration: str | None = None, user_title
     name = str(params.about.get("name") or Path(params.source).stem)
     head = name + (f", {configuration} configuration" if configuration else "")
     now, base = params.to_dict(), file_params.to_dict()
-    units = {**params.plant.topology.units, **CONTROLLER_UNITS}
-    sets = {**differences(now["plant"], base["plant"]), **differences(now["controller"], base["controller"])}
+    units = {**params.plant.topology.units, **CONTROLLER_UNITS, **DRIVE_UNITS}
+    sets = {**differences(now["plant"], base["plant"]), **differences(now["controller"], base["controller"]),
+            **differences(now["drive"], base["drive"])}
     opts = differences(loop.options.to_dict(), LoopOptions().resolved(params.plant.topology).to_dict())
     said = ", ".join(_value(k, v, units) for k, v in sets.items())
     if opts:

@@ -46,6 +46,7 @@ from haa_sym.io.inputs import read_text
 from haa_sym.loop import ClosedLoop
 from haa_sym.loop.options import parse_options
 from haa_sym.loop.statespace import closed_loop_eigenvalues
+from haa_sym.model.drive import DRIVE_KEYS
 from haa_sym.model.params import (CONTROLLER_KEYS, actuator_path, apply_sets, gain_array, load_params,
                                   parse_set)
 
@@ -251,7 +252,7 @@ def _loop(model_key: tuple):
     if blend_to:
         params = _blend(params, load_params(actuator_path(name or None, "--params")), configuration, blend_to,
                         blend)
-    known = tuple(params.plant.topology.parameter_keys) + CONTROLLER_KEYS
+    known = tuple(params.plant.topology.parameter_keys) + CONTROLLER_KEYS + DRIVE_KEYS
     params = apply_sets(params, parse_set([f"{k}={v}" for k, v in sets], known))
     loop = ClosedLoop(params, parse_options([f"{k}={v}" for k, v in options]))
     return file_params, params, loop

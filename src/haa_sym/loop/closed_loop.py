@@ -213,12 +213,15 @@ class ClosedLoop:
         """Refuse a loop whose order exceeds the largest generated capacity, from counts alone.
 
         The order is at least the plant's states (3 for the motor and 2 per body of the chain)
-        + 1 (the PI's integrator) + ``delay`` + the velocity filter's order; the exact order
-        (after the filters' common denominator) is checked again once they are built.
+        + the drive's (:func:`haa_sym.loop.plant.drive_states`: 1 for a lag, one per held
+        command of the delay line) + 1 (the PI's integrator) + ``delay`` + the velocity filter's
+        order; the exact order (after the filters' common denominator) is checked again once they
+        are built. The plant and the filter are judged first, without the drive, so that each
+        message names what to change.
         """
         top, ctrl, d = params.plant.topology, params.controller, self.options.structure.delay
         cap = max(capacities)
-        n_x = len(top.state_names) + drive_states(params.drive, ctrl.Ts)
+        n_x = len(top.state_names)
         n_f = filters.controller_filter_order(ctrl)
         if n_x + 1 + d + 1 > cap:       # even the smallest filter (order 1) does not fit
             bodies = (cap - 1 - d - 1 - 3) // 2
@@ -240,6 +243,19 @@ class ClosedLoop:
                 f"of {params.source}, above the largest generated capacity {cap}; allowed: {allowed} "
                 f"(with delay = {d}; a larger capacity needs CAPACITIES in codegen/generate.py of a "
                 "source tree and `make derive`)")
+        drive = params.drive
+        n_d = drive_states(drive, ctrl.Ts)
+        if n_x + n_d + 1 + d + n_f > cap:
+            lag = int(drive.tau_drive > 0)
+            room = cap - n_x - 1 - d - n_f - lag          # held commands that still fit
+            raise ParameterError(
+                f"delay_drive = {drive.delay_drive!r} s: the drive adds {n_d} states to the sampled plant "
+                f"({'1 of the lag tau_drive, ' if lag else ''}{n_d - lag} held commands of the delay line at "
+                f"Ts = {ctrl.Ts!r} s), a closed loop of order {n_x + n_d + 1 + d + n_f} with the {n_x} plant "
+                f"states of {params.source} and the velocity filter's {n_f}, above the largest generated "
+                f"capacity {cap}; allowed: delay_drive <= {room * ctrl.Ts:g} s ({room} samples; with "
+                f"delay = {d}; a larger capacity needs CAPACITIES in codegen/generate.py of a source tree "
+                "and `make derive`)")
 
     # --- the characteristic polynomial -------------------------------------------------------
     def plant_output(self, name: str) -> int:

@@ -41,6 +41,7 @@ from haa_sym.analysis.regions import region_map
 from haa_sym.analysis.sweep import CHUNK
 from haa_sym.analysis.torque import (p1_roots, step_response, torque_bandwidth, torque_bandwidth_map,
                                      torque_loop_margins)
+from haa_sym.check import reference
 from haa_sym.check.crosscheck import eigenvalue_crosscheck
 from haa_sym.design.schedule import schedule
 from haa_sym.io.budget import check_memory, sweep_bytes
@@ -516,6 +517,8 @@ def reproduce(out: str | Path = "results", params: Params | None = None,
     options = (options or LoopOptions()).resolved(params.plant.topology)
     spec = spec or paper_spec()
     check_params(params, spec)           # the paper's configurations and keys, before any work
+    if params.drive.delay_drive:         # the maps' cross-check builds the drive's delay exactly, or refuses
+        reference.plant_matrices(params)
     reg = spec["regions"]
     out = check_directory(out, field, _replaceable)
     P_grid = grid("log:1:20000:40" if quick else reg["P_gain"], "P_gain")
