@@ -21,6 +21,7 @@ LAYERS = (
     ("haa_sym.analysis",),
     ("haa_sym.fit",),
     ("haa_sym.design",),
+    ("haa_sym.robot",),
     ("haa_sym.explore",),
     ("haa_sym.check",),
     ("haa_sym.paper",),
