@@ -313,16 +313,30 @@ def simulate(s: Sampled, u: np.ndarray, sensitivities: bool = True):
 # Between two stamps every input is constant (the ZOH of the log: u[k] over [t_k, t_k+1), the
 # delayed command switching at t_j + delay_drive inside an interval), so the exact solution over a
 # sub-interval of length h is x+ = e^{A h} x + int_0^h e^{A s} ds B u. In A's eigenbasis
-# (A = V diag(lam) V^-1) each mode is a first-order recursion z+ = e^{lam h} z + phi1(lam, h) beta u
+# (A = V diag(lam) V^-1) each mode is a first-order recursion z+ = e^{lam h} z + e_h[lam, 0] beta u
 # with a coefficient per interval, which LAPACK's band solver runs as it does for a uniform log
-# (ztbtrs takes a subdiagonal per column). The derivatives of e^{X h}, X = [[A, B], [0, 0]], are
-# the Daleckii-Krein divided differences in X's eigenbasis: exact, vectorised over every interval.
-# X is diagonalisable when A is (distinct modes) and invertible (no integrator): then its
-# eigenvectors for the m zero eigenvalues are [-A^-1 B; I].
+# (ztbtrs takes a subdiagonal per column); e_h[.] are the divided differences of lam -> e^{lam h}
+# (e_h[lam, 0] = (e^{lam h} - 1) / lam = h at lam = 0).
+#
+# The derivatives are taken in A's eigenbasis only (Daleckii-Krein), with F = V^-1 dA V and
+# H = V^-1 dB: d e^{A h} = V (F o E1) V^-1 with E1_ab = e_h[lam_a, lam_b], and
+# d int_0^h e^{A s} ds B = V ((F o E2) beta + diag(e_h[lam, 0]) H) with E2_ab = e_h[lam_a, lam_b, 0]
+# (int_0^h e_s[a, b] ds = e_h[a, b, 0]: the second divided difference on a, b and the input's 0).
+# Why A's basis and not that of X = [[A, B], [0, 0]] (Van Loan's block, whose Daleckii-Krein form
+# needs only first differences): X is defective as soon as A has a mode at s = 0 (a free link, a
+# free rotor driven in current: the input's zero eigenvalue meets the integrator's), while A itself
+# stays diagonalisable; the second differences carry the confluent limits (a = b, a = 0, a = b = 0)
+# exactly, so an integrator costs nothing. What remains refused is a nearly defective A (close
+# modes whose eigenvectors nearly coincide): the modal coordinates lose cond(V) digits.
 
 #: Largest condition number of A's eigenvector matrix the per-interval simulation accepts: a
 #: nearly defective A loses that many digits in the modal coordinates.
 EIGENVECTOR_CONDITION = 1e8
+
+#: Below this |lam h| both nodes of a second divided difference are summed by their Taylor series
+#: (:func:`_divided2`); the terms fall as (k + 1) 0.5^k / (k + 2)!, 16 of them reach 1e-18.
+_TAYLOR_RADIUS = 0.5
+_TAYLOR_TERMS = 16
 
 
 def _divided(la: np.ndarray, lb: np.ndarray, h: np.ndarray) -> np.ndarray:
@@ -339,6 +353,34 @@ def _divided(la: np.ndarray, lb: np.ndarray, h: np.ndarray) -> np.ndarray:
     return np.where(small, near, far)
 
 
+def _divided2(la: np.ndarray, lb: np.ndarray, h: np.ndarray) -> np.ndarray:
+    """e_h[la, lb, 0]: the second divided difference of lam -> e^{lam h} on la, lb and 0 (s^2),
+    broadcast, with every confluent limit (h^2 / 2 at la = lb = 0).
+
+    Where |la h| and |lb h| are both below :data:`_TAYLOR_RADIUS`, the series
+    h^2 sum_k h_k(la h, lb h) / (k + 2)! with h_k = sum_{i <= k} x^i y^(k-i) (the complete
+    symmetric polynomials of the nodes; nothing cancels there). Elsewhere the recurrence
+    e[o, b, 0] = (e[o, b] - e[o, 0]) / b divided by the node b of larger modulus (|b h| >= the
+    radius, so the quotient amplifies rounding by at most 1 / radius), its two first differences
+    from :func:`_divided`, which is stable for close or equal nodes.
+    """
+    la, lb, h = np.broadcast_arrays(np.asarray(la, complex), np.asarray(lb, complex), np.asarray(h, float))
+    x, y = la * h, lb * h
+    far = np.maximum(np.abs(x), np.abs(y)) >= _TAYLOR_RADIUS
+    xs, ys = np.where(far, 0.0, x), np.where(far, 0.0, y)
+    hk, yk, total, fact = np.ones_like(xs), np.ones_like(xs), np.full_like(xs, 0.5), 2.0
+    for k in range(1, _TAYLOR_TERMS):
+        yk = yk * ys
+        hk = xs * hk + yk
+        fact *= k + 2
+        total = total + hk / fact
+    swap = np.abs(x) < np.abs(y)
+    big, other = np.where(swap, lb, la), np.where(swap, la, lb)
+    with np.errstate(over="ignore", invalid="ignore", divide="ignore", under="ignore"):
+        rec = (_divided(other, big, h) - _divided(other, 0.0, h)) / np.where(far, big, 1.0)
+    return np.where(far, rec, h * h * total)
+
+
 def _recursion(a: np.ndarray, rhs: np.ndarray) -> np.ndarray:
     """xi[0] = rhs[0], xi[i+1] = a[i] xi[i] + rhs[i+1] along the last axis (a (N-1,), rhs
     (..., N)): the lower bidiagonal system with -a[i] in column i, solved by ``ztbtrs``."""
@@ -352,15 +394,14 @@ def _recursion(a: np.ndarray, rhs: np.ndarray) -> np.ndarray:
 
 
 def modal_check(A: np.ndarray, what: str = "the model") -> None:
-    """Refuse (one line) a model the per-interval simulation cannot take: an integrator or a nearly
-    defective A (see the comment above :data:`EIGENVECTOR_CONDITION`)."""
-    lam, V = np.linalg.eig(A)
-    big = max(np.abs(lam).max(), 1e-300)
-    if np.abs(lam).min() <= 1e-12 * big or np.linalg.cond(V) > EIGENVECTOR_CONDITION:
-        raise ParameterError(f"{what}: a mode at s = 0 or coinciding modes (the per-interval simulation of a "
-                             "jittered, windowed, segmented or delayed log needs distinct, nonzero modes); "
-                             "allowed: a uniform log from rest without delay_drive, or a model with its output "
-                             "tied (a spring or stiffness to ground)")
+    """Refuse (one line) a model the per-interval simulation cannot take: a nearly defective A
+    (see the comment above :data:`EIGENVECTOR_CONDITION`); modes at s = 0 are exact."""
+    cond = float(np.linalg.cond(np.linalg.eig(A)[1]))
+    if not cond <= EIGENVECTOR_CONDITION:
+        raise ParameterError(f"{what}: coinciding modes (A's eigenvector matrix has condition number {cond:.3g} > "
+                             f"{EIGENVECTOR_CONDITION:.0e}: nearly defective), which the per-interval simulation of a "
+                             "jittered, windowed, segmented or delayed log cannot take exactly; allowed: a uniform "
+                             "log from rest without delay_drive, or parameters whose modes are distinct")
 
 
 def simulate_stamps(model: PlantModel, t: np.ndarray, u: np.ndarray, *, delay: float = 0.0,
@@ -451,12 +492,12 @@ def simulate_stamps(model: PlantModel, t: np.ndarray, u: np.ndarray, *, delay: f
     if not sensitivities:
         return ys, None, rank
     p = model.dA.shape[0]
-    AiB = np.linalg.solve(A, B)
     F = Vi @ model.dA @ V                                             # (p, n, n)
-    H = Vi @ (model.dB - model.dA @ AiB)                              # (p, n, m)
-    wz = z[:-1] + bu[:-1] / lam                                       # X's modal coordinates of [x; u]
-    K = _divided(lam[None, :, None], lam[None, None, :], h[:, None, None])     # (G-1, n, n)
-    r = np.einsum("iab,jab,ib->jia", K, F, wz) + phi[None] * np.einsum("jam,im->jia", H, ug[:-1])
+    H = Vi @ model.dB                                                 # (p, n, m)
+    la, lb, hh = lam[None, :, None], lam[None, None, :], h[:, None, None]
+    # d x+ = (F o E1) z + (F o E2) beta u + diag(e_h[lam, 0]) H u (the comment above EIGENVECTOR_CONDITION)
+    W = _divided(la, lb, hh) * z[:-1, None, :] + _divided2(la, lb, hh) * bu[:-1, None, :]   # (G-1, n, n)
+    r = np.einsum("iab,jab->jia", W, F) + phi[None] * np.einsum("jam,im->jia", H, ug[:-1])
     rhs = np.zeros((p, G, n), complex)
     rhs[:, 1:] = np.where(link[None, :, None], r, 0.0)
     sz = np.stack([_recursion(a[:, i], rhs[:, :, i]) for i in range(n)], axis=2)   # (p, G, n)
