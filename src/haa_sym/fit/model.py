@@ -334,51 +334,68 @@ def simulate(s: Sampled, u: np.ndarray, sensitivities: bool = True):
 EIGENVECTOR_CONDITION = 1e8
 
 #: Below this |lam h| both nodes of a second divided difference are summed by their Taylor series
-#: (:func:`_divided2`); the terms fall as (k + 1) 0.5^k / (k + 2)!, 16 of them reach 1e-18.
-_TAYLOR_RADIUS = 0.5
-_TAYLOR_TERMS = 16
+#: (:func:`_divided2`); the terms fall as (k + 1) 0.1^k / (k + 2)!, 10 of them reach 1e-18.
+_TAYLOR_RADIUS = 0.1
+_TAYLOR_TERMS = 10
 
 
 def _divided(la: np.ndarray, lb: np.ndarray, h: np.ndarray) -> np.ndarray:
     """(e^{la h} - e^{lb h}) / (la - lb) (h e^{la h} when equal), broadcast; stable for close
     la, lb: h e^{(la+lb) h/2} sinh(x)/x with x = (la - lb) h / 2, the direct quotient when |x| is
-    large (where the exponentials differ enough that nothing cancels)."""
+    large (where the exponentials differ enough that nothing cancels). The exponentials are taken
+    before broadcasting (per node and interval, not per pair) and the close form only where it is
+    used: the pairs of modes over every interval are the simulation's largest arrays."""
+    la, lb, h = (np.asarray(v) for v in (la, lb, h))
     x = 0.5 * (la - lb) * h
     with np.errstate(over="ignore", invalid="ignore", divide="ignore", under="ignore"):
         small = np.abs(x) < 0.5
-        xs = np.where(small, x, 0.5)
-        sinhc = np.where(xs == 0, 1.0, np.sinh(xs) / xs)
-        near = h * np.exp(0.5 * (la + lb) * h) * sinhc
-        far = (np.exp(la * h) - np.exp(lb * h)) / np.where(small, 1.0, la - lb)
-    return np.where(small, near, far)
+        out = (np.exp(la * h) - np.exp(lb * h)) / np.where(small, 1.0, la - lb)
+        if small.any():
+            xs = np.broadcast_to(x, small.shape)[small]
+            hs = np.broadcast_to(h, small.shape)[small]
+            ms = np.broadcast_to(0.5 * (la + lb) * h, small.shape)[small]
+            sinhc = np.where(xs == 0, 1.0, np.sinh(xs) / np.where(xs == 0, 1.0, xs))
+            out = np.array(np.broadcast_to(out, small.shape), dtype=np.result_type(out, sinhc, ms))
+            out[small] = hs * np.exp(ms) * sinhc
+    return out
 
 
-def _divided2(la: np.ndarray, lb: np.ndarray, h: np.ndarray) -> np.ndarray:
+def _divided2(la, lb, h, e_ab=None, e_a0=None, e_b0=None) -> np.ndarray:
     """e_h[la, lb, 0]: the second divided difference of lam -> e^{lam h} on la, lb and 0 (s^2),
     broadcast, with every confluent limit (h^2 / 2 at la = lb = 0).
 
     Where |la h| and |lb h| are both below :data:`_TAYLOR_RADIUS`, the series
     h^2 sum_k h_k(la h, lb h) / (k + 2)! with h_k = sum_{i <= k} x^i y^(k-i) (the complete
-    symmetric polynomials of the nodes; nothing cancels there). Elsewhere the recurrence
-    e[o, b, 0] = (e[o, b] - e[o, 0]) / b divided by the node b of larger modulus (|b h| >= the
-    radius, so the quotient amplifies rounding by at most 1 / radius), its two first differences
-    from :func:`_divided`, which is stable for close or equal nodes.
+    symmetric polynomials of the nodes; nothing cancels there), on those entries only. Elsewhere
+    the recurrence e[o, b, 0] = (e[o, b] - e[o, 0]) / b, divided by the node b of larger modulus
+    (|b h| >= the radius, so the quotient amplifies rounding by at most 1 / radius = 10), its
+    first differences from :func:`_divided` (stable for close or equal nodes) or given: ``e_ab``
+    = e_h[la, lb], ``e_a0`` = e_h[la, 0], ``e_b0`` = e_h[lb, 0], broadcastable (the simulation has
+    them already, and the pairs of modes over every interval are its largest arrays).
     """
-    la, lb, h = np.broadcast_arrays(np.asarray(la, complex), np.asarray(lb, complex), np.asarray(h, float))
+    la, lb, h = (np.asarray(v) for v in (la, lb, h))
     x, y = la * h, lb * h
-    far = np.maximum(np.abs(x), np.abs(y)) >= _TAYLOR_RADIUS
-    xs, ys = np.where(far, 0.0, x), np.where(far, 0.0, y)
-    hk, yk, total, fact = np.ones_like(xs), np.ones_like(xs), np.full_like(xs, 0.5), 2.0
-    for k in range(1, _TAYLOR_TERMS):
-        yk = yk * ys
-        hk = xs * hk + yk
-        fact *= k + 2
-        total = total + hk / fact
     swap = np.abs(x) < np.abs(y)
-    big, other = np.where(swap, lb, la), np.where(swap, la, lb)
+    big = np.where(swap, lb, la)
+    far = np.abs(big * h) >= _TAYLOR_RADIUS
+    e_ab = _divided(la, lb, h) if e_ab is None else e_ab
+    e_o0 = np.where(swap, _divided(la, 0.0, h) if e_a0 is None else e_a0,
+                    _divided(lb, 0.0, h) if e_b0 is None else e_b0)
     with np.errstate(over="ignore", invalid="ignore", divide="ignore", under="ignore"):
-        rec = (_divided(other, big, h) - _divided(other, 0.0, h)) / np.where(far, big, 1.0)
-    return np.where(far, rec, h * h * total)
+        out = (e_ab - e_o0) / np.where(far, big, 1.0)
+    near = ~far
+    if near.any():
+        hn = np.broadcast_to(h, near.shape)[near]
+        xs, ys = np.broadcast_to(x, near.shape)[near], np.broadcast_to(y, near.shape)[near]
+        hk, yk, total, fact = np.ones_like(xs), np.ones_like(xs), np.full_like(xs, 0.5), 2.0
+        for k in range(1, _TAYLOR_TERMS):
+            yk = yk * ys
+            hk = xs * hk + yk
+            fact *= k + 2
+            total = total + hk / fact
+        out = np.array(np.broadcast_to(out, near.shape), dtype=np.result_type(out, total))
+        out[near] = hn * hn * total
+    return out
 
 
 def _recursion(a: np.ndarray, rhs: np.ndarray) -> np.ndarray:
@@ -496,7 +513,8 @@ def simulate_stamps(model: PlantModel, t: np.ndarray, u: np.ndarray, *, delay: f
     H = Vi @ model.dB                                                 # (p, n, m)
     la, lb, hh = lam[None, :, None], lam[None, None, :], h[:, None, None]
     # d x+ = (F o E1) z + (F o E2) beta u + diag(e_h[lam, 0]) H u (the comment above EIGENVECTOR_CONDITION)
-    W = _divided(la, lb, hh) * z[:-1, None, :] + _divided2(la, lb, hh) * bu[:-1, None, :]   # (G-1, n, n)
+    E1 = _divided(la, lb, hh)                                         # (G-1, n, n)
+    W = E1 * z[:-1, None, :] + _divided2(la, lb, hh, E1, phi[:, :, None], phi[:, None, :]) * bu[:-1, None, :]
     r = np.einsum("iab,jab->jia", W, F) + phi[None] * np.einsum("jam,im->jia", H, ug[:-1])
     rhs = np.zeros((p, G, n), complex)
     rhs[:, 1:] = np.where(link[None, :, None], r, 0.0)
