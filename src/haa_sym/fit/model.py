@@ -313,30 +313,89 @@ def simulate(s: Sampled, u: np.ndarray, sensitivities: bool = True):
 # Between two stamps every input is constant (the ZOH of the log: u[k] over [t_k, t_k+1), the
 # delayed command switching at t_j + delay_drive inside an interval), so the exact solution over a
 # sub-interval of length h is x+ = e^{A h} x + int_0^h e^{A s} ds B u. In A's eigenbasis
-# (A = V diag(lam) V^-1) each mode is a first-order recursion z+ = e^{lam h} z + phi1(lam, h) beta u
+# (A = V diag(lam) V^-1) each mode is a first-order recursion z+ = e^{lam h} z + e_h[lam, 0] beta u
 # with a coefficient per interval, which LAPACK's band solver runs as it does for a uniform log
-# (ztbtrs takes a subdiagonal per column). The derivatives of e^{X h}, X = [[A, B], [0, 0]], are
-# the Daleckii-Krein divided differences in X's eigenbasis: exact, vectorised over every interval.
-# X is diagonalisable when A is (distinct modes) and invertible (no integrator): then its
-# eigenvectors for the m zero eigenvalues are [-A^-1 B; I].
+# (ztbtrs takes a subdiagonal per column); e_h[.] are the divided differences of lam -> e^{lam h}
+# (e_h[lam, 0] = (e^{lam h} - 1) / lam = h at lam = 0).
+#
+# The derivatives are taken in A's eigenbasis only (Daleckii-Krein), with F = V^-1 dA V and
+# H = V^-1 dB: d e^{A h} = V (F o E1) V^-1 with E1_ab = e_h[lam_a, lam_b], and
+# d int_0^h e^{A s} ds B = V ((F o E2) beta + diag(e_h[lam, 0]) H) with E2_ab = e_h[lam_a, lam_b, 0]
+# (int_0^h e_s[a, b] ds = e_h[a, b, 0]: the second divided difference on a, b and the input's 0).
+# Why A's basis and not that of X = [[A, B], [0, 0]] (Van Loan's block, whose Daleckii-Krein form
+# needs only first differences): X is defective as soon as A has a mode at s = 0 (a free link, a
+# free rotor driven in current: the input's zero eigenvalue meets the integrator's), while A itself
+# stays diagonalisable; the second differences carry the confluent limits (a = b, a = 0, a = b = 0)
+# exactly, so an integrator costs nothing. What remains refused is a nearly defective A (close
+# modes whose eigenvectors nearly coincide): the modal coordinates lose cond(V) digits.
 
 #: Largest condition number of A's eigenvector matrix the per-interval simulation accepts: a
 #: nearly defective A loses that many digits in the modal coordinates.
 EIGENVECTOR_CONDITION = 1e8
 
+#: Below this |lam h| both nodes of a second divided difference are summed by their Taylor series
+#: (:func:`_divided2`); the terms fall as (k + 1) 0.1^k / (k + 2)!, 10 of them reach 1e-18.
+_TAYLOR_RADIUS = 0.1
+_TAYLOR_TERMS = 10
+
 
 def _divided(la: np.ndarray, lb: np.ndarray, h: np.ndarray) -> np.ndarray:
     """(e^{la h} - e^{lb h}) / (la - lb) (h e^{la h} when equal), broadcast; stable for close
     la, lb: h e^{(la+lb) h/2} sinh(x)/x with x = (la - lb) h / 2, the direct quotient when |x| is
-    large (where the exponentials differ enough that nothing cancels)."""
+    large (where the exponentials differ enough that nothing cancels). The exponentials are taken
+    before broadcasting (per node and interval, not per pair) and the close form only where it is
+    used: the pairs of modes over every interval are the simulation's largest arrays."""
+    la, lb, h = (np.asarray(v) for v in (la, lb, h))
     x = 0.5 * (la - lb) * h
     with np.errstate(over="ignore", invalid="ignore", divide="ignore", under="ignore"):
         small = np.abs(x) < 0.5
-        xs = np.where(small, x, 0.5)
-        sinhc = np.where(xs == 0, 1.0, np.sinh(xs) / xs)
-        near = h * np.exp(0.5 * (la + lb) * h) * sinhc
-        far = (np.exp(la * h) - np.exp(lb * h)) / np.where(small, 1.0, la - lb)
-    return np.where(small, near, far)
+        out = (np.exp(la * h) - np.exp(lb * h)) / np.where(small, 1.0, la - lb)
+        if small.any():
+            xs = np.broadcast_to(x, small.shape)[small]
+            hs = np.broadcast_to(h, small.shape)[small]
+            ms = np.broadcast_to(0.5 * (la + lb) * h, small.shape)[small]
+            sinhc = np.where(xs == 0, 1.0, np.sinh(xs) / np.where(xs == 0, 1.0, xs))
+            out = np.array(np.broadcast_to(out, small.shape), dtype=np.result_type(out, sinhc, ms))
+            out[small] = hs * np.exp(ms) * sinhc
+    return out
+
+
+def _divided2(la, lb, h, e_ab=None, e_a0=None, e_b0=None) -> np.ndarray:
+    """e_h[la, lb, 0]: the second divided difference of lam -> e^{lam h} on la, lb and 0 (s^2),
+    broadcast, with every confluent limit (h^2 / 2 at la = lb = 0).
+
+    Where |la h| and |lb h| are both below :data:`_TAYLOR_RADIUS`, the series
+    h^2 sum_k h_k(la h, lb h) / (k + 2)! with h_k = sum_{i <= k} x^i y^(k-i) (the complete
+    symmetric polynomials of the nodes; nothing cancels there), on those entries only. Elsewhere
+    the recurrence e[o, b, 0] = (e[o, b] - e[o, 0]) / b, divided by the node b of larger modulus
+    (|b h| >= the radius, so the quotient amplifies rounding by at most 1 / radius = 10), its
+    first differences from :func:`_divided` (stable for close or equal nodes) or given: ``e_ab``
+    = e_h[la, lb], ``e_a0`` = e_h[la, 0], ``e_b0`` = e_h[lb, 0], broadcastable (the simulation has
+    them already, and the pairs of modes over every interval are its largest arrays).
+    """
+    la, lb, h = (np.asarray(v) for v in (la, lb, h))
+    x, y = la * h, lb * h
+    swap = np.abs(x) < np.abs(y)
+    big = np.where(swap, lb, la)
+    far = np.abs(big * h) >= _TAYLOR_RADIUS
+    e_ab = _divided(la, lb, h) if e_ab is None else e_ab
+    e_o0 = np.where(swap, _divided(la, 0.0, h) if e_a0 is None else e_a0,
+                    _divided(lb, 0.0, h) if e_b0 is None else e_b0)
+    with np.errstate(over="ignore", invalid="ignore", divide="ignore", under="ignore"):
+        out = (e_ab - e_o0) / np.where(far, big, 1.0)
+    near = ~far
+    if near.any():
+        hn = np.broadcast_to(h, near.shape)[near]
+        xs, ys = np.broadcast_to(x, near.shape)[near], np.broadcast_to(y, near.shape)[near]
+        hk, yk, total, fact = np.ones_like(xs), np.ones_like(xs), np.full_like(xs, 0.5), 2.0
+        for k in range(1, _TAYLOR_TERMS):
+            yk = yk * ys
+            hk = xs * hk + yk
+            fact *= k + 2
+            total = total + hk / fact
+        out = np.array(np.broadcast_to(out, near.shape), dtype=np.result_type(out, total))
+        out[near] = hn * hn * total
+    return out
 
 
 def _recursion(a: np.ndarray, rhs: np.ndarray) -> np.ndarray:
@@ -352,15 +411,14 @@ def _recursion(a: np.ndarray, rhs: np.ndarray) -> np.ndarray:
 
 
 def modal_check(A: np.ndarray, what: str = "the model") -> None:
-    """Refuse (one line) a model the per-interval simulation cannot take: an integrator or a nearly
-    defective A (see the comment above :data:`EIGENVECTOR_CONDITION`)."""
-    lam, V = np.linalg.eig(A)
-    big = max(np.abs(lam).max(), 1e-300)
-    if np.abs(lam).min() <= 1e-12 * big or np.linalg.cond(V) > EIGENVECTOR_CONDITION:
-        raise ParameterError(f"{what}: a mode at s = 0 or coinciding modes (the per-interval simulation of a "
-                             "jittered, windowed, segmented or delayed log needs distinct, nonzero modes); "
-                             "allowed: a uniform log from rest without delay_drive, or a model with its output "
-                             "tied (a spring or stiffness to ground)")
+    """Refuse (one line) a model the per-interval simulation cannot take: a nearly defective A
+    (see the comment above :data:`EIGENVECTOR_CONDITION`); modes at s = 0 are exact."""
+    cond = float(np.linalg.cond(np.linalg.eig(A)[1]))
+    if not cond <= EIGENVECTOR_CONDITION:
+        raise ParameterError(f"{what}: coinciding modes (A's eigenvector matrix has condition number {cond:.3g} > "
+                             f"{EIGENVECTOR_CONDITION:.0e}: nearly defective), which the per-interval simulation of a "
+                             "jittered, windowed, segmented or delayed log cannot take exactly; allowed: a uniform "
+                             "log from rest without delay_drive, or parameters whose modes are distinct")
 
 
 def simulate_stamps(model: PlantModel, t: np.ndarray, u: np.ndarray, *, delay: float = 0.0,
@@ -451,12 +509,13 @@ def simulate_stamps(model: PlantModel, t: np.ndarray, u: np.ndarray, *, delay: f
     if not sensitivities:
         return ys, None, rank
     p = model.dA.shape[0]
-    AiB = np.linalg.solve(A, B)
     F = Vi @ model.dA @ V                                             # (p, n, n)
-    H = Vi @ (model.dB - model.dA @ AiB)                              # (p, n, m)
-    wz = z[:-1] + bu[:-1] / lam                                       # X's modal coordinates of [x; u]
-    K = _divided(lam[None, :, None], lam[None, None, :], h[:, None, None])     # (G-1, n, n)
-    r = np.einsum("iab,jab,ib->jia", K, F, wz) + phi[None] * np.einsum("jam,im->jia", H, ug[:-1])
+    H = Vi @ model.dB                                                 # (p, n, m)
+    la, lb, hh = lam[None, :, None], lam[None, None, :], h[:, None, None]
+    # d x+ = (F o E1) z + (F o E2) beta u + diag(e_h[lam, 0]) H u (the comment above EIGENVECTOR_CONDITION)
+    E1 = _divided(la, lb, hh)                                         # (G-1, n, n)
+    W = E1 * z[:-1, None, :] + _divided2(la, lb, hh, E1, phi[:, :, None], phi[:, None, :]) * bu[:-1, None, :]
+    r = np.einsum("iab,jab->jia", W, F) + phi[None] * np.einsum("jam,im->jia", H, ug[:-1])
     rhs = np.zeros((p, G, n), complex)
     rhs[:, 1:] = np.where(link[None, :, None], r, 0.0)
     sz = np.stack([_recursion(a[:, i], rhs[:, :, i]) for i in range(n)], axis=2)   # (p, G, n)
