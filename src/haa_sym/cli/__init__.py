@@ -17,6 +17,7 @@ Examples, one per command:
   haa-sym options --params sea                every --set key (units, allowed) and --option value
   haa-sym tune --params sea --out sea_tuned.toml --report tune.json --plot tune.png   the torque PI (Sec. 3.2)
   haa-sym explore --params sea                the gain explorer in the browser (haa_sym[explore])
+  haa-sym export-mujoco --params sea --P-gain 200 --D-gain 1 --out sea.xml   # + sea_controller.py (haa_sym[mujoco])
   haa-sym identify --params sea --log run.csv --input voltage --output torque,theta --fit K_bar,D_bar --out fitted.toml
 
 Gains: --P-gain (P_gain, Nm/rad) and --D-gain (D_gain, Nms/rad) take the same syntax in every
@@ -56,10 +57,11 @@ from haa_sym.io.inputs import command_scope
 from haa_sym.io.progress import set_progress
 
 from haa_sym.cli import analyses, describe, explore, identify, simulate, tune
+from haa_sym.cli import robot_mujoco
 from haa_sym.cli.common import _Parser, _progress_flags
 
 # every module adding commands: register(sub) -> {command: run(args) -> exit status}
-COMMAND_MODULES = (analyses, identify, tune, simulate, describe, explore)
+COMMAND_MODULES = (analyses, identify, tune, simulate, describe, explore, robot_mujoco)
 
 
 def main(argv: list[str] | None = None) -> int:

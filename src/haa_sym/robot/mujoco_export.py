@@ -1,0 +1,337 @@
+"""The actuator and its analysed controller as a MuJoCo model (issue 25, item 2; docs/robot.md,
+"Export to MuJoCo").
+
+:func:`export_mujoco` writes two texts: an MJCF of the plant and a Python module that runs the
+controller the tool analysed in a MuJoCo control callback (``mujoco.set_mjcb_control``) at the
+controller's Ts. The model, per the chain equations of docs/model.md:
+
+* every body of the chain and the rotor is a hinge about the same axis, each a child of the
+  world (its joint angle is the body's absolute angle, as the chain's states are), named after
+  its body: ``rotor`` (the angle theta_m / N, the file's ``"rotor"``) and the file's body names;
+* the motor is MuJoCo's ``dcmotor`` on the ``rotor`` joint, ``gear`` = N: its state is the coil
+  current (``inductance`` L, ``resistance`` R), its torque k_t I on theta_m and its back-EMF k_w
+  dtheta_m; the rotor's inertia J_m and friction B_m are the actuator's ``armature`` and
+  ``damping`` (MuJoCo reflects both by gear^2, as the chain's virtual work does). MuJoCo's
+  dcmotor has one constant K = sqrt(k_t k_w) for both; the callback scales the voltage by
+  sqrt(k_t / k_w), which makes the current state sqrt(k_t / k_w) I and the coil equation and the
+  torque exactly the chain's (a no-op when k_t = k_w);
+* each coupling is a fixed tendon with the joint coefficients (+1, -1): its length is
+  theta_a - theta_b, its ``stiffness`` K and ``damping`` D give the spring-damper torque
+  -T on a and +T on b. MuJoCo has no series elastic element (mujoco issue #1524); a tendon spans
+  any two joints of the chain (a joint spring only the relative angle of a parent and child),
+  and the damping of joints and tendons is integrated implicitly by the implicit integrators;
+* a body's B and K (friction and stiffness to ground: for a leg its linearised gravity, the
+  file's K) are the joint's ``damping`` and ``stiffness`` (springref 0). Gravity itself is off:
+  the file's K is the gravity the tool analysed, linear.
+
+The controller is :func:`haa_sym.loop.statespace.controller_batch`'s state space at the gain point
+(the same elements and signal flow the maps analyse, and the matrices ``haa-sym simulate``'s C
+driver runs): the exported module holds its matrices and steps x' = Ac x + Bc u, y = Cc x + Dc u
+with u = [encoder angle, measured torque, T_ff, theta_ref]; it writes nothing of its own.
+"""
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+from xml.sax.saxutils import quoteattr
+
+import numpy as np
+
+from haa_sym._version import __version__
+from haa_sym.errors import ParameterError
+from haa_sym.loop.statespace import CONTROLLER_INPUTS, CONTROLLER_OUTPUTS, controller_batch
+
+__all__ = ["INTEGRATORS", "DEFAULT_INTEGRATOR", "DEFAULT_STEPS_PER_SAMPLE", "MujocoExport", "export_mujoco",
+           "mujoco_missing_message", "compile_check"]
+
+#: MuJoCo's integrators an export may name (``<option integrator>``).
+INTEGRATORS = ("RK4", "implicit", "implicitfast", "Euler")
+#: The default integrator and MuJoCo steps per controller sample (timestep = Ts / steps). RK4's
+#: stability bound on the real axis (|lambda h| < 2.78) sets the floor: HyQ's gearbox damping pole
+#: (-2.4e5 1/s) needs h < 11.6 us, hence at least Ts / 100. MuJoCo's dcmotor integrates its coil
+#: current to first order in h whatever the integrator (measured: the error of a voltage step
+#: falls 4x when h does), so h is also at most the electrical time constant L / R over
+#: ELECTRICAL_STEPS (docs/robot.md: the QDD leg, L / R = 0.17 ms: 1.6 % at Ts / 100, 0.7 % at Ts / 289).
+DEFAULT_INTEGRATOR = "RK4"
+DEFAULT_STEPS_PER_SAMPLE = 100
+ELECTRICAL_STEPS = 50
+#: The name of the optional dependency (pyproject's extra).
+EXTRA = "haa_sym[mujoco]"
+
+
+def mujoco_missing_message(what: str) -> str:
+    return f"{what} needs MuJoCo, which is not installed; allowed: install the extra {EXTRA} " \
+           f"(pip install '{EXTRA}')"
+
+
+@dataclass(frozen=True)
+class MujocoExport:
+    """The MJCF text, the controller module's text and what they hold (``meta``: the gain point,
+    the integrator, the controller's matrices and signal sources)."""
+
+    xml: str
+    controller: str
+    meta: dict = field(repr=False)
+
+
+def _f(v: float) -> str:
+    return repr(float(v))
+
+
+def _check(loop, P_gain, D_gain, integrator, steps_per_sample):
+    params = loop.params
+    for name, v in (("P_gain", P_gain), ("D_gain", D_gain)):
+        if isinstance(v, bool) or not isinstance(v, (int, float, np.floating, np.integer)) \
+                or not math.isfinite(v) or v < 0:
+            raise ParameterError(f"{name} = {v!r}; allowed: a finite number >= 0")
+    if integrator not in INTEGRATORS:
+        raise ParameterError(f"integrator = {integrator!r}; allowed: {list(INTEGRATORS)}")
+    if isinstance(steps_per_sample, bool) or not isinstance(steps_per_sample, (int, np.integer)) \
+            or not 1 <= steps_per_sample <= 10000:
+        raise ParameterError(f"steps_per_sample = {steps_per_sample!r}; allowed: an integer in [1, 10000]")
+    if params.drive.active:
+        # MuJoCo's dcmotor takes the voltage at its terminals: a lag in front of it has no state
+        # there, and the callback runs at Ts (docs/robot.md, "What is not exported")
+        raise ParameterError(f"{params.source} [drive]: tau_drive = {params.drive.tau_drive:g} s, delay_drive = "
+                             f"{params.drive.delay_drive:g} s; allowed: no [drive] section (both 0): the MuJoCo "
+                             "export does not model the drive's lag and dead time")
+    if params.plant.k_w <= 0:
+        raise ParameterError(f"{params.source} [motor]: k_w = {params.plant.k_w!r}; allowed: k_w > 0 for the MuJoCo "
+                             "export (its dcmotor has one constant sqrt(k_t k_w) for torque and back-EMF)")
+
+
+def export_mujoco(loop, P_gain: float, D_gain: float, *, controller_module: str = "controller",
+                  xml_name: str = "model.xml", integrator: str = DEFAULT_INTEGRATOR,
+                  steps_per_sample: int | None = None) -> MujocoExport:
+    """The MJCF of ``loop``'s plant and the module running its controller at one gain point.
+
+    Parameters
+    ----------
+    loop : ClosedLoop
+        Plant, controller and options (the analysed loop); a ``[drive]`` is refused.
+    P_gain, D_gain : float
+        Impedance gains of Eq. (8), Nm/rad and Nms/rad.
+    controller_module : str
+        The controller module's name (without ``.py``), named in the MJCF's comment.
+    xml_name : str
+        The MJCF's file name, which the module loads from its own directory.
+    integrator : str
+        MuJoCo's integrator (:data:`INTEGRATORS`; default :data:`DEFAULT_INTEGRATOR`).
+    steps_per_sample : int, optional
+        MuJoCo steps per controller sample: ``timestep`` = Ts / steps_per_sample (s). Default the
+        larger of :data:`DEFAULT_STEPS_PER_SAMPLE` and ceil(ELECTRICAL_STEPS Ts R / L).
+
+    Returns
+    -------
+    MujocoExport
+    """
+    params = loop.params
+    if steps_per_sample is None:
+        v0 = params.plant.as_dict()
+        steps_per_sample = max(DEFAULT_STEPS_PER_SAMPLE,
+                               math.ceil(ELECTRICAL_STEPS * params.controller.Ts * v0["R"] / v0["L"] - 1e-9))
+    _check(loop, P_gain, D_gain, integrator, steps_per_sample)
+    plant, top, Ts = params.plant, params.plant.topology, params.controller.Ts
+    v = plant.as_dict()
+    h = Ts / steps_per_sample
+    Ac, Bc, Cc, Dc = (m[0] for m in controller_batch(loop, float(P_gain), float(D_gain)))
+    # the torque the loop reads (loop.torque_output: the file's torque_damping or the option's)
+    if top.sensor == "current":
+        # k_t N I from the dcmotor's current state (the actuator's force is computed after the
+        # control callback, so at a sample instant it is the previous step's)
+        torque = {"kind": "current", "k_t_N": v["k_t"] * v["N"]}
+    else:
+        damped = loop.torque_output == "T_sensor"
+        torque = {"kind": "tendon", "name": top.sensor, "K": v[f"K_{top.sensor}"],
+                  "D": v[f"D_{top.sensor}"] if damped else 0.0}
+    names = ("rotor",) + tuple(b.name for b in top.bodies)
+    k_t, k_w, N = v["k_t"], v["k_w"], v["N"]
+    meta = {"haa_sym": __version__, "source": params.source, "P_gain": float(P_gain), "D_gain": float(D_gain),
+            "Ts": Ts, "timestep": h, "controller_module": controller_module, "steps_per_sample": steps_per_sample, "integrator": integrator,
+            "joints": list(names), "encoder_joint": top.encoder, "port_joint": top.port, "torque": torque,
+            "voltage_scale": math.sqrt(k_t / k_w), "current_scale": math.sqrt(k_w / k_t), "gear": N,
+            "controller_inputs": list(CONTROLLER_INPUTS), "controller_outputs": list(CONTROLLER_OUTPUTS),
+            "Ac": Ac.tolist(), "Bc": Bc.tolist(), "Cc": Cc.tolist(), "Dc": Dc.tolist(),
+            "configuration": params.configuration_name if hasattr(params, "configuration_name") else None}
+    return MujocoExport(_xml(params, names, h, integrator, controller_module),
+                        _controller_text(meta, xml_name), meta)
+
+
+def _xml(params, names, h, integrator, controller_module) -> str:
+    plant, top = params.plant, params.plant.topology
+    v = plant.as_dict()
+    # the rotor's own body carries a negligible inertia (MuJoCo wants a moving body to have one):
+    # its inertia is the dcmotor's armature J_m, reflected by gear^2
+    eps = 1e-12 * v["J_m"] * v["N"] ** 2
+    lines = [f"<!-- {params.source}: exported by haa-sym {__version__} (export-mujoco); the controller runs in "
+             f"{controller_module}.py (docs/robot.md, 'Export to MuJoCo'). Every hinge is a body's absolute "
+             "angle about x (rad); rotor = theta_m / N. -->",
+             f"<mujoco model={quoteattr(params.source)}>",
+             "  <compiler angle=\"radian\" autolimits=\"true\"/>",
+             f"  <option timestep=\"{_f(h)}\" integrator=\"{integrator}\" gravity=\"0 0 0\">",
+             "    <flag contact=\"disable\" gravity=\"disable\"/>",
+             "  </option>",
+             "  <worldbody>"]
+
+    def body(name, J, B, K, offset):
+        geom = (f"      <geom type=\"cylinder\" size=\"0.02 0.005\" pos=\"{offset:g} 0 0\" euler=\"0 1.5707963267948966 0\" "
+                "contype=\"0\" conaffinity=\"0\" mass=\"0\"/>")
+        lines.extend([f"    <body name={quoteattr(name)}>",
+                      f"      <inertial pos=\"0 0 0\" mass=\"1\" diaginertia=\"{_f(J)} {_f(J)} {_f(J)}\"/>",
+                      f"      <joint name={quoteattr(name)} type=\"hinge\" axis=\"1 0 0\" damping=\"{_f(B)}\" "
+                      f"stiffness=\"{_f(K)}\" springref=\"0\" armature=\"0\"/>",
+                      geom, "    </body>"])
+
+    body("rotor", eps, 0.0, 0.0, 0.0)
+    for i, b in enumerate(top.bodies):
+        body(b.name, v[f"J_{b.name}"], v[f"B_{b.name}"], v.get(f"K_{b.name}", 0.0), 0.02 * (i + 1))
+    lines.append("  </worldbody>")
+    lines.append("  <tendon>")
+    for c in top.couplings:
+        lines.extend([f"    <fixed name={quoteattr(c.name)} stiffness=\"{_f(v[f'K_{c.name}'])}\" "
+                      f"damping=\"{_f(v[f'D_{c.name}'])}\" springlength=\"0\">",
+                      f"      <joint joint={quoteattr(c.a)} coef=\"1\"/>",
+                      f"      <joint joint={quoteattr(c.b)} coef=\"-1\"/>",
+                      "    </fixed>"])
+    lines.append("  </tendon>")
+    lines.extend(["  <actuator>",
+                  f"    <dcmotor name=\"motor\" joint=\"rotor\" gear=\"{_f(v['N'])}\" resistance=\"{_f(v['R'])}\" "
+                  f"motorconst=\"{_f(v['k_t'])} {_f(v['k_w'])}\" inductance=\"{_f(v['L'])} 0\" "
+                  f"armature=\"{_f(v['J_m'])}\" damping=\"{_f(v['B_m'])} 0 0\"/>",
+                  "  </actuator>",
+                  "</mujoco>", ""])
+    return "\n".join(lines)
+
+
+def compile_check(xml: str) -> None:
+    """Compile the MJCF with MuJoCo (raises :class:`ParameterError` with MuJoCo's message, or
+    naming the extra when MuJoCo is absent)."""
+    try:
+        import mujoco
+    except ImportError:
+        raise ParameterError(mujoco_missing_message("export-mujoco")) from None
+    try:
+        mujoco.MjModel.from_xml_string(xml)
+    except ValueError as exc:                       # mujoco's compiler error
+        raise ParameterError(f"the exported MJCF does not compile in MuJoCo {mujoco.__version__}: "
+                             f"{' '.join(str(exc).split())}; allowed: parameters MuJoCo accepts") from None
+
+
+def _controller_text(meta: dict, xml_name: str) -> str:
+    mat = {k: repr(meta[k]) for k in ("Ac", "Bc", "Cc", "Dc")}
+    return _CONTROLLER_TEMPLATE.format(
+        version=meta["haa_sym"], source=meta["source"], module=meta["controller_module"], P=meta["P_gain"], D=meta["D_gain"], xml_name=xml_name,
+        Ts=repr(meta["Ts"]), steps=meta["steps_per_sample"], encoder=repr(meta["encoder_joint"]),
+        port=repr(meta["port_joint"]), torque=repr(meta["torque"]), vscale=repr(meta["voltage_scale"]),
+        iscale=repr(meta["current_scale"]), gear=repr(meta["gear"]), **mat)
+
+
+_CONTROLLER_TEMPLATE = '''"""The controller haa-sym {version} analysed for {source} at P_gain = {P!r} Nm/rad,
+D_gain = {D!r} Nms/rad, running on {xml_name} in a MuJoCo control callback at Ts (docs/robot.md,
+"Export to MuJoCo"). Needs numpy and mujoco only.
+
+The controller is the sampled state space of haa_sym.loop.statespace.controller_batch (the loop
+the maps analyse): inputs u = [encoder angle (rad), measured torque (Nm), T_ff (Nm), theta_ref
+(rad)], outputs [V (V, the voltage applied after the loop's delay), T_ref (Nm)]; per sample
+y = CC x + DC u, then x = AC x + BC u. The voltage is held until the next sample.
+
+    python {{this file}} --experiment disturbance-step --amplitude 1 --duration 1   # a run, summarised
+    >>> import {module}; r = {module}.run(1.0, T_dist=1.0)                    # from Python
+"""
+import argparse
+import math
+import pathlib
+
+import mujoco
+import numpy as np
+
+XML = pathlib.Path(__file__).with_name({xml_name!r})
+TS = {Ts}                      # s, the controller's sampling time
+STEPS_PER_SAMPLE = {steps}     # MuJoCo steps per sample (the MJCF's timestep = TS / STEPS_PER_SAMPLE)
+ENCODER = {encoder}            # the joint the encoder reads (rotor: theta_m / N)
+PORT = {port}                  # the joint the external torque T_dist acts on
+TORQUE = {torque}              # the measured torque: a tendon's spring (and damper), or k_t N I
+GEAR = {gear}                  # N
+VOLTAGE_SCALE = {vscale}       # sqrt(k_t / k_w): MuJoCo's dcmotor has one constant sqrt(k_t k_w)
+CURRENT_SCALE = {iscale}       # sqrt(k_w / k_t): the dcmotor's current state to the motor's current (A)
+AC = np.array({Ac})
+BC = np.array({Bc})
+CC = np.array({Cc})
+DC = np.array({Dc})
+COLUMNS = ("time", "theta", "velocity", "torque", "torque_ref", "voltage", "current")
+
+
+class Controller:
+    """The control callback (``mujoco.set_mjcb_control(Controller(model, data))``): at every
+    sample instant k TS it reads the sensors, steps the controller and sets the voltage; between
+    them it does nothing (the voltage is held). ``T_dist`` (Nm on PORT), ``T_ff`` (Nm) and
+    ``theta_ref`` (rad) are constant inputs from t = 0 (set them before a run); ``log`` collects
+    one row per sample (COLUMNS)."""
+
+    def __init__(self, model, data, T_dist=0.0, T_ff=0.0, theta_ref=0.0):
+        self.x = np.zeros(AC.shape[0])
+        self.k = -1
+        self.T_dist, self.T_ff, self.theta_ref = T_dist, T_ff, theta_ref
+        self.h = model.opt.timestep
+        self.q_enc = model.jnt_qposadr[model.joint(ENCODER).id]
+        port = model.joint(PORT).id
+        self.q_port, self.v_port = model.jnt_qposadr[port], model.jnt_dofadr[port]
+        self.tendon = model.tendon(TORQUE["name"]).id if TORQUE["kind"] == "tendon" else None
+        self.log = []
+
+    def measured_torque(self, data):
+        if self.tendon is None:                      # k_t N I: the current estimate
+            return TORQUE["k_t_N"] * float(data.act[0]) * CURRENT_SCALE
+        return TORQUE["K"] * float(data.ten_length[self.tendon]) + TORQUE["D"] * float(data.ten_velocity[self.tendon])
+
+    def __call__(self, model, data):
+        k = int(round(data.time / TS))
+        if k == self.k or abs(data.time - k * TS) > 0.25 * self.h:
+            return                                   # between samples (or a stage of the same sample)
+        self.k = k
+        u = np.array([data.qpos[self.q_enc], self.measured_torque(data), self.T_ff, self.theta_ref])
+        y = CC @ self.x + DC @ u
+        self.x = AC @ self.x + BC @ u
+        data.ctrl[0] = y[0] * VOLTAGE_SCALE
+        data.qfrc_applied[self.v_port] = self.T_dist
+        self.log.append((k * TS, u[0], data.qvel[self.v_port], u[1], y[1], y[0], data.act[0] * CURRENT_SCALE))
+
+
+def load():
+    """(model, data) of the exported MJCF."""
+    model = mujoco.MjModel.from_xml_path(str(XML))
+    return model, mujoco.MjData(model)
+
+
+def run(duration, T_dist=0.0, T_ff=0.0, theta_ref=0.0):
+    """Simulate ``duration`` seconds from rest with constant inputs from t = 0; one row per sample
+    (the columns of haa-sym simulate's CSV, COLUMNS) as a dict of arrays."""
+    model, data = load()
+    ctrl = Controller(model, data, T_dist, T_ff, theta_ref)
+    n = int(math.ceil(duration / TS - 1e-9)) + 1
+    mujoco.set_mjcb_control(ctrl)
+    try:
+        for _ in range((n - 1) * STEPS_PER_SAMPLE + 1):
+            mujoco.mj_step(model, data)
+    finally:
+        mujoco.set_mjcb_control(None)
+    rows = np.array(ctrl.log[:n])
+    return {{c: rows[:, i] for i, c in enumerate(COLUMNS)}}
+
+
+def main(argv=None):
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--experiment", default="disturbance-step",
+                    choices=["disturbance-step", "torque-step", "impedance-step"])
+    ap.add_argument("--amplitude", type=float, default=1.0, help="Nm (rad for impedance-step)")
+    ap.add_argument("--duration", type=float, default=1.0, help="s")
+    a = ap.parse_args(argv)
+    kw = {{"disturbance-step": "T_dist", "torque-step": "T_ff", "impedance-step": "theta_ref"}}[a.experiment]
+    r = run(a.duration, **{{kw: a.amplitude}})
+    print(f"{{a.experiment}} {{a.amplitude:g}}: theta {{r['theta'][-1]:.6g}} rad, torque {{r['torque'][-1]:.6g}} Nm "
+          f"at t = {{r['time'][-1]:g}} s; peak |torque| {{np.abs(r['torque']).max():.6g}} Nm")
+
+
+if __name__ == "__main__":
+    main()
+'''

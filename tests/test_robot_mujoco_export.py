@@ -1,0 +1,130 @@
+"""haa-sym export-mujoco (issue 25, item 2; docs/robot.md, "Export to MuJoCo"): the MJCF and its
+controller module against haa-sym simulate without limits, and the command's refusals."""
+import importlib.util
+import sys
+
+import numpy as np
+import pytest
+
+from haa_sym import ClosedLoop, load_params
+from haa_sym.analysis.simulate import simulate
+from haa_sym.cli import main
+from haa_sym.model.limits import Limits
+
+mujoco = pytest.importorskip("mujoco")
+
+EXPERIMENTS = {"disturbance-step": "T_dist", "torque-step": "T_ff"}
+DURATION = 0.4          # s: 401 samples
+NEAR_RADIUS = 0.9995    # the point "close to the boundary": spectral radius of the sampled loop
+UNSTABLE_RADIUS = 1.002
+D_GAIN = {"hyq_haa": 5.0, "sea": 1.0, "qdd_leg": 1.0}
+
+
+def _export(tmp_path, name, P, D, *extra):
+    out = tmp_path / f"{name}.xml"
+    assert main(["export-mujoco", "--params", f"model/{name}.toml", "--P-gain", repr(P), "--D-gain", repr(D),
+                 "--out", str(out), *extra]) == 0
+    spec = importlib.util.spec_from_file_location(f"{name}_controller_{abs(hash((P, D)))}",
+                                                  tmp_path / f"{name}_controller.py")
+    module = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(module)
+    return module
+
+
+def _radius(loop, P, D):
+    return float(loop.stability([P], [D], radius=True).spectral_radius[0])
+
+
+def _P_at(loop, D, rho, lo, hi):
+    """P_gain between lo and hi where the spectral radius is rho (bisection in log P)."""
+    for _ in range(50):
+        mid = np.sqrt(lo * hi)
+        lo, hi = (mid, hi) if _radius(loop, mid, D) < rho else (lo, mid)
+    return float(np.sqrt(lo * hi))
+
+
+def gain_points(loop, D):
+    """From the stability map along P_gain at D: the first unstable P_b; a stable point (P_b / 4),
+    a point close to the boundary (radius NEAR_RADIUS below P_b) and an unstable one."""
+    P = np.logspace(0, 5, 500)
+    r = np.asarray(loop.stability(P, np.full_like(P, D), radius=True).spectral_radius)
+    assert r[0] < 1
+    i = int(np.argmax(r >= 1))
+    Pb = float(P[i])
+    j = int(np.argmax(r > UNSTABLE_RADIUS))
+    return {"stable": Pb / 4, "near": _P_at(loop, D, NEAR_RADIUS, Pb / 4, Pb),
+            "unstable": _P_at(loop, D, UNSTABLE_RADIUS, P[j - 1], P[j])}
+
+
+def _growth(torque):
+    """The swing of the torque's sample-to-sample change over the run's last quarter over the
+    quarter's before (the difference removes the step's slow rise, not the loop's oscillation)."""
+    d = np.diff(torque)
+    q = len(d) // 4
+    return np.ptp(d[-q:]) / np.ptp(d[-2 * q:-q])
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("name", ["hyq_haa", "sea", "qdd_leg"])
+def test_mujoco_equals_simulate(tmp_path, name):
+    """A disturbance step and a torque-reference step in MuJoCo equal haa-sym simulate (no
+    limits) within 1 % of each signal's peak, at a stable point and one close to the boundary;
+    the point the map calls unstable grows in MuJoCo."""
+    loop = ClosedLoop(load_params(f"model/{name}.toml"))
+    D = D_GAIN[name]
+    pts = gain_points(loop, D)
+    assert _radius(loop, pts["stable"], D) < 1 and NEAR_RADIUS - 1e-6 < _radius(loop, pts["near"], D) < 1
+    for label in ("stable", "near"):
+        ctl = _export(tmp_path, name, pts[label], D)
+        for exp, key in EXPERIMENTS.items():
+            r = ctl.run(DURATION, **{key: 1.0})
+            c = simulate(loop, pts[label], D, limits=Limits(), experiment=exp, amplitude=1.0,
+                         duration=DURATION).columns()
+            if label == "near" and exp == "disturbance-step":
+                ctl_near_torque = r["torque"]
+            for sig in ("theta", "velocity", "torque", "torque_ref", "voltage"):
+                assert r[sig].shape == c[sig].shape
+                err = np.abs(r[sig] - c[sig]).max() / np.abs(c[sig]).max()
+                assert err < 0.01, (name, label, exp, sig, err)
+    ctl = _export(tmp_path, name, pts["unstable"], D)
+    r = ctl.run(DURATION, T_dist=1.0)
+    assert _growth(r["torque"]) > 1.15, _growth(r["torque"])
+    assert _growth(ctl_near_torque) < 1.0, _growth(ctl_near_torque)
+
+
+def test_model_structure(tmp_path):
+    """Every hinge is named after its body; the couplings are tendons with the file's K and D; the
+    dcmotor carries N, R, L, k_t, k_w, J_m and B_m; the controller's matrices are controller_batch's."""
+    from haa_sym.loop.statespace import controller_batch
+    ctl = _export(tmp_path, "hyq_haa", 200.0, 5.0)
+    m = mujoco.MjModel.from_xml_path(str(tmp_path / "hyq_haa.xml"))
+    assert [m.joint(i).name for i in range(m.njnt)] == ["rotor", "L1", "L2"]
+    p = load_params("model/hyq_haa.toml").plant
+    assert m.tendon_stiffness[m.tendon("hd").id] == p.K_hd and m.tendon_damping[m.tendon("p").id] == p.D_p
+    assert m.jnt_stiffness[m.joint("L2").id] == p.K_L2 and m.dof_damping[m.joint("L2").id] == p.B_L2
+    assert m.actuator_gear[0, 0] == p.N
+    assert m.opt.timestep == pytest.approx(1e-5) and m.opt.integrator == mujoco.mjtIntegrator.mjINT_RK4
+    Ac = controller_batch(ClosedLoop(load_params("model/hyq_haa.toml")), 200.0, 5.0)[0][0]
+    assert np.array_equal(ctl.AC, Ac)
+
+
+def test_bad_input_one_line_nothing_written(tmp_path, capsys):
+    cases = [(["--out", str(tmp_path / "m.txt")], "unsupported file type"),
+             (["--set", "tau_drive=0.002", "--out", str(tmp_path / "m.xml")], "tau_drive"),
+             (["--set", "k_w=0", "--out", str(tmp_path / "m.xml")], "k_w"),
+             (["--P-gain", "1,2", "--out", str(tmp_path / "m.xml")], "one point")]
+    for extra, word in cases:
+        argv = ["export-mujoco", "--params", "model/hyq_haa.toml", "--P-gain", "200", "--D-gain", "5"] + extra
+        assert main(argv) == 2
+        err = capsys.readouterr().err.strip().splitlines()
+        assert len(err) == 1 and err[0].startswith("haa-sym: error:") and word in err[0], err
+        assert list(tmp_path.iterdir()) == []
+
+
+def test_mujoco_absent(tmp_path, capsys, monkeypatch):
+    monkeypatch.setitem(sys.modules, "mujoco", None)          # import mujoco raises ImportError
+    assert main(["export-mujoco", "--params", "sea", "--P-gain", "200", "--D-gain", "1", "--out",
+                 str(tmp_path / "m.xml")]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "haa_sym[mujoco]" in err[0]
+    assert list(tmp_path.iterdir()) == []
