@@ -56,12 +56,11 @@ from haa_sym.errors import CompilerError, ParameterError, StaleGeneratedCode, Te
 from haa_sym.io.inputs import command_scope
 from haa_sym.io.progress import set_progress
 
-from haa_sym.cli import analyses, describe, explore, identify, simulate, tune
-from haa_sym.cli import robot_mujoco
+from haa_sym.cli import analyses, describe, explore, identify, robot_mujoco, robot_ros2, simulate, tune
 from haa_sym.cli.common import _Parser, _progress_flags
 
 # every module adding commands: register(sub) -> {command: run(args) -> exit status}
-COMMAND_MODULES = (analyses, identify, tune, simulate, describe, explore, robot_mujoco)
+COMMAND_MODULES = (analyses, identify, tune, simulate, describe, explore, robot_mujoco, robot_ros2)
 
 
 def main(argv: list[str] | None = None) -> int:

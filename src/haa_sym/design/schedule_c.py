@@ -269,16 +269,16 @@ def c_code(table: ScheduleTable) -> tuple[str, str]:
     return header, source
 
 
-def check_c_directory(directory: str | Path, field: str = "--c-out") -> Path:
+def check_c_directory(directory: str | Path, field: str = "--c-out", names: tuple = (HEADER, SOURCE)) -> Path:
     """``directory`` as a Path if it is a writable directory or can be created (the rule of every
-    output path, :mod:`haa_sym.io.outputs`); else an OutputError naming ``field`` (a command
-    checks this before computing anything)."""
+    output path, :mod:`haa_sym.io.outputs`) and its files ``names`` (default the schedule's) may be
+    written; else an OutputError naming ``field`` (a command checks this before computing anything)."""
     d = Path(directory)
     if d.exists() and not d.is_dir():
         raise OutputError(f"{field} {str(d)!r} is not a directory; allowed: a directory (created if missing)")
     if d.is_dir() and not os.access(d, os.W_OK | os.X_OK):
         raise OutputError(f"{field} {str(d)!r} is not writable; allowed: a writable directory")
-    for name in (HEADER, SOURCE):          # missing: its existing ancestors must allow creating it;
+    for name in names:                     # missing: its existing ancestors must allow creating it;
         check_file(d / name, field)        # existing: not one of the command's inputs
     return d
 

@@ -13,7 +13,7 @@ from haa_sym.analysis.decide import decide_points
 from haa_sym.analysis.margins import PM_THRESHOLD_DEG
 from haa_sym.model.params import gain_array
 
-__all__ = ["classify_grid", "classify_regions", "RegionDecisions"]
+__all__ = ["classify_grid", "classify_regions", "row_cuts", "RegionDecisions"]
 
 
 def classify_grid(loop, boundary: StabilityBoundary, P_gain, D_gain) -> np.ndarray:
@@ -41,6 +41,32 @@ def classify_grid(loop, boundary: StabilityBoundary, P_gain, D_gain) -> np.ndarr
         out[:, j] = st[start:start + n[j]][np.searchsorted(labels, seg)]
         start += n[j]
     return out
+
+
+def row_cuts(loop, boundary: StabilityBoundary, D_gain, P_range, *, pm_deg: float = PM_THRESHOLD_DEG,
+             passivity: bool = True) -> list:
+    """For every row D_gain = d, the sorted P_gain values inside ``P_range`` where a map's decision
+    may change along the row: the crossings of the stability boundary, of the loci where a
+    crossover has a margin of exactly +pm_deg, -pm_deg or 180 deg, and (``passivity``) the
+    candidate ends of the non-passive intervals
+    (:func:`haa_sym.analysis.boundaries.passivity.passivity_crossings`). A decision can also change
+    where a pair of crossovers appears or where the passivity excess crosses the options'
+    tolerance; those are not here (callers decide points on both sides)."""
+    D = gain_array("D_gain", D_gain).ravel()
+    ABC, nu = boundary.ABC, boundary.nu
+    P_range = (float(P_range[0]), float(P_range[1]))
+    cuts = crossings(boundary, D)
+    # crossovers count from omega_min to Nyquist (FrequencyGrid), as the margins locate them
+    w = loop.options.numerics.omega(boundary.Ts)
+    nu_w = np.tan(w * boundary.Ts / 2)
+    nu_pm = np.geomspace(nu_w[0], nu_w[-1], nu.size)
+    extra = [_branch_crossings(lambda x, *a: _rotated_branch(ABC, x, phi, *a), nu_pm, D, P_range)
+             for phi in (pm_deg, -pm_deg, 180.0)]
+    if passivity:
+        extra.append(passivity_crossings(loop, D, P_range, boundary.beta, boundary.alpha))
+    for j in range(D.size):
+        cuts[j] = np.unique(np.concatenate([cuts[j]] + [np.asarray(e[j], float) for e in extra]))
+    return cuts
 
 
 @dataclass(frozen=True)
@@ -75,19 +101,8 @@ def classify_regions(loop, boundary: StabilityBoundary, P_gain, D_gain, *, pm_de
     """
     P = gain_array("P_gain", P_gain).ravel()
     D = gain_array("D_gain", D_gain).ravel()
-    ABC, nu = boundary.ABC, boundary.nu
     beta, alpha = boundary.beta, boundary.alpha
-    cuts = crossings(boundary, D)
-    # crossovers count from omega_min to Nyquist (FrequencyGrid), as the margins locate them
-    w = loop.options.numerics.omega(boundary.Ts)
-    nu_w = np.tan(w * boundary.Ts / 2)
-    nu_pm = np.geomspace(nu_w[0], nu_w[-1], nu.size)
-    extra = [_branch_crossings(lambda x, *a: _rotated_branch(ABC, x, phi, *a), nu_pm, D, (P.min(), P.max()))
-             for phi in (pm_deg, -pm_deg, 180.0)]
-    if passivity:
-        extra.append(passivity_crossings(loop, D, (P.min(), P.max()), beta, alpha))
-    for j in range(D.size):
-        cuts[j] = np.unique(np.concatenate([cuts[j]] + [np.asarray(e[j], float) for e in extra]))
+    cuts = row_cuts(loop, boundary, D, (P.min(), P.max()), pm_deg=pm_deg, passivity=passivity)
 
     # every segment of every row gets one id; with P sorted, a segment's points are consecutive
     order = np.argsort(P, kind="stable")
