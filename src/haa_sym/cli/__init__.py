@@ -18,6 +18,7 @@ Examples, one per command:
   haa-sym tune --params sea --out sea_tuned.toml --report tune.json --plot tune.png   the torque PI (Sec. 3.2)
   haa-sym explore --params sea                the gain explorer in the browser (haa_sym[explore])
   haa-sym identify --params sea --log run.csv --input voltage --output torque,theta --fit K_bar,D_bar --out fitted.toml
+  haa-sym import-robot hyq.urdf --joint lf_haa_joint --configuration extended:lf_kfe_joint=-0.349 --merge hyq_haa --out hyq.toml
 
 Gains: --P-gain (P_gain, Nm/rad) and --D-gain (D_gain, Nms/rad) take the same syntax in every
 command, a grid of values: 'log:START:STOP:N' (N log-spaced, 0 < START <= STOP),
@@ -55,11 +56,11 @@ from haa_sym.errors import CompilerError, ParameterError, StaleGeneratedCode, Te
 from haa_sym.io.inputs import command_scope
 from haa_sym.io.progress import set_progress
 
-from haa_sym.cli import analyses, describe, explore, identify, simulate, tune
+from haa_sym.cli import analyses, describe, explore, identify, robot_import, simulate, tune
 from haa_sym.cli.common import _Parser, _progress_flags
 
 # every module adding commands: register(sub) -> {command: run(args) -> exit status}
-COMMAND_MODULES = (analyses, identify, tune, simulate, describe, explore)
+COMMAND_MODULES = (analyses, identify, tune, simulate, describe, explore, robot_import)
 
 
 def main(argv: list[str] | None = None) -> int:
