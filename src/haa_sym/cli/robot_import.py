@@ -29,22 +29,23 @@ def _cmd_import_robot(args) -> int:
         base_text, base_source = read_text(base, "--merge", limit=MAX_FILE_BYTES), str(base)
     r = import_joint(args.description, args.joint, configs, gravity=gravity)
     new = imported_text(r, base_text, base_source, skip)      # checked: it parses and reads back
-    print(f"{r.kind} {r.source}: joint {r.joint}, moving with it {', '.join(r.bodies)}; gravity "
+    lines = []      # printed once the file is written: a refused output prints nothing
+    lines.append(f"{r.kind} {r.source}: joint {r.joint}, moving with it {', '.join(r.bodies)}; gravity "
           f"({', '.join(f'{x:g}' for x in r.gravity)}) m/s^2 in the root frame (MuJoCo {r.mujoco_version})")
     for c in r.configurations:
-        print(f"  {c.name:12s} J = {c.J:.6g} kg m^2  K = {c.K:.6g} Nm/rad  static gravity torque {c.tau:.3g} Nm  "
+        lines.append(f"  {c.name:12s} J = {c.J:.6g} kg m^2  K = {c.K:.6g} Nm/rad  static gravity torque {c.tau:.3g} Nm  "
               f"({c.joints_text()})")
-    print(f"  damping {r.damping:g} Nm s/rad, friction {r.friction:g} Nm; gear ratio "
+    lines.append(f"  damping {r.damping:g} Nm s/rad, friction {r.friction:g} Nm; gear ratio "
           + (f"{r.gear:g} ({r.gear_source})" if r.gear else "none") + "; rotor inertia "
           + (f"{r.rotor_inertia:g} kg m^2 (motor side)" if r.rotor_inertia is not None else
              f"armature {r.armature:g} kg m^2 (at the joint)" if r.armature is not None else "none"))
-    for note in r.notes:
-        print(f"  note: {note}")
+    lines += [f"  note: {note}" for note in r.notes]
     if args.merge is None:
-        print(f"  new file: the motor, gearbox and controller are PLACEHOLDERS from the bundled {TEMPLATE}.toml "
+        lines.append(f"  new file: the motor, gearbox and controller are PLACEHOLDERS from the bundled {TEMPLATE}.toml "
               "(source \"placeholder\"): replace them before trusting an analysis")
     with Transaction() as tx:
         tx.write_text(out, new, "--out")
+    print("\n".join(lines))
     print(f"wrote {out}" + (f" (merged into a copy of {base_source})" if base_source else "")
           + (f"; skipped {', '.join(skip)}" if skip else ""))
     return 0

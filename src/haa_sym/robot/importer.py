@@ -256,7 +256,7 @@ def _urdf_distal_links(root, joint: str) -> set:
     """The URDF links that move with ``joint``: its child link and every link below it."""
     children = {}
     child_of = {}
-    for j in root.iter("joint"):
+    for j in root.findall("joint"):              # not a <transmission>'s <joint>
         p, c = j.find("parent"), j.find("child")
         if p is not None and c is not None:
             children.setdefault(p.get("link"), []).append(c.get("link"))
@@ -344,9 +344,13 @@ def import_joint(description: str | os.PathLike, joint: str, configurations, *, 
     notes, gears = [], {}
     if root.tag == "robot":
         kind = "URDF"
+        if not any(link.find("inertial") is not None for link in root.iter("link")):
+            raise ParameterError(f"{field_name} {shown!r}: no link has an <inertial> (a kinematic-only description); "
+                                 "allowed: a URDF whose links carry <inertial> mass and inertia (J and K need them; "
+                                 "meshes they do not)")
         xml, gears, link_notes = _urdf_for_mujoco(root, shown)
         m = _compile(mujoco, shown, kind, xml, None)
-        urdf_types = {j.get("name"): j.get("type") for j in root.iter("joint") if j.get("name")}
+        urdf_types = {j.get("name"): j.get("type") for j in root.findall("joint") if j.get("name")}
         distal = _urdf_distal_links(root, joint)
         # only the links that move with the joint enter J and K
         notes = [t for link, t in link_notes.items() if link in distal]
