@@ -15,10 +15,12 @@ import pytest
 
 from conftest import ROOT
 
-pytest.importorskip("mujoco")
+from haa_sym.cli import main
+from haa_sym.model.params import load_params
+from haa_sym.robot.importer import mujoco_available
 
-from haa_sym.cli import main                                   # noqa: E402
-from haa_sym.model.params import load_params                   # noqa: E402
+# every test but the last needs MuJoCo (the test extra installs it); the last checks its absence
+needs_mujoco = pytest.mark.skipif(not mujoco_available(), reason="MuJoCo (haa_sym[mujoco]) not installed")
 
 DATA = ROOT / "tests" / "data" / "robots"
 HYQ = DATA / "hyq_description" / "hyq_no_sensors.urdf"
@@ -133,6 +135,7 @@ def _cfg(name, values):
     return ["--configuration", f"{name}:" + ",".join(f"{k}={v!r}" for k, v in values.items())]
 
 
+@needs_mujoco
 def test_hyq_inertia_and_gravity_stiffness_against_numpy(tmp_path, capsys):
     assert "package://" in HYQ.read_text()        # meshes that are not here: the import must not need them
     out, printed = _import(tmp_path, capsys, *_cfg("extended", EXTENDED), *_cfg("retracted", FOLDED),
@@ -166,6 +169,7 @@ def test_hyq_inertia_and_gravity_stiffness_against_numpy(tmp_path, capsys):
     assert "lf_foot" in printed and "mechanicalReduction = 1" in printed
 
 
+@needs_mujoco
 def test_new_file_is_a_loading_template_with_marked_placeholders(tmp_path, capsys):
     out, printed = _import(tmp_path, capsys, *_cfg("extended", EXTENDED))
     p = load_params(out)
@@ -178,6 +182,7 @@ def test_new_file_is_a_loading_template_with_marked_placeholders(tmp_path, capsy
     assert "PLACEHOLDER" in printed
 
 
+@needs_mujoco
 def test_mjcf_armature_gear_damping_friction(tmp_path, capsys):
     out, _ = _import(tmp_path, capsys, "--configuration", "straight:", "--configuration", "bent:knee=-1.5",
                      "--merge", "sea", description=MJCF, joint="hip")
@@ -195,6 +200,7 @@ def test_mjcf_armature_gear_damping_friction(tmp_path, capsys):
     assert p.configurations["bent"]["K_link"] == pytest.approx(9.81 * (1.5 * 0.1 - 0.4 * c[2]), rel=1e-12)
 
 
+@needs_mujoco
 def test_drake_transmission_tags(tmp_path, capsys):
     urdf = tmp_path / "d.urdf"
     urdf.write_text(_URDF.replace("</robot>", """<transmission name="t"><joint name="hip"/>
@@ -222,6 +228,7 @@ def test_unknown_joint_names_the_joints(assert_refused):
                    ("--joint 'lf_haa': no such joint", "lf_haa_joint", "rh_kfe_joint"))
 
 
+@needs_mujoco
 def test_floating_joint(assert_refused, tmp_path):
     urdf = tmp_path / "f.urdf"
     urdf.write_text(_URDF.replace('<link name="base">', '<link name="world"/><joint name="free" type="floating">'
@@ -230,6 +237,7 @@ def test_floating_joint(assert_refused, tmp_path):
                    ("--joint 'free': a floating joint", "allowed: a hinge", "hip"))
 
 
+@needs_mujoco
 def test_description_without_inertials(assert_refused, tmp_path):
     urdf = tmp_path / "n.urdf"
     text = _URDF
@@ -240,6 +248,7 @@ def test_description_without_inertials(assert_refused, tmp_path):
                    "no link has an <inertial>")
 
 
+@needs_mujoco
 def test_missing_meshes_do_not_fail(tmp_path, capsys):
     urdf = tmp_path / "m.urdf"
     urdf.write_text(_URDF)
@@ -249,12 +258,14 @@ def test_missing_meshes_do_not_fail(tmp_path, capsys):
     assert p.plant.K_link == pytest.approx(9.81 * 0.2 * math.cos(0.5), rel=1e-12)
 
 
+@needs_mujoco
 def test_configuration_outside_the_limits(assert_refused):
     assert_refused(["import-robot", str(HYQ), "--joint", "lf_haa_joint", "--configuration",
                     "extended:lf_hfe_joint=0,lf_kfe_joint=-0.3", "--out", "x.toml"],
                    ("lf_kfe_joint=-0.3: outside the joint's limits", "-2.44346095279 to -0.349065850399"))
 
 
+@needs_mujoco
 def test_merge_never_replaces_its_input(assert_refused, tmp_path):
     mine = tmp_path / "mine.toml"
     mine.write_bytes((ROOT / "model" / "hyq_haa.toml").read_bytes())
@@ -262,6 +273,7 @@ def test_merge_never_replaces_its_input(assert_refused, tmp_path):
                     "--merge", str(mine), "--out", str(mine)], "--out")
 
 
+@needs_mujoco
 def test_skip_of_a_key_not_written(assert_refused):
     assert_refused(["import-robot", str(HYQ), "--joint", "lf_haa_joint", *_cfg("extended", EXTENDED),
                     "--merge", "hyq_haa", "--skip", "N", "--out", "x.toml"], ("--skip N", "allowed: ['J_L2'"))
