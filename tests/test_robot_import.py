@@ -223,6 +223,7 @@ _URDF = """<robot name="r">
 
 
 # ---- bad input: one line, exit 2, nothing written --------------------------------------------------
+@needs_mujoco
 def test_unknown_joint_names_the_joints(assert_refused):
     assert_refused(["import-robot", str(HYQ), "--joint", "lf_haa", "--configuration", "a:", "--out", "x.toml"],
                    ("--joint 'lf_haa': no such joint", "lf_haa_joint", "rh_kfe_joint"))
@@ -289,3 +290,22 @@ def test_without_mujoco_one_line_naming_the_extra(assert_refused, monkeypatch):
     from haa_sym.robot.importer import import_joint
     with pytest.raises(ParameterError, match=r"haa_sym\[mujoco\]"):
         import_joint(HYQ, "lf_haa_joint", [("a", {})])
+
+
+@needs_mujoco
+def test_gravity_option_is_in_the_root_frame(tmp_path, capsys):
+    """--gravity: a base tilted in the world (here gravity 12 deg off -z, in no plane of the axes)."""
+    g = np.array([1.0, -2.0, -9.5])
+    out, printed = _import(tmp_path, capsys, *_cfg("extended", EXTENDED), "--gravity", "1,-2,-9.5", "--merge",
+                           "hyq_haa")
+    J, K, V = reference(HYQ, "lf_haa_joint", EXTENDED, g=g)
+    c = load_params(out).configurations["extended"]
+    assert c["J_L2"] == pytest.approx(J, rel=1e-9, abs=0) and c["K_L2"] == pytest.approx(K, rel=1e-9, abs=0)
+    assert abs(K / reference(HYQ, "lf_haa_joint", EXTENDED)[1] - 1) > 0.01     # the option changes K
+    assert "gravity (1, -2, -9.5)" in printed
+
+
+@needs_mujoco
+def test_bad_gravity(assert_refused):
+    assert_refused(["import-robot", str(HYQ), "--joint", "lf_haa_joint", "--configuration", "a:", "--gravity", "0,0",
+                    "--out", "x.toml"], ("--gravity '0,0'", "three finite numbers"))
