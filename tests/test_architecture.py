@@ -37,7 +37,8 @@ LAYERS = (
 # by the few functions that use them (the cross-check's reference, a fit's figure, root finding),
 # so that a command which does not need them starts without them (tests/test_cli_startup.py)
 LAZY_ALLOWED = ("sympy", "dask", "distributed", "control", "matplotlib", "pint", "haa_sym.symbolic",
-                "haa_sym.io.plots", "panel", "bokeh", "tornado", "scipy.signal", "scipy.stats", "scipy.optimize", "mujoco")
+                "haa_sym.io.plots", "panel", "bokeh", "tornado", "scipy.signal", "scipy.stats", "scipy.optimize",
+                "mujoco")
 
 
 def _modules():

@@ -19,6 +19,7 @@ Examples, one per command:
   haa-sym explore --params sea                the gain explorer in the browser (haa_sym[explore])
   haa-sym export-mujoco --params sea --P-gain 200 --D-gain 1 --out sea.xml   # + sea_controller.py (haa_sym[mujoco])
   haa-sym identify --params sea --log run.csv --input voltage --output torque,theta --fit K_bar,D_bar --out fitted.toml
+  haa-sym import-robot hyq.urdf --joint lf_haa_joint --configuration extended:lf_kfe_joint=-0.349 --merge hyq_haa --out hyq.toml
 
 Gains: --P-gain (P_gain, Nm/rad) and --D-gain (D_gain, Nms/rad) take the same syntax in every
 command, a grid of values: 'log:START:STOP:N' (N log-spaced, 0 < START <= STOP),
@@ -56,11 +57,11 @@ from haa_sym.errors import CompilerError, ParameterError, StaleGeneratedCode, Te
 from haa_sym.io.inputs import command_scope
 from haa_sym.io.progress import set_progress
 
-from haa_sym.cli import analyses, describe, explore, identify, robot_mujoco, robot_ros2, simulate, tune
+from haa_sym.cli import analyses, describe, explore, identify, robot_import, robot_mujoco, robot_ros2, simulate, tune
 from haa_sym.cli.common import _Parser, _progress_flags
 
 # every module adding commands: register(sub) -> {command: run(args) -> exit status}
-COMMAND_MODULES = (analyses, identify, tune, simulate, describe, explore, robot_mujoco, robot_ros2)
+COMMAND_MODULES = (analyses, identify, tune, simulate, describe, explore, robot_import, robot_mujoco, robot_ros2)
 
 
 def main(argv: list[str] | None = None) -> int:
