@@ -60,8 +60,8 @@ __all__ = ["harmonic_sums", "ExactForms", "exact_forms", "HarmonicSums", "N_SERI
            "loop_exact_forms", "passivity_excess", "passivity_tolerance", "passivity_conics"]
 
 # Laurent terms of each summand at infinity; with |w_k| >= RADIUS_FACTOR x the radius of
-# convergence beyond the explicit terms, the series' remainder is below RADIUS_FACTOR^-N_SERIES
-N_SERIES = 40
+# convergence beyond the explicit terms, the series' remainder is below RADIUS_FACTOR^-N_SERIES (checked: the last terms below 1e-13 of the largest)
+N_SERIES = 60
 RADIUS_FACTOR = 4.0
 # at least this many explicit harmonics on each side (the Euler-Maclaurin tail starts beyond)
 MIN_EXPLICIT = 8
@@ -191,6 +191,11 @@ def harmonic_sums(A, b_u, b_f, c_v, C_y, Ts: float, omega, *, source: str = "the
     n = A.shape[0]
     zeros = _d_zeros(A, b_f, c_v)
     poles = np.linalg.eigvals(A)
+    # the pencil's infinite eigenvalues (d has relative degree 2) may come out as huge finite
+    # ones: zeros beyond 1e4 x the largest plant pole are taken as infinite (the series check
+    # below catches a real zero that far out)
+    p_max = float(np.max(np.abs(poles), initial=0.0))
+    zeros = zeros[np.abs(zeros) <= 1e4 * max(p_max, 1.0)]
     scale = max(float(np.max(np.abs(np.concatenate([zeros, poles])), initial=0.0)), 1.0)
     # the plant's own port must dissipate at every frequency (d_k > 0): a zero of d on the
     # imaginary axis away from the origin is a lossless frequency, where the test is singular
@@ -225,6 +230,13 @@ def harmonic_sums(A, b_u, b_f, c_v, C_y, Ts: float, omega, *, source: str = "the
     R_A = _mul(_mul(alpha, _mirror(alpha), N), inv_d, N)
     R_g = _mul(_mul(g_yf, alpha, N), inv_d, N)
     R_B = _mul(_mul(g_yf, np.transpose(_mirror(g_yf), (0, 2, 1)), N), inv_d, N)
+    # the series must converge at RADIUS_FACTOR x scale: its last terms negligible there
+    for R in (R_A, R_g, R_B):
+        top = np.abs(R[2:]).max(axis=(1, 2)) / RADIUS_FACTOR ** np.arange(N - 2)
+        if not top[-4:].max() <= 1e-13 * top.max():
+            raise ParameterError(f"passivity = 'exact': the aliasing series of {source} do not converge "
+                                 "(a zero of the port's dissipation far beyond the plant's poles); allowed: "
+                                 "passivity = 'corrected_phase' for this actuator")
     # the explicit harmonics: |w_k| > RADIUS_FACTOR scale beyond K
     K = max(MIN_EXPLICIT, int(np.ceil(RADIUS_FACTOR * scale / ws)) + 1)
     x = omega / ws
