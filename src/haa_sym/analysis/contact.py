@@ -22,7 +22,8 @@ import numpy as np
 
 from tqdm.auto import tqdm
 
-from haa_sym.analysis.sweep import BLAS_THREADS, blas_limits, gain_rows, phase_excess
+from haa_sym.analysis.sampled_port import passivity_excess, passivity_tolerance
+from haa_sym.analysis.sweep import BLAS_THREADS, blas_limits
 from haa_sym.errors import ParameterError
 from haa_sym.io.budget import check_memory, sweep_bytes
 from haa_sym.loop import ClosedLoop, loop_first
@@ -92,9 +93,7 @@ def _radius(loop, P_gain, D_gain, beta, alpha) -> float:
 def _excess(loop, P_gain, D_gain, beta, alpha) -> float:
     """Worst corrected phase of Z beyond +-90 deg on the options' frequency grid, as
     :func:`haa_sym.analysis.passivity.passivity` computes it (whatever the loop's stability)."""
-    coef = loop.loop_coefficients(None, beta, alpha)
-    ex, _ = phase_excess(gain_rows([P_gain], [D_gain]), coef.Z_num, coef.Z_den, coef.omega,
-                         loop.params.controller.Ts, loop.options.conventions.colgate)
+    ex, _ = passivity_excess(loop, np.array([P_gain]), np.array([D_gain]), beta, alpha)
     return float(ex[0])
 
 
@@ -270,7 +269,7 @@ def _locate(loop, key, base, K, P_gain, D_gain, beta, alpha, mode, rtol, passivi
     unstable = _runs(float(K[0]), float(K[-1]), ~stable, ends)
     if not passivity:
         return ContactIntervals(unstable, key, mode, rtol, K, rho)
-    tol = loop.options.conventions.passivity_tol_deg
+    tol = passivity_tolerance(loop)
 
     def excess_minus_tol(logK):
         return _excess(_loop(loop, key, np.exp(logK), base), P_gain, D_gain, beta, alpha) - tol

@@ -9,7 +9,8 @@ from dataclasses import dataclass
 import numpy as np
 
 from haa_sym.analysis.margins import PM_THRESHOLD_DEG, phase_margins
-from haa_sym.analysis.sweep import BLAS_THREADS, blas_limits, gain_rows, phase_excess, run_chunks
+from haa_sym.analysis.sampled_port import passivity_excess, passivity_tolerance
+from haa_sym.analysis.sweep import BLAS_THREADS, blas_limits, run_chunks
 from haa_sym.loop import loop_first
 
 __all__ = ["PointDecisions", "decide_points"]
@@ -51,7 +52,6 @@ def decide_points(loop, P_gain, D_gain, beta=None, alpha=None, *, passivity: boo
     stable, refined = np.zeros(n, bool), np.zeros(n, bool)
     rho, pm, ex = np.full(n, np.nan), np.full(n, np.nan), np.full(n, np.nan)
     low = np.zeros(n, bool)
-    coef = loop.loop_coefficients(None, beta, alpha) if passivity else None
 
     def stability(sl):
         st = loop.stability(P[sl], D[sl], beta, alpha, radius=radius)
@@ -67,11 +67,11 @@ def decide_points(loop, P_gain, D_gain, beta=None, alpha=None, *, passivity: boo
         pm[ok] = m.pm_deg
         low[ok] = m.low(conv.pm_rule, pm_threshold_deg)
     if passivity and ok.size:
+        passivity_excess(loop, P[ok[:1]], D[ok[:1]], beta, alpha)     # the pieces, once
         def excess(sl):
             k = ok[sl]
-            ex[k] = phase_excess(gain_rows(P[k], D[k]), coef.Z_num, coef.Z_den, coef.omega,
-                                 loop.params.controller.Ts, conv.colgate)[0]
+            ex[k] = passivity_excess(loop, P[k], D[k], beta, alpha)[0]
         run_chunks(excess, ok.size, blas_threads=blas_threads)
     with np.errstate(invalid="ignore"):
-        passive = stable & (ex <= conv.passivity_tol_deg)
+        passive = stable & (ex <= passivity_tolerance(loop))
     return PointDecisions(stable, low, passive, pm, ex, refined, rho)

@@ -20,7 +20,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from haa_sym.analysis.sweep import BLAS_THREADS, CHUNK, colgate_factor, gain_rows, phase_excess, run_chunks
+from haa_sym.analysis.sampled_port import passivity_excess, passivity_tolerance
+from haa_sym.analysis.sweep import BLAS_THREADS, CHUNK, colgate_factor, run_chunks
 from haa_sym.io.budget import check_memory, sweep_bytes
 from haa_sym.io.progress import progress as progress_bar
 from haa_sym.loop import loop_first
@@ -37,7 +38,9 @@ def status(stable, passive) -> np.ndarray:
 @dataclass(frozen=True)
 class PassivityResult:
     """Per gain point: ``stable``, ``passive``, ``phase_excess_deg`` (worst corrected phase of Z
-    beyond +-90 deg; <= 0 inside, NaN when unstable) and ``omega_worst`` (rad/s)."""
+    beyond +-90 deg; <= 0 inside, NaN when unstable; with ``passivity = "exact"`` the
+    dimensionless dissipation deficit -min mu of :mod:`haa_sym.analysis.sampled_port` instead)
+    and ``omega_worst`` (rad/s)."""
 
     stable: np.ndarray
     passive: np.ndarray
@@ -78,7 +81,8 @@ def passivity(loop, P_gain=0.0, D_gain=0.0, *, beta: float | None = None, alpha:
     # chunked: one chunk's sweep at a time, plus the coefficients and the per-point results
     check_memory(sweep_bytes(P.size, options.numerics.n_omega, CHUNK),
                  f"passivity of {P.size} gain points on n_omega = {options.numerics.n_omega} frequencies")
-    coef = loop.loop_coefficients(None, beta, alpha)
+    # the test's pieces built once, before the chunks share them
+    passivity_excess(loop, P[:1], D[:1], beta, alpha)
     n = P.size
     stable = np.empty(n, bool)
     ex = np.empty(n)
@@ -86,14 +90,13 @@ def passivity(loop, P_gain=0.0, D_gain=0.0, *, beta: float | None = None, alpha:
 
     def work(sl):
         stable[sl] = loop.stability(P[sl], D[sl], beta, alpha).stable.ravel()
-        ex[sl], ww[sl] = phase_excess(gain_rows(P[sl], D[sl]), coef.Z_num, coef.Z_den, coef.omega,
-                                      loop.params.controller.Ts, options.conventions.colgate)
+        ex[sl], ww[sl] = passivity_excess(loop, P[sl], D[sl], beta, alpha)
     with progress_bar(n, "passivity", "pt", progress) as bar:
         run_chunks(work, n, blas_threads=blas_threads, bar=bar)
     ex = np.where(stable, ex, np.nan)
     ww = np.where(stable, ww, np.nan)
     with np.errstate(invalid="ignore"):
-        passive = stable & (ex <= options.conventions.passivity_tol_deg)
+        passive = stable & (ex <= passivity_tolerance(loop))
     return PassivityResult(stable.reshape(shape), passive.reshape(shape), ex.reshape(shape),
                            ww.reshape(shape))
 

@@ -191,8 +191,10 @@ def _cmd_contact(args) -> int:
             "K_range": list(K_range), "n_scan": args.n_scan, "rtol": r.rtol,
             "unstable_intervals": [list(i) for i in r.unstable],
             "not_passive_intervals": [list(i) for i in r.not_passive],
-            "not_passive": "stable, and the corrected phase of Z leaves +-(90 + passivity_tol_deg) deg "
-                           "somewhere on the options' frequency grid (meta: n_omega, omega_min); the "
+            "not_passive": ("stable, and the corrected phase of Z leaves +-(90 + passivity_tol_deg) deg "
+                            if loop.options.conventions.passivity == "corrected_phase" else
+                            "stable, and the exact test's dissipation deficit exceeds passivity_tol_exact ")
+                           + "somewhere on the options' frequency grid (meta: n_omega, omega_min); the "
                            "ends are exact for that grid"}
     _write_outputs(out, plot,
                    lambda path, tx: save_json(path, {**data, "meta": loop.provenance()}, tx, "--out"),
@@ -275,8 +277,11 @@ def _cmd_passivity(args) -> int:
     for i in range(P.size):
         rows.append({"P_gain": float(P[i]), "D_gain": float(D[i]), "status": str(r.status[i]),
                      "phase_excess_deg": float(r.phase_excess_deg[i]), "omega_worst_rad_s": float(r.omega_worst[i])})
-        excess = (f"worst corrected phase excess {r.phase_excess_deg[i]:+.3f} deg at {r.omega_worst[i]:.4g} rad/s"
-                  if np.isfinite(r.phase_excess_deg[i]) else "(the phase of Z of an unstable loop is not judged)")
+        # passivity = "exact": the field holds the dissipation deficit (haa_sym.analysis.sampled_port)
+        what = ("worst corrected phase excess {:+.3f} deg" if loop.options.conventions.passivity == "corrected_phase"
+                else "exact dissipation deficit {:+.4g}").format(r.phase_excess_deg[i])
+        excess = (f"{what} at {r.omega_worst[i]:.4g} rad/s"
+                  if np.isfinite(r.phase_excess_deg[i]) else "(passivity of an unstable loop is not judged)")
         print(f"P_gain {P[i]:g}  D_gain {D[i]:g}: {r.status[i]:8s}  {excess}")
     curves = []
     if plot:

@@ -18,7 +18,7 @@ from haa_sym.errors import ParameterError
 from haa_sym.io.budget import check_memory, sweep_bytes
 
 __all__ = ["LoopOptions", "LoopStructure", "AnalysisConventions", "FrequencyGrid", "PORTS", "COLGATE",
-           "FILTERS", "PM_LOOPS", "PM_RULES", "ALLOWED",
+           "FILTERS", "PM_LOOPS", "PM_RULES", "PASSIVITY_TESTS", "ALLOWED",
            "parse_options"]
 
 PORTS = ("dtheta_L2", "dtheta_L1", "encoder_average")
@@ -28,6 +28,9 @@ PM_LOOPS = ("impedance", "torque")
 # the phase-margin rules of haa_sym.analysis.margins ("distance": the angular distance of L from
 # -1 at any crossover)
 PM_RULES = ("distance", "min_abs", "worst")
+# the passivity tests (haa_sym.analysis.sampled_port, docs/passivity.md): the paper's corrected
+# phase of the sampled Z(z), or the exact test of the continuous port under the sampled controller
+PASSIVITY_TESTS = ("corrected_phase", "exact")
 
 
 # What each option allows, in words (haa-sym options, the CLI's help); the checks are the
@@ -40,7 +43,10 @@ ALLOWED: dict[str, str] = {
     "colgate": " | ".join(COLGATE) + " (Colgate's w Ts/2 correction of the phase of Z)",
     "pm_loop": " | ".join(PM_LOOPS) + " (the loop whose phase margin the maps judge)",
     "pm_rule": " | ".join(PM_RULES) + " (when a phase margin is low)",
+    "passivity": " | ".join(PASSIVITY_TESTS) + " (the paper's corrected phase of Z(z), or the exact "
+                 "test of the continuous port under the sampled controller)",
     "passivity_tol_deg": "a finite number >= 0, deg",
+    "passivity_tol_exact": "a finite number >= 0 (the exact test's dissipation deficit)",
     "n_omega": "an integer >= 10 (points of the frequency grid)",
     "omega_min": "a finite number > 0, rad/s (the grid's lowest frequency)",
 }
@@ -121,23 +127,38 @@ class AnalysisConventions:
         "min_abs" when the signed margin of the crossover with the smallest |PM| is below the
         threshold (the rule before issue 15: a crossover at -102 deg counted as low); "worst"
         when the smallest signed margin is.
+    passivity : {"corrected_phase", "exact"}
+        The passivity test. "corrected_phase" (default, the paper's Sec. 5): the phase of the
+        sampled Z(z), corrected by ``colgate``, within +-90 deg. "exact": the continuous port
+        torque -> port velocity under the sampled controller and its hold, a periodically
+        time-varying operator, judged by the smallest eigenvalue of its lifted Hermitian part
+        (:mod:`haa_sym.analysis.sampled_port`, docs/passivity.md).
     passivity_tol_deg : float
         A point is passive when the corrected phase of Z stays within 90 deg + this tolerance.
         A spring (Z ~ K/(j w)) sits at -90 deg as w -> 0, so a zero tolerance would decide
         such points by rounding. Default 1e-3.
+    passivity_tol_exact : float
+        With ``passivity = "exact"`` a point is passive when the dissipation deficit
+        -min_w mu(w) is at most this (mu: the fraction of the port's own dissipation the loop
+        leaves). At low frequency a virtual spring leaves mu -> 0, where the evaluation's
+        rounding is about 1e-9 (docs/passivity.md). Default 1e-7.
     """
 
     colgate: str = "subtract"
     pm_loop: str = "impedance"
     pm_rule: str = "distance"
+    passivity: str = "corrected_phase"
     passivity_tol_deg: float = 1e-3
+    passivity_tol_exact: float = 1e-7
 
     def __post_init__(self):
-        for name, allowed in (("colgate", COLGATE), ("pm_loop", PM_LOOPS), ("pm_rule", PM_RULES)):
+        for name, allowed in (("colgate", COLGATE), ("pm_loop", PM_LOOPS), ("pm_rule", PM_RULES),
+                              ("passivity", PASSIVITY_TESTS)):
             _choice(self, name, allowed)
-        v = self.passivity_tol_deg
-        if isinstance(v, bool) or not isinstance(v, (int, float)) or not np.isfinite(v) or v < 0:
-            raise ParameterError(f"passivity_tol_deg = {v!r}; allowed: a finite number >= 0 (deg)")
+        for name, unit in (("passivity_tol_deg", " (deg)"), ("passivity_tol_exact", "")):
+            v = getattr(self, name)
+            if isinstance(v, bool) or not isinstance(v, (int, float)) or not np.isfinite(v) or v < 0:
+                raise ParameterError(f"{name} = {v!r}; allowed: a finite number >= 0{unit}")
 
 
 @dataclass(frozen=True)

@@ -35,7 +35,7 @@ import numpy as np
 from haa_sym.loop import ClosedLoop, loop_first
 from haa_sym.errors import ParameterError
 from haa_sym.analysis.boundaries.curves import BoundaryCurve
-from haa_sym.analysis.sweep import colgate_factor, gain_rows, phase_excess, product_form
+from haa_sym.analysis.sampled_port import passivity_conics, passivity_excess
 
 __all__ = ["passivity_boundary", "passivity_crossings", "NEUTRAL"]
 
@@ -52,14 +52,14 @@ REFINE_XTOL = 1e-10
 # the non-passive set (the refinement moves a boundary point by far less)
 PRUNE_DEG = 1e-2
 REFINE_STEPS = 80
+# the exact test's deficit in the units of the thresholds above (see _worst_excess)
+EXACT_SCALE = 100.0
 
 
 def _conics(loop: ClosedLoop, omega: np.ndarray, beta: float, alpha: float, cached: bool = False) -> np.ndarray:
     """Re W's coefficients on the monomials (1, P, D, P^2, P D, D^2), shape (6, n_omega); NaN
     columns at neutral frequencies."""
-    coef = loop.loop_coefficients(omega, beta, alpha, cached=cached)
-    W = product_form(coef.Z_num, coef.Z_den) * colgate_factor(coef.omega, loop.params.controller.Ts,
-                                                              loop.options.conventions.colgate)
+    W = passivity_conics(loop, omega, beta, alpha, cached=cached)
     Q = W.real.copy()
     with np.errstate(invalid="ignore", divide="ignore"):
         neutral = np.abs(W.real).max(axis=0) <= NEUTRAL * np.abs(W).max(axis=0)
@@ -219,9 +219,10 @@ def _refine(loop, on_P_line, t, branch, sign, lw, beta, alpha, xtol: float = REF
 
 def _worst_excess(loop, P, D, beta, alpha, omega):
     """max over ``omega`` of |corrected phase of Z| - 90 deg at the points (P, D)."""
-    coef = loop.loop_coefficients(omega, beta, alpha)
-    return phase_excess(gain_rows(P, D), coef.Z_num, coef.Z_den, coef.omega, loop.params.controller.Ts,
-                        loop.options.conventions.colgate)[0]
+    ex = passivity_excess(loop, P, D, beta, alpha, omega)[0]
+    # the thresholds below are in deg of the corrected phase; the exact test's deficit is a
+    # fraction of the port's dissipation: EXACT_SCALE deg per unit (1e-6 deg -> 1e-8)
+    return ex * EXACT_SCALE if loop.options.conventions.passivity == "exact" else ex
 
 
 def _line_points(Q, omega, along, t):

@@ -1,0 +1,414 @@
+"""Exact passivity of the continuous port under the sampled controller (issue 24, docs/passivity.md).
+
+The port torque f(t) and the port velocity v(t) are continuous signals; the controller samples
+its measurements y (the torque signal and the encoder angle) at Ts and drives the plant through a
+zero-order hold. The map f -> v is linear and Ts-periodic. In the frequency-domain lifting
+(Araki and Ito; Yamamoto and Khargonekar 1996) the input of frequency w is the sequence of its
+harmonics f_k = f(j w_k), w_k = w + k ws (ws = 2 pi / Ts), and the operator acts on it as
+
+    v_k = G_vf(j w_k) f_k + a_k U,    U = c(z) (1/Ts) sum_m G_yf(j w_m) f_m,
+    a_k = G_vV(j w_k) (1 - z^-1) / (j w_k),   c = K / (1 - K P_d),   z = exp(j w Ts),
+
+with K(z) the controller's row from y to the voltage (``haa_sym.loop.statespace.controller_batch``)
+and P_d(z) the zero-order-hold sampled plant from the voltage to y. That is a diagonal operator
+(the plant alone, the voltage held at zero) plus a rank-one one (the sampled feedback):
+T = D + a b^T with b_m = c G_yf(j w_m) / Ts. The port is passive iff Re <f, T f> >= 0 for every
+f and every w in [0, pi/Ts], i.e. iff the Hermitian part Delta + a b^T + conj(b) a^* is positive
+semidefinite, Delta = diag(d_k), d_k = 2 Re G_vf(j w_k) > 0 (the plant's own dissipation, which
+the method requires). With p = Delta^-1/2 a, q = Delta^-1/2 conj(b) the rank-two part has the
+eigenvalues Re(q^* p) +- sqrt(|p|^2 |q|^2 - Im(q^* p)^2), so
+
+    mu(w) = 1 + Re(q^* p) - sqrt(|p|^2 |q|^2 - Im(q^* p)^2)
+
+is the smallest eigenvalue of I + Delta^-1/2 (a b^T + conj(b) a^*) Delta^-1/2 (the fraction of
+the plant's own dissipation the closed loop leaves; 1 with the controller off) and the port is
+passive iff mu(w) >= 0 for all w. mu >= 0 is equivalent to |1 + q^* p|^2 >= |p|^2 |q|^2, and
+multiplied by |1 - K P_d|^2 to
+
+    f(w; x) = |1 - K (P_d - (1 - z^-1) gamma / Ts)|^2 - |1 - z^-1|^2 A (K B K^*) / Ts^2 >= 0,
+
+a quadratic form in the gains x = (1, P_gain, D_gain) at every frequency (K is affine in them),
+as the corrected phase's Re W is: the boundary code's conics take it unchanged. The three
+gain-independent aliasing sums are
+
+    A(w) = sum_k |alpha_k|^2 / d_k,  gamma(w) = sum_k beta_k alpha_k / d_k,
+    B(w) = sum_k beta_k beta_k^* / d_k,
+    alpha_k = G_vV(j w_k) / (j w_k),  beta_k = G_yf(j w_k),
+
+sums of rational functions of s = j w_k; :func:`harmonic_sums` evaluates them exactly to
+rounding: the terms |k| <= K directly from the continuous plant, the tail from the Laurent
+series at infinity of each summand (Markov parameters, series arithmetic) summed term by term
+in closed form (Euler-Maclaurin on (k +- x)^-m, exact to 1e-20 relative for k > K >= 8),
+with K chosen so that every |w_k| beyond it is at least 4 times the series' radius of
+convergence (the largest plant pole and zero of d(s)): the truncation of the series after
+``N_SERIES`` terms is then below 4^-N_SERIES.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+import scipy.linalg
+
+from haa_sym.analysis.sweep import colgate_factor, gain_rows, phase_excess, product_form
+from haa_sym.compiled.cache import BoundedCache, array_key
+from haa_sym.errors import ParameterError
+from haa_sym.loop.plant import continuous_plant, with_lag
+from haa_sym.loop.statespace import controller_batch
+
+__all__ = ["harmonic_sums", "ExactForms", "exact_forms", "HarmonicSums", "N_SERIES", "RADIUS_FACTOR",
+           "loop_exact_forms", "passivity_excess", "passivity_tolerance", "passivity_conics"]
+
+# Laurent terms of each summand at infinity; with |w_k| >= RADIUS_FACTOR x the radius of
+# convergence beyond the explicit terms, the series' remainder is below RADIUS_FACTOR^-N_SERIES (checked: the last terms below 1e-13 of the largest)
+N_SERIES = 60
+RADIUS_FACTOR = 4.0
+# at least this many explicit harmonics on each side (the Euler-Maclaurin tail starts beyond)
+MIN_EXPLICIT = 8
+# Bernoulli numbers B_2, B_4, ..., B_16 over (2j)!: Euler-Maclaurin's correction terms
+_BERN = np.array([1 / 6, -1 / 30, 1 / 42, -1 / 30, 5 / 66, -691 / 2730, 7 / 6, -3617 / 510])
+_FACT = np.array([float(np.prod(np.arange(1, 2 * j + 1))) for j in range(1, 9)])
+
+
+@dataclass(frozen=True)
+class HarmonicSums:
+    """The gain-independent aliasing sums at ``omega`` (rad/s): ``A`` (n_omega,), ``gamma``
+    (n_omega, n_y) and ``B`` (n_omega, n_y, n_y, Hermitian), and ``K`` the explicit harmonics
+    on each side."""
+
+    omega: np.ndarray
+    A: np.ndarray
+    gamma: np.ndarray
+    B: np.ndarray
+    K: int
+
+
+def _markov(A, B, C, n: int, scale: float) -> np.ndarray:
+    """Laurent coefficients of C (sI - A)^-1 B in (scale/s): entry m is C (A/scale)^(m-1) B / scale
+    (m >= 1; entry 0 is 0), shape (n, rows, cols)."""
+    out = np.zeros((n, C.shape[0], B.shape[1]))
+    X = B / scale
+    As = A / scale
+    for m in range(1, n):
+        out[m] = C @ X
+        X = As @ X
+    return out
+
+
+def _mirror(c: np.ndarray) -> np.ndarray:
+    """Series of F(-s) from that of F(s) (in 1/s): the coefficient of w^m times (-1)^m."""
+    return c * ((-1.0) ** np.arange(c.shape[0]))[:, None, None]
+
+
+def _mul(a: np.ndarray, b: np.ndarray, n: int) -> np.ndarray:
+    """Product of two matrix series (n terms), entry m = sum_i a_i @ b_(m-i) (a 1 x 1 factor
+    scales)."""
+    scalar = b.shape[1:] == (1, 1) and a.shape[2] != 1
+    out = np.zeros((n, a.shape[1], a.shape[2] if scalar else b.shape[2]), dtype=np.result_type(a, b))
+    for m in range(n):
+        for i in range(m + 1):
+            out[m] += a[i] * b[m - i] if scalar else a[i] @ b[m - i]
+    return out
+
+
+def _reciprocal_d(d: np.ndarray, n: int) -> np.ndarray:
+    """Series of 1/d(s) for a scalar d = d_2 w^2 + d_3 w^3 + ... (w = scale/s): returned as the
+    series of w^2 / d (the caller multiplies by w^-2, a shift), n terms."""
+    e = d[2:, 0, 0]
+    r = np.zeros(n)
+    r[0] = 1.0 / e[0]
+    for m in range(1, n):
+        s = sum(e[i] * r[m - i] for i in range(1, min(m, e.size - 1) + 1))
+        r[m] = -s / e[0]
+    return r[:, None, None]
+
+
+def _tail_powers(x: np.ndarray, K: int, n: int) -> np.ndarray:
+    """T_m(x) = sum_{k > K} [(k + x)^-m + (-1)^m (k - x)^-m] for m = 1..n-1 (row m; row 0 zero),
+    0 <= x <= 1/2, by Euler-Maclaurin from a = K + 1 (error below 1e-20 relative for a >= 9)."""
+    a = K + 1.0
+    out = np.zeros((n, x.size))
+    p, q = a + x, a - x
+    for m in range(1, n):
+        sgn = (-1.0) ** m
+        if m == 1:
+            integral = np.log(q / p)
+        else:
+            integral = (p ** (1 - m) + sgn * q ** (1 - m)) / (m - 1)
+        total = integral + 0.5 * (p ** -m + sgn * q ** -m)
+        rising = float(m)                           # m (m+1) ... (m + 2j - 2)
+        for j in range(1, _BERN.size + 1):
+            # g^(2j-1)(a) of (k + c)^-m is -(m)_(2j-1) (a + c)^(-m-2j+1)
+            deriv = -rising * (p ** (-m - 2 * j + 1) + sgn * q ** (-m - 2 * j + 1))
+            total = total - _BERN[j - 1] / _FACT[j - 1] * deriv
+            rising *= (m + 2 * j - 1) * (m + 2 * j)
+        out[m] = total
+    return out
+
+
+def _d_zeros(A, b_f, c_v) -> np.ndarray:
+    """Finite zeros of d(s) = G_vf(s) + G_vf(-s) (the invariant zeros of its realisation)."""
+    n = A.shape[0]
+    Ad = scipy.linalg.block_diag(A, -A.T)
+    Bd = np.concatenate([b_f, c_v.T])
+    Cd = np.concatenate([c_v, -b_f.T], axis=1)
+    M = np.block([[Ad, Bd], [Cd, np.zeros((1, 1))]])
+    N = scipy.linalg.block_diag(np.eye(2 * n), np.zeros((1, 1)))
+    w = scipy.linalg.eigvals(M, N)
+    return w[np.isfinite(w)]
+
+
+def harmonic_sums(A, b_u, b_f, c_v, C_y, Ts: float, omega, *, source: str = "the plant") -> HarmonicSums:
+    """The aliasing sums A, gamma, B of the module docstring at ``omega`` (rad/s, in (0, pi/Ts]).
+
+    Parameters
+    ----------
+    A : (n, n) array
+        Continuous plant matrix (the drive's lag included).
+    b_u, b_f : (n, 1) arrays
+        Columns of the held command (V_m) and of the port torque (T_dist).
+    c_v : (1, n) array
+        Row of the port velocity (rad/s).
+    C_y : (n_y, n) array
+        Rows of the sampled measurements (the order of the controller's inputs).
+    Ts : float
+        Sampling time, s.
+    omega : array_like
+        Frequencies, rad/s.
+    source : str
+        What to name in a refusal.
+
+    Raises
+    ------
+    ParameterError
+        The plant's own port is not strictly passive (d(jw) has a zero on the imaginary axis
+        away from 0: no dissipation at some frequency), or a summand decays too slowly (a
+        measurement with a direct response to the port torque).
+    """
+    A, b_u, b_f, c_v, C_y = (np.asarray(m, float) for m in (A, b_u, b_f, c_v, C_y))
+    omega = np.asarray(omega, float).ravel()
+    ws = 2 * np.pi / Ts
+    n = A.shape[0]
+    zeros = _d_zeros(A, b_f, c_v)
+    poles = np.linalg.eigvals(A)
+    # the pencil's infinite eigenvalues (d has relative degree 2) may come out as huge finite
+    # ones: zeros beyond 1e4 x the largest plant pole are taken as infinite (the series check
+    # below catches a real zero that far out)
+    p_max = float(np.max(np.abs(poles), initial=0.0))
+    zeros = zeros[np.abs(zeros) <= 1e4 * max(p_max, 1.0)]
+    scale = max(float(np.max(np.abs(np.concatenate([zeros, poles])), initial=0.0)), 1.0)
+    # the plant's own port must dissipate at every frequency (d_k > 0): a zero of d on the
+    # imaginary axis away from the origin is a lossless frequency, where the test is singular
+    on_axis = np.abs(zeros.real) <= 1e-9 * np.maximum(np.abs(zeros), 1.0)
+    away = np.abs(zeros) > 1e-6 * scale
+    d_probe = 2 * np.real(c_v @ np.linalg.solve(1j * scale * np.eye(n) - A, b_f))[0, 0]
+    if (on_axis & away).any() or not d_probe > 0:
+        raise ParameterError(
+            f"passivity = 'exact': the port of {source} is not strictly passive on its own (its "
+            "velocity's response to the port torque, the voltage held at zero, has no dissipation at "
+            f"{'some frequency' if d_probe > 0 else 'high frequency'}); allowed: a port body with "
+            "physical damping (the exact test divides by it), or passivity = 'corrected_phase'")
+    # Laurent series at infinity in w = scale/s
+    g_vV = _markov(A, b_u, c_v, N_SERIES + 4, scale)
+    g_vf = _markov(A, b_f, c_v, N_SERIES + 4, scale)
+    g_yf = _markov(A, b_f, C_y, N_SERIES + 4, scale)
+    if np.any(np.abs(g_yf[1]) > 1e-12 * np.abs(g_yf).max(initial=1.0)):
+        raise ParameterError(
+            f"passivity = 'exact': a measurement of {source} responds directly to the port torque "
+            "(relative degree 1), so its samples are not defined at the jumps; allowed: "
+            "measurements of relative degree >= 2 from the port torque (angles, spring torques), "
+            "or passivity = 'corrected_phase'")
+    d = g_vf + _mirror(g_vf)
+    if not abs(d[2, 0, 0]) > 0:
+        raise ParameterError(f"passivity = 'exact': the port of {source} has no damping at high "
+                             "frequency; allowed: a port body with viscous damping, or "
+                             "passivity = 'corrected_phase'")
+    N = N_SERIES + 2
+    inv_d = _reciprocal_d(d, N)                          # w^2 / d
+    alpha = np.concatenate([np.zeros((1, 1, 1)), g_vV[:-1]]) / scale   # G_vV / s = G_vV w / scale
+    # summands times w^-2 (the 1/d shift): start from power 2 of the products below
+    R_A = _mul(_mul(alpha, _mirror(alpha), N), inv_d, N)
+    R_g = _mul(_mul(g_yf, alpha, N), inv_d, N)
+    R_B = _mul(_mul(g_yf, np.transpose(_mirror(g_yf), (0, 2, 1)), N), inv_d, N)
+    # the series must converge at RADIUS_FACTOR x scale: its last terms negligible there
+    for R in (R_A, R_g, R_B):
+        top = np.abs(R[2:]).max(axis=(1, 2)) / RADIUS_FACTOR ** np.arange(N - 2)
+        if not top[-4:].max() <= 1e-13 * top.max():
+            raise ParameterError(f"passivity = 'exact': the aliasing series of {source} do not converge "
+                                 "(a zero of the port's dissipation far beyond the plant's poles); allowed: "
+                                 "passivity = 'corrected_phase' for this actuator")
+    # the explicit harmonics: |w_k| > RADIUS_FACTOR scale beyond K
+    K = max(MIN_EXPLICIT, int(np.ceil(RADIUS_FACTOR * scale / ws)) + 1)
+    x = omega / ws
+    ks = np.arange(-K, K + 1)
+    s = 1j * (omega[:, None] + ks[None, :] * ws)                        # (n_omega, 2K+1)
+    M = s[..., None, None] * np.eye(n) - A
+    X = np.linalg.solve(M, np.broadcast_to(np.concatenate([b_u, b_f], axis=1), s.shape + (n, 2)))
+    G_vV = (c_v @ X[..., :1])[..., 0, 0]
+    G_vf = (c_v @ X[..., 1:])[..., 0, 0]
+    G_yf = (C_y @ X[..., 1:])[..., 0]                                   # (n_omega, 2K+1, n_y)
+    dk = 2 * G_vf.real
+    al = G_vV / s
+    A_sum = np.sum(np.abs(al) ** 2 / dk, axis=1)
+    g_sum = np.einsum("wk,wky->wy", al / dk, G_yf)
+    B_sum = np.einsum("wk,wky,wkz->wyz", 1 / dk, G_yf, np.conj(G_yf))
+    # the tail: sum over |k| > K of sum_m R_m (scale/s_k)^m, R's powers shifted by -2 (1/d)
+    T = _tail_powers(x, K, N)                                            # (N, n_omega)
+    pw = (scale / (1j * ws)) ** np.arange(N)                             # (scale/(j ws))^m
+    tail = {}
+    for name, R in (("A", R_A), ("g", R_g), ("B", R_B)):
+        # coefficient of w^m in R (with w^-2) is R[m + 2]
+        c = np.zeros_like(R)
+        c[:N - 2] = R[2:]
+        if np.any(np.abs(c[:2]) > 1e-9 * np.abs(c).max(initial=1.0)):
+            raise ParameterError(f"passivity = 'exact': an aliasing sum of {source} does not converge "
+                                 "absolutely (a summand of relative degree < 2); allowed: the port and "
+                                 "measurements of the bundled structures, or passivity = 'corrected_phase'")
+        tail[name] = np.einsum("m,mw,mij->wij", pw, T, c)
+    A_sum = A_sum + tail["A"][:, 0, 0].real
+    g_sum = g_sum + tail["g"][:, :, 0]
+    B_sum = B_sum + tail["B"]
+    B_sum = 0.5 * (B_sum + np.conj(np.transpose(B_sum, (0, 2, 1))))
+    return HarmonicSums(omega, A_sum, g_sum, B_sum, K)
+
+
+@dataclass(frozen=True)
+class ExactForms:
+    """Gain-affine pieces of the exact test on a frequency grid, x = (1, P_gain, D_gain):
+    ``delta`` (n_omega, 3) the return difference 1 - K P_d, ``u`` (n_omega, 3) the aliased part
+    (1 - z^-1) K gamma / Ts (so q^* p = u.x / delta.x), ``S`` (n_omega, 3, 3) Hermitian with
+    x^T S x = |1 - z^-1|^2 A K B K^* / Ts^2 (= |p|^2 |q|^2 |delta.x|^2)."""
+
+    omega: np.ndarray
+    delta: np.ndarray
+    u: np.ndarray
+    S: np.ndarray
+
+    def conics(self) -> np.ndarray:
+        """f(w; x) = |(delta + u).x|^2 - x^T S x on the monomials (1, P, D, P^2, P D, D^2):
+        real, shape (6, n_omega). f >= 0 at a frequency iff mu(w) >= 0 there."""
+        e = self.delta + self.u
+        ee = e[:, :, None] * np.conj(e[:, None, :]) - self.S
+        return np.stack([ee[:, 0, 0].real, 2 * ee[:, 0, 1].real, 2 * ee[:, 0, 2].real, ee[:, 1, 1].real,
+                         2 * ee[:, 1, 2].real, ee[:, 2, 2].real])
+
+    def worst(self, X: np.ndarray):
+        """(-min_w mu(w), argmin w) at the gain rows ``X`` (n, 3): the dissipation deficit
+        (<= 0: passive; -1 with the controller off)."""
+        dl = X @ self.delta.T
+        uu = X @ self.u.T
+        S = np.einsum("ni,wij,nj->nw", X, self.S, X).real
+        rho = np.abs(dl) ** 2
+        w = uu * np.conj(dl)
+        with np.errstate(invalid="ignore", divide="ignore"):
+            mu = (rho + w.real - np.sqrt(np.maximum(S * rho - w.imag ** 2, 0.0))) / rho
+        j = np.argmin(mu, axis=1)
+        return -mu[np.arange(X.shape[0]), j], self.omega[j]
+
+
+def exact_forms(sums: HarmonicSums, P_d, K_aff, Ts: float) -> ExactForms:
+    """The pieces of :class:`ExactForms` from the aliasing sums, the sampled plant ``P_d``
+    (n_omega, n_y: the voltage to the measurements) and the controller's affine coefficients
+    ``K_aff`` (n_omega, 3, n_y: rows for 1, P_gain, D_gain; u = K y, the controller's own signs)."""
+    z = np.exp(1j * sums.omega * Ts)
+    h = 1 - 1 / z
+    unit = np.zeros(3)
+    unit[0] = 1.0
+    delta = unit[None, :] - np.einsum("wiy,wy->wi", K_aff, P_d)
+    u = (h / Ts)[:, None] * np.einsum("wiy,wy->wi", K_aff, sums.gamma)
+    a0 = (np.abs(h) ** 2 * sums.A / Ts ** 2)
+    S = a0[:, None, None] * np.einsum("wiy,wyz,wjz->wij", K_aff, sums.B, np.conj(K_aff))
+    S = 0.5 * (S + np.conj(np.transpose(S, (0, 2, 1))))
+    return ExactForms(sums.omega, delta, u, S)
+
+
+def _loop_pieces(loop):
+    """The continuous plant's matrices the exact test needs (A, b_u, b_f, c_v, C_y), checking that
+    the loop is one it handles."""
+    opt, params = loop.options, loop.params
+    port = opt.structure.port
+    if port == "encoder_average":
+        raise ParameterError("passivity = 'exact' with port = 'encoder_average': that port reads the "
+                             "controller's sampled estimate, not a continuous velocity; allowed: port = "
+                             "'dtheta_<body>' with passivity = 'exact', or passivity = 'corrected_phase'")
+    if params.drive.delay_drive > 0:
+        raise ParameterError(f"passivity = 'exact' with delay_drive = {params.drive.delay_drive!r} s: the "
+                             "drive's dead time is not handled by the exact test; allowed: delay_drive = 0 "
+                             "with passivity = 'exact', or passivity = 'corrected_phase'")
+    cont = with_lag(continuous_plant(params.plant, loop.backend), params.drive.tau_drive)
+    names = cont.output_names
+    # the controller's inputs, in its order (haa_sym.loop.statespace.CONTROLLER_INPUTS)
+    C_y = cont.C[[names.index("theta_encoder"), names.index(loop.torque_output)]]
+    c_v = cont.C[[names.index(port)]]
+    return cont.A, cont.B[:, :1], cont.B[:, 2:3], c_v, C_y
+
+
+def loop_exact_forms(loop, omega, beta: float, alpha: float) -> ExactForms:
+    """:class:`ExactForms` of ``loop`` at ``omega`` (rad/s) for the torque gains beta, alpha;
+    memoised per loop structure, grid and gains (a map reuses one)."""
+    Ts = loop.params.controller.Ts
+    omega = np.asarray(omega, float).ravel()
+
+    def sums():
+        A, b_u, b_f, c_v, C_y = _loop_pieces(loop)
+        return harmonic_sums(A, b_u, b_f, c_v, C_y, Ts, omega, source=str(loop.params.source))
+
+    def build():
+        S = _SUMS.get((array_key(loop.plant.Phi, loop.plant.Gamma, loop.plant.C, omega), loop.options.structure.port,
+                       loop.torque_output, loop.backend), sums)
+        P_d = loop.plant.frequency_response(omega, outputs=("theta_encoder", loop.torque_output),
+                                            inputs=("V_m",))[:, 0, :].T          # (n_omega, 2)
+        Ac, Bc, Cc, Dc = controller_batch(loop, [0.0, 1.0, 0.0], [0.0, 0.0, 1.0], beta, alpha)
+        z = np.exp(1j * omega * Ts)
+        m = Ac.shape[1]
+        # K(z) = C (zI - A)^-1 B + D from (theta_encoder, T_meas) to V, at the three points
+        Mz = z[None, :, None, None] * np.eye(m) - Ac[:, None]
+        Xz = np.linalg.solve(Mz, np.broadcast_to(Bc[:, None, :, :2], (3, omega.size, m, 2)))
+        Kz = np.einsum("pj,pwjy->pwy", Cc[:, 0, :], Xz) + Dc[:, None, 0, :2]   # (3, n_omega, 2)
+        K_aff = np.stack([Kz[0], Kz[1] - Kz[0], Kz[2] - Kz[0]], axis=1)      # (n_omega, 3, 2)
+        return exact_forms(S, P_d, K_aff, Ts)
+    key = (array_key(loop.plant.Phi, loop.plant.Gamma, loop.plant.C, omega), loop.options.structure.port,
+           loop.torque_output, loop.backend, tuple((e.numerator, e.denominator) for e in loop.elements.values()),
+           tuple(loop.const), float(beta), float(alpha))
+    return _FORMS.get(key, build)
+
+
+_SUMS = BoundedCache(16)
+_FORMS = BoundedCache(32)
+
+
+def passivity_excess(loop, P, D, beta: float, alpha: float, omega=None):
+    """The one passivity measure of the maps, the curves' probes, the contact scan and Table 2:
+    ``(excess, omega_worst)`` at the gain points (flat P, D) on ``omega`` (default the options'
+    grid), by the options' ``passivity`` test:
+
+    * ``"corrected_phase"`` (the paper's): the worst corrected phase of Z beyond +-90 deg, deg;
+    * ``"exact"``: the dissipation deficit -min_w mu(w), dimensionless (module docstring).
+
+    A point is passive when its loop is stable and excess <= :func:`passivity_tolerance`."""
+    conv = loop.options.conventions
+    X = gain_rows(P, D)
+    if X.shape[0] == 0:
+        return np.full(0, np.nan), np.full(0, np.nan)
+    if conv.passivity == "exact":
+        w = loop.options.numerics.omega(loop.params.controller.Ts) if omega is None else omega
+        return loop_exact_forms(loop, w, beta, alpha).worst(X)
+    coef = loop.loop_coefficients(omega, beta, alpha)
+    return phase_excess(X, coef.Z_num, coef.Z_den, coef.omega, loop.params.controller.Ts, conv.colgate)
+
+
+def passivity_tolerance(loop) -> float:
+    """The options' tolerance of :func:`passivity_excess`'s measure (deg or dimensionless)."""
+    conv = loop.options.conventions
+    return conv.passivity_tol_exact if conv.passivity == "exact" else conv.passivity_tol_deg
+
+
+def passivity_conics(loop, omega, beta: float, alpha: float, cached: bool = False) -> np.ndarray:
+    """Per frequency, the quadratic form in (1, P, D, P^2, P D, D^2) whose sign is the test's
+    (shape (6, n_omega), complex for the corrected phase, whose real part is Re W; real for
+    the exact test): the conics of :mod:`haa_sym.analysis.boundaries.passivity`."""
+    conv = loop.options.conventions
+    if conv.passivity == "exact":
+        return loop_exact_forms(loop, omega, beta, alpha).conics().astype(complex)
+    coef = loop.loop_coefficients(omega, beta, alpha, cached=cached)
+    return product_form(coef.Z_num, coef.Z_den) * colgate_factor(coef.omega, loop.params.controller.Ts, conv.colgate)

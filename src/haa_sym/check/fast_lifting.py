@@ -1,0 +1,104 @@
+"""Independent reference of the exact passivity test: the fast-rate lifting (issue 24).
+
+The continuous port torque is restricted to functions held constant over M sub-steps of each
+sample, h = Ts / M; the port velocity is averaged over each sub-step, so that <f, v> =
+h sum_i f_i vbar_i exactly for such f. Over one sample the plant, the port torque's M values and
+the controller's held voltage form a discrete system with M inputs and M outputs (the lifted
+system); its M x M transfer matrix T_M(z) at z = exp(j w Ts) is the restriction of the
+sampled-data operator to those functions. Its Hermitian part against that of the plant alone
+(the controller off, G_M) gives
+
+    mu_M(w) = min eig(T_M + T_M^*, G_M + G_M^*),
+
+the smallest Rayleigh quotient Re<f, T f> / Re<f, G f> over the piecewise-constant f: it is at
+least the exact mu(w) of :mod:`haa_sym.analysis.sampled_port` (a minimum over a subspace), does
+not increase when M doubles (the subspaces are nested) and tends to mu(w) as M grows (they are
+dense in L2). Nothing is shared with the exact method but the continuous plant's matrices
+(the generated plant function) and the controller's realisation
+(:func:`haa_sym.loop.statespace.controller_batch`, itself checked against
+:mod:`haa_sym.check.reference`): no aliasing sums, no series, no closed forms; matrix exponentials
+(scipy.linalg.expm) and a generalised Hermitian eigenvalue problem (scipy.linalg.eigh).
+"""
+from __future__ import annotations
+
+import numpy as np
+import scipy.linalg
+
+from haa_sym.loop.plant import continuous_plant, with_lag
+from haa_sym.loop.statespace import controller_batch
+
+__all__ = ["lifted_mu", "sampled_data_mu", "loop_plant"]
+
+
+def loop_plant(loop):
+    """(A, b_u, b_f, c_v, C_y) of ``loop``'s continuous plant (drive lag included), C_y the rows of
+    the controller's inputs (theta_encoder, the torque signal)."""
+    params = loop.params
+    cont = with_lag(continuous_plant(params.plant, loop.backend), params.drive.tau_drive)
+    names = cont.output_names
+    C_y = cont.C[[names.index("theta_encoder"), names.index(loop.torque_output)]]
+    return cont.A, cont.B[:, :1], cont.B[:, 2:3], cont.C[[names.index(loop.options.structure.port)]], C_y
+
+
+def _substep(A, b_u, b_f, h):
+    """E = e^{Ah}, Gamma = int_0^h e^{At} dt [b_u b_f], Psi = int_0^h e^{At} dt,
+    Theta = int_0^h int_0^t e^{As} ds dt [b_u b_f], from one exponential of a block matrix."""
+    n = A.shape[0]
+    Bm = np.concatenate([b_u, b_f], axis=1)
+    M = np.zeros((n + 2, n + 2))
+    M[:n, :n], M[:n, n:] = A, Bm
+    big = np.zeros((2 * (n + 2), 2 * (n + 2)))
+    big[:n + 2, :n + 2] = M
+    big[:n + 2, n + 2:] = np.eye(n + 2)
+    F = scipy.linalg.expm(big * h)
+    eM, iM = F[:n + 2, :n + 2], F[:n + 2, n + 2:]
+    return eM[:n, :n], eM[:n, n:], iM[:n, :n], iM[:n, n:]
+
+
+def sampled_data_mu(A, b_u, b_f, c_v, C_y, ctrl, Ts: float, omega, M: int) -> np.ndarray:
+    """mu_M(w) at ``omega`` (rad/s) for the plant (A, b_u, b_f, c_v, C_y) under the discrete
+    controller ``ctrl`` = (Ac, Bc, Cc, Dc) from y (n_y) to the held command (u = Cc xi + Dc y)."""
+    Ac, Bc, Cc, Dc = (np.atleast_2d(np.asarray(m, float)) for m in ctrl)
+    n, m = A.shape[0], Ac.shape[0]
+    h = Ts / M
+    E, G, Psi, Th = _substep(A, b_u, b_f, h)
+    Gu, Gf = G[:, :1], G[:, 1:]
+    # x_i = E^i x_0 + S_i V + sum_{l<i} E^(i-1-l) Gf f_l
+    Ep = [np.eye(n)]
+    for _ in range(M):
+        Ep.append(E @ Ep[-1])
+    S = [np.zeros((n, 1))]
+    for i in range(M):
+        S.append(E @ S[-1] + Gu)
+    Fx = np.zeros((M + 1, n, M))                           # x_i's dependence on f
+    for i in range(1, M + 1):
+        Fx[i] = E @ Fx[i - 1]
+        Fx[i][:, i - 1] += Gf[:, 0]
+    # average velocity over sub-step i: (c_v Psi x_i + c_v Th_u V + c_v Th_f f_i) / h
+    cP = c_v @ Psi
+    Cx = np.concatenate([cP @ Ep[i] for i in range(M)]) / h                # (M, n)
+    CV = np.concatenate([cP @ S[i] + c_v @ Th[:, :1] for i in range(M)]) / h   # (M, 1)
+    Df = np.stack([(cP @ Fx[i])[0] for i in range(M)]) / h + np.eye(M) * (c_v @ Th[:, 1:])[0, 0] / h
+    # the closed loop over one sample: state [x, xi], V = Cc xi + Dc C_y x
+    KV = np.concatenate([Dc @ C_y, Cc], axis=1)                           # V as a row over [x, xi]
+    Acl = np.zeros((n + m, n + m))
+    Acl[:n, :n] = Ep[M]
+    Acl[:n] += S[M] @ KV
+    Acl[n:, :n] = Bc @ C_y
+    Acl[n:, n:] = Ac
+    Bcl = np.concatenate([Fx[M], np.zeros((m, M))])
+    Ccl = np.concatenate([Cx, np.zeros((M, m))], axis=1) + CV @ KV
+    z = np.exp(1j * np.asarray(omega, float).ravel() * Ts)
+    out = np.empty(z.size)
+    for k, zk in enumerate(z):
+        T = Df + Ccl @ np.linalg.solve(zk * np.eye(n + m) - Acl, Bcl)
+        G0 = Df + Cx @ np.linalg.solve(zk * np.eye(n) - Ep[M], Fx[M])
+        out[k] = scipy.linalg.eigh(T + T.conj().T, G0 + G0.conj().T, eigvals_only=True)[0]
+    return out
+
+
+def lifted_mu(loop, P_gain: float, D_gain: float, omega, M: int, beta=None, alpha=None) -> np.ndarray:
+    """mu_M(w) of ``loop`` at one gain point (see the module docstring)."""
+    Ac, Bc, Cc, Dc = (x[0] for x in controller_batch(loop, P_gain, D_gain, beta, alpha))
+    ctrl = (Ac, Bc[:, :2], Cc[:1], Dc[:1, :2])
+    return sampled_data_mu(*loop_plant(loop), ctrl, loop.params.controller.Ts, omega, M)

@@ -1,0 +1,164 @@
+"""The exact passivity test of the sampled-data port (issue 24, docs/passivity.md).
+
+Colgate and Schenkel (1997): a mass m with physical damping b, its position sampled at Ts, a
+virtual wall u = -K x[k] - B (x[k] - x[k-1]) / Ts through a zero-order hold, is passive iff
+b >= K Ts / 2 + |B|. The wall is built here directly from m, b, K, B, Ts (the rotor-only,
+current-commanded actuator file of the structures work is not there yet: ``_wall`` is the one
+place to switch to it).
+"""
+import numpy as np
+import pytest
+import scipy.linalg
+
+from haa_sym import ClosedLoop, load_params
+from haa_sym.analysis.sampled_port import exact_forms, harmonic_sums, passivity_excess
+from haa_sym.check.fast_lifting import lifted_mu, sampled_data_mu
+from haa_sym.errors import ParameterError
+from haa_sym.loop.options import LoopOptions
+
+
+def _wall(m, b, Ts, omega):
+    """The virtual wall's plant (x, v; force u and port torque on the mass; x sampled) and the
+    exact test's pieces with gains x = (1, K, B)."""
+    A = np.array([[0.0, 1.0], [0.0, -b / m]])
+    bu = np.array([[0.0], [1.0 / m]])
+    cv, Cy = np.array([[0.0, 1.0]]), np.array([[1.0, 0.0]])
+    E = scipy.linalg.expm(np.block([[A, bu], [np.zeros((1, 3))]]) * Ts)
+    z = np.exp(1j * omega * Ts)
+    P_d = np.array([(Cy @ np.linalg.solve(zz * np.eye(2) - E[:2, :2], E[:2, 2:]))[0, 0] for zz in z])[:, None]
+    K_aff = np.zeros((omega.size, 3, 1), complex)
+    K_aff[:, 1, 0], K_aff[:, 2, 0] = -1.0, -(1 - 1 / z) / Ts              # u = -K x - B (1 - z^-1)/Ts x
+    return (A, bu, bu, cv, Cy), exact_forms(harmonic_sums(A, bu, bu, cv, Cy, Ts, omega), P_d, K_aff, Ts)
+
+
+def _grid(Ts, n=400):
+    return np.logspace(-1, np.log10(np.pi / Ts * (1 - 1e-9)), n)
+
+
+@pytest.mark.slow
+def test_colgate_schenkel_boundary_exact():
+    """K_max of the exact test on lines B = const equals 2 (b - |B|) / Ts within 1e-6 relative,
+    for 50 random (m, b, Ts), Ts in 0.1-10 ms (B >= 0: the sup over frequency is at Nyquist,
+    which the grid reaches; B < 0 puts it at w -> 0, below omega_min)."""
+    from scipy.optimize import brentq
+    rng = np.random.default_rng(24)
+    worst = 0.0
+    for _ in range(50):
+        m, b = 10 ** rng.uniform(-2, 1), 10 ** rng.uniform(-1, 1)
+        Ts = 10 ** rng.uniform(-4, -2)
+        B = rng.uniform(0, 0.8) * b
+        _, F = _wall(m, b, Ts, _grid(Ts))
+        K_cs = 2 * (b - B) / Ts                                     # Colgate-Schenkel's closed form
+        deficit = lambda K: F.worst(np.array([[1.0, K, B]]))[0][0] - 1e-7
+        assert deficit(0.999 * K_cs) < 0 < deficit(1.001 * K_cs)
+        K = brentq(deficit, 0.999 * K_cs, 1.001 * K_cs, xtol=1e-12 * K_cs)
+        worst = max(worst, abs(K / K_cs - 1))
+    assert worst < 1e-6, worst
+
+
+def test_colgate_schenkel_paper_test_distance():
+    """The paper's corrected-phase test on the same wall (its sampled Z(z), port torque held):
+    its boundary lies off the line; m = 1, b = 1, Ts = 1 ms, B = 0: K_max = 1994 vs 2000
+    (docs/passivity.md states the numbers; the test pins the side, not a tuned value)."""
+    from haa_sym.analysis.sweep import phase_excess
+    m, b, Ts = 1.0, 1.0, 1e-3
+    w = _grid(Ts, 1000)
+    (A, bu, _, cv, Cy), _ = _wall(m, b, Ts, w)
+    z = np.exp(1j * w * Ts)
+    # Z(z) = T_dist / v of the sampled loop: v = (G_vf + G_vu K/(1 - K P_d) ...) all sampled with T_dist held
+    E = scipy.linalg.expm(np.block([[A, bu], [np.zeros((1, 3))]]) * Ts)
+    Phi, G = E[:2, :2], E[:2, 2:]
+    res = lambda C: np.array([(C @ np.linalg.solve(zz * np.eye(2) - Phi, G))[0, 0] for zz in z])
+    Px, Pv = res(Cy), res(cv)
+    # x = (1, K, B): the loop u = -(K + B (1 - z^-1)/Ts) x, the port torque adds to u (same column)
+    # v = Pv (f + u), x = Px (f + u) => v / f = Pv / (1 + (K + B h) Px)
+    h = (1 - 1 / z) / Ts
+    Z_num = np.stack([np.ones_like(z), Px, h * Px], axis=1)          # 1 + (K + B h) Px
+    Z_den = np.stack([Pv, 0 * Pv, 0 * Pv], axis=1)
+    ex = lambda K: phase_excess(np.array([[1.0, K, 0.0]]), Z_num, Z_den, w, Ts)[0][0] - 1e-3
+    from scipy.optimize import brentq
+    K = brentq(ex, 1000.0, 3000.0, xtol=1e-6)
+    print(f"paper's test: K_max = {K:.6g} (Colgate-Schenkel 2000)")
+    # measured: 2000.34 with passivity_tol_deg = 1e-3: 1.7e-4 above the exact line, the
+    # non-conservative side (docs/passivity.md)
+    assert 2000.0 < K < 2001.0
+    _, F = _wall(m, b, Ts, w)
+    assert F.worst(np.array([[1.0, K, 0.0]]))[0][0] > 1e-7      # the exact test: not passive there
+
+
+def test_colgate_schenkel_boundary_exact_few():
+    """The default suite's share of the slow test: 4 (m, b, Ts, B) at the ends of the ranges."""
+    for m, b, Ts, B in ((0.01, 0.1, 1e-4, 0.0), (10.0, 10.0, 1e-2, 3.0), (1.0, 1.0, 1e-3, 0.5), (0.3, 5.0, 5e-3, 1.0)):
+        _, F = _wall(m, b, Ts, _grid(Ts, 200))
+        K_cs = 2 * (b - B) / Ts
+        lo, hi = (F.worst(np.array([[1.0, K_cs * f, B]]))[0][0] for f in (1 - 1e-6, 1 + 1e-6))
+        assert lo <= 1e-7 < hi
+
+
+def test_fast_lifting_converges_to_exact_on_the_wall():
+    """mu_M (the fast-rate lifting, check/) decreases as M doubles and tends to the exact mu."""
+    m, b, Ts, K, B = 1.0, 1.0, 1e-3, 1500.0, 0.2
+    w = np.array([30.0, 700.0, 3000.0])
+    plant, F = _wall(m, b, Ts, w)
+    X = np.array([[1.0, K, B]])
+    dl, uu = X @ F.delta.T, X @ F.u.T
+    S = np.einsum("ni,wij,nj->nw", X, F.S, X).real
+    rho, ww = np.abs(dl) ** 2, uu * np.conj(dl)
+    mu = ((rho + ww.real - np.sqrt(S * rho - ww.imag ** 2)) / rho)[0]
+    ctrl = (np.zeros((1, 1)), np.array([[1.0]]), np.array([[B / Ts]]), np.array([[-K - B / Ts]]))
+    errs = [np.abs(sampled_data_mu(*plant, ctrl, Ts, w, M) - mu) for M in (2, 8, 32, 64)]
+    mus = [sampled_data_mu(*plant, ctrl, Ts, w, M) for M in (8, 32)]
+    assert np.all(mus[0] >= mus[1] - 1e-12) and np.all(mus[1] >= mu - 1e-9)
+    assert np.all(np.diff(np.max(errs, axis=1)) < 0)
+    assert np.max(errs[-1]) < 0.3 * np.max(errs[1])
+
+
+@pytest.mark.parametrize("name", ["hyq_haa", "qdd_leg"])
+def test_fast_lifting_tends_to_exact_on_actuators(name):
+    """On the bundled actuators the lifting's mu_M approaches the exact mu from above."""
+    p = load_params(name)
+    loop = ClosedLoop(p, LoopOptions(passivity="exact"))
+    w = np.array([300.0, 2000.0])
+    from haa_sym.analysis.sampled_port import loop_exact_forms
+    F = loop_exact_forms(loop, w, p.controller.beta, p.controller.alpha)
+    X = np.array([[1.0, 200.0, 10.0]])
+    dl, uu = X @ F.delta.T, X @ F.u.T
+    S = np.einsum("ni,wij,nj->nw", X, F.S, X).real
+    rho, ww = np.abs(dl) ** 2, uu * np.conj(dl)
+    mu = ((rho + ww.real - np.sqrt(S * rho - ww.imag ** 2)) / rho)[0]
+    m16, m64 = (lifted_mu(loop, 200.0, 10.0, w, M) for M in (16, 64))
+    assert np.all(m16 >= m64 - 1e-9) and np.all(m64 >= mu - 1e-9)
+    assert np.all(np.abs(m64 - mu) < np.abs(m16 - mu))
+
+
+def test_exact_refuses_what_it_cannot_handle():
+    p = load_params()
+    for opts, words in ((dict(passivity="exact", port="encoder_average"), "encoder_average"),):
+        with pytest.raises(ParameterError, match=words):
+            passivity_excess(ClosedLoop(p, LoopOptions(**opts)), np.array([0.0]), np.array([0.0]), 1.0, 1.0)
+    with pytest.raises(ParameterError, match="passivity"):
+        LoopOptions(passivity="foo")
+    # a port without damping (m with b = 0): no dissipation to divide by
+    A = np.array([[0.0, 1.0], [0.0, 0.0]])
+    bu = np.array([[0.0], [1.0]])
+    with pytest.raises(ParameterError, match="not strictly passive|no damping"):
+        harmonic_sums(A, bu, bu, np.array([[0.0, 1.0]]), np.array([[1.0, 0.0]]), 1e-3, _grid(1e-3, 20))
+
+
+def test_harmonic_sums_against_brute_force():
+    """The closed-form aliasing sums equal the explicit sums over 4e5 harmonics (their own
+    truncation ~1e-9 relative) on the wall."""
+    m, b, Ts = 0.7, 2.0, 2e-3
+    w = np.array([3.0, 500.0, 1500.0])
+    S = _wall(m, b, Ts, w)[1]
+    sums = harmonic_sums(np.array([[0.0, 1.0], [0.0, -b / m]]), np.array([[0.0], [1 / m]]),
+                         np.array([[0.0], [1 / m]]), np.array([[0.0, 1.0]]), np.array([[1.0, 0.0]]), Ts, w)
+    k = np.arange(-200000, 200001)
+    for i, wi in enumerate(w):
+        s = 1j * (wi + k * 2 * np.pi / Ts)
+        G = 1 / (m * s + b)
+        d, al, be = 2 * G.real, G / s, G / s
+        assert np.isclose(np.sum(np.abs(al) ** 2 / d), sums.A[i], rtol=1e-8)
+        assert np.isclose(np.sum(be * al / d), sums.gamma[i, 0], rtol=1e-8)
+        assert np.isclose(np.sum(np.abs(be) ** 2 / d), sums.B[i, 0, 0].real, rtol=1e-8)
+    assert S is not None
