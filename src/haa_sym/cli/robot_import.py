@@ -38,7 +38,7 @@ def _cmd_import_robot(args) -> int:
     lines.append(f"  damping {r.damping:g} Nm s/rad, friction {r.friction:g} Nm; gear ratio "
           + (f"{r.gear:g} ({r.gear_source})" if r.gear else "none") + "; rotor inertia "
           + (f"{r.rotor_inertia:g} kg m^2 (motor side)" if r.rotor_inertia is not None else
-             f"armature {r.armature:g} kg m^2 (at the joint)" if r.armature is not None else "none"))
+             f"armature {r.armature:g} kg m^2 (reflected to the joint, J_m N^2)" if r.armature is not None else "none"))
     lines += [f"  note: {note}" for note in r.notes]
     if args.merge is None:
         lines.append(f"  new file: the motor, gearbox and controller are PLACEHOLDERS from the bundled {TEMPLATE}.toml "

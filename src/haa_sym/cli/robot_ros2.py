@@ -4,9 +4,13 @@
 from __future__ import annotations
 
 import math
+import sys
 from pathlib import Path
 
-from haa_sym.design.schedule_c import check_c_directory
+from haa_sym._version import __version__
+from haa_sym.design.schedule import table_from_csv
+from haa_sym.design.schedule_c import HEADER as SCHEDULE_HEADER, SOURCE as SCHEDULE_SOURCE, check_c_directory
+from haa_sym.io.inputs import read_text
 from haa_sym.errors import ParameterError
 from haa_sym.robot import ros2
 
@@ -16,6 +20,8 @@ from haa_sym.cli.common import (MAP_D_GAIN, _axis, _check_out, _common, _gain_fl
                                 _parse_options, _requirements)
 
 P_GAIN = "log:1:20000:200"
+#: The largest schedule CSV read (bytes): a 200 x 200 schedule is about 3 MB.
+MAX_SCHEDULE_BYTES = 64 << 20
 
 
 def _measure(spec: str) -> str:
@@ -27,7 +33,16 @@ def _cmd_export_ros2(args) -> int:
     params = _params(args, _loaded(args))
     loop = ClosedLoop(params, _parse_options(args.option))
     out = _check_out(args.out, "export-ros2", suffixes=(".yaml", ".yml"))
-    check_c_directory(args.c_out, "--c-out", names=(ros2.HEADER, ros2.SOURCE))
+    names = (ros2.HEADER, ros2.SOURCE) + ((SCHEDULE_HEADER, SCHEDULE_SOURCE) if args.schedule else ())
+    check_c_directory(args.c_out, "--c-out", names=names)
+    schedule = None
+    if args.schedule is not None:
+        # the schedule's CSV (haa-sym schedule --out) as its lookup, checked before any work
+        schedule = table_from_csv(read_text(args.schedule, "--schedule", limit=MAX_SCHEDULE_BYTES), args.schedule,
+                                  {"actuator": str(params.about.get("name") or Path(params.source).stem),
+                                   "requirements": "those of the haa-sym schedule run that wrote the CSV",
+                                   "tolerances": "those of the haa-sym schedule run that wrote the CSV",
+                                   "haa_sym_version": __version__})
     try:
         req = ros2._check_requirements(_requirements(args))
     except ParameterError:
@@ -42,21 +57,28 @@ def _cmd_export_ros2(args) -> int:
     meta = {"actuator": str(params.about.get("name") or Path(params.source).stem),
             "source": Path(params.source).name, "configuration": args.configuration,
             "requirements": ", ".join(words[r] for r in req),
-            "map": f"P_gain {args.P_gain} Nm/rad x D_gain {args.D_gain} Nms/rad"}
+            "map": f"P_gain {args.P_gain} Nm/rad x D_gain {args.D_gain} Nms/rad",
+            "schedule": Path(args.schedule).name if args.schedule else None}
     table = ros2.certified_region(loop, P, D, req, rtol=args.region_rtol)
     if table.lo.size == 0:
         raise ParameterError(f"--require {','.join(req)}: no point of the map (--P-gain {args.P_gain}, --D-gain "
                              f"{args.D_gain}) meets the requirements; allowed: requirements or a map where some "
                              "gains meet them")
     box = ros2.certified_box(loop, table, req, _measure(args.P_gain), _measure(args.D_gain))
-    ros2.write_outputs(out, args.c_out, table, box, meta, args.controller)
+    ros2.write_outputs(out, args.c_out, table, box, meta, args.controller, schedule)
+    if schedule is not None:
+        print(f"haa-sym: warning: --schedule {args.schedule}: the lookup's cells are not checked (the CSV holds beta "
+              "at the grid points only); haa-sym schedule --c-out writes the cell-checked table", file=sys.stderr)
     P0, D0 = box.centre
     print(f"certified region ({meta['requirements']}): {table.D_rows.size} rows ({table.meta['inserted_rows']} "
           f"inserted), {table.lo.size} intervals; largest box P_gain [{box.P_lo:.6g}, {box.P_hi:.6g}] Nm/rad x "
           f"D_gain [{box.D_lo:.6g}, {box.D_hi:.6g}] Nms/rad (area in {box.P_measure} x {box.D_measure}; "
           f"{box.checked_points} points checked, {box.shrink_rounds} shrink rounds); default stiffness "
           f"{P0:.6g} Nm/rad, damping {D0:.6g} Nms/rad; wrote {out}, {Path(args.c_out) / ros2.HEADER}, "
-          f"{Path(args.c_out) / ros2.SOURCE}")
+          f"{Path(args.c_out) / ros2.SOURCE}"
+          + (f", {Path(args.c_out) / SCHEDULE_HEADER}, {Path(args.c_out) / SCHEDULE_SOURCE} (the schedule "
+             f"{args.schedule}: {schedule.shape[0]} x {schedule.shape[1]} points, {int(schedule.feasible.sum())} "
+             "feasible)" if schedule is not None else ""))
     return 0
 
 
@@ -71,6 +93,9 @@ def register(sub) -> dict:
                    "meets (pm: phase margin >= 30 deg; default stable,pm)")
     p.add_argument("--out", required=True, help="the parameter file (.yaml)")
     p.add_argument("--c-out", required=True, metavar="DIR", help="directory for haa_region.h and haa_region.c")
+    p.add_argument("--schedule", metavar="SCHEDULE.csv", help="also emit the torque-gain schedule's lookup "
+                   "(haa_schedule.h/.c, haa_schedule_lookup) into --c-out, from the CSV of haa-sym schedule --out; "
+                   "its cells unchecked (docs/robot.md; the cell-checked table is haa-sym schedule --c-out's)")
     p.add_argument("--controller", default=ros2.CONTROLLER_NAME,
                    help=f"the YAML's top-level entry (the generated C++ namespace; default {ros2.CONTROLLER_NAME})")
     p.add_argument("--region-rtol", type=float, default=ros2.REGION_RTOL, metavar="RTOL",

@@ -70,6 +70,7 @@ Example
 from __future__ import annotations
 
 import contextlib
+import math
 
 from dataclasses import dataclass, field
 
@@ -89,7 +90,8 @@ from haa_sym.io.tasks import DEFAULT_CONNECT_TIMEOUT, TaskRunner, cluster
 from haa_sym.loop import ClosedLoop, loop_first
 from haa_sym.model.params import Params, gain_array
 
-__all__ = ["Schedule", "schedule", "beta_grid", "CSV_COLUMNS", "DEFAULT_P_GAIN", "DEFAULT_D_GAIN"]
+__all__ = ["Schedule", "schedule", "beta_grid", "CSV_COLUMNS", "DEFAULT_P_GAIN", "DEFAULT_D_GAIN",
+           "table_from_csv", "CSV_CELL_CHECK"]
 
 CSV_COLUMNS = ("P_gain", "D_gain", "beta", "alpha", "torque_bandwidth_rad_s", "feasible", "beta_at_limit")
 # HyQ's locomotion range (the issue): P_gain log 1..2000 Nm/rad, D_gain 1..50 Nms/rad
@@ -185,6 +187,63 @@ class Schedule:
         alpha = self.alpha if m.get("alpha_scheduled") else None
         return ScheduleTable(self.P_gain, self.D_gain, self.table_beta, self.feasible, meta, alpha=alpha,
                              cell_safe=self.cell_safe)
+
+
+#: What the header of a lookup rebuilt from the CSV says about its cells: the CSV holds the
+#: schedule at the grid points only (its ``beta``), not the cell-checked corner values.
+CSV_CELL_CHECK = ("not checked: the table was rebuilt from the schedule's CSV, which holds beta at the grid points "
+                  "(not the corner values the cell check lowered, nor its safe cells); the cell-checked table is "
+                  "haa-sym schedule --c-out's")
+
+
+def table_from_csv(text: str, source: str, meta: dict, field: str = "--schedule") -> ScheduleTable:
+    """A :class:`ScheduleTable` from the text of :meth:`Schedule.csv_text` (``haa-sym schedule
+    --out``): its grid, ``beta`` and ``feasible``; ``alpha`` where the CSV's feasible rows do not
+    all share one value (a scheduled alpha). The cells are those with four feasible corners,
+    unchecked (:data:`CSV_CELL_CHECK`). ``meta``: the header's provenance (:data:`META_KEYS` of
+    :mod:`haa_sym.design.schedule_table`), ``source`` added.
+
+    Raises
+    ------
+    ParameterError
+        One line naming ``field``, the file, the row or column at fault and what is allowed.
+    """
+    where = f"{field} {source!r}"
+    lines = [ln for ln in text.splitlines() if ln.strip()]
+    if not lines or tuple(c.strip() for c in lines[0].split(",")) != CSV_COLUMNS:
+        raise ParameterError(f"{where}: header {lines[0][:80] if lines else ''!r}; allowed: a CSV of haa-sym "
+                             f"schedule --out, columns {','.join(CSV_COLUMNS)}")
+    rows = []
+    for n, line in enumerate(lines[1:], start=2):
+        cells = [c.strip() for c in line.split(",")]
+        try:
+            if len(cells) != len(CSV_COLUMNS) or cells[5] not in ("true", "false"):
+                raise ValueError
+            ok = cells[5] == "true"
+            P, D = float(cells[0]), float(cells[1])
+            beta = float(cells[2]) if ok else math.nan
+            alpha = float(cells[3]) if ok and cells[3] else math.nan
+        except ValueError:
+            raise ParameterError(f"{where}: row {n} {line[:80]!r}; allowed: {len(CSV_COLUMNS)} columns, numbers "
+                                 "P_gain, D_gain, beta (and alpha) where feasible is true, feasible true or false")
+        rows.append((P, D, beta, alpha, ok))
+    P = np.array(sorted({r[0] for r in rows}))
+    D = np.array(sorted({r[1] for r in rows}))
+    if len(rows) != P.size * D.size:
+        raise ParameterError(f"{where}: {len(rows)} rows for {P.size} P_gain x {D.size} D_gain values; allowed: "
+                             "one row per point of a rectangular grid")
+    beta, alpha = np.full((P.size, D.size), math.nan), np.full((P.size, D.size), math.nan)
+    feasible = np.zeros((P.size, D.size), bool)
+    seen = np.zeros((P.size, D.size), bool)
+    for Pv, Dv, b, a, ok in rows:
+        i, j = int(np.searchsorted(P, Pv)), int(np.searchsorted(D, Dv))
+        if seen[i, j]:
+            raise ParameterError(f"{where}: the point P_gain {Pv!r}, D_gain {Dv!r} twice; allowed: each point once")
+        seen[i, j], beta[i, j], alpha[i, j], feasible[i, j] = True, b, a, ok
+    a_ok = alpha[feasible]
+    scheduled = a_ok.size and np.all(np.isfinite(a_ok)) and np.ptp(a_ok) > 0
+    return ScheduleTable(P, D, beta, feasible, {**meta, "source": source, "cell_check": CSV_CELL_CHECK},
+                         alpha=alpha if scheduled else None)
 
 
 # ------------------------------------------------------------------------------ the tasks

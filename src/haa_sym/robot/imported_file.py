@@ -15,8 +15,9 @@ Written entries (flat names; ``--skip`` leaves any of them as the merged file ha
 ``K_<port>``       linearised gravity stiffness there (K > 0 restoring)
 ``B_<port>``       the joint's viscous damping (URDF ``<dynamics damping>``, MJCF ``damping``)
 ``N``              the gear ratio, where the description gives one other than 1
-``J_m``            the rotor inertia, motor side: ``drake:rotor_inertia``, or MJCF ``armature``
-                   (reflected, J_m N^2) divided by N^2 (the description's N, else the file's)
+``J_m``            the rotor inertia, motor side: ``drake:rotor_inertia``, or MJCF armature
+                   (reflected, J_m N^2: the motor's joint's plus its actuators' times gear^2)
+                   divided by N^2 (the description's N, else the file's)
 ``Fc_<port>``      ([limits]) the joint's Coulomb friction, where > 0
 =================  ==========================================================================
 

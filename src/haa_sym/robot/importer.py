@@ -18,7 +18,8 @@ joint and the bodies B distal to it (mass m_b, centre of mass c_b, inertia I_b a
 
 J is the diagonal of the joint-space mass matrix at that joint (the composite inertia of the
 subtree about the axis); K is the second derivative of the potential energy -sum m_b g . c_b with
-respect to this joint alone (every other joint held), so K > 0 is restoring, as the actuator
+respect to this joint alone (every other joint held; an MJCF joint spring's stiffness about
+the joint is added, a stiffness to ground for the linear model), so K > 0 is restoring, as the actuator
 file's K of a body (Table 1's K_L2: the hanging leg). ``tau`` is the static torque the linear
 model leaves out (0 where the joint hangs in equilibrium).
 
@@ -57,6 +58,8 @@ _CONFIG_NAME = re.compile(r"[A-Za-z][A-Za-z0-9_-]*\Z")
 # a gear ratio of exactly 1 is the identity transmission (the command is the joint torque): what
 # ros_control's SimpleTransmission and MuJoCo's default gear write when no gearbox is described
 IDENTITY_GEAR = 1.0
+# MuJoCo's wrap type of a joint in a fixed tendon (mjWRAP_JOINT)
+_WRAP_JOINT = 1
 
 
 @dataclass(frozen=True)
@@ -99,7 +102,10 @@ class RobotImport:
     rotor_inertia : float or None
         The rotor's inertia on the motor side, kg m^2 (``drake:rotor_inertia``), None if not given.
     armature : float or None
-        MJCF ``armature``: the rotor's inertia reflected to the joint (J_m N^2), kg m^2.
+        MJCF armature: the rotor's inertia reflected to the joint (J_m N^2), kg m^2: the motor's
+        joint's ``armature`` plus its actuators' ``armature`` (motor side) times gear^2; the
+        motor's joint is the joint itself or, where no actuator acts on it, the one joint that
+        fixed tendons tie it to (:func:`_motor_of`).
     notes : tuple of str
         What the import changed or left out (e.g. an inertia tensor MuJoCo would refuse).
     """
@@ -307,6 +313,42 @@ def _port_values(m, d, mujoco, jid: int, bodies: list, g: np.ndarray) -> tuple[f
     return float(J), float(K), float(tau)
 
 
+def _motor_of(m, jid: int) -> tuple[int, list, list]:
+    """The joint whose actuators drive joint ``jid`` and those actuators (joint transmission):
+    ``jid``'s own; if it has none, the actuators on the joints that fixed tendons tie to it,
+    directly or through other joints (a motor's rotor joint coupled to the link by a tendon
+    spring: MuJoCo's series elastic element, mujoco #1524, and export-mujoco's layout). All of
+    them on one joint, else none (an ambiguous motor). Returns (motor joint, actuators, the
+    tendons' names on the way)."""
+    def on(j):
+        return [i for i in range(m.nu) if m.actuator_trntype[i] == 0 and m.actuator_trnid[i, 0] == j]
+    if on(jid):
+        return jid, on(jid), []
+    links: dict = {}
+    for t in range(m.ntendon):
+        adr, num = int(m.tendon_adr[t]), int(m.tendon_num[t])
+        js = [int(m.wrap_objid[w]) for w in range(adr, adr + num) if m.wrap_type[w] == _WRAP_JOINT]
+        if len(js) != num:                       # a spatial tendon: a cable, not a drive train
+            continue
+        for a in js:
+            for b in js:
+                if a != b:
+                    links.setdefault(a, []).append((b, m.tendon(t).name or str(t)))
+    seen, todo, found = {jid: []}, [jid], []
+    while todo:
+        j = todo.pop(0)
+        if on(j):
+            found.append(j)
+            continue                             # the motor ends the train
+        for b, name in links.get(j, []):
+            if b not in seen:
+                seen[b] = seen[j] + [name]
+                todo.append(b)
+    if len(found) != 1:
+        return jid, [], []
+    return found[0], on(found[0]), seen[found[0]]
+
+
 _TYPES = {0: "free (floating, 6 degrees of freedom)", 1: "ball (3 rotational degrees of freedom)",
           2: "slide (prismatic)", 3: "hinge (revolute)"}
 
@@ -408,6 +450,12 @@ def import_joint(description: str | os.PathLike, joint: str, configurations, *, 
                 raise ParameterError(f"{where}: outside the joint's limits; allowed: {lo!r} to {hi!r} (rad)")
             d.qpos[m.jnt_qposadr[k]] = v
         J, K, tau = _port_values(m, d, mujoco, jid, bodies, g)
+        # a joint spring about the joint (MJCF stiffness, springref) is, with every other joint
+        # held, a stiffness to ground: d^2/dq^2 of 1/2 k (q - q_spring)^2 adds k to the gravity's
+        # K, and its torque -k (q - q_spring) to the static torque the linear model leaves out
+        k_spring = float(m.jnt_stiffness[jid])
+        K += k_spring
+        tau -= k_spring * (float(d.qpos[m.jnt_qposadr[jid]]) - float(m.qpos_spring[m.jnt_qposadr[jid]]))
         if K < 0:
             raise ParameterError(f"--configuration {name}: the gravity stiffness about {joint!r} is {K:.6g} Nm/rad "
                                  "(gravity turns the leg away: an inverted configuration); allowed: configurations "
@@ -425,12 +473,19 @@ def import_joint(description: str | os.PathLike, joint: str, configurations, *, 
                 break
         rotor = t.get("drake:rotor_inertia")
     else:
-        acts = [i for i in range(m.nu) if m.actuator_trntype[i] == 0 and m.actuator_trnid[i, 0] == jid]
+        motor_joint, acts, train = _motor_of(m, jid)
         ratios = sorted({float(m.actuator_gear[i, 0]) for i in acts})
+        via = (f" on joint {names[motor_joint]!r}, which drives {joint!r} through the fixed tendon(s) "
+               f"{', '.join(train)}" if motor_joint != jid else "")
         if len(ratios) == 1:
-            gear, gear_source = ratios[0], f"actuator {m.actuator(acts[0]).name or acts[0]!r} gear"
+            gear, gear_source = ratios[0], f"actuator {m.actuator(acts[0]).name or acts[0]!r} gear{via}"
+            # the rotor reflected to the joint the motor drives: the joint's own armature plus the
+            # actuators' (MuJoCo >= 4: an actuator's armature is motor side, reflected by gear^2)
+            act_arm = getattr(m, "actuator_armature", np.zeros(m.nu))
+            armature = float(m.dof_armature[m.jnt_dofadr[motor_joint]]) \
+                + sum(float(act_arm[i]) * ratios[0] ** 2 for i in acts)
         elif len(ratios) > 1:
-            notes.append(f"actuators on {joint!r} have gears {ratios}: no single gear ratio, N not imported")
+            notes.append(f"actuators on {joint!r}{via} have gears {ratios}: no single gear ratio, N not imported")
     if gear is not None and gear == IDENTITY_GEAR:
         notes.append(f"{gear_source} = 1 on {joint!r}: the identity transmission (the command is the joint "
                      "torque), no gear ratio imported")

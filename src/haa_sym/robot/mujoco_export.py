@@ -28,6 +28,13 @@ The controller is :func:`haa_sym.loop.statespace.controller_batch`'s state space
 (the same elements and signal flow the maps analyse, and the matrices ``haa-sym simulate``'s C
 driver runs): the exported module holds its matrices and steps x' = Ac x + Bc u, y = Cc x + Dc u
 with u = [encoder angle, measured torque, T_ff, theta_ref]; it writes nothing of its own.
+
+The drive (:mod:`haa_sym.model.drive`; the order of :mod:`haa_sym.analysis.simulate`: delay, then
+lag, then the motor) runs in the same callback, which MuJoCo calls at every step and every
+Runge-Kutta stage: each sample's command joins a delay line of held commands and takes effect
+at t_k + delay_drive (any length, not whole steps only); the lag 1 / (tau_drive s + 1) is the
+exact solution of its first-order equation between those switches, evaluated at each call's
+time, and is the dcmotor's input voltage. Nothing is discretised but MuJoCo's own integration.
 """
 from __future__ import annotations
 
@@ -89,12 +96,6 @@ def _check(loop, P_gain, D_gain, integrator, steps_per_sample):
     if isinstance(steps_per_sample, bool) or not isinstance(steps_per_sample, (int, np.integer)) \
             or not 1 <= steps_per_sample <= 10000:
         raise ParameterError(f"steps_per_sample = {steps_per_sample!r}; allowed: an integer in [1, 10000]")
-    if params.drive.active:
-        # MuJoCo's dcmotor takes the voltage at its terminals: a lag in front of it has no state
-        # there, and the callback runs at Ts (docs/robot.md, "What is not exported")
-        raise ParameterError(f"{params.source} [drive]: tau_drive = {params.drive.tau_drive:g} s, delay_drive = "
-                             f"{params.drive.delay_drive:g} s; allowed: no [drive] section (both 0): the MuJoCo "
-                             "export does not model the drive's lag and dead time")
     if params.plant.k_w <= 0:
         raise ParameterError(f"{params.source} [motor]: k_w = {params.plant.k_w!r}; allowed: k_w > 0 for the MuJoCo "
                              "export (its dcmotor has one constant sqrt(k_t k_w) for torque and back-EMF)")
@@ -108,7 +109,8 @@ def export_mujoco(loop, P_gain: float, D_gain: float, *, controller_module: str 
     Parameters
     ----------
     loop : ClosedLoop
-        Plant, controller and options (the analysed loop); a ``[drive]`` is refused.
+        Plant, controller and options (the analysed loop); its ``[drive]`` (lag, dead time)
+        runs in the controller module, between the controller's voltage and the dcmotor.
     P_gain, D_gain : float
         Impedance gains of Eq. (8), Nm/rad and Nms/rad.
     controller_module : str
@@ -150,6 +152,7 @@ def export_mujoco(loop, P_gain: float, D_gain: float, *, controller_module: str 
             "Ts": Ts, "timestep": h, "controller_module": controller_module, "steps_per_sample": steps_per_sample, "integrator": integrator,
             "joints": list(names), "encoder_joint": top.encoder, "port_joint": top.port, "torque": torque,
             "voltage_scale": math.sqrt(k_t / k_w), "current_scale": math.sqrt(k_w / k_t), "gear": N,
+            "tau_drive": params.drive.tau_drive, "delay_drive": params.drive.delay_drive,
             "controller_inputs": list(CONTROLLER_INPUTS), "controller_outputs": list(CONTROLLER_OUTPUTS),
             "Ac": Ac.tolist(), "Bc": Bc.tolist(), "Cc": Cc.tolist(), "Dc": Dc.tolist(),
             "configuration": params.configuration_name if hasattr(params, "configuration_name") else None}
@@ -223,7 +226,8 @@ def _controller_text(meta: dict, xml_name: str) -> str:
         version=meta["haa_sym"], source=meta["source"], module=meta["controller_module"], P=meta["P_gain"], D=meta["D_gain"], xml_name=xml_name,
         Ts=repr(meta["Ts"]), steps=meta["steps_per_sample"], encoder=repr(meta["encoder_joint"]),
         port=repr(meta["port_joint"]), torque=repr(meta["torque"]), vscale=repr(meta["voltage_scale"]),
-        iscale=repr(meta["current_scale"]), gear=repr(meta["gear"]), **mat)
+        iscale=repr(meta["current_scale"]), gear=repr(meta["gear"]), tau=repr(meta["tau_drive"]),
+        delay=repr(meta["delay_drive"]), **mat)
 
 
 _CONTROLLER_TEMPLATE = '''"""The controller haa-sym {version} analysed for {source} at P_gain = {P!r} Nm/rad,
@@ -233,7 +237,10 @@ D_gain = {D!r} Nms/rad, running on {xml_name} in a MuJoCo control callback at Ts
 The controller is the sampled state space of haa_sym.loop.statespace.controller_batch (the loop
 the maps analyse): inputs u = [encoder angle (rad), measured torque (Nm), T_ff (Nm), theta_ref
 (rad)], outputs [V (V, the voltage applied after the loop's delay), T_ref (Nm)]; per sample
-y = CC x + DC u, then x = AC x + BC u. The voltage is held until the next sample.
+y = CC x + DC u, then x = AC x + BC u. The voltage is held until the next sample, then passes
+the drive: the dead time DELAY_DRIVE (the held command switches at t_k + DELAY_DRIVE) and the
+first-order lag TAU_DRIVE (its exact solution between switches, at every call's time), and is
+the dcmotor's input.
 
     python {{this file}} --experiment disturbance-step --amplitude 1 --duration 1   # a run, summarised
     >>> import {module}; r = {module}.run(1.0, T_dist=1.0)                    # from Python
@@ -254,6 +261,8 @@ TORQUE = {torque}              # the measured torque: a tendon's spring (and dam
 GEAR = {gear}                  # N
 VOLTAGE_SCALE = {vscale}       # sqrt(k_t / k_w): MuJoCo's dcmotor has one constant sqrt(k_t k_w)
 CURRENT_SCALE = {iscale}       # sqrt(k_w / k_t): the dcmotor's current state to the motor's current (A)
+TAU_DRIVE = {tau}              # s, the drive's first-order lag (0: none)
+DELAY_DRIVE = {delay}          # s, the drive's dead time on the command (0: none)
 AC = np.array({Ac})
 BC = np.array({Bc})
 CC = np.array({Cc})
@@ -271,6 +280,9 @@ class Controller:
     def __init__(self, model, data, T_dist=0.0, T_ff=0.0, theta_ref=0.0):
         self.x = np.zeros(AC.shape[0])
         self.k = -1
+        # the drive: commands waiting for their switch time (t_k + DELAY_DRIVE, V); the command in
+        # effect and the lag's output at the last switch s (both 0 from rest)
+        self.queue, self.v_in, self.v_lag, self.s = [], 0.0, 0.0, 0.0
         self.T_dist, self.T_ff, self.theta_ref = T_dist, T_ff, theta_ref
         self.h = model.opt.timestep
         self.q_enc = model.jnt_qposadr[model.joint(ENCODER).id]
@@ -284,15 +296,36 @@ class Controller:
             return TORQUE["k_t_N"] * float(data.act[0]) * CURRENT_SCALE
         return TORQUE["K"] * float(data.ten_length[self.tendon]) + TORQUE["D"] * float(data.ten_velocity[self.tendon])
 
+    def drive(self, t):
+        """The voltage at the motor's terminals at time t (V): the held commands after the dead
+        time, through the lag (exact: v = v_in + (v_lag(s) - v_in) exp(-(t - s) / TAU_DRIVE)
+        between switches s)."""
+        while self.queue and self.queue[0][0] <= t + 1e-6 * self.h:
+            s, v = self.queue.pop(0)
+            self.v_lag, self.v_in, self.s = self.lag(s), v, s
+        return self.lag(t)
+
+    def lag(self, t):
+        if TAU_DRIVE == 0:
+            return self.v_in
+        return self.v_in + (self.v_lag - self.v_in) * math.exp(-max(t - self.s, 0.0) / TAU_DRIVE)
+
     def __call__(self, model, data):
         k = int(round(data.time / TS))
-        if k == self.k or abs(data.time - k * TS) > 0.25 * self.h:
-            return                                   # between samples (or a stage of the same sample)
+        if k != self.k and abs(data.time - k * TS) <= 0.25 * self.h:
+            self.sample(k, data)                     # a sample instant (its first call)
+        if TAU_DRIVE or DELAY_DRIVE:
+            data.ctrl[0] = self.drive(data.time) * VOLTAGE_SCALE
+
+    def sample(self, k, data):
         self.k = k
         u = np.array([data.qpos[self.q_enc], self.measured_torque(data), self.T_ff, self.theta_ref])
         y = CC @ self.x + DC @ u
         self.x = AC @ self.x + BC @ u
-        data.ctrl[0] = y[0] * VOLTAGE_SCALE
+        if TAU_DRIVE or DELAY_DRIVE:
+            self.queue.append((k * TS + DELAY_DRIVE, float(y[0])))
+        else:
+            data.ctrl[0] = y[0] * VOLTAGE_SCALE
         data.qfrc_applied[self.v_port] = self.T_dist
         self.log.append((k * TS, u[0], data.qvel[self.v_port], u[1], y[1], y[0], data.act[0] * CURRENT_SCALE))
 

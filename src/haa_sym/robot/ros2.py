@@ -45,6 +45,7 @@ from haa_sym.analysis.boundaries.stability import stability_boundary
 from haa_sym.analysis.decide import decide_points
 from haa_sym.analysis.robust import _check_requirements, meets
 from haa_sym.design.schedule_c import _num, _render, _rows, _text, check_c_directory
+from haa_sym.design.schedule_c import write_c as write_schedule_c
 from haa_sym.errors import ParameterError
 from haa_sym.io.outputs import Transaction, transaction
 from haa_sym.loop import loop_first
@@ -439,7 +440,9 @@ def params_yaml(box: Box, meta: dict, controller: str = CONTROLLER_NAME) -> str:
              f"region where {meta['requirements']} hold for {meta['actuator']} ({meta['source']}"
              + (f", configuration {meta['configuration']}" if meta.get("configuration") else "")
              + f"), by haa_sym {__version__}; the region itself is haa_region_contains() in haa_region.c; "
-             "default: the box's centre")
+             + (f"the torque-gain schedule ({meta['schedule']}) is haa_schedule_lookup() in haa_schedule.c; "
+                if meta.get("schedule") else "")
+             + "default: the box's centre")
     lines = [f"# generate_parameter_library parameters of a joint impedance controller, written by haa_sym "
              f"{__version__} (haa-sym export-ros2).",
              "# The bounds are a box inside the certified region, not the region: check the pair (stiffness, "
@@ -500,11 +503,16 @@ def write_c(table: RegionTable, box: Box, meta: dict, directory, tx: Transaction
 
 
 def write_outputs(yaml_path, c_dir, table: RegionTable, box: Box, meta: dict,
-                  controller: str = CONTROLLER_NAME) -> None:
-    """The YAML and the C together, all or nothing (:class:`haa_sym.io.outputs.Transaction`)."""
+                  controller: str = CONTROLLER_NAME, schedule=None) -> None:
+    """The YAML and the C together, all or nothing (:class:`haa_sym.io.outputs.Transaction`);
+    ``schedule`` (a :class:`~haa_sym.design.schedule_table.ScheduleTable`, optional): its lookup
+    ``haa_schedule.{h,c}`` into ``c_dir`` too, by the schedule's own writer
+    (:func:`haa_sym.design.schedule_c.write_c`), and named in the YAML's descriptions."""
     text = params_yaml(box, meta, controller)
     with Transaction() as tx:
         if yaml_path is not None:
             tx.write_text(yaml_path, text, "--out")
         if c_dir is not None:
             write_c(table, box, meta, c_dir, tx)
+            if schedule is not None:
+                write_schedule_c(schedule, c_dir, tx)
