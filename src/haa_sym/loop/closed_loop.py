@@ -386,6 +386,11 @@ class ClosedLoop:
         self._check_unread(arrs[2], arrs[3])
         return np.stack([a.ravel() for a in arrs]).reshape(4, -1), arrs[0].shape
 
+    def require(self, feature: str, what: str) -> None:
+        """Refuse ``what`` in one line when this loop's structure lacks ``feature``
+        (:func:`haa_sym.model.structures.require`: "torque_loop", "voltage")."""
+        structures.require(self.structure.name, feature, what)
+
     def _check_unread(self, beta, alpha) -> None:
         """Refuse a beta or alpha other than its neutral value for a structure that does not read
         it (haa_sym.model.structures.NEUTRAL): no torque PI to scale, no compensation."""
