@@ -49,8 +49,9 @@ __all__ = ["closed_loop_matrices", "plant_matrices", "closed_loop_eigenvalues", 
 def _own_output_row(plant, cont, name):
     """The reference's own row of a rotor-side sensor of a chain, assembled from the state
     names and the motor's parameters (not read from the plant function): the current estimate
-    k_t N I_m (``[sensors] torque = "current"``, both torque outputs) and the motor-side encoder
-    theta_m / N (``encoder = "rotor"``). None for every other output."""
+    k_t N I_m (``[sensors] torque = "current"``, both torque outputs), the motor-side encoder
+    theta_m / N (``encoder = "rotor"``) and the rotor's port velocity dtheta_m / N (``port =
+    "rotor"``, an actuator without bodies). None for every other output."""
     top = plant.topology
     if not isinstance(top, Topology):
         return None
@@ -59,6 +60,8 @@ def _own_output_row(plant, cont, name):
         row[cont.state_names.index("I_m")] = plant.k_t * plant.N
     elif name == "theta_encoder" and top.encoder == ROTOR:
         row[cont.state_names.index("theta_m")] = 1.0 / plant.N
+    elif name == f"dtheta_{ROTOR}":                  # a rotor-only actuator's port velocity
+        row[cont.state_names.index("dtheta_m")] = 1.0 / plant.N
     else:
         return None
     return row
@@ -335,7 +338,8 @@ def _batch(loop, P_gain, D_gain, beta=None, alpha=None, cut=None):
     e = T_ref - sig("y_T")
     y_I = sig("y_I") if "y_I" in ys else np.zeros((k, width))
     u_pi = P_t[:, None] * e + I_t[:, None] * y_I + K_ff[:, None] * T_ref      # Eq. (7), feed-forward
-    V_k = (sig("r") if cut == "PI" else u_pi) + VC[:, None] * v_vc
+    # no compensation: no estimate it would read (v_vc None), VC zero
+    V_k = (sig("r") if cut == "PI" else u_pi) + (0.0 if v_vc is None else VC[:, None] * v_vc)
     inputs = {"u_V": sig("y_del") if opt.structure.delay else V_k, "u_Tdist": sig("T_dist"), "u_F": th,
               "u_diff": th, "u_I": e, "u_del": V_k, **{u: sig(y) for u, y in links.items()}}
     KE = np.stack([inputs[u] for u in us], axis=1)                           # (k, nu, ny + nw)

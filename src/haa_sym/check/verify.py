@@ -264,8 +264,8 @@ def row_exact_vc_generalised(params: Params) -> Row:
     num, den, ring = chain.torque_tf_fraction(top, syms, vc=vc)
     expected = chain.load_free_g_tvc(top, syms)
     same = tt.same_rational(num, den, expected, ring)
-    g = top.gearbox
-    motor = set(MOTOR_DOMAIN) | {f"K_{g.name}", f"D_{g.name}"}
+    g = top.gearbox                     # None for a rotor-only actuator
+    motor = set(MOTOR_DOMAIN) | ({f"K_{g.name}", f"D_{g.name}"} if g else set())
     loads = sorted(str(x) for x in expected.free_symbols if str(x) not in motor and str(x) != "s")
     spring = top.sensor != CURRENT and not top.torque_damping
     return Row(claim, same and not loads,
