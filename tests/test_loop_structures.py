@@ -87,7 +87,8 @@ def test_frequency_responses_equal_the_reference_closed_loops(name, structure):
         np.testing.assert_allclose(fr[k], want[k], rtol=1e-9, err_msg=k)
 
 
-@pytest.mark.parametrize("structure", NEW)
+@pytest.mark.parametrize("structure", [pytest.param("torque_pi", marks=pytest.mark.slow),
+                                       pytest.param("torque_pi_ff", marks=pytest.mark.slow), "impedance_current"])
 def test_pm_and_passivity_maps_agree_with_the_reference(structure):
     """PM < 30 deg against the reference's exact crossovers and the passivity excess against the
     reference closed loop's Z, on every stable point of a small QDD map at 1 ms."""
@@ -195,3 +196,59 @@ def test_switching_structure_with_set(tmp_path, capsys):
         p.with_values(structure="paper")
     q = p.with_values(structure="paper", P_t0=0.1922, I_t0=9.05, alpha=0.94, beta=1.0)
     assert ClosedLoop(q).const[0] == 0.1922
+
+
+# --- the haptic device (a rotor-only file: no [bodies]) -------------------------------------------
+def _check_haptic_map(Ts, shape):
+    loop = ClosedLoop(load_params("haptic_wall").with_values(Ts=Ts))
+    K, B = np.geomspace(0.01, 1000.0, shape[0]), np.linspace(0.0, 0.05, shape[1])
+    m = region_map(loop, K, B, progress=False)
+    cc = eigenvalue_crosscheck(m, loop, band=1e-6, points="all")
+    assert cc["decided"] > 0.99 * cc["points"] and cc["disagree"] == 0, cc
+    assert m.stable.any() and (~m.stable).any()
+
+
+@pytest.mark.parametrize("Ts", [5e-5, 1e-3])
+def test_haptic_wall_map_agrees_with_the_reference_eigenvalues(Ts):
+    _check_haptic_map(Ts, (40, 20))
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("Ts", [5e-5, 1e-3])
+def test_haptic_wall_200_by_100_map_agrees_with_the_reference_eigenvalues(Ts):
+    _check_haptic_map(Ts, (200, 100))
+
+
+def test_haptic_wall_is_the_rotor_alone_under_a_current_command():
+    p = load_params("haptic_wall")
+    top = p.plant.topology
+    assert top.bodies == () and (top.sensor, top.encoder, top.port) == ("current", "rotor", "rotor")
+    loop = ClosedLoop(p)
+    # two states (theta_m, dtheta_m), the backward difference's one: a loop of order 3
+    assert loop.plant.state_names == ("theta_m", "dtheta_m") and loop.degree == 3
+    # the port: T_dist on the handle moves it as 1/(J s^2 + b s) (N = 1), in the sampled plant
+    Phi, G = loop.plant.Phi, loop.plant.Gamma[:, 2]
+    J, b, Ts = p.plant.J_m, p.plant.B_m, p.controller.Ts
+    a = np.exp(-b / J * Ts)
+    np.testing.assert_allclose(Phi, [[1.0, J / b * (1 - a)], [0.0, a]], rtol=1e-12)
+    np.testing.assert_allclose(G, [(Ts - J / b * (1 - a)) / b, (1 - a) / b], rtol=1e-9)
+
+
+@pytest.mark.parametrize("argv, match", [
+    (["contact", "--P-gain", "2", "--D-gain", "0.001"], "the port is the rotor of an actuator without [bodies]"),
+    (["simulate", "--P-gain", "2", "--D-gain", "0.001", "--experiment", "disturbance-step", "--duration",
+      "0.1", "--out", "s.csv"], "needs a voltage-commanded motor, and structure = 'impedance_current'"),
+    (["step", "--out", "s.csv"], "step_response needs a torque loop"),
+    (["tune", "--out", "t.toml"], "tune (the torque PI tuner) needs a torque loop"),
+    (["regions", "--set", "beta=2", "--out", "m.npz"], "beta = 2: structure = 'impedance_current' has no torque PI"),
+])
+def test_haptic_wall_refusals(argv, match, assert_refused):
+    assert_refused(argv + ["--params", "haptic_wall"], match)
+
+
+def test_margins_of_a_structure_without_torque_loop_say_so(capsys):
+    from haa_sym.cli import main
+    assert main(["margins", "--params", "haptic_wall", "--P-gain", "2", "--D-gain", "0.001"]) == 0
+    out = capsys.readouterr().out
+    assert "torque loop (opened at the PI output): none (structure = 'impedance_current'" in out
+    assert "impedance loop (opened at T_lref):\n  PM +" in out
