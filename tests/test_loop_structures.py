@@ -252,3 +252,13 @@ def test_margins_of_a_structure_without_torque_loop_say_so(capsys):
     out = capsys.readouterr().out
     assert "torque loop (opened at the PI output): none (structure = 'impedance_current'" in out
     assert "impedance loop (opened at T_lref):\n  PM +" in out
+
+
+@pytest.mark.parametrize("name", ["qdd_leg", "haptic_wall"])
+def test_verify_derives_every_structure_in_sympy(name):
+    """python -m haa_sym.verify: one row per structure (chi and Z against their sympy derivation)."""
+    from haa_sym.check import verify
+    rows = verify.row_structures(load_params(name))
+    assert [r.claim.split("'")[1] for r in rows] == list(STRUCTURES)
+    assert all(r.ok for r in rows), [(r.claim, r.numbers) for r in rows if not r.ok]
+    assert all("one constant at 3 gain points x 2 rational z: True" in r.numbers for r in rows)
