@@ -33,6 +33,7 @@ def _params(name, structure, Ts=None):
     """The bundled file's plant and sampling with ``structure`` (the keys it does not read left out)."""
     p = load_params(name)
     c = p.controller
+    c = c if c.structure == "paper" else p.with_values(structure="paper").controller   # [controller.paper]
     keys = {k: getattr(c, k) for k in STRUCTURES[structure].keys}
     ctrl = Controller(Ts=c.Ts if Ts is None else Ts, N_av=c.N_av, structure=structure, **keys)
     return dataclasses.replace(p, controller=ctrl)
@@ -112,7 +113,7 @@ def test_pm_and_passivity_maps_agree_with_the_reference(structure):
 
 
 def test_the_paper_structure_named_is_the_default():
-    a, b = ClosedLoop(load_params("qdd_leg")), ClosedLoop(load_params("qdd_leg").with_values(structure="paper"))
+    a, b = ClosedLoop(load_params("sea")), ClosedLoop(load_params("sea").with_values(structure="paper"))
     np.testing.assert_array_equal(a.basis, b.basis)
     np.testing.assert_array_equal(a.const, b.const)
 
@@ -159,7 +160,7 @@ def test_analyses_that_need_what_a_structure_lacks_refuse_it():
 
 # --- the file and the command line -----------------------------------------------------------------
 def _file(tmp_path, structure, drop=(), extra=""):
-    text = (ROOT / "model" / "qdd_leg.toml").read_text()
+    text = (ROOT / "model" / "hyq_haa.toml").read_text()
     lines = [ln for ln in text.splitlines() if not any(ln.startswith(k + " ") for k in drop)]
     out = "\n".join(lines).replace("[controller]", f"[controller]\nstructure = \"{structure}\"{extra}", 1)
     path = tmp_path / "in" / f"{structure}.toml"
@@ -178,24 +179,37 @@ def test_unknown_structure_is_refused_in_one_line(tmp_path, assert_refused):
 def test_torque_loop_keys_in_a_file_without_a_torque_loop_are_refused(tmp_path, assert_refused):
     f = _file(tmp_path, "impedance_current", drop=("alpha", "beta", "I_t0"))
     assert_refused(["regions", "--params", str(f), "--out", "m.npz"],
-                   ("P_t0 = 0.1922: structure = 'impedance_current' has no torque PI", "leave P_t0 out"))
+                   ("P_t0 = 0.382: structure = 'impedance_current' has no torque PI", "leave P_t0 out"))
     g = _file(tmp_path, "torque_pi")
     assert_refused(["regions", "--params", str(g), "--out", "m.npz"],
                    "alpha = 0.94: structure = 'torque_pi' has no velocity compensation")
 
 
 def test_switching_structure_with_set(tmp_path, capsys):
-    """--set structure=impedance_current drops the torque loop's keys; back to the paper's needs them."""
+    """--set structure=impedance_current drops the torque loop's keys; back to the paper's needs them,
+    from --set or from the file's [controller.paper] (the bundled QDD leg's)."""
     from haa_sym.cli import main
-    assert main(["regions", "--params", "qdd_leg", "--set", "structure=impedance_current",
+    assert main(["regions", "--params", "hyq_haa", "--set", "structure=impedance_current",
                  "--P-gain", "lin:1:100:3", "--D-gain", "lin:0:1:2", "--out", str(tmp_path / "m.npz")]) == 0
     f = _file(tmp_path, "impedance_current", drop=("alpha", "beta", "I_t0", "P_t0"))
     p = load_params(f)
     assert p.controller.structure == "impedance_current" and p.controller.beta == 1.0
     with pytest.raises(ParameterError, match="P_t0"):
         p.with_values(structure="paper")
-    q = p.with_values(structure="paper", P_t0=0.1922, I_t0=9.05, alpha=0.94, beta=1.0)
-    assert ClosedLoop(q).const[0] == 0.1922
+    q = p.with_values(structure="paper", P_t0=0.382, I_t0=18.0, alpha=0.94, beta=1.0)
+    assert ClosedLoop(q).const[0] == 0.382
+    # the QDD leg: the robot's structure, the paper's from [controller.paper], and back
+    qdd = load_params("qdd_leg")
+    assert qdd.controller.structure == "impedance_current"
+    paper = qdd.with_values(structure="paper")
+    c = paper.controller
+    assert (c.P_t0, c.I_t0, c.alpha, c.beta) == (0.1922, 9.05, 0.94, 1.0)
+    assert paper.with_values(structure="impedance_current").controller == qdd.controller
+    capsys.readouterr()
+    assert main(["stability", "--params", "qdd_leg", "--set", "structure=paper", "--P-gain", "30",
+                 "--D-gain", "0.2"]) == 0
+    rho = float(ClosedLoop(paper).stability(30.0, 0.2, radius=True).spectral_radius)
+    assert capsys.readouterr().out == f"stable: False  spectral radius: {rho:.12g}\n" and rho > 1
 
 
 # --- the haptic device (a rotor-only file: no [bodies]) -------------------------------------------
@@ -262,3 +276,15 @@ def test_verify_derives_every_structure_in_sympy(name):
     assert [r.claim.split("'")[1] for r in rows] == list(STRUCTURES)
     assert all(r.ok for r in rows), [(r.claim, r.numbers) for r in rows if not r.ok]
     assert all("one constant at 3 gain points x 2 rational z: True" in r.numbers for r in rows)
+
+
+def test_a_controller_sub_table_must_hold_exactly_its_structures_keys(tmp_path, assert_refused):
+    text = (ROOT / "model" / "qdd_leg.toml").read_text()
+    bad = tmp_path / "in" / "bad.toml"
+    bad.parent.mkdir()
+    bad.write_text(text.replace("[controller.paper]", "[controller.torque_pi]"))
+    assert_refused(["regions", "--params", str(bad), "--out", "m.npz"],
+                   ("[controller.torque_pi]", "alpha"))
+    bad.write_text(text.replace("[controller.paper]", "[controller.impedance_current]"))
+    assert_refused(["regions", "--params", str(bad), "--out", "m.npz"],
+                   "[controller.impedance_current]: the file's own structure")

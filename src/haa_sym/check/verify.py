@@ -361,12 +361,13 @@ _STRUCTURE_DEFAULTS = {"P_t0": 0.382, "I_t0": 18.0, "beta": 1.0, "alpha": 0.94}
 
 
 def _with_structure(params: Params, name: str) -> Params:
-    """``params`` with ``structure = name``: the keys it reads from the file, else
-    :data:`_STRUCTURE_DEFAULTS`."""
+    """``params`` with ``structure = name``: the keys it reads from the file ([controller] or
+    [controller.<name>]), else the paper's structure's of the file, else :data:`_STRUCTURE_DEFAULTS`."""
     from haa_sym.model.structures import STRUCTURES
-    own = STRUCTURES[params.controller.structure].keys
-    keys = {k: (getattr(params.controller, k) if k in own else _STRUCTURE_DEFAULTS[k])
-            for k in STRUCTURES[name].keys}
+    ctrl = params.controller
+    own = {k: getattr(ctrl, k) for k in STRUCTURES[ctrl.structure].keys}
+    pool = {**_STRUCTURE_DEFAULTS, **ctrl.alternatives.get("paper", {}), **ctrl.alternatives.get(name, {}), **own}
+    keys = {k: pool[k] for k in STRUCTURES[name].keys}
     return params.with_values(structure=name, **keys)
 
 

@@ -80,7 +80,7 @@ def actuator_toml(params) -> str:
     ctrl = data.setdefault("controller", {})
     unread = STRUCTURES[params.controller.structure].unread    # neutral values, left out of a file
     for key, value in params.controller.__dict__.items():
-        if value is None or key in unread:
+        if value is None or key in unread or key == "alternatives":   # sub-tables stay as read
             ctrl.pop(key, None)
         else:
             _set_entry(ctrl, key, value if isinstance(value, str) else _number(value), CONTROLLER_UNITS.get(key))

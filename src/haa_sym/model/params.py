@@ -234,6 +234,9 @@ class Controller:
     velocity_filter: str = filters.DEFAULT
     f_c: float | None = None
     structure: str = structures.DEFAULT
+    # the keys of other structures for this actuator ([controller.<structure>] tables): what
+    # `--set structure=<name>` takes when it switches to one (not part of the loop: no equality)
+    alternatives: Mapping[str, Mapping[str, float]] = field(default_factory=dict, compare=False, repr=False)
 
     def __post_init__(self):
         st = structures.get(_check_value("structure", self.structure, "structure"))
@@ -273,13 +276,18 @@ class Controller:
         """A copy with some keys changed, validated like a file. A change of ``structure`` drops
         the keys the new structure does not read; those it reads and this one did not must be
         among ``changes``."""
-        values = {**self.__dict__, **changes}
+        values = {k: v for k, v in {**self.__dict__, **changes}.items() if k != "alternatives"}
         new = structures.get(_check_value("structure", values["structure"], "structure"))
         old = structures.get(self.structure)
+        alternatives = dict(self.alternatives)
+        if new is not old:                  # the keys of the one left, for a switch back
+            alternatives.setdefault(old.name, {k: getattr(self, k) for k in old.keys})
         for k in structures.NEUTRAL:
             if k not in changes and (k in new.unread or k in old.unread):
                 values.pop(k)               # neutral in the new one, or missing (reported as such)
-        return _controller(values)
+                if k in new.keys and k in alternatives.get(new.name, {}):
+                    values[k] = alternatives[new.name][k]     # the file's [controller.<structure>]
+        return _controller(values, alternatives=alternatives)
 
 
 @dataclass(frozen=True)
@@ -407,7 +415,8 @@ class Params:
         return {
             "plant": self.plant.as_dict(),
             "topology": {**top.structure(), "fingerprint": top.fingerprint},
-            "controller": dict(self.controller.__dict__),
+            "controller": {k: v for k, v in self.controller.__dict__.items()
+                           if not (k == "alternatives" and not v)},
             "configurations": {k: dict(v) for k, v in self.configurations.items()},
             "drive": self.drive.as_dict(),
             "source": self.source,
@@ -522,9 +531,10 @@ def _validated(cls, values: Mapping[str, object], domain: Mapping[str, str], whe
         raise ParameterError(f"{prefix}{exc}") from None
 
 
-def _controller(values: Mapping[str, object], where: str | None = None, optional=None) -> Controller:
+def _controller(values: Mapping[str, object], where: str | None = None, alternatives=None) -> Controller:
     """A :class:`Controller` from a [controller] table's values: the keys its ``structure``
-    (haa_sym.model.structures) reads are required, those it does not read are refused if given."""
+    (haa_sym.model.structures) reads are required, those it does not read are refused if given;
+    ``alternatives`` the other structures' keys (:func:`_alternatives`)."""
     prefix = f"{where}: " if where else ""
     name = values.get("structure", structures.DEFAULT)
     st = structures.get(_check_value("structure", name, "structure", where))
@@ -533,8 +543,32 @@ def _controller(values: Mapping[str, object], where: str | None = None, optional
         raise ParameterError(f"{prefix}{given[0]} = {values[given[0]]!r}: structure = {st.name!r} has no "
                              f"{'velocity compensation' if given[0] == 'alpha' else 'torque PI'}; allowed: "
                              f"leave {', '.join(given)} out (it reads {list(st.keys) or 'none of P_t0, I_t0, beta, alpha'})")
-    return _validated(Controller, values, _CONTROLLER_DOMAIN, where,
+    ctrl = _validated(Controller, values, _CONTROLLER_DOMAIN, where,
                       optional={k: v for k, v in _CONTROLLER_OPTIONAL.items() if k not in st.keys})
+    object.__setattr__(ctrl, "alternatives", dict(alternatives or {}))
+    return ctrl
+
+
+def _alternatives(table: Mapping[str, object], source: str, refs) -> tuple[dict, dict]:
+    """``([controller] without its sub-tables, {structure: its keys})``: a ``[controller.<name>]``
+    table, ``<name>`` a structure of haa_sym.model.structures other than the file's, holds exactly
+    the keys that structure reads, for ``--set structure=<name>``."""
+    own = table.get("structure", structures.DEFAULT)
+    rest, alts = {}, {}
+    for name, tab in table.items():
+        if name not in structures.STRUCTURES:
+            rest[name] = tab
+            continue
+        where = f"{source} [controller.{name}]"
+        if not isinstance(tab, Mapping):
+            raise ParameterError(f"{where}: {tab!r}; allowed: a table of the keys structure {name!r} reads")
+        if name == own:
+            raise ParameterError(f"{where}: the file's own structure; allowed: its keys in [controller] itself")
+        st = structures.STRUCTURES[name]
+        vals = entry_values(tab, where, refs, CONTROLLER_UNITS)
+        check_keys(vals, st.keys, st.keys, where)
+        alts[name] = {k: _check_value(k, v, _CONTROLLER_DOMAIN[k], where) for k, v in vals.items()}
+    return rest, alts
 
 
 def gain_array(name: str, value, label: str | None = None) -> np.ndarray:
@@ -634,10 +668,11 @@ def parse_params(data: Mapping[str, object], source: str = "<memory>") -> Params
     if not isinstance(data.get("controller"), Mapping):
         raise ParameterError(f"{source}: missing table [controller]")
     refs = about["references"]
-    controller = _controller(entry_values(data["controller"], f"{source} [controller]", refs,
+    table, alternatives = _alternatives(data["controller"], source, refs)
+    controller = _controller(entry_values(table, f"{source} [controller]", refs,
                                                      {**CONTROLLER_UNITS, "velocity_filter": None,
                                                       "structure": None}),
-                            f"{source} [controller]")
+                            f"{source} [controller]", alternatives)
     raw_configs = data.get("configurations", {})
     if not isinstance(raw_configs, Mapping):
         raise ParameterError(f"{source}: [configurations] must be a table of tables")
