@@ -31,6 +31,10 @@ from haa_sym.analysis.torque import torque_loop_margins
 from haa_sym.model.actuator import CURRENT, HYQ, MOTOR_DOMAIN, Topology
 from haa_sym.errors import ParameterError
 from haa_sym.model.params import Params, load_params
+from haa_sym.model.structures import STRUCTURES
+from haa_sym.compiled.layout import gain_monomials
+from haa_sym.loop.exact import transfer_polynomials
+from haa_sym.model.elements import frequency_responses
 
 LOAD_KEYS = ("J_L1", "B_L1", "J_L2", "B_L2", "K_L2", "K_p", "D_p")
 
@@ -363,7 +367,6 @@ _STRUCTURE_DEFAULTS = {"P_t0": 0.382, "I_t0": 18.0, "beta": 1.0, "alpha": 0.94}
 def _with_structure(params: Params, name: str) -> Params:
     """``params`` with ``structure = name``: the keys it reads from the file ([controller] or
     [controller.<name>]), else the paper's structure's of the file, else :data:`_STRUCTURE_DEFAULTS`."""
-    from haa_sym.model.structures import STRUCTURES
     ctrl = params.controller
     own = {k: getattr(ctrl, k) for k in STRUCTURES[ctrl.structure].keys}
     pool = {**_STRUCTURE_DEFAULTS, **ctrl.alternatives.get("paper", {}), **ctrl.alternatives.get(name, {}), **own}
@@ -384,10 +387,6 @@ def row_structures(params: Params) -> list[Row]:
     1/(k_t N)) to 2 ulp."""
     import sympy as sp
     from fractions import Fraction
-    from haa_sym.compiled.layout import gain_monomials
-    from haa_sym.loop.exact import transfer_polynomials
-    from haa_sym.model.elements import frequency_responses
-    from haa_sym.model.structures import STRUCTURES
     rng = random.Random(24)
     names = ("GTV", "GTd", "GthV", "Gthd", "GpV", "Gpd", "F_d", "F_vc", "I_z", "zd")
     S = dict(zip(names, sp.symbols(names)))
