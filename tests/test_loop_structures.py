@@ -288,3 +288,20 @@ def test_a_controller_sub_table_must_hold_exactly_its_structures_keys(tmp_path, 
     bad.write_text(text.replace("[controller.paper]", "[controller.impedance_current]"))
     assert_refused(["regions", "--params", str(bad), "--out", "m.npz"],
                    "[controller.impedance_current]: the file's own structure")
+
+
+@pytest.mark.parametrize("structure", ["paper", "torque_pi", "torque_pi_ff"])
+def test_describing_functions_controller_is_the_flows(structure):
+    """The describing function's linear part reads the controller as V = -(K_T T + K_theta theta);
+    with each structure that is the controller of the one flow (statespace.controller_batch)."""
+    from haa_sym.analysis.describing import _controller
+    from haa_sym.loop.statespace import CONTROLLER_INPUTS, controller_batch
+    loop = ClosedLoop(_params("hyq_haa", structure), basis=False)
+    w = np.geomspace(1.0, 3000.0, 25)
+    K_T, K_th = _controller(loop, 300.0, 4.0, w)
+    A, B, C, D = (m[0] for m in controller_batch(loop, 300.0, 4.0))
+    z = np.exp(1j * w * loop.params.controller.Ts)
+    X = np.linalg.solve(z[:, None, None] * np.eye(A.shape[0]) - A, np.broadcast_to(B, (w.size,) + B.shape))
+    H = np.einsum("j,wjk->wk", C[0], X) + D[0]                    # V from each controller input
+    np.testing.assert_allclose(-H[:, CONTROLLER_INPUTS.index("T_meas")], K_T, rtol=1e-10)
+    np.testing.assert_allclose(-H[:, CONTROLLER_INPUTS.index("theta_encoder")], K_th, rtol=1e-10)
