@@ -128,7 +128,10 @@ def set_keys(params: "Params") -> list[tuple[str, str, str, object]]:
     controller's, then the drive's."""
     top = params.plant.topology
     rows = [(k, top.units[k], domain_text(d), params.plant.as_dict()[k]) for k, d in top.domain.items()]
-    rows += [(k, CONTROLLER_UNITS.get(k, "name"), domain_text(d), getattr(params.controller, k))
+    unread = structures.get(params.controller.structure).unread
+    rows += [(k, CONTROLLER_UNITS.get(k, "name"),
+              f"not read by structure {params.controller.structure!r} (with --set structure=NAME that reads it)"
+              if k in unread else domain_text(d), getattr(params.controller, k))
              for k, d in _CONTROLLER_DOMAIN.items()]
     rows += [(k, DRIVE_UNITS[k], drive_allowed(k), getattr(params.drive, k)) for k in DRIVE_KEYS]
     return rows
@@ -222,7 +225,11 @@ class Controller:
     :mod:`haa_sym.model.filters`: ``"average"`` of ``N_av`` samples, or the backward difference followed
     by a Tustin ``"lowpass1"`` or ``"butterworth2"`` filter of cut-off ``f_c`` Hz (below Nyquist
     1/(2 Ts)), or any filter registered there. The keys the chosen filter reads are required (or
-    take the registry's default); the others may be None.
+    take the registry's default); the others may be None. ``structure`` (default ``"paper"``) is
+    an entry of :mod:`haa_sym.model.structures`: the keys it does not read (``P_t0``, ``I_t0``,
+    ``beta`` without a torque loop, ``alpha`` without compensation) are refused if given and
+    hold their neutral values (0, 0, 1, 0); ``alternatives`` holds other structures' keys
+    (``[controller.<structure>]``) for a switch with ``--set structure=...``.
     """
 
     Ts: float
