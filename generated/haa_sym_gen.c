@@ -56,6 +56,7 @@ extern "C" {
 #define casadi_f18 CASADI_PREFIX(f18)
 #define casadi_f19 CASADI_PREFIX(f19)
 #define casadi_f2 CASADI_PREFIX(f2)
+#define casadi_f20 CASADI_PREFIX(f20)
 #define casadi_f3 CASADI_PREFIX(f3)
 #define casadi_f4 CASADI_PREFIX(f4)
 #define casadi_f5 CASADI_PREFIX(f5)
@@ -92,6 +93,8 @@ extern "C" {
 #define casadi_s28 CASADI_PREFIX(s28)
 #define casadi_s29 CASADI_PREFIX(s29)
 #define casadi_s3 CASADI_PREFIX(s3)
+#define casadi_s30 CASADI_PREFIX(s30)
+#define casadi_s31 CASADI_PREFIX(s31)
 #define casadi_s4 CASADI_PREFIX(s4)
 #define casadi_s5 CASADI_PREFIX(s5)
 #define casadi_s6 CASADI_PREFIX(s6)
@@ -223,27 +226,29 @@ static const casadi_int casadi_s5[3] = {16, 1, 1};
 static const casadi_int casadi_s6[3] = {7, 7, 1};
 static const casadi_int casadi_s7[3] = {7, 3, 1};
 static const casadi_int casadi_s8[3] = {5, 7, 1};
-static const casadi_int casadi_s9[3] = {20, 1, 1};
-static const casadi_int casadi_s10[3] = {3, 1, 1};
-static const casadi_int casadi_s11[3] = {2, 1, 1};
-static const casadi_int casadi_s12[3] = {26, 1, 1};
-static const casadi_int casadi_s13[3] = {17, 8, 1};
-static const casadi_int casadi_s14[3] = {4, 1, 1};
-static const casadi_int casadi_s15[3] = {33, 8, 1};
-static const casadi_int casadi_s16[3] = {65, 8, 1};
-static const casadi_int casadi_s17[3] = {8, 1, 1};
-static const casadi_int casadi_s18[3] = {5, 1, 1};
-static const casadi_int casadi_s19[3] = {164, 1, 1};
-static const casadi_int casadi_s20[3] = {7, 1, 1};
-static const casadi_int casadi_s21[3] = {80, 1, 1};
-static const casadi_int casadi_s22[3] = {161, 1, 1};
-static const casadi_int casadi_s23[3] = {329, 1, 1};
-static const casadi_int casadi_s24[3] = {64, 1, 1};
-static const casadi_int casadi_s25[3] = {4532, 1, 1};
-static const casadi_int casadi_s26[3] = {4572, 1, 1};
-static const casadi_int casadi_s27[3] = {288, 1, 1};
-static const casadi_int casadi_s28[3] = {577, 1, 1};
-static const casadi_int casadi_s29[3] = {905, 1, 1};
+static const casadi_int casadi_s9[3] = {7, 1, 1};
+static const casadi_int casadi_s10[3] = {3, 3, 1};
+static const casadi_int casadi_s11[3] = {4, 3, 1};
+static const casadi_int casadi_s12[3] = {20, 1, 1};
+static const casadi_int casadi_s13[3] = {3, 1, 1};
+static const casadi_int casadi_s14[3] = {2, 1, 1};
+static const casadi_int casadi_s15[3] = {26, 1, 1};
+static const casadi_int casadi_s16[3] = {17, 8, 1};
+static const casadi_int casadi_s17[3] = {4, 1, 1};
+static const casadi_int casadi_s18[3] = {33, 8, 1};
+static const casadi_int casadi_s19[3] = {65, 8, 1};
+static const casadi_int casadi_s20[3] = {8, 1, 1};
+static const casadi_int casadi_s21[3] = {5, 1, 1};
+static const casadi_int casadi_s22[3] = {164, 1, 1};
+static const casadi_int casadi_s23[3] = {80, 1, 1};
+static const casadi_int casadi_s24[3] = {161, 1, 1};
+static const casadi_int casadi_s25[3] = {329, 1, 1};
+static const casadi_int casadi_s26[3] = {64, 1, 1};
+static const casadi_int casadi_s27[3] = {4532, 1, 1};
+static const casadi_int casadi_s28[3] = {4572, 1, 1};
+static const casadi_int casadi_s29[3] = {288, 1, 1};
+static const casadi_int casadi_s30[3] = {577, 1, 1};
+static const casadi_int casadi_s31[3] = {905, 1, 1};
 
 static const casadi_real casadi_c0[17] = 
   {-1., -1., 1., 1., -1., -1., 1., 1.,
@@ -793,8 +798,151 @@ CASADI_SYMBOL_EXPORT int haa_plant_5cfa27f41820_work_bytes(casadi_int *sz_arg, c
   return 0;
 }
 
-/* haa_plant_b107ac0be577:(p[16])->(A[7x7],B[7x3],C[5x7],VC0) */
+/* haa_plant_864ce79ba35b:(p[7])->(A[3x3],B[3x3],C[4x3],VC0) */
 static int casadi_f2(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
+  casadi_real a0, a1, a2, a3, a4, a5, a6, a7;
+  a0=arg[0]? arg[0][1] : 0;
+  a1=arg[0]? arg[0][0] : 0;
+  a2=(a0/a1);
+  a2=(-a2);
+  if (res[0]!=0) res[0][0]=a2;
+  a2=0.;
+  if (res[0]!=0) res[0][1]=a2;
+  a3=arg[0]? arg[0][2] : 0;
+  a4=arg[0]? arg[0][4] : 0;
+  a5=(a3/a4);
+  if (res[0]!=0) res[0][2]=a5;
+  if (res[0]!=0) res[0][3]=a2;
+  if (res[0]!=0) res[0][4]=a2;
+  if (res[0]!=0) res[0][5]=a2;
+  a5=arg[0]? arg[0][3] : 0;
+  a6=(a5/a1);
+  a6=(-a6);
+  if (res[0]!=0) res[0][6]=a6;
+  a6=1.;
+  if (res[0]!=0) res[0][7]=a6;
+  a6=arg[0]? arg[0][5] : 0;
+  a7=(a6/a4);
+  a7=(-a7);
+  if (res[0]!=0) res[0][8]=a7;
+  a1=(1./a1);
+  if (res[1]!=0) res[1][0]=a1;
+  if (res[1]!=0) res[1][1]=a2;
+  if (res[1]!=0) res[1][2]=a2;
+  if (res[1]!=0) res[1][3]=a2;
+  if (res[1]!=0) res[1][4]=a2;
+  a1=(1./a4);
+  if (res[1]!=0) res[1][5]=a1;
+  if (res[1]!=0) res[1][6]=a2;
+  if (res[1]!=0) res[1][7]=a2;
+  a4=(1./a4);
+  a1=arg[0]? arg[0][6] : 0;
+  a4=(a4/a1);
+  if (res[1]!=0) res[1][8]=a4;
+  a4=(a1*a3);
+  if (res[2]!=0) res[2][0]=a4;
+  a4=(a1*a3);
+  if (res[2]!=0) res[2][1]=a4;
+  if (res[2]!=0) res[2][2]=a2;
+  if (res[2]!=0) res[2][3]=a2;
+  if (res[2]!=0) res[2][4]=a2;
+  if (res[2]!=0) res[2][5]=a2;
+  a4=(1./a1);
+  if (res[2]!=0) res[2][6]=a4;
+  if (res[2]!=0) res[2][7]=a2;
+  if (res[2]!=0) res[2][8]=a2;
+  if (res[2]!=0) res[2][9]=a2;
+  if (res[2]!=0) res[2][10]=a2;
+  a2=(1./a1);
+  if (res[2]!=0) res[2][11]=a2;
+  a1=(a1/a3);
+  a6=(a6*a0);
+  a5=(a5*a3);
+  a6=(a6+a5);
+  a1=(a1*a6);
+  if (res[3]!=0) res[3][0]=a1;
+  return 0;
+}
+
+CASADI_SYMBOL_EXPORT int haa_plant_864ce79ba35b(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem){
+  return casadi_f2(arg, res, iw, w, mem);
+}
+
+CASADI_SYMBOL_EXPORT int haa_plant_864ce79ba35b_checkout(void) {
+  return 0;
+}
+
+CASADI_SYMBOL_EXPORT void haa_plant_864ce79ba35b_release(int mem) {
+}
+
+CASADI_SYMBOL_EXPORT void haa_plant_864ce79ba35b_incref(void) {
+}
+
+CASADI_SYMBOL_EXPORT void haa_plant_864ce79ba35b_decref(void) {
+}
+
+CASADI_SYMBOL_EXPORT casadi_int haa_plant_864ce79ba35b_n_in(void) { return 1;}
+
+CASADI_SYMBOL_EXPORT casadi_int haa_plant_864ce79ba35b_n_out(void) { return 4;}
+
+CASADI_SYMBOL_EXPORT casadi_real haa_plant_864ce79ba35b_default_in(casadi_int i) {
+  switch (i) {
+    default: return 0;
+  }
+}
+
+CASADI_SYMBOL_EXPORT const char* haa_plant_864ce79ba35b_name_in(casadi_int i) {
+  switch (i) {
+    case 0: return "p";
+    default: return 0;
+  }
+}
+
+CASADI_SYMBOL_EXPORT const char* haa_plant_864ce79ba35b_name_out(casadi_int i) {
+  switch (i) {
+    case 0: return "A";
+    case 1: return "B";
+    case 2: return "C";
+    case 3: return "VC0";
+    default: return 0;
+  }
+}
+
+CASADI_SYMBOL_EXPORT const casadi_int* haa_plant_864ce79ba35b_sparsity_in(casadi_int i) {
+  switch (i) {
+    case 0: return casadi_s9;
+    default: return 0;
+  }
+}
+
+CASADI_SYMBOL_EXPORT const casadi_int* haa_plant_864ce79ba35b_sparsity_out(casadi_int i) {
+  switch (i) {
+    case 0: return casadi_s10;
+    case 1: return casadi_s10;
+    case 2: return casadi_s11;
+    case 3: return casadi_s4;
+    default: return 0;
+  }
+}
+
+CASADI_SYMBOL_EXPORT int haa_plant_864ce79ba35b_work(casadi_int *sz_arg, casadi_int* sz_res, casadi_int *sz_iw, casadi_int *sz_w) {
+  if (sz_arg) *sz_arg = 1;
+  if (sz_res) *sz_res = 4;
+  if (sz_iw) *sz_iw = 0;
+  if (sz_w) *sz_w = 0;
+  return 0;
+}
+
+CASADI_SYMBOL_EXPORT int haa_plant_864ce79ba35b_work_bytes(casadi_int *sz_arg, casadi_int* sz_res, casadi_int *sz_iw, casadi_int *sz_w) {
+  if (sz_arg) *sz_arg = 1*sizeof(const casadi_real*);
+  if (sz_res) *sz_res = 4*sizeof(casadi_real*);
+  if (sz_iw) *sz_iw = 0*sizeof(casadi_int);
+  if (sz_w) *sz_w = 0*sizeof(casadi_real);
+  return 0;
+}
+
+/* haa_plant_b107ac0be577:(p[16])->(A[7x7],B[7x3],C[5x7],VC0) */
+static int casadi_f3(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
   casadi_real a00, a01, a02, a03, a04, a05, a06, a07, a08, a09, a10, a11;
   casadi_real a12, a13, a14;
   a00=arg[0]? arg[0][1] : 0;
@@ -976,7 +1124,7 @@ static int casadi_f2(const casadi_real** arg, casadi_real** res, casadi_int* iw,
 }
 
 CASADI_SYMBOL_EXPORT int haa_plant_b107ac0be577(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem){
-  return casadi_f2(arg, res, iw, w, mem);
+  return casadi_f3(arg, res, iw, w, mem);
 }
 
 CASADI_SYMBOL_EXPORT int haa_plant_b107ac0be577_checkout(void) {
@@ -1053,7 +1201,7 @@ CASADI_SYMBOL_EXPORT int haa_plant_b107ac0be577_work_bytes(casadi_int *sz_arg, c
 }
 
 /* haa_plant_cc30ca5c5149:(p[12])->(A[5x5],B[5x3],C[4x5],VC0) */
-static int casadi_f3(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
+static int casadi_f4(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
   casadi_real a00, a01, a02, a03, a04, a05, a06, a07, a08, a09, a10, a11;
   casadi_real a12, a13, a14;
   a00=arg[0]? arg[0][1] : 0;
@@ -1175,7 +1323,7 @@ static int casadi_f3(const casadi_real** arg, casadi_real** res, casadi_int* iw,
 }
 
 CASADI_SYMBOL_EXPORT int haa_plant_cc30ca5c5149(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem){
-  return casadi_f3(arg, res, iw, w, mem);
+  return casadi_f4(arg, res, iw, w, mem);
 }
 
 CASADI_SYMBOL_EXPORT int haa_plant_cc30ca5c5149_checkout(void) {
@@ -1252,7 +1400,7 @@ CASADI_SYMBOL_EXPORT int haa_plant_cc30ca5c5149_work_bytes(casadi_int *sz_arg, c
 }
 
 /* haa_loopcoef:(Gw[20],const[3],gains[2])->(coef[26]) */
-static int casadi_f4(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
+static int casadi_f5(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
   casadi_real a00, a01, a02, a03, a04, a05, a06, a07, a08, a09, a10, a11;
   casadi_real a12, a13, a14, a15, a16, a17, a18, a19, a20, a21, a22, a23;
   casadi_real a24;
@@ -1537,7 +1685,7 @@ static int casadi_f4(const casadi_real** arg, casadi_real** res, casadi_int* iw,
 }
 
 CASADI_SYMBOL_EXPORT int haa_loopcoef(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem){
-  return casadi_f4(arg, res, iw, w, mem);
+  return casadi_f5(arg, res, iw, w, mem);
 }
 
 CASADI_SYMBOL_EXPORT int haa_loopcoef_checkout(void) {
@@ -1581,16 +1729,16 @@ CASADI_SYMBOL_EXPORT const char* haa_loopcoef_name_out(casadi_int i) {
 
 CASADI_SYMBOL_EXPORT const casadi_int* haa_loopcoef_sparsity_in(casadi_int i) {
   switch (i) {
-    case 0: return casadi_s9;
-    case 1: return casadi_s10;
-    case 2: return casadi_s11;
+    case 0: return casadi_s12;
+    case 1: return casadi_s13;
+    case 2: return casadi_s14;
     default: return 0;
   }
 }
 
 CASADI_SYMBOL_EXPORT const casadi_int* haa_loopcoef_sparsity_out(casadi_int i) {
   switch (i) {
-    case 0: return casadi_s12;
+    case 0: return casadi_s15;
     default: return 0;
   }
 }
@@ -1612,7 +1760,7 @@ CASADI_SYMBOL_EXPORT int haa_loopcoef_work_bytes(casadi_int *sz_arg, casadi_int*
 }
 
 /* haa_routh16:(a[17])->(changes,regular) */
-static int casadi_f6(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
+static int casadi_f7(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
   casadi_real a00, a01, a02, a03, a04, a05, a06, a07, a08, a09, a10, a11;
   casadi_real a12, a13, a14, a15, a16, a17, a18, a19, a20, a21, a22, a23;
   casadi_real a24, a25, a26;
@@ -1947,7 +2095,7 @@ static int casadi_f6(const casadi_real** arg, casadi_real** res, casadi_int* iw,
 }
 
 /* haa_decide16:(basis[17x8],const[3],point[4])->(n_unstable,certified) */
-static int casadi_f5(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
+static int casadi_f6(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
   casadi_int i;
   casadi_real **res1=res+2, *rr, *w00=w+27, *w01=w+44, w02, *w03=w+180, w04, *w05=w+184, w06, w07, w08, w09;
   casadi_real w10, w11, w12, *w13=w+187, *w14=w+195, w15, w16, w17, w18, *w19=w+212;
@@ -2022,7 +2170,7 @@ static int casadi_f5(const casadi_real** arg, casadi_real** res, casadi_int* iw,
   arg1[0]=w00;
   res1[0]=(&w06);
   res1[1]=(&w04);
-  if (casadi_f6(arg1, res1, iw, w, 0)) return 1;
+  if (casadi_f7(arg1, res1, iw, w, 0)) return 1;
   /* #30: output[0][0] = @6 */
   if (res[0]) res[0][0] = w06;
   /* #31: @8 = 3.55271e-15 */
@@ -2109,7 +2257,7 @@ static int casadi_f5(const casadi_real** arg, casadi_real** res, casadi_int* iw,
   arg1[0]=w19;
   res1[0]=(&w02);
   res1[1]=(&w08);
-  if (casadi_f6(arg1, res1, iw, w, 0)) return 1;
+  if (casadi_f7(arg1, res1, iw, w, 0)) return 1;
   /* #68: @4 = (@4*@8) */
   w04 *= w08;
   /* #69: @8 = 0.5 */
@@ -2134,7 +2282,7 @@ static int casadi_f5(const casadi_real** arg, casadi_real** res, casadi_int* iw,
   arg1[0]=w19;
   res1[0]=(&w02);
   res1[1]=(&w08);
-  if (casadi_f6(arg1, res1, iw, w, 0)) return 1;
+  if (casadi_f7(arg1, res1, iw, w, 0)) return 1;
   /* #79: @4 = (@4*@8) */
   w04 *= w08;
   /* #80: @8 = 0.5 */
@@ -2155,7 +2303,7 @@ static int casadi_f5(const casadi_real** arg, casadi_real** res, casadi_int* iw,
   arg1[0]=w19;
   res1[0]=(&w02);
   res1[1]=(&w08);
-  if (casadi_f6(arg1, res1, iw, w, 0)) return 1;
+  if (casadi_f7(arg1, res1, iw, w, 0)) return 1;
   /* #88: @4 = (@4*@8) */
   w04 *= w08;
   /* #89: @8 = 0.5 */
@@ -2176,7 +2324,7 @@ static int casadi_f5(const casadi_real** arg, casadi_real** res, casadi_int* iw,
   arg1[0]=w00;
   res1[0]=(&w02);
   res1[1]=(&w08);
-  if (casadi_f6(arg1, res1, iw, w, 0)) return 1;
+  if (casadi_f7(arg1, res1, iw, w, 0)) return 1;
   /* #97: @4 = (@4*@8) */
   w04 *= w08;
   /* #98: @8 = 0.5 */
@@ -2193,7 +2341,7 @@ static int casadi_f5(const casadi_real** arg, casadi_real** res, casadi_int* iw,
 }
 
 CASADI_SYMBOL_EXPORT int haa_decide16(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem){
-  return casadi_f5(arg, res, iw, w, mem);
+  return casadi_f6(arg, res, iw, w, mem);
 }
 
 CASADI_SYMBOL_EXPORT int haa_decide16_checkout(void) {
@@ -2238,9 +2386,9 @@ CASADI_SYMBOL_EXPORT const char* haa_decide16_name_out(casadi_int i) {
 
 CASADI_SYMBOL_EXPORT const casadi_int* haa_decide16_sparsity_in(casadi_int i) {
   switch (i) {
-    case 0: return casadi_s13;
-    case 1: return casadi_s10;
-    case 2: return casadi_s14;
+    case 0: return casadi_s16;
+    case 1: return casadi_s13;
+    case 2: return casadi_s17;
     default: return 0;
   }
 }
@@ -2270,7 +2418,7 @@ CASADI_SYMBOL_EXPORT int haa_decide16_work_bytes(casadi_int *sz_arg, casadi_int*
 }
 
 /* haa_routh32:(a[33])->(changes,regular) */
-static int casadi_f8(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
+static int casadi_f9(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
   casadi_real a00, a01, a02, a03, a04, a05, a06, a07, a08, a09, a10, a11;
   casadi_real a12, a13, a14, a15, a16, a17, a18, a19, a20, a21, a22, a23;
   casadi_real a24, a25, a26, a27, a28, a29, a30, a31, a32, a33, a34, a35;
@@ -3183,7 +3331,7 @@ static int casadi_f8(const casadi_real** arg, casadi_real** res, casadi_int* iw,
 }
 
 /* haa_decide32:(basis[33x8],const[3],point[4])->(n_unstable,certified) */
-static int casadi_f7(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
+static int casadi_f8(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
   casadi_int i;
   casadi_real **res1=res+2, *rr, *w00=w+51, *w01=w+84, w02, *w03=w+348, w04, *w05=w+352, w06, w07, w08, w09;
   casadi_real w10, w11, w12, *w13=w+355, *w14=w+363, w15, w16, w17, w18, *w19=w+396;
@@ -3258,7 +3406,7 @@ static int casadi_f7(const casadi_real** arg, casadi_real** res, casadi_int* iw,
   arg1[0]=w00;
   res1[0]=(&w06);
   res1[1]=(&w04);
-  if (casadi_f8(arg1, res1, iw, w, 0)) return 1;
+  if (casadi_f9(arg1, res1, iw, w, 0)) return 1;
   /* #30: output[0][0] = @6 */
   if (res[0]) res[0][0] = w06;
   /* #31: @8 = 3.55271e-15 */
@@ -3345,7 +3493,7 @@ static int casadi_f7(const casadi_real** arg, casadi_real** res, casadi_int* iw,
   arg1[0]=w19;
   res1[0]=(&w02);
   res1[1]=(&w08);
-  if (casadi_f8(arg1, res1, iw, w, 0)) return 1;
+  if (casadi_f9(arg1, res1, iw, w, 0)) return 1;
   /* #68: @4 = (@4*@8) */
   w04 *= w08;
   /* #69: @8 = 0.5 */
@@ -3370,7 +3518,7 @@ static int casadi_f7(const casadi_real** arg, casadi_real** res, casadi_int* iw,
   arg1[0]=w19;
   res1[0]=(&w02);
   res1[1]=(&w08);
-  if (casadi_f8(arg1, res1, iw, w, 0)) return 1;
+  if (casadi_f9(arg1, res1, iw, w, 0)) return 1;
   /* #79: @4 = (@4*@8) */
   w04 *= w08;
   /* #80: @8 = 0.5 */
@@ -3391,7 +3539,7 @@ static int casadi_f7(const casadi_real** arg, casadi_real** res, casadi_int* iw,
   arg1[0]=w19;
   res1[0]=(&w02);
   res1[1]=(&w08);
-  if (casadi_f8(arg1, res1, iw, w, 0)) return 1;
+  if (casadi_f9(arg1, res1, iw, w, 0)) return 1;
   /* #88: @4 = (@4*@8) */
   w04 *= w08;
   /* #89: @8 = 0.5 */
@@ -3412,7 +3560,7 @@ static int casadi_f7(const casadi_real** arg, casadi_real** res, casadi_int* iw,
   arg1[0]=w00;
   res1[0]=(&w02);
   res1[1]=(&w08);
-  if (casadi_f8(arg1, res1, iw, w, 0)) return 1;
+  if (casadi_f9(arg1, res1, iw, w, 0)) return 1;
   /* #97: @4 = (@4*@8) */
   w04 *= w08;
   /* #98: @8 = 0.5 */
@@ -3429,7 +3577,7 @@ static int casadi_f7(const casadi_real** arg, casadi_real** res, casadi_int* iw,
 }
 
 CASADI_SYMBOL_EXPORT int haa_decide32(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem){
-  return casadi_f7(arg, res, iw, w, mem);
+  return casadi_f8(arg, res, iw, w, mem);
 }
 
 CASADI_SYMBOL_EXPORT int haa_decide32_checkout(void) {
@@ -3474,9 +3622,9 @@ CASADI_SYMBOL_EXPORT const char* haa_decide32_name_out(casadi_int i) {
 
 CASADI_SYMBOL_EXPORT const casadi_int* haa_decide32_sparsity_in(casadi_int i) {
   switch (i) {
-    case 0: return casadi_s15;
-    case 1: return casadi_s10;
-    case 2: return casadi_s14;
+    case 0: return casadi_s18;
+    case 1: return casadi_s13;
+    case 2: return casadi_s17;
     default: return 0;
   }
 }
@@ -3506,7 +3654,7 @@ CASADI_SYMBOL_EXPORT int haa_decide32_work_bytes(casadi_int *sz_arg, casadi_int*
 }
 
 /* haa_routh64:(a[65])->(changes,regular) */
-static int casadi_f10(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
+static int casadi_f11(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
   casadi_real a00, a01, a02, a03, a04, a05, a06, a07, a08, a09, a10, a11;
   casadi_real a12, a13, a14, a15, a16, a17, a18, a19, a20, a21, a22, a23;
   casadi_real a24, a25, a26, a27, a28, a29, a30, a31, a32, a33, a34, a35;
@@ -6343,7 +6491,7 @@ static int casadi_f10(const casadi_real** arg, casadi_real** res, casadi_int* iw
 }
 
 /* haa_decide64:(basis[65x8],const[3],point[4])->(n_unstable,certified) */
-static int casadi_f9(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
+static int casadi_f10(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
   casadi_int i;
   casadi_real **res1=res+2, *rr, *w00=w+99, *w01=w+164, w02, *w03=w+684, w04, *w05=w+688, w06, w07, w08, w09;
   casadi_real w10, w11, w12, *w13=w+691, *w14=w+699, w15, w16, w17, w18, *w19=w+764;
@@ -6418,7 +6566,7 @@ static int casadi_f9(const casadi_real** arg, casadi_real** res, casadi_int* iw,
   arg1[0]=w00;
   res1[0]=(&w06);
   res1[1]=(&w04);
-  if (casadi_f10(arg1, res1, iw, w, 0)) return 1;
+  if (casadi_f11(arg1, res1, iw, w, 0)) return 1;
   /* #30: output[0][0] = @6 */
   if (res[0]) res[0][0] = w06;
   /* #31: @8 = 3.55271e-15 */
@@ -6505,7 +6653,7 @@ static int casadi_f9(const casadi_real** arg, casadi_real** res, casadi_int* iw,
   arg1[0]=w19;
   res1[0]=(&w02);
   res1[1]=(&w08);
-  if (casadi_f10(arg1, res1, iw, w, 0)) return 1;
+  if (casadi_f11(arg1, res1, iw, w, 0)) return 1;
   /* #68: @4 = (@4*@8) */
   w04 *= w08;
   /* #69: @8 = 0.5 */
@@ -6530,7 +6678,7 @@ static int casadi_f9(const casadi_real** arg, casadi_real** res, casadi_int* iw,
   arg1[0]=w19;
   res1[0]=(&w02);
   res1[1]=(&w08);
-  if (casadi_f10(arg1, res1, iw, w, 0)) return 1;
+  if (casadi_f11(arg1, res1, iw, w, 0)) return 1;
   /* #79: @4 = (@4*@8) */
   w04 *= w08;
   /* #80: @8 = 0.5 */
@@ -6551,7 +6699,7 @@ static int casadi_f9(const casadi_real** arg, casadi_real** res, casadi_int* iw,
   arg1[0]=w19;
   res1[0]=(&w02);
   res1[1]=(&w08);
-  if (casadi_f10(arg1, res1, iw, w, 0)) return 1;
+  if (casadi_f11(arg1, res1, iw, w, 0)) return 1;
   /* #88: @4 = (@4*@8) */
   w04 *= w08;
   /* #89: @8 = 0.5 */
@@ -6572,7 +6720,7 @@ static int casadi_f9(const casadi_real** arg, casadi_real** res, casadi_int* iw,
   arg1[0]=w00;
   res1[0]=(&w02);
   res1[1]=(&w08);
-  if (casadi_f10(arg1, res1, iw, w, 0)) return 1;
+  if (casadi_f11(arg1, res1, iw, w, 0)) return 1;
   /* #97: @4 = (@4*@8) */
   w04 *= w08;
   /* #98: @8 = 0.5 */
@@ -6589,7 +6737,7 @@ static int casadi_f9(const casadi_real** arg, casadi_real** res, casadi_int* iw,
 }
 
 CASADI_SYMBOL_EXPORT int haa_decide64(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem){
-  return casadi_f9(arg, res, iw, w, mem);
+  return casadi_f10(arg, res, iw, w, mem);
 }
 
 CASADI_SYMBOL_EXPORT int haa_decide64_checkout(void) {
@@ -6634,9 +6782,9 @@ CASADI_SYMBOL_EXPORT const char* haa_decide64_name_out(casadi_int i) {
 
 CASADI_SYMBOL_EXPORT const casadi_int* haa_decide64_sparsity_in(casadi_int i) {
   switch (i) {
-    case 0: return casadi_s16;
-    case 1: return casadi_s10;
-    case 2: return casadi_s14;
+    case 0: return casadi_s19;
+    case 1: return casadi_s13;
+    case 2: return casadi_s17;
     default: return 0;
   }
 }
@@ -6666,7 +6814,7 @@ CASADI_SYMBOL_EXPORT int haa_decide64_work_bytes(casadi_int *sz_arg, casadi_int*
 }
 
 /* haa_sim_sample_8_8:(x[8],xc[8],exo[5],par[164])->(u[2],xc_next[8],y[7]) */
-static int casadi_f11(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
+static int casadi_f12(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
   casadi_real a00, a01, a02, a03, a04, a05, a06, a07, a08, a09, a10, a11;
   casadi_real a12, a13, a14, a15, a16, a17, a18, a19, a20, a21, a22, a23;
   casadi_real a24;
@@ -7212,7 +7360,7 @@ static int casadi_f11(const casadi_real** arg, casadi_real** res, casadi_int* iw
 }
 
 CASADI_SYMBOL_EXPORT int haa_sim_sample_8_8(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem){
-  return casadi_f11(arg, res, iw, w, mem);
+  return casadi_f12(arg, res, iw, w, mem);
 }
 
 CASADI_SYMBOL_EXPORT int haa_sim_sample_8_8_checkout(void) {
@@ -7259,19 +7407,19 @@ CASADI_SYMBOL_EXPORT const char* haa_sim_sample_8_8_name_out(casadi_int i) {
 
 CASADI_SYMBOL_EXPORT const casadi_int* haa_sim_sample_8_8_sparsity_in(casadi_int i) {
   switch (i) {
-    case 0: return casadi_s17;
-    case 1: return casadi_s17;
-    case 2: return casadi_s18;
-    case 3: return casadi_s19;
+    case 0: return casadi_s20;
+    case 1: return casadi_s20;
+    case 2: return casadi_s21;
+    case 3: return casadi_s22;
     default: return 0;
   }
 }
 
 CASADI_SYMBOL_EXPORT const casadi_int* haa_sim_sample_8_8_sparsity_out(casadi_int i) {
   switch (i) {
-    case 0: return casadi_s11;
-    case 1: return casadi_s17;
-    case 2: return casadi_s20;
+    case 0: return casadi_s14;
+    case 1: return casadi_s20;
+    case 2: return casadi_s9;
     default: return 0;
   }
 }
@@ -7293,7 +7441,7 @@ CASADI_SYMBOL_EXPORT int haa_sim_sample_8_8_work_bytes(casadi_int *sz_arg, casad
 }
 
 /* haa_sim_zoh_8:(x[8],u[2],s,par[80])->(x_next[8]) */
-static int casadi_f12(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
+static int casadi_f13(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
   casadi_real a00, a01, a02, a03, a04, a05, a06, a07, a08, a09, a10, a11;
   casadi_real a12;
   a00=arg[3]? arg[3][0] : 0;
@@ -7550,7 +7698,7 @@ static int casadi_f12(const casadi_real** arg, casadi_real** res, casadi_int* iw
 }
 
 CASADI_SYMBOL_EXPORT int haa_sim_zoh_8(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem){
-  return casadi_f12(arg, res, iw, w, mem);
+  return casadi_f13(arg, res, iw, w, mem);
 }
 
 CASADI_SYMBOL_EXPORT int haa_sim_zoh_8_checkout(void) {
@@ -7595,17 +7743,17 @@ CASADI_SYMBOL_EXPORT const char* haa_sim_zoh_8_name_out(casadi_int i) {
 
 CASADI_SYMBOL_EXPORT const casadi_int* haa_sim_zoh_8_sparsity_in(casadi_int i) {
   switch (i) {
-    case 0: return casadi_s17;
-    case 1: return casadi_s11;
+    case 0: return casadi_s20;
+    case 1: return casadi_s14;
     case 2: return casadi_s4;
-    case 3: return casadi_s21;
+    case 3: return casadi_s23;
     default: return 0;
   }
 }
 
 CASADI_SYMBOL_EXPORT const casadi_int* haa_sim_zoh_8_sparsity_out(casadi_int i) {
   switch (i) {
-    case 0: return casadi_s17;
+    case 0: return casadi_s20;
     default: return 0;
   }
 }
@@ -7627,7 +7775,7 @@ CASADI_SYMBOL_EXPORT int haa_sim_zoh_8_work_bytes(casadi_int *sz_arg, casadi_int
 }
 
 /* haa_sim_jitter_8:(x[8],u[2],s,par[161])->(x_next[8]) */
-static int casadi_f13(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
+static int casadi_f14(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
   casadi_real a000, a001, a002, a003, a004, a005, a006, a007, a008, a009, a010, a011;
   casadi_real a012, a013, a014, a015, a016, a017, a018, a019, a020, a021, a022, a023;
   casadi_real a024, a025, a026, a027, a028, a029, a030, a031, a032, a033, a034, a035;
@@ -10013,7 +10161,7 @@ static int casadi_f13(const casadi_real** arg, casadi_real** res, casadi_int* iw
 }
 
 CASADI_SYMBOL_EXPORT int haa_sim_jitter_8(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem){
-  return casadi_f13(arg, res, iw, w, mem);
+  return casadi_f14(arg, res, iw, w, mem);
 }
 
 CASADI_SYMBOL_EXPORT int haa_sim_jitter_8_checkout(void) {
@@ -10058,17 +10206,17 @@ CASADI_SYMBOL_EXPORT const char* haa_sim_jitter_8_name_out(casadi_int i) {
 
 CASADI_SYMBOL_EXPORT const casadi_int* haa_sim_jitter_8_sparsity_in(casadi_int i) {
   switch (i) {
-    case 0: return casadi_s17;
-    case 1: return casadi_s11;
+    case 0: return casadi_s20;
+    case 1: return casadi_s14;
     case 2: return casadi_s4;
-    case 3: return casadi_s22;
+    case 3: return casadi_s24;
     default: return 0;
   }
 }
 
 CASADI_SYMBOL_EXPORT const casadi_int* haa_sim_jitter_8_sparsity_out(casadi_int i) {
   switch (i) {
-    case 0: return casadi_s17;
+    case 0: return casadi_s20;
     default: return 0;
   }
 }
@@ -10090,7 +10238,7 @@ CASADI_SYMBOL_EXPORT int haa_sim_jitter_8_work_bytes(casadi_int *sz_arg, casadi_
 }
 
 /* haa_sim_etd_8:(x[8],u[2],s,par[329])->(x_next[8]) */
-static int casadi_f14(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
+static int casadi_f15(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
   casadi_real a000, a001, a002, a003, a004, a005, a006, a007, a008, a009, a010, a011;
   casadi_real a012, a013, a014, a015, a016, a017, a018, a019, a020, a021, a022, a023;
   casadi_real a024, a025, a026, a027, a028, a029, a030, a031, a032, a033, a034, a035;
@@ -11639,7 +11787,7 @@ static int casadi_f14(const casadi_real** arg, casadi_real** res, casadi_int* iw
 }
 
 CASADI_SYMBOL_EXPORT int haa_sim_etd_8(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem){
-  return casadi_f14(arg, res, iw, w, mem);
+  return casadi_f15(arg, res, iw, w, mem);
 }
 
 CASADI_SYMBOL_EXPORT int haa_sim_etd_8_checkout(void) {
@@ -11684,17 +11832,17 @@ CASADI_SYMBOL_EXPORT const char* haa_sim_etd_8_name_out(casadi_int i) {
 
 CASADI_SYMBOL_EXPORT const casadi_int* haa_sim_etd_8_sparsity_in(casadi_int i) {
   switch (i) {
-    case 0: return casadi_s17;
-    case 1: return casadi_s11;
+    case 0: return casadi_s20;
+    case 1: return casadi_s14;
     case 2: return casadi_s4;
-    case 3: return casadi_s23;
+    case 3: return casadi_s25;
     default: return 0;
   }
 }
 
 CASADI_SYMBOL_EXPORT const casadi_int* haa_sim_etd_8_sparsity_out(casadi_int i) {
   switch (i) {
-    case 0: return casadi_s17;
+    case 0: return casadi_s20;
     default: return 0;
   }
 }
@@ -11716,7 +11864,7 @@ CASADI_SYMBOL_EXPORT int haa_sim_etd_8_work_bytes(casadi_int *sz_arg, casadi_int
 }
 
 /* haa_sim_sample_8_64:(x[8],xc[64],exo[5],par[4532])->(u[2],xc_next[64],y[7]) */
-static int casadi_f15(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
+static int casadi_f16(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
   casadi_int i;
   casadi_real *rr, *w00=w+64, *w03=w+66, *w04=w+130, w06, w07, w08, w09, w12, *w13=w+132, w14, *w15=w+137;
   casadi_real *w16=w+141;
@@ -11916,7 +12064,7 @@ static int casadi_f15(const casadi_real** arg, casadi_real** res, casadi_int* iw
 }
 
 CASADI_SYMBOL_EXPORT int haa_sim_sample_8_64(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem){
-  return casadi_f15(arg, res, iw, w, mem);
+  return casadi_f16(arg, res, iw, w, mem);
 }
 
 CASADI_SYMBOL_EXPORT int haa_sim_sample_8_64_checkout(void) {
@@ -11963,19 +12111,19 @@ CASADI_SYMBOL_EXPORT const char* haa_sim_sample_8_64_name_out(casadi_int i) {
 
 CASADI_SYMBOL_EXPORT const casadi_int* haa_sim_sample_8_64_sparsity_in(casadi_int i) {
   switch (i) {
-    case 0: return casadi_s17;
-    case 1: return casadi_s24;
-    case 2: return casadi_s18;
-    case 3: return casadi_s25;
+    case 0: return casadi_s20;
+    case 1: return casadi_s26;
+    case 2: return casadi_s21;
+    case 3: return casadi_s27;
     default: return 0;
   }
 }
 
 CASADI_SYMBOL_EXPORT const casadi_int* haa_sim_sample_8_64_sparsity_out(casadi_int i) {
   switch (i) {
-    case 0: return casadi_s11;
-    case 1: return casadi_s24;
-    case 2: return casadi_s20;
+    case 0: return casadi_s14;
+    case 1: return casadi_s26;
+    case 2: return casadi_s9;
     default: return 0;
   }
 }
@@ -11997,7 +12145,7 @@ CASADI_SYMBOL_EXPORT int haa_sim_sample_8_64_work_bytes(casadi_int *sz_arg, casa
 }
 
 /* haa_sim_sample_16_64:(x[16],xc[64],exo[5],par[4572])->(u[2],xc_next[64],y[7]) */
-static int casadi_f16(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
+static int casadi_f17(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
   casadi_int i;
   casadi_real *rr, *w00=w+64, *w03=w+66, *w04=w+130, w06, w07, w08, w09, w12, *w13=w+132, w14, *w15=w+137;
   casadi_real *w16=w+141;
@@ -12197,7 +12345,7 @@ static int casadi_f16(const casadi_real** arg, casadi_real** res, casadi_int* iw
 }
 
 CASADI_SYMBOL_EXPORT int haa_sim_sample_16_64(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem){
-  return casadi_f16(arg, res, iw, w, mem);
+  return casadi_f17(arg, res, iw, w, mem);
 }
 
 CASADI_SYMBOL_EXPORT int haa_sim_sample_16_64_checkout(void) {
@@ -12245,18 +12393,18 @@ CASADI_SYMBOL_EXPORT const char* haa_sim_sample_16_64_name_out(casadi_int i) {
 CASADI_SYMBOL_EXPORT const casadi_int* haa_sim_sample_16_64_sparsity_in(casadi_int i) {
   switch (i) {
     case 0: return casadi_s5;
-    case 1: return casadi_s24;
-    case 2: return casadi_s18;
-    case 3: return casadi_s26;
+    case 1: return casadi_s26;
+    case 2: return casadi_s21;
+    case 3: return casadi_s28;
     default: return 0;
   }
 }
 
 CASADI_SYMBOL_EXPORT const casadi_int* haa_sim_sample_16_64_sparsity_out(casadi_int i) {
   switch (i) {
-    case 0: return casadi_s11;
-    case 1: return casadi_s24;
-    case 2: return casadi_s20;
+    case 0: return casadi_s14;
+    case 1: return casadi_s26;
+    case 2: return casadi_s9;
     default: return 0;
   }
 }
@@ -12278,7 +12426,7 @@ CASADI_SYMBOL_EXPORT int haa_sim_sample_16_64_work_bytes(casadi_int *sz_arg, cas
 }
 
 /* haa_sim_zoh_16:(x[16],u[2],s,par[288])->(x_next[16]) */
-static int casadi_f17(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
+static int casadi_f18(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
   casadi_int i;
   casadi_real *rr, *w0=w+16, *w3=w+32, *w5=w+48;
   const casadi_real *cs, *wr1, *wr2, *wr3, *wr4;
@@ -12310,7 +12458,7 @@ static int casadi_f17(const casadi_real** arg, casadi_real** res, casadi_int* iw
 }
 
 CASADI_SYMBOL_EXPORT int haa_sim_zoh_16(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem){
-  return casadi_f17(arg, res, iw, w, mem);
+  return casadi_f18(arg, res, iw, w, mem);
 }
 
 CASADI_SYMBOL_EXPORT int haa_sim_zoh_16_checkout(void) {
@@ -12356,9 +12504,9 @@ CASADI_SYMBOL_EXPORT const char* haa_sim_zoh_16_name_out(casadi_int i) {
 CASADI_SYMBOL_EXPORT const casadi_int* haa_sim_zoh_16_sparsity_in(casadi_int i) {
   switch (i) {
     case 0: return casadi_s5;
-    case 1: return casadi_s11;
+    case 1: return casadi_s14;
     case 2: return casadi_s4;
-    case 3: return casadi_s27;
+    case 3: return casadi_s29;
     default: return 0;
   }
 }
@@ -12387,7 +12535,7 @@ CASADI_SYMBOL_EXPORT int haa_sim_zoh_16_work_bytes(casadi_int *sz_arg, casadi_in
 }
 
 /* haa_sim_jitter_16:(x[16],u[2],s,par[577])->(x_next[16]) */
-static int casadi_f18(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
+static int casadi_f19(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
   casadi_int i;
   casadi_real *rr, *w00=w+16, *w03=w+32, w04, w05, *w06=w+48, *w08=w+64, w09, *w10=w+80, w11, *w12=w+96, w13;
   casadi_real *w14=w+112, w15, *w16=w+128, w17, *w18=w+144, w19, *w20=w+160, w21, *w22=w+176, w23, *w24=w+192, w25;
@@ -12618,7 +12766,7 @@ static int casadi_f18(const casadi_real** arg, casadi_real** res, casadi_int* iw
 }
 
 CASADI_SYMBOL_EXPORT int haa_sim_jitter_16(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem){
-  return casadi_f18(arg, res, iw, w, mem);
+  return casadi_f19(arg, res, iw, w, mem);
 }
 
 CASADI_SYMBOL_EXPORT int haa_sim_jitter_16_checkout(void) {
@@ -12664,9 +12812,9 @@ CASADI_SYMBOL_EXPORT const char* haa_sim_jitter_16_name_out(casadi_int i) {
 CASADI_SYMBOL_EXPORT const casadi_int* haa_sim_jitter_16_sparsity_in(casadi_int i) {
   switch (i) {
     case 0: return casadi_s5;
-    case 1: return casadi_s11;
+    case 1: return casadi_s14;
     case 2: return casadi_s4;
-    case 3: return casadi_s28;
+    case 3: return casadi_s30;
     default: return 0;
   }
 }
@@ -12695,7 +12843,7 @@ CASADI_SYMBOL_EXPORT int haa_sim_jitter_16_work_bytes(casadi_int *sz_arg, casadi
 }
 
 /* haa_sim_etd_16:(x[16],u[2],s,par[905])->(x_next[16]) */
-static int casadi_f19(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
+static int casadi_f20(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
   casadi_int i;
   casadi_real *rr, *w00=w+16, *w03=w+32, *w04=w+48, *w06=w+64, *w08=w+66, *w09=w+70, *w11=w+74, *w12=w+78, w13, *w14=w+82, *w16=w+98;
   casadi_real *w17=w+102, *w18=w+118;
@@ -12881,7 +13029,7 @@ static int casadi_f19(const casadi_real** arg, casadi_real** res, casadi_int* iw
 }
 
 CASADI_SYMBOL_EXPORT int haa_sim_etd_16(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem){
-  return casadi_f19(arg, res, iw, w, mem);
+  return casadi_f20(arg, res, iw, w, mem);
 }
 
 CASADI_SYMBOL_EXPORT int haa_sim_etd_16_checkout(void) {
@@ -12927,9 +13075,9 @@ CASADI_SYMBOL_EXPORT const char* haa_sim_etd_16_name_out(casadi_int i) {
 CASADI_SYMBOL_EXPORT const casadi_int* haa_sim_etd_16_sparsity_in(casadi_int i) {
   switch (i) {
     case 0: return casadi_s5;
-    case 1: return casadi_s11;
+    case 1: return casadi_s14;
     case 2: return casadi_s4;
-    case 3: return casadi_s29;
+    case 3: return casadi_s31;
     default: return 0;
   }
 }

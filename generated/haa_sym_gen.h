@@ -53,6 +53,24 @@ int haa_plant_5cfa27f41820_work_bytes(casadi_int *sz_arg, casadi_int* sz_res, ca
 #define haa_plant_5cfa27f41820_SZ_RES 4
 #define haa_plant_5cfa27f41820_SZ_IW 0
 #define haa_plant_5cfa27f41820_SZ_W 0
+int haa_plant_864ce79ba35b(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem);
+int haa_plant_864ce79ba35b_checkout(void);
+void haa_plant_864ce79ba35b_release(int mem);
+void haa_plant_864ce79ba35b_incref(void);
+void haa_plant_864ce79ba35b_decref(void);
+casadi_int haa_plant_864ce79ba35b_n_in(void);
+casadi_int haa_plant_864ce79ba35b_n_out(void);
+casadi_real haa_plant_864ce79ba35b_default_in(casadi_int i);
+const char* haa_plant_864ce79ba35b_name_in(casadi_int i);
+const char* haa_plant_864ce79ba35b_name_out(casadi_int i);
+const casadi_int* haa_plant_864ce79ba35b_sparsity_in(casadi_int i);
+const casadi_int* haa_plant_864ce79ba35b_sparsity_out(casadi_int i);
+int haa_plant_864ce79ba35b_work(casadi_int *sz_arg, casadi_int* sz_res, casadi_int *sz_iw, casadi_int *sz_w);
+int haa_plant_864ce79ba35b_work_bytes(casadi_int *sz_arg, casadi_int* sz_res, casadi_int *sz_iw, casadi_int *sz_w);
+#define haa_plant_864ce79ba35b_SZ_ARG 1
+#define haa_plant_864ce79ba35b_SZ_RES 4
+#define haa_plant_864ce79ba35b_SZ_IW 0
+#define haa_plant_864ce79ba35b_SZ_W 0
 int haa_plant_b107ac0be577(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem);
 int haa_plant_b107ac0be577_checkout(void);
 void haa_plant_b107ac0be577_release(int mem);

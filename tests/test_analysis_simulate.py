@@ -145,7 +145,9 @@ def test_casadi_vm_runs_the_same_loop(lim):
 @pytest.mark.parametrize("name", ["sea", "harmonic_drive", "qdd_leg"])
 def test_limits_off_is_the_linear_closed_loop_for_every_bundled_actuator(name):
     # other chains, a current-based torque estimate (qdd_leg) and a motor-side encoder
-    loop = ClosedLoop(load_params(name), basis=False)
+    p = load_params(name)
+    # the QDD leg's own structure commands the current (no simulation): the paper's reads the estimate
+    loop = ClosedLoop(p if p.controller.structure == "paper" else p.with_values(structure="paper"), basis=False)
     n, Ts = 300, loop.params.controller.Ts
     s = simulate(loop, 20.0, 0.5, limits=Limits(), experiment="disturbance-step", amplitude=0.3,
                  duration=(n - 1) * Ts)

@@ -6,7 +6,7 @@ from haa_sym.cli import main
 from haa_sym.errors import ParameterError
 from haa_sym.model.params import ALIASES, actuator_path, builtin_actuators, bundled_actuators
 
-NAMES = ["harmonic_drive", "hyq_haa", "qdd_leg", "sea"]
+NAMES = ["haptic_wall", "harmonic_drive", "hyq_haa", "qdd_leg", "sea"]
 
 
 def test_the_bundled_names_are_the_bundled_files():
@@ -51,7 +51,7 @@ def test_unknown_name_exits_2_listing_the_names(argv, capsys):
 
 def test_unknown_name_in_the_api_names_the_value():
     with pytest.raises(ParameterError, match=r"'hyq.toml': no such parameter file, nor a bundled actuator; "
-                                             r"allowed: a TOML file or a bundled name: harmonic_drive"):
+                                             r"allowed: a TOML file or a bundled name: haptic_wall, harmonic_drive"):
         load_params("hyq.toml")
 
 

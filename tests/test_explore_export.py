@@ -9,12 +9,16 @@ from haa_sym.errors import ParameterError
 from haa_sym.explore.export import EXPORT_NAMES, actuator_toml, export_view
 from haa_sym.explore.state import ViewState, resolve, to_query
 from haa_sym.model.params import bundled_actuators, load_params
+from haa_sym.model.structures import STRUCTURES
 
 
 @pytest.mark.parametrize("name", sorted(bundled_actuators()))
 def test_actuator_file_round_trip(name, tmp_path):
     p = load_params(bundled_actuators()[name])
-    state = ViewState(params=name).with_set("beta", "2.5").with_set("Ts", "0.0005")
+    torque_pi = "beta" in STRUCTURES[p.controller.structure].keys    # the virtual wall has none
+    state = ViewState(params=name).with_set("Ts", "0.0005")
+    if torque_pi:
+        state = state.with_set("beta", "2.5")
     key = p.plant.topology.parameter_keys[0]
     state = state.with_set(key, repr(getattr(p.plant, key) * 1.25))
     if len(p.configurations) >= 2:
@@ -27,7 +31,8 @@ def test_actuator_file_round_trip(name, tmp_path):
     assert back.plant == analysed.plant
     assert back.controller == analysed.controller
     assert back.configurations == analysed.configurations
-    assert back.controller.beta == 2.5 and back.controller.Ts == 0.0005
+    assert back.controller.beta == (2.5 if torque_pi else 1.0) and back.controller.Ts == 0.0005
+    assert back.controller.structure == p.controller.structure
 
 
 def test_export_view_writes_all_three(tmp_path):

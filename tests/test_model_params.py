@@ -105,9 +105,10 @@ def test_overrides_are_validated(params):
 
 
 def test_controller_keys_and_the_velocity_filter_default(params):
-    assert CONTROLLER_KEYS == ("Ts", "N_av", "alpha", "beta", "P_t0", "I_t0", "velocity_filter", "f_c")
-    # the paper's filter is the stated default; a file need not name it
+    assert CONTROLLER_KEYS == ("Ts", "N_av", "alpha", "beta", "P_t0", "I_t0", "velocity_filter", "f_c", "structure")
+    # the paper's filter and structure are the stated defaults; a file need not name them
     assert params.controller.velocity_filter == "average" and params.controller.f_c is None
+    assert params.controller.structure == "paper"
     lp = params.with_values(velocity_filter="lowpass1", f_c=40.0)
     assert lp.controller.velocity_filter == "lowpass1" and lp.controller.f_c == 40.0
 

@@ -28,7 +28,7 @@ from haa_sym.errors import ParameterError
 from haa_sym.io.budget import check_memory, sweep_bytes
 from haa_sym.loop import ClosedLoop, loop_first
 from haa_sym.loop.statespace import closed_loop_batch
-from haa_sym.model.actuator import Body, Topology
+from haa_sym.model.actuator import ROTOR, Body, Topology
 from haa_sym.model.params import Params, Plant, gain_array
 
 __all__ = ["contact_stability", "contact_intervals", "contact_params", "ContactIntervals", "intervals",
@@ -53,6 +53,11 @@ def contact_params(params: Params) -> tuple[Params, str, bool]:
     key = f"K_{top.port}"
     if key in top.parameter_keys:
         return params, key, False
+    if top.port == ROTOR:
+        raise ParameterError(
+            f"{params.source}: the port is the rotor of an actuator without [bodies], which has no stiffness "
+            f"to ground ({key}) for the contact scan to vary; allowed: an actuator file whose port is a body "
+            "([bodies.<name>], [sensors] port)")
     if not isinstance(top, Topology):
         raise ParameterError(
             f"{params.source}: the model has no parameter {key} (the port's stiffness to ground, "

@@ -179,10 +179,11 @@ def _controller(loop: ClosedLoop, P: float, D: float, omega: np.ndarray):
     ctrl, el = loop.params.controller, loop.elements
     Ts = ctrl.Ts
     E = {k: el[k].frequency_response(omega, Ts) for k in ("F_d", "F_vc", "I_z", "z_delay")}
-    P_t, I_t, VC = ctrl.beta * loop.const[0], ctrl.beta * loop.const[1], ctrl.alpha * loop.const[2]
-    PI = P_t + I_t * E["I_z"]
-    K_T = E["z_delay"] * PI
-    K_th = E["z_delay"] * (PI * (P + D * E["F_d"]) - VC * E["F_vc"])
+    # the structure's gains (haa_sym.model.structures): P_r on the reference, P_m on the torque
+    P_r, P_m = ctrl.beta * loop.const[0], ctrl.beta * loop.P_m0
+    I_t, VC = ctrl.beta * loop.const[1], ctrl.alpha * loop.const[2]
+    K_T = E["z_delay"] * (P_m + I_t * E["I_z"])
+    K_th = E["z_delay"] * ((P_r + I_t * E["I_z"]) * (P + D * E["F_d"]) - VC * E["F_vc"])
     return K_T, K_th
 
 
@@ -331,6 +332,7 @@ def limit_cycles(loop: ClosedLoop, P_gain: float, D_gain: float, *, nonlinearity
     LimitCycles
         Every (A, omega) of the harmonic balance, the crossings in increasing frequency.
     """
+    loop.require("voltage", "limit_cycles (the describing function of the voltage-driven plant)")
     key, value = _check(nonlinearity)
     # many small stacked solves: threaded BLAS only contends for the cores (as in the sweeps)
     with blas_limits(BLAS_THREADS):

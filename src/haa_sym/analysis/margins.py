@@ -476,6 +476,8 @@ def _which(loop, which):
         which = {"impedance": "L_imp", "torque": "L_t"}[loop.options.conventions.pm_loop]
     if which not in WHICH:
         raise ParameterError(f"which = {which!r}; allowed: {list(WHICH)} or None (the options' pm_loop)")
+    if which == "L_t":
+        loop.require("torque_loop", "the torque loop's phase margin (pm_loop = 'torque', which = 'L_t')")
     return which
 
 

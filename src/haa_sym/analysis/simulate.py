@@ -589,6 +589,7 @@ def simulate(loop, P_gain: float, D_gain: float, *, limits: Limits | None = None
     -------
     Simulation
     """
+    loop.require("voltage", "simulate (the simulation's plant is driven by the motor voltage)")
     P = _number("P_gain", P_gain, "a finite number (Nm/rad)", lambda v: True)
     D = _number("D_gain", D_gain, "a finite number (Nms/rad)", lambda v: True)
     # small matrices only: BLAS threads cost more than they give (16 ms vs 30 us for one
@@ -611,6 +612,7 @@ def simulate_batch(loop, P_gain, D_gain, *, limits: Limits | None = None,
     ``linear_stable``: the linear loop's decision per point if known (1, 0 or NaN), else
     computed (:func:`linear_verdict`). ``setup``: :func:`batch_setup` of the same loop and
     arguments, if already built (a worker keeps it for its next tasks)."""
+    loop.require("voltage", "simulate_batch (the simulation's plant is driven by the motor voltage)")
     P, D = (np.atleast_1d(np.asarray(v, float)).ravel() for v in np.broadcast_arrays(P_gain, D_gain))
     if not (np.all(np.isfinite(P)) and np.all(np.isfinite(D))):
         raise ParameterError("P_gain, D_gain: not finite; allowed: finite gains (Nm/rad, Nms/rad)")

@@ -177,6 +177,7 @@ def step_response(loop, *, duration: float = 0.3, beta: float | None = None,
     -------
     StepResponse
     """
+    loop.require("torque_loop", "step_response")
     t = _step_times(loop, duration)
     _, _, beta, alpha = loop.gain_points(0.0, 0.0, beta, alpha)
     ss = [m[0] for m in closed_loop_batch(loop, 0.0, 0.0, beta, alpha, cut="T_ref")]
@@ -216,6 +217,7 @@ def dc_gain(loop, *, beta: float | None = None, alpha: float | None = None) -> f
     the torque output does not see, and the matrix form is then singular (python-control's
     ``dcgain`` returns 1.22 for a loop whose step tends to 1).
     """
+    loop.require("torque_loop", "dc_gain")
     _, _, beta, alpha = loop.gain_points(0.0, 0.0, beta, alpha)
     coef = loop.loop_coefficients(np.array([1e-6]), beta, alpha)
     return float(coef.H_T[0].real)
@@ -265,6 +267,7 @@ def torque_bandwidth(loop, *, beta: float | None = None, alpha: float | None = N
     >>> torque_bandwidth(ClosedLoop(load_params().with_values(K_L2=0.0)))   # doctest: +SKIP
     30.36...
     """
+    loop.require("torque_loop", "torque_bandwidth")
     if definition not in BANDWIDTH_DEFINITIONS:
         raise ParameterError(f"definition = {definition!r}; allowed: {list(BANDWIDTH_DEFINITIONS)}")
     _, _, beta, alpha = loop.gain_points(0.0, 0.0, beta, alpha)
@@ -329,6 +332,7 @@ def load_mode(loop, bandwidth: float, *, beta: float | None = None, alpha: float
     ``bandwidth`` (rad/s, e.g. :func:`torque_bandwidth`): the figure the bandwidth gives is then
     the load mode's, not the loop's (a step rings at it). None also when ``bandwidth`` is NaN.
     """
+    loop.require("torque_loop", "load_mode")
     if not np.isfinite(bandwidth):
         return None
     _, _, beta, alpha = loop.gain_points(0.0, 0.0, beta, alpha)
@@ -387,6 +391,7 @@ def torque_bandwidth_map(loop, beta, alpha):
     NaN where the torque loop is unstable. For the paper's definition (leg free in the air) build
     the loop with the port body's ground stiffness 0 (K_L2 = 0).
     """
+    loop.require("torque_loop", "torque_bandwidth_map")
     B = gain_array("beta", beta).ravel()
     A = gain_array("alpha", alpha).ravel()
     BB, AA = np.meshgrid(B, A, indexing="ij")
@@ -445,6 +450,7 @@ def torque_loop_margins(loop, *, beta: float | None = None, alpha: float | None 
         |L_t| is below 1 and still rising at the bottom of that extension: a crossover may lie
         further down, where the torque loop does nothing useful.
     """
+    loop.require("torque_loop", "torque_loop_margins")
     _, _, beta, alpha = loop.gain_points(0.0, 0.0, beta, alpha)
     base = loop.options.omega(loop.params.controller.Ts)
     x = np.array([[1.0, 0.0, 0.0]])

@@ -40,6 +40,7 @@ import scipy.linalg
 from haa_sym.errors import ParameterError
 from haa_sym.loop.plant import continuous_plant
 from haa_sym.model.actuator import CURRENT, ROTOR, Topology
+from haa_sym.model.structures import get as get_structure
 
 __all__ = ["closed_loop_matrices", "plant_matrices", "closed_loop_eigenvalues", "spectral_radius", "frequency_response",
            "VELOCITY_ESTIMATES", "register_velocity_estimate"]
@@ -48,8 +49,9 @@ __all__ = ["closed_loop_matrices", "plant_matrices", "closed_loop_eigenvalues", 
 def _own_output_row(plant, cont, name):
     """The reference's own row of a rotor-side sensor of a chain, assembled from the state
     names and the motor's parameters (not read from the plant function): the current estimate
-    k_t N I_m (``[sensors] torque = "current"``, both torque outputs) and the motor-side encoder
-    theta_m / N (``encoder = "rotor"``). None for every other output."""
+    k_t N I_m (``[sensors] torque = "current"``, both torque outputs), the motor-side encoder
+    theta_m / N (``encoder = "rotor"``) and the rotor's port velocity dtheta_m / N (``port =
+    "rotor"``, an actuator without bodies). None for every other output."""
     top = plant.topology
     if not isinstance(top, Topology):
         return None
@@ -58,6 +60,8 @@ def _own_output_row(plant, cont, name):
         row[cont.state_names.index("I_m")] = plant.k_t * plant.N
     elif name == "theta_encoder" and top.encoder == ROTOR:
         row[cont.state_names.index("theta_m")] = 1.0 / plant.N
+    elif name == f"dtheta_{ROTOR}":                  # a rotor-only actuator's port velocity
+        row[cont.state_names.index("dtheta_m")] = 1.0 / plant.N
     else:
         return None
     return row
@@ -73,10 +77,17 @@ def _zoh_plant(params, outputs):
     C = np.array([cont.C[cont.output_names.index(o)] if (own := _own_output_row(params.plant, cont, o)) is None
                   else own for o in outputs])
     B = cont.B[:, [0, 2]]                                # V_m, T_dist
+    A = cont.A
+    if get_structure(params.controller.structure).command == "current":
+        # the current imposed: the electrical equation dropped, the current's column of A (the
+        # motor torque k_t N I_m on the mechanics) the command's; a sensor row of I_m reads nothing
+        i = cont.state_names.index("I_m")
+        B = np.delete(np.column_stack([A[:, i], B[:, 1]]), i, axis=0)
+        A, C = np.delete(np.delete(A, i, axis=0), i, axis=1), np.delete(C, i, axis=1)
     drive = params.drive
     if drive.tau_drive > 0 or drive.delay_drive > 0:
-        return _drive_plant(cont.A, B, C, params.controller.Ts, drive.tau_drive, drive.delay_drive)
-    Ad, Bd, Cd, Dd, _ = cont2discrete((cont.A, B, C, np.zeros((len(outputs), 2))),
+        return _drive_plant(A, B, C, params.controller.Ts, drive.tau_drive, drive.delay_drive)
+    Ad, Bd, Cd, Dd, _ = cont2discrete((A, B, C, np.zeros((len(outputs), 2))),
                                       params.controller.Ts, method="zoh")
     return Ad, Bd, Cd, Dd
 
@@ -246,18 +257,28 @@ def _velocity_estimate_blocks(ctrl):
 
 def _blocks(params, options, torque_output):
     """The dynamic blocks: (name, (A, B, C, D), output names, input names), and the velocity
-    estimate's series links (input name: output name)."""
+    estimate's series links (input name: output name). A block the structure does not use (the
+    integral without a torque loop, an estimate only the absent compensation would read) is left
+    out, so that no uncoupled state adds an eigenvalue."""
     ctrl = params.controller
+    st = get_structure(ctrl.structure)
     port_body = options.structure.port != "encoder_average"
     outs = [torque_output, "theta_encoder"] + ([options.structure.port] if port_body else [])
     blocks = [("plant", _zoh_plant(params, outs), [f"y_{o}" for o in ("T", "th", "p")[:len(outs)]],
                ["u_V", "u_Tdist"])]
-    estimate, links = _velocity_estimate_blocks(ctrl)
-    blocks += estimate
-    if options.structure.filter != "both":
+    f = options.structure.filter
+    uses_F = f in ("both", "impedance") or not port_body or (f == "compensation" and st.velocity_compensation)
+    uses_diff = f == "compensation" or (f == "impedance" and st.velocity_compensation)
+    links = {}
+    if uses_F:
+        estimate, links = _velocity_estimate_blocks(ctrl)
+        blocks += estimate
+    if uses_diff:
         blocks.append(("diff", _tf_block([1 / ctrl.Ts, -1 / ctrl.Ts], [1.0]), ["v_diff"], ["u_diff"]))
     # backward Euler (Eq. 7) with the state in N s (the integral itself), so it is scaled like e
-    blocks.append(("integral", (np.eye(1), ctrl.Ts * np.eye(1), np.eye(1), ctrl.Ts * np.eye(1)), ["y_I"], ["u_I"]))
+    if st.torque_loop:
+        blocks.append(("integral", (np.eye(1), ctrl.Ts * np.eye(1), np.eye(1), ctrl.Ts * np.eye(1)), ["y_I"],
+                       ["u_I"]))
     if options.structure.delay:
         d = options.structure.delay                                 # a shift register of d samples
         shift = (np.eye(d, k=-1), np.eye(d, 1), np.eye(1, d, d - 1), np.zeros((1, 1)))
@@ -274,8 +295,15 @@ def _batch(loop, P_gain, D_gain, beta=None, alpha=None, cut=None):
     P, D, beta, alpha = (np.atleast_1d(np.asarray(v, float)).ravel()
                          for v in np.broadcast_arrays(P_gain, D_gain, beta, alpha))
     k = P.size
+    st = get_structure(ctrl.structure)
+    # the structure's gains from its definition (docs/model.md, "Controller structures"): the PI
+    # on e, the feed-forward R/(k_t N) T_ref (scaled by beta with the PI), the compensation, or
+    # for a current command T_ref/(k_t N) alone
     P_t, I_t = beta * ctrl.P_t0, beta * ctrl.I_t0
-    VC = alpha * _vc0(pl)
+    VC = alpha * _vc0(pl) if st.velocity_compensation else 0.0 * alpha
+    K_ff = beta * (pl.R / (pl.k_t * pl.N)) if st.feedforward else 0.0 * beta
+    if st.command == "current":
+        P_t, I_t, K_ff = 0.0 * beta, 0.0 * beta, np.full(k, 1.0 / (pl.k_t * pl.N))
     damped = opt.structure.torque_damping
     blocks, links = _blocks(params, opt, "T_sensor" if damped else "T_sensor_spring")
     ys = [y for _, _, yn, _ in blocks for y in yn]
@@ -301,15 +329,17 @@ def _batch(loop, P_gain, D_gain, beta=None, alpha=None, cut=None):
         r[:, ys.index(name) if name in ys else len(ys) + ws.index(name)] = 1.0 if scale is None else scale
         return r
     th = sig("y_th")
-    v_F = sig("v_F")
+    v_F = sig("v_F") if "v_F" in ys else None
     v_diff = sig("v_diff") if "v_diff" in ys else v_F
     v_d = v_F if opt.structure.filter in ("both", "impedance") else v_diff
     v_vc = v_F if opt.structure.filter in ("both", "compensation") else v_diff
     imp = P[:, None] * th + D[:, None] * v_d                                  # Eq. (8)
     T_ref = sig("r") if cut == "T_ref" else -imp
     e = T_ref - sig("y_T")
-    u_pi = P_t[:, None] * e + I_t[:, None] * sig("y_I")                       # Eq. (7)
-    V_k = (sig("r") if cut == "PI" else u_pi) + VC[:, None] * v_vc
+    y_I = sig("y_I") if "y_I" in ys else np.zeros((k, width))
+    u_pi = P_t[:, None] * e + I_t[:, None] * y_I + K_ff[:, None] * T_ref      # Eq. (7), feed-forward
+    # no compensation: no estimate it would read (v_vc None), VC zero
+    V_k = (sig("r") if cut == "PI" else u_pi) + (0.0 if v_vc is None else VC[:, None] * v_vc)
     inputs = {"u_V": sig("y_del") if opt.structure.delay else V_k, "u_Tdist": sig("T_dist"), "u_F": th,
               "u_diff": th, "u_I": e, "u_del": V_k, **{u: sig(y) for u, y in links.items()}}
     KE = np.stack([inputs[u] for u in us], axis=1)                           # (k, nu, ny + nw)

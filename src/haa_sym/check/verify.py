@@ -31,6 +31,10 @@ from haa_sym.analysis.torque import torque_loop_margins
 from haa_sym.model.actuator import CURRENT, HYQ, MOTOR_DOMAIN, Topology
 from haa_sym.errors import ParameterError
 from haa_sym.model.params import Params, load_params
+from haa_sym.model.structures import STRUCTURES
+from haa_sym.compiled.layout import gain_monomials
+from haa_sym.loop.exact import transfer_polynomials
+from haa_sym.model.elements import frequency_responses
 
 LOAD_KEYS = ("J_L1", "B_L1", "J_L2", "B_L2", "K_L2", "K_p", "D_p")
 
@@ -264,8 +268,8 @@ def row_exact_vc_generalised(params: Params) -> Row:
     num, den, ring = chain.torque_tf_fraction(top, syms, vc=vc)
     expected = chain.load_free_g_tvc(top, syms)
     same = tt.same_rational(num, den, expected, ring)
-    g = top.gearbox
-    motor = set(MOTOR_DOMAIN) | {f"K_{g.name}", f"D_{g.name}"}
+    g = top.gearbox                     # None for a rotor-only actuator
+    motor = set(MOTOR_DOMAIN) | ({f"K_{g.name}", f"D_{g.name}"} if g else set())
     loads = sorted(str(x) for x in expected.free_symbols if str(x) not in motor and str(x) != "s")
     spring = top.sensor != CURRENT and not top.torque_damping
     return Row(claim, same and not loads,
@@ -315,7 +319,7 @@ def run(params: Params) -> list[Row]:
         rows += row_torque_margins(params)
         rows.append(row_alpha_range(params))
         rows.append(row_plant_values(params))
-        return rows
+        return rows + row_structures(params)
     if not isinstance(params.plant.topology, Topology):       # a sympy model written in code
         return [row_pi(), row_plant_values(params)]
     return generic_rows(params)
@@ -324,7 +328,7 @@ def run(params: Params) -> list[Row]:
 def generic_rows(params: Params) -> list[Row]:
     """The rows every actuator gets (``run`` gives HyQ the paper's rows instead of the first two)."""
     return [row_chain_state_space(params), row_exact_vc_generalised(params), row_vc_simplified(),
-            row_pi(), row_plant_values(params)]
+            row_pi(), row_plant_values(params)] + row_structures(params)
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -352,3 +356,124 @@ def main(argv: list[str] | None = None) -> int:
 
 if __name__ == "__main__":
     sys.exit(main())
+
+
+# --- the controller structures (haa_sym.model.structures; docs/model.md, "Controller structures") --
+#: The torque loop's values a file without one is checked with (the rows test identities, which
+#: hold at any values): the paper's PI and compensation scale.
+_STRUCTURE_DEFAULTS = {"P_t0": 0.382, "I_t0": 18.0, "beta": 1.0, "alpha": 0.94}
+
+
+def _with_structure(params: Params, name: str) -> Params:
+    """``params`` with ``structure = name``: the keys it reads from the file ([controller] or
+    [controller.<name>]), else the paper's structure's of the file, else :data:`_STRUCTURE_DEFAULTS`."""
+    ctrl = params.controller
+    own = {k: getattr(ctrl, k) for k in STRUCTURES[ctrl.structure].keys}
+    pool = {**_STRUCTURE_DEFAULTS, **ctrl.alternatives.get("paper", {}), **ctrl.alternatives.get(name, {}), **own}
+    keys = {k: pool[k] for k in STRUCTURES[name].keys}
+    return params.with_values(structure=name, **keys)
+
+
+def row_structures(params: Params) -> list[Row]:
+    """Each controller structure's closed loop, derived in sympy from its own block equations
+    (u = P_r T_ref - P_m T + I_t I_z e + VC F_vc theta, e = T_ref - T, T_ref = -(P_gain + D_gain
+    F_d) theta, V = z^-d u, theta, T and the port velocity from V and T_dist through the sampled
+    plant): the characteristic polynomial of :class:`ClosedLoop` (its exact basis times the gain
+    monomials) is the derived return difference times the loop's denominators (d(z), the
+    delay's, the integrator's, the lcm of the estimates'), up to one constant factor, exactly
+    at random rational z and gains; the port impedance Z = T_dist / velocity of the generated
+    kernels equals the derived one on the options' grid (the plant's and the elements' responses
+    substituted, 1e-9); the loop's constants are the structure's definition (R/(k_t N),
+    1/(k_t N)) to 2 ulp."""
+    import sympy as sp
+    from fractions import Fraction
+    rng = random.Random(24)
+    names = ("GTV", "GTd", "GthV", "Gthd", "GpV", "Gpd", "F_d", "F_vc", "I_z", "zd")
+    S = dict(zip(names, sp.symbols(names)))
+    Pg, Dg, P_r, P_m, I_t, VC, T_dist, V = sp.symbols("P_gain D_gain P_r P_m I_t VC T_dist V")
+    # the derivation, once for every structure: the structure only sets P_r, P_m, I_t, VC
+    th = S["GthV"] * V + S["Gthd"] * T_dist
+    T = S["GTV"] * V + S["GTd"] * T_dist
+    T_ref = -(Pg + Dg * S["F_d"]) * th
+    u = P_r * T_ref - P_m * T + I_t * S["I_z"] * (T_ref - T) + VC * S["F_vc"] * th
+    V_sol = sp.solve(sp.Eq(V, S["zd"] * u), V)[0]
+    Rd = sp.expand(1 - S["zd"] * sp.diff(u, V))                  # the return difference at V
+    vel = sp.cancel((S["GpV"] * V_sol + S["Gpd"] * T_dist) / T_dist)
+    Z_expr = sp.lambdify(list(S.values()) + [Pg, Dg, P_r, P_m, I_t, VC], 1 / vel, "numpy")
+
+    def horner(c, x):
+        v = Fraction(0)
+        for ci in c:
+            v = v * x + ci
+        return v
+
+    def sym_poly(c):
+        n = len(c) - 1
+        return sum(sp.Rational(ci.numerator, ci.denominator) * sp.Symbol("z") ** (n - i) for i, ci in enumerate(c))
+
+    rows = []
+    for name, st in STRUCTURES.items():
+        t = time.time()
+        p = _with_structure(params, name)
+        loop = ClosedLoop(p)
+        pl, ctrl, el = p.plant, p.controller, loop.elements
+        d, nums = transfer_polynomials(loop.plant.Phi, loop.plant.Gamma[:, [0, 2]], loop.plant.C)
+        averaged = loop.options.structure.port == "encoder_average"
+        port = "theta_encoder" if averaged else loop.options.structure.port
+        rowsof = {"T": loop.plant_output(loop.torque_output), "th": loop.plant_output("theta_encoder"),
+                  "p": loop.plant_output(port)}
+        k = pl.k_t * pl.N
+        want = {"paper": (ctrl.P_t0, ctrl.P_t0, ctrl.I_t0, loop.plant.VC0),
+                "torque_pi": (ctrl.P_t0, ctrl.P_t0, ctrl.I_t0, 0.0),
+                "torque_pi_ff": (ctrl.P_t0 + pl.R / k, ctrl.P_t0, ctrl.I_t0, 0.0),
+                "impedance_current": (1.0 / k, 0.0, 0.0, 0.0)}[name]
+        got = (float(loop.const[0]), float(loop.P_m0), float(loop.const[1]), float(loop.const[2]))
+        const_ok = all(abs(g - w) <= 2 * np.spacing(abs(w)) for g, w in zip(got, want))
+        # the loop's denominators, from the elements' own (sympy's lcm of the estimates')
+        zs = sp.Symbol("z")
+        lcm = sp.Poly(sp.lcm(sym_poly(el["F_d"].denominator), sym_poly(el["F_vc"].denominator)), zs)
+        lcm_c = [Fraction(int(c.p), int(c.q)) for c in lcm.all_coeffs()]
+        exact = loop._exact_basis()
+        ratios = set()
+        for _ in range(3):
+            pt = [Fraction(rng.randint(1, 3000)), Fraction(rng.randint(0, 50)), Fraction(1), Fraction(0)]
+            if "beta" in st.keys:
+                pt[2] = Fraction(rng.randint(1, 8), 4)
+            if "alpha" in st.keys:
+                pt[3] = Fraction(rng.randint(0, 10), 10)
+            g = gain_monomials(pt, [Fraction(c) for c in got[:1] + got[2:]], Fraction(1))
+            chi = [sum(gj * bj[i] for gj, bj in zip(g, exact)) for i in range(len(exact[0]))]
+            gains = {P_r: pt[2] * Fraction(got[0]), P_m: pt[2] * Fraction(got[1]), I_t: pt[2] * Fraction(got[2]),
+                     VC: pt[3] * Fraction(got[3]), Pg: pt[0], Dg: pt[1]}
+            for z0 in (Fraction(rng.randint(2, 40), rng.randint(2, 9)), Fraction(-7, 3)):
+                dz = horner(d, z0)
+                val = {"GTV": horner(nums[rowsof["T"]][0], z0) / dz, "GthV": horner(nums[rowsof["th"]][0], z0) / dz,
+                       "I_z": horner(el["I_z"].numerator, z0) / horner(el["I_z"].denominator, z0),
+                       "zd": horner(el["z_delay"].numerator, z0) / horner(el["z_delay"].denominator, z0),
+                       **{f: horner(el[f].numerator, z0) / horner(el[f].denominator, z0) for f in ("F_d", "F_vc")}}
+                Den = dz * horner(el["z_delay"].denominator, z0) * horner(el["I_z"].denominator, z0) * horner(lcm_c, z0)
+                rd = Rd.subs({**{S[n]: sp.Rational(v.numerator, v.denominator) for n, v in val.items()},
+                              **{s_: sp.Rational(v.numerator, v.denominator) for s_, v in gains.items()}})
+                ratios.add(sp.Rational(horner(chi, z0).numerator, horner(chi, z0).denominator) / (rd * sp.Rational(
+                    Den.numerator, Den.denominator)))
+        chi_ok = len(ratios) == 1 and next(iter(ratios)) != 0
+        # Z on the options' grid (every 50th frequency) at one gain point
+        w = loop.options.omega(ctrl.Ts)[::50]
+        P0, D0 = 0.3 * rng.randint(1, 3000), 0.01 * rng.randint(0, 500)
+        G = loop.plant.frequency_response(w, outputs=(loop.torque_output, "theta_encoder", port),
+                                          inputs=("V_m", "T_dist")).reshape(6, -1)
+        E = dict(zip(("F_d", "F_vc", "I_z", "zd", "F_port"),
+                     frequency_responses([el[k_] for k_ in ("F_d", "F_vc", "I_z", "z_delay", "F_port")], w, ctrl.Ts)))
+        if averaged:
+            G[4], G[5] = E["F_port"] * G[2], E["F_port"] * G[3]
+        alpha = 1.0 if "alpha" in st.keys else 0.0
+        Z_sym = Z_expr(*G, E["F_d"], E["F_vc"], E["I_z"], E["zd"], P0, D0, got[0], got[1], got[2], alpha * got[3])
+        Z_loop = loop.frequency_response(w, P0, D0, 1.0, alpha).Z
+        z_err = float(np.max(np.abs(Z_loop - Z_sym) / np.abs(Z_sym)))
+        rows.append(Row(f"Controller structure {name!r} ({st.summary}): chi and Z equal their derivation from "
+                        "the structure's equations (sympy)", chi_ok and const_ok and z_err < 1e-9,
+                        f"chi / (return difference x denominators) one constant at 3 gain points x 2 rational z: "
+                        f"{chi_ok}; constants (P_r0, P_m0, I_t0, VC0) = the definition to 2 ulp: {const_ok}; "
+                        f"Z at {w.size} frequencies: max relative difference {z_err:.2g} (tolerance 1e-9) "
+                        f"({time.time() - t:.1f} s)"))
+    return rows

@@ -332,6 +332,9 @@ def _margins_of_point(loop, P: float, D: float) -> None:
     print(f"closed loop: {'stable' if st.stable else 'UNSTABLE'}, spectral radius {float(st.spectral_radius):.9g}")
     for name, label in (("L_t", "torque loop (opened at the PI output)"),
                         ("L_imp", "impedance loop (opened at T_lref)")):
+        if name == "L_t" and not loop.structure.torque_loop:
+            print(f"{label}: none (structure = {loop.structure.name!r} has no torque loop)")
+            continue
         m = margins(loop, P, D, which=name)
         pms = ", ".join(f"{pm:+.2f} deg @ {w:.6g} rad/s" for pm, w in zip(m.phase_margins_deg, m.gain_crossovers))
         gms = ", ".join(f"{g:+.2f} dB @ {w:.6g} rad/s" for g, w in zip(m.gain_margins_db, m.phase_crossovers))

@@ -482,6 +482,7 @@ def schedule(loop, P_gain=None, D_gain=None, *, beta_range=(0.1, 8.0), beta_tol:
     -------
     Schedule
     """
+    loop.require("torque_loop", "schedule (the torque-gain scheduler)")
     params, options = loop.params, loop.options
     P = gain_array("P_gain", grid(DEFAULT_P_GAIN) if P_gain is None else P_gain).ravel()
     D = gain_array("D_gain", grid(DEFAULT_D_GAIN) if D_gain is None else D_gain).ravel()

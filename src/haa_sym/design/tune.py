@@ -70,6 +70,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from haa_sym.analysis.passivity import passivity
+from haa_sym.model.structures import require as require_structure
 from haa_sym.analysis.torque import (BANDWIDTH_DEFINITIONS, load_mode, step_figures, step_response, torque_bandwidth,
                                      torque_loop_margins)
 from haa_sym.errors import ParameterError
@@ -472,6 +473,7 @@ def tune(params, options: LoopOptions | None = None, tune_options: TuneOptions |
         No point of the coarse grid meets the targets (the message says which target failed
         most often), or bad options.
     """
+    require_structure(params.controller.structure, "torque_loop", "tune (the torque PI tuner)")
     opts = tune_options or TuneOptions()
     prob = _Problem(params, options, opts)
     pl = params.plant

@@ -683,6 +683,9 @@ def _margins_html(d) -> str:
     for loop, label in (("impedance", "impedance loop (opened at T_lref)"),
                         ("torque", "torque loop (opened at the PI output)")):
         m = d.margins[loop]
+        if m is None:                       # a structure without a torque loop
+            rows.append(f"<b>{label}</b>: none (no torque loop)")
+            continue
         pms = ", ".join(f"{pm:+.2f} deg @ {w:.4g} rad/s" for pm, w in zip(m["phase_margins_deg"],
                                                                          m["gain_crossovers_rad_s"])) or "none"
         gms = ", ".join(f"{g:+.2f} dB @ {w:.4g} rad/s" for g, w in zip(m["gain_margins_db"],

@@ -23,6 +23,7 @@ from haa_sym.io.formats import save_json
 from haa_sym.io.outputs import Transaction, check_file
 from haa_sym.io.inputs import command_scope, protect, read_text
 from haa_sym.model.params import CONTROLLER_UNITS, MAX_FILE_BYTES
+from haa_sym.model.structures import STRUCTURES
 
 __all__ = ["actuator_toml", "export_view", "export_paths", "EXPORT_NAMES", "MAX_EXPORTS"]
 
@@ -77,8 +78,9 @@ def actuator_toml(params) -> str:
         table, name = where[key]
         _set_entry(table, name, _number(getattr(params.plant, key)), top.units.get(key))
     ctrl = data.setdefault("controller", {})
+    unread = STRUCTURES[params.controller.structure].unread    # neutral values, left out of a file
     for key, value in params.controller.__dict__.items():
-        if value is None:
+        if value is None or key in unread or key == "alternatives":   # sub-tables stay as read
             ctrl.pop(key, None)
         else:
             _set_entry(ctrl, key, value if isinstance(value, str) else _number(value), CONTROLLER_UNITS.get(key))

@@ -539,13 +539,16 @@ def _point_detail(loop, P_gain, D_gain) -> Detail:
     ctrl = loop.params.controller
     poles = closed_loop_eigenvalues(loop, np.array([[P], [D], [ctrl.beta], [ctrl.alpha]]))[0]
     w, ph = corrected_phase(loop, P, D)
-    s = step_response(loop, duration=STEP_DURATION_S)
+    # a structure without a torque loop (haa_sym.model.structures): no torque step, no margins
+    torque = loop.structure.torque_loop
+    s = step_response(loop, duration=STEP_DURATION_S) if torque else None
     z = impedance_step(loop, P, D, duration=STEP_DURATION_S)
     return Detail(P, D, bool(st.stable), float(st.spectral_radius),
                   {"impedance": _margins_dict(margins(loop, P, D, which="L_imp")),
-                   "torque": _margins_dict(margins(loop, P, D, which="L_t"))},
+                   "torque": _margins_dict(margins(loop, P, D, which="L_t")) if torque else None},
                   {"omega_rad_s": w, "phase_deg": ph},
-                  {"t_s": s.t, "T_Nm": s.T, "final_value": s.final_value},
+                  {"t_s": s.t, "T_Nm": s.T, "final_value": s.final_value} if torque else
+                  {"t_s": np.zeros(0), "T_Nm": np.zeros(0), "final_value": float("nan")},
                   {"t_s": z.t, "theta_rad": z.theta, "final_value_rad_per_Nm": z.final_value},
                   poles)
 

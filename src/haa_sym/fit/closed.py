@@ -27,7 +27,11 @@ class _LoopWithPlant:
     def __init__(self, loop, plant: DiscretePlant):
         self.params, self.options, self.elements = loop.params, loop.options, loop.elements
         self.plant = plant
-        self.const = np.array([loop.const[0], loop.const[1], plant.VC0])
+        # the structure's constants (haa_sym.model.structures), VC0 from the fitted plant when
+        # the structure compensates; P_m0, the PI's gain on the measured torque
+        self.const = np.array([loop.const[0], loop.const[1],
+                               plant.VC0 if loop.structure.velocity_compensation else 0.0])
+        self.P_m0 = loop.P_m0
         self.torque_output = loop.torque_output
 
     def plant_output(self, name):
@@ -51,6 +55,7 @@ def _loop(params, options):
 def torque_loop_model(params, keys, inputs, outputs, options=None) -> Sampled:
     """The closed torque loop from ``torque_ref`` (and ``T_dist``) to ``outputs`` at the file's Ts."""
     loop = _loop(params, options)
+    loop.require("voltage", "identify (the torque loop closed around the fitted voltage-driven plant)")
     top = params.plant.topology
     A, B, C, dA, dB, dC, VC0, dVC0 = plant_derivatives(params.plant, keys, vc0=True)
     Ts = params.controller.Ts

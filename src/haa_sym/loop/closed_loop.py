@@ -43,13 +43,14 @@ from haa_sym.loop.exact import bilinear, polymul, polysub, to_float, transfer_po
 from haa_sym.errors import ParameterError
 from haa_sym.io.progress import message
 from haa_sym.model.params import Params, gain_array, gain_points
-from haa_sym.model.elements import backward_difference, common_denominator, delay, frequency_responses, pi_integral
-from haa_sym.model import filters
+from haa_sym.model.elements import (Element, backward_difference, common_denominator, delay, frequency_responses,
+                                    pi_integral)
+from haa_sym.model import filters, structures
 from haa_sym.model.filters import controller_filter
 from haa_sym.compiled.layout import (COEF_FORMS, COEF_OUTPUTS, COEF_TERMS, FREQ_COLUMN, N_BASIS, TORQUE_GAINS,
                             gain_monomials)
 from haa_sym.loop.options import LoopOptions
-from haa_sym.loop.plant import DiscretePlant, continuous_plant, discretize, drive_states, with_lag
+from haa_sym.loop.plant import DiscretePlant, continuous_plant, current_commanded, discretize, drive_states, with_lag
 from haa_sym.loop.statespace import closed_loop_eigenvalues, to_statespace
 
 __all__ = ["LoopCoefficients", "ClosedLoop", "StabilityResult", "FrequencyResponse", "FREQ_OUTPUTS", "loop_first"]
@@ -177,10 +178,14 @@ class ClosedLoop:
         # the drive's lag (a continuous state) and dead time (the delay line) are part of the
         # sampled plant (haa_sym.loop.plant.discretize): every analysis of this loop sees them
         drive = params.drive
+        self.structure = structures.get(ctrl.structure)
+        # a current-commanded motor (structure "impedance_current"): the electrical state is
+        # imposed and the command is the current; the drive's lag and delay act on it
+        current = self.structure.command == "current"
         self.plant: DiscretePlant = _PLANTS.get(
-            (params.plant, ctrl.Ts, backend, drive),
-            lambda: discretize(with_lag(continuous_plant(params.plant, backend), drive.tau_drive), ctrl.Ts,
-                               drive.delay_drive))
+            (params.plant, ctrl.Ts, backend, drive, current),
+            lambda: discretize(with_lag(current_commanded(continuous_plant(params.plant, backend), current),
+                                        drive.tau_drive), ctrl.Ts, drive.delay_drive))
         # chi = (z - 1) z^delay z^N_av d(z) + ...: integrator, delay, filter, plant states
         el = self.elements
         filter_order = common_denominator(el["F_d"], el["F_vc"])[0].__len__() - 1
@@ -196,7 +201,7 @@ class ClosedLoop:
                 f"delay = {self.options.structure.delay}; a larger capacity needs CAPACITIES in "
                 "codegen/generate.py of a source tree and `make derive`)")
         self.capacity = caps[0]
-        self.const = np.array([ctrl.P_t0, ctrl.I_t0, self.plant.VC0])
+        self.const, self.P_m0 = self._structure_gains(params)
         ports = [o for o in self.plant.output_names if o.startswith("dtheta_")] + ["encoder_average"]
         if self.options.structure.port not in ports:
             raise ParameterError(
@@ -257,6 +262,30 @@ class ClosedLoop:
                 f"delay = {d}; a larger capacity needs CAPACITIES in codegen/generate.py of a source tree "
                 "and `make derive`)")
 
+    def _structure_gains(self, params: Params):
+        """``(const, P_m0)``: the generated functions' constants [P_r0, I_t0, VC0] of this
+        structure (haa_sym.model.structures; layout.CONST's P_t0 is the gain on the torque
+        reference, P_r0) and P_m0, the proportional gain on the measured torque (V/Nm at beta = 1)."""
+        ctrl, st, pl = params.controller, self.structure, params.plant
+        if st.name != structures.DEFAULT:
+            missing = [k for k in ("k_t", "N", "R") if k not in pl.keys]
+            if missing:
+                raise ParameterError(f"structure = {st.name!r} needs the motor's {missing} of an actuator file "
+                                     f"({params.source} has none); allowed: structure = 'paper'")
+        if st.command == "current":             # u = T_ref / (k_t N), a current in A
+            return np.array([1.0 / (pl.k_t * pl.N), 0.0, 0.0]), 0.0
+        VC0 = self.plant.VC0 if st.velocity_compensation else 0.0
+        # the feed-forward: T_ref through the motor's static inverse at stall, R/(k_t N) V/Nm
+        P_r0 = ctrl.P_t0 + (pl.R / (pl.k_t * pl.N) if st.feedforward else 0.0)
+        return np.array([P_r0, ctrl.I_t0, VC0]), ctrl.P_t0
+
+    @property
+    def torque_ratio(self) -> Fraction:
+        """P_m0 / P_r0 exactly: the share of the reference's proportional gain that also acts on
+        the measured torque (1 without feed-forward, 0 without a torque loop)."""
+        P_r0 = Fraction(float(self.const[0]))
+        return Fraction(float(self.P_m0)) / P_r0 if P_r0 else Fraction(0)
+
     # --- the characteristic polynomial -------------------------------------------------------
     def plant_output(self, name: str) -> int:
         """Row of the plant's output ``name`` (its C matrix and transfer numerators)."""
@@ -279,16 +308,20 @@ class ClosedLoop:
         ctrl, f = self.params.controller, self.options.structure.filter
         F = controller_filter(ctrl)
         diff = backward_difference(ctrl.Ts)
-        return {"F_d": F if f in ("both", "impedance") else diff,
-                "F_vc": F if f in ("both", "compensation") else diff,
-                "F_port": F, "I_z": pi_integral(ctrl.Ts), "z_delay": delay(self.options.structure.delay)}
+        F_d = F if f in ("both", "impedance") else diff
+        # a structure without velocity compensation (or without a torque loop) has no F_vc and
+        # no integrator: F_vc is F_d (no states of its own), I_z is zero (no state at z = 1)
+        vc, pi = self.structure.velocity_compensation, self.structure.torque_loop
+        return {"F_d": F_d, "F_vc": (F if f in ("both", "compensation") else diff) if vc else F_d,
+                "F_port": F, "I_z": pi_integral(ctrl.Ts) if pi else Element("no_integral", (0,), (1,)),
+                "z_delay": delay(self.options.structure.delay)}
 
     def _structure_key(self) -> tuple:
         """Everything the basis depends on: the sampled plant and the loop's structure."""
         p, el = self.plant, self.elements
         return (array_key(p.Phi, p.Gamma[:, :1], p.C), self.params.controller.Ts,
                 tuple((e.numerator, e.denominator) for e in el.values()), self.torque_output,
-                self.capacity)
+                self.capacity, self.torque_ratio)
 
     def _exact_basis(self) -> list[list[Fraction]]:
         """Exact descending coefficients of b0..b7 in z (haa_sym.compiled.layout.GAIN_MONOMIALS), each of
@@ -298,7 +331,9 @@ class ClosedLoop:
         denominator of the two velocity estimates, F_d = A_d/D and F_vc = A_vc/D (Eq. 6-8). P_t
         D_gain and VC multiply the same polynomial when both estimates are one filter; they nearly
         cancel in parts of the plane, so chi uses (P_t D_gain - VC) b_d - VC (b_vc - b_d) with the
-        difference exact (zero for filter = "both").
+        difference exact (zero for filter = "both"). The structure (haa_sym.model.structures) sets
+        the gains: P_t stands for P_r, the gain on the torque reference, and the torque path's
+        own proportional gain P_m = ratio P_r (:attr:`torque_ratio`) scales b1.
         """
         el = self.elements
         d, nums = _transfer_polynomials(self.plant, self.params.source)
@@ -310,7 +345,7 @@ class ClosedLoop:
         b_d = polymul(I_den, z_num, A_d, n_th)
         basis = [
             polymul(I_den, z_den, d, D),                                  # 1
-            polymul(I_den, z_num, D, n_T),                                # P_t
+            [self.torque_ratio * c for c in polymul(I_den, z_num, D, n_T)],  # P_t (P_m = ratio P_r)
             polymul(I_num, z_num, D, n_T),                                # I_t
             polymul(I_den, z_num, D, n_th),                               # P_t P_gain
             polymul(I_num, z_num, D, n_th),                               # I_t P_gain
@@ -348,7 +383,24 @@ class ClosedLoop:
             shapes = ", ".join(f"{n} {v.shape}" for n, v in named)
             raise ParameterError(f"gain arrays of shapes {shapes} do not broadcast together; allowed: "
                                  "shapes that broadcast (one value each per gain point)") from None
+        self._check_unread(arrs[2], arrs[3])
         return np.stack([a.ravel() for a in arrs]).reshape(4, -1), arrs[0].shape
+
+    def require(self, feature: str, what: str) -> None:
+        """Refuse ``what`` in one line when this loop's structure lacks ``feature``
+        (:func:`haa_sym.model.structures.require`: "torque_loop", "voltage")."""
+        structures.require(self.structure.name, feature, what)
+
+    def _check_unread(self, beta, alpha) -> None:
+        """Refuse a beta or alpha other than its neutral value for a structure that does not read
+        it (haa_sym.model.structures.NEUTRAL): no torque PI to scale, no compensation."""
+        for name, v in (("beta", beta), ("alpha", alpha)):
+            neutral = structures.NEUTRAL[name]
+            if name in self.structure.unread and np.any(np.asarray(v) != neutral):
+                raise ParameterError(f"{name} = {np.asarray(v).ravel()[np.argmax(np.asarray(v).ravel() != neutral)]:g}: "
+                                     f"structure = {self.structure.name!r} has no "
+                                     f"{'torque PI' if name == 'beta' else 'velocity compensation'}; allowed: "
+                                     f"{name} = {neutral:g}")
 
     def characteristic_polynomial(self, P_gain, D_gain, beta=None, alpha=None) -> np.ndarray:
         """Descending coefficients of chi (monic up to the factor N_av Ts) for one point."""
@@ -437,7 +489,7 @@ class ClosedLoop:
             return self._loop_coefficients(omega, beta, alpha)
         key = (array_key(self.plant.Phi, self.plant.Gamma, self.plant.C, omega, self.const),
                tuple((e.numerator, e.denominator) for e in el.values()), self.torque_output,
-               self.options.structure.port, beta, alpha, self.backend)
+               self.options.structure.port, beta, alpha, self.backend, self.P_m0)
         return _COEFFICIENTS.get(key, lambda: self._loop_coefficients(omega, beta, alpha))
 
     def _loop_coefficients(self, omega, beta, alpha) -> LoopCoefficients:
@@ -454,17 +506,40 @@ class ClosedLoop:
         if averaged:                      # the port reads the controller's velocity estimate
             F = values.pop("F_port")
             values["G_pV"], values["G_pd"] = F * values["G_thV"], F * values["G_thd"]
+        phi = self._torque_path(omega)
+        if phi is not None:
+            # the kernel applies PI = P_r + I_t I_z to T_ref - T; the structure's measured torque
+            # goes through P_m + I_t I_z: the same as the torque signal times phi = (P_m + I_t
+            # I_z)/(P_r + I_t I_z) (beta cancels), and H_T = T/T_ref is the kernel's over phi
+            values["G_TV"], values["G_Td"] = phi * values["G_TV"], phi * values["G_Td"]
         cols = np.empty((2 * len(FREQ_COLUMN), omega.size))
         for i, k in enumerate(FREQ_COLUMN):
             cols[2 * i], cols[2 * i + 1] = values[k].real, values[k].imag
         (out,) = evaluators(self.backend).call_columns(
             "haa_loopcoef", [cols, self.const, np.array([{"beta": beta, "alpha": alpha}[k] for k in TORQUE_GAINS])], 0)
         c = dict(zip(COEF_OUTPUTS, (out[:, 0::2] + 1j * out[:, 1::2]).T))
+        if phi is not None:
+            with np.errstate(divide="ignore", invalid="ignore"):
+                c["H_T"] = c["H_T"] / phi if self.structure.torque_loop else np.full(omega.size, np.nan + 0j)
         forms = {f: np.stack([c[f"{f}.{t}"] for t in COEF_TERMS], axis=1) for f in COEF_FORMS}
         res = LoopCoefficients(omega=omega.copy(), Ts=ctrl.Ts, H_T=c["H_T"].copy(), **forms)
         for arr in (res.omega, res.H_T, *forms.values()):
             arr.setflags(write=False)
         return res
+
+    def _torque_path(self, omega):
+        """phi(e^{j w Ts}) = (P_m0 + I_t0 I_z)/(P_r0 + I_t0 I_z) on ``omega``, or None where it is 1
+        (no feed-forward and a torque loop: the paper's flow, left bit for bit as it was)."""
+        st = self.structure
+        if st.torque_loop and not st.feedforward:
+            return None
+        if not st.torque_loop:
+            return np.zeros(omega.size, complex)
+        I_z = self.elements["I_z"]
+        P_m0, P_r0, I_t0 = (Fraction(float(x)) for x in (self.P_m0, self.const[0], self.const[1]))
+        num = [P_m0 * a + I_t0 * b for a, b in zip(I_z.denominator, I_z.numerator)]
+        den = [P_r0 * a + I_t0 * b for a, b in zip(I_z.denominator, I_z.numerator)]
+        return frequency_responses([Element("torque_path", num, den)], omega, self.params.controller.Ts)[0]
 
     def to_statespace(self, P_gain: float, D_gain: float, beta=None, alpha=None, cut: str | None = None):
         """The closed loop at one gain point as a python-control ``StateSpace`` with named signals
@@ -513,6 +588,7 @@ class ClosedLoop:
         if b.size != 1 or a.size != 1:
             raise ParameterError(f"beta has {b.size} and alpha {a.size} values; allowed: one value each "
                                  "(the analysis holds the torque loop fixed)")
+        self._check_unread(b, a)
         return P.ravel(), D.ravel(), float(b.ravel()[0]), float(a.ravel()[0])
 
     def provenance(self, **extra) -> dict:

@@ -18,7 +18,8 @@ from haa_sym.errors import ParameterError
 from haa_sym.model.params import Plant, load_params
 from haa_sym.compiled.plant_code import plant_function
 
-__all__ = ["ContinuousPlant", "DiscretePlant", "continuous_plant", "discretize", "with_lag", "delay_split",
+__all__ = ["ContinuousPlant", "DiscretePlant", "continuous_plant", "discretize", "with_lag", "current_commanded",
+           "delay_split",
            "drive_states", "LAG_STATE", "DELAY_STATE"]
 
 #: The names of the drive's states (haa_sym.model.drive): the lag's output (the command as the
@@ -92,6 +93,28 @@ def continuous_plant(plant: Plant, backend: str = "auto") -> ContinuousPlant:
     if not _finite(cont.A, cont.B, cont.C, cont.VC0):
         raise _overflow(plant, None, backend)
     return cont
+
+
+#: The state a current command imposes (the motor's electrical state of every topology).
+CURRENT_STATE = "I_m"
+
+
+def current_commanded(cont: ContinuousPlant, current: bool = True) -> ContinuousPlant:
+    """The plant with its motor current imposed: the state I_m removed and its column of A
+    (k_t/J_m and, through nothing else, the mechanics' dependence on the current) made the
+    command input (the first, still named ``V_m``: the command, here in A). Exact for an ideal
+    current loop, as ``fit`` does with ``--input current``; the [drive] lag and delay then act
+    on this command (:func:`with_lag`, :func:`discretize`). Output rows lose I_m's column (the
+    estimate k_t N I_m of a current sensor is then no signal: a current-commanded structure
+    reads no torque). ``current=False`` returns ``cont`` itself."""
+    if not current:
+        return cont
+    i = cont.state_names.index(CURRENT_STATE)
+    keep = [j for j in range(cont.A.shape[0]) if j != i]
+    B = cont.B[keep].copy()
+    B[:, 0] = cont.A[keep, i]
+    return ContinuousPlant(cont.A[np.ix_(keep, keep)].copy(), B, cont.C[:, keep].copy(), cont.VC0, cont.plant,
+                           tuple(cont.state_names[j] for j in keep), cont.input_names, cont.output_names)
 
 
 def with_lag(cont: ContinuousPlant, tau_drive: float) -> ContinuousPlant:

@@ -4,7 +4,10 @@ Sample by sample (Fig. 6): the encoder angle theta and the measured torque T are
 velocity estimate (``ClosedLoop.elements``, each realised by :meth:`Element.realization`) is
 updated; the impedance law Eq. (8) gives T_ref = -(P_gain theta + D_gain v_d) (theta_ref = 0);
 the PI of Eq. (7) acts on T_ref - T; velocity compensation adds VC v_vc (Eq. 6); the voltage goes
-through the delay element and the zero-order hold into the sampled plant.
+through the delay element and the zero-order hold into the sampled plant. The controller's
+structure (haa_sym.model.structures) fixes the gains: the torque reference is also fed forward
+with K_ff = P_r - P_m (the feed-forward; for a current command, the whole T_ref/(k_t N)), and a
+structure without a PI or compensation has them zero (its elements then have no states).
 
 It serves the evaluators where eigenvalues are the answer (the spectral radius, the points the
 certified polynomial test leaves open) and :func:`to_statespace`. The tests check it against
@@ -63,7 +66,7 @@ def closed_loop_batch(loop, P_gain, D_gain, beta=None, alpha=None, cut: str | No
     if cut not in CUTS:
         raise ValueError(f"cut = {cut!r}; allowed: {list(CUTS)}")
     pl, opt = loop.plant, loop.options
-    P, D, P_t, I_t, VC = _gains(loop, P_gain, D_gain, beta, alpha)
+    P, D, P_t, I_t, VC, K_ff = _gains(loop, P_gain, D_gain, beta, alpha)
     k = P.shape[0]
     owner, blocks, n = _layout(loop)
     nx, nin = pl.Phi.shape[0], len(INPUT_NAMES)
@@ -80,7 +83,7 @@ def closed_loop_batch(loop, P_gain, D_gain, beta=None, alpha=None, cut: str | No
     rows[:, :nx, n + INPUT_NAMES.index("T_dist")] = pl.Gamma[:, 2]
     th, T = _bcast(plant_row("theta_encoder"), k), _bcast(plant_row(loop.torque_output), k)
     sig = _controller_flow(loop, owner, rows, P, D, P_t, I_t, VC, th, T, cut=cut,
-                           r=_bcast(_unit(i_r, width), k))
+                           r=_bcast(_unit(i_r, width), k), K_ff=K_ff)
     rows[:, :nx] += pl.Gamma[None, :, 0, None] * sig["V"][:, None, :]
     port = sig["port"] if opt.structure.port == "encoder_average" else _bcast(plant_row(opt.structure.port), k)
     y = {None: np.zeros((k, width)), "T_ref": sig["imp"], "PI": -sig["u_pi"]}[cut]
@@ -93,7 +96,9 @@ def _gains(loop, P_gain, D_gain, beta, alpha):
     beta = ctrl.beta if beta is None else beta
     alpha = ctrl.alpha if alpha is None else alpha
     P, D, beta, alpha = (np.atleast_1d(np.asarray(v, float)) for v in np.broadcast_arrays(P_gain, D_gain, beta, alpha))
-    return P, D, beta * loop.const[0], beta * loop.const[1], alpha * loop.const[2]
+    # P_t on the torque error, K_ff = P_r - P_m on the reference alone (0.0 for the paper's)
+    return (P, D, beta * loop.P_m0, beta * loop.const[1], alpha * loop.const[2],
+            beta * (loop.const[0] - loop.P_m0))
 
 
 def _unit(i, width):
@@ -107,13 +112,14 @@ def _bcast(r, k):
 
 
 def _controller_flow(loop, owner, rows, P, D, P_t, I_t, VC, th, T, *, cut=None, r=None, T_ff=None,
-                     theta_ref=None):
+                     theta_ref=None, K_ff=None):
     """The controller's signal flow of one sample (Fig. 6), every signal a row over the caller's
     [states, inputs]; writes each element's state update into ``rows`` (shape (k, n, width)).
 
     ``th``, ``T``: the encoder angle and the torque signal the loop reads; ``r`` is injected at
     ``cut``; ``T_ff`` (a torque feed-forward) and ``theta_ref`` (the set point of Eq. 8) are
-    optional rows. Returns the signals ``V`` (applied, after the delay), ``T_ref``, ``imp``,
+    optional rows; ``K_ff`` (k,) the structure's gain from T_ref straight to the command (the PI's
+    output ``u_pi`` includes it: the torque controller's whole output). Returns the signals ``V`` (applied, after the delay), ``T_ref``, ``imp``,
     ``u_pi`` and ``port`` (the port's velocity estimate, when the port reads one).
     """
     k, width = th.shape
@@ -138,6 +144,8 @@ def _controller_flow(loop, owner, rows, P, D, P_t, I_t, VC, th, T, *, cut=None, 
     T_ref = r if cut == "T_ref" else (-imp if T_ff is None else T_ff - imp)
     e = T_ref - T
     u_pi = P_t[:, None] * e + I_t[:, None] * element("I_z", e)
+    if K_ff is not None and np.any(K_ff):
+        u_pi = u_pi + K_ff[:, None] * T_ref
     V_k = (r if cut == "PI" else u_pi) + VC[:, None] * v_vc
     V = element("z_delay", V_k)
     port = element("F_port", th) if loop.options.structure.port == "encoder_average" else None
@@ -152,14 +160,14 @@ def controller_batch(loop, P_gain, D_gain, beta=None, alpha=None):
     (the voltage applied after the delay, V; the torque reference, Nm); shapes (k, m, m),
     (k, m, 4), (k, 2, m), (k, 2, 4) with m the controller's order.
     """
-    P, D, P_t, I_t, VC = _gains(loop, P_gain, D_gain, beta, alpha)
+    P, D, P_t, I_t, VC, K_ff = _gains(loop, P_gain, D_gain, beta, alpha)
     k = P.shape[0]
     owner, _blocks, m = _layout(loop, start=0)
     width = m + len(CONTROLLER_INPUTS)
     rows = np.zeros((k, m, width))
     sig_in = {name: _bcast(_unit(m + i, width), k) for i, name in enumerate(CONTROLLER_INPUTS)}
     sig = _controller_flow(loop, owner, rows, P, D, P_t, I_t, VC, sig_in["theta_encoder"],
-                           sig_in["T_meas"], T_ff=sig_in["T_ff"], theta_ref=sig_in["theta_ref"])
+                           sig_in["T_meas"], T_ff=sig_in["T_ff"], theta_ref=sig_in["theta_ref"], K_ff=K_ff)
     out = np.stack([sig[n] for n in CONTROLLER_OUTPUTS], axis=1)
     return rows[:, :, :m], rows[:, :, m:], out[:, :, :m], out[:, :, m:]
 

@@ -123,7 +123,10 @@ class Topology(Actuator):
         The body whose angle the encoder reads, or ``"rotor"``: a motor-side encoder, theta_m / N
         (rad at the output).
     port : str
-        The body the external torque T_dist acts on (passivity port, contact).
+        The body the external torque T_dist acts on (passivity port, contact); ``"rotor"`` in a
+        rotor-only actuator (no bodies: a direct drive or a one-axis haptic device, where the
+        current estimate and the rotor's encoder are the only sensors), whose port velocity
+        ``dtheta_rotor`` is dtheta_m / N (N = 1 for a direct drive).
     source : str
         Where it was read from, for messages (not part of the structure).
     """
@@ -150,9 +153,9 @@ class Topology(Actuator):
         return tuple(b.name for b in self.bodies)
 
     @property
-    def gearbox(self) -> Coupling:
-        """The coupling touching the rotor."""
-        return next(c for c in self.couplings if ROTOR in (c.a, c.b))
+    def gearbox(self) -> Coupling | None:
+        """The coupling touching the rotor; None for a rotor-only actuator (no [bodies])."""
+        return next((c for c in self.couplings if ROTOR in (c.a, c.b)), None)
 
     @property
     def sensor_coupling(self) -> Coupling | None:
@@ -214,7 +217,7 @@ class Topology(Actuator):
         whatever the sensors are: with ``torque = "current"`` both torque outputs are the
         estimate k_t N I_m, with ``encoder = "rotor"`` ``theta_encoder`` is theta_m / N."""
         return ("T_sensor", "T_sensor_spring", "theta_encoder") + tuple(
-            f"dtheta_{b.name}" for b in self.bodies)
+            f"dtheta_{b.name}" for b in self.bodies) + ((f"dtheta_{ROTOR}",) if self.port == ROTOR else ())
 
     # --- identity ----------------------------------------------------------------------------
     def structure(self) -> dict:
@@ -275,8 +278,21 @@ def _oriented(couplings) -> tuple:
 def _check_structure(t: Topology) -> None:
     src = t.source
     if not t.bodies:
-        raise _error(f"{src} [bodies]: no bodies; allowed: at least one [bodies.<name>] table "
-                     "(the load after the gearbox)")
+        # the rotor the only body (a direct drive, a one-axis haptic device): nothing after a
+        # gearbox to couple, to sense or to load; the current estimate, the rotor's angle and
+        # its port are the only sensors there are
+        if t.couplings:
+            raise _error(f"{src} [couplings.{t.couplings[0].name}]: a file without [bodies] has no couplings "
+                         "(the rotor is the only body); allowed: [bodies.<name>] tables for the load, or no "
+                         "[couplings]")
+        for key, value in (("torque", t.sensor), ("encoder", t.encoder), ("port", t.port)):
+            want = CURRENT if key == "torque" else ROTOR
+            if value != want:
+                raise _error(f"{src} [sensors]: {key} = {value!r} in a file without [bodies] (the rotor "
+                             f"is the only body); allowed: {key} = {want!r}")
+        if not isinstance(t.torque_damping, bool):
+            raise _error(f"{src} [sensors]: torque_damping = {t.torque_damping!r}; allowed: true or false")
+        return
     for kind, items in (("bodies", t.bodies), ("couplings", t.couplings)):
         for it in items:
             if not isinstance(it.name, str) or not _NAME.match(it.name) or it.name in _RESERVED:

@@ -37,7 +37,7 @@ from haa_sym.io.inputs import read_bytes
 from haa_sym.model.actuator import (ACTUATOR_SECTIONS, HYQ, Actuator, Topology, check_keys, entry_values,
                               parse_actuator)
 from haa_sym.model.motor import MOTOR_CONVENTION_DEFAULT, split_convention
-from haa_sym.model import filters
+from haa_sym.model import filters, structures
 from haa_sym.model.filters import PARAMETERS as FILTER_PARAMETERS
 from haa_sym.model.drive import DRIVE_KEYS, DRIVE_UNITS, Drive, drive_allowed, parse_drive
 from haa_sym.model.limits import Limits, parse_limits
@@ -75,11 +75,16 @@ __all__ = [
 _CONTROLLER_DOMAIN: dict[str, str] = {
     "Ts": "Ts", "N_av": FILTER_PARAMETERS["N_av"].domain, "alpha": ">=0", "beta": ">0", "P_t0": ">=0",
     "I_t0": ">=0", "velocity_filter": "filter", "f_c": FILTER_PARAMETERS["f_c"].domain,
+    "structure": "structure",
 }
 # The velocity estimate is a modelling choice with a stated default (the paper's average); a
 # filter's keys are optional in a file unless the chosen filter reads them without a default.
-_CONTROLLER_OPTIONAL = {"velocity_filter": filters.DEFAULT, **{k: None for k in FILTER_PARAMETERS}}
-STRING_KEYS = ("velocity_filter",)   # keys whose value is a name, not a number
+# The controller's structure likewise (haa_sym.model.structures, default the paper's); the keys a
+# structure does not read (P_t0, I_t0, beta without a torque loop; alpha without velocity
+# compensation) are left out of a file and take their neutral values (structures.NEUTRAL).
+_CONTROLLER_OPTIONAL = {"velocity_filter": filters.DEFAULT, **{k: None for k in FILTER_PARAMETERS},
+                        "structure": structures.DEFAULT, **{k: None for k in structures.NEUTRAL}}
+STRING_KEYS = ("velocity_filter", "structure")   # keys whose value is a name, not a number
 # The sampling times accepted, s: the maps' decisions are checked against the eigenvalues of the
 # explicit closed loop from 10 us to 8 ms (docs/model.md); 1 us to 1 s leaves room on either side,
 # and beyond it the closed-loop poles sit within rounding of z = 1 (Ts = 1e-300 gave "stable,
@@ -112,6 +117,8 @@ CONTROLLER_KEYS: tuple[str, ...] = tuple(_CONTROLLER_DOMAIN)
 
 def domain_text(domain: str) -> str:
     """What a key's ``domain`` (">0", ">=0", "int>=1", "filter") allows, in words."""
+    if domain == "structure":
+        return structures.allowed_text()
     return filters.allowed_text() if domain == "filter" else _DOMAIN_TEXT[domain]
 
 
@@ -121,7 +128,10 @@ def set_keys(params: "Params") -> list[tuple[str, str, str, object]]:
     controller's, then the drive's."""
     top = params.plant.topology
     rows = [(k, top.units[k], domain_text(d), params.plant.as_dict()[k]) for k, d in top.domain.items()]
-    rows += [(k, CONTROLLER_UNITS.get(k, "name"), domain_text(d), getattr(params.controller, k))
+    unread = structures.get(params.controller.structure).unread
+    rows += [(k, CONTROLLER_UNITS.get(k, "name"),
+              f"not read by structure {params.controller.structure!r} (with --set structure=NAME that reads it)"
+              if k in unread else domain_text(d), getattr(params.controller, k))
              for k, d in _CONTROLLER_DOMAIN.items()]
     rows += [(k, DRIVE_UNITS[k], drive_allowed(k), getattr(params.drive, k)) for k in DRIVE_KEYS]
     return rows
@@ -215,19 +225,34 @@ class Controller:
     :mod:`haa_sym.model.filters`: ``"average"`` of ``N_av`` samples, or the backward difference followed
     by a Tustin ``"lowpass1"`` or ``"butterworth2"`` filter of cut-off ``f_c`` Hz (below Nyquist
     1/(2 Ts)), or any filter registered there. The keys the chosen filter reads are required (or
-    take the registry's default); the others may be None.
+    take the registry's default); the others may be None. ``structure`` (default ``"paper"``) is
+    an entry of :mod:`haa_sym.model.structures`: the keys it does not read (``P_t0``, ``I_t0``,
+    ``beta`` without a torque loop, ``alpha`` without compensation) are refused if given and
+    hold their neutral values (0, 0, 1, 0); ``alternatives`` holds other structures' keys
+    (``[controller.<structure>]``) for a switch with ``--set structure=...``.
     """
 
     Ts: float
     N_av: int | None
-    alpha: float
-    beta: float
-    P_t0: float
-    I_t0: float
+    alpha: float | None = None
+    beta: float | None = None
+    P_t0: float | None = None
+    I_t0: float | None = None
     velocity_filter: str = filters.DEFAULT
     f_c: float | None = None
+    structure: str = structures.DEFAULT
+    # the keys of other structures for this actuator ([controller.<structure>] tables): what
+    # `--set structure=<name>` takes when it switches to one (not part of the loop: no equality)
+    alternatives: Mapping[str, Mapping[str, float]] = field(default_factory=dict, compare=False, repr=False)
 
     def __post_init__(self):
+        st = structures.get(_check_value("structure", self.structure, "structure"))
+        for k in st.unread:             # a key the structure does not read: left out, neutral
+            if self.__dict__[k] is not None and self.__dict__[k] != structures.NEUTRAL[k]:
+                raise ParameterError(f"{k} = {self.__dict__[k]!r}: structure = {st.name!r} has no "
+                                     f"{'torque PI' if k != 'alpha' else 'velocity compensation'}; allowed: "
+                                     f"leave {k} out (it reads {list(st.keys) or 'none of P_t0, I_t0, beta, alpha'})")
+            object.__setattr__(self, k, structures.NEUTRAL[k])
         _check_fields(self, {k: d for k, d in _CONTROLLER_DOMAIN.items()
                              if not (k in FILTER_PARAMETERS and getattr(self, k) is None)})
         kind = self.velocity_filter
@@ -255,9 +280,21 @@ class Controller:
         return self.beta * self.I_t0
 
     def replace(self, **changes: float) -> "Controller":
-        """A copy with some keys changed, validated like a file."""
-        return _validated(Controller, {**self.__dict__, **changes}, _CONTROLLER_DOMAIN,
-                          optional=_CONTROLLER_OPTIONAL)
+        """A copy with some keys changed, validated like a file. A change of ``structure`` drops
+        the keys the new structure does not read; those it reads and this one did not must be
+        among ``changes``."""
+        values = {k: v for k, v in {**self.__dict__, **changes}.items() if k != "alternatives"}
+        new = structures.get(_check_value("structure", values["structure"], "structure"))
+        old = structures.get(self.structure)
+        alternatives = dict(self.alternatives)
+        if new is not old:                  # the keys of the one left, for a switch back
+            alternatives.setdefault(old.name, {k: getattr(self, k) for k in old.keys})
+        for k in structures.NEUTRAL:
+            if k not in changes and (k in new.unread or k in old.unread):
+                values.pop(k)               # neutral in the new one, or missing (reported as such)
+                if k in new.keys and k in alternatives.get(new.name, {}):
+                    values[k] = alternatives[new.name][k]     # the file's [controller.<structure>]
+        return _controller(values, alternatives=alternatives)
 
 
 @dataclass(frozen=True)
@@ -348,8 +385,7 @@ class Params:
             if not isinstance(controller, Mapping):
                 raise ParameterError(f"{source} controller: {controller!r}; allowed: a haa_sym.Controller "
                                      f"or a mapping of {list(CONTROLLER_KEYS)}")
-            controller = _validated(Controller, controller, _CONTROLLER_DOMAIN, f"{source} controller",
-                                    optional=_CONTROLLER_OPTIONAL)
+            controller = _controller(controller, f"{source} controller")
         return cls(plant=plant, controller=controller, configurations=dict(configurations or {}),
                    source=source)
 
@@ -386,7 +422,8 @@ class Params:
         return {
             "plant": self.plant.as_dict(),
             "topology": {**top.structure(), "fingerprint": top.fingerprint},
-            "controller": dict(self.controller.__dict__),
+            "controller": {k: v for k, v in self.controller.__dict__.items()
+                           if not (k == "alternatives" and not v)},
             "configurations": {k: dict(v) for k, v in self.configurations.items()},
             "drive": self.drive.as_dict(),
             "source": self.source,
@@ -448,6 +485,11 @@ def _check_value(key: str, value: object, domain: str, where: str | None = None)
         if value not in filters.names():
             raise ParameterError(f"{prefix}{key} = {value!r}; allowed: {filters.allowed_text()}")
         return value
+    if domain == "structure":
+        if not (isinstance(value, str) and value in structures.STRUCTURES):
+            raise ParameterError(f"{prefix}{key} = {value!r}; allowed: {structures.allowed_text()} "
+                                 "(docs/model.md, \"Controller structures\")")
+        return value
     allowed = _DOMAIN_TEXT[domain]
     if value is None:
         raise ParameterError(f"{prefix}{key} = None is missing; allowed: {allowed}")
@@ -494,6 +536,46 @@ def _validated(cls, values: Mapping[str, object], domain: Mapping[str, str], whe
         return cls(**values)
     except ParameterError as exc:
         raise ParameterError(f"{prefix}{exc}") from None
+
+
+def _controller(values: Mapping[str, object], where: str | None = None, alternatives=None) -> Controller:
+    """A :class:`Controller` from a [controller] table's values: the keys its ``structure``
+    (haa_sym.model.structures) reads are required, those it does not read are refused if given;
+    ``alternatives`` the other structures' keys (:func:`_alternatives`)."""
+    prefix = f"{where}: " if where else ""
+    name = values.get("structure", structures.DEFAULT)
+    st = structures.get(_check_value("structure", name, "structure", where))
+    given = [k for k in st.unread if k in values]
+    if given:
+        raise ParameterError(f"{prefix}{given[0]} = {values[given[0]]!r}: structure = {st.name!r} has no "
+                             f"{'velocity compensation' if given[0] == 'alpha' else 'torque PI'}; allowed: "
+                             f"leave {', '.join(given)} out (it reads {list(st.keys) or 'none of P_t0, I_t0, beta, alpha'})")
+    ctrl = _validated(Controller, values, _CONTROLLER_DOMAIN, where,
+                      optional={k: v for k, v in _CONTROLLER_OPTIONAL.items() if k not in st.keys})
+    object.__setattr__(ctrl, "alternatives", dict(alternatives or {}))
+    return ctrl
+
+
+def _alternatives(table: Mapping[str, object], source: str, refs) -> tuple[dict, dict]:
+    """``([controller] without its sub-tables, {structure: its keys})``: a ``[controller.<name>]``
+    table, ``<name>`` a structure of haa_sym.model.structures other than the file's, holds exactly
+    the keys that structure reads, for ``--set structure=<name>``."""
+    own = table.get("structure", structures.DEFAULT)
+    rest, alts = {}, {}
+    for name, tab in table.items():
+        if name not in structures.STRUCTURES:
+            rest[name] = tab
+            continue
+        where = f"{source} [controller.{name}]"
+        if not isinstance(tab, Mapping):
+            raise ParameterError(f"{where}: {tab!r}; allowed: a table of the keys structure {name!r} reads")
+        if name == own:
+            raise ParameterError(f"{where}: the file's own structure; allowed: its keys in [controller] itself")
+        st = structures.STRUCTURES[name]
+        vals = entry_values(tab, where, refs, CONTROLLER_UNITS)
+        check_keys(vals, st.keys, st.keys, where)
+        alts[name] = {k: _check_value(k, v, _CONTROLLER_DOMAIN[k], where) for k, v in vals.items()}
+    return rest, alts
 
 
 def gain_array(name: str, value, label: str | None = None) -> np.ndarray:
@@ -593,9 +675,11 @@ def parse_params(data: Mapping[str, object], source: str = "<memory>") -> Params
     if not isinstance(data.get("controller"), Mapping):
         raise ParameterError(f"{source}: missing table [controller]")
     refs = about["references"]
-    controller = _validated(Controller, entry_values(data["controller"], f"{source} [controller]", refs,
-                                                     {**CONTROLLER_UNITS, "velocity_filter": None}),
-                            _CONTROLLER_DOMAIN, f"{source} [controller]", optional=_CONTROLLER_OPTIONAL)
+    table, alternatives = _alternatives(data["controller"], source, refs)
+    controller = _controller(entry_values(table, f"{source} [controller]", refs,
+                                                     {**CONTROLLER_UNITS, "velocity_filter": None,
+                                                      "structure": None}),
+                            f"{source} [controller]", alternatives)
     raw_configs = data.get("configurations", {})
     if not isinstance(raw_configs, Mapping):
         raise ParameterError(f"{source}: [configurations] must be a table of tables")

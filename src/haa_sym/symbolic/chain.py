@@ -107,8 +107,10 @@ def equations_of_motion(top: Topology, p: dict | None = None):
     dth = {"m": dth_m, **{b.name: x[4 + 2 * i] for i, b in enumerate(top.bodies)}}
     V_m, T_fr, T_dist = u
     net = _net_torques(top, p, th, dth)
+    # a rotor-only actuator's port is the rotor: T_dist at the output acts on it through 1/N
+    on_rotor = T_dist / p["N"] if top.port == ROTOR else 0
     xdot = [(V_m - p["R"] * I_m - p["k_w"] * dth_m) / p["L"], dth_m,
-            (p["k_t"] * I_m - p["B_m"] * dth_m + net[ROTOR] / p["N"] + T_fr) / p["J_m"]]
+            (p["k_t"] * I_m - p["B_m"] * dth_m + net[ROTOR] / p["N"] + T_fr + on_rotor) / p["J_m"]]
     for b in top.bodies:
         rhs = net[b.name] - p[f"B_{b.name}"] * dth[b.name]
         if b.ground:
@@ -126,7 +128,8 @@ def state_space(top: Topology, p: dict | None = None) -> ChainStateSpace:
     f = sp.Matrix(xdot)
     A = f.jacobian(xv)
     B = f.jacobian(uv)
-    y = sp.Matrix(sensor_outputs(top, p, x[0], th, dth) + [dth[b.name] for b in top.bodies])
+    y = sp.Matrix(sensor_outputs(top, p, x[0], th, dth) + [dth[b.name] for b in top.bodies]
+                  + ([dth["m"] / p["N"]] if top.port == ROTOR else []))
     C = y.jacobian(xv)
     return ChainStateSpace(A=sp.simplify(A), B=sp.simplify(B), C=C, symbols=p,
                            states=top.state_names, inputs=top.input_names, outputs=top.output_names)
@@ -167,15 +170,17 @@ def laplace_equations(top: Topology, p: dict | None = None):
     V_m, T_fr, T_dist = sp.symbols(top.input_names)
     net = _net_torques(top, p, th, dth)
     Jm = (p["J_m"] * s + p["B_m"]) * s
+    on_rotor = T_dist / p["N"] if top.port == ROTOR else 0
     eqs = [I_m - (V_m - p["k_w"] * s * th_m) / (p["L"] * s + p["R"]),
-           th_m - (p["k_t"] * I_m + net[ROTOR] / p["N"] + T_fr) / Jm]
+           th_m - (p["k_t"] * I_m + net[ROTOR] / p["N"] + T_fr + on_rotor) / Jm]
     for b in top.bodies:
         Jx = (p[f"J_{b.name}"] * s + p[f"B_{b.name}"]) * s
         rhs = net[b.name] + (T_dist if b.name == top.port else 0)
         if b.ground:
             rhs -= p[f"K_{b.name}"] * th[b.name]
         eqs.append(th[b.name] - rhs / Jx)
-    outputs = sensor_outputs(top, p, I_m, th, dth) + [dth[b.name] for b in top.bodies]
+    outputs = sensor_outputs(top, p, I_m, th, dth) + [dth[b.name] for b in top.bodies] \
+        + ([dth["m"] / p["N"]] if top.port == ROTOR else [])
     unknowns = (I_m, th_m) + tuple(th[b.name] for b in top.bodies)
     return p, unknowns, eqs, outputs
 
@@ -191,7 +196,8 @@ def torque_tf_fraction(top: Topology, p: dict | None = None, vc=VC):
     V = sp.Symbol("V")
     enc = outputs[2]                                        # theta_X, or theta_m / N
     subs = {sp.Symbol("V_m"): V + vc * s * enc, sp.Symbol("T_fr"): 0, sp.Symbol("T_dist"): 0}
-    sol, det, ring = cramer_solve([e.subs(subs) for e in eqs], unknowns, {V})   # sol times det
+    # N a generator even where no equation holds it (a rotor-only actuator: no gearbox)
+    sol, det, ring = cramer_solve([e.subs(subs) for e in eqs], unknowns, {V, p["N"]})   # sol times det
     # the measured torque is linear in the unknowns: substitute each by its Cramer numerator
     T = sp.expand(outputs[0 if top.torque_damping else 1] * p["N"])      # clear 1/N of theta_rotor
     num = ring.zero
@@ -251,8 +257,6 @@ def exact_vc_condition(top: Topology) -> tuple[bool, str]:
     * the torque from the current (k_t N I_m) and a motor-side encoder: VC_gain = N k_w cancels
       the back-EMF alone and k_t N I_m / V = N k_t / (L s + R).
     """
-    g = top.gearbox
-    out = g.b if g.a == ROTOR else g.a
     if top.sensor == CURRENT:
         if top.encoder == ROTOR:
             return True, ("torque from the motor current (k_t N I_m), encoder on the rotor: "
@@ -260,6 +264,8 @@ def exact_vc_condition(top: Topology) -> tuple[bool, str]:
         return False, (f"the torque is the current estimate but the encoder reads body "
                        f"{top.encoder!r}, not the rotor: the compensation feeds back that body's "
                        "velocity, not the back-EMF's")
+    g = top.gearbox
+    out = g.b if g.a == ROTOR else g.a
     if top.sensor != g.name:
         return False, (f"the torque sensor is on coupling {top.sensor!r}, not on the gearbox "
                        f"{g.name!r}: the measured torque depends on the bodies between them")
