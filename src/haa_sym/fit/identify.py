@@ -22,14 +22,29 @@ import numpy as np
 from haa_sym.analysis.sweep import blas_limits
 from haa_sym.errors import ParameterError
 from haa_sym.fit.closed import torque_loop_model
+from haa_sym.fit.diagnostics import (WHITENESS_LAGS, WHITENESS_LEVEL, fit_quality, hac_covariance,
+                                     near_null_keys, whiteness)
 from haa_sym.fit.model import open_loop_model, sample, simulate
 from haa_sym.io.budget import check_memory, fit_bytes
 from haa_sym.io.logs import OUTPUTS, Log
 
-__all__ = ["FitOptions", "FitResult", "Experiment", "identify", "INPUT_MODES"]
+__all__ = ["FitOptions", "FitResult", "Experiment", "identify", "INPUT_MODES", "simulate_log", "validate",
+           "refuse_unreliable", "CONDITION_LIMIT", "INTERVAL_METHODS"]
 
 INPUT_MODES = ("voltage", "current", "torque_ref")
+# the scaled normal matrix's condition number above which the fitted keys are refused
+# (refuse_unreliable): the normal equations have then lost ten of their sixteen digits and the keys
+# of its near-null direction change the outputs together. Measured (docs/identify.md, "Refusals"):
+# the well-posed fits of the synthetic logs give 6-200, a near-collinear pair
+# (e.g. an inertia and a stiffness seen only through their ratio) 1e12 and above
+CONDITION_LIMIT = 1e10
 Z95 = 1.959963984540054          # the two-sided 95 % point of the normal distribution
+# how ci95 is computed (FitOptions.intervals): the name and the text the report and the fitted
+# file give
+INTERVAL_METHODS = {
+    "hac": "sandwich (HAC) covariance: Newey-West, Bartlett kernel, Andrews' AR(1) plug-in bandwidth per log, "
+           "from each log's score series (holds with correlated residuals)",
+    "white": "Gauss-Newton covariance s^2 (J^T J)^-1 (assumes white output noise)"}
 
 
 @dataclass(frozen=True)
@@ -58,6 +73,16 @@ class FitOptions:
         from a start 4-40x off than from one 20 % off, on the same log).
     max_reweights : int
         At most this many noise-weighted passes (default 5).
+    intervals : str
+        How ``ci95`` is computed: ``"hac"`` (default), the sandwich covariance H^-1 S H^-1 with S
+        the long-run covariance of each log's score series (Newey-West, Bartlett kernel, Andrews'
+        AR(1) plug-in bandwidth; :func:`haa_sym.fit.diagnostics.hac_covariance`), which holds when
+        the residuals are correlated in time; ``"white"``, Gauss-Newton's s^2 (J^T J)^-1, which
+        assumes white residuals. The other one is reported as well (``ci95_white`` is always).
+    whiteness_lags : int
+        Lags of the Ljung-Box test of each log's and output's residuals (default 20; even).
+    whiteness_level : float
+        A residual series is called white when the test's p-value is at least this (0.05).
     """
 
     min_periods: float = 3.0
@@ -67,6 +92,13 @@ class FitOptions:
     first_pass_tolerance: float = 1e-3
     reweight_rtol: float = 0.05
     max_reweights: int = 5
+    intervals: str = "hac"
+    whiteness_lags: int = WHITENESS_LAGS
+    whiteness_level: float = WHITENESS_LEVEL
+
+    def __post_init__(self):
+        if self.intervals not in INTERVAL_METHODS:
+            raise ParameterError(f"FitOptions.intervals {self.intervals!r}; allowed: {list(INTERVAL_METHODS)}")
 
 
 @dataclass(frozen=True)
@@ -101,9 +133,15 @@ class FitResult:
     meta: dict = field(default_factory=dict, repr=False)
 
     def report(self) -> dict:
-        """The ``fit.json`` of the issue: parameters, rms_error, samples, sampling, meta."""
-        return {"parameters": {k: {"value": float(v), "initial": float(v0), "ci95": [float(lo), float(hi)]}
-                               for k, v, v0, (lo, hi) in zip(self.keys, self.value, self.initial, self.ci95)},
+        """The ``fit.json`` of the issue: parameters (value, initial, ci95 and, for comparison, the
+        white-noise ci95_white), the interval method, converged, the residuals' whiteness per log
+        and output, rms_error, samples, sampling, meta."""
+        white = self.meta["intervals"]["ci95_white"]
+        return {"parameters": {k: {"value": float(v), "initial": float(v0), "ci95": [float(lo), float(hi)],
+                                   "ci95_white": [float(x) for x in w]}
+                               for k, v, v0, (lo, hi), w in zip(self.keys, self.value, self.initial, self.ci95, white)},
+                "ci95_method": self.meta["intervals"]["method"], "converged": bool(self.meta["converged"]),
+                "residuals": self.meta["residuals"],
                 "rms_error": {o: {"initial": self.rms_initial[o], "fitted": self.rms_fitted[o]} for o in self.outputs},
                 "samples": self.samples, "sampling": self.sampling, "meta": self.meta}
 
@@ -114,6 +152,75 @@ def _model(exp: Experiment, keys, values, inputs, outputs, options=None):
     if inputs[0] == "torque_ref":
         return torque_loop_model(params, keys, inputs, outputs, options)
     return sample(open_loop_model(params.plant, keys, inputs, outputs), exp.log.Ts)
+
+
+def simulate_log(exp: Experiment, keys, values, inputs, outputs, loop_options=None, sensitivities=False,
+                 u: np.ndarray | None = None):
+    """The model's outputs ``(N, ny)`` on ``exp``'s log with ``keys`` at ``values`` (SI), from rest,
+    and with ``sensitivities`` their derivatives ``(p, N, ny)`` by the values: the one simulation
+    path of the fit and of its validation (:func:`validate`). ``u``: the log's input columns when
+    the caller has them already."""
+    if u is None:
+        u = np.column_stack([exp.log.signals[i] for i in inputs])
+    return simulate(_model(exp, keys, values, inputs, outputs, loop_options), u, sensitivities)
+
+
+def validate(result: "FitResult", cases, loop_options=None) -> tuple[dict, list]:
+    """NRMSE and VAF (:func:`haa_sym.fit.diagnostics.fit_quality`) of the fitted model per output
+    on each of ``cases``.
+
+    Parameters
+    ----------
+    result : FitResult
+        The fit (its keys and values are set on each case's parameters).
+    cases : list of (label, Experiment, start, stop)
+        A log with its parameters, simulated whole from rest by :func:`simulate_log` (as a fitted
+        log is), and the samples ``start:stop`` scored: the fitted part of a fitted log, its
+        held-out last part, a validation log's window.
+    loop_options : LoopOptions, optional
+
+    Returns
+    -------
+    quality : dict
+        ``{label: {output: {"nrmse", "vaf_percent", "samples"}}}``.
+    traces : list of dict
+        Per case ``name``, ``t`` (s), ``measured`` and ``fitted`` over the scored samples, for a figure.
+    """
+    quality, traces = {}, []
+    with blas_limits(1):
+        for label, exp, start, stop in cases:
+            yp = simulate_log(exp, result.keys, result.value, result.inputs, result.outputs, loop_options)[0]
+            y = np.column_stack([exp.log.signals[o] for o in result.outputs])
+            sl = slice(start, stop)
+            quality[label] = {o: fit_quality(y[sl, i], yp[sl, i]) for i, o in enumerate(result.outputs)}
+            traces.append({"name": label, "t": np.arange(len(y))[sl] * exp.log.Ts, "measured": y[sl],
+                           "fitted": yp[sl]})
+    return quality, traces
+
+
+def refuse_unreliable(result: "FitResult", allow_unconverged: bool = False,
+                      condition_limit: float = CONDITION_LIMIT) -> None:
+    """Refuse a fit whose values are not a result (the CLI writes nothing then).
+
+    Raises
+    ------
+    ParameterError
+        The scaled normal matrix's condition number above ``condition_limit`` (the keys of its
+        near-null direction named: the logs see them only together), or the fit stopped at its
+        iteration limit while the cost still fell, unless ``allow_unconverged``.
+    """
+    cond = result.meta["condition_number"]
+    if not cond <= condition_limit:
+        group = result.meta.get("near_null_keys") or list(result.keys)
+        raise ParameterError(f"--fit {','.join(result.keys)}: these logs cannot tell {', '.join(group)} apart "
+                             f"(condition number {cond:.3g} of the scaled normal matrix, above {condition_limit:.0e}); "
+                             "allowed: keys the logs distinguish (fit fewer keys, log more outputs, a richer input)")
+    if not result.meta["converged"] and not allow_unconverged:
+        its = result.meta["options"]["max_iterations"]
+        raise ParameterError(f"--fit {','.join(result.keys)}: the fit stopped at its iteration limit ({its} per "
+                             "pass) while the error still fell, so the values are not a minimum; allowed: a converged "
+                             "fit (check the time column is in s and the start values), or --allow-unconverged to "
+                             "write the file marked as not converged")
 
 
 def _check_keys(exps, keys, inputs):
@@ -221,8 +328,7 @@ def identify(experiments: list[Experiment], keys: tuple[str, ...], inputs: tuple
             if key not in cache or (sens and cache[key][1] is None):
                 errs, sens_ = [], []
                 for e, u, y in zip(experiments, U, Y):
-                    m = _model(e, keys, np.exp(theta), inputs, outputs, loop_options)
-                    yp, dy = simulate(m, u, sens)
+                    yp, dy = simulate_log(e, keys, np.exp(theta), inputs, outputs, loop_options, sens, u)
                     errs.append(y - yp)
                     sens_.append(None if dy is None else dy * np.exp(theta)[:, None, None])
                 cache.clear() if len(cache) > 8 else None
@@ -253,7 +359,8 @@ def identify(experiments: list[Experiment], keys: tuple[str, ...], inputs: tuple
     dof = max(r.size - len(keys), 1)
     s2 = float(r @ r) / dof
     # the scaled normal matrix's condition: keys the logs cannot tell apart make it huge (and the
-    # intervals meaningless); reported in meta, warned about by the CLI
+    # intervals meaningless); reported in meta with the keys of its near-null direction, refused
+    # by the CLI (haa_sym.fit.identify.refuse_unreliable)
     H = J.T @ J
     d = np.sqrt(np.maximum(np.diag(H), 1e-300))
     Hs = H / np.outer(d, d)
@@ -261,10 +368,24 @@ def identify(experiments: list[Experiment], keys: tuple[str, ...], inputs: tuple
     # inverted in the scaled coordinates: pinv(H) itself would drop, as below its rcond, the
     # direction of a key the logs barely see (e.g. a damping run towards 0, where d y / d log p
     # vanishes) and give it a zero-width interval, the opposite of the truth
-    cov = s2 * np.linalg.pinv(Hs) / np.outer(d, d)
-    sd = np.sqrt(np.maximum(np.diag(cov), 0.0))
+    cov_white = s2 * np.linalg.pinv(Hs) / np.outer(d, d)
+    errs = run(theta)[0]
+    # the residuals of each log and output, tested for whiteness; the sandwich covariance from
+    # each log's score series (J_t^T r_t summed over its outputs), so that correlated residuals
+    # widen the intervals as much as they weaken the information (docs/identify.md, "Intervals")
+    residuals = {e.log.name: {o: whiteness(err[:, i], opt.whiteness_lags, opt.whiteness_level)
+                              for i, o in enumerate(outputs)} for e, err in zip(experiments, errs)}
+    scores, row = [], 0
+    for y in Y:
+        rows = y.size
+        scores.append(np.einsum("tok,to->tk", J[row:row + rows].reshape(len(y), y.shape[1], len(keys)),
+                                r[row:row + rows].reshape(len(y), y.shape[1])))
+        row += rows
+    cov_hac, bandwidths = hac_covariance(H, scores)
+    cov = cov_hac if opt.intervals == "hac" else cov_white
     with np.errstate(over="ignore"):       # an undetermined key's interval is (0, inf): said so, not warned
-        ci = np.exp(np.column_stack([theta - Z95 * sd, theta + Z95 * sd]))
+        ci = _interval(theta, cov)
+        ci_white = _interval(theta, cov_white)
 
     def rms(preds):
         return {o: float(np.sqrt(np.mean(np.concatenate([(y[:, i] - p[:, i]) ** 2 for y, p in zip(Y, preds)]))))
@@ -278,7 +399,10 @@ def identify(experiments: list[Experiment], keys: tuple[str, ...], inputs: tuple
     meta = {**(provenance or {}), "inputs": list(inputs), "outputs": list(outputs), "method":
             "time-domain output error, Levenberg-Marquardt on log-parameters, exact Jacobian (CasADi AD, "
             "Van Loan ZOH derivative)", "iterations": [it1, it2], "converged": converged, "residual_variance": s2,
-            "condition_number": condition,
+            "condition_number": condition, "near_null_keys": near_null_keys(Hs, d, keys),
+            "intervals": {"method": INTERVAL_METHODS[opt.intervals], "ci95_white": ci_white.tolist(),
+                          "bandwidth": {e.log.name: b for e, b in zip(experiments, bandwidths)}},
+            "residuals": residuals,
             "logs": {e.log.name: {"sha256": e.log.sha256, "samples": e.log.samples, "configuration": e.configuration}
                      for e in experiments},
             "date": datetime.datetime.now(datetime.timezone.utc).isoformat(timespec="seconds"),
@@ -286,6 +410,13 @@ def identify(experiments: list[Experiment], keys: tuple[str, ...], inputs: tuple
     return FitResult(keys, np.exp(theta), np.exp(theta0), ci, cov, rms(pred0), rms(pred), it1 + it2,
                      int(sum(len(y) for y in Y)), {e.log.name: e.log.sampling for e in experiments},
                      outputs, inputs, traces, bode, meta)
+
+
+def _interval(theta: np.ndarray, cov: np.ndarray) -> np.ndarray:
+    """95 % intervals exp(log p +- 1.96 sd) of log-parameters ``theta`` with covariance ``cov``:
+    positive and asymmetric in p."""
+    sd = np.sqrt(np.maximum(np.diag(cov), 0.0))
+    return np.exp(np.column_stack([theta - Z95 * sd, theta + Z95 * sd]))
 
 
 def _levenberg_marquardt(evaluate, theta, opt: FitOptions, keys, tolerance: float | None = None):
