@@ -61,7 +61,7 @@ def ar1(rng, shape, rho):
     # lfilter's state before e_1 is rho e_0
     e = scipy.signal.lfilter([np.sqrt(1 - rho ** 2)], [1, -rho], w[1:], axis=0,
                              zi=rho * w[:1])[0]
-    return np.vstack([w[:1], e])
+    return np.concatenate([w[:1], e], axis=0)
 
 
 def coloured_experiment(model, p, *, seed=0, duration=25.0, Ts=1e-3, rho=0.9, noise=0.01,
