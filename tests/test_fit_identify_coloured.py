@@ -18,9 +18,9 @@ START_FACTORS = (1.25, 0.8, 1.2, 0.7)          # every key 20-30 % off, as tests
 OUTPUTS = ("torque", "theta")
 
 
-def _fit(params, u, y, name="hd.csv"):
+def _fit(params, u, y, name="hd.csv", factors=START_FACTORS):
     log = Log(name, 1e-3, {"voltage": u, **{o: y[:, i] for i, o in enumerate(OUTPUTS)}}, {}, "0" * 64)
-    start = params.with_values(**{k: v * f for (k, v), f in zip(HD_TRUTH.items(), START_FACTORS)})
+    start = params.with_values(**{k: v * f for (k, v), f in zip(HD_TRUTH.items(), factors)})
     return identify([Experiment(log, start)], tuple(HD_TRUTH), ("voltage",), OUTPUTS)
 
 
@@ -91,13 +91,17 @@ def test_white_noise_is_reported_white_and_the_intervals_agree():
 @pytest.mark.slow
 def test_20_noise_seeds_within_3_percent_and_hac_covers_18():
     """One 25 s run of the harmonic drive, 20 realisations of the AR(1) noise (the coverage of an
-    interval is a statement over the noise for a given experiment)."""
+    interval is a statement over the noise for a given experiment). Measured: ci95 (HAC) covered the
+    truth in 19, 19, 20, 19 of 20 (J_link, B_link, K_hd, D_hd), the white-noise ci95_white in 13, 7,
+    18, 18; worst errors 0.05, 1.83, 0.03, 0.04 %. Started 5 % off (the same counts and values as
+    from 20-30 % off, which test_ar1_noise_is_reported_and_widens_the_intervals covers, in 2/3 of
+    the time)."""
     params = load_params(actuator_path("harmonic_drive"))
     _, u, ys, _ = coloured_experiment(two_mass, params.plant.as_dict(), seed=0, duration=25.0, rho=0.9,
                                       noise_seeds=range(100, 120))
     new, old = {k: 0 for k in HD_TRUTH}, {k: 0 for k in HD_TRUTH}
     for y in ys:
-        r = _fit(params, u, y)
+        r = _fit(params, u, y, factors=(1.05, 0.95, 1.05, 0.95))
         white = r.meta["intervals"]["ci95_white"]
         for i, k in enumerate(r.keys):
             assert abs(r.value[i] / HD_TRUTH[k] - 1) < 0.03, (k, r.value[i])

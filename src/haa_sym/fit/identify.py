@@ -7,10 +7,14 @@ estimated from its own residuals; a first pass weights by the signal's standard 
 The parameters are fitted as logarithms (positive by construction, the only bound the keys'
 domains impose: ``>0`` or ``>=0``, fitted from a positive start) by Levenberg-Marquardt with the
 exact Jacobian (sensitivities of the simulation, derivatives from CasADi), so a few iterations
-suffice. Confidence intervals are Gauss-Newton's: cov(log p) = s^2 (J^T J)^-1 with s^2 the
-weighted residual variance; 95 % intervals are log p +- 1.96 sd, so they are asymmetric and
-positive. They assume white, Gaussian output noise, a correct model and an input known exactly;
-coloured residuals (a model error) make them too narrow (docs/identify.md).
+suffice. Confidence intervals (``ci95``) are a sandwich (HAC) covariance H^-1 S H^-1 of the
+log-parameters, S the long-run covariance of each log's score series (Newey-West, Bartlett kernel,
+Andrews' bandwidth; :mod:`haa_sym.fit.diagnostics`), so they hold when the residuals are correlated
+in time; Gauss-Newton's s^2 (J^T J)^-1, which assumes white residuals, is kept as ``ci95_white``.
+95 % intervals are log p +- 1.96 sd, so they are asymmetric and positive. The residuals of each log
+and output are tested for whiteness (Ljung-Box); :func:`validate` scores the fitted model (NRMSE,
+VAF) on held-out or other logs; :func:`refuse_unreliable` refuses keys the logs cannot tell apart
+and an unconverged fit (docs/identify.md).
 """
 from __future__ import annotations
 
