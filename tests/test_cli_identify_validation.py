@@ -5,7 +5,6 @@ stopped at its iteration limit refused (exit 2, one line, nothing written) unles
 simulation)."""
 import json
 
-import numpy as np
 import pytest
 
 import haa_sym.cli.identify as cli_identify

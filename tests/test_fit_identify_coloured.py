@@ -11,7 +11,7 @@ from haa_sym.fit.identify import Experiment, identify
 from haa_sym.io.logs import Log
 from haa_sym.model.params import actuator_path, load_params
 
-from identify_coloured import coloured_experiment, sampled
+from identify_coloured import coloured_experiment
 from identify_synthetic import HD_TRUTH, experiment, two_mass
 
 START_FACTORS = (1.25, 0.8, 1.2, 0.7)          # every key 20-30 % off, as tests/test_fit_identify.py

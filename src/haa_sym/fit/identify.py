@@ -193,6 +193,11 @@ def validate(result: "FitResult", cases, loop_options=None) -> tuple[dict, list]
     quality, traces = {}, []
     with blas_limits(1):
         for label, exp, start, stop in cases:
+            if result.inputs[0] == "torque_ref":
+                m = _model(exp, result.keys, result.value, result.inputs, result.outputs, loop_options)
+                if abs(exp.log.Ts - m.Ts) > 1e-6 * m.Ts:
+                    raise ParameterError(f"--validate {exp.log.name!r}: mean period {exp.log.Ts:.6g} s; allowed: the "
+                                         f"torque loop's Ts = {m.Ts:g} s with --input torque_ref")
             yp = simulate_log(exp, result.keys, result.value, result.inputs, result.outputs, loop_options)[0]
             y = np.column_stack([exp.log.signals[o] for o in result.outputs])
             sl = slice(start, stop)
