@@ -34,7 +34,7 @@ def _validate(params):
     run2 = read_log(DATA / "sweep3Nm_run2_stamped.csv", ("current",), ("torque",))
     out = []
     for log in (held, run2):
-        yp = simulate_log(Experiment(log, params), ("current",), ("torque",))[:, 0]
+        yp = simulate_log(Experiment(log, params), ("current",), ("torque",))[0][:, 0]
         out.append(nrmse_vaf(log.signals["torque"], yp))
     return out
 
@@ -95,5 +95,5 @@ def test_a_log_that_does_not_start_at_rest_is_refused_or_its_state_estimated(tmp
                                       delay_drive=0.0034969)
     with pytest.raises(ParameterError, match="torque starts at .*not at rest; allowed: --initial-state estimate"):
         identify([Experiment(log, p)], ("k_t",), ("current",), ("torque",))
-    yp = simulate_log(Experiment(log, p), ("current",), ("torque",), FitOptions(initial_state="estimate"))[:, 0]
+    yp = simulate_log(Experiment(log, p), ("current",), ("torque",), options=FitOptions(initial_state="estimate"))[0][:, 0]
     assert nrmse_vaf(log.signals["torque"], yp)[0] < 0.35

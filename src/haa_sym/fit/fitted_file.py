@@ -33,8 +33,9 @@ def reference_text(result, date: str) -> str:
                      + (f", configuration {m['configuration']}" if m.get("configuration") else "") + ")"
                      for name, m in result.meta["logs"].items())
     return (f"haa-sym identify, {date}: {', '.join(result.keys)} fitted to {logs}; input "
-            f"{','.join(result.inputs)}, outputs {','.join(result.outputs)}; time-domain output error, "
-            "95 % intervals (ci95) from the Gauss-Newton covariance assuming white output noise")
+            f"{','.join(result.inputs)}, outputs {','.join(result.outputs)}; time-domain output error"
+            + ("" if result.meta.get("converged", True) else ", NOT CONVERGED (stopped at the iteration limit)")
+            + f"; 95 % intervals (ci95) from the {result.meta['intervals']['method']}")
 
 
 def _section_and_key(topology, legacy: bool, key: str) -> tuple[str, str]:
@@ -128,6 +129,10 @@ def fitted_text(text: str, source: str, params, result, date: str) -> str:
         if lines and not lines[-1].endswith("\n"):
             lines[-1] += "\n"
         lines += ["\n", "[about.references]\n", ref_line]
+    if not result.meta.get("converged", True):
+        # the file's first line, not only the reference: a reader meets it before any value
+        lines.insert(0, f"# haa-sym identify ({ref_key}): NOT CONVERGED, the fit stopped at its iteration limit "
+                        "(--allow-unconverged); the fitted values are not a minimum\n")
     new = "".join(lines)
     check = parse_params(tomllib.loads(new), source)
     for k, v in zip(result.keys, result.value):

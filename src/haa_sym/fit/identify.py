@@ -7,10 +7,14 @@ estimated from its own residuals; a first pass weights by the signal's standard 
 The parameters are fitted as logarithms (positive by construction, the only bound the keys'
 domains impose: ``>0`` or ``>=0``, fitted from a positive start) by Levenberg-Marquardt with the
 exact Jacobian (sensitivities of the simulation, derivatives from CasADi), so a few iterations
-suffice. Confidence intervals are Gauss-Newton's: cov(log p) = s^2 (J^T J)^-1 with s^2 the
-weighted residual variance; 95 % intervals are log p +- 1.96 sd, so they are asymmetric and
-positive. They assume white, Gaussian output noise, a correct model and an input known exactly;
-coloured residuals (a model error) make them too narrow (docs/identify.md).
+suffice. Confidence intervals (``ci95``) are a sandwich (HAC) covariance H^-1 S H^-1 of the
+log-parameters, S the long-run covariance of each log's score series (Newey-West, Bartlett kernel,
+Andrews' bandwidth; :mod:`haa_sym.fit.diagnostics`), so they hold when the residuals are correlated
+in time; Gauss-Newton's s^2 (J^T J)^-1, which assumes white residuals, is kept as ``ci95_white``.
+95 % intervals are log p +- 1.96 sd, so they are asymmetric and positive. The residuals of each log
+and output are tested for whiteness (Ljung-Box); :func:`validate` scores the fitted model (NRMSE,
+VAF) on held-out or other logs; :func:`refuse_unreliable` refuses keys the logs cannot tell apart
+and an unconverged fit (docs/identify.md).
 """
 from __future__ import annotations
 
@@ -22,15 +26,30 @@ import numpy as np
 from haa_sym.analysis.sweep import blas_limits
 from haa_sym.errors import ParameterError
 from haa_sym.fit.closed import torque_loop_model
+from haa_sym.fit.diagnostics import (WHITENESS_LAGS, WHITENESS_LEVEL, fit_quality, hac_covariance,
+                                     near_null_keys, whiteness)
 from haa_sym.fit.model import modal_check, open_loop_model, sample, simulate, simulate_stamps
 from haa_sym.io.budget import check_memory, fit_bytes
 from haa_sym.io.logs import OUTPUTS, Log
 from haa_sym.model.drive import DRIVE_KEYS
 
-__all__ = ["FitOptions", "FitResult", "Experiment", "identify", "simulate_log", "INPUT_MODES", "INITIAL_STATES"]
+__all__ = ["FitOptions", "FitResult", "Experiment", "identify", "INPUT_MODES", "INITIAL_STATES", "simulate_log",
+           "validate", "refuse_unreliable", "CONDITION_LIMIT", "INTERVAL_METHODS"]
 
 INPUT_MODES = ("voltage", "current", "torque_ref")
+# the scaled normal matrix's condition number above which the fitted keys are refused
+# (refuse_unreliable): the normal equations have then lost ten of their sixteen digits and the keys
+# of its near-null direction change the outputs together. Measured (docs/identify.md, "Refusals"):
+# the well-posed fits of the synthetic logs give 6-200, a near-collinear pair
+# (e.g. an inertia and a stiffness seen only through their ratio) 1e12 and above
+CONDITION_LIMIT = 1e10
 Z95 = 1.959963984540054          # the two-sided 95 % point of the normal distribution
+# how ci95 is computed (FitOptions.intervals): the name and the text the report and the fitted
+# file give
+INTERVAL_METHODS = {
+    "hac": "sandwich (HAC) covariance: Newey-West, Bartlett kernel, Andrews' AR(1) plug-in bandwidth per log, "
+           "from each log's score series (holds with correlated residuals)",
+    "white": "Gauss-Newton covariance s^2 (J^T J)^-1 (assumes white output noise)"}
 
 
 @dataclass(frozen=True)
@@ -64,6 +83,16 @@ class FitOptions:
         not start within :data:`REST_FRACTION` of their rms of zero is refused); ``"estimate"``:
         its initial state is estimated too. Segments after a gap, and a window that does not
         start at the log's first sample, always start from an estimated state.
+    intervals : str
+        How ``ci95`` is computed: ``"hac"`` (default), the sandwich covariance H^-1 S H^-1 with S
+        the long-run covariance of each log's score series (Newey-West, Bartlett kernel, Andrews'
+        AR(1) plug-in bandwidth; :func:`haa_sym.fit.diagnostics.hac_covariance`), which holds when
+        the residuals are correlated in time; ``"white"``, Gauss-Newton's s^2 (J^T J)^-1, which
+        assumes white residuals. The other one is reported as well (``ci95_white`` is always).
+    whiteness_lags : int
+        Lags of the Ljung-Box test of each log's and output's residuals (default 20; even).
+    whiteness_level : float
+        A residual series is called white when the test's p-value is at least this (0.05).
     """
 
     min_periods: float = 3.0
@@ -74,6 +103,13 @@ class FitOptions:
     reweight_rtol: float = 0.05
     max_reweights: int = 5
     initial_state: str = "rest"
+    intervals: str = "hac"
+    whiteness_lags: int = WHITENESS_LAGS
+    whiteness_level: float = WHITENESS_LEVEL
+
+    def __post_init__(self):
+        if self.intervals not in INTERVAL_METHODS:
+            raise ParameterError(f"FitOptions.intervals {self.intervals!r}; allowed: {list(INTERVAL_METHODS)}")
 
 
 #: A log fitted from rest must start there: each output's first sample within this fraction of
@@ -115,9 +151,15 @@ class FitResult:
     meta: dict = field(default_factory=dict, repr=False)
 
     def report(self) -> dict:
-        """The ``fit.json`` of the issue: parameters, rms_error, samples, sampling, meta."""
-        return {"parameters": {k: {"value": float(v), "initial": float(v0), "ci95": [float(lo), float(hi)]}
-                               for k, v, v0, (lo, hi) in zip(self.keys, self.value, self.initial, self.ci95)},
+        """The ``fit.json`` of the issue: parameters (value, initial, ci95 and, for comparison, the
+        white-noise ci95_white), the interval method, converged, the residuals' whiteness per log
+        and output, rms_error, samples, sampling, meta."""
+        white = self.meta["intervals"]["ci95_white"]
+        return {"parameters": {k: {"value": float(v), "initial": float(v0), "ci95": [float(lo), float(hi)],
+                                   "ci95_white": [float(x) for x in w]}
+                               for k, v, v0, (lo, hi), w in zip(self.keys, self.value, self.initial, self.ci95, white)},
+                "ci95_method": self.meta["intervals"]["method"], "converged": bool(self.meta["converged"]),
+                "residuals": self.meta["residuals"],
                 "rms_error": {o: {"initial": self.rms_initial[o], "fitted": self.rms_fitted[o]} for o in self.outputs},
                 "samples": self.samples, "sampling": self.sampling, "meta": self.meta}
 
@@ -144,19 +186,132 @@ def _uniform_path(exp: Experiment, keys, opt) -> bool:
             and "delay_drive" not in keys)
 
 
-def _predict(exp, keys, values, inputs, outputs, loop_options, opt, u, y, scale, sens):
-    """The outputs of ``exp`` with ``keys`` at ``values`` (and d y / d p), and the number of
-    initial-state values estimated."""
-    model = _model(exp, keys, values, inputs, outputs, loop_options)
-    if not hasattr(model, "A"):                                     # the sampled torque loop
-        return simulate(model, u, sens) + (0,)
-    if _uniform_path(exp, keys, opt):
-        return simulate(sample(model, exp.log.Ts), u, sens) + (0,)
+def simulate_log(exp: Experiment, inputs, outputs=None, keys=(), values=(), *, options: "FitOptions | None" = None,
+                 loop_options=None, sensitivities: bool = False, u: np.ndarray | None = None,
+                 y: np.ndarray | None = None, scale: np.ndarray | None = None):
+    """The model's outputs on ``exp``'s log, simulated as a fit simulates it: the one simulation
+    path of the fit and of its validation (:func:`validate`).
+
+    A uniform log from rest without a delay at its one period (:func:`haa_sym.fit.model.simulate`);
+    any other on its own stamps (:func:`haa_sym.fit.model.simulate_stamps`: the input held over
+    each true interval, the delayed command switching inside them, every segment after a gap
+    restarted from an estimated state, the first from rest unless ``options.initial_state`` or a
+    window says otherwise).
+
+    Parameters
+    ----------
+    exp : Experiment
+        The log and its parameters (``keys`` at ``values`` set over them; none: as they are).
+    inputs, outputs : tuple of str
+        The log's inputs and outputs (``exp.outputs`` when the experiment names its own).
+    keys, values : sequence
+        Keys set to values (SI) and, with ``sensitivities``, differentiated by.
+    options : FitOptions, optional
+        ``initial_state`` (default :class:`FitOptions`' ``"rest"``).
+    u, y : ndarray, optional
+        The log's input (N, m) and output (N, ny) columns when the caller has them already.
+    scale : ndarray, optional
+        Per output, the weights of the initial-state estimate (default the outputs' standard
+        deviations).
+
+    Returns
+    -------
+    y_model : ndarray (N, ny)
+    dy : ndarray (p, N, ny) or None
+        d y_model / d values (with ``sensitivities``).
+    n_initial : int
+        The number of initial-state values estimated (degrees of freedom the fit used up).
+    """
+    opt = options or FitOptions()
+    keys, inputs = tuple(keys), tuple(inputs)
+    outs = tuple(exp.outputs or outputs)
     log = exp.log
+    if u is None:
+        u = np.column_stack([log.signals[i] for i in inputs])
+    if y is None:
+        y = np.column_stack([log.signals[x] for x in outs])
+    if scale is None:
+        scale = np.maximum(np.std(y, axis=0), 1e-300)
+    model = _model(exp, keys, values, inputs, outs, loop_options)
+    if not hasattr(model, "A"):                                     # the sampled torque loop
+        return simulate(model, u, sensitivities) + (0,)
+    if _uniform_path(exp, keys, opt):
+        return simulate(sample(model, log.Ts), u, sensitivities) + (0,)
     delay = dict(zip(keys, values)).get("delay_drive", exp.params.drive.delay_drive)
     return simulate_stamps(model, log.t, u, delay=delay, delay_key=keys.index("delay_drive") if "delay_drive" in keys
                            else None, starts=log.starts, estimate=_estimated(exp, opt), y=y, weights=scale,
-                           sensitivities=sens)
+                           sensitivities=sensitivities)
+
+
+def validate(result: "FitResult", cases, loop_options=None, options: "FitOptions | None" = None) -> tuple[dict, list]:
+    """NRMSE and VAF (:func:`haa_sym.fit.diagnostics.fit_quality`) of the fitted model per output
+    on each of ``cases``.
+
+    Parameters
+    ----------
+    result : FitResult
+        The fit (its keys and values are set on each case's parameters).
+    cases : list of (label, Experiment, start, stop)
+        A log with its parameters, simulated whole by :func:`simulate_log` as a fitted log is
+        (its own stamps, segments after gaps from estimated states: a segment's initial state is
+        estimated from the whole segment, so a segment that runs on past the held-out boundary
+        uses those samples for its n state values, never for the parameters), and the samples
+        ``start:stop`` scored: the fitted part of a fitted log, its held-out last part, a
+        validation log's window.
+    loop_options : LoopOptions, optional
+    options : FitOptions, optional
+        The fit's (``initial_state``).
+
+    Returns
+    -------
+    quality : dict
+        ``{label: {output: {"nrmse", "vaf_percent", "samples"}}}``.
+    traces : list of dict
+        Per case ``name``, ``t`` (s), ``measured`` and ``fitted`` over the scored samples, for a figure.
+    """
+    quality, traces = {}, []
+    with blas_limits(1):
+        for label, exp, start, stop in cases:
+            if result.inputs[0] == "torque_ref":
+                m = _model(exp, result.keys, result.value, result.inputs, result.outputs, loop_options)
+                if abs(exp.log.Ts - m.Ts) > 1e-6 * m.Ts or not (exp.log.uniform and exp.log.from_start):
+                    raise ParameterError(f"--validate {exp.log.name!r}: mean period {exp.log.Ts:.6g} s"
+                                         f"{'' if exp.log.uniform else ', non-uniform stamps'}; allowed: a uniform "
+                                         f"log at the torque loop's Ts = {m.Ts:g} s with --input torque_ref")
+            outs = tuple(exp.outputs or result.outputs)
+            yp = simulate_log(exp, result.inputs, outs, result.keys, result.value, options=options,
+                              loop_options=loop_options)[0]
+            y = np.column_stack([exp.log.signals[o] for o in outs])
+            sl = slice(start, stop)
+            quality[label] = {o: fit_quality(y[sl, i], yp[sl, i]) for i, o in enumerate(outs)}
+            traces.append({"name": label, "t": (exp.log.t - exp.log.t[0])[sl], "measured": y[sl],
+                           "fitted": yp[sl], "outputs": outs})
+    return quality, traces
+
+
+def refuse_unreliable(result: "FitResult", allow_unconverged: bool = False,
+                      condition_limit: float = CONDITION_LIMIT) -> None:
+    """Refuse a fit whose values are not a result (the CLI writes nothing then).
+
+    Raises
+    ------
+    ParameterError
+        The scaled normal matrix's condition number above ``condition_limit`` (the keys of its
+        near-null direction named: the logs see them only together), or the fit stopped at its
+        iteration limit while the cost still fell, unless ``allow_unconverged``.
+    """
+    cond = result.meta["condition_number"]
+    if not cond <= condition_limit:
+        group = result.meta.get("near_null_keys") or list(result.keys)
+        raise ParameterError(f"--fit {','.join(result.keys)}: these logs cannot tell {', '.join(group)} apart "
+                             f"(condition number {cond:.3g} of the scaled normal matrix, above {condition_limit:.0e}); "
+                             "allowed: keys the logs distinguish (fit fewer keys, log more outputs, a richer input)")
+    if not result.meta["converged"] and not allow_unconverged:
+        its = result.meta["options"]["max_iterations"]
+        raise ParameterError(f"--fit {','.join(result.keys)}: the fit stopped at its iteration limit ({its} per "
+                             "pass) while the error still fell, so the values are not a minimum; allowed: a converged "
+                             "fit (check the time column is in s and the start values), or --allow-unconverged to "
+                             "write the file marked as not converged")
 
 
 def _check_keys(exps, keys, inputs):
@@ -323,7 +478,8 @@ def identify(experiments: list[Experiment], keys: tuple[str, ...], inputs: tuple
             if key not in cache or (sens and cache[key][1] is None):
                 errs, sens_, n0 = [], [], 0
                 for e, o, u, y, w in zip(experiments, outs, U, Y, scale):
-                    yp, dy, n_init = _predict(e, keys, np.exp(theta), inputs, o, loop_options, opt, u, y, w, sens)
+                    yp, dy, n_init = simulate_log(e, inputs, o, keys, np.exp(theta), options=opt,
+                                                  loop_options=loop_options, sensitivities=sens, u=u, y=y, scale=w)
                     errs.append(y - yp)
                     n0 += n_init
                     sens_.append(None if dy is None else dy * np.exp(theta)[:, None, None])
@@ -358,7 +514,8 @@ def identify(experiments: list[Experiment], keys: tuple[str, ...], inputs: tuple
     dof = max(r.size - len(keys) - n_initial, 1)
     s2 = float(r @ r) / dof
     # the scaled normal matrix's condition: keys the logs cannot tell apart make it huge (and the
-    # intervals meaningless); reported in meta, warned about by the CLI
+    # intervals meaningless); reported in meta with the keys of its near-null direction, refused
+    # by the CLI (haa_sym.fit.identify.refuse_unreliable)
     H = J.T @ J
     d = np.sqrt(np.maximum(np.diag(H), 1e-300))
     Hs = H / np.outer(d, d)
@@ -366,10 +523,27 @@ def identify(experiments: list[Experiment], keys: tuple[str, ...], inputs: tuple
     # inverted in the scaled coordinates: pinv(H) itself would drop, as below its rcond, the
     # direction of a key the logs barely see (e.g. a damping run towards 0, where d y / d log p
     # vanishes) and give it a zero-width interval, the opposite of the truth
-    cov = s2 * np.linalg.pinv(Hs) / np.outer(d, d)
-    sd = np.sqrt(np.maximum(np.diag(cov), 0.0))
+    cov_white = s2 * np.linalg.pinv(Hs) / np.outer(d, d)
+    errs = run(theta)[0]
+    # the residuals of each log and output, tested for whiteness; the sandwich covariance from
+    # each log's score series (J_t^T r_t summed over its outputs), so that correlated residuals
+    # widen the intervals as much as they weaken the information (docs/identify.md, "Intervals")
+    # A log's score series is cut at its segments' starts: samples across a gap are not
+    # neighbours, so no lagged product spans one (haa_sym.fit.diagnostics.hac_covariance)
+    residuals = {e.log.name: {x: whiteness(err[:, i], opt.whiteness_lags, opt.whiteness_level)
+                              for i, x in enumerate(o)} for e, o, err in zip(experiments, outs, errs)}
+    scores, row = [], 0
+    for e, y in zip(experiments, Y):
+        rows = y.size
+        v = np.einsum("tok,to->tk", J[row:row + rows].reshape(len(y), y.shape[1], len(keys)),
+                      r[row:row + rows].reshape(len(y), y.shape[1]))
+        scores.append(np.split(v, list(e.log.starts[1:])))
+        row += rows
+    cov_hac, bandwidths = hac_covariance(H, scores)
+    cov = cov_hac if opt.intervals == "hac" else cov_white
     with np.errstate(over="ignore"):       # an undetermined key's interval is (0, inf): said so, not warned
-        ci = np.exp(np.column_stack([theta - Z95 * sd, theta + Z95 * sd]))
+        ci = _interval(theta, cov)
+        ci_white = _interval(theta, cov_white)
 
     def rms(preds):
         return {x: float(np.sqrt(np.mean(np.concatenate([(y[:, o.index(x)] - p[:, o.index(x)]) ** 2
@@ -386,6 +560,10 @@ def identify(experiments: list[Experiment], keys: tuple[str, ...], inputs: tuple
             "Van Loan ZOH derivative)", "iterations": [it1, it2], "converged": converged, "residual_variance": s2,
             "initial_state_values": n_initial,
             "condition_number": condition,
+            "near_null_keys": near_null_keys(Hs, d, keys),
+            "intervals": {"method": INTERVAL_METHODS[opt.intervals], "ci95_white": ci_white.tolist(),
+                          "bandwidth": {e.log.name: b for e, b in zip(experiments, bandwidths)}},
+            "residuals": residuals,
             "logs": {e.log.name: {"sha256": e.log.sha256, "samples": e.log.samples, "configuration": e.configuration}
                      for e in experiments},
             "date": datetime.datetime.now(datetime.timezone.utc).isoformat(timespec="seconds"),
@@ -395,20 +573,11 @@ def identify(experiments: list[Experiment], keys: tuple[str, ...], inputs: tuple
                      outputs, inputs, traces, bode, meta)
 
 
-def simulate_log(exp: Experiment, inputs: tuple[str, ...], outputs: tuple[str, ...] | None = None,
-                 options: FitOptions | None = None, loop_options=None) -> np.ndarray:
-    """The model's outputs (N, ny) for ``exp``'s log with ``exp.params`` as they are (e.g. a fitted
-    file's), simulated as a fit simulates it (its own intervals, segments restarted from
-    estimated states, the first from rest unless ``options.initial_state`` or a window says
-    otherwise): what a validation compares with the measurement."""
-    opt = options or FitOptions()
-    outs = tuple(exp.outputs or outputs)
-    u = np.column_stack([exp.log.signals[i] for i in inputs])
-    y = np.column_stack([exp.log.signals[x] for x in outs])
-    with blas_limits(1):
-        yp, _, _ = _predict(exp, (), np.zeros(0), tuple(inputs), outs, loop_options, opt, u, y,
-                            np.maximum(np.std(y, axis=0), 1e-300), False)
-    return yp
+def _interval(theta: np.ndarray, cov: np.ndarray) -> np.ndarray:
+    """95 % intervals exp(log p +- 1.96 sd) of log-parameters ``theta`` with covariance ``cov``:
+    positive and asymmetric in p."""
+    sd = np.sqrt(np.maximum(np.diag(cov), 0.0))
+    return np.exp(np.column_stack([theta - Z95 * sd, theta + Z95 * sd]))
 
 
 def _levenberg_marquardt(evaluate, theta, opt: FitOptions, keys, tolerance: float | None = None):
