@@ -22,6 +22,7 @@ import numpy as np
 from haa_sym.analysis.sweep import blas_limits
 from haa_sym.errors import ParameterError
 from haa_sym.fit.closed import torque_loop_model
+from haa_sym.fit.friction import friction_entries, is_friction_key, simulate_friction
 from haa_sym.fit.model import open_loop_model, sample, simulate
 from haa_sym.io.budget import check_memory, fit_bytes
 from haa_sym.io.logs import OUTPUTS, Log
@@ -58,9 +59,13 @@ class FitOptions:
         from a start 4-40x off than from one 20 % off, on the same log).
     max_reweights : int
         At most this many noise-weighted passes (default 5).
+    max_substep : float
+        Longest substep (s) of the friction simulation (:mod:`haa_sym.fit.friction`), used when
+        friction is in the model (default 2.5e-4 s; docs/identify.md, "Friction and offsets").
     """
 
     min_periods: float = 3.0
+    max_substep: float = 2.5e-4
     max_iterations: int = 50
     tolerance: float = 1e-10
     max_step: float = 1.0
@@ -99,24 +104,64 @@ class FitResult:
     traces: list = field(default_factory=list, repr=False)
     bode: list = field(default_factory=list, repr=False)
     meta: dict = field(default_factory=dict, repr=False)
+    offsets: dict = field(default_factory=dict)
 
     def report(self) -> dict:
         """The ``fit.json`` of the issue: parameters, rms_error, samples, sampling, meta."""
         return {"parameters": {k: {"value": float(v), "initial": float(v0), "ci95": [float(lo), float(hi)]}
                                for k, v, v0, (lo, hi) in zip(self.keys, self.value, self.initial, self.ci95)},
                 "rms_error": {o: {"initial": self.rms_initial[o], "fitted": self.rms_fitted[o]} for o in self.outputs},
-                "samples": self.samples, "sampling": self.sampling, "meta": self.meta}
+                "samples": self.samples, "sampling": self.sampling, "meta": self.meta,
+                **({"offsets": self.offsets} if self.offsets else {})}
 
 
 def _model(exp: Experiment, keys, values, inputs, outputs, options=None):
-    """The sampled model of ``exp`` with ``keys`` at ``values``."""
+    """The sampled model of ``exp`` with ``keys`` at ``values`` (the linear model: friction keys
+    left out)."""
+    keys, values = _plant_part(keys, values)
     params = exp.params.with_values(**dict(zip(keys, values)))
     if inputs[0] == "torque_ref":
         return torque_loop_model(params, keys, inputs, outputs, options)
     return sample(open_loop_model(params.plant, keys, inputs, outputs), exp.log.Ts)
 
 
-def _check_keys(exps, keys, inputs):
+def _plant_part(keys, values):
+    """The plant keys of ``keys`` and their values (the ``Fc_*`` keys are [limits] entries)."""
+    pairs = [(k, v) for k, v in zip(keys, values) if not is_friction_key(k)]
+    return tuple(k for k, _ in pairs), [v for _, v in pairs]
+
+
+def _friction_of(exp: Experiment, friction: dict | None) -> dict:
+    """The experiment's Coulomb friction by entry (``"m"``, bodies), Nm: the file's [limits],
+    then ``friction`` (start values given to :func:`identify`)."""
+    out = dict(exp.params.limits.friction)
+    out.update({k[3:]: float(v) for k, v in (friction or {}).items()})
+    return out
+
+
+def _friction_run(exp: Experiment, keys, values, inputs, outputs, friction, u, sens, max_substep):
+    """Outputs and sensitivities of ``exp`` with Coulomb friction (:mod:`haa_sym.fit.friction`)
+    on the log's own intervals (``log.dt`` when the log carries them, else its uniform period)."""
+    vals = dict(zip(keys, values))
+    pk, pv = _plant_part(keys, values)
+    params = exp.params.with_values(**dict(zip(pk, pv)))
+    model = open_loop_model(params.plant, pk, inputs, outputs)
+    fmap = _friction_of(exp, friction)
+    fmap.update({k[3:]: vals[k] for k in keys if is_friction_key(k)})
+    fr = friction_entries(params.plant, keys, inputs, model.A.shape[0], fmap, params.limits.friction_velocity)
+    # the Fc keys' rows of dA ... dD are zero (they act in the recursion only)
+    idx = [pk.index(k) if k in pk else None for k in keys]
+
+    def full(d):
+        return np.stack([d[i] if i is not None else np.zeros(d.shape[1:]) for i in idx]) if keys else d
+    model = type(model)(model.A, model.B, model.C, model.D, full(model.dA), full(model.dB), full(model.dC),
+                        full(model.dD))
+    dt = getattr(exp.log, "dt", None)
+    dt = np.full(len(u) - 1, exp.log.Ts) if dt is None else np.asarray(dt, float)
+    return simulate_friction(model, fr, dt, u, sensitivities=sens, max_substep=max_substep)
+
+
+def _check_keys(exps, keys, inputs, friction=None):
     if not keys:
         raise ParameterError("--fit: no keys; allowed: one or more parameter keys, comma separated")
     top = exps[0].params.plant.topology
@@ -124,6 +169,19 @@ def _check_keys(exps, keys, inputs):
     if dup:
         raise ParameterError(f"--fit {','.join(keys)}: {dup} given twice; allowed: each key once")
     for k in keys:
+        if is_friction_key(k):
+            allowed = ["Fc_m"] + [f"Fc_{b}" for b in top.body_names]
+            if k not in allowed:
+                raise ParameterError(f"--fit {k}: not a friction entry of {top.source}; allowed: {allowed}")
+            if inputs[0] == "torque_ref":
+                raise ParameterError(f"--fit {k}: friction with --input torque_ref is not modelled; allowed: "
+                                     "--input voltage or current")
+            for e in exps:
+                v = _friction_of(e, friction).get(k[3:], 0.0)
+                if not v > 0:
+                    raise ParameterError(f"--fit {k}: initial value {v!r}; allowed: a positive start ([limits] "
+                                         f"{k} in the file, or --set {k}=VALUE)")
+            continue
         if k not in top.parameter_keys:
             raise ParameterError(f"--fit {k}: not a plant parameter of {top.source}; allowed: "
                                  f"{list(top.parameter_keys)}")
@@ -155,7 +213,8 @@ def _slow_period(model) -> float:
 
 def identify(experiments: list[Experiment], keys: tuple[str, ...], inputs: tuple[str, ...],
              outputs: tuple[str, ...], options: FitOptions | None = None, loop_options=None,
-             provenance: dict | None = None, figure_data: bool = False) -> FitResult:
+             provenance: dict | None = None, figure_data: bool = False, friction: dict | None = None,
+             offsets: tuple[str, ...] = ()) -> FitResult:
     """Fit ``keys`` to the experiments (jointly) by output error; see the module docstring.
 
     Parameters
@@ -176,6 +235,14 @@ def identify(experiments: list[Experiment], keys: tuple[str, ...], inputs: tuple
     figure_data : bool
         Also compute the Welch H1 estimates, coherences and model responses (``bode``) for a
         figure (Welch and 2 x ny frequency responses: only when a figure is drawn).
+    friction : dict, optional
+        Coulomb friction torques (``Fc_m``, ``Fc_<body>``: Nm) over the file's ``[limits]``:
+        the start of fitted ones, the value of the others. With any friction (fitted or in the
+        file) every log is simulated with it (:mod:`haa_sym.fit.friction`).
+    offsets : tuple of str
+        Outputs with a constant offset per log (a sensor's tare): linear, so eliminated inside
+        every evaluation (the residual and its Jacobian are centred per log and output: the
+        offset's least-squares value is the residual's mean); reported in ``FitResult.offsets``.
 
     Raises
     ------
@@ -190,8 +257,18 @@ def identify(experiments: list[Experiment], keys: tuple[str, ...], inputs: tuple
                              "followed by ,T_dist")
     if not outputs or any(o not in OUTPUTS for o in outputs) or len(set(outputs)) != len(outputs):
         raise ParameterError(f"--output {','.join(outputs)}; allowed: distinct names of {list(OUTPUTS)}")
-    _check_keys(experiments, keys, inputs)
-    theta0 = np.log([getattr(experiments[0].params.plant, k) for k in keys])
+    _check_keys(experiments, keys, inputs, friction)
+    offsets = tuple(offsets)
+    if any(o not in outputs for o in offsets) or len(set(offsets)) != len(offsets):
+        raise ParameterError(f"--offsets {','.join(offsets)}; allowed: distinct names of --output {list(outputs)}")
+    theta0 = np.log([_friction_of(experiments[0], friction)[k[3:]] if is_friction_key(k)
+                     else getattr(experiments[0].params.plant, k) for k in keys])
+    use_friction = any(is_friction_key(k) for k in keys) or any(
+        v > 0 for e in experiments for v in _friction_of(e, friction).values())
+    if use_friction and inputs[0] == "torque_ref":
+        raise ParameterError("[limits] friction with --input torque_ref is not modelled; allowed: --input voltage or "
+                             "current (or a file without friction)")
+    off_cols = [outputs.index(o) for o in offsets]
     with blas_limits(1):          # small matrices, long signals: BLAS threads only contend
         models0 = [_model(e, keys, np.exp(theta0), inputs, outputs, loop_options) for e in experiments]
         for e, m in zip(experiments, models0):
@@ -213,20 +290,35 @@ def identify(experiments: list[Experiment], keys: tuple[str, ...], inputs: tuple
         sigma = [np.maximum(np.std(y, axis=0), 1e-300) for y in Y]
 
         cache: dict = {}
+        offset_of: dict = {}          # the offsets each cached point's simulation found, per log
 
         def run(theta, sens=True):
             """Unweighted errors y - y_model and, with ``sens``, d y_model / d log p, per log; a
             point's simulation is kept so that reweighting and the reports re-run nothing."""
             key = theta.tobytes()
             if key not in cache or (sens and cache[key][1] is None):
-                errs, sens_ = [], []
+                errs, sens_, offs = [], [], {}
                 for e, u, y in zip(experiments, U, Y):
-                    m = _model(e, keys, np.exp(theta), inputs, outputs, loop_options)
-                    yp, dy = simulate(m, u, sens)
+                    if use_friction:
+                        yp, dy = _friction_run(e, keys, np.exp(theta), inputs, outputs, friction, u, sens,
+                                               opt.max_substep)
+                    else:
+                        m = _model(e, keys, np.exp(theta), inputs, outputs, loop_options)
+                        yp, dy = simulate(m, u, sens)
+                    if off_cols:
+                        # variable projection of the offsets: the model plus the mean error
+                        yp = yp.copy()
+                        off = np.mean(y[:, off_cols] - yp[:, off_cols], axis=0)
+                        yp[:, off_cols] += off
+                        offs[e.log.name] = {o: float(v) for o, v in zip(offsets, off)}
+                        if dy is not None:
+                            dy = dy.copy()
+                            dy[:, :, off_cols] -= np.mean(dy[:, :, off_cols], axis=1, keepdims=True)
                     errs.append(y - yp)
                     sens_.append(None if dy is None else dy * np.exp(theta)[:, None, None])
                 cache.clear() if len(cache) > 8 else None
                 cache[key] = (errs, sens_ if sens else None)
+                offset_of[key] = offs
             return cache[key]
 
         def evaluate(theta, sens=True):
@@ -249,6 +341,7 @@ def identify(experiments: list[Experiment], keys: tuple[str, ...], inputs: tuple
             it2 += it
         r, J = evaluate(theta)
         pred = [y - err for y, err in zip(Y, run(theta)[0])]
+        fitted_offsets = offset_of.get(theta.tobytes(), {})
         pred0 = [y - err for y, err in zip(Y, run(theta0, False)[0])]
     dof = max(r.size - len(keys), 1)
     s2 = float(r @ r) / dof
@@ -279,13 +372,17 @@ def identify(experiments: list[Experiment], keys: tuple[str, ...], inputs: tuple
             "time-domain output error, Levenberg-Marquardt on log-parameters, exact Jacobian (CasADi AD, "
             "Van Loan ZOH derivative)", "iterations": [it1, it2], "converged": converged, "residual_variance": s2,
             "condition_number": condition,
+            "friction": ({"start": {f"Fc_{b}": v for b, v in _friction_of(experiments[0], friction).items()},
+                          "friction_velocity": experiments[0].params.limits.friction_velocity,
+                          "max_substep": opt.max_substep, "method": "exact ZOH per interval, friction torque "
+                          "implicit at each substep's end"} if use_friction else None),
             "logs": {e.log.name: {"sha256": e.log.sha256, "samples": e.log.samples, "configuration": e.configuration}
                      for e in experiments},
             "date": datetime.datetime.now(datetime.timezone.utc).isoformat(timespec="seconds"),
             "options": {k: getattr(opt, k) for k in FitOptions.__dataclass_fields__}}
     return FitResult(keys, np.exp(theta), np.exp(theta0), ci, cov, rms(pred0), rms(pred), it1 + it2,
                      int(sum(len(y) for y in Y)), {e.log.name: e.log.sampling for e in experiments},
-                     outputs, inputs, traces, bode, meta)
+                     outputs, inputs, traces, bode, meta, fitted_offsets)
 
 
 def _levenberg_marquardt(evaluate, theta, opt: FitOptions, keys, tolerance: float | None = None):
