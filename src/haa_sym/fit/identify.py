@@ -28,6 +28,7 @@ from haa_sym.errors import ParameterError
 from haa_sym.fit.closed import torque_loop_model
 from haa_sym.fit.diagnostics import (WHITENESS_LAGS, WHITENESS_LEVEL, fit_quality, hac_covariance,
                                      near_null_keys, whiteness)
+from haa_sym.fit.friction import friction_entries, is_friction_key, simulate_friction_stamps
 from haa_sym.fit.model import modal_check, open_loop_model, sample, simulate, simulate_stamps
 from haa_sym.io.budget import check_memory, fit_bytes
 from haa_sym.io.logs import OUTPUTS, Log
@@ -93,9 +94,13 @@ class FitOptions:
         Lags of the Ljung-Box test of each log's and output's residuals (default 20; even).
     whiteness_level : float
         A residual series is called white when the test's p-value is at least this (0.05).
+    max_substep : float
+        Longest substep (s) of the friction simulation (:mod:`haa_sym.fit.friction`), used when
+        friction is in the model (default 2.5e-4 s; docs/identify.md, "Friction and offsets").
     """
 
     min_periods: float = 3.0
+    max_substep: float = 2.5e-4
     max_iterations: int = 50
     tolerance: float = 1e-10
     max_step: float = 1.0
@@ -149,6 +154,7 @@ class FitResult:
     traces: list = field(default_factory=list, repr=False)
     bode: list = field(default_factory=list, repr=False)
     meta: dict = field(default_factory=dict, repr=False)
+    offsets: dict = field(default_factory=dict)
 
     def report(self) -> dict:
         """The ``fit.json`` of the issue: parameters (value, initial, ci95 and, for comparison, the
@@ -161,12 +167,14 @@ class FitResult:
                 "ci95_method": self.meta["intervals"]["method"], "converged": bool(self.meta["converged"]),
                 "residuals": self.meta["residuals"],
                 "rms_error": {o: {"initial": self.rms_initial[o], "fitted": self.rms_fitted[o]} for o in self.outputs},
-                "samples": self.samples, "sampling": self.sampling, "meta": self.meta}
+                "samples": self.samples, "sampling": self.sampling, "meta": self.meta,
+                **({"offsets": self.offsets} if self.offsets else {})}
 
 
 def _model(exp: Experiment, keys, values, inputs, outputs, options=None):
     """The model of ``exp`` with ``keys`` at ``values``: the sampled closed torque loop
     (``torque_ref``), else the continuous open-loop plant behind the file's drive."""
+    keys, values = _plant_part(keys, values)
     params = exp.params.with_values(**dict(zip(keys, values)))
     if inputs[0] == "torque_ref":
         return torque_loop_model(params, keys, inputs, outputs, options)
@@ -188,7 +196,7 @@ def _uniform_path(exp: Experiment, keys, opt) -> bool:
 
 def simulate_log(exp: Experiment, inputs, outputs=None, keys=(), values=(), *, options: "FitOptions | None" = None,
                  loop_options=None, sensitivities: bool = False, u: np.ndarray | None = None,
-                 y: np.ndarray | None = None, scale: np.ndarray | None = None):
+                 y: np.ndarray | None = None, scale: np.ndarray | None = None, friction: dict | None = None):
     """The model's outputs on ``exp``'s log, simulated as a fit simulates it: the one simulation
     path of the fit and of its validation (:func:`validate`).
 
@@ -213,6 +221,9 @@ def simulate_log(exp: Experiment, inputs, outputs=None, keys=(), values=(), *, o
     scale : ndarray, optional
         Per output, the weights of the initial-state estimate (default the outputs' standard
         deviations).
+    friction : dict, optional
+        ``Fc_*`` (Nm) over the file's [limits]; with any friction (or an ``Fc_*`` key) the log is
+        simulated with Coulomb friction (:func:`_friction_run`).
 
     Returns
     -------
@@ -232,6 +243,8 @@ def simulate_log(exp: Experiment, inputs, outputs=None, keys=(), values=(), *, o
         y = np.column_stack([log.signals[x] for x in outs])
     if scale is None:
         scale = np.maximum(np.std(y, axis=0), 1e-300)
+    if inputs[0] != "torque_ref" and _uses_friction(exp, keys, friction):
+        return _friction_run(exp, keys, values, inputs, outs, friction, u, y, scale, opt, sensitivities)
     model = _model(exp, keys, values, inputs, outs, loop_options)
     if not hasattr(model, "A"):                                     # the sampled torque loop
         return simulate(model, u, sensitivities) + (0,)
@@ -243,7 +256,8 @@ def simulate_log(exp: Experiment, inputs, outputs=None, keys=(), values=(), *, o
                            sensitivities=sensitivities)
 
 
-def validate(result: "FitResult", cases, loop_options=None, options: "FitOptions | None" = None) -> tuple[dict, list]:
+def validate(result: "FitResult", cases, loop_options=None, options: "FitOptions | None" = None,
+             friction: dict | None = None) -> tuple[dict, list]:
     """NRMSE and VAF (:func:`haa_sym.fit.diagnostics.fit_quality`) of the fitted model per output
     on each of ``cases``.
 
@@ -260,7 +274,13 @@ def validate(result: "FitResult", cases, loop_options=None, options: "FitOptions
         validation log's window.
     loop_options : LoopOptions, optional
     options : FitOptions, optional
-        The fit's (``initial_state``).
+        The fit's (``initial_state``, ``max_substep``).
+    friction : dict, optional
+        The fit's ``friction`` (:func:`identify`).
+
+    An output with a fitted offset gets its log's offset (a fitted log's part and held-out part);
+    a log that was not fitted gets its own, the mean error over its scored samples (a tare is
+    per log: it says nothing about another log's).
 
     Returns
     -------
@@ -280,9 +300,15 @@ def validate(result: "FitResult", cases, loop_options=None, options: "FitOptions
                                          f"log at the torque loop's Ts = {m.Ts:g} s with --input torque_ref")
             outs = tuple(exp.outputs or result.outputs)
             yp = simulate_log(exp, result.inputs, outs, result.keys, result.value, options=options,
-                              loop_options=loop_options)[0]
+                              loop_options=loop_options, friction=friction)[0]
             y = np.column_stack([exp.log.signals[o] for o in outs])
             sl = slice(start, stop)
+            own = result.offsets.get(exp.log.name)
+            for i, o in enumerate(outs):
+                if own is not None and o in own:
+                    yp[:, i] += own[o]
+                elif own is None and o in result.meta.get("offsets", ()):
+                    yp[:, i] += np.mean(y[sl, i] - yp[sl, i])
             quality[label] = {o: fit_quality(y[sl, i], yp[sl, i]) for i, o in enumerate(outs)}
             traces.append({"name": label, "t": (exp.log.t - exp.log.t[0])[sl], "measured": y[sl],
                            "fitted": yp[sl], "outputs": outs})
@@ -314,7 +340,53 @@ def refuse_unreliable(result: "FitResult", allow_unconverged: bool = False,
                              "write the file marked as not converged")
 
 
-def _check_keys(exps, keys, inputs):
+def _plant_part(keys, values):
+    """The plant keys of ``keys`` and their values (the ``Fc_*`` keys are [limits] entries)."""
+    pairs = [(k, v) for k, v in zip(keys, values) if not is_friction_key(k)]
+    return tuple(k for k, _ in pairs), [v for _, v in pairs]
+
+
+def _friction_of(exp: Experiment, friction: dict | None) -> dict:
+    """The experiment's Coulomb friction by entry (``"m"``, bodies), Nm: the file's [limits],
+    then ``friction`` (start values given to :func:`identify`)."""
+    out = dict(exp.params.limits.friction)
+    out.update({k[3:]: float(v) for k, v in (friction or {}).items()})
+    return out
+
+
+def _uses_friction(exp: Experiment, keys, friction) -> bool:
+    """Whether ``exp`` is simulated with Coulomb friction: a fitted ``Fc_*`` key, or a nonzero one in
+    the file's [limits] or in ``friction``."""
+    return any(is_friction_key(k) for k in keys) or any(v > 0 for v in _friction_of(exp, friction).values())
+
+
+def _friction_run(exp: Experiment, keys, values, inputs, outputs, friction, u, y, scale, opt, sens):
+    """:func:`simulate_log`'s friction path: the plant behind the file's drive (its lag a state
+    appended after the plant's, no friction on it), Coulomb friction on the rotor and the bodies
+    (:mod:`haa_sym.fit.friction`), on the log's own stamps with the delayed command and its
+    segments, as the linear path (:func:`haa_sym.fit.friction.simulate_friction_stamps`)."""
+    vals = dict(zip(keys, values))
+    pk, pv = _plant_part(keys, values)
+    params = exp.params.with_values(**dict(zip(pk, pv)))
+    model = open_loop_model(params.plant, pk, inputs, outputs, params.drive)
+    fmap = _friction_of(exp, friction)
+    fmap.update({k[3:]: vals[k] for k in keys if is_friction_key(k)})
+    fr = friction_entries(params.plant, keys, inputs, model.A.shape[0], fmap, params.limits.friction_velocity)
+    # the Fc keys' rows of dA ... dD are zero (they act in the recursion only)
+    idx = [pk.index(k) if k in pk else None for k in keys]
+
+    def full(d):
+        return np.stack([d[i] if i is not None else np.zeros(d.shape[1:]) for i in idx]) if keys else d
+    model = type(model)(model.A, model.B, model.C, model.D, full(model.dA), full(model.dB), full(model.dC),
+                        full(model.dD))
+    log = exp.log
+    return simulate_friction_stamps(model, fr, log.t, u, delay=params.drive.delay_drive,
+                                    delay_key=keys.index("delay_drive") if "delay_drive" in keys else None,
+                                    starts=log.starts, estimate=_estimated(exp, opt), y=y, weights=scale,
+                                    sensitivities=sens, max_substep=opt.max_substep)
+
+
+def _check_keys(exps, keys, inputs, friction=None):
     if not keys:
         raise ParameterError("--fit: no keys; allowed: one or more parameter keys, comma separated")
     top = exps[0].params.plant.topology
@@ -324,6 +396,19 @@ def _check_keys(exps, keys, inputs):
     for k in keys:
         if k in DRIVE_KEYS:
             _check_drive_key(exps, k, inputs)
+            continue
+        if is_friction_key(k):
+            allowed = ["Fc_m"] + [f"Fc_{b}" for b in top.body_names]
+            if k not in allowed:
+                raise ParameterError(f"--fit {k}: not a friction entry of {top.source}; allowed: {allowed}")
+            if inputs[0] == "torque_ref":
+                raise ParameterError(f"--fit {k}: friction with --input torque_ref is not modelled; allowed: "
+                                     "--input voltage or current")
+            for e in exps:
+                v = _friction_of(e, friction).get(k[3:], 0.0)
+                if not v > 0:
+                    raise ParameterError(f"--fit {k}: initial value {v!r}; allowed: a positive start ([limits] "
+                                         f"{k} in the file, or --set {k}=VALUE)")
             continue
         if k not in top.parameter_keys:
             raise ParameterError(f"--fit {k}: not a plant parameter of {top.source}; allowed: "
@@ -381,7 +466,8 @@ def _slow_period(model) -> float:
 
 def identify(experiments: list[Experiment], keys: tuple[str, ...], inputs: tuple[str, ...],
              outputs: tuple[str, ...], options: FitOptions | None = None, loop_options=None,
-             provenance: dict | None = None, figure_data: bool = False) -> FitResult:
+             provenance: dict | None = None, figure_data: bool = False, friction: dict | None = None,
+             offsets: tuple[str, ...] = ()) -> FitResult:
     """Fit ``keys`` to the experiments (jointly) by output error; see the module docstring.
 
     Parameters
@@ -402,6 +488,14 @@ def identify(experiments: list[Experiment], keys: tuple[str, ...], inputs: tuple
     figure_data : bool
         Also compute the Welch H1 estimates, coherences and model responses (``bode``) for a
         figure (Welch and 2 x ny frequency responses: only when a figure is drawn).
+    friction : dict, optional
+        Coulomb friction torques (``Fc_m``, ``Fc_<body>``: Nm) over the file's ``[limits]``:
+        the start of fitted ones, the value of the others. With any friction (fitted or in the
+        file) every log is simulated with it (:mod:`haa_sym.fit.friction`).
+    offsets : tuple of str
+        Outputs with a constant offset per log (a sensor's tare): linear, so eliminated inside
+        every evaluation (the residual and its Jacobian are centred per log and output: the
+        offset's least-squares value is the residual's mean); reported in ``FitResult.offsets``.
 
     Raises
     ------
@@ -416,7 +510,7 @@ def identify(experiments: list[Experiment], keys: tuple[str, ...], inputs: tuple
                              "followed by ,T_dist")
     if not outputs or any(o not in OUTPUTS for o in outputs) or len(set(outputs)) != len(outputs):
         raise ParameterError(f"--output {','.join(outputs)}; allowed: distinct names of {list(OUTPUTS)}")
-    _check_keys(experiments, keys, inputs)
+    _check_keys(experiments, keys, inputs, friction)
     if opt.initial_state not in INITIAL_STATES:
         raise ParameterError(f"--initial-state {opt.initial_state!r}; allowed: one of {list(INITIAL_STATES)}")
     outs = [tuple(e.outputs or outputs) for e in experiments]
@@ -424,9 +518,18 @@ def identify(experiments: list[Experiment], keys: tuple[str, ...], inputs: tuple
         if any(x not in OUTPUTS for x in o) or len(set(o)) != len(o):
             raise ParameterError(f"--output {','.join(o)}; allowed: distinct names of {list(OUTPUTS)}")
     all_outputs = tuple(dict.fromkeys(x for o in outs for x in o))
-    values0 = [getattr(experiments[0].params.drive if k in DRIVE_KEYS else experiments[0].params.plant, k)
-               for k in keys]
+    offsets = tuple(offsets)
+    if any(o not in all_outputs for o in offsets) or len(set(offsets)) != len(offsets):
+        raise ParameterError(f"--offsets {','.join(offsets)}; allowed: distinct names of --output "
+                             f"{list(all_outputs)}")
+    e0 = experiments[0]
+    values0 = [_friction_of(e0, friction)[k[3:]] if is_friction_key(k)
+               else getattr(e0.params.drive if k in DRIVE_KEYS else e0.params.plant, k) for k in keys]
     theta0 = np.log(values0)
+    use_friction = any(_uses_friction(e, keys, friction) for e in experiments)
+    if use_friction and inputs[0] == "torque_ref":
+        raise ParameterError("[limits] friction with --input torque_ref is not modelled; allowed: --input voltage or "
+                             "current (or a file without friction)")
     with blas_limits(1):          # small matrices, long signals: BLAS threads only contend
         models0 = [_model(e, keys, np.exp(theta0), inputs, o, loop_options) for e, o in zip(experiments, outs)]
         for e, o, m in zip(experiments, outs, models0):
@@ -470,21 +573,35 @@ def identify(experiments: list[Experiment], keys: tuple[str, ...], inputs: tuple
         scale = list(sigma)
 
         cache: dict = {}
+        offset_of: dict = {}          # the offsets each cached point's simulation found, per log
 
         def run(theta, sens=True):
             """Unweighted errors y - y_model and, with ``sens``, d y_model / d log p, per log; a
             point's simulation is kept so that reweighting and the reports re-run nothing."""
             key = theta.tobytes()
             if key not in cache or (sens and cache[key][1] is None):
-                errs, sens_, n0 = [], [], 0
+                errs, sens_, n0, offs = [], [], 0, {}
                 for e, o, u, y, w in zip(experiments, outs, U, Y, scale):
                     yp, dy, n_init = simulate_log(e, inputs, o, keys, np.exp(theta), options=opt,
-                                                  loop_options=loop_options, sensitivities=sens, u=u, y=y, scale=w)
+                                                  loop_options=loop_options, sensitivities=sens, u=u, y=y, scale=w,
+                                                  friction=friction)
+                    off_cols = [o.index(x) for x in offsets if x in o]
+                    if off_cols:
+                        # variable projection of the offsets: the model plus the mean error (after the
+                        # initial states' projection, not jointly with it)
+                        yp = yp.copy()
+                        off = np.mean(y[:, off_cols] - yp[:, off_cols], axis=0)
+                        yp[:, off_cols] += off
+                        offs[e.log.name] = {o[c]: float(v) for c, v in zip(off_cols, off)}
+                        if dy is not None:
+                            dy = dy.copy()
+                            dy[:, :, off_cols] -= np.mean(dy[:, :, off_cols], axis=1, keepdims=True)
                     errs.append(y - yp)
                     n0 += n_init
                     sens_.append(None if dy is None else dy * np.exp(theta)[:, None, None])
                 cache.clear() if len(cache) > 8 else None
-                cache[key] = (errs, sens_ if sens else None, n0)
+                cache[key] = (errs, sens_ if sens else None, n0 + sum(len(v) for v in offs.values()))
+                offset_of[key] = offs
             return cache[key]
 
         def evaluate(theta, sens=True):
@@ -508,10 +625,12 @@ def identify(experiments: list[Experiment], keys: tuple[str, ...], inputs: tuple
         r, J = evaluate(theta)
         n_initial = run(theta)[2]
         pred = [y - err for y, err in zip(Y, run(theta)[0])]
+        fitted_offsets = offset_of.get(theta.tobytes(), {})
+        n_initial -= sum(len(v) for v in fitted_offsets.values())
         pred0 = [y - err for y, err in zip(Y, run(theta0, False)[0])]
     outputs = all_outputs
     # the estimated initial states took their degrees of freedom too
-    dof = max(r.size - len(keys) - n_initial, 1)
+    dof = max(r.size - len(keys) - n_initial - sum(len(v) for v in fitted_offsets.values()), 1)
     s2 = float(r @ r) / dof
     # the scaled normal matrix's condition: keys the logs cannot tell apart make it huge (and the
     # intervals meaningless); reported in meta with the keys of its near-null direction, refused
@@ -564,13 +683,20 @@ def identify(experiments: list[Experiment], keys: tuple[str, ...], inputs: tuple
             "intervals": {"method": INTERVAL_METHODS[opt.intervals], "ci95_white": ci_white.tolist(),
                           "bandwidth": {e.log.name: b for e, b in zip(experiments, bandwidths)}},
             "residuals": residuals,
+            "friction": ({"start": {f"Fc_{b}": v for b, v in _friction_of(experiments[0], friction).items()},
+                          "friction_velocity": experiments[0].params.limits.friction_velocity,
+                          "max_substep": opt.max_substep, "method": "exact ZOH per substep of the log's own "
+                          "intervals (the delayed command switching inside them, segments from estimated states), "
+                          "friction torque implicit at each substep's end; d/d delay_drive a central difference"}
+                         if use_friction else None),
+            "offsets": list(offsets),
             "logs": {e.log.name: {"sha256": e.log.sha256, "samples": e.log.samples, "configuration": e.configuration}
                      for e in experiments},
             "date": datetime.datetime.now(datetime.timezone.utc).isoformat(timespec="seconds"),
             "options": {k: getattr(opt, k) for k in FitOptions.__dataclass_fields__}}
     return FitResult(keys, np.exp(theta), np.exp(theta0), ci, cov, rms(pred0), rms(pred), it1 + it2,
                      int(sum(len(y) for y in Y)), {e.log.name: e.log.sampling for e in experiments},
-                     outputs, inputs, traces, bode, meta)
+                     outputs, inputs, traces, bode, meta, fitted_offsets)
 
 
 def _interval(theta: np.ndarray, cov: np.ndarray) -> np.ndarray:
