@@ -21,11 +21,12 @@ from haa_sym.design.tune import NOMINAL
 from haa_sym.fit.identify import (INITIAL_STATES, INPUT_MODES, Experiment, FitOptions, identify, refuse_unreliable,
                                   validate)
 from haa_sym.io.formats import save_json
-from haa_sym.io.logs import GAP_PERIODS, MAX_ANGLE, OUTPUTS, parse_window, read_log
+from haa_sym.io.logs import GAP_PERIODS, MAX_ANGLE, OUTPUT_UNITS, OUTPUTS, parse_window, read_log
 from haa_sym.model.drive import DRIVE_KEYS
 from haa_sym.io.outputs import Transaction, check_file
 from haa_sym.loop import ClosedLoop
-from haa_sym.model.params import MAX_FILE_BYTES, actuator_path, load_params
+from haa_sym.model.limits import FRICTION_SET_KEYS, with_friction_sets
+from haa_sym.model.params import MAX_FILE_BYTES, actuator_path, load_params, parse_set
 
 from haa_sym.cli.common import PARAMS_HELP, _check_out, _parse_options, _params, _plots
 
@@ -50,7 +51,12 @@ def register(sub) -> dict:
                    help="configuration of the file the logs were taken in: once for every log, or once per --log "
                         "in the same order")
     p.add_argument("--set", action="append", default=[], metavar="KEY=VALUE",
-                   help="override a key of the file (SI units) before fitting: the starting values")
+                   help="override a key of the file (SI units) before fitting: the starting values; also the "
+                        "[limits] friction: Fc_m, Fc_<body> (Nm; a fitted Fc key needs a start > 0) and "
+                        "friction_velocity (rad/s)")
+    p.add_argument("--offsets", metavar="NAME[,NAME...]",
+                   help="outputs with a constant offset per log (a sensor's tare), fitted with the keys "
+                        "(eliminated by variable projection) and reported; default none")
     p.add_argument("--option", action="append", default=[], metavar="KEY=VALUE",
                    help="loop option (haa_sym.LoopOptions) of the torque loop, --input torque_ref only")
     p.add_argument("--window", action="append", default=[], metavar="START:STOP",
@@ -85,6 +91,12 @@ def register(sub) -> dict:
     p.add_argument("--report", metavar="fit.json", help="the fit as JSON (parameters, rms_error, samples, sampling, meta)")
     p.add_argument("--plot", metavar="fit.png", help="measured against predicted: time traces and Bode (H1, coherence)")
     return {"identify": run}
+
+
+def _is_limit_set(item: str) -> bool:
+    """Whether a --set item names a [limits] friction key (Fc_*, friction_velocity)."""
+    key = item.partition("=")[0].strip()
+    return key.startswith("Fc_") or key in FRICTION_SET_KEYS
 
 
 def _split(text: str, flag: str) -> tuple[str, ...]:
@@ -194,6 +206,9 @@ def run(args) -> int:
                              "allowed: with --input torque_ref")
     if args.holdout is not None and not 0 < args.holdout < 1:
         raise ParameterError(f"--holdout {args.holdout!r}; allowed: a fraction 0 < F < 1 of each log's end")
+    offsets = _split(args.offsets, "--offsets") if args.offsets is not None else ()
+    if any(o not in outputs for o in offsets) or len(set(offsets)) != len(offsets):
+        raise ParameterError(f"--offsets {args.offsets}; allowed: distinct names of --output {list(outputs)}")
     _refuse_repeated_logs(args.log + args.validate, ["--log"] * len(args.log) + ["--validate"] * len(args.validate))
     path = actuator_path(args.params, "--params")
     file_params = load_params(path)
@@ -211,11 +226,18 @@ def run(args) -> int:
     # a configuration's log (--configuration nominal --configuration heavy)
     per_log = [None if c == NOMINAL else c for c in per_log]
     loop_options = _parse_options(args.option) if inputs[0] == "torque_ref" else None
+    # --set's [limits] friction keys act on the limits; the rest are parameters (_params)
+    limit_sets = parse_set([x for x in args.set if _is_limit_set(x)])
+    args.set = [x for x in args.set if not _is_limit_set(x)]
+    bodies = file_params.plant.topology.body_names
+
+    def with_limits(params):
+        return replace(params, limits=with_friction_sets(params.limits, limit_sets, bodies)) if limit_sets else params
     experiments, fitted_logs = [], []
     for log_path, conf, outs, window in zip(args.log, per_log, per_output, windows):
         base = file_params.configuration(conf) if conf else file_params
         args.configuration = conf                     # _params applies --set over this configuration
-        params = _params(args, base)
+        params = with_limits(_params(args, base))
         log = read_log(log_path, inputs, outs, window=window, gap=args.gap, max_angle=args.max_angle)
         fitted_logs.append(log)
         if args.holdout is not None:
@@ -223,8 +245,8 @@ def run(args) -> int:
         experiments.append(Experiment(log, params, conf, outs))
     # the --validate logs' parameters: the configuration given once, else the file's own
     args.configuration = per_log[0] if len(set(per_log)) == 1 else None
-    validate_params = _params(args, file_params.configuration(args.configuration) if args.configuration
-                              else file_params)
+    validate_params = with_limits(_params(args, file_params.configuration(args.configuration) if args.configuration
+                                          else file_params))
     # the inputs are known now: an output that is one of them (--out the log, a link to it) is
     # refused before the fit's seconds, not only when the outputs are committed
     for target, flag in ((args.out, "--out"), (args.report, "--report"), (args.plot, "--plot")):
@@ -234,7 +256,8 @@ def run(args) -> int:
     loop = ClosedLoop(experiments[0].params, loop_options, basis=False)
     options = FitOptions(min_periods=args.min_periods, initial_state=args.initial_state)
     result = identify(experiments, keys, inputs, outputs, options, loop_options,
-                      provenance={**loop.provenance(), "params_file": str(path)}, figure_data=plot is not None)
+                      provenance={**loop.provenance(), "params_file": str(path)}, figure_data=plot is not None,
+                      offsets=offsets)
     # keys the logs cannot tell apart, a fit stopped at its iteration limit: one line, nothing written
     refuse_unreliable(result, allow_unconverged=args.allow_unconverged)
     for k, v, (lo, hi) in zip(result.keys, result.value, result.ci95):
@@ -273,6 +296,8 @@ def run(args) -> int:
               file=sys.stderr)
     for k, v, v0, (lo, hi) in zip(result.keys, result.value, result.initial, result.ci95):
         print(f"{k} = {v:.6g} (ci95 {lo:.6g} .. {hi:.6g}; initial {v0:.6g})")
+    for log_name, off in result.offsets.items():
+        print(f"{log_name}: offsets " + ", ".join(f"{o} {v:.6g} {OUTPUT_UNITS[o]}" for o, v in off.items()))
     print(f"ci95: {result.meta['intervals']['method'].split(':')[0]}; residuals: "
           + "; ".join(f"{log} " + ", ".join(f"{o} lag-1 {w['lag1']:.2f} {'white' if w['white'] else 'NOT white'} "
                                             f"(Ljung-Box p {w['p_value']:.2g})" for o, w in res.items())

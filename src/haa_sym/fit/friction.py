@@ -227,8 +227,10 @@ def _interval_matrices(model: PlantModel, W, dW, h: np.ndarray, sens: bool):
         E = np.exp(a)
     psi = h[:, None] * _phi1(a)
     BWt = Vi @ BW                                                   # (n, mw)
-    Phi = np.einsum("ij,kj,jl->kil", V, E, Vi).real
-    G = np.einsum("ij,kj,jl->kil", V, psi, BWt).real
+    VE = V[None] * E[:, None, :]                                    # V diag(e^a): (K, n, n)
+    Vpsi = V[None] * psi[:, None, :]
+    Phi = (VE @ Vi).real
+    G = (Vpsi @ BWt).real
     if not (np.all(np.isfinite(Phi)) and np.all(np.isfinite(G))):
         raise ParameterError(f"friction simulation: the plant overflows over an interval of {h.max():.3g} s "
                              "(an unstable mode); allowed: shorter intervals or a stable plant")
@@ -241,10 +243,13 @@ def _interval_matrices(model: PlantModel, W, dW, h: np.ndarray, sens: bool):
     dG = np.empty((p,) + G.shape)
     dBW = np.concatenate([model.dB, dW], axis=2)                    # (p, n, mw)
     for j in range(p):
+        if not (np.any(model.dA[j]) or np.any(dBW[j])):
+            # a key acting elsewhere (a friction torque, the delay, an initial state's direction)
+            dPhi[j], dG[j] = 0.0, 0.0
+            continue
         At = Vi @ model.dA[j] @ V
-        dPhi[j] = np.einsum("ij,kjl,lm->kim", V, F * At, Vi).real
-        dG[j] = (np.einsum("ij,kjl,lm->kim", V, Psi * At, BWt)
-                 + np.einsum("ij,kj,jl->kil", V, psi, Vi @ dBW[j])).real
+        dPhi[j] = (V @ (F * At) @ Vi).real
+        dG[j] = (V @ (Psi * At) @ BWt + Vpsi @ (Vi @ dBW[j])).real
     return Phi, G, dPhi, dG
 
 
@@ -339,7 +344,8 @@ def _run_python(nsub, Phi, G, dPhi, dG, u, fr: Friction, x0, s0, sens):
 
 
 def simulate_friction(model: PlantModel, fr: Friction, dt, u, x0=None, sensitivities: bool = True,
-                      max_substep: float = DEFAULT_MAX_SUBSTEP, backend: str = "auto", substeps=None, s0=None):
+                      max_substep: float = DEFAULT_MAX_SUBSTEP, backend: str = "auto", substeps=None, s0=None,
+                      matrices=None):
     """Outputs and their sensitivities of the model with Coulomb friction, on a log's intervals.
 
     Parameters
@@ -365,6 +371,8 @@ def simulate_friction(model: PlantModel, fr: Friction, dt, u, x0=None, sensitivi
         Substeps per interval (default ceil(dt / max_substep)).
     s0 : array (p, n), optional
         The initial state's derivatives along the keys (default zero: x0 does not depend on them).
+    matrices : tuple, optional
+        (Phi, G, dPhi, dG) of these substeps (:func:`_interval_matrices`), when the caller has them.
 
     Returns
     -------
@@ -379,7 +387,7 @@ def simulate_friction(model: PlantModel, fr: Friction, dt, u, x0=None, sensitivi
                              "positive intervals")
     nsub = (np.maximum(1, np.ceil(dt / max_substep - 1e-9)) if substeps is None else substeps).astype(np.int32)
     h = dt / nsub
-    Phi, G, dPhi, dG = _interval_matrices(model, fr.W, fr.dW, h, sensitivities)
+    Phi, G, dPhi, dG = matrices or _interval_matrices(model, fr.W, fr.dW, h, sensitivities)
     x0 = np.zeros(n) if x0 is None else np.asarray(x0, float)
     p = model.dA.shape[0]
     s0 = np.zeros((p, n)) if s0 is None else np.ascontiguousarray(s0, float)
@@ -399,20 +407,19 @@ def simulate_friction(model: PlantModel, fr: Friction, dt, u, x0=None, sensitivi
 
 #: Gauss-Newton steps of a segment's estimated initial state at most (friction makes the outputs
 #: nonlinear in it; from rest the first step is the linear estimate, the next ones correct the
-#: stick/slip pattern it changes), and the relative size of a step that ends them
-MAX_STATE_STEPS = 6
-STATE_STEP_RTOL = 1e-8
+#: stick/slip pattern it changes), and the size of a step that ends them, relative to the
+#: segment's weighted outputs (1e-6: far below the 1 % noise, so the fit's cost does not see it)
+MAX_STATE_STEPS = 8
+STATE_STEP_RTOL = 1e-6
 
 
 def _stamp_grid(t: np.ndarray, u: np.ndarray, delay: float, starts, max_substep: float):
     """The simulation grid of a log's own stamps ``t`` with its first (command) input column delayed
     by ``delay`` (s): the stamps and the delayed command's switches t_j + delay inside a segment's
     span, the inputs on each grid interval (the command as the motor gets it, held from before a
-    segment's start into it), and the substeps of each grid interval. The same grid as
-    :func:`haa_sym.fit.model.simulate_stamps`' (its rule: a switch within 1e-9 median periods of
-    a stamp is the stamp). The substeps come from the stamp interval a grid interval lies in, so
-    they do not change when a switch moves inside it (the delay's derivative is a central
-    difference, :func:`simulate_friction_stamps`).
+    segment's start into it), and the substeps of each grid interval (ceil(length / max_substep)).
+    The same grid as :func:`haa_sym.fit.model.simulate_stamps`' (its rule: a switch within 1e-9
+    median periods of a stamp is the stamp).
 
     Returns
     -------
@@ -436,47 +443,33 @@ def _stamp_grid(t: np.ndarray, u: np.ndarray, delay: float, starts, max_substep:
     cmd_of = np.clip(np.searchsorted(t, grid - delay + tol, side="right") - 1, 0, N - 1)
     ug = u[stamp_of].copy()
     ug[:, 0] = u[cmd_of, 0]
-    dts = np.diff(t)
-    span = dts[np.minimum(stamp_of[:-1], N - 2)]
-    nsub = np.maximum(1, np.ceil(span / max_substep - 1e-9)).astype(np.int32)
+    nsub = np.maximum(1, np.ceil(np.diff(grid) / max_substep - 1e-9)).astype(np.int32)
     return grid, ug, samp, nsub
-
-
-def _zero_keys(model: PlantModel, fr: Friction, p: int):
-    """``model`` and ``fr`` with ``p`` keys of zero derivatives (the initial state's directions)."""
-    n, m = model.B.shape
-    ny = model.C.shape[0]
-    z = PlantModel(model.A, model.B, model.C, model.D, np.zeros((p, n, n)), np.zeros((p, n, m)),
-                   np.zeros((p, ny, n)), np.zeros((p, ny, m)))
-    return z, replace(fr, dW=np.zeros((p,) + fr.W.shape), key_index=np.full(len(fr.Fc), -1, np.int32))
-
-
-def _with_state_keys(model: PlantModel, fr: Friction):
-    """``model`` and ``fr`` with n more keys, the initial state's (zero derivatives)."""
-    n = model.A.shape[0]
-    z, _ = _zero_keys(model, fr, n)
-    m2 = PlantModel(model.A, model.B, model.C, model.D, *(np.concatenate([d, dz]) for d, dz in
-                                                          zip((model.dA, model.dB, model.dC, model.dD),
-                                                              (z.dA, z.dB, z.dC, z.dD))))
-    return m2, replace(fr, dW=np.concatenate([fr.dW, np.zeros((n,) + fr.W.shape)]))
 
 
 def simulate_friction_stamps(model: PlantModel, fr: Friction, t: np.ndarray, u: np.ndarray, *, delay: float = 0.0,
                              delay_key: int | None = None, starts=(0,), estimate=(False,), y=None, weights=None,
-                             sensitivities: bool = True, max_substep: float = DEFAULT_MAX_SUBSTEP):
+                             sensitivities: bool = True, max_substep: float = DEFAULT_MAX_SUBSTEP,
+                             state_cache: dict | None = None):
     """The friction simulation on a log as measured: what :func:`haa_sym.fit.model.simulate_stamps`
     is for the linear model, with the same arguments and returns.
 
     The log's own stamps ``t`` with the command delayed by ``delay`` and switching inside the
     intervals (:func:`_stamp_grid`); every segment (``starts``) simulated on its own, from rest or,
-    where ``estimate``, from an initial state estimated by Gauss-Newton on the weighted output
-    error (at most :data:`MAX_STATE_STEPS` steps; its sensitivities from the same recursion, seeded
-    with the identity); the keys' sensitivities at that state, projected onto the complement of its
-    directions (variable projection, Kaufman's Jacobian, as the linear path). ``delay_key``: the
-    delay's derivative by a central difference of step 1e-4 ``delay`` (at least 1e-7 s) at the
-    estimated states held fixed: exact to the difference's error, since the substeps do not change
-    with the delay (:func:`_stamp_grid`); the recursion's own derivative would need the command's
-    switch inside a substep.
+    where ``estimate``, from an initial state estimated on the weighted output error by a chord
+    (quasi-Newton) iteration whose matrix is the linear part's free response (at most
+    :data:`MAX_STATE_STEPS` simulations without sensitivities; a step that raises the cost is
+    quartered); the keys' sensitivities at that state, projected onto the complement of the free
+    response's directions (variable projection, Kaufman's Jacobian, as the linear path: exact
+    without friction, the linear part's directions with it). ``delay_key``: the
+    delay's derivative by a forward difference of step 1e-4 ``delay`` (at least 1e-7 s) at the
+    estimated states held fixed, on the same substeps (a count that changed would change the
+    scheme's error by more than the difference measures); the recursion's own derivative would
+    need the command's switch inside a substep.
+
+    ``state_cache``: a dict kept by the caller between calls on one log: each estimated state
+    starts from the last one found (the fit's next point is near; the iteration ends at the same
+    minimum, in fewer steps).
 
     Returns
     -------
@@ -489,15 +482,19 @@ def simulate_friction_stamps(model: PlantModel, fr: Friction, t: np.ndarray, u: 
     ends = np.append(starts[1:], N)
     w = np.ones(ny) if weights is None else np.asarray(weights, float)
 
-    def segments(d):
+    def segments(d, nsub_of=None):
         grid, ug, samp, nsub = _stamp_grid(t, u, d, starts, max_substep)
+        if nsub_of is not None and nsub_of.shape == nsub.shape:
+            # the delay's difference: the same substeps as the grid it perturbs (a count that moved
+            # by one would change the scheme's error by more than the difference measures)
+            nsub = nsub_of
         out = []
         for s, e in zip(starts, ends):
             a, b = samp[s], samp[e - 1]
             out.append((np.diff(grid[a:b + 1]), ug[a:b + 1], nsub[a:b], samp[s:e] - a))
-        return out
+        return out, nsub
 
-    def run(seg, x0, mdl, frc, sens, s0=None):
+    def run(seg, x0, mdl, frc, sens, s0=None, mats=None):
         dt, ug, nsub, at = seg
         if dt.size == 0:                                    # a one-sample segment
             X = np.asarray(x0, float)[None]
@@ -507,56 +504,64 @@ def simulate_friction_stamps(model: PlantModel, fr: Friction, t: np.ndarray, u: 
             S = (np.zeros((mdl.dA.shape[0], n)) if s0 is None else s0)[:, None]
             return yy, S @ mdl.C.T + X @ mdl.dC.transpose(0, 2, 1) + ug @ mdl.dD.transpose(0, 2, 1)
         yy, dd = simulate_friction(mdl, frc, dt, ug, x0=x0, sensitivities=sens, max_substep=max_substep,
-                                   substeps=nsub, s0=s0)
+                                   substeps=nsub, s0=s0, matrices=mats)
         return yy[at], (None if dd is None else dd[:, at])
 
-    segs = segments(delay)
-    zmodel, zfr = _zero_keys(model, fr, n)
-    x0s, ys, dys, bases, rank = [], np.empty((N, ny)), (np.empty((p, N, ny)) if sensitivities else None), {}, 0
-    full_model, full_fr = _with_state_keys(model, fr) if sensitivities else (None, None)
+    segs, nsub0 = segments(delay)
+    lam, V = np.linalg.eig(model.A)
+    Vi = np.linalg.inv(V)
+    CV = model.C @ V
+    x0s, ys, dys, bases = [], np.empty((N, ny)), (np.empty((p, N, ny)) if sensitivities else None), {}
+    rank = 0
     for g, (seg, s, e) in enumerate(zip(segs, starts, ends)):
+        # the substeps' matrices once per segment: every run below shares them
+        mats = _interval_matrices(model, fr.W, fr.dW, seg[0] / seg[2], sensitivities) if seg[0].size else None
         x0 = np.zeros(n)
+        if estimate[g] and state_cache is not None and state_cache.get(g) is not None:
+            x0 = state_cache[g].copy()
         if estimate[g]:
-            yw = y[s:e] / w
-            for _ in range(MAX_STATE_STEPS):
-                yg, Psi = run(seg, x0, zmodel, zfr, True, np.eye(n))
-                Pw = (Psi / w).transpose(1, 2, 0).reshape(-1, n)
-                step = np.linalg.lstsq(Pw, (yw - yg / w).ravel(), rcond=1e-9)[0]
-                x0 = x0 + step
-                if np.linalg.norm(Pw @ step) <= STATE_STEP_RTOL * max(np.linalg.norm(yw), 1e-300):
-                    break
-        x0s.append(x0)
-        if not sensitivities:
-            ys[s:e] = run(seg, x0, model, fr, False)[0]
-            continue
-        s0 = np.zeros((p + n, n))
-        s0[p:] = np.eye(n)
-        yg, dd = run(seg, x0, full_model, full_fr, True, s0)
-        ys[s:e], dys[:, s:e] = yg, dd[:p]
-        if estimate[g]:
-            Pw = (dd[p:] / w).transpose(1, 2, 0).reshape(-1, n)
+            # the state's directions: the linear part's free response C e^{A (t_k - t_s)} at the
+            # segment's stamps (exact without friction; with it, the chord of a quasi-Newton
+            # iteration, and Kaufman's basis)
+            tk = t[s:e] - t[s]
+            Psi = np.einsum("oa,ka,as->kos", CV, np.exp(np.outer(tk, lam)), Vi).real        # (len, ny, n)
+            Pw = (Psi / w[None, :, None]).reshape(-1, n)
             U, sv, _ = np.linalg.svd(Pw, full_matrices=False)
             r = int(np.sum(sv > 1e-9 * max(sv.max(), 1e-300)))
             bases[g] = U[:, :r]
-    rank = 0
-    for g in range(len(starts)):
-        if estimate[g]:
-            if g not in bases:
-                Psi = run(segs[g], x0s[g], zmodel, zfr, True, np.eye(n))[1]
-                sv = np.linalg.svd((Psi / w).transpose(1, 2, 0).reshape(-1, n), compute_uv=False)
-                rank += int(np.sum(sv > 1e-9 * max(sv.max(), 1e-300)))
-            else:
-                rank += bases[g].shape[1]
+            rank += r
+            yw = y[s:e] / w
+            best = None                 # (cost, x0) of the best state simulated
+            for _ in range(MAX_STATE_STEPS):
+                res = (yw - run(seg, x0, model, fr, False, None, mats)[0] / w).ravel()
+                cost = float(res @ res)
+                if best is not None and not cost < best[0]:
+                    # the outputs are nonlinear in the state (friction): a step that raised the
+                    # cost is quartered from the best state instead
+                    x0 = best[1] + (x0 - best[1]) / 4
+                    continue
+                best = (cost, x0)
+                step = np.linalg.lstsq(Pw, res, rcond=1e-9)[0]
+                if np.linalg.norm(Pw @ step) <= STATE_STEP_RTOL * max(np.linalg.norm(yw), 1e-300):
+                    break
+                x0 = x0 + step
+            x0 = best[1]
+        x0s.append(x0)
+        if estimate[g] and state_cache is not None:
+            state_cache[g] = x0
+        if sensitivities:
+            ys[s:e], dys[:, s:e] = run(seg, x0, model, fr, True, None, mats)
+        else:
+            ys[s:e] = run(seg, x0, model, fr, False, None, mats)[0]
     if not sensitivities:
         return ys, None, rank
     if delay_key is not None:
+        # a forward difference: its error, about h / delay = 1e-4 of the derivative, is far inside
+        # what the Jacobian needs (Levenberg-Marquardt's steps and the intervals' 1e-2)
         h = max(1e-4 * delay, 1e-7)
-        lo = max(delay - h, 0.0)
-        yd = []
-        for d in (lo, delay + h):
-            sg = segments(d)
-            yd.append(np.concatenate([run(sg[g], x0s[g], model, fr, False)[0] for g in range(len(starts))]))
-        dys[delay_key] = (yd[1] - yd[0]) / (delay + h - lo)
+        sg = segments(delay + h, nsub0)[0]
+        yh = np.concatenate([run(sg[g], x0s[g], model, fr, False)[0] for g in range(len(starts))])
+        dys[delay_key] = (yh - ys) / h
     for g, U in bases.items():                               # Kaufman: the initial state's directions out
         s, e = starts[g], ends[g]
         D = (dys[:, s:e] / w).reshape(p, -1)

@@ -16,6 +16,7 @@ from matplotlib.patches import Patch  # noqa: E402
 
 from haa_sym.errors import ParameterError  # noqa: E402
 from haa_sym.io.outputs import transaction  # noqa: E402
+from haa_sym.io.logs import OUTPUT_UNITS  # noqa: E402
 
 __all__ = ["plot_region", "plot_region_panels", "plot_corrected_phase", "plot_steps",
            "plot_contact", "gains_text", "plot_torque_bandwidth", "STYLE", "plot_describing", "save_figure", "check_title", "plot_identify"]
@@ -710,7 +711,7 @@ def plot_simulation(time, columns: dict, saturated=None, title: str = "", cycle:
     return fig
 
 
-_UNITS = {"torque": "Nm", "theta": "rad", "current": "A", "velocity": "rad/s"}
+_UNITS = OUTPUT_UNITS
 
 
 # The zoomed time panel of plot_identify: the log's last stretch with this many crossings of the
