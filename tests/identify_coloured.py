@@ -95,3 +95,48 @@ def coloured_experiment(model, p, *, seed=0, duration=25.0, Ts=1e-3, rho=0.9, no
                                        for s in noise_seeds], y)
     y_noisy = y + noise * np.std(y, axis=0) * ar1(rng, y.shape, rho)
     return np.arange(n) * Ts, u, y_noisy, y
+
+
+def friction_experiment(model, p, *, Fc, v_s, seed=0, duration=6.0, Ts=1e-3, rho=0.9, noise=0.01,
+                        outputs=("torque", "theta"), tau_drive=0.0, delay_drive=0.0, amplitude=None,
+                        substeps=20, noise_seeds=(0,)):
+    """(t, u, [y_noisy per noise seed], y_clean) of a current-driven experiment with Coulomb friction
+    T = -Fc tanh(w_m / v_s) on the rotor (``model``'s current-driven states; the rotor's velocity is
+    the second, its inertia ``p["J_m"]``), a first-order drive lag and a dead time (a whole number
+    of sub-steps Ts / ``substeps``). Integrated here, independently of haa_sym.fit.friction: the
+    linear part exactly over each sub-step (scipy ``expm`` of [A, [B_c, W]]), the friction torque
+    held over the sub-step at its value at the sub-step's start (explicit: stable while
+    Fc h / (v_s J_m) < 2, checked), the command c(t - delay) held over the sub-step."""
+    A, B, C, D = model(p, True)
+    n0 = A.shape[0]
+    W = np.zeros(n0)
+    W[1] = 1.0 / p["J_m"]
+    if tau_drive > 0:
+        A, B, C, D = _with_drive_lag(A, B, C, D, tau_drive)
+        W = np.append(W, 0.0)
+    h = Ts / substeps
+    if not Fc * h / (v_s * p["J_m"]) < 2:
+        raise ValueError("explicit friction sub-step unstable: more substeps")
+    j = delay_drive / h
+    if abs(j - round(j)) > 1e-9:
+        raise ValueError(f"delay {delay_drive} is not a whole number of sub-steps {h}")
+    lagj = int(round(j))
+    rng = np.random.default_rng(seed)
+    N = int(round(duration / Ts))
+    b, a = scipy.signal.butter(4, 0.25)
+    u = scipy.signal.lfilter(b, a, rng.standard_normal(N + 200))[200:]
+    u *= (amplitude or 5.0) / np.std(u)
+    n = A.shape[0]
+    BW = np.column_stack([B[:, 0], W])
+    E = scipy.linalg.expm(np.block([[A, BW], [np.zeros((2, n + 2))]]) * h)
+    Ph, Gc, Gw = E[:n, :n], E[:n, n], E[:n, n + 1]
+    rows = [OUTPUT_ROWS[o] for o in outputs]
+    x, y = np.zeros(n), np.empty((N, len(rows)))
+    for k in range(N):
+        y[k] = C[rows] @ x            # D's command column is zero for these outputs
+        for s in range(substeps):
+            i = k * substeps + s - lagj                           # the sub-step whose command acts now
+            c = u[i // substeps] if i >= 0 else 0.0
+            x = Ph @ x + Gc * c + Gw * (-Fc * np.tanh(x[1] / v_s))
+    noisy = [y + noise * np.std(y, axis=0) * ar1(np.random.default_rng(s), y.shape, rho) for s in noise_seeds]
+    return np.arange(N) * Ts, u, noisy, y

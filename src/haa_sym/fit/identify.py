@@ -558,7 +558,9 @@ def identify(experiments: list[Experiment], keys: tuple[str, ...], inputs: tuple
                                      f"of the model's slowest mode are {opt.min_periods * slow:.3g} s; allowed: a "
                                      "longer log (or --min-periods)")
             if _estimated(e, opt)[0] is False:
-                for x in o:
+                # an output with an offset starts at its tare, not at 0: the others say whether the
+                # log starts at rest
+                for x in (x for x in o if x not in offsets):
                     v = e.log.signals[x]
                     rms = float(np.sqrt(np.mean(v ** 2)))
                     if abs(float(v[0])) > REST_FRACTION * rms:
