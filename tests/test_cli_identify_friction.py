@@ -3,7 +3,6 @@ item 2): ``--set Fc_m=...`` / ``friction_velocity=...`` (the [limits] friction i
 ``--fit ...,Fc_m``, ``--offsets``; the fitted file's [limits] and fit.json's offsets; the refusals
 (one line, exit 2, nothing written). The log: the friction simulation of the RMD X8 SEA file (its
 drive off), written to a CSV with a tare added to each output."""
-import dataclasses
 import json
 import tomllib
 from pathlib import Path

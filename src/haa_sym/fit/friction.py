@@ -49,7 +49,7 @@ from __future__ import annotations
 import ctypes
 import functools
 import math
-from dataclasses import dataclass, replace
+from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
@@ -214,7 +214,6 @@ def _interval_matrices(model: PlantModel, W, dW, h: np.ndarray, sens: bool):
     """Phi (K, n, n), G = [Gamma, Gamma_W] (K, n, m + nf) at the substep lengths ``h`` (K,) and,
     with ``sens``, their derivatives (p, K, n, n), (p, K, n, m + nf)."""
     A = model.A
-    n = A.shape[0]
     BW = np.column_stack([model.B, W])
     lam, V = np.linalg.eig(A)
     cond = np.linalg.cond(V)
