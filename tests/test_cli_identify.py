@@ -38,7 +38,8 @@ def test_fitted_file_round_trip_and_report(tmp_path, hd_log, capsys):
     printed = capsys.readouterr().out
     assert "hd.csv: 6000 samples, mean period 0.001 s" in printed and "uniform" in printed
     report = json.loads(rep.read_text())
-    assert set(report) == {"parameters", "rms_error", "samples", "sampling", "meta"}
+    assert set(report) == {"parameters", "rms_error", "samples", "sampling", "meta", "ci95_method", "converged",
+                           "residuals", "validation"}
     assert report["samples"] == 6000 and report["meta"]["logs"]["hd.csv"]["sha256"]
     text = out.read_text()
     original = actuator_path("harmonic_drive").read_text()
@@ -158,7 +159,8 @@ def test_fitted_entries_say_they_were_fitted_before_their_old_description(tmp_pa
         keys, value, initial = ("K_hd",), np.array([30000.0]), np.array([31000.0])
         ci95 = np.array([[29900.0, 30100.0]])
         inputs, outputs = ("voltage",), ("torque",)
-        meta = {"logs": {"run.csv": {"sha256": "0" * 64, "samples": 100}}}
+        meta = {"logs": {"run.csv": {"sha256": "0" * 64, "samples": 100}}, "converged": True,
+                "intervals": {"method": "sandwich (HAC) covariance"}}
     path = actuator_path("harmonic_drive")
     text = fitted_text(path.read_text(), str(path), load_params(path), Result(), "2026-11-24")
     entry = tomllib.loads(text)

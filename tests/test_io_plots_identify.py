@@ -62,3 +62,29 @@ def test_time_panels_whole_log_and_a_readable_zoom():
     labels = [x.get_text() for x in fig.legends[0].get_texts()]
     assert labels == ["measured; Bode: H1 (Welch) where the coherence >= 0.5", "model, initial", "model, fitted",
                       "the zoomed window"]
+
+
+def test_validation_rows_measured_against_fitted_with_nrmse_and_vaf():
+    """Issue 23, item 5: a row per data set not fitted (held-out part, --validate log), zoomed as
+    the fit data's second row, measured against the fitted model, titled with NRMSE and VAF; the
+    fitted log's own NRMSE and VAF in its title. No row for a fitted log."""
+    t = np.arange(3000) * 1e-3
+    y = np.sin(2 * np.pi * 60 * t)[:, None]
+    result = SimpleNamespace(
+        outputs=("torque",), inputs=("voltage",), rms_initial={"torque": 1.0}, rms_fitted={"torque": 0.1},
+        traces=[{"name": "x.csv", "t": t, "u": y, "measured": y, "initial": 1.1 * y, "fitted": y}], bode=[])
+    tv = 3 + t[:1000]
+    yv = np.sin(2 * np.pi * 60 * tv)[:, None]
+    traces = [{"name": "x.csv", "t": t, "measured": y, "fitted": y},
+              {"name": "x.csv:holdout", "t": tv, "measured": yv, "fitted": 0.9 * yv}]
+    quality = {"x.csv": {"torque": {"nrmse": 0.01, "vaf_percent": 99.99, "samples": 3000}},
+               "x.csv:holdout": {"torque": {"nrmse": 0.1, "vaf_percent": 99.0, "samples": 1000}}}
+    fig = plot_identify(result, validation=(traces, quality))
+    assert len(fig.axes) == 3
+    assert "fit data NRMSE 0.01, VAF 99.99 %" in fig.axes[0].get_title()
+    val = fig.axes[2]
+    assert val.get_title() == "validation x.csv:holdout: torque, NRMSE 0.1, VAF 99 %"
+    fitted = next(ln for ln in val.get_lines() if ln.get_label() == "model, fitted")
+    lo, hi = val.get_xlim()
+    assert hi == tv[-1] and lo > tv[0]
+    assert np.allclose(fitted.get_ydata(), 0.9 * yv[tv >= lo, 0])

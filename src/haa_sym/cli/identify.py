@@ -9,6 +9,7 @@ from __future__ import annotations
 import argparse
 import hashlib
 import sys
+from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
@@ -17,20 +18,18 @@ from haa_sym.io.inputs import read_text
 from haa_sym.errors import ParameterError
 from haa_sym.fit.fitted_file import fitted_text
 from haa_sym.design.tune import NOMINAL
-from haa_sym.fit.identify import INITIAL_STATES, INPUT_MODES, Experiment, FitOptions, identify
+from haa_sym.fit.identify import (INITIAL_STATES, INPUT_MODES, Experiment, FitOptions, identify, refuse_unreliable,
+                                  validate)
 from haa_sym.io.formats import save_json
-from haa_sym.io.logs import GAP_PERIODS, MAX_ANGLE, OUTPUTS, parse_window, read_log
+from haa_sym.io.logs import GAP_PERIODS, MAX_ANGLE, OUTPUT_UNITS, OUTPUTS, parse_window, read_log
 from haa_sym.model.drive import DRIVE_KEYS
 from haa_sym.io.outputs import Transaction, check_file
 from haa_sym.loop import ClosedLoop
-from haa_sym.model.params import MAX_FILE_BYTES, actuator_path, load_params
+from haa_sym.model.limits import FRICTION_SET_KEYS, with_friction_sets
+from haa_sym.model.params import MAX_FILE_BYTES, actuator_path, load_params, parse_set
 
 from haa_sym.cli.common import PARAMS_HELP, _check_out, _parse_options, _params, _plots
 
-# the scaled normal matrix's condition beyond which a fit's intervals are not to be trusted: the
-# keys are then nearly linearly dependent in the logs (e.g. an inertia and a stiffness seen only
-# through their ratio), and the normal equations have lost ten of their sixteen digits
-CONDITION_WARNING = 1e10
 
 
 def register(sub) -> dict:
@@ -52,7 +51,12 @@ def register(sub) -> dict:
                    help="configuration of the file the logs were taken in: once for every log, or once per --log "
                         "in the same order")
     p.add_argument("--set", action="append", default=[], metavar="KEY=VALUE",
-                   help="override a key of the file (SI units) before fitting: the starting values")
+                   help="override a key of the file (SI units) before fitting: the starting values; also the "
+                        "[limits] friction: Fc_m, Fc_<body> (Nm; a fitted Fc key needs a start > 0) and "
+                        "friction_velocity (rad/s)")
+    p.add_argument("--offsets", metavar="NAME[,NAME...]",
+                   help="outputs with a constant offset per log (a sensor's tare), fitted with the keys "
+                        "(eliminated by variable projection) and reported; default none")
     p.add_argument("--option", action="append", default=[], metavar="KEY=VALUE",
                    help="loop option (haa_sym.LoopOptions) of the torque loop, --input torque_ref only")
     p.add_argument("--window", action="append", default=[], metavar="START:STOP",
@@ -69,11 +73,30 @@ def register(sub) -> dict:
     p.add_argument("--initial-state", choices=INITIAL_STATES, default=FitOptions().initial_state,
                    help="a log's first segment starts at rest (checked) or from an estimated state (default "
                         "%(default)s; segments after gaps and windows inside a log are always estimated)")
+    p.add_argument("--allow-unconverged", action="store_true",
+                   help="write the fit even if it stopped at its iteration limit, marked as not converged (a "
+                        "comment in the fitted file, \"converged\": false in the report); default: refused")
+    p.add_argument("--validate", action="append", default=[], metavar="LOG.csv",
+                   help="a log not fitted, only predicted: NRMSE and VAF per output (repeatable; the same columns "
+                        "as --log, taken in the configuration given once, else the file's own)")
+    p.add_argument("--validate-window", action="append", default=[], metavar="START:STOP",
+                   help="the samples of a --validate log scored, START <= t < STOP in s of the log's time column "
+                        "(either may be empty, as --window); once for every --validate log or once per --validate; "
+                        "the log is simulated from its start")
+    p.add_argument("--holdout", type=float, metavar="FRACTION",
+                   help="the last FRACTION (0 < F < 1) of every --log is not fitted, only predicted (the model "
+                        "simulated over the whole log) and scored")
     p.add_argument("--out", required=True, metavar="FITTED.toml",
                    help="the parameter file with the fitted values, their source and ci95")
     p.add_argument("--report", metavar="fit.json", help="the fit as JSON (parameters, rms_error, samples, sampling, meta)")
     p.add_argument("--plot", metavar="fit.png", help="measured against predicted: time traces and Bode (H1, coherence)")
     return {"identify": run}
+
+
+def _is_limit_set(item: str) -> bool:
+    """Whether a --set item names a [limits] friction key (Fc_*, friction_velocity)."""
+    key = item.partition("=")[0].strip()
+    return key.startswith("Fc_") or key in FRICTION_SET_KEYS
 
 
 def _split(text: str, flag: str) -> tuple[str, ...]:
@@ -83,14 +106,16 @@ def _split(text: str, flag: str) -> tuple[str, ...]:
     return items
 
 
-def _refuse_repeated_logs(logs: list[str]) -> None:
+def _refuse_repeated_logs(logs: list[str], flags: list[str] | None = None) -> None:
     """Refuse a log given twice: the fit would count its samples twice and narrow every ci95 by
     sqrt(n) as if the copies were independent experiments (40 copies: 6.3x) with nothing to show it.
     The same file (by resolved path or by device and inode: a link, a second spelling) and a copy
     (the same bytes, by sha256) are both the same experiment. Only regular files are hashed; a
-    missing or special file is left to read_log's refusal."""
+    missing or special file is left to read_log's refusal. ``flags``: each log's flag (default
+    --log; a --validate log that is a fitted one would be scored on the data it was fitted to)."""
     seen: dict = {}
-    for text in logs:
+    flags = flags or ["--log"] * len(logs)
+    for text, flag in zip(logs, flags):
         path = Path(text)
         try:
             st = path.stat()
@@ -105,11 +130,48 @@ def _refuse_repeated_logs(logs: list[str]) -> None:
             keys.append(("identical content (sha256)", digest.hexdigest()))
         for how, key in keys:
             if key in seen:
-                raise ParameterError(f"--log {text}: {how} as --log {seen[key]}; allowed: each experiment once (a "
+                raise ParameterError(f"{flag} {text}: {how} as {seen[key]}; allowed: each experiment once (a "
                                      "repeated log counts its samples twice and narrows the ci95 as if it were new "
-                                     "data)")
+                                     "data; a validation log must not be a fitted one)")
         for _, key in keys:
-            seen.setdefault(key, text)
+            seen.setdefault(key, f"{flag} {text}")
+
+
+def _head(log, n: int):
+    """The log's first ``n`` samples (the fitted part of a log with --holdout): its signals, stamps
+    and the segments that start inside them; the sampling says how many samples are held out."""
+    starts = tuple(s for s in log.starts if s < n)
+    t = log.t[:n]
+    return replace(log, signals={k: v[:n] for k, v in log.signals.items()}, t=t, starts=starts,
+                   Ts=float((t[-1] - t[0]) / (n - 1)),
+                   sampling={**log.sampling, "segments": len(starts), "held_out_samples": log.samples - n})
+
+
+def _validation_cases(args, experiments, inputs, outputs, base_params, fitted_logs) -> list:
+    """(label, Experiment, start, stop) of every scored data set: each fitted log's fitted part,
+    its held-out part (label ``NAME:holdout``), each --validate log's window."""
+    cases = []
+    for e, full in zip(experiments, fitted_logs):
+        n = e.log.samples
+        cases.append((e.log.name, Experiment(full, e.params, e.configuration), 0, n))
+        if full.samples > n:
+            cases.append((f"{e.log.name}:holdout", Experiment(full, e.params, e.configuration), n, full.samples))
+    wins = args.validate_window
+    if len(wins) not in (0, 1, len(args.validate)) or (wins and not args.validate):
+        raise ParameterError(f"--validate-window given {len(wins)} times for {len(args.validate)} --validate logs; "
+                             "allowed: once (every --validate log) or once per --validate")
+    wins = [parse_window(w, "--validate-window") for w in wins]
+    wins = wins * len(args.validate) if len(wins) == 1 else (wins or [(-np.inf, np.inf)] * len(args.validate))
+    for path, (lo, hi) in zip(args.validate, wins):
+        log = read_log(path, inputs, outputs, gap=args.gap, max_angle=args.max_angle, label=f"--validate {path!r}")
+        t = log.t                                  # s of the log's time column, as --window
+        inside = np.flatnonzero((t >= lo) & (t < hi))
+        if inside.size < 2:
+            raise ParameterError(f"--validate-window {lo:g}:{hi:g} holds {inside.size} samples of --validate {path} "
+                                 f"({t[0]:g} to {t[-1]:g} s); allowed: a window inside the log")
+        label = log.name if log.name not in {c[0] for c in cases} else str(path)
+        cases.append((label, Experiment(log, base_params), int(inside[0]), int(inside[-1]) + 1))
+    return cases
 
 
 def run(args) -> int:
@@ -142,7 +204,12 @@ def run(args) -> int:
     if args.option and inputs[0] != "torque_ref":
         raise ParameterError(f"--option {args.option[0]}: the loop options apply to the closed torque loop; "
                              "allowed: with --input torque_ref")
-    _refuse_repeated_logs(args.log)
+    if args.holdout is not None and not 0 < args.holdout < 1:
+        raise ParameterError(f"--holdout {args.holdout!r}; allowed: a fraction 0 < F < 1 of each log's end")
+    offsets = _split(args.offsets, "--offsets") if args.offsets is not None else ()
+    if any(o not in outputs for o in offsets) or len(set(offsets)) != len(offsets):
+        raise ParameterError(f"--offsets {args.offsets}; allowed: distinct names of --output {list(outputs)}")
+    _refuse_repeated_logs(args.log + args.validate, ["--log"] * len(args.log) + ["--validate"] * len(args.validate))
     path = actuator_path(args.params, "--params")
     file_params = load_params(path)
     for k in keys:
@@ -159,22 +226,40 @@ def run(args) -> int:
     # a configuration's log (--configuration nominal --configuration heavy)
     per_log = [None if c == NOMINAL else c for c in per_log]
     loop_options = _parse_options(args.option) if inputs[0] == "torque_ref" else None
-    experiments = []
+    # --set's [limits] friction keys act on the limits; the rest are parameters (_params)
+    limit_sets = parse_set([x for x in args.set if _is_limit_set(x)])
+    args.set = [x for x in args.set if not _is_limit_set(x)]
+    bodies = file_params.plant.topology.body_names
+
+    def with_limits(params):
+        return replace(params, limits=with_friction_sets(params.limits, limit_sets, bodies)) if limit_sets else params
+    experiments, fitted_logs = [], []
     for log_path, conf, outs, window in zip(args.log, per_log, per_output, windows):
         base = file_params.configuration(conf) if conf else file_params
         args.configuration = conf                     # _params applies --set over this configuration
-        params = _params(args, base)
+        params = with_limits(_params(args, base))
         log = read_log(log_path, inputs, outs, window=window, gap=args.gap, max_angle=args.max_angle)
+        fitted_logs.append(log)
+        if args.holdout is not None:
+            log = _head(log, int(round((1 - args.holdout) * log.samples)))
         experiments.append(Experiment(log, params, conf, outs))
+    # the --validate logs' parameters: the configuration given once, else the file's own
+    args.configuration = per_log[0] if len(set(per_log)) == 1 else None
+    validate_params = with_limits(_params(args, file_params.configuration(args.configuration) if args.configuration
+                                          else file_params))
     # the inputs are known now: an output that is one of them (--out the log, a link to it) is
     # refused before the fit's seconds, not only when the outputs are committed
     for target, flag in ((args.out, "--out"), (args.report, "--report"), (args.plot, "--plot")):
         if target is not None:
             check_file(target, flag)
+    cases = _validation_cases(args, experiments, inputs, outputs, validate_params, fitted_logs)
     loop = ClosedLoop(experiments[0].params, loop_options, basis=False)
     options = FitOptions(min_periods=args.min_periods, initial_state=args.initial_state)
     result = identify(experiments, keys, inputs, outputs, options, loop_options,
-                      provenance={**loop.provenance(), "params_file": str(path)}, figure_data=plot is not None)
+                      provenance={**loop.provenance(), "params_file": str(path)}, figure_data=plot is not None,
+                      offsets=offsets)
+    # keys the logs cannot tell apart, a fit stopped at its iteration limit: one line, nothing written
+    refuse_unreliable(result, allow_unconverged=args.allow_unconverged)
     for k, v, (lo, hi) in zip(result.keys, result.value, result.ci95):
         # an interval reaching 0 or infinity: the logs do not determine the key (a fitted file cannot
         # carry it, and a zero-width one from a dropped direction would claim the opposite)
@@ -182,34 +267,44 @@ def run(args) -> int:
             raise ParameterError(f"--fit {k}: these logs do not determine it (fitted {v:.6g}, ci95 {lo:.3g} .. "
                                  f"{hi:.3g}); allowed: keys the logs observe (fit fewer keys, log more outputs, a "
                                  "richer input; the time column in s)")
+    quality, val_traces = validate(result, cases, loop_options, options)
     date = result.meta["date"]
     text = fitted_text(read_text(path, "--params", limit=MAX_FILE_BYTES), str(path), file_params, result, date)
     with Transaction() as tx:
         tx.write_text(out, text, "--out")
         if report:
-            save_json(report, result.report(), tx, "--report")
+            save_json(report, {**result.report(), "validation": quality}, tx, "--report")
         if plot:
             name = str(file_params.about.get("name") or Path(path).stem)
-            _plots().save_figure(_plots().plot_identify(result, title=f"{name}: identify {', '.join(keys)}"),
+            _plots().save_figure(_plots().plot_identify(result, title=f"{name}: identify {', '.join(keys)}",
+                                                          validation=(val_traces, quality)),
                                  plot, tx, "--plot")
-    for e in experiments:                 # after the fit: a refused command prints one line only
+    for e, full in zip(experiments, fitted_logs):  # after the fit: a refused command prints one line only
         s = e.log.sampling
-        print(f"{e.log.name}: {e.log.samples} samples"
+        print(f"{e.log.name}: {full.samples} samples"
               + (f" in {s['window'][0]:g} .. {s['window'][1]:g} s" if s["window"] else "")
               + f", mean period {s['mean_period']:.6g} s, jitter {s['jitter']:.2g} (max |dt - mean| / mean); "
               + ("uniform" if s["uniform"] else "simulated on its own intervals")
               + (f"; {s['segments']} segments (gaps > {s['gap_threshold']:.3g} s, longest interval "
-                 f"{s['longest_interval']:.3g} s)" if s["segments"] > 1 else ""))
-    if result.meta["condition_number"] > CONDITION_WARNING:
-        print(f"haa-sym: warning: the fitted keys are nearly indistinguishable in these logs (condition number "
-              f"{result.meta['condition_number']:.3g} of the scaled normal matrix): the intervals are not reliable; "
-              "fit fewer keys or log more outputs", file=sys.stderr)
+                 f"{s['longest_interval']:.3g} s)" if s["segments"] > 1 else "")
+              + (f"; the last {full.samples - e.log.samples} held out (--holdout)" if full.samples > e.log.samples
+                 else ""))
     if not result.meta["converged"]:
-        print(f"haa-sym: warning: the fit stopped at the iteration limit ({FitOptions().max_iterations} per pass) "
-              "while the error still fell: the values and intervals are not a minimum (check the log's time unit, "
-              "seconds, and the start values)", file=sys.stderr)
+        print(f"haa-sym: warning: the fit stopped at its iteration limit "
+              f"({result.meta['options']['max_iterations']} per pass) while the error still fell (--allow-unconverged): the values are not a "
+              "minimum; the file says so",
+              file=sys.stderr)
     for k, v, v0, (lo, hi) in zip(result.keys, result.value, result.initial, result.ci95):
         print(f"{k} = {v:.6g} (ci95 {lo:.6g} .. {hi:.6g}; initial {v0:.6g})")
+    for log_name, off in result.offsets.items():
+        print(f"{log_name}: offsets " + ", ".join(f"{o} {v:.6g} {OUTPUT_UNITS[o]}" for o, v in off.items()))
+    print(f"ci95: {result.meta['intervals']['method'].split(':')[0]}; residuals: "
+          + "; ".join(f"{log} " + ", ".join(f"{o} lag-1 {w['lag1']:.2f} {'white' if w['white'] else 'NOT white'} "
+                                            f"(Ljung-Box p {w['p_value']:.2g})" for o, w in res.items())
+                      for log, res in result.meta["residuals"].items()))
+    for label, q in quality.items():
+        print(f"validation {label}: " + ", ".join(f"{o} NRMSE {v['nrmse']:.3g} VAF {v['vaf_percent']:.4g} %"
+                                                  for o, v in q.items()) + f" ({next(iter(q.values()))['samples']} samples)")
     rms = ", ".join(f"{o} {result.rms_initial[o]:.3g} -> {result.rms_fitted[o]:.3g}" for o in outputs)
     print(f"{result.samples} samples, {result.iterations} iterations; rms error {rms}; wrote {out}"
           + (f", {report}" if report else "") + (f", {plot}" if plot else ""))

@@ -7,10 +7,14 @@ estimated from its own residuals; a first pass weights by the signal's standard 
 The parameters are fitted as logarithms (positive by construction, the only bound the keys'
 domains impose: ``>0`` or ``>=0``, fitted from a positive start) by Levenberg-Marquardt with the
 exact Jacobian (sensitivities of the simulation, derivatives from CasADi), so a few iterations
-suffice. Confidence intervals are Gauss-Newton's: cov(log p) = s^2 (J^T J)^-1 with s^2 the
-weighted residual variance; 95 % intervals are log p +- 1.96 sd, so they are asymmetric and
-positive. They assume white, Gaussian output noise, a correct model and an input known exactly;
-coloured residuals (a model error) make them too narrow (docs/identify.md).
+suffice. Confidence intervals (``ci95``) are a sandwich (HAC) covariance H^-1 S H^-1 of the
+log-parameters, S the long-run covariance of each log's score series (Newey-West, Bartlett kernel,
+Andrews' bandwidth; :mod:`haa_sym.fit.diagnostics`), so they hold when the residuals are correlated
+in time; Gauss-Newton's s^2 (J^T J)^-1, which assumes white residuals, is kept as ``ci95_white``.
+95 % intervals are log p +- 1.96 sd, so they are asymmetric and positive. The residuals of each log
+and output are tested for whiteness (Ljung-Box); :func:`validate` scores the fitted model (NRMSE,
+VAF) on held-out or other logs; :func:`refuse_unreliable` refuses keys the logs cannot tell apart
+and an unconverged fit (docs/identify.md).
 """
 from __future__ import annotations
 
@@ -22,15 +26,31 @@ import numpy as np
 from haa_sym.analysis.sweep import blas_limits
 from haa_sym.errors import ParameterError
 from haa_sym.fit.closed import torque_loop_model
+from haa_sym.fit.diagnostics import (WHITENESS_LAGS, WHITENESS_LEVEL, fit_quality, hac_covariance,
+                                     near_null_keys, whiteness)
+from haa_sym.fit.friction import friction_entries, is_friction_key, simulate_friction_stamps
 from haa_sym.fit.model import modal_check, open_loop_model, sample, simulate, simulate_stamps
 from haa_sym.io.budget import check_memory, fit_bytes
 from haa_sym.io.logs import OUTPUTS, Log
 from haa_sym.model.drive import DRIVE_KEYS
 
-__all__ = ["FitOptions", "FitResult", "Experiment", "identify", "simulate_log", "INPUT_MODES", "INITIAL_STATES"]
+__all__ = ["FitOptions", "FitResult", "Experiment", "identify", "INPUT_MODES", "INITIAL_STATES", "simulate_log",
+           "validate", "refuse_unreliable", "CONDITION_LIMIT", "INTERVAL_METHODS"]
 
 INPUT_MODES = ("voltage", "current", "torque_ref")
+# the scaled normal matrix's condition number above which the fitted keys are refused
+# (refuse_unreliable): the normal equations have then lost ten of their sixteen digits and the keys
+# of its near-null direction change the outputs together. Measured (docs/identify.md, "Refusals"):
+# the well-posed fits of the synthetic logs give 6-200, a near-collinear pair
+# (e.g. an inertia and a stiffness seen only through their ratio) 1e12 and above
+CONDITION_LIMIT = 1e10
 Z95 = 1.959963984540054          # the two-sided 95 % point of the normal distribution
+# how ci95 is computed (FitOptions.intervals): the name and the text the report and the fitted
+# file give
+INTERVAL_METHODS = {
+    "hac": "sandwich (HAC) covariance: Newey-West, Bartlett kernel, Andrews' AR(1) plug-in bandwidth per log, "
+           "from each log's score series (holds with correlated residuals)",
+    "white": "Gauss-Newton covariance s^2 (J^T J)^-1 (assumes white output noise)"}
 
 
 @dataclass(frozen=True)
@@ -64,9 +84,23 @@ class FitOptions:
         not start within :data:`REST_FRACTION` of their rms of zero is refused); ``"estimate"``:
         its initial state is estimated too. Segments after a gap, and a window that does not
         start at the log's first sample, always start from an estimated state.
+    intervals : str
+        How ``ci95`` is computed: ``"hac"`` (default), the sandwich covariance H^-1 S H^-1 with S
+        the long-run covariance of each log's score series (Newey-West, Bartlett kernel, Andrews'
+        AR(1) plug-in bandwidth; :func:`haa_sym.fit.diagnostics.hac_covariance`), which holds when
+        the residuals are correlated in time; ``"white"``, Gauss-Newton's s^2 (J^T J)^-1, which
+        assumes white residuals. The other one is reported as well (``ci95_white`` is always).
+    whiteness_lags : int
+        Lags of the Ljung-Box test of each log's and output's residuals (default 20; even).
+    whiteness_level : float
+        A residual series is called white when the test's p-value is at least this (0.05).
+    max_substep : float
+        Longest substep (s) of the friction simulation (:mod:`haa_sym.fit.friction`), used when
+        friction is in the model (default 2.5e-4 s; docs/identify.md, "Friction and offsets").
     """
 
     min_periods: float = 3.0
+    max_substep: float = 2.5e-4
     max_iterations: int = 50
     tolerance: float = 1e-10
     max_step: float = 1.0
@@ -74,6 +108,13 @@ class FitOptions:
     reweight_rtol: float = 0.05
     max_reweights: int = 5
     initial_state: str = "rest"
+    intervals: str = "hac"
+    whiteness_lags: int = WHITENESS_LAGS
+    whiteness_level: float = WHITENESS_LEVEL
+
+    def __post_init__(self):
+        if self.intervals not in INTERVAL_METHODS:
+            raise ParameterError(f"FitOptions.intervals {self.intervals!r}; allowed: {list(INTERVAL_METHODS)}")
 
 
 #: A log fitted from rest must start there: each output's first sample within this fraction of
@@ -113,18 +154,27 @@ class FitResult:
     traces: list = field(default_factory=list, repr=False)
     bode: list = field(default_factory=list, repr=False)
     meta: dict = field(default_factory=dict, repr=False)
+    offsets: dict = field(default_factory=dict)
 
     def report(self) -> dict:
-        """The ``fit.json`` of the issue: parameters, rms_error, samples, sampling, meta."""
-        return {"parameters": {k: {"value": float(v), "initial": float(v0), "ci95": [float(lo), float(hi)]}
-                               for k, v, v0, (lo, hi) in zip(self.keys, self.value, self.initial, self.ci95)},
+        """The ``fit.json`` of the issue: parameters (value, initial, ci95 and, for comparison, the
+        white-noise ci95_white), the interval method, converged, the residuals' whiteness per log
+        and output, rms_error, samples, sampling, meta."""
+        white = self.meta["intervals"]["ci95_white"]
+        return {"parameters": {k: {"value": float(v), "initial": float(v0), "ci95": [float(lo), float(hi)],
+                                   "ci95_white": [float(x) for x in w]}
+                               for k, v, v0, (lo, hi), w in zip(self.keys, self.value, self.initial, self.ci95, white)},
+                "ci95_method": self.meta["intervals"]["method"], "converged": bool(self.meta["converged"]),
+                "residuals": self.meta["residuals"],
                 "rms_error": {o: {"initial": self.rms_initial[o], "fitted": self.rms_fitted[o]} for o in self.outputs},
-                "samples": self.samples, "sampling": self.sampling, "meta": self.meta}
+                "samples": self.samples, "sampling": self.sampling, "meta": self.meta,
+                **({"offsets": self.offsets} if self.offsets else {})}
 
 
 def _model(exp: Experiment, keys, values, inputs, outputs, options=None):
     """The model of ``exp`` with ``keys`` at ``values``: the sampled closed torque loop
     (``torque_ref``), else the continuous open-loop plant behind the file's drive."""
+    keys, values = _plant_part(keys, values)
     params = exp.params.with_values(**dict(zip(keys, values)))
     if inputs[0] == "torque_ref":
         return torque_loop_model(params, keys, inputs, outputs, options)
@@ -144,22 +194,205 @@ def _uniform_path(exp: Experiment, keys, opt) -> bool:
             and "delay_drive" not in keys)
 
 
-def _predict(exp, keys, values, inputs, outputs, loop_options, opt, u, y, scale, sens):
-    """The outputs of ``exp`` with ``keys`` at ``values`` (and d y / d p), and the number of
-    initial-state values estimated."""
-    model = _model(exp, keys, values, inputs, outputs, loop_options)
-    if not hasattr(model, "A"):                                     # the sampled torque loop
-        return simulate(model, u, sens) + (0,)
-    if _uniform_path(exp, keys, opt):
-        return simulate(sample(model, exp.log.Ts), u, sens) + (0,)
+def simulate_log(exp: Experiment, inputs, outputs=None, keys=(), values=(), *, options: "FitOptions | None" = None,
+                 loop_options=None, sensitivities: bool = False, u: np.ndarray | None = None,
+                 y: np.ndarray | None = None, scale: np.ndarray | None = None, friction: dict | None = None,
+                 state_cache: dict | None = None):
+    """The model's outputs on ``exp``'s log, simulated as a fit simulates it: the one simulation
+    path of the fit and of its validation (:func:`validate`).
+
+    A uniform log from rest without a delay at its one period (:func:`haa_sym.fit.model.simulate`);
+    any other on its own stamps (:func:`haa_sym.fit.model.simulate_stamps`: the input held over
+    each true interval, the delayed command switching inside them, every segment after a gap
+    restarted from an estimated state, the first from rest unless ``options.initial_state`` or a
+    window says otherwise).
+
+    Parameters
+    ----------
+    exp : Experiment
+        The log and its parameters (``keys`` at ``values`` set over them; none: as they are).
+    inputs, outputs : tuple of str
+        The log's inputs and outputs (``exp.outputs`` when the experiment names its own).
+    keys, values : sequence
+        Keys set to values (SI) and, with ``sensitivities``, differentiated by.
+    options : FitOptions, optional
+        ``initial_state`` (default :class:`FitOptions`' ``"rest"``).
+    u, y : ndarray, optional
+        The log's input (N, m) and output (N, ny) columns when the caller has them already.
+    scale : ndarray, optional
+        Per output, the weights of the initial-state estimate (default the outputs' standard
+        deviations).
+    friction : dict, optional
+        ``Fc_*`` (Nm) over the file's [limits]; with any friction (or an ``Fc_*`` key) the log is
+        simulated with Coulomb friction (:func:`_friction_run`).
+    state_cache : dict, optional
+        Kept by the caller between calls on this log: the friction path's estimated states start
+        from the last ones (:func:`haa_sym.fit.friction.simulate_friction_stamps`).
+
+    Returns
+    -------
+    y_model : ndarray (N, ny)
+    dy : ndarray (p, N, ny) or None
+        d y_model / d values (with ``sensitivities``).
+    n_initial : int
+        The number of initial-state values estimated (degrees of freedom the fit used up).
+    """
+    opt = options or FitOptions()
+    keys, inputs = tuple(keys), tuple(inputs)
+    outs = tuple(exp.outputs or outputs)
     log = exp.log
+    if u is None:
+        u = np.column_stack([log.signals[i] for i in inputs])
+    if y is None:
+        y = np.column_stack([log.signals[x] for x in outs])
+    if scale is None:
+        scale = np.maximum(np.std(y, axis=0), 1e-300)
+    if inputs[0] != "torque_ref" and _uses_friction(exp, keys, friction):
+        return _friction_run(exp, keys, values, inputs, outs, friction, u, y, scale, opt, sensitivities, state_cache)
+    model = _model(exp, keys, values, inputs, outs, loop_options)
+    if not hasattr(model, "A"):                                     # the sampled torque loop
+        return simulate(model, u, sensitivities) + (0,)
+    if _uniform_path(exp, keys, opt):
+        return simulate(sample(model, log.Ts), u, sensitivities) + (0,)
     delay = dict(zip(keys, values)).get("delay_drive", exp.params.drive.delay_drive)
     return simulate_stamps(model, log.t, u, delay=delay, delay_key=keys.index("delay_drive") if "delay_drive" in keys
                            else None, starts=log.starts, estimate=_estimated(exp, opt), y=y, weights=scale,
-                           sensitivities=sens)
+                           sensitivities=sensitivities)
 
 
-def _check_keys(exps, keys, inputs):
+def validate(result: "FitResult", cases, loop_options=None, options: "FitOptions | None" = None,
+             friction: dict | None = None) -> tuple[dict, list]:
+    """NRMSE and VAF (:func:`haa_sym.fit.diagnostics.fit_quality`) of the fitted model per output
+    on each of ``cases``.
+
+    Parameters
+    ----------
+    result : FitResult
+        The fit (its keys and values are set on each case's parameters).
+    cases : list of (label, Experiment, start, stop)
+        A log with its parameters, simulated whole by :func:`simulate_log` as a fitted log is
+        (its own stamps, segments after gaps from estimated states: a segment's initial state is
+        estimated from the whole segment, so a segment that runs on past the held-out boundary
+        uses those samples for its n state values, never for the parameters), and the samples
+        ``start:stop`` scored: the fitted part of a fitted log, its held-out last part, a
+        validation log's window.
+    loop_options : LoopOptions, optional
+    options : FitOptions, optional
+        The fit's (``initial_state``, ``max_substep``).
+    friction : dict, optional
+        The fit's ``friction`` (:func:`identify`).
+
+    An output with a fitted offset gets its log's offset (a fitted log's part and held-out part);
+    a log that was not fitted gets its own, the mean error over its scored samples (a tare is
+    per log: it says nothing about another log's).
+
+    Returns
+    -------
+    quality : dict
+        ``{label: {output: {"nrmse", "vaf_percent", "samples"}}}``.
+    traces : list of dict
+        Per case ``name``, ``t`` (s), ``measured`` and ``fitted`` over the scored samples, for a figure.
+    """
+    quality, traces = {}, []
+    with blas_limits(1):
+        for label, exp, start, stop in cases:
+            if result.inputs[0] == "torque_ref":
+                m = _model(exp, result.keys, result.value, result.inputs, result.outputs, loop_options)
+                if abs(exp.log.Ts - m.Ts) > 1e-6 * m.Ts or not (exp.log.uniform and exp.log.from_start):
+                    raise ParameterError(f"--validate {exp.log.name!r}: mean period {exp.log.Ts:.6g} s"
+                                         f"{'' if exp.log.uniform else ', non-uniform stamps'}; allowed: a uniform "
+                                         f"log at the torque loop's Ts = {m.Ts:g} s with --input torque_ref")
+            outs = tuple(exp.outputs or result.outputs)
+            yp = simulate_log(exp, result.inputs, outs, result.keys, result.value, options=options,
+                              loop_options=loop_options, friction=friction)[0]
+            y = np.column_stack([exp.log.signals[o] for o in outs])
+            sl = slice(start, stop)
+            own = result.offsets.get(exp.log.name)
+            for i, o in enumerate(outs):
+                if own is not None and o in own:
+                    yp[:, i] += own[o]
+                elif own is None and o in result.meta.get("offsets", ()):
+                    yp[:, i] += np.mean(y[sl, i] - yp[sl, i])
+            quality[label] = {o: fit_quality(y[sl, i], yp[sl, i]) for i, o in enumerate(outs)}
+            traces.append({"name": label, "t": (exp.log.t - exp.log.t[0])[sl], "measured": y[sl],
+                           "fitted": yp[sl], "outputs": outs})
+    return quality, traces
+
+
+def refuse_unreliable(result: "FitResult", allow_unconverged: bool = False,
+                      condition_limit: float = CONDITION_LIMIT) -> None:
+    """Refuse a fit whose values are not a result (the CLI writes nothing then).
+
+    Raises
+    ------
+    ParameterError
+        The scaled normal matrix's condition number above ``condition_limit`` (the keys of its
+        near-null direction named: the logs see them only together), or the fit stopped at its
+        iteration limit while the cost still fell, unless ``allow_unconverged``.
+    """
+    cond = result.meta["condition_number"]
+    if not cond <= condition_limit:
+        group = result.meta.get("near_null_keys") or list(result.keys)
+        raise ParameterError(f"--fit {','.join(result.keys)}: these logs cannot tell {', '.join(group)} apart "
+                             f"(condition number {cond:.3g} of the scaled normal matrix, above {condition_limit:.0e}); "
+                             "allowed: keys the logs distinguish (fit fewer keys, log more outputs, a richer input)")
+    if not result.meta["converged"] and not allow_unconverged:
+        its = result.meta["options"]["max_iterations"]
+        raise ParameterError(f"--fit {','.join(result.keys)}: the fit stopped at its iteration limit ({its} per "
+                             "pass) while the error still fell, so the values are not a minimum; allowed: a converged "
+                             "fit (check the time column is in s and the start values), or --allow-unconverged to "
+                             "write the file marked as not converged")
+
+
+def _plant_part(keys, values):
+    """The plant keys of ``keys`` and their values (the ``Fc_*`` keys are [limits] entries)."""
+    pairs = [(k, v) for k, v in zip(keys, values) if not is_friction_key(k)]
+    return tuple(k for k, _ in pairs), [v for _, v in pairs]
+
+
+def _friction_of(exp: Experiment, friction: dict | None) -> dict:
+    """The experiment's Coulomb friction by entry (``"m"``, bodies), Nm: the file's [limits],
+    then ``friction`` (start values given to :func:`identify`)."""
+    out = dict(exp.params.limits.friction)
+    out.update({k[3:]: float(v) for k, v in (friction or {}).items()})
+    return out
+
+
+def _uses_friction(exp: Experiment, keys, friction) -> bool:
+    """Whether ``exp`` is simulated with Coulomb friction: a fitted ``Fc_*`` key, or a nonzero one in
+    the file's [limits] or in ``friction``."""
+    return any(is_friction_key(k) for k in keys) or any(v > 0 for v in _friction_of(exp, friction).values())
+
+
+def _friction_run(exp: Experiment, keys, values, inputs, outputs, friction, u, y, scale, opt, sens,
+                  state_cache=None):
+    """:func:`simulate_log`'s friction path: the plant behind the file's drive (its lag a state
+    appended after the plant's, no friction on it), Coulomb friction on the rotor and the bodies
+    (:mod:`haa_sym.fit.friction`), on the log's own stamps with the delayed command and its
+    segments, as the linear path (:func:`haa_sym.fit.friction.simulate_friction_stamps`)."""
+    vals = dict(zip(keys, values))
+    pk, pv = _plant_part(keys, values)
+    params = exp.params.with_values(**dict(zip(pk, pv)))
+    model = open_loop_model(params.plant, pk, inputs, outputs, params.drive)
+    fmap = _friction_of(exp, friction)
+    fmap.update({k[3:]: vals[k] for k in keys if is_friction_key(k)})
+    fr = friction_entries(params.plant, keys, inputs, model.A.shape[0], fmap, params.limits.friction_velocity)
+    # the Fc keys' rows of dA ... dD are zero (they act in the recursion only)
+    idx = [pk.index(k) if k in pk else None for k in keys]
+
+    def full(d):
+        return np.stack([d[i] if i is not None else np.zeros(d.shape[1:]) for i in idx]) if keys else d
+    model = type(model)(model.A, model.B, model.C, model.D, full(model.dA), full(model.dB), full(model.dC),
+                        full(model.dD))
+    log = exp.log
+    return simulate_friction_stamps(model, fr, log.t, u, delay=params.drive.delay_drive,
+                                    delay_key=keys.index("delay_drive") if "delay_drive" in keys else None,
+                                    starts=log.starts, estimate=_estimated(exp, opt), y=y, weights=scale,
+                                    sensitivities=sens, max_substep=opt.max_substep,
+                                    state_cache=state_cache)
+
+
+def _check_keys(exps, keys, inputs, friction=None):
     if not keys:
         raise ParameterError("--fit: no keys; allowed: one or more parameter keys, comma separated")
     top = exps[0].params.plant.topology
@@ -169,6 +402,19 @@ def _check_keys(exps, keys, inputs):
     for k in keys:
         if k in DRIVE_KEYS:
             _check_drive_key(exps, k, inputs)
+            continue
+        if is_friction_key(k):
+            allowed = ["Fc_m"] + [f"Fc_{b}" for b in top.body_names]
+            if k not in allowed:
+                raise ParameterError(f"--fit {k}: not a friction entry of {top.source}; allowed: {allowed}")
+            if inputs[0] == "torque_ref":
+                raise ParameterError(f"--fit {k}: friction with --input torque_ref is not modelled; allowed: "
+                                     "--input voltage or current")
+            for e in exps:
+                v = _friction_of(e, friction).get(k[3:], 0.0)
+                if not v > 0:
+                    raise ParameterError(f"--fit {k}: initial value {v!r}; allowed: a positive start ([limits] "
+                                         f"{k} in the file, or --set {k}=VALUE)")
             continue
         if k not in top.parameter_keys:
             raise ParameterError(f"--fit {k}: not a plant parameter of {top.source}; allowed: "
@@ -226,7 +472,8 @@ def _slow_period(model) -> float:
 
 def identify(experiments: list[Experiment], keys: tuple[str, ...], inputs: tuple[str, ...],
              outputs: tuple[str, ...], options: FitOptions | None = None, loop_options=None,
-             provenance: dict | None = None, figure_data: bool = False) -> FitResult:
+             provenance: dict | None = None, figure_data: bool = False, friction: dict | None = None,
+             offsets: tuple[str, ...] = ()) -> FitResult:
     """Fit ``keys`` to the experiments (jointly) by output error; see the module docstring.
 
     Parameters
@@ -247,6 +494,14 @@ def identify(experiments: list[Experiment], keys: tuple[str, ...], inputs: tuple
     figure_data : bool
         Also compute the Welch H1 estimates, coherences and model responses (``bode``) for a
         figure (Welch and 2 x ny frequency responses: only when a figure is drawn).
+    friction : dict, optional
+        Coulomb friction torques (``Fc_m``, ``Fc_<body>``: Nm) over the file's ``[limits]``:
+        the start of fitted ones, the value of the others. With any friction (fitted or in the
+        file) every log is simulated with it (:mod:`haa_sym.fit.friction`).
+    offsets : tuple of str
+        Outputs with a constant offset per log (a sensor's tare): linear, so eliminated inside
+        every evaluation (the residual and its Jacobian are centred per log and output: the
+        offset's least-squares value is the residual's mean); reported in ``FitResult.offsets``.
 
     Raises
     ------
@@ -261,7 +516,7 @@ def identify(experiments: list[Experiment], keys: tuple[str, ...], inputs: tuple
                              "followed by ,T_dist")
     if not outputs or any(o not in OUTPUTS for o in outputs) or len(set(outputs)) != len(outputs):
         raise ParameterError(f"--output {','.join(outputs)}; allowed: distinct names of {list(OUTPUTS)}")
-    _check_keys(experiments, keys, inputs)
+    _check_keys(experiments, keys, inputs, friction)
     if opt.initial_state not in INITIAL_STATES:
         raise ParameterError(f"--initial-state {opt.initial_state!r}; allowed: one of {list(INITIAL_STATES)}")
     outs = [tuple(e.outputs or outputs) for e in experiments]
@@ -269,9 +524,18 @@ def identify(experiments: list[Experiment], keys: tuple[str, ...], inputs: tuple
         if any(x not in OUTPUTS for x in o) or len(set(o)) != len(o):
             raise ParameterError(f"--output {','.join(o)}; allowed: distinct names of {list(OUTPUTS)}")
     all_outputs = tuple(dict.fromkeys(x for o in outs for x in o))
-    values0 = [getattr(experiments[0].params.drive if k in DRIVE_KEYS else experiments[0].params.plant, k)
-               for k in keys]
+    offsets = tuple(offsets)
+    if any(o not in all_outputs for o in offsets) or len(set(offsets)) != len(offsets):
+        raise ParameterError(f"--offsets {','.join(offsets)}; allowed: distinct names of --output "
+                             f"{list(all_outputs)}")
+    e0 = experiments[0]
+    values0 = [_friction_of(e0, friction)[k[3:]] if is_friction_key(k)
+               else getattr(e0.params.drive if k in DRIVE_KEYS else e0.params.plant, k) for k in keys]
     theta0 = np.log(values0)
+    use_friction = any(_uses_friction(e, keys, friction) for e in experiments)
+    if use_friction and inputs[0] == "torque_ref":
+        raise ParameterError("[limits] friction with --input torque_ref is not modelled; allowed: --input voltage or "
+                             "current (or a file without friction)")
     with blas_limits(1):          # small matrices, long signals: BLAS threads only contend
         models0 = [_model(e, keys, np.exp(theta0), inputs, o, loop_options) for e, o in zip(experiments, outs)]
         for e, o, m in zip(experiments, outs, models0):
@@ -294,7 +558,9 @@ def identify(experiments: list[Experiment], keys: tuple[str, ...], inputs: tuple
                                      f"of the model's slowest mode are {opt.min_periods * slow:.3g} s; allowed: a "
                                      "longer log (or --min-periods)")
             if _estimated(e, opt)[0] is False:
-                for x in o:
+                # an output with an offset starts at its tare, not at 0: the others say whether the
+                # log starts at rest
+                for x in (x for x in o if x not in offsets):
                     v = e.log.signals[x]
                     rms = float(np.sqrt(np.mean(v ** 2)))
                     if abs(float(v[0])) > REST_FRACTION * rms:
@@ -315,20 +581,36 @@ def identify(experiments: list[Experiment], keys: tuple[str, ...], inputs: tuple
         scale = list(sigma)
 
         cache: dict = {}
+        states = [{} for _ in experiments]       # the friction path's last estimated states, per log
+        offset_of: dict = {}          # the offsets each cached point's simulation found, per log
 
         def run(theta, sens=True):
             """Unweighted errors y - y_model and, with ``sens``, d y_model / d log p, per log; a
             point's simulation is kept so that reweighting and the reports re-run nothing."""
             key = theta.tobytes()
             if key not in cache or (sens and cache[key][1] is None):
-                errs, sens_, n0 = [], [], 0
-                for e, o, u, y, w in zip(experiments, outs, U, Y, scale):
-                    yp, dy, n_init = _predict(e, keys, np.exp(theta), inputs, o, loop_options, opt, u, y, w, sens)
+                errs, sens_, n0, offs = [], [], 0, {}
+                for e, o, u, y, w, sc in zip(experiments, outs, U, Y, scale, states):
+                    yp, dy, n_init = simulate_log(e, inputs, o, keys, np.exp(theta), options=opt,
+                                                  loop_options=loop_options, sensitivities=sens, u=u, y=y, scale=w,
+                                                  friction=friction, state_cache=sc)
+                    off_cols = [o.index(x) for x in offsets if x in o]
+                    if off_cols:
+                        # variable projection of the offsets: the model plus the mean error (after the
+                        # initial states' projection, not jointly with it)
+                        yp = yp.copy()
+                        off = np.mean(y[:, off_cols] - yp[:, off_cols], axis=0)
+                        yp[:, off_cols] += off
+                        offs[e.log.name] = {o[c]: float(v) for c, v in zip(off_cols, off)}
+                        if dy is not None:
+                            dy = dy.copy()
+                            dy[:, :, off_cols] -= np.mean(dy[:, :, off_cols], axis=1, keepdims=True)
                     errs.append(y - yp)
                     n0 += n_init
                     sens_.append(None if dy is None else dy * np.exp(theta)[:, None, None])
                 cache.clear() if len(cache) > 8 else None
-                cache[key] = (errs, sens_ if sens else None, n0)
+                cache[key] = (errs, sens_ if sens else None, n0 + sum(len(v) for v in offs.values()))
+                offset_of[key] = offs
             return cache[key]
 
         def evaluate(theta, sens=True):
@@ -352,13 +634,16 @@ def identify(experiments: list[Experiment], keys: tuple[str, ...], inputs: tuple
         r, J = evaluate(theta)
         n_initial = run(theta)[2]
         pred = [y - err for y, err in zip(Y, run(theta)[0])]
+        fitted_offsets = offset_of.get(theta.tobytes(), {})
+        n_initial -= sum(len(v) for v in fitted_offsets.values())
         pred0 = [y - err for y, err in zip(Y, run(theta0, False)[0])]
     outputs = all_outputs
     # the estimated initial states took their degrees of freedom too
-    dof = max(r.size - len(keys) - n_initial, 1)
+    dof = max(r.size - len(keys) - n_initial - sum(len(v) for v in fitted_offsets.values()), 1)
     s2 = float(r @ r) / dof
     # the scaled normal matrix's condition: keys the logs cannot tell apart make it huge (and the
-    # intervals meaningless); reported in meta, warned about by the CLI
+    # intervals meaningless); reported in meta with the keys of its near-null direction, refused
+    # by the CLI (haa_sym.fit.identify.refuse_unreliable)
     H = J.T @ J
     d = np.sqrt(np.maximum(np.diag(H), 1e-300))
     Hs = H / np.outer(d, d)
@@ -366,10 +651,27 @@ def identify(experiments: list[Experiment], keys: tuple[str, ...], inputs: tuple
     # inverted in the scaled coordinates: pinv(H) itself would drop, as below its rcond, the
     # direction of a key the logs barely see (e.g. a damping run towards 0, where d y / d log p
     # vanishes) and give it a zero-width interval, the opposite of the truth
-    cov = s2 * np.linalg.pinv(Hs) / np.outer(d, d)
-    sd = np.sqrt(np.maximum(np.diag(cov), 0.0))
+    cov_white = s2 * np.linalg.pinv(Hs) / np.outer(d, d)
+    errs = run(theta)[0]
+    # the residuals of each log and output, tested for whiteness; the sandwich covariance from
+    # each log's score series (J_t^T r_t summed over its outputs), so that correlated residuals
+    # widen the intervals as much as they weaken the information (docs/identify.md, "Intervals")
+    # A log's score series is cut at its segments' starts: samples across a gap are not
+    # neighbours, so no lagged product spans one (haa_sym.fit.diagnostics.hac_covariance)
+    residuals = {e.log.name: {x: whiteness(err[:, i], opt.whiteness_lags, opt.whiteness_level)
+                              for i, x in enumerate(o)} for e, o, err in zip(experiments, outs, errs)}
+    scores, row = [], 0
+    for e, y in zip(experiments, Y):
+        rows = y.size
+        v = np.einsum("tok,to->tk", J[row:row + rows].reshape(len(y), y.shape[1], len(keys)),
+                      r[row:row + rows].reshape(len(y), y.shape[1]))
+        scores.append(np.split(v, list(e.log.starts[1:])))
+        row += rows
+    cov_hac, bandwidths = hac_covariance(H, scores)
+    cov = cov_hac if opt.intervals == "hac" else cov_white
     with np.errstate(over="ignore"):       # an undetermined key's interval is (0, inf): said so, not warned
-        ci = np.exp(np.column_stack([theta - Z95 * sd, theta + Z95 * sd]))
+        ci = _interval(theta, cov)
+        ci_white = _interval(theta, cov_white)
 
     def rms(preds):
         return {x: float(np.sqrt(np.mean(np.concatenate([(y[:, o.index(x)] - p[:, o.index(x)]) ** 2
@@ -386,29 +688,31 @@ def identify(experiments: list[Experiment], keys: tuple[str, ...], inputs: tuple
             "Van Loan ZOH derivative)", "iterations": [it1, it2], "converged": converged, "residual_variance": s2,
             "initial_state_values": n_initial,
             "condition_number": condition,
+            "near_null_keys": near_null_keys(Hs, d, keys),
+            "intervals": {"method": INTERVAL_METHODS[opt.intervals], "ci95_white": ci_white.tolist(),
+                          "bandwidth": {e.log.name: b for e, b in zip(experiments, bandwidths)}},
+            "residuals": residuals,
+            "friction": ({"start": {f"Fc_{b}": v for b, v in _friction_of(experiments[0], friction).items()},
+                          "friction_velocity": experiments[0].params.limits.friction_velocity,
+                          "max_substep": opt.max_substep, "method": "exact ZOH per substep of the log's own "
+                          "intervals (the delayed command switching inside them, segments from estimated states), "
+                          "friction torque implicit at each substep's end; d/d delay_drive a forward difference"}
+                         if use_friction else None),
+            "offsets": list(offsets),
             "logs": {e.log.name: {"sha256": e.log.sha256, "samples": e.log.samples, "configuration": e.configuration}
                      for e in experiments},
             "date": datetime.datetime.now(datetime.timezone.utc).isoformat(timespec="seconds"),
             "options": {k: getattr(opt, k) for k in FitOptions.__dataclass_fields__}}
     return FitResult(keys, np.exp(theta), np.exp(theta0), ci, cov, rms(pred0), rms(pred), it1 + it2,
                      int(sum(len(y) for y in Y)), {e.log.name: e.log.sampling for e in experiments},
-                     outputs, inputs, traces, bode, meta)
+                     outputs, inputs, traces, bode, meta, fitted_offsets)
 
 
-def simulate_log(exp: Experiment, inputs: tuple[str, ...], outputs: tuple[str, ...] | None = None,
-                 options: FitOptions | None = None, loop_options=None) -> np.ndarray:
-    """The model's outputs (N, ny) for ``exp``'s log with ``exp.params`` as they are (e.g. a fitted
-    file's), simulated as a fit simulates it (its own intervals, segments restarted from
-    estimated states, the first from rest unless ``options.initial_state`` or a window says
-    otherwise): what a validation compares with the measurement."""
-    opt = options or FitOptions()
-    outs = tuple(exp.outputs or outputs)
-    u = np.column_stack([exp.log.signals[i] for i in inputs])
-    y = np.column_stack([exp.log.signals[x] for x in outs])
-    with blas_limits(1):
-        yp, _, _ = _predict(exp, (), np.zeros(0), tuple(inputs), outs, loop_options, opt, u, y,
-                            np.maximum(np.std(y, axis=0), 1e-300), False)
-    return yp
+def _interval(theta: np.ndarray, cov: np.ndarray) -> np.ndarray:
+    """95 % intervals exp(log p +- 1.96 sd) of log-parameters ``theta`` with covariance ``cov``:
+    positive and asymmetric in p."""
+    sd = np.sqrt(np.maximum(np.diag(cov), 0.0))
+    return np.exp(np.column_stack([theta - Z95 * sd, theta + Z95 * sd]))
 
 
 def _levenberg_marquardt(evaluate, theta, opt: FitOptions, keys, tolerance: float | None = None):

@@ -32,10 +32,11 @@ from haa_sym.errors import ParameterError
 from haa_sym.io.budget import LOG_BYTES_PER_FILE_BYTE, check_memory
 from haa_sym.io.inputs import read_bytes
 
-__all__ = ["INPUTS", "OUTPUTS", "UNIFORM_JITTER", "GAP_PERIODS", "MAX_ANGLE", "Log", "read_log", "parse_window"]
+__all__ = ["INPUTS", "OUTPUTS", "OUTPUT_UNITS", "UNIFORM_JITTER", "GAP_PERIODS", "MAX_ANGLE", "Log", "read_log", "parse_window"]
 
 INPUTS = ("voltage", "current", "T_dist", "torque_ref")
 OUTPUTS = ("torque", "theta", "current", "velocity")
+OUTPUT_UNITS = {"torque": "Nm", "theta": "rad", "current": "A", "velocity": "rad/s"}     # SI, as logged
 UNIFORM_JITTER = 1e-6     # relative: below this the time stamps are rounding of a uniform clock
 # the mean sampling periods a log may have, s: 10 MHz to 0.1 Hz, far beyond any drive's logger
 PERIOD_RANGE = (1e-7, 10.0)

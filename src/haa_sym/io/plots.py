@@ -16,6 +16,7 @@ from matplotlib.patches import Patch  # noqa: E402
 
 from haa_sym.errors import ParameterError  # noqa: E402
 from haa_sym.io.outputs import transaction  # noqa: E402
+from haa_sym.io.logs import OUTPUT_UNITS  # noqa: E402
 
 __all__ = ["plot_region", "plot_region_panels", "plot_corrected_phase", "plot_steps",
            "plot_contact", "gains_text", "plot_torque_bandwidth", "STYLE", "plot_describing", "save_figure", "check_title", "plot_identify"]
@@ -710,7 +711,7 @@ def plot_simulation(time, columns: dict, saturated=None, title: str = "", cycle:
     return fig
 
 
-_UNITS = {"torque": "Nm", "theta": "rad", "current": "A", "velocity": "rad/s"}
+_UNITS = OUTPUT_UNITS
 
 
 # The zoomed time panel of plot_identify: the log's last stretch with this many crossings of the
@@ -728,18 +729,30 @@ def _zoom_start(t: np.ndarray, y: np.ndarray, crossings: int = ZOOM_CROSSINGS, m
     return max(0, min(start, t.size - min_samples))
 
 
-def plot_identify(result, title: str = "", max_points: int = 4000):
+# plot_identify draws at most this many validation data sets (a row each)
+MAX_VALIDATION_ROWS = 3
+
+
+def plot_identify(result, title: str = "", max_points: int = 4000, validation=None):
     """``haa-sym identify --plot``: per output, the first log's measured trace against the
     model's prediction before (initial values) and after the fit, over the whole log (every
     ``len // max_points``-th sample) and zoomed on its last :data:`ZOOM_CROSSINGS` crossings of
     the mean (every sample; the zoom is shaded on the whole log); below, the Bode magnitude and
     phase of the Welch H1 estimate (first input to the output) with the model's before and
     after, and the coherence. ``result`` is a :class:`haa_sym.fit.identify.FitResult` computed
-    with ``figure_data=True``."""
+    with ``figure_data=True``. ``validation``: ``(traces, quality)`` of
+    :func:`haa_sym.fit.identify.validate`; the data sets that were not fitted (a held-out part, a
+    --validate log; at most :data:`MAX_VALIDATION_ROWS`) get a row each below the zoom, measured
+    against the fitted model over the scored samples, titled with NRMSE and VAF, and the fitted
+    log's own NRMSE and VAF are in its title."""
     tr = result.traces[0]
     bode = result.bode[0] if result.bode else None
     outs = tuple(tr.get("outputs", result.outputs))      # the first log's own outputs
-    rows = 2 + (3 if bode is not None else 0)
+    fitted_names = {t["name"] for t in result.traces}
+    val_traces, quality = validation if validation is not None else ([], {})
+    held = [v for v in val_traces if v["name"] not in fitted_names][:MAX_VALIDATION_ROWS]
+    nv = len(held)
+    rows = 2 + nv + (3 if bode is not None else 0)
     fig, axes = plt.subplots(rows, len(outs), figsize=(6 * len(outs), 2.5 * rows), squeeze=False,
                              layout="constrained")
     t = tr["t"]
@@ -762,12 +775,33 @@ def plot_identify(result, title: str = "", max_points: int = 4000):
         zoom.set_xlabel(f"t (s), the log's last {t[-1] - t[k0]:.3g} s")
         for a in (ax, zoom):
             a.set_ylabel(f"{o} ({_UNITS[o]})")
-        ax.set_title(f"{tr['name']}: {o}, rms error {result.rms_initial[o]:.3g} -> {result.rms_fitted[o]:.3g}",
+        own = quality.get(tr["name"], {}).get(o)
+        ax.set_title(f"{tr['name']}: {o}, rms error {result.rms_initial[o]:.3g} -> {result.rms_fitted[o]:.3g}"
+                     + (f"; fit data NRMSE {own['nrmse']:.3g}, VAF {own['vaf_percent']:.4g} %" if own else ""),
                      fontsize=STYLE["panel_title_size"])
+        for j, v in enumerate(held):
+            # zoomed as the fit data's second row: the whole of a broadband log is a solid band
+            va, tv = axes[2 + j, i], v["t"]
+            vo = tuple(v.get("outputs", outs))
+            if o not in vo:                      # a validation log of other outputs (per-log --output)
+                va.set_axis_off()
+                continue
+            iv = vo.index(o)
+            kv = _zoom_start(tv, v["measured"][:, iv])
+            step = slice(kv, None, max(1, (len(tv) - kv) // max_points))
+            va.plot(tv[step], v["measured"][step, iv], **styles[0][1])
+            va.plot(tv[step], v["fitted"][step, iv], **styles[2][1])
+            va.set_xlim(tv[kv], tv[-1])
+            va.set_xlabel(f"t (s), the last {tv[-1] - tv[kv]:.3g} s of validation data (not fitted; scores over "
+                          f"{tv[0]:.3g} .. {tv[-1]:.3g} s)")
+            va.set_ylabel(f"{o} ({_UNITS[o]})")
+            q = quality[v["name"]][o]
+            va.set_title(f"validation {v['name']}: {o}, NRMSE {q['nrmse']:.3g}, VAF {q['vaf_percent']:.4g} %",
+                         fontsize=STYLE["panel_title_size"])
         if bode is None:
             continue
         w = bode["omega"]
-        mag, ph, coh = axes[2, i], axes[3, i], axes[4, i]
+        mag, ph, coh = axes[2 + nv, i], axes[3 + nv, i], axes[4 + nv, i]
         # H1 only where the coherence says the measurement carries the input (>= 0.5)
         H1 = np.where(bode["coherence"][i] >= 0.5, bode["H1"][i], np.nan)
         # H1's phase as its angle from the fitted model's, added to that model's unwrapped phase:

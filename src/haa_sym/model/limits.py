@@ -31,14 +31,14 @@ haa_sym.errors.ParameterError: f.toml [limits]: unknown key(s) ['Fc_L3']; allowe
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from typing import Mapping
 
 from haa_sym.errors import ParameterError
 from haa_sym.model.actuator import check_keys, entry_values
 
 __all__ = ["Limits", "FRICTION_MODELS", "DEFAULT_FRICTION_MODEL", "DEFAULT_FRICTION_VELOCITY",
-           "limit_units", "parse_limits"]
+           "limit_units", "parse_limits", "FRICTION_SET_KEYS", "with_friction_sets"]
 
 #: The friction models: "tanh" (smooth, the default). "stick-slip" (exact sticking) is named so
 #: that a file asking for it gets a clear refusal: it is not implemented (docs/simulate.md).
@@ -147,3 +147,32 @@ def parse_limits(table: object, bodies, source: str = "<memory>",
         else:
             out[k] = _check(k, v, *_FIXED[k][1:], where)
     return Limits(friction=friction, **out)
+
+
+#: The [limits] keys ``--set`` may change besides the ``Fc_<entry>`` torques (identify's friction).
+FRICTION_SET_KEYS = ("friction_velocity",)
+
+
+def with_friction_sets(limits: Limits, sets: Mapping[str, object], bodies) -> Limits:
+    """``limits`` with ``Fc_m`` / ``Fc_<body>`` (Nm, >= 0) and ``friction_velocity`` (rad/s, > 0)
+    from ``sets`` (``--set KEY=VALUE``, SI), checked as a file's ``[limits]`` entries are.
+
+    Raises
+    ------
+    ParameterError
+        An ``Fc_`` key that is not the rotor's or a body's, or a value out of its domain; one line
+        naming ``--set KEY=VALUE``.
+    """
+    friction, out = dict(limits.friction), {}
+    allowed = ["Fc_m"] + [f"Fc_{b}" for b in bodies]
+    for k, v in sets.items():
+        where = f"--set {k}={v}"
+        if k.startswith("Fc_"):
+            if k not in allowed:
+                raise ParameterError(f"{where}: not a friction entry; allowed: {allowed}")
+            friction[k[3:]] = _check(k, v, *_FRICTION[1:], where)
+        elif k in FRICTION_SET_KEYS:
+            out[k] = _check(k, v, *_FIXED[k][1:], where)
+        else:
+            raise ParameterError(f"{where}: not a [limits] friction key; allowed: {allowed + list(FRICTION_SET_KEYS)}")
+    return replace(limits, friction=friction, **out)

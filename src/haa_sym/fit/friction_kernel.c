@@ -1,0 +1,150 @@
+/* The friction simulation of haa_sym.fit.friction: the recursion over samples and substeps.
+ *
+ * Per substep of interval k (length h_k, n_sub[k] substeps, the matrices of that length):
+ *   a  = P x + G[:, :m] u_k,   x+ = a + H T,   H = G[:, m:],
+ *   T_b = -Fc_b tanh(x+[c_b] / v_s)            (implicit in T: nf equations, Newton),
+ * and, per key j, the exact derivative of that step:
+ *   r  = P s + dP x + dG[:, :m] u + dH T,   (I - Dg M) dT = Dg (r[c]) + q,   s+ = r + H dT,
+ * with M = H[c, :], Dg = diag(-Fc/v_s sech^2(v/v_s)), q_b = -tanh(v_b/v_s) when key j is Fc_b.
+ * Layouts are C order: P (K, n, n), G (K, n, mw), dP (np, K, n, n), dG (np, K, n, mw),
+ * u (K, m), X (K + 1, n), S (np, K + 1, n); mw = m + nf.  Returns 0, or 1 when a Newton
+ * solve did not converge (the caller refuses the point). */
+#include <math.h>
+#include <string.h>
+
+#define NFMAX 8
+
+/* solve the nf x nf system A z = b in place (Gaussian elimination, partial pivoting) */
+static int solve_small(int nf, double *A, double *b)
+{
+    for (int c = 0; c < nf; ++c) {
+        int piv = c;
+        for (int r = c + 1; r < nf; ++r)
+            if (fabs(A[r * nf + c]) > fabs(A[piv * nf + c])) piv = r;
+        if (A[piv * nf + c] == 0.0) return 1;
+        if (piv != c) {
+            for (int k = 0; k < nf; ++k) { double t = A[c * nf + k]; A[c * nf + k] = A[piv * nf + k]; A[piv * nf + k] = t; }
+            double t = b[c]; b[c] = b[piv]; b[piv] = t;
+        }
+        for (int r = c + 1; r < nf; ++r) {
+            double f = A[r * nf + c] / A[c * nf + c];
+            for (int k = c; k < nf; ++k) A[r * nf + k] -= f * A[c * nf + k];
+            b[r] -= f * b[c];
+        }
+    }
+    for (int c = nf - 1; c >= 0; --c) {
+        double acc = b[c];
+        for (int k = c + 1; k < nf; ++k) acc -= A[c * nf + k] * b[k];
+        b[c] = acc / A[c * nf + c];
+    }
+    return 0;
+}
+
+int haa_fit_friction(int K, int n, int m, int nf, int np_, const int *nsub,
+                     const double *P, const double *G, const double *dP, const double *dG,
+                     const double *u, const int *csel, const double *Fc, double vs,
+                     const int *fck, const double *x0, const double *s0, int sens,
+                     double *X, double *S, double *work)
+{
+    const int mw = m + nf;
+    double *a = work, *xn = work + n, *r = work + 2 * n;          /* 3 n doubles */
+    double T[NFMAX], v[NFMAX], F[NFMAX], Jm[NFMAX * NFMAX], dT[NFMAX], Dg[NFMAX], th[NFMAX];
+    int fail = 0;
+    memcpy(X, x0, sizeof(double) * n);
+    if (sens)
+        for (int j = 0; j < np_; ++j) memcpy(S + (size_t)j * (K + 1) * n, s0 + (size_t)j * n, sizeof(double) * n);
+    for (int b = 0; b < nf; ++b) T[b] = 0.0;
+    for (int k = 0; k < K; ++k) {
+        const double *Pk = P + (size_t)k * n * n, *Gk = G + (size_t)k * n * mw, *uk = u + (size_t)k * m;
+        double *xk = X + (size_t)(k + 1) * n;
+        memcpy(xk, X + (size_t)k * n, sizeof(double) * n);
+        if (sens)
+            for (int j = 0; j < np_; ++j) {
+                double *Sj = S + (size_t)j * (K + 1) * n;
+                memcpy(Sj + (size_t)(k + 1) * n, Sj + (size_t)k * n, sizeof(double) * n);
+            }
+        for (int sub = 0; sub < nsub[k]; ++sub) {
+            for (int i = 0; i < n; ++i) {
+                double acc = 0.0;
+                for (int l = 0; l < n; ++l) acc += Pk[i * n + l] * xk[l];
+                for (int l = 0; l < m; ++l) acc += Gk[i * mw + l] * uk[l];
+                a[i] = acc;
+            }
+            /* Newton on F(T) = T + Fc tanh((a_c + M T) / vs) = 0: each F_b rises with T_b
+             * (M's diagonal h/J > 0), the root is unique in [-Fc, Fc]; the step is halved until
+             * |F| falls */
+            int it;
+            for (it = 0; it < 100; ++it) {
+                double norm = 0.0;
+                for (int b = 0; b < nf; ++b) {
+                    double acc = a[csel[b]];
+                    for (int c = 0; c < nf; ++c) acc += Gk[csel[b] * mw + m + c] * T[c];
+                    v[b] = acc; th[b] = tanh(acc / vs);
+                    F[b] = T[b] + Fc[b] * th[b];
+                    norm += fabs(F[b]);
+                }
+                double scale = 0.0;
+                for (int b = 0; b < nf; ++b) scale += Fc[b];
+                if (norm <= 1e-15 * (scale > 0 ? scale : 1.0)) break;
+                for (int b = 0; b < nf; ++b) {
+                    double sl = Fc[b] / vs * (1.0 - th[b] * th[b]);
+                    for (int c = 0; c < nf; ++c) Jm[b * nf + c] = (b == c) + sl * Gk[csel[b] * mw + m + c];
+                    dT[b] = -F[b];
+                }
+                if (solve_small(nf, Jm, dT)) { fail = 1; break; }
+                double lam = 1.0, T1[NFMAX];
+                for (int tries = 0; tries < 60; ++tries, lam *= 0.5) {
+                    double n1 = 0.0;
+                    for (int b = 0; b < nf; ++b) T1[b] = T[b] + lam * dT[b];
+                    for (int b = 0; b < nf; ++b) {
+                        double acc = a[csel[b]];
+                        for (int c = 0; c < nf; ++c) acc += Gk[csel[b] * mw + m + c] * T1[c];
+                        n1 += fabs(T1[b] + Fc[b] * tanh(acc / vs));
+                    }
+                    if (n1 < norm || tries == 59) break;
+                }
+                double moved = 0.0;
+                for (int b = 0; b < nf; ++b) { moved += fabs(T1[b] - T[b]); T[b] = T1[b]; }
+                if (moved <= 1e-16 * (scale > 0 ? scale : 1.0)) break;
+            }
+            if (it == 100) fail = 1;
+            for (int b = 0; b < nf; ++b) {
+                double acc = a[csel[b]];
+                for (int c = 0; c < nf; ++c) acc += Gk[csel[b] * mw + m + c] * T[c];
+                v[b] = acc; th[b] = tanh(acc / vs);
+                T[b] = -Fc[b] * th[b];
+                Dg[b] = -Fc[b] / vs * (1.0 - th[b] * th[b]);
+            }
+            for (int i = 0; i < n; ++i) {
+                double acc = a[i];
+                for (int c = 0; c < nf; ++c) acc += Gk[i * mw + m + c] * T[c];
+                xn[i] = acc;
+            }
+            if (sens) {
+                for (int j = 0; j < np_; ++j) {
+                    double *sj = S + (size_t)j * (K + 1) * n + (size_t)(k + 1) * n;
+                    const double *dPk = dP + ((size_t)j * K + k) * n * n, *dGk = dG + ((size_t)j * K + k) * n * mw;
+                    for (int i = 0; i < n; ++i) {
+                        double acc = 0.0;
+                        for (int l = 0; l < n; ++l) acc += Pk[i * n + l] * sj[l] + dPk[i * n + l] * xk[l];
+                        for (int l = 0; l < m; ++l) acc += dGk[i * mw + l] * uk[l];
+                        for (int c = 0; c < nf; ++c) acc += dGk[i * mw + m + c] * T[c];
+                        r[i] = acc;
+                    }
+                    for (int b = 0; b < nf; ++b) {
+                        for (int c = 0; c < nf; ++c) Jm[b * nf + c] = (b == c) - Dg[b] * Gk[csel[b] * mw + m + c];
+                        dT[b] = Dg[b] * r[csel[b]] + (fck[b] == j ? -th[b] : 0.0);
+                    }
+                    if (solve_small(nf, Jm, dT)) fail = 1;
+                    for (int i = 0; i < n; ++i) {
+                        double acc = r[i];
+                        for (int c = 0; c < nf; ++c) acc += Gk[i * mw + m + c] * dT[c];
+                        sj[i] = acc;
+                    }
+                }
+            }
+            memcpy(xk, xn, sizeof(double) * n);
+        }
+    }
+    return fail;
+}
