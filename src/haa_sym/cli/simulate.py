@@ -204,7 +204,7 @@ def _predictions(loop, P, D, s, cols) -> list[tuple[str, str, dict | None]]:
     Ts = loop.params.controller.Ts
     # the limits in force (the friction model's settings are not limits of their own)
     n_limits = len([k for k in loop.params.limits.active if k not in ("friction_model", "friction_velocity")])
-    for nl in limit_nonlinearities(loop.params.limits):
+    for nl in limit_nonlinearities(loop.params.limits, loop.structure.command):
         (key, value), = nl.items()
         r = limit_cycles(loop, P, D, nonlinearity=nl)
         ok = np.flatnonzero(r.stable)
