@@ -504,7 +504,8 @@ def compare_cycle(r: LimitCycles, k: int, columns: dict, Ts: float, *, port: str
     col, side = _signal_column(r.nonlinearity, port)
     A, f, d = float(r.amplitude[k]), float(r.frequency_hz[k]), float(r.distortion[k])
     pred_amp = float(describing_function("saturation", r.value, A)[0]) * A if side == "output" else A
-    out = {"signal": col or "torque (frequency only)", "predicted_amplitude": pred_amp, "predicted_frequency_hz": f,
+    shown = "current command" if r.nonlinearity == "I_max" else col
+    out = {"signal": shown or "torque (frequency only)", "predicted_amplitude": pred_amp, "predicted_frequency_hz": f,
            "simulated_kind": None, "simulated_amplitude": None, "simulated_frequency_hz": None,
            "amplitude_error": None, "frequency_error": None, "tolerance": max(d, CONFIRM_TOL_FLOOR),
            "agrees": False, "untrusted": []}
