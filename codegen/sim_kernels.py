@@ -50,20 +50,22 @@ def sample_function(nx: int, nc: int) -> ca.Function:
     x, xc = SYM.sym("x", nx), SYM.sym("xc", nc)
     exo, par = SYM.sym("exo", len(L.SIM_EXO)), SYM.sym("par", lay.size)
     e = {n: exo[i] for i, n in enumerate(L.SIM_EXO)}
-    row = {n: _mat(par, lay, n) for n in ("c_theta", "c_T", "c_I", "c_v", "c_emf")}
-    p = {n: par[lay[n]][0] for n in ("V_max", "RI_max", "q_theta", "q_T")}
+    row = {n: _mat(par, lay, n) for n in ("c_theta", "c_T", "c_I", "c_v", "c_w1", "c_w2")}
+    p = {n: par[lay[n]][0] for n in ("w1", "w2", "q_theta", "q_T")}
     theta = _quantise(ca.mtimes(row["c_theta"], x), p["q_theta"])
     T = _quantise(ca.mtimes(row["c_T"], x) + e["noise_T"], p["q_T"])
     uin = ca.vertcat(theta, T, e["T_ff"], e["theta_ref"])
     out = ca.mtimes(_mat(par, lay, "Cc"), xc) + ca.mtimes(_mat(par, lay, "Dc"), uin)
     xc_next = ca.mtimes(_mat(par, lay, "Ac"), xc) + ca.mtimes(_mat(par, lay, "Bc"), uin)
-    emf = ca.mtimes(row["c_emf"], x)
-    # the drive's current limit as a voltage window: the voltages whose steady current at the
-    # present speed is within +-I_max (docs/simulate.md); then the supply's +-V_max, last, so that
-    # it holds also where the back-EMF puts the whole window outside it (a window below -V_max
-    # gave a voltage beyond the supply when both were merged into one clip)
-    V_I = ca.fmin(ca.fmax(out[0], -p["RI_max"] + emf), p["RI_max"] + emf)
-    V = ca.fmin(ca.fmax(V_I, -p["V_max"]), p["V_max"])
+    # two windows, each centred on a row of the state (docs/simulate.md, "Saturate"): the drive's
+    # current limit first, the supply last, so that the supply holds also where the back-EMF puts
+    # the whole of the first window outside it. A voltage command: the voltages whose steady
+    # current at the present speed is within +-I_max (centre k_w dtheta_m, half-width R I_max),
+    # then +-V_max. A current command: +-I_max, then the currents the supply sustains at the
+    # present speed (centre -k_w dtheta_m / R, half-width V_max / R)
+    c1, c2 = ca.mtimes(row["c_w1"], x), ca.mtimes(row["c_w2"], x)
+    u_1 = ca.fmin(ca.fmax(out[0], c1 - p["w1"]), c1 + p["w1"])
+    V = ca.fmin(ca.fmax(u_1, c2 - p["w2"]), c2 + p["w2"])
     sat = ca.if_else(V == out[0], 0, 1)
     y = ca.vertcat(theta, ca.mtimes(row["c_v"], x), T, out[1], V, ca.mtimes(row["c_I"], x), sat)
     u = ca.vertcat(V, e["T_dist"])

@@ -41,7 +41,7 @@ def test_describe_says_when_nothing_is_predicted(capsys):
     (["--limit", "V_max"], "--limit 'V_max'"),
     (["--limit", "V_max=abc"], "--limit 'V_max=abc'"),
     (["--limit", "V_max=0"], "V_max = 0.0; allowed: a number from 1e-100 to 1e+100 (V)"),
-    (["--limit", "I_max=3"], "nonlinearity 'I_max'; allowed"),
+    (["--limit", "I_max=3"], "I_max: structure = 'paper' commands a voltage, and the current limit"),
     (["--limit", "Fc_L3=1"], "no body 'L3'"),
     (["--P-gain", "1,2", "--limit", "V_max=24"], "allowed: one point"),
 ])

@@ -153,8 +153,6 @@ def test_analyses_that_need_what_a_structure_lacks_refuse_it():
     cur = ClosedLoop(_params("qdd_leg", "impedance_current"))
     with pytest.raises(ParameterError, match="needs a torque loop.*'impedance_current'"):
         torque_bandwidth(cur)
-    with pytest.raises(ParameterError, match="needs a voltage-commanded motor"):
-        simulate(cur, 10.0, 0.1, limits=Limits())
     with pytest.raises(ParameterError, match="beta = 2: structure = 'impedance_current' has no torque PI"):
         cur.stability(10.0, 0.1, beta=2.0)
     with pytest.raises(ParameterError, match="alpha = 0.5: structure = 'torque_pi' has no velocity"):
@@ -255,8 +253,6 @@ def test_haptic_wall_is_the_rotor_alone_under_a_current_command():
 
 @pytest.mark.parametrize("argv, match", [
     (["contact", "--P-gain", "2", "--D-gain", "0.001"], "the port is the rotor of an actuator without [bodies]"),
-    (["simulate", "--P-gain", "2", "--D-gain", "0.001", "--experiment", "disturbance-step", "--duration",
-      "0.1", "--out", "s.csv"], "needs a voltage-commanded motor, and structure = 'impedance_current'"),
     (["step", "--out", "s.csv"], "step_response needs a torque loop"),
     (["tune", "--out", "t.toml"], "tune (the torque PI tuner) needs a torque loop"),
     (["regions", "--set", "beta=2", "--out", "m.npz"], "beta = 2: structure = 'impedance_current' has no torque PI"),

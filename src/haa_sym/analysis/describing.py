@@ -16,6 +16,9 @@ The nonlinearities (their parameters plain data, ``{"V_max": 24.0}``; the names 
 ``V_max`` (V)        saturation of the voltage command ``V_k`` (PI output + velocity
                      compensation) before the delay and the zero-order hold; ``u = V_k`` (V),
                      discrete: ``G = K_T G_TV + K_theta G_thV`` at ``z = exp(j omega Ts)``.
+``I_max`` (A)        a current-commanded structure (``impedance_current``): saturation of the
+                     current command ``I_k`` (T_ref / (k_t N)) before the delay and the hold,
+                     ``u = I_k`` (A), the same ``G`` with the current-commanded plant's column.
 ``T_res`` (Nm)       a rounding quantiser of step ``T_res`` on the torque the loop reads; ``u`` the
                      torque (Nm), discrete: ``G = K_T G_TV / (1 + K_theta G_thV)``.
 ``Fc_m``, ``Fc_<body>`` (Nm)  Coulomb friction ``-Fc sign(v)`` on the rotor or on a body; ``u`` its
@@ -40,7 +43,7 @@ from haa_sym.analysis.simulate import simulate
 from haa_sym.analysis.sweep import BLAS_THREADS, blas_limits
 from haa_sym.errors import ParameterError
 from haa_sym.loop import ClosedLoop, loop_first
-from haa_sym.loop.plant import continuous_plant, with_lag
+from haa_sym.loop.plant import continuous_plant, current_commanded, with_lag
 from haa_sym.model.limits import Limits
 from haa_sym.model.params import gain_array
 
@@ -52,11 +55,20 @@ __all__ = ["LimitCycles", "NONLINEARITIES", "describing_function", "df_harmonics
 # key (or prefix) -> (what the nonlinearity sees, the unit of that signal, the unit of the parameter)
 NONLINEARITIES = {
     "V_max": ("voltage command V_k (PI output + velocity compensation, before the hold)", "V", "V"),
+    "I_max": ("current command I_k (T_ref / (k_t N), before the hold)", "A", "A"),
     "T_res": ("torque the loop reads (the torque sensor)", "Nm", "Nm"),
     "Fc_m": ("rotor velocity dtheta_m", "rad/s", "Nm"),
     "Fc_<body>": ("velocity dtheta_<body> of the body", "rad/s", "Nm"),
 }
-KINDS = {"V_max": "saturation", "T_res": "quantiser", "Fc": "relay"}
+KINDS = {"V_max": "saturation", "I_max": "saturation", "T_res": "quantiser", "Fc": "relay"}
+# Which saturation is the command's own, by the structure's command (haa_sym.model.structures):
+# the other limit is a window that moves with the rotor's speed (the current limit of a voltage
+# command, the supply of a current command; docs/simulate.md), which no describing function here
+# covers; a current command's loop reads no torque, so a torque quantiser is outside its loop
+COMMAND_SATURATION = {"voltage": "V_max", "current": "I_max"}
+NO_DF = {"voltage": {"I_max": "the current limit of a voltage command is a window that moves with the speed"},
+         "current": {"V_max": "the supply of a current command is a window of currents that moves with the speed",
+                     "T_res": "a current-commanded structure reads no torque: the quantiser is outside its loop"}}
 
 
 @dataclass(frozen=True)
@@ -191,7 +203,8 @@ def _friction_input(loop: ClosedLoop, key: str):
     """(continuous plant, input column of a torque on the body, velocity row) for ``Fc_<body>``:
     the plant behind the drive's lag (its states first, as in ``loop.plant``; the drive's delay
     is applied by :func:`linear_part`)."""
-    cont = with_lag(continuous_plant(loop.params.plant, loop.backend), loop.params.drive.tau_drive)
+    cont = with_lag(current_commanded(continuous_plant(loop.params.plant, loop.backend),
+                                      loop.structure.command == "current"), loop.params.drive.tau_drive)
     body = key[3:]
     names = cont.state_names
     if f"dtheta_{body}" not in names:
@@ -332,8 +345,12 @@ def limit_cycles(loop: ClosedLoop, P_gain: float, D_gain: float, *, nonlinearity
     LimitCycles
         Every (A, omega) of the harmonic balance, the crossings in increasing frequency.
     """
-    loop.require("voltage", "limit_cycles (the describing function of the voltage-driven plant)")
     key, value = _check(nonlinearity)
+    command = loop.structure.command
+    if key in NO_DF[command]:
+        ok = ", ".join(k for k in NONLINEARITIES if k not in NO_DF[command])
+        raise ParameterError(f"{key}: structure = {loop.structure.name!r} commands a {command}, and "
+                             f"{NO_DF[command][key]}; allowed: {ok}")
     # many small stacked solves: threaded BLAS only contends for the cores (as in the sweeps)
     with blas_limits(BLAS_THREADS):
         return _limit_cycles(loop, P_gain, D_gain, key, value, n_omega, amplitude_max, k_max)
@@ -406,15 +423,19 @@ def _limit_cycles(loop, P_gain, D_gain, key, value, n_omega, amplitude_max, k_ma
                        grid, Gg, amp_curve, minus_inv_N, meta)
 
 
-def limit_nonlinearities(limits) -> list[dict]:
+def limit_nonlinearities(limits, command: str = "voltage") -> list[dict]:
     """The entries of a :class:`haa_sym.model.limits.Limits` a describing function predicts, each
-    as a ``nonlinearity`` of :func:`limit_cycles`: ``V_max``, the torque quantum
-    (``torque_resolution`` as ``T_res``) and every Coulomb friction ``Fc_m``, ``Fc_<body>``
-    (the current window, encoder quantisation, noise and jitter have no describing function here)."""
+    as a ``nonlinearity`` of :func:`limit_cycles`: the command's saturation (``V_max`` of a
+    voltage command, ``I_max`` of a current command: ``command``, the structure's), the torque
+    quantum of a loop that reads the torque (``torque_resolution`` as ``T_res``) and every
+    Coulomb friction ``Fc_m``, ``Fc_<body>`` (the windows that move with the speed, encoder
+    quantisation, noise and jitter have no describing function here: :data:`NO_DF`)."""
     out = []
-    if limits.V_max:
+    if command == "voltage" and limits.V_max:
         out.append({"V_max": float(limits.V_max)})
-    if limits.torque_resolution:
+    if command == "current" and limits.I_max:
+        out.append({"I_max": float(limits.I_max)})
+    if command == "voltage" and limits.torque_resolution:
         out.append({"T_res": float(limits.torque_resolution)})
     out += [{f"Fc_{b}": float(v)} for b, v in limits.friction.items() if v > 0]
     return out
@@ -445,7 +466,7 @@ def _signal_column(key: str, port: str):
     """(CSV column of ``haa-sym simulate`` carrying the nonlinearity's signal, "input" or
     "output"), or (None, None): the supply's command is not a column, its held output is; the
     rotor's velocity is not a column."""
-    if key == "V_max":
+    if key in ("V_max", "I_max"):               # the held command's column (a current's for I_max)
         return "voltage", "output"
     if key == "T_res":
         return "torque", "input"
@@ -483,7 +504,8 @@ def compare_cycle(r: LimitCycles, k: int, columns: dict, Ts: float, *, port: str
     col, side = _signal_column(r.nonlinearity, port)
     A, f, d = float(r.amplitude[k]), float(r.frequency_hz[k]), float(r.distortion[k])
     pred_amp = float(describing_function("saturation", r.value, A)[0]) * A if side == "output" else A
-    out = {"signal": col or "torque (frequency only)", "predicted_amplitude": pred_amp, "predicted_frequency_hz": f,
+    shown = "current command" if r.nonlinearity == "I_max" else col
+    out = {"signal": shown or "torque (frequency only)", "predicted_amplitude": pred_amp, "predicted_frequency_hz": f,
            "simulated_kind": None, "simulated_amplitude": None, "simulated_frequency_hz": None,
            "amplitude_error": None, "frequency_error": None, "tolerance": max(d, CONFIRM_TOL_FLOOR),
            "agrees": False, "untrusted": []}
@@ -532,6 +554,8 @@ def confirm_cycles(loop, P_gain: float, D_gain: float, r: LimitCycles, *, seed: 
     key = r.nonlinearity
     if key == "V_max":
         lim = Limits(V_max=r.value)
+    elif key == "I_max":
+        lim = Limits(I_max=r.value)
     elif key == "T_res":
         lim = Limits(torque_resolution=r.value)
     else:

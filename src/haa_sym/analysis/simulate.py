@@ -47,8 +47,10 @@ from haa_sym.compiled.generated import evaluators
 from haa_sym.errors import ParameterError
 from haa_sym.io.budget import BYTES_PER_SAMPLE, check_memory
 from haa_sym.loop import loop_first
-from haa_sym.loop.plant import continuous_plant, delay_split, with_lag
+from haa_sym.loop.plant import (CURRENT_STATE, LAG_STATE, continuous_plant, current_commanded, delay_split,
+                                with_lag)
 from haa_sym.loop.statespace import controller_batch
+from haa_sym.model.actuator import ROTOR
 from haa_sym.model.limits import Limits
 
 __all__ = ["EXPERIMENTS", "FORCED_EXPERIMENTS", "CSV_COLUMNS", "Simulation", "SimulationBatch", "simulate",
@@ -88,6 +90,9 @@ CHIRP_F0 = 0.1               # Hz
 JITTER_CLIP = 3.0            # the sample offsets are Gaussian clipped to +-3 sigma
 # |lambda_max delta| / n_sub of each jitter substep's series (codegen/sim_kernels.py)
 JITTER_STEP_BOUND = 0.5
+#: The simulation's state of a current command held without a lag: the current the motor carried
+#: over the last interval (every plant step sets it to its held command: :meth:`_Setup.hold_rows`)
+HOLD_STATE = "I_held"
 
 
 @dataclass(frozen=True)
@@ -229,11 +234,15 @@ class _Setup:
         self.limits, self.experiment, self.duration, self.n, self.seed = lim, experiment, duration, n, seed
         top = params.plant.topology
         motor = _continuous(params.plant, loop.backend)
+        # a current-commanded structure (impedance_current): the plant without the electrical
+        # state, the command its current (the linear loop's own current_commanded)
+        self.current = current = loop.structure.command == "current"
+        plant = current_commanded(motor, current)
         # the drive (haa_sym.model.drive; docs/simulate.md, "The drive"): its lag is one more
         # continuous state of the plant (the linear loop's own with_lag), so every plant step
         # below integrates it exactly; its dead time is the driver's delay line of commands
         self.drive = drive = params.drive
-        cont = with_lag(motor, drive.tau_drive)
+        cont = with_lag(plant, drive.tau_drive)
         self.whole, self.frac = delay_split(drive.delay_drive, Ts)
         # the sample interval's pieces: with a fractional delay f the held command switches at
         # t_k + f (the older command before, the newer after), else one piece; the jitter
@@ -241,23 +250,44 @@ class _Setup:
         self.spans = (self.frac, Ts - self.frac) if self.frac else (Ts,)
         self.piece_frac = tuple(h / Ts for h in self.spans) if self.frac else (1.0,)
         A, B = cont.A, cont.B
-        self.nx = nx = A.shape[0]
+        n_p = A.shape[0]                 # the linear loop's plant states (without its delay line)
         states, outs = cont.state_names, cont.output_names
-        Cm = loop.plant.C[:, :nx]        # the delay line's states are not the plant's (driver.c)
-        self.rows = {"c_theta": Cm[outs.index("theta_encoder")], "c_T": Cm[outs.index(loop.torque_output)],
-                     "c_I": np.eye(nx)[states.index("I_m")], "c_v": Cm[outs.index(f"dtheta_{top.port}")]}
-        # the motor's voltage equation, row I_m of A and B of the motor without the drive's lag:
-        # L dI/dt = V - R I - emf(x) (the lag's state enters that row, not the command)
-        i = states.index("I_m")
-        n_m = motor.A.shape[0]
-        L_m = 1.0 / motor.B[i, 0]
+        Cm = loop.plant.C[:, :n_p]       # the delay line's states are not the plant's (driver.c)
+        # a current command without a lag is held, not a state: one more state, HOLD_STATE, that
+        # every plant step sets to the command it held (no continuous dynamics: _hold), so that
+        # the current the motor carried up to t_k is read at t_k like every other signal
+        self.hold = n_p if current and not drive.tau_drive > 0 else None
+        if self.hold is not None:
+            A, B, Cm = _pad(A, n_p + 1, n_p + 1), _pad(B, n_p + 1, B.shape[1]), _pad(Cm, Cm.shape[0], n_p + 1)
+            states = states + (HOLD_STATE,)
+        self.nx = nx = A.shape[0]
+        # the motor's voltage equation, row I_m of A and B of the motor (voltage-driven, no lag):
+        # L dI/dt = V - R I - emf(x); for a current command its states but I_m are this plant's
+        i_m = motor.state_names.index(CURRENT_STATE)
+        L_m = 1.0 / motor.B[i_m, 0]
+        R = -motor.A[i_m, i_m] * L_m
         emf = np.zeros(nx)
-        emf[:n_m] = -motor.A[i] * L_m
-        R = emf[i]
-        emf[i] = 0.0
-        self.rows["c_emf"] = emf
-        self.RI_max = math.inf if lim.I_max is None else R * lim.I_max
-        self.V_max = math.inf if lim.V_max is None else lim.V_max
+        for j, name in enumerate(motor.state_names):
+            if j != i_m:
+                emf[states.index(name)] = -motor.A[i_m, j] * L_m
+        # the motor current: the state I_m, or for a current command the held command (the lag's
+        # state u_lag with a lag); the torque signal's row takes its I_m coefficient there
+        # (torque = "current": k_t N I), the rest of it being the current plant's own row
+        i_cur = states.index(CURRENT_STATE) if not current else \
+            (self.hold if self.hold is not None else states.index(LAG_STATE))
+        c_T = Cm[outs.index(loop.torque_output)].copy()
+        if current:
+            c_T[i_cur] += motor.C[motor.output_names.index(loop.torque_output), i_m]
+        self.rows = {"c_theta": Cm[outs.index("theta_encoder")], "c_T": c_T, "c_I": np.eye(nx)[i_cur],
+                     "c_v": Cm[outs.index(f"dtheta_{top.port}")]}
+        # the two windows of the held command (codegen/sim_kernels.py): the drive's current limit
+        # first, the supply last (docs/simulate.md, "Saturate")
+        I_max = math.inf if lim.I_max is None else lim.I_max
+        V_max = math.inf if lim.V_max is None else lim.V_max
+        if current:
+            self.windows = dict(c_w1=np.zeros(nx), w1=I_max, c_w2=-emf / R, w2=V_max / R)
+        else:
+            self.windows = dict(c_w1=emf, w1=R * I_max, c_w2=np.zeros(nx), w2=V_max)
         turn = 2 * math.pi / (params.plant.N if top.encoder == "rotor" else 1.0)
         self.q_theta = 0.0 if lim.encoder_counts is None else turn / lim.encoder_counts
         self.q_T = lim.torque_resolution or 0.0
@@ -296,7 +326,8 @@ class _Setup:
             exo[k("T_ff")] = A_ * u
         self.x0 = np.zeros(nx)
         if experiment == "deflection":
-            self.x0[states.index(f"theta_{top.port}")] = A_
+            # a rotor-only file's port is the rotor, whose state is theta_m
+            self.x0[states.index("theta_m" if top.port == ROTOR else f"theta_{top.port}")] = A_
         if lim.torque_noise:
             exo[k("noise_T")] = lim.torque_noise * rng.standard_normal(n)
         eps = np.zeros(n + 1)
@@ -329,12 +360,12 @@ class _Setup:
                 raise ParameterError(f"{where}: jitter = {jitter!r} s rms needs {self.n_sub0} substeps for this "
                                      f"plant; allowed: a jitter below {MAX_SUBSTEPS * JITTER_STEP_BOUND / (2 * JITTER_CLIP * rho):g} s")
             # per piece: Phi, Gamma over span / n_sub, the interval's stretch delta span / Ts
-            self.plant_parts = [dict(zip(("Phi", "Gamma"), _zoh(A, Bu, h / self.n_sub0)), inv_n=1.0 / self.n_sub0)
-                                for h in self.spans]
+            self.plant_parts = [dict(zip(("Phi", "Gamma"), self.hold_rows(*_zoh(A, Bu, h / self.n_sub0))),
+                                     inv_n=1.0 / self.n_sub0) for h in self.spans]
         else:
             self.kind = "zoh"
             self.n_sub0 = 1
-        self.A, self.Bu = A, Bu
+        self.A, self.Bu, self.n_p = A, Bu, n_p
         self.zoh_parts = self._zoh_parts(loop, iu)
         if self.kind == "zoh":
             self.plant_parts = self.zoh_parts
@@ -344,7 +375,19 @@ class _Setup:
         and a fraction, and the order of the command's path (docs/simulate.md, "The drive")."""
         return {"tau_drive": self.drive.tau_drive, "delay_drive": self.drive.delay_drive,
                 "delay_whole_samples": self.whole, "delay_fraction_s": self.frac,
-                "order": "clip (supply, current window) -> delay -> lag -> motor"}
+                "order": "clip (supply, current window) -> delay -> lag -> motor",
+                "command": "current" if self.current else "voltage"}
+
+    def hold_rows(self, Phi, Gamma):
+        """``Phi``, ``Gamma`` of a plant step (any length) with the row of :data:`HOLD_STATE` set to
+        the held command, x_hold+ = u (a copy; unchanged without that state). The row is zero in
+        the continuous A and B, so every other row of an exact or integrating step is untouched."""
+        if self.hold is None:
+            return Phi, Gamma
+        Phi, Gamma = Phi.copy(), Gamma.copy()
+        Phi[self.hold], Gamma[self.hold] = 0.0, 0.0
+        Gamma[self.hold, 0] = 1.0
+        return Phi, Gamma
 
     def _zoh_parts(self, loop, iu):
         """The exact ZOH transition (``Phi``, ``Gamma`` of the inputs [V, T_dist]) of each piece of
@@ -352,13 +395,13 @@ class _Setup:
         plant (with every limit off the simulation then gives its numbers): its plant block, and
         the command's column where :func:`haa_sym.loop.plant.discretize` put it (the delay line's
         oldest state for a whole-sample delay). With one, the two pieces over f and Ts - f."""
-        nx, pl = self.nx, loop.plant
+        nx, n, pl = self.nx, self.n_p, loop.plant
         if self.frac:
-            return [dict(zip(("Phi", "Gamma"), _zoh(self.A, self.Bu, h))) for h in self.spans]
-        Gamma = pl.Gamma[:nx, iu].copy()
+            return [dict(zip(("Phi", "Gamma"), self.hold_rows(*_zoh(self.A, self.Bu, h)))) for h in self.spans]
+        Gamma = pl.Gamma[:n, iu].copy()
         if self.whole:
-            Gamma[:, 0] = pl.Phi[:nx, nx + self.whole - 1]
-        return [dict(Phi=pl.Phi[:nx, :nx], Gamma=Gamma)]
+            Gamma[:, 0] = pl.Phi[:n, n + self.whole - 1]
+        return [dict(zip(("Phi", "Gamma"), self.hold_rows(_pad(pl.Phi[:n, :n], nx, nx), _pad(Gamma, nx, len(iu)))))]
 
     def etd_tables(self, fractions, cx, span=None):
         """The packed ETDRK4 substep parameters (``sim_plant_layout("etd", cx)``) of every row of
@@ -396,6 +439,9 @@ class _Setup:
             tops[i] = E[:, :n]
             if i < LEVELS:
                 E = E @ E
+        if self.hold is not None:                        # x_hold+ = u over every (sub)step
+            tops[:, :, self.hold] = 0.0
+            tops[:, :, self.hold, n] = 1.0
         lay = L.sim_plant_layout("etd", cx)
         out = np.zeros((nt, LEVELS, lay.size))
 
@@ -433,9 +479,10 @@ def _run(loop, setup: _Setup, P_gain, D_gain, controller=None):
     cx, cc = _capacity(setup.nx, nc)
     names = L.sim_function_names(cx, cc)
     ev = evaluators(loop.backend)
-    ctrl = _pack(L.sim_ctrl_layout(cx, cc), Ac=Ac, Bc=Bc, Cc=Cc, Dc=Dc, V_max=setup.V_max,
-                 RI_max=setup.RI_max, q_theta=setup.q_theta, q_T=setup.q_T,
-                 **{k: v[None, :] for k, v in setup.rows.items()})
+    ctrl = _pack(L.sim_ctrl_layout(cx, cc), Ac=Ac, Bc=Bc, Cc=Cc, Dc=Dc,
+                 q_theta=setup.q_theta, q_T=setup.q_T,
+                 **{k: v[None, :] for k, v in setup.rows.items()},
+                 **{k: v[None, :] if np.ndim(v) else v for k, v in setup.windows.items()})
     x0 = _pad(setup.x0[:, None], cx, 1).ravel()
     xc0 = np.zeros(cc)
 
@@ -589,7 +636,6 @@ def simulate(loop, P_gain: float, D_gain: float, *, limits: Limits | None = None
     -------
     Simulation
     """
-    loop.require("voltage", "simulate (the simulation's plant is driven by the motor voltage)")
     P = _number("P_gain", P_gain, "a finite number (Nm/rad)", lambda v: True)
     D = _number("D_gain", D_gain, "a finite number (Nms/rad)", lambda v: True)
     # small matrices only: BLAS threads cost more than they give (16 ms vs 30 us for one
@@ -612,7 +658,6 @@ def simulate_batch(loop, P_gain, D_gain, *, limits: Limits | None = None,
     ``linear_stable``: the linear loop's decision per point if known (1, 0 or NaN), else
     computed (:func:`linear_verdict`). ``setup``: :func:`batch_setup` of the same loop and
     arguments, if already built (a worker keeps it for its next tasks)."""
-    loop.require("voltage", "simulate_batch (the simulation's plant is driven by the motor voltage)")
     P, D = (np.atleast_1d(np.asarray(v, float)).ravel() for v in np.broadcast_arrays(P_gain, D_gain))
     if not (np.all(np.isfinite(P)) and np.all(np.isfinite(D))):
         raise ParameterError("P_gain, D_gain: not finite; allowed: finite gains (Nm/rad, Nms/rad)")

@@ -360,7 +360,7 @@ def cycle_comparison(c: dict, head: str, unit: str = "") -> str:
     (the voltage's simulated amplitude is its fundamental's, as the prediction's)."""
     if c["simulated_kind"] == "sustained":
         amp = "" if c["simulated_amplitude"] is None or c["amplitude_error"] is None else \
-            (("fundamental " if c["signal"] == "voltage" else "") + f"{c['simulated_amplitude']:.4g}"
+            (("fundamental " if c["signal"] in ("voltage", "current command") else "") + f"{c['simulated_amplitude']:.4g}"
              + (f" {unit}" if unit else "") + f" (error {100 * c['amplitude_error']:.3g} %) ")
         text = (f"{head} {c['signal']}: {amp}at {c['simulated_frequency_hz']:.4g} Hz (error "
                 f"{100 * c['frequency_error']:.3g} %): {'agrees' if c['agrees'] else 'DISAGREES'} within "

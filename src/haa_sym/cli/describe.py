@@ -7,13 +7,14 @@ from haa_sym.analysis.describing import DISTORTION_STRONG, NONLINEARITIES, confi
 from haa_sym.errors import ParameterError
 from haa_sym.io.formats import save_json
 from haa_sym.loop import ClosedLoop
+from haa_sym.model import structures
 
 from haa_sym.cli.common import (TITLE_HELP, _check_out, _common, _gain_flags, _loaded, _params, _parse_options,
                                 cycle_comparison,
                                 _plots, _points, _write_outputs, _wrote, figure_title)
 
 LIMIT_HELP = ("a nonlinearity and its parameter, KEY=VALUE (repeatable, each predicted alone): V_max (V, "
-              "saturation of the voltage command), T_res or torque_resolution (Nm, rounding of the torque the loop "
+              "saturation of the voltage command), I_max (A, saturation of a current command), T_res or torque_resolution (Nm, rounding of the torque the loop "
               "reads), Fc_m or Fc_<body> (Nm, Coulomb friction on the rotor or a body); default: those of the "
               "file's [limits] section")
 
@@ -22,10 +23,12 @@ def _limits(items: list[str], params) -> list[dict]:
     """The nonlinearities of ``--limit``, else those of the file's ``[limits]`` section (one name per
     concept: ``torque_resolution``, the [limits] key, is read as the describing function's ``T_res``)."""
     if not items:
-        from_file = limit_nonlinearities(params.limits)
+        command = structures.get(params.controller.structure).command
+        from_file = limit_nonlinearities(params.limits, command)
         if not from_file:
-            raise ParameterError("--limit missing and the parameter file's [limits] has no V_max, "
-                                 "torque_resolution or Coulomb friction; allowed: KEY=VALUE with KEY one of "
+            raise ParameterError("--limit missing and the parameter file's [limits] has no "
+                                 + ("V_max, torque_resolution" if command == "voltage" else "I_max")
+                                 + " or Coulomb friction; allowed: KEY=VALUE with KEY one of "
                                  + ", ".join(NONLINEARITIES) + " (e.g. --limit V_max=24)")
         return from_file
     out = []

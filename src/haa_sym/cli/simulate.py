@@ -60,11 +60,14 @@ def _cmd_simulate(args) -> int:
     m = s.meta
     m["describing_functions"] = [c for _, _, c in predicted]
 
+    # a current command's held command is a current (A): its column says so (docs/simulate.md)
+    names = csv_names(loop)
+
     def write_csv(path, tx):
         # formatted only when written: the rows' strings are 5x the run's own memory (1 kB a
         # sample; CSV_BYTES_PER_SAMPLE); a run that diverged at once has no row: the header alone
-        rows = [{c: f"{cols[c][k]:.12g}" for c in CSV_COLUMNS} for k in range(len(s.time))]
-        text = csv_text(rows) if rows else ",".join(CSV_COLUMNS) + "\n"
+        rows = [{names[c]: f"{cols[c][k]:.12g}" for c in CSV_COLUMNS} for k in range(len(s.time))]
+        text = csv_text(rows) if rows else ",".join(names[c] for c in CSV_COLUMNS) + "\n"
         del rows
         tx.write_text(path, text, "--out")
 
@@ -80,7 +83,9 @@ def _cmd_simulate(args) -> int:
                 # a run near overflow (|values| ~ 1e307) makes matplotlib's tick arithmetic
                 # overflow: the figure is still drawn, the warning is noise beside the verdict
                 warnings.simplefilter("ignore", RuntimeWarning)
-                _plots().save_figure(_plots().plot_simulation(s.time, cols, s.saturated, title, note), plot, tx,
+                _plots().save_figure(_plots().plot_simulation(
+                    s.time, cols, s.saturated, title, note,
+                    "current command (A)" if loop.structure.command == "current" else "voltage (V)"), plot, tx,
                                      "--plot")
     integ = m["integrator"] + (f", {m['n_sub']:.3g} substeps per sample" if m["n_sub"] > 1 else "")
     if "n_sub_max" in m:
@@ -99,6 +104,13 @@ def _cmd_simulate(args) -> int:
     if log_out:
         print(f"wrote {log_out}: the run as a log for haa-sym identify")
     return 0
+
+
+def csv_names(loop) -> dict[str, str]:
+    """The CSV's header per column of :data:`CSV_COLUMNS`: ``voltage`` is the held command, which
+    for a current-commanded structure is the current command (A), ``current_command``."""
+    return {c: ("current_command" if c == "voltage" and loop.structure.command == "current" else c)
+            for c in CSV_COLUMNS}
 
 
 def verdict_line(s) -> str:
@@ -161,9 +173,16 @@ def _log_text(args, loop, P, D, s) -> str:
     cols = s.columns()
     rng = np.random.default_rng([args.seed, 1])
     data = {}
-    for c in LOG_COLUMNS:
+    columns = LOG_COLUMNS
+    if loop.structure.command == "current":
+        # a current command: identify's input `current` is the command the drive receives
+        # (identify --input current passes it through the file's [drive] as this run did); no
+        # motor voltage is modelled, and the current the motor carried is that input's response
+        cols = dict(cols, current=cols["voltage"])
+        columns = tuple(c for c in LOG_COLUMNS if c != "voltage")
+    for c in columns:
         v = np.asarray(cols[c], float)
-        if c in LOG_OUTPUTS and args.log_noise:
+        if c in LOG_OUTPUTS and args.log_noise and not (c == "current" and columns != LOG_COLUMNS):
             v = v + args.log_noise * np.std(v) * rng.standard_normal(v.size)
         data[c] = v
     how = args.excitation or ("the sweep of --experiment chirp" if args.experiment == "chirp" else "none")
@@ -173,9 +192,10 @@ def _log_text(args, loop, P, D, s) -> str:
             f"# P_gain = {float(P[0]):g} Nm/rad, D_gain = {float(D[0]):g} Nms/rad; {args.experiment}, excitation "
             f"{how}, amplitude {s.meta['amplitude']:g}; duration {args.duration:g} s; seed {args.seed}; "
             f"output noise {args.log_noise:g} x std",
-            "# units: time s, voltage V, current A, torque_ref Nm, torque Nm, theta rad, velocity rad/s "
-            "(docs/identify.md, Logs)"]
-    rows = [",".join(LOG_COLUMNS)] + [",".join(f"{data[c][k]:.12g}" for c in LOG_COLUMNS) for k in range(len(s.time))]
+            "# units: time s, " + ("voltage V, current A" if columns == LOG_COLUMNS else
+                                   "current A (the current command, held from t_k)")
+            + ", torque_ref Nm, torque Nm, theta rad, velocity rad/s (docs/identify.md, Logs)"]
+    rows = [",".join(columns)] + [",".join(f"{data[c][k]:.12g}" for c in columns) for k in range(len(s.time))]
     return "\n".join(head + rows) + "\n"
 
 
@@ -204,7 +224,7 @@ def _predictions(loop, P, D, s, cols) -> list[tuple[str, str, dict | None]]:
     Ts = loop.params.controller.Ts
     # the limits in force (the friction model's settings are not limits of their own)
     n_limits = len([k for k in loop.params.limits.active if k not in ("friction_model", "friction_velocity")])
-    for nl in limit_nonlinearities(loop.params.limits):
+    for nl in limit_nonlinearities(loop.params.limits, loop.structure.command):
         (key, value), = nl.items()
         r = limit_cycles(loop, P, D, nonlinearity=nl)
         ok = np.flatnonzero(r.stable)
@@ -216,7 +236,7 @@ def _predictions(loop, P, D, s, cols) -> list[tuple[str, str, dict | None]]:
         A, f = float(r.amplitude[k]), float(r.frequency_hz[k])
         c = compare_cycle(r, k, cols, Ts, port=loop.params.plant.topology.port, n_limits=n_limits)
         text = f"{head} A = {A:.4g} {r.unit} at {f:.4g} Hz"
-        if c["signal"] == "voltage":
+        if c["signal"] in ("voltage", "current command"):
             text += f" (output fundamental N(A) A = {c['predicted_amplitude']:.4g} {r.unit})"
         if s.meta["experiment"] in FORCED_EXPERIMENTS:
             sim = f"not compared: the {s.meta['experiment']} forces the loop (its oscillation is the input's)"

@@ -124,7 +124,8 @@ SIM_EXO = ("T_dist", "T_ff", "theta_ref", "noise_T", "delta")
 # command then the delayed one, codegen/driver.c): the voltage (V) and the external torque (Nm).
 SIM_U = ("V", "T_dist")
 # One row per sample, what the sample function reports (the CSV columns after ``time``, and the
-# saturation flag: 1 when the held voltage was clipped).
+# saturation flag: 1 when the held command was clipped). ``voltage`` is the held command: a voltage
+# (V), or for a current-commanded structure the current command (A).
 SIM_COLUMNS = ("theta", "velocity", "torque", "torque_ref", "voltage", "current", "saturated")
 
 
@@ -150,13 +151,17 @@ class Slices:
 def sim_ctrl_layout(nx: int, nc: int) -> Slices:
     """The sample function's parameter vector: the controller (``Ac``, ``Bc``, ``Cc``, ``Dc`` of
     ``haa_sym.loop.statespace.controller_batch``), the plant's output rows it reads (encoder angle,
-    torque signal, motor current, port velocity, back-EMF ``k_w dtheta_m``), and the limits:
-    ``V_max`` (V), ``RI_max`` (R I_max, V), the encoder and torque quanta (rad, Nm; 0 = off)."""
+    torque signal, motor current, port velocity), the two windows of the held command (the first
+    clip, then the second: centre ``c_w1 x``, ``c_w2 x`` and half-width ``w1``, ``w2``; a voltage
+    command: the current limit's voltage window, centre the back-EMF k_w dtheta_m, half-width
+    R I_max (V), then the supply, 0 and V_max; a current command: 0 and I_max (A), then the
+    supply's currents, centre -k_w dtheta_m / R and half-width V_max / R), and the encoder and
+    torque quanta (rad, Nm; 0 = off)."""
     n_in, n_out = 4, 2
     return Slices([("Ac", (nc, nc)), ("Bc", (nc, n_in)), ("Cc", (n_out, nc)), ("Dc", (n_out, n_in)),
                    ("c_theta", (1, nx)), ("c_T", (1, nx)), ("c_I", (1, nx)), ("c_v", (1, nx)),
-                   ("c_emf", (1, nx)), ("V_max", (1, 1)), ("RI_max", (1, 1)), ("q_theta", (1, 1)),
-                   ("q_T", (1, 1))])
+                   ("c_w1", (1, nx)), ("w1", (1, 1)), ("c_w2", (1, nx)), ("w2", (1, 1)),
+                   ("q_theta", (1, 1)), ("q_T", (1, 1))])
 
 
 def sim_plant_layout(kind: str, nx: int) -> Slices:

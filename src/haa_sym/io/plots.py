@@ -674,9 +674,11 @@ def plot_tune(lead_s, integral, grid_objective, before, after, steps, title: str
     return fig
 
 
-def plot_simulation(time, columns: dict, saturated=None, title: str = "", cycle: str = ""):
+def plot_simulation(time, columns: dict, saturated=None, title: str = "", cycle: str = "",
+                    command: str = "voltage (V)"):
     """A simulated run (``haa-sym simulate``): angle and velocity, torque and its reference,
-    voltage (saturated samples marked) and current over ``time`` (s). ``columns`` maps the CSV
+    the held command (``columns["voltage"]``, labelled ``command``: a current command's is a
+    current; saturated samples marked) and current over ``time`` (s). ``columns`` maps the CSV
     names to arrays; ``cycle`` is a note on a detected limit cycle (shown in the torque panel)."""
     t = np.asarray(time)
     cycle = _wrap(cycle, 5.4, 7)            # the panel's width, not the figure's
@@ -700,7 +702,7 @@ def plot_simulation(time, columns: dict, saturated=None, title: str = "", cycle:
         axes[2].plot(t[sat], np.asarray(columns["voltage"])[sat], ".", ms=2, color="tab:red",
                      label="saturated")
         axes[2].legend(fontsize=8)
-    axes[2].set_ylabel("voltage (V)")
+    axes[2].set_ylabel(command)
     axes[3].plot(t, columns["current"], color="k")
     axes[3].set_ylabel("current (A)")
     axes[3].set_xlabel("t (s)")
