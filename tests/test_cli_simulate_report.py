@@ -78,8 +78,8 @@ def test_figure_says_what_was_run_and_the_note_does_not_cover_the_trace(tmp_path
     seen = {}
     real = plots.plot_simulation
 
-    def spy(time, columns, saturated=None, title="", cycle=""):
-        seen["title"], seen["fig"] = title, real(time, columns, saturated, title, cycle)
+    def spy(time, columns, saturated=None, title="", cycle="", command="voltage (V)"):
+        seen["title"], seen["fig"] = title, real(time, columns, saturated, title, cycle, command)
         return seen["fig"]
 
     monkeypatch.setattr(plots, "plot_simulation", spy)
