@@ -24,6 +24,7 @@ from __future__ import annotations
 import numpy as np
 import scipy.linalg
 
+from haa_sym.analysis.sweep import blas_limits
 from haa_sym.loop.plant import continuous_plant, with_lag
 from haa_sym.loop.statespace import controller_batch
 
@@ -90,10 +91,13 @@ def sampled_data_mu(A, b_u, b_f, c_v, C_y, ctrl, Ts: float, omega, M: int) -> np
     Ccl = np.concatenate([Cx, np.zeros((M, m))], axis=1) + CV @ KV
     z = np.exp(1j * np.asarray(omega, float).ravel() * Ts)
     out = np.empty(z.size)
-    for k, zk in enumerate(z):
-        T = Df + Ccl @ np.linalg.solve(zk * np.eye(n + m) - Acl, Bcl)
-        G0 = Df + Cx @ np.linalg.solve(zk * np.eye(n) - Ep[M], Fx[M])
-        out[k] = scipy.linalg.eigh(T + T.conj().T, G0 + G0.conj().T, eigvals_only=True)[0]
+    # one BLAS thread: the M x M problems are small, and threads fighting over a loaded 2-core
+    # machine made M = 128 take 0.02-3.7 s
+    with blas_limits(1):
+        for k, zk in enumerate(z):
+            T = Df + Ccl @ np.linalg.solve(zk * np.eye(n + m) - Acl, Bcl)
+            G0 = Df + Cx @ np.linalg.solve(zk * np.eye(n) - Ep[M], Fx[M])
+            out[k] = scipy.linalg.eigh(T + T.conj().T, G0 + G0.conj().T, eigvals_only=True)[0]
     return out
 
 
