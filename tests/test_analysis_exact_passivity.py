@@ -258,3 +258,57 @@ def test_exact_decisions_against_lifting_on_maps(name):
     print(f"{name}: {far.sum()} points, {(mu[far] > 0).sum()} passive, {certified} certified non-passive "
           f"by mu_{2 * M} < 0")
     assert name != "qdd_leg" or 0 < (mu[far] > 0).sum() < far.sum()      # both decisions checked
+
+
+# --- the drive's dead time: the delayed hold -------------------------------------------------------
+
+@pytest.mark.parametrize("frac", [0.25, 0.5, 0.9, 1.3, 2.0])
+def test_delayed_hold_sums_against_brute_force(frac):
+    """With the command held from kTs + d, gamma's harmonics carry exp(-j w_k d): the closed form
+    (oscillating tails for a fractional delay, the undelayed tails times exp(-j w d) for whole
+    samples) equals the explicit sum over 8e5 harmonics on the wall (to 1e-10 relative where the
+    oscillation makes the explicit sum converge fast; whole samples as the undelayed test)."""
+    m, b, Ts = 0.7, 2.0, 2e-3
+    d = frac * Ts
+    w = np.array([3.0, 500.0, 1500.0])
+    A, bu = np.array([[0.0, 1.0], [0.0, -b / m]]), np.array([[0.0], [1 / m]])
+    sums = harmonic_sums(A, bu, bu, np.array([[0.0, 1.0]]), np.array([[1.0, 0.0]]), Ts, w, delay=d)
+    plain = harmonic_sums(A, bu, bu, np.array([[0.0, 1.0]]), np.array([[1.0, 0.0]]), Ts, w)
+    assert np.allclose(sums.A, plain.A, rtol=1e-13) and np.allclose(sums.B, plain.B, rtol=1e-13, atol=0)
+    k = np.arange(-400000, 400001)
+    for i, wi in enumerate(w):
+        s = 1j * (wi + k * 2 * np.pi / Ts)
+        G = 1 / (m * s + b)
+        ref = np.sum((G / s) ** 2 * np.exp(-s * d) / (2 * G.real))
+        assert np.isclose(sums.gamma[i, 0], ref, rtol=1e-10 if frac % 1 else 1e-6), (wi, sums.gamma[i, 0], ref)
+
+
+@pytest.mark.parametrize("delay", [0.25e-3, 1e-3])
+def test_delayed_drive_against_lifting_sea(delay):
+    """SEA at P_gain 200, D_gain 10 with the drive's dead time a quarter sample and a whole one:
+    the fast-rate lifting with the delay built as a state of its own (the first j sub-steps of
+    each sample still driven by the previous command) converges to the exact test's mu as 1/M,
+    Richardson from M = 64 / 128 within 1e-6 relative (measured 1e-8 and 5e-8); the dead time
+    moves mu by 0.2-0.9, so ignoring it would fail."""
+    p = load_params("sea").with_values(delay_drive=delay)
+    loop = ClosedLoop(p, LoopOptions(passivity="exact"))
+    mu, w = _exact_mu(loop, 200.0, 10.0)
+    m64, m128 = (lifted_mu(loop, 200.0, 10.0, w, M)[0] for M in (64, 128))
+    assert m64 >= m128 >= mu[0]
+    assert abs(2 * m128 - m64 - mu[0]) < 1e-6 * abs(mu[0])
+    mu0, _ = _exact_mu(ClosedLoop(load_params("sea"), LoopOptions(passivity="exact")), 200.0, 10.0)
+    assert abs(mu[0] - mu0[0]) > 0.2
+
+
+def test_delayed_drive_passive_point_qdd_and_refusals():
+    """QDD at a passive point with a half-sample dead time: the lifting's mu_128 is the exact mu
+    to 1e-10 (it converges faster than 1/M there) and both say passive; a dead time 1e-5 Ts off a
+    whole sample is refused (its aliasing sums would need millions of harmonics), one line."""
+    p = load_params("qdd_leg").with_values(delay_drive=0.5e-3)
+    loop = ClosedLoop(p, LoopOptions(passivity="exact"))
+    mu, w = _exact_mu(loop, 1.0, 3.6)
+    m128 = lifted_mu(loop, 1.0, 3.6, w, 128)[0]
+    assert mu[0] > 0.2 and -1e-10 < m128 - mu[0] < 1e-10
+    bad = ClosedLoop(load_params("qdd_leg").with_values(delay_drive=1.00001e-3), LoopOptions(passivity="exact"))
+    with pytest.raises(ParameterError, match="delay_drive = 0.00100001 s"):
+        _exact_mu(bad, 1.0, 3.6)

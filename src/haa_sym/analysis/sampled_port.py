@@ -152,6 +152,43 @@ def _tail_powers(x: np.ndarray, K: int, n: int) -> np.ndarray:
     return out
 
 
+# terms of the oscillating tails' expansion (:func:`_tail_powers_delayed`), and how far beyond
+# the radius of that expansion's terms' growth the first tail harmonic must sit
+N_OSC = 40
+OSC_MARGIN = 4.0
+
+
+def _tail_powers_delayed(x: np.ndarray, K: int, n: int, theta: float) -> np.ndarray:
+    """T_m(x) = sum_{k > K} [q^k (k + x)^-m + (-1)^m conj(q)^k (k - x)^-m], q = exp(-j theta), for
+    m = 2..n-1 (rows 0, 1 zero), theta not a multiple of 2 pi: the tails of the delayed hold's
+    sums, whose harmonics carry exp(-j k theta).
+
+    Sum_{k >= a} q^k g(k) = q^a [(1 - q E)^-1 g](a) with E = e^D the shift, so it is
+    q^a sum_j b_j g^(j)(a), b_j the Taylor coefficients of 1 / (1 - q e^t) at 0 (their radius is
+    rho = the distance of theta to the nearest multiple of 2 pi) and g^(j)(a) of (k + c)^-m equal
+    to (-1)^j (m)_j (a + c)^(-m-j): the terms shrink by (m + j) / (rho (a + c)) each, at most
+    1 / OSC_MARGIN for the K that :func:`harmonic_sums` chooses, so N_OSC terms leave
+    OSC_MARGIN^-N_OSC = 8e-25 of the first."""
+    q = np.exp(-1j * theta)
+    b = np.zeros(N_OSC, complex)
+    b[0] = 1.0 / (1.0 - q)
+    fact = np.cumprod(np.concatenate([[1.0], np.arange(1.0, N_OSC)]))          # j!
+    for j in range(1, N_OSC):                  # (1 - q e^t) sum b_j t^j = 1
+        b[j] = q / (1.0 - q) * np.sum(b[j - 1::-1][:j] / fact[1:j + 1])
+    a = K + 1.0
+    out = np.zeros((n, x.size), complex)
+    for m in range(2, n):
+        rising = np.ones(N_OSC)
+        rising[1:] = np.cumprod(m + np.arange(N_OSC - 1.0))                    # (m)_j
+        alt = rising * (-1.0) ** np.arange(N_OSC)
+        # k > K with (k + x)^-m and q; k < -K as k' > K with (-1)^m (k' - x)^-m and conj(q), whose
+        # coefficients are conj(b) (1 / (1 - conj(q) e^t) is the conjugate for real t)
+        for c, qq, bb, sgn in ((x, q, b, 1.0), (-x, np.conj(q), np.conj(b), (-1.0) ** m)):
+            powers = (a + c)[None, :] ** (-m - np.arange(N_OSC)[:, None])      # (N_OSC, n_omega)
+            out[m] += sgn * qq ** a * ((bb * alt) @ powers)
+    return out
+
+
 def _d_zeros(A, b_f, c_v) -> np.ndarray:
     """Finite zeros of d(s) = G_vf(s) + G_vf(-s) (the invariant zeros of its realisation)."""
     n = A.shape[0]
@@ -234,7 +271,8 @@ def _responses(A, b_u, b_f, c_v, C_y, s, shift=None):
     return out[..., 0], out[..., 1], out[..., 2:]
 
 
-def harmonic_sums(A, b_u, b_f, c_v, C_y, Ts: float, omega, *, source: str = "the plant") -> HarmonicSums:
+def harmonic_sums(A, b_u, b_f, c_v, C_y, Ts: float, omega, *, source: str = "the plant",
+                  delay: float = 0.0) -> HarmonicSums:
     """The aliasing sums A, gamma, B of the module docstring at ``omega`` (rad/s, in (0, pi/Ts]).
 
     Parameters
@@ -253,6 +291,9 @@ def harmonic_sums(A, b_u, b_f, c_v, C_y, Ts: float, omega, *, source: str = "the
         Frequencies, rad/s.
     source : str
         What to name in a refusal.
+    delay : float
+        The drive's dead time d (s, >= 0): the command is held from kTs + d, so the hold's
+        harmonics carry exp(-j w_k d) (gamma's only: A and B hold |.|^2 and no command).
 
     Raises
     ------
@@ -315,6 +356,17 @@ def harmonic_sums(A, b_u, b_f, c_v, C_y, Ts: float, omega, *, source: str = "the
                                  "passivity = 'corrected_phase' for this actuator")
     # the explicit harmonics: |w_k| > RADIUS_FACTOR scale beyond K
     K = max(MIN_EXPLICIT, int(np.ceil(RADIUS_FACTOR * scale / ws)) + 1)
+    theta = (ws * delay) % (2 * np.pi)                  # exp(-j k ws d) = exp(-j k theta)
+    rho = min(theta, 2 * np.pi - theta)
+    oscillating = rho > 1e-9
+    if oscillating:
+        # the oscillating tails' expansion needs rho (K + 1/2) >= OSC_MARGIN (N + N_OSC)
+        K = max(K, int(np.ceil(OSC_MARGIN * (N + N_OSC) / rho)))
+        if K > 50000:
+            raise ParameterError(f"passivity = 'exact' with delay_drive = {delay!r} s at Ts = {Ts!r} s: the dead "
+                                 "time is within 1e-3 Ts of a whole number of samples but not on it, and its "
+                                 f"aliasing sums would need {K} harmonics a side; allowed: a dead time a whole "
+                                 "number of samples, or at least 1e-3 Ts away from one")
     x = omega / ws
     ks = np.arange(-K, K + 1)
     s = 1j * (omega[:, None] + ks[None, :] * ws)                        # (n_omega, 2K+1)
@@ -322,7 +374,8 @@ def harmonic_sums(A, b_u, b_f, c_v, C_y, Ts: float, omega, *, source: str = "the
     dk = 2 * G_vf.real
     al = G_vV / s
     A_sum = np.sum(np.abs(al) ** 2 / dk, axis=1)
-    g_sum = np.einsum("wk,wky->wy", al / dk, G_yf)
+    # the delayed hold: exp(-j w_k d) = exp(-j w d) exp(-j k theta); whole samples: exp(-j w d) only
+    g_sum = np.einsum("wk,wky->wy", al * np.exp(-1j * ks * theta) / dk, G_yf)
     B_sum = np.einsum("wk,wky,wkz->wyz", 1 / dk, G_yf, np.conj(G_yf))
     # the tail: sum over |k| > K of sum_m R_m (scale/s_k)^m, R's powers shifted by -2 (1/d)
     T = _tail_powers(x, K, N)                                            # (N, n_omega)
@@ -336,9 +389,10 @@ def harmonic_sums(A, b_u, b_f, c_v, C_y, Ts: float, omega, *, source: str = "the
             raise ParameterError(f"passivity = 'exact': an aliasing sum of {source} does not converge "
                                  "absolutely (a summand of relative degree < 2); allowed: the port and "
                                  "measurements of the bundled structures, or passivity = 'corrected_phase'")
-        tail[name] = np.einsum("m,mw,mij->wij", pw, T, c)
+        Tm = _tail_powers_delayed(x, K, N, theta) if name == "g" and oscillating else T
+        tail[name] = np.einsum("m,mw,mij->wij", pw, Tm, c)
     A_sum = A_sum + tail["A"][:, 0, 0].real
-    g_sum = g_sum + tail["g"][:, :, 0]
+    g_sum = (g_sum + tail["g"][:, :, 0]) * np.exp(-1j * omega * delay)[:, None]
     B_sum = B_sum + tail["B"]
     B_sum = 0.5 * (B_sum + np.conj(np.transpose(B_sum, (0, 2, 1))))
     return HarmonicSums(omega, A_sum, g_sum, B_sum, K)
@@ -421,10 +475,6 @@ def _loop_pieces(loop):
         raise ParameterError("passivity = 'exact' with port = 'encoder_average': that port reads the "
                              "controller's sampled estimate, not a continuous velocity; allowed: port = "
                              "'dtheta_<body>' with passivity = 'exact', or passivity = 'corrected_phase'")
-    if params.drive.delay_drive > 0:
-        raise ParameterError(f"passivity = 'exact' with delay_drive = {params.drive.delay_drive!r} s: the "
-                             "drive's dead time is not handled by the exact test; allowed: delay_drive = 0 "
-                             "with passivity = 'exact', or passivity = 'corrected_phase'")
     cont = with_lag(continuous_plant(params.plant, loop.backend), params.drive.tau_drive)
     names = cont.output_names
     # the controller's inputs, in its order (haa_sym.loop.statespace.CONTROLLER_INPUTS)
@@ -441,11 +491,12 @@ def loop_exact_forms(loop, omega, beta: float, alpha: float) -> ExactForms:
 
     def sums():
         A, b_u, b_f, c_v, C_y = _loop_pieces(loop)
-        return harmonic_sums(A, b_u, b_f, c_v, C_y, Ts, omega, source=str(loop.params.source))
+        return harmonic_sums(A, b_u, b_f, c_v, C_y, Ts, omega, source=str(loop.params.source),
+                             delay=float(loop.params.drive.delay_drive))
 
     def build():
         S = _SUMS.get((array_key(loop.plant.Phi, loop.plant.Gamma, loop.plant.C, omega), loop.options.structure.port,
-                       loop.torque_output, loop.backend), sums)
+                       loop.torque_output, loop.backend, float(loop.params.drive.delay_drive)), sums)
         P_d = loop.plant.frequency_response(omega, outputs=("theta_encoder", loop.torque_output),
                                             inputs=("V_m",))[:, 0, :].T          # (n_omega, 2)
         Ac, Bc, Cc, Dc = controller_batch(loop, [0.0, 1.0, 0.0], [0.0, 0.0, 1.0], beta, alpha)
