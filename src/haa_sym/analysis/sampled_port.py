@@ -245,15 +245,15 @@ def _responses(A, b_u, b_f, c_v, C_y, s, shift=None):
     # balanced first (A's entries span many decades: rad, rad/s, A, Nm): A = S Ab S^-1
     Ab, Sm = scipy.linalg.matrix_balance(A)
     T, Q = scipy.linalg.schur(Ab.astype(complex), output="complex")
-    to_q = lambda B: Q.conj().T @ np.linalg.solve(Sm, B)                # noqa: E731
     rows_q = rows @ Sm @ Q
     flat = s.ravel()
     out = np.empty((flat.size, len(pairs)), complex)
     far = np.abs(flat) > shift
     r_arr = np.array(rdeg, float)
     # each frequency solves only the right-hand sides of its form (plain near, shifted far)
-    for sel, Y, col in ((np.flatnonzero(~far), to_q(B_plain), plain_key),
-                        (np.flatnonzero(far), to_q(B_shift), shift_key)):
+    for sel, B, col, shifted in ((np.flatnonzero(~far), B_plain, plain_key, False),
+                                 (np.flatnonzero(far), B_shift, shift_key, True)):
+        Y = Q.conj().T @ np.linalg.solve(Sm, B)                          # in Schur coordinates
         step = max(1, 2 ** 18 // (Y.shape[1] * n))
         for a in range(0, sel.size, step):
             idx = sel[a:a + step]
@@ -266,7 +266,7 @@ def _responses(A, b_u, b_f, c_v, C_y, s, shift=None):
                         acc = acc + T[i, j] * x[j]
                 x[i] = acc / (sb - T[i, i])
             g = sum(rows_q[:, i] * x[i][:, col] for i in range(n))       # (m, n_pairs)
-            out[idx] = g / sb ** r_arr if Y is not None and col is shift_key else g
+            out[idx] = g / sb ** r_arr if shifted else g
     out = out.reshape(s.shape + (len(pairs),))
     return out[..., 0], out[..., 1], out[..., 2:]
 
