@@ -560,10 +560,13 @@ def deficit_lower_bound(loop, P, D, beta: float, alpha: float, stride: int = 16)
     tests); the deficit itself is :func:`passivity_excess`."""
     if loop.options.conventions.passivity != "exact":
         raise ParameterError("deficit_lower_bound is the exact test's; allowed: a loop with passivity = 'exact'")
+    X = gain_rows(P, D)
+    if X.shape[0] == 0:
+        return np.full(0, np.nan), np.full(0, np.nan)
     w = loop.options.numerics.omega(loop.params.controller.Ts)
     F = loop_exact_forms(loop, w, beta, alpha)
     k = np.arange(0, w.size, max(int(stride), 1))
-    return ExactForms(F.omega[k], F.delta[k], F.u[k], F.S[k]).worst(gain_rows(P, D))
+    return ExactForms(F.omega[k], F.delta[k], F.u[k], F.S[k]).worst(X)
 
 
 def passivity_tolerance(loop) -> float:

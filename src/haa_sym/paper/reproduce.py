@@ -347,6 +347,8 @@ def _exact_deficits(loop, P, D, tol: float):
     beta, alpha = loop.params.controller.beta, loop.params.controller.alpha
     val, w = np.full(P.size, np.nan), np.full(P.size, np.nan)
     full = np.zeros(P.size, bool)
+    if P.size == 0:                                      # a map with no stable point
+        return val, w, full
 
     def screen(sl):
         val[sl], w[sl] = deficit_lower_bound(loop, P[sl], D[sl], beta, alpha)
