@@ -48,9 +48,3 @@ def test_report_section_states_the_side_from_the_numbers():
     maps["8a"]["exact_only"] = 2
     assert "errs on both sides" in exact_passivity_markdown({"maps": maps, "table2": cells, "tolerance": 1e-7})
 
-
-def test_screened_deficits_of_no_points():
-    """A map without a stable point: nothing to judge, no error."""
-    loop = ClosedLoop(load_params(), LoopOptions(passivity="exact"))
-    val, w, full = _exact_deficits(loop, np.zeros(0), np.zeros(0), 1e-7)
-    assert val.size == w.size == full.size == 0
