@@ -45,6 +45,7 @@ def test_report_section_states_the_side_from_the_numbers():
     assert "errs on the optimistic side only: 4 of the 5 points" in text and "at least 8.97 times" in text
     assert "1 of 2 cells change" in text and "1 of the 1 changes are Yes -> No" in text
     assert "1 of the 1 points the exact test calls passive have their least mu at the grid's lowest" in text
+    assert "the largest of those least mu values is 1e-06" in text
     maps["8a"]["exact_only"] = 2
     assert "errs on both sides" in exact_passivity_markdown({"maps": maps, "table2": cells, "tolerance": 1e-7})
 

@@ -86,10 +86,11 @@ def exact_passivity_markdown(x: dict) -> str:
     pp, pe = sum(m["passive_paper"] for m in maps), sum(m["passive_exact"] for m in maps)
     edge = sum(m.get("passive_exact_at_omega_min", 0) for m in maps)
     if edge:
+        top = max(-m["least_deficit"]["deficit"] for m in maps if m.get("passive_exact_at_omega_min"))
         L.append(f"\n{edge} of the {sum(m['passive_exact'] for m in maps)} points the exact test calls passive have "
                  "their least mu at the grid's lowest frequency (`omega_min`), where the port's own dissipation "
-                 "vanishes and mu is of the order of 1e-6: their verdict is decided at the edge of the judged "
-                 "range, not inside it.")
+                 f"vanishes; the largest of those least mu values is {top:.3g}: their verdict is decided at the edge "
+                 "of the judged range, not inside it.")
     L.append(f"\nIn all {len(maps)} maps: {pp} points passive by the paper's test, {pe} by the exact one; "
              f"{po} change from passive to not passive and {eo} from not passive to passive. "
              + (f"The approximation errs on the optimistic side only: {po} of the {pp} points it calls "
