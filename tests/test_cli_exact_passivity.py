@@ -80,3 +80,16 @@ def test_passivity_and_regions_name_the_exact_measure(tmp_path, capsys):
                       else (m.phase_excess_deg, m.dissipation_deficit))
         assert np.all(np.isnan(other)) and np.array_equal(np.isfinite(ran), m.stable)
         assert np.array_equal(m.passive, m.stable & (ran <= (1e-7 if test == "exact" else 1e-3)))
+
+
+def test_a_map_written_before_the_deficit_field_loads(tmp_path):
+    """An npz without `dissipation_deficit` (written before issue 24 gave the exact test its own
+    field) loads with it NaN, the rest unchanged."""
+    from haa_sym.analysis.regions import region_map
+    m = region_map(ClosedLoop(load_params("qdd_leg"), LoopOptions(n_omega=200)), [1.0, 10.0], [1.0, 3.6],
+                   method="grid", progress=False)
+    arrays = {k: v for k, v in np.load(m.save(tmp_path / "new.npz")).items() if k != "dissipation_deficit"}
+    np.savez(tmp_path / "old.npz", **arrays)
+    old = RegionMap.load(tmp_path / "old.npz")
+    assert np.all(np.isnan(old.dissipation_deficit)) and old.dissipation_deficit.shape == (2, 2)
+    assert np.array_equal(old.passive, m.passive) and old.meta == m.meta
