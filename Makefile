@@ -41,6 +41,7 @@ bench: $(STAMP)
 	HAA_SYM_BENCH_DIR=$(BENCH_DIR) $(PY) benchmarks/bench_nonlinear_map.py --cluster
 	HAA_SYM_BENCH_DIR=$(BENCH_DIR) $(PY) benchmarks/bench_identify.py
 	HAA_SYM_BENCH_DIR=$(BENCH_DIR) $(PY) benchmarks/bench_explore.py
+	HAA_SYM_BENCH_DIR=$(BENCH_DIR) $(PY) benchmarks/bench_exact_passivity.py
 
 ## Rewrite the benchmark block of docs/benchmarks.md (between <!-- bench:start --> and
 ## <!-- bench:end -->) from the JSON of `make bench`; `make bench-readme BENCH_ARGS=--check` only compares.

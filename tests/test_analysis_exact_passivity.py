@@ -162,3 +162,153 @@ def test_harmonic_sums_against_brute_force():
         assert np.isclose(np.sum(be * al / d), sums.gamma[i, 0], rtol=1e-8)
         assert np.isclose(np.sum(np.abs(be) ** 2 / d), sums.B[i, 0, 0].real, rtol=1e-8)
     assert S is not None
+
+
+@pytest.mark.parametrize("name", ["hyq_haa", "sea", "qdd_leg"])
+def test_schur_responses_equal_direct_solves(name):
+    """The vectorised Schur evaluation of the plant's responses (the harmonics of the sums)
+    equals one pivoted solve per frequency, 3 rad/s to 1e6 rad/s, to 1e-10 relative."""
+    from haa_sym.analysis.sampled_port import _loop_pieces, _responses
+    loop = ClosedLoop(load_params(name), LoopOptions(passivity="exact"))
+    A, bu, bf, cv, Cy = _loop_pieces(loop)
+    s = 1j * np.concatenate([np.logspace(0.5, 6, 40), -np.logspace(0.5, 6, 7)])[None, :]
+    got = _responses(A, bu, bf, cv, Cy, s)
+    X = np.array([np.linalg.solve(sv * np.eye(A.shape[0]) - A, np.concatenate([bu, bf], axis=1)) for sv in s[0]])
+    ref = ((cv @ X[..., :1])[:, 0, 0], (cv @ X[..., 1:])[:, 0, 0], (Cy @ X[..., 1:])[..., 0])
+    for g, r in zip(got, ref):
+        g = g[0]
+        err = np.abs(g - r) / np.abs(r).reshape(len(r), -1).max(axis=1).reshape((-1,) + (1,) * (r.ndim - 1))
+        assert err.max() < 1e-10, err.max()
+
+
+# --- the exact test against the fast-rate lifting on the bundled actuators' maps -----------------
+
+def _exact_mu(loop, P, D):
+    """(mu, omega_worst) of the exact test at gain points: mu = -deficit, its minimum over the grid."""
+    c = loop.params.controller
+    ex, w = passivity_excess(loop, np.atleast_1d(np.asarray(P, float)), np.atleast_1d(np.asarray(D, float)),
+                             c.beta, c.alpha)
+    return -ex, w
+
+
+def test_lifting_converges_as_one_over_M_sea():
+    """SEA at P_gain 200, D_gain 10, at the frequency where the exact mu is least (408 rad/s):
+    mu_M - mu halves as M doubles (1/M: successive differences in ratio 2 within 1 %), so
+    Richardson's 2 mu_2M - mu_M removes the leading term: from M = 64 and 128 it is the exact mu
+    within 1e-6 relative (measured 5e-8), where mu_128 alone is 1.7e-4 off."""
+    loop = ClosedLoop(load_params("sea"), LoopOptions(passivity="exact"))
+    mu, w = _exact_mu(loop, 200.0, 10.0)
+    m = [lifted_mu(loop, 200.0, 10.0, w, M)[0] for M in (32, 64, 128)]
+    assert m[0] >= m[1] >= m[2] >= mu[0]
+    assert abs((m[0] - m[1]) / (m[1] - m[2]) - 2.0) < 0.02
+    rich = 2 * m[2] - m[1]
+    assert abs(rich - mu[0]) < 1e-6 * abs(mu[0]) < abs(m[2] - mu[0]) / 100
+
+
+def test_lifting_certifies_hyq_table2_point_not_passive():
+    """HyQ at P_gain 200, D_gain 10 (Table 2: "Yes" by the paper's test): the lifting's mu_M is an
+    upper bound of the exact mu (a minimum over a subspace of inputs), so mu_256 < 0 at the exact
+    test's worst frequency (20.6 rad/s) proves the port not passive without the aliasing sums;
+    mu_128 >= mu_256 >= the exact -8.97."""
+    loop = ClosedLoop(load_params(), LoopOptions(passivity="exact"))
+    mu, w = _exact_mu(loop, 200.0, 10.0)
+    m128, m256 = (lifted_mu(loop, 200.0, 10.0, w, M)[0] for M in (128, 256))
+    assert m128 >= m256 >= mu[0] and m256 < 0
+    assert abs(w[0] - 20.6) < 0.1 and abs(mu[0] + 8.9717) < 1e-4
+
+
+# per actuator: the lifting levels (M, 2M) and how close Richardson's value must come to the
+# exact mu, relative, set by where the 1/M regime starts: HyQ's L1 mode (2.4e5 rad/s) needs
+# sub-steps well below 4 us, i.e. M >> 250: from 512/1024 its extrapolation is within 1.1e-3
+# (measured at P 1, D 50 and P 2000, D 30; 7e-5 from 1024/2048); SEA and QDD are in it from M ~ 32
+LEVELS = {"hyq_haa": (512, 3e-3), "sea": (64, 1e-5), "qdd_leg": (64, 1e-5)}
+# the maps: the paper's axes (P_gain log 1..20000, D_gain lin 1..50) for HyQ (3 x 2: its M = 1024
+# costs ~1 s a point) and SEA; for QDD, whose stable region ends near P_gain 100, the corner
+# with its passive points
+MAPS = {"hyq_haa": (np.logspace(0, np.log10(20000), 3), np.linspace(1, 50, 2)),
+        "sea": (np.logspace(0, np.log10(20000), 8), np.linspace(1, 50, 6)),
+        "qdd_leg": (np.logspace(0, 2, 8), np.linspace(0.5, 10, 6))}
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("name", sorted(LEVELS))
+def test_exact_decisions_against_lifting_on_maps(name):
+    """On a coarse map of each bundled actuator, every stable point away from the boundary
+    (|mu| > 0.02): at the exact test's worst frequency mu_2M <= mu_M (nested subspaces) and
+    mu_2M >= the exact mu (a bound), Richardson's 2 mu_2M - mu_M agrees with the exact mu and
+    with its sign (the decision); a point the exact test calls non-passive where mu_2M < 0 is
+    certified by the lifting alone."""
+    M, rtol = LEVELS[name]
+    p = load_params(name)
+    loop = ClosedLoop(p, LoopOptions(passivity="exact"))
+    PP, DD = np.meshgrid(*MAPS[name])
+    P, D = PP.ravel(), DD.ravel()
+    stable = loop.stability(P, D).stable.ravel()
+    mu, w = _exact_mu(loop, P[stable], D[stable])
+    far = np.abs(mu) > 0.02
+    assert far.sum() >= 3
+    certified = 0
+    for Pk, Dk, mk, wk in zip(P[stable][far], D[stable][far], mu[far], w[far]):
+        m1, m2 = (lifted_mu(loop, Pk, Dk, [wk], k)[0] for k in (M, 2 * M))
+        scale = max(1.0, abs(mk))
+        assert m1 >= m2 - 1e-9 * scale and m2 >= mk - 1e-9 * scale, (Pk, Dk, m1, m2, mk)
+        rich = 2 * m2 - m1
+        assert abs(rich - mk) <= rtol * scale and np.sign(rich) == np.sign(mk), (Pk, Dk, rich, mk)
+        certified += m2 < 0
+    print(f"{name}: {far.sum()} points, {(mu[far] > 0).sum()} passive, {certified} certified non-passive "
+          f"by mu_{2 * M} < 0")
+    assert name != "qdd_leg" or 0 < (mu[far] > 0).sum() < far.sum()      # both decisions checked
+
+
+# --- the drive's dead time: the delayed hold -------------------------------------------------------
+
+@pytest.mark.parametrize("frac", [0.25, 0.5, 0.9, 1.3, 2.0])
+def test_delayed_hold_sums_against_brute_force(frac):
+    """With the command held from kTs + d, gamma's harmonics carry exp(-j w_k d): the closed form
+    (oscillating tails for a fractional delay, the undelayed tails times exp(-j w d) for whole
+    samples) equals the explicit sum over 8e5 harmonics on the wall (to 1e-10 relative where the
+    oscillation makes the explicit sum converge fast; whole samples as the undelayed test)."""
+    m, b, Ts = 0.7, 2.0, 2e-3
+    d = frac * Ts
+    w = np.array([3.0, 500.0, 1500.0])
+    A, bu = np.array([[0.0, 1.0], [0.0, -b / m]]), np.array([[0.0], [1 / m]])
+    sums = harmonic_sums(A, bu, bu, np.array([[0.0, 1.0]]), np.array([[1.0, 0.0]]), Ts, w, delay=d)
+    plain = harmonic_sums(A, bu, bu, np.array([[0.0, 1.0]]), np.array([[1.0, 0.0]]), Ts, w)
+    assert np.allclose(sums.A, plain.A, rtol=1e-13) and np.allclose(sums.B, plain.B, rtol=1e-13, atol=0)
+    k = np.arange(-400000, 400001)
+    for i, wi in enumerate(w):
+        s = 1j * (wi + k * 2 * np.pi / Ts)
+        G = 1 / (m * s + b)
+        ref = np.sum((G / s) ** 2 * np.exp(-s * d) / (2 * G.real))
+        assert np.isclose(sums.gamma[i, 0], ref, rtol=1e-10 if frac % 1 else 1e-6), (wi, sums.gamma[i, 0], ref)
+
+
+@pytest.mark.parametrize("delay", [0.25e-3, 1e-3])
+def test_delayed_drive_against_lifting_sea(delay):
+    """SEA at P_gain 200, D_gain 10 with the drive's dead time a quarter sample and a whole one:
+    the fast-rate lifting with the delay built as a state of its own (the first j sub-steps of
+    each sample still driven by the previous command) converges to the exact test's mu as 1/M,
+    Richardson from M = 64 / 128 within 1e-6 relative (measured 1e-8 and 5e-8); the dead time
+    moves mu by 0.2-0.9, so ignoring it would fail."""
+    p = load_params("sea").with_values(delay_drive=delay)
+    loop = ClosedLoop(p, LoopOptions(passivity="exact"))
+    mu, w = _exact_mu(loop, 200.0, 10.0)
+    m64, m128 = (lifted_mu(loop, 200.0, 10.0, w, M)[0] for M in (64, 128))
+    assert m64 >= m128 >= mu[0]
+    assert abs(2 * m128 - m64 - mu[0]) < 1e-6 * abs(mu[0])
+    mu0, _ = _exact_mu(ClosedLoop(load_params("sea"), LoopOptions(passivity="exact")), 200.0, 10.0)
+    assert abs(mu[0] - mu0[0]) > 0.2
+
+
+def test_delayed_drive_passive_point_qdd_and_refusals():
+    """QDD at a passive point with a half-sample dead time: the lifting's mu_128 is the exact mu
+    to 1e-10 (it converges faster than 1/M there) and both say passive; a dead time 1e-5 Ts off a
+    whole sample is refused (its aliasing sums would need millions of harmonics), one line."""
+    p = load_params("qdd_leg").with_values(delay_drive=0.5e-3)
+    loop = ClosedLoop(p, LoopOptions(passivity="exact"))
+    mu, w = _exact_mu(loop, 1.0, 3.6)
+    m128 = lifted_mu(loop, 1.0, 3.6, w, 128)[0]
+    assert mu[0] > 0.2 and -1e-10 < m128 - mu[0] < 1e-10
+    bad = ClosedLoop(load_params("qdd_leg").with_values(delay_drive=1.00001e-3), LoopOptions(passivity="exact"))
+    with pytest.raises(ParameterError, match="delay_drive = 0.00100001 s"):
+        _exact_mu(bad, 1.0, 3.6)

@@ -63,10 +63,18 @@ def test_reproduce_quick(tmp_path, capsys):
     for heading in ("## Table 2: passivity", "## Quantitative claims", "## Qualitative trends",
                     "![Fig. 8: varying beta](fig08.png)", "Quick mode"):
         assert heading in report
+    # issue 24: the exact test against the paper's on every map and on Table 2, the paper's kept above
+    ex = claims["exact_passivity"]
+    assert len(ex["maps"]) == 16 and len(ex["table2"]) == 45
+    for pid, m in ex["maps"].items():
+        assert m["passive_paper"] - m["paper_only"] == m["passive_exact"] - m["exact_only"] >= 0
+    assert [c["corrected_phase"] for c in ex["table2"]] == [c["computed"] for c in claims["table2"]]
+    assert "## Exact sampled-data passivity against the paper's test" in report
     # issue 26: "the paper says / we compute" first, Table 2 next, the option table (108 rows at
     # paper scale) after both
     order = [report.index(h) for h in ("## Quantitative claims: the paper says / we compute",
-                                       "## Table 2: passivity", "## Modelling options", "## Qualitative trends")]
+                                       "## Table 2: passivity", "## Exact sampled-data passivity against the paper's test",
+                                       "## Modelling options", "## Qualitative trends")]
     assert order == sorted(order)
     # the report's Table 2 count is the computed one
     n = sum(c["agrees"] for c in claims["table2"])

@@ -22,7 +22,7 @@ import numpy as np
 
 from tqdm.auto import tqdm
 
-from haa_sym.analysis.sampled_port import passivity_excess, passivity_tolerance
+from haa_sym.analysis.sampled_port import MEASURES, passivity_excess, passivity_tolerance
 from haa_sym.analysis.sweep import BLAS_THREADS, blas_limits
 from haa_sym.errors import ParameterError
 from haa_sym.io.budget import check_memory, sweep_bytes
@@ -162,8 +162,10 @@ class ContactIntervals:
     ``rtol``), an end of an unstable interval, or the range's edge.
     ``mode`` says whether K_env replaced the port body's ground stiffness (the paper's reading)
     or was added to it; ``K_env``, ``spectral_radius``, ``phase_excess_deg`` (deg beyond +-90,
-    NaN where unstable; None when skipped): the scan that bracketed the ends;
-    ``passivity_tol_deg``: the options' tolerance the excess was compared with;
+    NaN where unstable; None when skipped or under ``passivity = "exact"``): the scan that
+    bracketed the ends; ``passivity_tol_deg``: the options' tolerance the excess was compared
+    with; under ``passivity = "exact"`` the scan's measure is ``dissipation_deficit``
+    (dimensionless) and its tolerance ``passivity_tol_exact`` instead (the paper's two None);
     ``ground_added``: the port body of the file has no stiffness to ground, so ``key`` is a new
     one on it (:func:`contact_params`; both modes then scan the same stiffnesses).
     """
@@ -178,6 +180,18 @@ class ContactIntervals:
     phase_excess_deg: np.ndarray | None = field(default=None, repr=False)
     passivity_tol_deg: float | None = None
     ground_added: bool = False
+    dissipation_deficit: np.ndarray | None = field(default=None, repr=False)
+    passivity_tol_exact: float | None = None
+
+    @property
+    def measure(self):
+        """``(values, tolerance, name)`` of the scan's passivity measure, whichever test ran
+        (None when the scan skipped passivity)."""
+        if self.dissipation_deficit is not None:
+            return self.dissipation_deficit, self.passivity_tol_exact, "dissipation_deficit"
+        if self.phase_excess_deg is not None:
+            return self.phase_excess_deg, self.passivity_tol_deg, "phase_excess_deg"
+        return None
 
 
 @loop_first
@@ -283,8 +297,11 @@ def _locate(loop, key, base, K, P_gain, D_gain, beta, alpha, mode, rtol, passivi
         not_passive = stable & (excess > tol)
     for i in np.flatnonzero(stable[1:] & stable[:-1] & (not_passive[1:] != not_passive[:-1])):
         ends[i] = root(excess_minus_tol, i)
-    return ContactIntervals(unstable, key, mode, rtol, K, rho, _runs(float(K[0]), float(K[-1]), not_passive, ends),
-                            excess, tol)
+    runs = _runs(float(K[0]), float(K[-1]), not_passive, ends)
+    if MEASURES[loop.options.conventions.passivity] == "dissipation_deficit":
+        return ContactIntervals(unstable, key, mode, rtol, K, rho, runs, dissipation_deficit=excess,
+                                passivity_tol_exact=tol)
+    return ContactIntervals(unstable, key, mode, rtol, K, rho, runs, excess, tol)
 
 
 def _runs(K_lo, K_hi, flag, ends) -> list[tuple[float, float]]:

@@ -9,7 +9,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from haa_sym.analysis.margins import PM_THRESHOLD_DEG, phase_margins
-from haa_sym.analysis.sampled_port import passivity_excess, passivity_tolerance
+from haa_sym.analysis.sampled_port import measure_fields, passivity_excess, passivity_tolerance
 from haa_sym.analysis.sweep import BLAS_THREADS, blas_limits, run_chunks
 from haa_sym.loop import loop_first
 
@@ -23,7 +23,9 @@ class PointDecisions:
     +-90 deg plus the options' tolerance; False everywhere when passivity was not asked for);
     ``phase_margin_deg`` (the signed margin of the crossover nearest -1, exact; NaN where
     unstable or without crossover); ``phase_excess_deg`` (worst corrected phase of Z beyond
-    +-90 deg; NaN where unstable or not asked for); ``refined`` (decided from eigenvalues, the
+    +-90 deg, deg, with ``passivity = "corrected_phase"``) or ``dissipation_deficit`` (the exact
+    test's -min mu, dimensionless, with ``passivity = "exact"``): the other NaN, both NaN where
+    unstable or not asked for; ``refined`` (decided from eigenvalues, the
     generated test being uncertified there); ``spectral_radius`` (NaN unless asked for)."""
 
     stable: np.ndarray
@@ -31,6 +33,7 @@ class PointDecisions:
     passive: np.ndarray
     phase_margin_deg: np.ndarray
     phase_excess_deg: np.ndarray
+    dissipation_deficit: np.ndarray
     refined: np.ndarray
     spectral_radius: np.ndarray
 
@@ -74,4 +77,5 @@ def decide_points(loop, P_gain, D_gain, beta=None, alpha=None, *, passivity: boo
         run_chunks(excess, ok.size, blas_threads=blas_threads)
     with np.errstate(invalid="ignore"):
         passive = stable & (ex <= passivity_tolerance(loop))
-    return PointDecisions(stable, low, passive, pm, ex, refined, rho)
+    m = measure_fields(loop, ex)
+    return PointDecisions(stable, low, passive, pm, m["phase_excess_deg"], m["dissipation_deficit"], refined, rho)

@@ -20,7 +20,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from haa_sym.analysis.sampled_port import passivity_excess, passivity_tolerance
+from haa_sym.analysis.sampled_port import measure_fields, passivity_excess, passivity_tolerance
 from haa_sym.analysis.sweep import BLAS_THREADS, CHUNK, colgate_factor, run_chunks
 from haa_sym.io.budget import check_memory, sweep_bytes
 from haa_sym.io.progress import progress as progress_bar
@@ -37,15 +37,17 @@ def status(stable, passive) -> np.ndarray:
 
 @dataclass(frozen=True)
 class PassivityResult:
-    """Per gain point: ``stable``, ``passive``, ``phase_excess_deg`` (worst corrected phase of Z
-    beyond +-90 deg; <= 0 inside, NaN when unstable; with ``passivity = "exact"`` the
-    dimensionless dissipation deficit -min mu of :mod:`haa_sym.analysis.sampled_port` instead)
-    and ``omega_worst`` (rad/s)."""
+    """Per gain point: ``stable``, ``passive``, the measure of the options' test —
+    ``phase_excess_deg`` (``passivity = "corrected_phase"``: worst corrected phase of Z beyond
+    +-90 deg, deg; <= 0 inside) or ``dissipation_deficit`` (``passivity = "exact"``: -min mu of
+    :mod:`haa_sym.analysis.sampled_port`, dimensionless; <= 0 passive), the other NaN, both NaN
+    when unstable — and ``omega_worst`` (rad/s, where the measure is worst)."""
 
     stable: np.ndarray
     passive: np.ndarray
     phase_excess_deg: np.ndarray
     omega_worst: np.ndarray
+    dissipation_deficit: np.ndarray
 
     @property
     def status(self) -> np.ndarray:
@@ -97,8 +99,9 @@ def passivity(loop, P_gain=0.0, D_gain=0.0, *, beta: float | None = None, alpha:
     ww = np.where(stable, ww, np.nan)
     with np.errstate(invalid="ignore"):
         passive = stable & (ex <= passivity_tolerance(loop))
-    return PassivityResult(stable.reshape(shape), passive.reshape(shape), ex.reshape(shape),
-                           ww.reshape(shape))
+    m = measure_fields(loop, ex.reshape(shape))
+    return PassivityResult(stable.reshape(shape), passive.reshape(shape), m["phase_excess_deg"],
+                           ww.reshape(shape), m["dissipation_deficit"])
 
 
 @dataclass(frozen=True)

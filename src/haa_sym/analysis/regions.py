@@ -10,8 +10,13 @@ For every point of a P_gain x D_gain grid, with the torque-loop gains (beta, alp
                       ``LoopOptions.pm_loop``, at every point decided point by point (NaN where
                       the loop is unstable, |L| never crosses 1, or the point was labelled
                       from the curves);
-``passive``           stable and the corrected phase of Z(z) within +-90 deg up to Nyquist (Sec. 5);
-``phase_excess_deg``  the worst excess of that phase beyond +-90 deg (<= 0 inside; NaN if unstable).
+``passive``           stable and the corrected phase of Z(z) within +-90 deg up to Nyquist (Sec. 5;
+                      ``passivity = "corrected_phase"``, the default), or the exact test's
+                      dissipation deficit within its tolerance (``passivity = "exact"``);
+``phase_excess_deg``  the worst excess of that phase beyond +-90 deg, deg (<= 0 inside; NaN if
+                      unstable, and everywhere under ``passivity = "exact"``);
+``dissipation_deficit`` the exact test's -min mu, dimensionless (<= 0 passive; -1 with the
+                      controller off; NaN if unstable, and everywhere under the paper's test).
 
 Crossovers are located exactly; the passivity excess is sampled on ``LoopOptions.omega``
 (default 1000 log points, 0.1 rad/s to Nyquist): its values next to lightly damped poles
@@ -64,6 +69,7 @@ class RegionMap:
     spectral_radius: np.ndarray
     phase_margin_deg: np.ndarray
     phase_excess_deg: np.ndarray
+    dissipation_deficit: np.ndarray
     refined: np.ndarray
     meta: dict = field(default_factory=dict)
 
@@ -75,6 +81,8 @@ class RegionMap:
     @classmethod
     def load(cls, path: str | Path) -> "RegionMap":
         arrays, meta = load_npz(path)
+        # a map written before the exact test had its own field (issue 24) has no deficit
+        arrays.setdefault("dissipation_deficit", np.full(np.shape(arrays["phase_excess_deg"]), np.nan))
         return cls(meta=meta, **arrays)
 
 
@@ -177,11 +185,12 @@ def region_map(loop, P_gain, D_gain, *, beta: float | None = None, alpha: float 
                 rho = loop.stability(PP, DD, beta, alpha, radius=True).spectral_radius.reshape(shape)
             bar.update(P.size * D.size)
         return RegionMap(P, D, r.stable, r.low_pm, r.passive, rho, r.phase_margin_deg, r.phase_excess_deg,
-                         np.zeros(shape, bool), loop.provenance(beta=beta, alpha=alpha, method="curves"))
+                         r.dissipation_deficit, np.zeros(shape, bool), loop.provenance(beta=beta, alpha=alpha, method="curves"))
     PP, DD = np.meshgrid(P, D, indexing="ij")
     with progress_bar(PP.size, "region map", "pt", progress) as bar:
         d = decide_points(loop, PP, DD, beta, alpha, passivity=passivity, radius=radius, bar=bar,
                           blas_threads=blas_threads)
     return RegionMap(P, D, *(v.reshape(shape) for v in (d.stable, d.low_pm, d.passive, d.spectral_radius,
-                                                        d.phase_margin_deg, d.phase_excess_deg, d.refined)),
+                                                        d.phase_margin_deg, d.phase_excess_deg, d.dissipation_deficit,
+                                                        d.refined)),
                      loop.provenance(beta=beta, alpha=alpha, method="grid"))

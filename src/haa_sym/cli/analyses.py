@@ -15,6 +15,7 @@ from haa_sym.analysis.nonlinear_map import CLASSES, DEFAULT_DURATION, DEFAULT_MA
 from haa_sym.analysis.regions import region_map
 from haa_sym.analysis.simulate import EXPERIMENTS
 from haa_sym.analysis.robust import box_text, robust_region
+from haa_sym.analysis.sampled_port import MEASURES
 from haa_sym.analysis.torque import STEP_CONVENTION, describe_step, step_response, torque_bandwidth
 from haa_sym.check.verify import main as verify_main
 from haa_sym.compiled.generated import evaluators
@@ -199,8 +200,8 @@ def _cmd_contact(args) -> int:
     _write_outputs(out, plot,
                    lambda path, tx: save_json(path, {**data, "meta": loop.provenance()}, tx, "--out"),
                    lambda: _plots().plot_contact(r.K_env, r.spectral_radius, unstable=r.unstable, key=r.key,
-                                                 excess=r.phase_excess_deg, not_passive=r.not_passive,
-                                                 tol=r.passivity_tol_deg, title=args.figure_title,
+                                                 excess=r.measure[0], not_passive=r.not_passive,
+                                                 tol=r.measure[1], measure=r.measure[2], title=args.figure_title,
                                                  gains=_plots().gains_text(float(P), float(D), *_beta_alpha(loop))))
 
     def ends(iv):
@@ -275,13 +276,15 @@ def _cmd_passivity(args) -> int:
     r = passivity(loop, P, D)
     rows = []
     for i in range(P.size):
+        # each test's measure under its own name; the other test's field is absent (not run)
+        name = MEASURES[loop.options.conventions.passivity]
+        value = getattr(r, name)[i]
         rows.append({"P_gain": float(P[i]), "D_gain": float(D[i]), "status": str(r.status[i]),
-                     "phase_excess_deg": float(r.phase_excess_deg[i]), "omega_worst_rad_s": float(r.omega_worst[i])})
-        # passivity = "exact": the field holds the dissipation deficit (haa_sym.analysis.sampled_port)
-        what = ("worst corrected phase excess {:+.3f} deg" if loop.options.conventions.passivity == "corrected_phase"
-                else "exact dissipation deficit {:+.4g}").format(r.phase_excess_deg[i])
+                     name: float(value), "omega_worst_rad_s": float(r.omega_worst[i])})
+        what = ("worst corrected phase excess {:+.3f} deg" if name == "phase_excess_deg"
+                else "exact dissipation deficit {:+.4g}").format(value)
         excess = (f"{what} at {r.omega_worst[i]:.4g} rad/s"
-                  if np.isfinite(r.phase_excess_deg[i]) else "(passivity of an unstable loop is not judged)")
+                  if np.isfinite(value) else "(passivity of an unstable loop is not judged)")
         print(f"P_gain {P[i]:g}  D_gain {D[i]:g}: {r.status[i]:8s}  {excess}")
     curves = []
     if plot:

@@ -337,12 +337,16 @@ def gains_text(P_gain: float, D_gain: float, beta: float | None = None, alpha: f
 
 
 def plot_contact(K, rho, paper_range=None, unstable=(), key: str = "K_L2", excess=None,
-                 not_passive=(), tol: float | None = None, title: str = "", gains: str | None = None):
+                 not_passive=(), tol: float | None = None, title: str = "", gains: str | None = None,
+                 measure: str = "phase_excess_deg"):
     """Spectral radius of the loop against the environment stiffness, with the exact ends of the
     unstable intervals (:func:`haa_sym.analysis.contact.contact_intervals`) and the paper's range; with
     ``excess`` (deg, NaN where unstable) a second panel: the phase excess of Z beyond +-90 deg,
-    the tolerance ``tol`` and the exact ends of the stable, non-passive intervals. ``gains``
-    (:func:`gains_text`): the gains the scan was made at, a line of the title."""
+    the tolerance ``tol`` and the exact ends of the stable, non-passive intervals; with
+    ``measure = "dissipation_deficit"`` the panel is the exact test's deficit (dimensionless)
+    instead. ``gains`` (:func:`gains_text`): the gains the scan was made at, a line of the title."""
+    exact = measure == "dissipation_deficit"
+    unit = "" if exact else " deg"
     title = "\n".join(x for x in (title, f"gains: {gains}" if gains else "") if x)
     two = excess is not None
     fig, axes = plt.subplots(2 if two else 1, 1, figsize=(6.4, 5.6 if two else 3.2), sharex=True,
@@ -360,13 +364,14 @@ def plot_contact(K, rho, paper_range=None, unstable=(), key: str = "K_L2", exces
     ax.grid(True, which="both", alpha=0.3)
     if two:
         ax = axes[1, 0]
-        ax.semilogx(K, excess, color="k", label="stable: worst |phase of Z| - 90 deg")
+        ax.semilogx(K, excess, color="k", label="stable: exact dissipation deficit -min mu" if exact
+                    else "stable: worst |phase of Z| - 90 deg")
         # symmetric log: the passive side sits at rounding level (Z touches -90 deg at Nyquist),
         # the non-passive side spans decades up to 90 deg
         lin = tol if tol else 1e-3
         ax.set_yscale("symlog", linthresh=lin)
         if tol is not None:
-            ax.axhline(tol, color="tab:red", lw=0.8, label=f"tolerance {tol:g} deg")
+            ax.axhline(tol, color="tab:red", lw=0.8, label=f"tolerance {tol:g}{unit}")
         for i, (lo, hi) in enumerate(unstable):
             ax.axvspan(lo, hi, color="0.85", label=None if i else "unstable")
         inner = [k for iv in not_passive for k in iv if K[0] < k < K[-1]]
@@ -374,7 +379,7 @@ def plot_contact(K, rho, paper_range=None, unstable=(), key: str = "K_L2", exces
             ax.axvspan(lo, hi, color="tab:purple", alpha=0.12, label=None if i else "stable, not passive")
         for i, k in enumerate(inner):
             ax.axvline(k, color="tab:purple", lw=0.8, ls="--", label=None if i else "computed: interval ends")
-        ax.set_ylabel("phase excess of Z (deg)")
+        ax.set_ylabel("dissipation deficit (-)" if exact else "phase excess of Z (deg)")
         ax.legend(fontsize=8)
         ax.grid(True, which="both", alpha=0.3)
     axes[-1, 0].set_xlabel(f"environment stiffness {key} (Nm/rad)")

@@ -37,13 +37,15 @@ import numpy as np
 from haa_sym.analysis.boundaries.combined import boundaries
 from haa_sym.analysis.contact import contact_intervals, intervals
 from haa_sym.analysis.passivity import bands_beyond, corrected_phase
-from haa_sym.analysis.regions import region_map
-from haa_sym.analysis.sweep import CHUNK
+from haa_sym.analysis.regions import RegionMap, region_map
+from haa_sym.analysis.sampled_port import deficit_lower_bound, passivity_excess, passivity_tolerance
+from haa_sym.analysis.sweep import CHUNK, run_chunks
 from haa_sym.analysis.torque import (p1_roots, step_response, torque_bandwidth, torque_bandwidth_map,
                                      torque_loop_margins)
 from haa_sym.check import reference
 from haa_sym.check.crosscheck import eigenvalue_crosscheck
 from haa_sym.design.schedule import schedule
+from haa_sym.errors import ParameterError
 from haa_sym.io.budget import check_memory, sweep_bytes
 from haa_sym.io.gridspec import grid
 from haa_sym.io.outputs import Transaction, check_directory, csv_text as _csv, write_text
@@ -333,6 +335,98 @@ def _table2(job: _Job) -> dict:
             "differing_cells_rescued_by": rescue}
 
 
+def _exact_deficits(loop, P, D, tol: float):
+    """The exact test's deficit at the points (P, D), as far as the comparison needs it:
+    ``(deficit, omega, full)``. Every point is screened on every 16th frequency of the grid (a
+    lower bound, :func:`haa_sym.analysis.sampled_port.deficit_lower_bound`: 1/16 of the cost);
+    the points whose bound does not already exceed ``tol`` are evaluated on the whole grid (so
+    every decision is the exact test's), then the points with the smallest bounds until the least
+    deficit is certified (a full value below every remaining bound). ``full`` marks the points
+    whose ``deficit`` and ``omega`` are the test's own; elsewhere they are the bound and its
+    frequency (and the point is not passive)."""
+    beta, alpha = loop.params.controller.beta, loop.params.controller.alpha
+    val, w = np.full(P.size, np.nan), np.full(P.size, np.nan)
+    full = np.zeros(P.size, bool)
+    if P.size == 0:                                      # a map with no stable point
+        return val, w, full
+
+    def screen(sl):
+        val[sl], w[sl] = deficit_lower_bound(loop, P[sl], D[sl], beta, alpha)
+
+    def evaluate(idx):
+        idx = idx[~full[idx]]
+
+        def work(sl):
+            val[idx[sl]], w[idx[sl]] = passivity_excess(loop, P[idx[sl]], D[idx[sl]], beta, alpha)
+        run_chunks(work, idx.size, blas_threads=1)
+        full[idx] = True
+    # the aliasing sums and forms built once, before two threads would both build them
+    deficit_lower_bound(loop, P[:1], D[:1], beta, alpha)
+    run_chunks(screen, P.size, blas_threads=1)
+    evaluate(np.flatnonzero(val <= tol))
+    n = 64
+    while not full.all():
+        evaluate(np.argsort(np.where(full, np.inf, val))[:n])
+        if full.all() or val[full].min() <= val[~full].min():
+            break
+        n *= 4
+    return val, w, full
+
+
+def _exact_passivity(job: _Job) -> dict:
+    """Issue 24: the exact sampled-data passivity test against the paper's corrected phase, on the
+    stable points of every map of Figs. 8-11 (stability does not depend on the test) and on
+    Table 2; the maps, figures and Table 2 above keep the paper's test."""
+    _log("exact sampled-data passivity (issue 24) on the maps and Table 2")
+    exact = job.with_options(passivity="exact")
+    maps = {}
+    for entry in job.spec["regions"]["panel"]:
+        pid = f"{entry['figure']}{entry['panel']}"
+        m = RegionMap.load(job.out / "regions" / f"fig{entry['figure']:02d}{entry['panel']}.npz")
+        loop = ClosedLoop(panel_params(job.params, entry), exact)
+        PP, DD = np.meshgrid(m.P_gain, m.D_gain, indexing="ij")
+        st = np.flatnonzero(m.stable.ravel())
+        P, D = PP.ravel()[st], DD.ravel()[st]
+        try:
+            deficit, w, full = _exact_deficits(loop, P, D, passivity_tolerance(loop))
+        except ParameterError as e:
+            maps[pid] = {"refused": str(e)}
+            continue
+        pe = deficit <= passivity_tolerance(loop)
+        pp = m.passive.ravel()[st]
+        row = {"points": int(m.stable.size), "stable": int(st.size), "passive_paper": int(pp.sum()),
+               "passive_exact": int(pe.sum()), "paper_only": int((pp & ~pe).sum()),
+               "exact_only": int((pe & ~pp).sum()),
+               # passive points whose least mu is at the grid's lowest frequency: decided at its edge
+               "passive_exact_at_omega_min": int((pe & (w <= loop.options.numerics.omega_min)).sum())}
+        if pp.any():          # the paper's test's worst optimistic call found (the largest bound's point)
+            k = np.flatnonzero(pp)[np.argmax(deficit[pp])]
+            dk, wk = passivity_excess(loop, P[k:k + 1], D[k:k + 1], loop.params.controller.beta,
+                                      loop.params.controller.alpha)
+            row["worst_paper_passive"] = {"P_gain": float(P[k]), "D_gain": float(D[k]),
+                                          "deficit": float(dk[0]), "omega_rad_s": float(wk[0])}
+        if st.size:
+            k = int(np.argmin(deficit))
+            row["least_deficit"] = {"P_gain": float(P[k]), "D_gain": float(D[k]),
+                                    "deficit": float(deficit[k]), "omega_rad_s": float(w[k])}
+        if (pe & ~pp).any():               # how far the paper's test is from calling them passive
+            paper = ClosedLoop(loop.params, job.options)
+            ex, _ = passivity_excess(paper, P[pe & ~pp], D[pe & ~pp], paper.params.controller.beta,
+                                     paper.params.controller.alpha)
+            row["exact_only_paper_excess_deg_max"] = float(np.max(ex))
+        maps[pid] = row
+    paper_cells = table2(job.params, job.options, job.spec)
+    cells = []
+    for c, x in zip(paper_cells, table2(job.params, exact, job.spec)):
+        cells.append({"row": c.row, "column": c.column, "P_gain": c.P_gain, "D_gain": c.D_gain, "paper": c.paper,
+                      "corrected_phase": c.status, "exact": x.status,
+                      "phase_excess_deg": _finite_or_none(c.phase_excess_deg),
+                      "dissipation_deficit": _finite_or_none(x.dissipation_deficit),
+                      "omega_worst_exact_rad_s": _finite_or_none(x.omega_worst)})
+    return {"exact_passivity": {"maps": maps, "table2": cells, "tolerance": exact.passivity_tol_exact,
+                                "tolerance_deg": job.options.passivity_tol_deg}}
+
+
 def _fig12(job: _Job, loop: ClosedLoop) -> dict:
     """Fig. 12: corrected phase of Z, torque loop alone and impedance loop closed; the bands."""
     from haa_sym.io.plots import plot_corrected_phase, save_figure
@@ -535,7 +629,7 @@ def reproduce(out: str | Path = "results", params: Params | None = None,
         loop = ClosedLoop(params, options)
         result: dict = {"meta": loop.provenance(quick=quick)}
         # one bar over the sections (stderr; shown on a terminal after 2 s, see haa_sym.io.progress)
-        with progress_bar(12, "reproduce", "section") as bar:
+        with progress_bar(13, "reproduce", "section") as bar:
             def run(section, *args):
                 result.update(section(job, *args))
                 bar.update(1)
@@ -544,6 +638,7 @@ def reproduce(out: str | Path = "results", params: Params | None = None,
             run(_trend_alternatives, result["region_trends"]["locomotion"],
                 result["region_splits"]["locomotion"])
             run(_table2)
+            run(_exact_passivity)
             _log("Fig. 12, contact stiffness, beta threshold, Fig. 7, torque-loop bounds, verify")
             run(_fig12, loop)
             run(_contact)

@@ -31,8 +31,9 @@ class Cell:
     D_gain: float
     status: str               # "Yes" / "No" / "Unstable"
     paper: str
-    phase_excess_deg: float   # NaN when unstable
+    phase_excess_deg: float   # NaN when unstable or under passivity = "exact"
     omega_worst: float        # rad/s, NaN when unstable
+    dissipation_deficit: float = float("nan")   # passivity = "exact" only (docs/passivity.md)
 
     @property
     def agrees(self) -> bool:
@@ -59,7 +60,8 @@ def table2(params: Params, options: LoopOptions | None = None, spec: dict | None
         r = passivity(ClosedLoop(p, options), P, D)
         for j, col in enumerate(t["columns"]):
             cells.append(Cell(row["label"], col, float(P[j]), float(D[j]), str(r.status[j]),
-                              row["paper"][j], float(r.phase_excess_deg[j]), float(r.omega_worst[j])))
+                              row["paper"][j], float(r.phase_excess_deg[j]), float(r.omega_worst[j]),
+                              float(r.dissipation_deficit[j])))
     return cells
 
 

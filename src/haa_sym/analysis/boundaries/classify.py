@@ -75,13 +75,15 @@ class RegionDecisions:
     phase margin below the threshold by the options' rule), ``passive`` (stable and the corrected
     phase of Z within +-90 deg up to the options' tolerance; False everywhere when not asked
     for), and at the points decided one by one (the segments' probes and the segments decided
-    point by point; NaN elsewhere) their exact ``phase_margin_deg`` and ``phase_excess_deg``."""
+    point by point; NaN elsewhere) their exact ``phase_margin_deg`` and the passivity measure,
+    ``phase_excess_deg`` or ``dissipation_deficit`` by the options' test (the other NaN)."""
 
     stable: np.ndarray
     low_pm: np.ndarray
     passive: np.ndarray
     phase_margin_deg: np.ndarray
     phase_excess_deg: np.ndarray
+    dissipation_deficit: np.ndarray
 
 
 def classify_regions(loop, boundary: StabilityBoundary, P_gain, D_gain, *, pm_deg: float = PM_THRESHOLD_DEG,
@@ -114,12 +116,13 @@ def classify_regions(loop, boundary: StabilityBoundary, P_gain, D_gain, *, pm_de
     ids, first, count = np.unique(flat, return_index=True, return_counts=True)
     n = flat.size
     val = [np.zeros(n, bool) for _ in range(3)]            # stable, low_pm, passive
-    num = [np.full(n, np.nan) for _ in range(2)]           # phase margin, phase excess
+    num = [np.full(n, np.nan) for _ in range(3)]           # phase margin, phase excess, deficit
 
     def decide(idx):
         d = decide_points(loop, Ps[idx % P.size], D[idx // P.size], beta, alpha, passivity=passivity,
                           pm_threshold_deg=pm_deg)
-        for v, x in zip(val + num, (d.stable, d.low_pm, d.passive, d.phase_margin_deg, d.phase_excess_deg)):
+        for v, x in zip(val + num, (d.stable, d.low_pm, d.passive, d.phase_margin_deg, d.phase_excess_deg,
+                                       d.dissipation_deficit)):
             v[idx] = x
     # each segment's first, middle and last grid point
     probe = np.stack([first, first + count // 2, first + count - 1], axis=1)        # (n_seg, 3)
