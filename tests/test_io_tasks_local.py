@@ -178,3 +178,29 @@ def test_sigterm_stops_the_local_cluster(tmp_path):
     assert {ip for _, ip in sockets} == {"127.0.0.1"}, sockets
     assert _gone(seen) == [], "processes of the local cluster left behind"
     assert not out.exists()
+
+
+@pytest.mark.slow
+def test_regions_robust_on_local_2_listens_on_loopback_and_writes_the_in_process_bytes(tmp_path):
+    # issue 27, item 2: the leg range's (and an uncertainty box's) maps on the cluster's workers
+    argv = ["regions", "--robust", "--leg-mode", "box", "--P-gain", "log:1:2000:40", "--D-gain", "lin:1:50:20",
+            "-q"]
+    remote = tmp_path / "remote.npz"
+    proc = subprocess.Popen([sys.executable, "-m", "haa_sym.cli", *argv, "--scheduler", "local:2",
+                             "--out", str(remote)], stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
+                            env=ENV, cwd=tmp_path, start_new_session=True)
+    try:
+        seen, sockets = _watch(proc)
+        out, err = proc.communicate(timeout=300)
+    finally:
+        if proc.poll() is None:
+            os.killpg(proc.pid, signal.SIGKILL)
+    assert proc.returncode == 0, err
+    assert len({pid for pid, _ in sockets}) >= 3, sockets   # the scheduler's and each worker's port
+    assert {ip for _, ip in sockets} == {"127.0.0.1"}, sockets
+    assert _gone(seen) == []
+    local = tmp_path / "local.npz"
+    assert main([*argv, "--out", str(local)]) == 0
+    assert remote.read_bytes() == local.read_bytes()      # the whole file, its meta included
+    z = np.load(local)
+    assert 0 < z["feasible"].sum() < z["feasible"].size

@@ -69,3 +69,25 @@ def test_stream_records_which_task_asked_for_which():
     firsts = {t["key"] for t in trace[:2]}
     assert all(t["after"] == [] for t in trace[:2])
     assert all(len(t["after"]) == 1 and t["after"][0] in firsts for t in trace[2:])
+
+
+def test_the_robust_region_maps_each_configuration_as_a_task_once():
+    # issue 27, item 2: regions --robust on the task runner; the doubling (2, 3, ... configurations)
+    # maps only the configurations it has not mapped yet, and the result is the in-process one
+    distributed = pytest.importorskip("distributed")
+    from haa_sym.analysis.robust import robust_region
+    loop = ClosedLoop(load_params())
+    P, D = [5.0, 50.0, 300.0, 2000.0], [1.0, 10.0, 40.0]
+    local = robust_region(loop, P, D)
+    with distributed.LocalCluster(n_workers=2, threads_per_worker=1, processes=False,
+                                  dashboard_address=None) as cl, distributed.Client(cl) as client:
+        tasks.TRACE = []
+        try:
+            remote = robust_region(loop, P, D, scheduler=client)
+            trace = tasks.TRACE
+        finally:
+            tasks.TRACE = None
+    assert remote.feasible.tobytes() == local.feasible.tobytes() and remote.history == local.history
+    assert 0 < remote.feasible.sum() < remote.feasible.size
+    # one task per configuration: the ends, then one midpoint per doubling
+    assert len(trace) == remote.n_configurations == local.n_configurations

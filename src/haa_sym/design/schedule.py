@@ -77,7 +77,7 @@ import numpy as np
 
 from haa_sym._version import __version__
 from haa_sym.analysis.decide import decide_points
-from haa_sym.analysis.robust import (MAX_LEG_POINTS, _check_requirements, check_uncertainty, feasible_map,
+from haa_sym.analysis.robust import (MAX_LEG_POINTS, _check_requirements, check_uncertainty, feasible_task,
                                      leg_configurations, leg_ends, leg_values, meets)
 from haa_sym.analysis.torque import torque_bandwidth
 from haa_sym.design.schedule_table import ScheduleTable
@@ -188,12 +188,8 @@ class Schedule:
 
 
 # ------------------------------------------------------------------------------ the tasks
-# Module-level functions of plain data: what a dask worker runs (one map or one point set).
-
-def _task_map(params, config, P, D, beta, alpha, requirements, options):
-    return feasible_map(ClosedLoop(params.with_values(**config), options), P, D, beta, alpha,
-                        requirements=requirements)
-
+# Module-level functions of plain data: what a dask worker runs (one point set; one map is
+# haa_sym.analysis.robust.feasible_task).
 
 def _task_points(params, config, P, D, beta, alpha, requirements, options):
     loop = ClosedLoop(params.with_values(**config), options)
@@ -464,7 +460,7 @@ def schedule(loop, P_gain=None, D_gain=None, *, beta_range=(0.1, 8.0), beta_tol:
         def coarse_maps(configs):
             todo = [(c, k, a) for c in configs for k in coarse for a in range(alphas.size)
                     if (key_of(c), k, a) not in maps]
-            res = runner.run(_task_map, [(params, c, P, D, float(fine[k]), float(alphas[a]), req, options)
+            res = runner.run(feasible_task, [(params, c, P, D, float(fine[k]), float(alphas[a]), req, options)
                                          for c, k, a in todo], "schedule: maps")
             for (c, k, a), r in zip(todo, res):
                 maps[(key_of(c), k, a)] = np.asarray(r, bool)
@@ -524,7 +520,7 @@ def schedule(loop, P_gain=None, D_gain=None, *, beta_range=(0.1, 8.0), beta_tol:
             current, lowered = _verify(runner, params, configs, P, D, fine, alphas, current, req, options)
             # beta = 1 (the file's own torque gains) at the file's alpha, for the comparison
             alpha_1 = float(ctrl.alpha if alpha is None else alpha)
-            res = runner.run(_task_map, [(params, c, P, D, 1.0, alpha_1, req, options) for c in configs],
+            res = runner.run(feasible_task, [(params, c, P, D, 1.0, alpha_1, req, options) for c in configs],
                              "schedule: beta = 1")
             fixed = np.logical_and.reduce([np.asarray(r, bool) for r in res])
             # the torque bandwidths the table reports (and ties between alphas need), as tasks:
