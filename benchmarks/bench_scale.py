@@ -21,6 +21,12 @@ sized to the workers: more workers, smaller tasks, shorter chains):
 - predicted time on M workers: ``S + max(C, W / M)``, and the bound on the speedup
   ``T(1) / (S + C)`` however many workers (the critical path S + C).
 
+``--whole R`` also times the whole command as a user runs it, ``python -m haa_sym.cli ...
+--scheduler local:N`` in a new process (imports, the cluster's start and stop, every task), for
+N = 1, 2, ..., alternating, R rounds: each round's local:1 / local:N ratio is taken from runs a few
+seconds apart (the other jobs of a shared machine change within a minute), and the JSON keeps
+every run with the cores free before it.
+
 Before each run it measures how many of n cores are free now (:func:`capacity`: n spinning
 processes against one; the load average of a shared virtual machine does not say it).
 
@@ -28,13 +34,15 @@ Prints a table and writes ``results_scale_<preset>.json`` into ``$HAA_SYM_BENCH_
 bench-results/). Not part of ``make bench``.
 
 Usage: python benchmarks/bench_scale.py [--workers N] [--predict M] [--preset nonlinear|schedule]
-       [--repeats R] [-- haa-sym ARGS ...]
+       [--repeats R] [--whole R] [--no-warm] [-- haa-sym ARGS ...]
 """
 from __future__ import annotations
 
 import argparse
 import logging
 import os
+import statistics
+import subprocess
 import sys
 import tempfile
 import time
@@ -155,12 +163,48 @@ def run_once(argv: list[str], n: int, out: Path, sized_for: int | None = None) -
             "output": _output_bytes(out)}
 
 
+def whole_runs(argv: list[str], workers: int, rounds: int, out: Path) -> dict:
+    """The whole command in a new process (``python -m haa_sym.cli ... --scheduler local:N``),
+    N = 1..workers alternating, ``rounds`` times; every run's wall time, the cores free and the
+    load before it, and whether its output has the bytes of the first."""
+    env = {**os.environ, "PYTHONPATH": os.pathsep.join([str(ROOT / "src")] + [p for p in [os.environ.get("PYTHONPATH")]
+                                                                            if p])}
+    runs, first = [], None
+    for r in range(rounds):
+        for n in range(1, workers + 1):
+            load, cores = os.getloadavg()[0], capacity(workers)
+            t = time.perf_counter()
+            proc = subprocess.run([sys.executable, "-m", "haa_sym.cli", *argv, "-q", "--scheduler", f"local:{n}"],
+                                  env=env, capture_output=True, text=True)
+            wall = time.perf_counter() - t
+            if proc.returncode != 0:
+                raise SystemExit(f"the command failed (exit {proc.returncode}): {proc.stderr.strip()[-400:]}")
+            got = _output_bytes(out)
+            first = got if first is None else first
+            runs.append({"round": r, "workers": n, "seconds": wall, "cores_available_before": round(cores, 2),
+                         "load_1min_before": round(load, 2), "same_output": got == first})
+            print(f"  whole command, round {r + 1}, local:{n}: {wall:6.2f} s (cores free before {cores:.2f} of "
+                  f"{workers}, load {load:.2f})", flush=True)
+    by_n = {n: [x["seconds"] for x in runs if x["workers"] == n] for n in range(1, workers + 1)}
+    ratios = {n: [a / b for a, b in zip(by_n[1], by_n[n])] for n in range(2, workers + 1)}
+    return {"runs": runs, "same_output": all(x["same_output"] for x in runs),
+            "best_s": {str(n): min(v) for n, v in by_n.items()},
+            "median_s": {str(n): statistics.median(v) for n, v in by_n.items()},
+            "speedup_of_best": {str(n): min(by_n[1]) / min(by_n[n]) for n in ratios},
+            "speedup_per_round": {str(n): v for n, v in ratios.items()},
+            "cores_available_before": [x["cores_available_before"] for x in runs]}
+
+
 def main() -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--workers", type=int, default=os.cpu_count() or 1, help="up to N workers (default: the cores)")
     ap.add_argument("--predict", type=int, default=16, help="predict the time on M workers (default 16)")
     ap.add_argument("--preset", choices=sorted(PRESETS), default="nonlinear")
     ap.add_argument("--repeats", type=int, default=1, help="runs per worker count, the fastest kept")
+    ap.add_argument("--whole", type=int, default=0, metavar="R",
+                    help="also time the whole command (--scheduler local:N, a new process) R rounds, N alternating")
+    ap.add_argument("--no-warm", action="store_true",
+                    help="only the whole-command rounds and the critical path (no warm-cluster table)")
     ap.add_argument("command", nargs=argparse.REMAINDER, help="-- haa-sym ARGS (with --out FILE)")
     args = ap.parse_args()
     bench = Run("bench_scale.py")
@@ -176,7 +220,8 @@ def main() -> int:
             argv = [a.format(limits_file=limits_file, out=Path(tmp) / "out") for a in PRESETS[name]]
             out = Path(argv[argv.index("--out") + 1])
         rows = []
-        for n in range(1, args.workers + 1):
+        whole = whole_runs(argv, args.workers, args.whole, out) if args.whole else None
+        for n in range(1, 1 + (1 if args.no_warm else args.workers)):
             best = None
             for _ in range(max(1, args.repeats)):
                 load, cores = os.getloadavg()[0], capacity(n)
@@ -197,7 +242,7 @@ def main() -> int:
         print(f" 1 worker, tasks sized for {args.predict}: {chain['seconds']:.2f} s, work {chain['work_s']:.2f} s "
               f"in {chain['tasks']} tasks, serial {chain['serial_s']:.2f} s, longest chain "
               f"{chain['longest_chain_s']:.2f} s", flush=True)
-    same = all(r["output"] == rows[0]["output"] for r in rows + [chain])
+    same = all(r["output"] == rows[0]["output"] for r in rows + [chain]) and (whole is None or whole["same_output"])
     for r in rows + [chain]:
         del r["output"]
     one = rows[0]
@@ -218,12 +263,19 @@ def main() -> int:
           f"{critical:.2f} s; work {W:.2f} s; speedup bound T(1) / critical path = {one['seconds'] / critical:.1f}")
     print(f"predicted on {M} workers: S + max(C, W / {M}) = {predict[M]:.1f} s, {one['seconds'] / predict[M]:.1f}x "
           f"the measured 1 worker")
+    if whole is not None:
+        for n in range(2, args.workers + 1):
+            per = ", ".join(f"{x:.2f}x" for x in whole["speedup_per_round"][str(n)])
+            print(f"whole command local:1 -> local:{n}: best {whole['best_s']['1']:.2f} s -> {whole['best_s'][str(n)]:.2f} s "
+                  f"({whole['speedup_of_best'][str(n)]:.2f}x); per round {per}; cores free before the runs "
+                  f"{min(whole['cores_available_before']):.2f}-{max(whole['cores_available_before']):.2f} of "
+                  f"{args.workers}")
     print(f"same output at every worker count: {same}; machine: {bench.info['cpu_model']}, "
           f"{bench.info['cpu_count']} cores")
     res = {"command": ["haa-sym", *argv], "preset": name, "rows": rows, "chain_run": chain, "same_output": same,
            "critical_path_s": critical, "serial_s": S, "longest_chain_s": C, "work_s": W,
            "predicted_s": {str(m): t for m, t in predict.items()},
-           "speedup_bound": one["seconds"] / critical}
+           "speedup_bound": one["seconds"] / critical, "whole_command": whole}
     print(f"wrote {bench.write(f'results_scale_{name}.json', res)}")
     return 0 if same else 1
 

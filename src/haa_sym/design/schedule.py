@@ -457,18 +457,33 @@ def schedule(loop, P_gain=None, D_gain=None, *, beta_range=(0.1, 8.0), beta_tol:
         def key_of(c):
             return tuple(sorted(c.items()))
 
-        def coarse_maps(configs):
+        alpha_1 = float(ctrl.alpha if alpha is None else alpha)
+        fixed_maps: dict = {}               # config key -> (n_P, n_D) bool at beta = 1, alpha_1
+
+        def map_round(configs, fixed_configs=()):
+            """One task list: the coarse maps of ``configs`` and the beta = 1 maps of
+            ``fixed_configs`` not computed yet."""
             todo = [(c, k, a) for c in configs for k in coarse for a in range(alphas.size)
                     if (key_of(c), k, a) not in maps]
+            todo_1 = list({key_of(c): c for c in fixed_configs if key_of(c) not in fixed_maps}.values())
             res = runner.run(feasible_task, [(params, c, P, D, float(fine[k]), float(alphas[a]), req, options)
-                                         for c, k, a in todo], "schedule: maps")
+                                             for c, k, a in todo]
+                             + [(params, c, P, D, 1.0, alpha_1, req, options) for c in todo_1], "schedule: maps")
             for (c, k, a), r in zip(todo, res):
                 maps[(key_of(c), k, a)] = np.asarray(r, bool)
+            for c, r in zip(todo_1, res[len(todo):]):
+                fixed_maps[key_of(c)] = np.asarray(r, bool)
 
-        def solve(configs):
-            coarse_maps(configs)
+        PP, DD = (x.ravel() for x in np.meshgrid(P, D, indexing="ij"))
+
+        def solve(configs, ahead=()):
+            """Each point's largest beta feasible at every configuration of ``configs``; the fine
+            values of its bracket are decided for ``ahead`` too (the next doubling's new
+            configurations, whose brackets are mostly the same), in the same task list."""
+            map_round(configs)
             n_pts = P.size * D.size
             best_k = np.full((alphas.size, n_pts), -1)
+            needs, todo = [], []
             for a in range(alphas.size):
                 F = np.ones((coarse.size, n_pts), bool)
                 for c in configs:
@@ -482,19 +497,19 @@ def schedule(loop, P_gain=None, D_gain=None, *, beta_range=(0.1, 8.0), beta_tol:
                 for p in np.flatnonzero(any_ok & (kc < coarse.size - 1)):
                     for k in range(coarse[kc[p]] + 1, coarse[kc[p] + 1]):
                         need.setdefault(k, []).append(p)
-                todo = []
-                for c in configs:
+                needs.append(need)
+                for c in [*configs, *ahead]:
                     for k, pts in need.items():
                         done = points.setdefault((key_of(c), k, a), {})
                         missing = [p for p in pts if p not in done]
                         if missing:
-                            todo.append((c, k, missing))
-                PP, DD = np.meshgrid(P, D, indexing="ij")
-                PP, DD = PP.ravel(), DD.ravel()
-                res = runner.run(_task_points, [(params, c, PP[m], DD[m], float(fine[k]), float(alphas[a]), req, options)
-                                                for c, k, m in todo], "schedule: refine")
-                for (c, k, m), r in zip(todo, res):
-                    points[(key_of(c), k, a)].update(zip(m, np.asarray(r, bool).tolist()))
+                            todo.append((c, k, a, missing))
+            # every alpha's refinement in one task list
+            res = runner.run(_task_points, [(params, c, PP[m], DD[m], float(fine[k]), float(alphas[a]), req, options)
+                                            for c, k, a, m in todo], "schedule: refine")
+            for (c, k, a, m), r in zip(todo, res):
+                points[(key_of(c), k, a)].update(zip(m, np.asarray(r, bool).tolist()))
+            for a, need in enumerate(needs):
                 for k in sorted(need):
                     ok = np.array([all(points[(key_of(c), k, a)][p] for c in configs) for p in need[k]])
                     pts = np.array(need[k])
@@ -504,7 +519,16 @@ def schedule(loop, P_gain=None, D_gain=None, *, beta_range=(0.1, 8.0), beta_tol:
         try:
             n = 2
             configs = leg_configurations(params, n, leg=leg, leg_mode=leg_mode, uncertainty=uncertainty)
-            current = solve(configs)
+            # Speculation without waste: the doubling always goes on to 3 configurations per axis
+            # (it compares two levels), and the beta = 1 comparison is made at the last level,
+            # which holds the level-3 configurations. So the first task list maps them all, and
+            # the first refinement decides the level-3 configurations at the level-2 brackets:
+            # 2 task lists where there were 5 (each a barrier of the cluster).
+            ahead = leg_configurations(params, 3, leg=leg, leg_mode=leg_mode, uncertainty=uncertainty) \
+                if 3 <= max_per_axis else configs
+            map_round(ahead, ahead)
+            new = [c for c in ahead if key_of(c) not in {key_of(x) for x in configs}]
+            current = solve(configs, new)
             history = [(len(configs), int((current.max(axis=0) >= 0).sum()))]
             converged = False
             while 2 * n - 1 <= max_per_axis:
@@ -518,11 +542,10 @@ def schedule(loop, P_gain=None, D_gain=None, *, beta_range=(0.1, 8.0), beta_tol:
                     converged = True
                     break
             current, lowered = _verify(runner, params, configs, P, D, fine, alphas, current, req, options)
-            # beta = 1 (the file's own torque gains) at the file's alpha, for the comparison
-            alpha_1 = float(ctrl.alpha if alpha is None else alpha)
-            res = runner.run(feasible_task, [(params, c, P, D, 1.0, alpha_1, req, options) for c in configs],
-                             "schedule: beta = 1")
-            fixed = np.logical_and.reduce([np.asarray(r, bool) for r in res])
+            # beta = 1 (the file's own torque gains) at the file's alpha, for the comparison (the
+            # level-3 configurations' maps were made in the first task list)
+            map_round([], configs)
+            fixed = np.logical_and.reduce([fixed_maps[key_of(c)] for c in configs])
             # the torque bandwidths the table reports (and ties between alphas need), as tasks:
             # the leg free in the air, at each point's largest beta and every alpha reaching it,
             # and at beta = 1
