@@ -49,6 +49,15 @@ TRACE: list | None = None
 LOCAL = "local:"
 #: Seconds for a local cluster's N workers to start and register.
 LOCAL_START_TIMEOUT = 120.0
+#: How ``local:N`` starts its worker processes (dask's ``distributed.worker.multiprocessing-method``,
+#: set for this cluster only): "fork" on Linux, where a forked worker inherits the command's
+#: imported haa_sym, numpy and compiled library and is up in about 0.1 s; "spawn" (dask's default)
+#: elsewhere, where fork is unsafe (macOS) or missing (Windows), a new interpreter that imports
+#: them again (about 1.2 s for two workers on this 2-core machine, which every command paid before
+#: issue 27's second round; docs/schedule.md). The fork is made by dask's event-loop thread while the
+#: command's main thread waits for the workers, holding no lock; in a forked worker the command's
+#: SIGTERM handler restores the default action (``haa_sym.cli``: SIGTERM ends a worker as before).
+LOCAL_START_METHOD = "fork" if sys.platform == "linux" else "spawn"
 
 
 def local_workers(spec) -> int | None:
@@ -85,14 +94,16 @@ def cluster(spec):
         # allowed (a test of the scheduling), but more processes than cores share them
         print(f"haa-sym: warning: --scheduler {spec}: {n} worker processes on {cores} cores; they share the "
               f"cores (no faster than local:{cores})", file=sys.stderr)
+    import dask
     from distributed import Client, LocalCluster
     cl = client = None
     try:
         # dashboard_address=None: no HTTP server at all (a dashboard would listen on every
         # interface unless given 127.0.0.1; docs/schedule.md); the workers' too
-        cl = LocalCluster(n_workers=n, threads_per_worker=1, processes=True, host="127.0.0.1",
-                          dashboard_address=None, worker_dashboard_address=None,
-                          silence_logs=logging.ERROR)
+        with dask.config.set({"distributed.worker.multiprocessing-method": LOCAL_START_METHOD}):
+            cl = LocalCluster(n_workers=n, threads_per_worker=1, processes=True, host="127.0.0.1",
+                              dashboard_address=None, worker_dashboard_address=None,
+                              silence_logs=logging.ERROR)
         client = Client(cl)
         client.wait_for_workers(n, timeout=LOCAL_START_TIMEOUT)
         yield client
