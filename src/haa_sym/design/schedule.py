@@ -474,8 +474,6 @@ def schedule(loop, P_gain=None, D_gain=None, *, beta_range=(0.1, 8.0), beta_tol:
             for c, r in zip(todo_1, res[len(todo):]):
                 fixed_maps[key_of(c)] = np.asarray(r, bool)
 
-        PP, DD = (x.ravel() for x in np.meshgrid(P, D, indexing="ij"))
-
         def solve(configs, ahead=()):
             """Each point's largest beta feasible at every configuration of ``configs``; the fine
             values of its bracket are decided for ``ahead`` too (the next doubling's new
@@ -504,7 +502,9 @@ def schedule(loop, P_gain=None, D_gain=None, *, beta_range=(0.1, 8.0), beta_tol:
                         missing = [p for p in pts if p not in done]
                         if missing:
                             todo.append((c, k, a, missing))
-            # every alpha's refinement in one task list
+            # every alpha's refinement in one task list (the grid's points made after the maps,
+            # whose tasks check the memory budget first)
+            PP, DD = (x.ravel() for x in np.meshgrid(P, D, indexing="ij"))
             res = runner.run(_task_points, [(params, c, PP[m], DD[m], float(fine[k]), float(alphas[a]), req, options)
                                             for c, k, a, m in todo], "schedule: refine")
             for (c, k, a, m), r in zip(todo, res):
