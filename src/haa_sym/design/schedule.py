@@ -205,30 +205,47 @@ def _Runner(scheduler, progress):
     return TaskRunner(scheduler, progress, connect_timeout=CONNECT_TIMEOUT)
 
 
-def _verify(runner, params, configs, P, D, fine, alphas, best_k, req, options):
+def _key(config: dict) -> tuple:
+    """A leg configuration as a dict key."""
+    return tuple(sorted(config.items()))
+
+
+def _verify(runner, params, configs, P, D, fine, alphas, best_k, req, options, decided=None):
     """Re-decide every answer point by point (:func:`haa_sym.analysis.decide.decide_points`, the
     maps' own rule with exactly located crossovers) at every leg configuration, and lower a
     point's beta until it holds: the maps decide whole segments from a few probes. Every
-    (beta, configuration) group of a round is a task (:func:`_task_points`). Returns the new
+    (beta, configuration) group of a round is a task (:func:`_task_points`), every alpha's in
+    the same task list. ``decided`` ({(configuration key, beta index, alpha index): {flat point
+    index: bool}}): decisions of :func:`_task_points` made before (the refinement's), reused and
+    extended; a point's decision does not depend on the others decided with it. Returns the new
     indices and how many points were lowered."""
+    decided = {} if decided is None else decided
     PP, DD = np.meshgrid(P, D, indexing="ij")
     PP, DD = PP.ravel(), DD.ravel()
     best_k = best_k.copy()
     lowered = set()
-    for a in range(alphas.size):
-        todo = np.flatnonzero(best_k[a] >= 0)
-        while todo.size:
-            bad = np.zeros(best_k.shape[1], bool)
-            groups = [(k, todo[best_k[a, todo] == k]) for k in np.unique(best_k[a, todo])]
-            res = runner.run(_task_points, [(params, c, PP[pts], DD[pts], float(fine[k]), float(alphas[a]), req,
-                                             options) for k, pts in groups for c in configs], "schedule: point check")
-            for g, (k, pts) in enumerate(groups):
-                for r in res[g * len(configs):(g + 1) * len(configs)]:
-                    bad[pts[~np.asarray(r, bool)]] = True
-            todo = np.flatnonzero(bad)
-            lowered.update(todo.tolist())
-            best_k[a, todo] -= 1                # -1: no beta of the range is left
-            todo = todo[best_k[a, todo] >= 0]
+    todo = {a: np.flatnonzero(best_k[a] >= 0) for a in range(alphas.size)}
+    while any(t.size for t in todo.values()):
+        jobs = []
+        for a, t in todo.items():
+            for k in np.unique(best_k[a, t]).tolist():
+                pts = t[best_k[a, t] == k]
+                for c in configs:
+                    done = decided.setdefault((_key(c), k, a), {})
+                    missing = [p for p in pts.tolist() if p not in done]
+                    if missing:
+                        jobs.append((c, k, a, missing))
+        res = runner.run(_task_points, [(params, c, PP[m], DD[m], float(fine[k]), float(alphas[a]), req, options)
+                                        for c, k, a, m in jobs], "schedule: point check")
+        for (c, k, a, m), r in zip(jobs, res):
+            decided[(_key(c), k, a)].update(zip(m, np.asarray(r, bool).tolist()))
+        for a, t in todo.items():
+            ok = np.array([all(decided[(_key(c), int(best_k[a, p]), a)][p] for c in configs) for p in t.tolist()],
+                          bool)
+            bad = t[~ok] if t.size else t
+            lowered.update(bad.tolist())
+            best_k[a, bad] -= 1                 # -1: no beta of the range is left
+            todo[a] = bad[best_k[a, bad] >= 0]
     return best_k, len(lowered)
 
 
@@ -454,8 +471,7 @@ def schedule(loop, P_gain=None, D_gain=None, *, beta_range=(0.1, 8.0), beta_tol:
         maps: dict = {}                     # (config key, beta index, alpha index) -> (n_P, n_D) bool
         points: dict = {}                   # (config key, beta index, alpha index) -> {flat index: bool}
 
-        def key_of(c):
-            return tuple(sorted(c.items()))
+        key_of = _key
 
         alpha_1 = float(ctrl.alpha if alpha is None else alpha)
         fixed_maps: dict = {}               # config key -> (n_P, n_D) bool at beta = 1, alpha_1
@@ -496,8 +512,14 @@ def schedule(loop, P_gain=None, D_gain=None, *, beta_range=(0.1, 8.0), beta_tol:
                     for k in range(coarse[kc[p]] + 1, coarse[kc[p] + 1]):
                         need.setdefault(k, []).append(p)
                 needs.append(need)
+                # and at each point's coarse answer (the answer when no fine value above it holds),
+                # which the point check (_verify) decides next: in this task list, so that the
+                # point check usually finds every decision made and runs no task list of its own
+                check = dict(need)
+                for p in np.flatnonzero(any_ok):
+                    check.setdefault(int(coarse[kc[p]]), []).append(p)
                 for c in [*configs, *ahead]:
-                    for k, pts in need.items():
+                    for k, pts in check.items():
                         done = points.setdefault((key_of(c), k, a), {})
                         missing = [p for p in pts if p not in done]
                         if missing:
@@ -541,7 +563,7 @@ def schedule(loop, P_gain=None, D_gain=None, *, beta_range=(0.1, 8.0), beta_tol:
                 if same:
                     converged = True
                     break
-            current, lowered = _verify(runner, params, configs, P, D, fine, alphas, current, req, options)
+            current, lowered = _verify(runner, params, configs, P, D, fine, alphas, current, req, options, points)
             # beta = 1 (the file's own torque gains) at the file's alpha, for the comparison (the
             # level-3 configurations' maps were made in the first task list)
             map_round([], configs)
@@ -552,34 +574,40 @@ def schedule(loop, P_gain=None, D_gain=None, *, beta_range=(0.1, 8.0), beta_tol:
             free_params = _free_in_the_air(params)
             pairs = sorted({(int(current[:, p].max()), a) for p in np.flatnonzero(current.max(axis=0) >= 0)
                             for a in range(alphas.size) if current[a, p] == current[:, p].max()})
-            res = runner.run(_task_bandwidth, [(free_params, options, loop.backend, float(fine[k]),
-                                                float(alphas[a])) for k, a in pairs]
-                             + [(free_params, options, loop.backend, 1.0, alpha_1)], "schedule: bandwidths")
-            bw_cache = dict(zip(pairs, res[:-1]))
-            bw_1 = res[-1]
-        finally:
-            runner.close()
+            # started, not waited for: with one alpha the cell check does not need them, and its
+            # first task list runs beside them on a cluster (no barrier between the two)
+            bandwidths = runner.start(_task_bandwidth, [(free_params, options, loop.backend, float(fine[k]),
+                                                         float(alphas[a])) for k, a in pairs]
+                                      + [(free_params, options, loop.backend, 1.0, alpha_1)], "schedule: bandwidths")
+            bw: dict = {}
 
-        # per point: the alpha with the largest beta, ties to the larger torque bandwidth
-        def bandwidth(k, a):
-            return bw_cache[(k, a)]
-        n_pts = P.size * D.size
-        beta_out, alpha_out, bw_out = np.full(n_pts, np.nan), np.full(n_pts, np.nan), np.full(n_pts, np.nan)
-        feasible = current.max(axis=0) >= 0
-        for p in np.flatnonzero(feasible):
-            kmax = current[:, p].max()
-            cand = [a for a in range(alphas.size) if current[a, p] == kmax]
-            a = max(cand, key=lambda a: (bandwidth(kmax, a), -a)) if len(cand) > 1 else cand[0]
-            beta_out[p], alpha_out[p], bw_out[p] = fine[kmax], alphas[a], bandwidth(kmax, a)
-        shape = (P.size, D.size)
-        K = np.full(n_pts, -1)
-        K[feasible] = current.max(axis=0)[feasible]
-        K = K.reshape(shape)
-        runner = _Runner(scheduler, progress)
-        try:
+            def collected() -> dict:
+                """{(beta index, alpha index): bandwidth, "beta_1": at beta = 1}, waited for once."""
+                if not bw:
+                    res = bandwidths()
+                    bw.update(zip(pairs, res[:-1]), beta_1=res[-1])
+                return bw
+
+            # per point: the alpha with the largest beta, ties to the larger torque bandwidth
+            n_pts = P.size * D.size
+            beta_out, alpha_out, bw_out = np.full(n_pts, np.nan), np.full(n_pts, np.nan), np.full(n_pts, np.nan)
+            a_out = np.zeros(n_pts, int)
+            feasible = current.max(axis=0) >= 0
+            for p in np.flatnonzero(feasible):
+                kmax = current[:, p].max()
+                cand = [a for a in range(alphas.size) if current[a, p] == kmax]
+                a = max(cand, key=lambda a: (collected()[(kmax, a)], -a)) if len(cand) > 1 else cand[0]
+                beta_out[p], alpha_out[p], a_out[p] = fine[kmax], alphas[a], a
+            shape = (P.size, D.size)
+            K = np.full(n_pts, -1)
+            K[feasible] = current.max(axis=0)[feasible]
+            K = K.reshape(shape)
             K_table, cell_safe, n_failed, n_lowered_pts, n_given_up, n_passes = _check_cells(
                 runner, params, configs, P, D, fine, K, np.nan_to_num(alpha_out.reshape(shape)), req, options,
                 int(cell_subdivisions), None if cell_rounds is None else int(cell_rounds))
+            for p in np.flatnonzero(feasible):
+                bw_out[p] = collected()[(int(current[:, p].max()), int(a_out[p]))]
+            bw_1 = collected()["beta_1"]
         finally:
             runner.close()
     finally:

@@ -212,23 +212,9 @@ class TaskRunner:
             return []
         with progress_bar(len(args_list), label, unit, self.progress) as bar:
             if self.client is not None:
-                # a cluster task costs milliseconds of scheduling and transfer: small calls go in
-                # groups, CHUNKS_PER_WORKER a worker; every n-th call to a group (neighbouring
-                # calls cost alike, e.g. one leg configuration's maps), so the groups take about
-                # the same time and the slowest decides little
-                n = max(1, min(len(args_list), CHUNKS_PER_WORKER * self.workers()))
-                groups = [args_list[g::n] for g in range(n)]
-                futures = [self.client.submit(_call_each, fn, g, pure=False) for g in groups]
-                self._trace(futures, self._before)
-                self._before = [f.key for f in futures]
-                try:
-                    self._wait(futures, bar, sizes={f: len(g) for f, g in zip(futures, groups)})
-                    out = [None] * len(args_list)
-                    for g, rs in enumerate(self.client.gather(futures)):
-                        out[g::n] = rs
-                    return out
-                finally:
-                    self.client.cancel([f for f in futures if not f.done()])
+                submitted = self._submit(fn, args_list)
+                self._before = [f.key for f in submitted[0]]
+                return self._gather(*submitted, bar)
             if self.threads == 1:
                 out = []
                 for a in args_list:
@@ -245,6 +231,41 @@ class TaskRunner:
             tasks = [dask.delayed(fn, pure=False)(*a, dask_key_name=f"task-{k}") for k, a in enumerate(args_list)]
             with _Bar():
                 return list(dask.compute(*tasks, scheduler="threads", num_workers=self.threads))
+
+    def start(self, fn, args_list: list, label: str, unit: str = "task"):
+        """:meth:`run` without the wait: returns a function of no argument that returns the
+        results. On a cluster the tasks are submitted now and run while the command goes on, so
+        the task lists that follow do not wait for them (no barrier); in-process they run when
+        the results are asked for."""
+        if self.client is None or not args_list:
+            return lambda: self.run(fn, args_list, label, unit)
+        submitted = self._submit(fn, args_list)
+
+        def collect():
+            with progress_bar(len(args_list), label, unit, self.progress) as bar:
+                return self._gather(*submitted, bar)
+        return collect
+
+    def _submit(self, fn, args_list: list):
+        """A cluster's tasks of ``args_list``: small calls go in groups, CHUNKS_PER_WORKER a
+        worker (a cluster task costs milliseconds of scheduling and transfer); every n-th call to
+        a group (neighbouring calls cost alike, e.g. one leg configuration's maps), so the groups
+        take about the same time and the slowest decides little. Returns (futures, groups, n)."""
+        n = max(1, min(len(args_list), CHUNKS_PER_WORKER * self.workers()))
+        groups = [args_list[g::n] for g in range(n)]
+        futures = [self.client.submit(_call_each, fn, g, pure=False) for g in groups]
+        self._trace(futures, self._before)
+        return futures, groups, n
+
+    def _gather(self, futures, groups, n, bar) -> list:
+        try:
+            self._wait(futures, bar, sizes={f: len(g) for f, g in zip(futures, groups)})
+            out = [None] * sum(len(g) for g in groups)
+            for g, rs in enumerate(self.client.gather(futures)):
+                out[g::n] = rs
+            return out
+        finally:
+            self.client.cancel([f for f in futures if not f.done()])
 
     def workers(self) -> int:
         """How many tasks run at once: the cluster's worker threads, else the in-process threads."""
