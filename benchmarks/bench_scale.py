@@ -13,12 +13,15 @@ tasks' own durations, not sharing a core) with the tasks sized as for M workers 
 sized to the workers: more workers, smaller tasks, shorter chains):
 
 - work W: the sum of the tasks' compute times;
-- serial S: the time in which no task ran (the command's own computation between and around the
-  tasks, the scheduling latency; on one worker also each task's dispatch, so S errs long);
+- serial S: the time in which no task ran and none was waiting to run (the command's own
+  computation between and around the task lists: it does not shrink with workers);
+- dispatch d: the time in which no task ran while some were submitted (each task's trip through
+  the scheduler to the single worker); on M workers these trips overlap, so it is counted with the
+  work, ``(W + d) / M`` (before issue 27's second round it was counted in S, which erred long);
 - longest chain C: the heaviest chain of tasks that waited for one another
   (:data:`haa_sym.io.tasks.TRACE`: a ``run`` waits for the previous ``run``'s tasks; a
-  ``stream`` follow-up for the task that asked for it);
-- predicted time on M workers: ``S + max(C, W / M)``, and the bound on the speedup
+  ``stream`` follow-up for the task that asked for it), each link with its share of d;
+- predicted time on M workers: ``S + max(C, (W + d) / M)``, and the bound on the speedup
   ``T(1) / (S + C)`` however many workers (the critical path S + C).
 
 ``--whole R`` also times the whole command as a user runs it, ``python -m haa_sym.cli ...
@@ -123,8 +126,20 @@ def analyse(trace: list, stream: list, t0: float, t1: float) -> dict:
         longest[r["key"]] = dur.get(r["key"], 0.0) + max((longest.get(k, 0.0) for k in r["after"]), default=0.0)
     intervals = [iv for k in keys for iv in span.get(k, ())]
     busy = _union([(max(a, t0), min(b, t1)) for a, b in intervals if b > t0 and a < t1])
+    # from a task's submission to its end it is running or waiting to run: idle time inside these
+    # spans is dispatch, outside them the command's own serial computation
+    ends = {k: max(b for _, b in span[k]) for k in span}
+    live = _union([(max(r["submitted"], t0), min(ends[r["key"]], t1)) for r in trace
+                   if r["key"] in ends and "submitted" in r and ends[r["key"]] > t0])
+    dispatch = max(0.0, live - busy)
+    gap = dispatch / max(1, len(keys))
+    links: dict = {}
+    for r in trace:
+        links[r["key"]] = dur.get(r["key"], 0.0) + gap + max((links.get(k, 0.0) for k in r["after"]), default=0.0)
     return {"tasks": len(keys), "tasks_missing_from_stream": len(missing), "work_s": float(sum(dur.values())),
-            "busy_s": busy, "serial_s": (t1 - t0) - busy, "longest_chain_s": max(longest.values(), default=0.0),
+            "busy_s": busy, "idle_s": (t1 - t0) - busy, "dispatch_s": dispatch, "serial_s": (t1 - t0) - live,
+            "longest_chain_s": max(links.values(), default=0.0),
+            "longest_chain_without_dispatch_s": max(longest.values(), default=0.0),
             "longest_task_s": max(dur.values(), default=0.0)}
 
 
@@ -240,8 +255,8 @@ def main() -> int:
         # the chains of the predicted cluster: tasks sized for --predict workers, run on one
         chain = run_once(argv, 1, out, sized_for=args.predict)
         print(f" 1 worker, tasks sized for {args.predict}: {chain['seconds']:.2f} s, work {chain['work_s']:.2f} s "
-              f"in {chain['tasks']} tasks, serial {chain['serial_s']:.2f} s, longest chain "
-              f"{chain['longest_chain_s']:.2f} s", flush=True)
+              f"in {chain['tasks']} tasks, serial {chain['serial_s']:.2f} s, dispatch {chain['dispatch_s']:.2f} s, "
+              f"longest chain {chain['longest_chain_s']:.2f} s", flush=True)
     same = all(r["output"] == rows[0]["output"] for r in rows + [chain]) and (whole is None or whole["same_output"])
     for r in rows + [chain]:
         del r["output"]
@@ -251,17 +266,18 @@ def main() -> int:
         r["efficiency"] = r["speedup"] / r["workers"]
     # the prediction for M workers from the run on one worker with tasks sized for M (task
     # durations not inflated by sharing the cores; the chains of M's task sizes)
-    S, W, C = chain["serial_s"], chain["work_s"], chain["longest_chain_s"]
+    S, W, C, d = chain["serial_s"], chain["work_s"], chain["longest_chain_s"], chain["dispatch_s"]
     critical = S + C
     M = args.predict
-    predict = {M: S + max(C, W / M)}
+    predict = {M: S + max(C, (W + d) / M)}
     print()
     print(f"{'workers':>7} {'seconds':>8} {'speedup':>8} {'efficiency':>10}")
     for r in rows:
         print(f"{r['workers']:7d} {r['seconds']:8.2f} {r['speedup']:8.2f} {r['efficiency']:10.2f}")
     print(f"critical path (tasks sized for {M} workers): serial {S:.2f} s + longest task chain {C:.2f} s = "
-          f"{critical:.2f} s; work {W:.2f} s; speedup bound T(1) / critical path = {one['seconds'] / critical:.1f}")
-    print(f"predicted on {M} workers: S + max(C, W / {M}) = {predict[M]:.1f} s, {one['seconds'] / predict[M]:.1f}x "
+          f"{critical:.2f} s; work {W:.2f} s, dispatch {d:.2f} s; speedup bound T(1) / critical path = "
+          f"{one['seconds'] / critical:.1f}")
+    print(f"predicted on {M} workers: S + max(C, (W + d) / {M}) = {predict[M]:.1f} s, {one['seconds'] / predict[M]:.1f}x "
           f"the measured 1 worker")
     if whole is not None:
         for n in range(2, args.workers + 1):
@@ -273,7 +289,7 @@ def main() -> int:
     print(f"same output at every worker count: {same}; machine: {bench.info['cpu_model']}, "
           f"{bench.info['cpu_count']} cores")
     res = {"command": ["haa-sym", *argv], "preset": name, "rows": rows, "chain_run": chain, "same_output": same,
-           "critical_path_s": critical, "serial_s": S, "longest_chain_s": C, "work_s": W,
+           "critical_path_s": critical, "serial_s": S, "longest_chain_s": C, "work_s": W, "dispatch_s": d,
            "predicted_s": {str(m): t for m, t in predict.items()},
            "speedup_bound": one["seconds"] / critical, "whole_command": whole}
     print(f"wrote {bench.write(f'results_scale_{name}.json', res)}")

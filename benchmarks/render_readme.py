@@ -397,7 +397,8 @@ def scale_block(data: dict) -> str:
             continue
         w, r = d.get("whole_command"), d["run"]
         M = next(iter(d["predicted_s"]), "16")
-        pred = (f"S {d['serial_s']:.2f} s + C {d['longest_chain_s']:.2f} s, W {d['work_s']:.1f} s: "
+        pred = (f"S {d['serial_s']:.2f} s + C {d['longest_chain_s']:.2f} s, W {d['work_s']:.1f} s"
+                + (f" + d {d['dispatch_s']:.1f} s" if "dispatch_s" in d else "") + ": "
                 f"{sec(d['predicted_s'][M])} on {M}, {d['rows'][0]['seconds'] / d['predicted_s'][M]:.1f}x the "
                 f"1-worker run ({sec(d['rows'][0]['seconds'])})")
         if key == "nonlinear":

@@ -60,6 +60,14 @@ existing dask.distributed cluster (``scheduler`` = its address or a ``distribute
 where small calls go in groups, a few per worker (:meth:`haa_sym.io.tasks.TaskRunner.run`). The
 result is the same, byte for byte.
 
+Each task list waits for the one before it (a barrier: what to compute next depends on the
+results), so on a cluster their number, not only their work, sets the time. The first task list
+therefore also maps the configurations the doubling's second level will ask for and the beta = 1
+comparison (both always needed), the first refinement also decides those configurations and each
+point at its coarse answer (what the point check re-decides), and the torque bandwidths run
+beside the cell check (:meth:`haa_sym.io.tasks.TaskRunner.start`): on the default grid 5 task
+lists (maps, refinement, three cell-check passes) where there were 11, the same decisions.
+
 Example
 -------
 >>> from haa_sym import ClosedLoop, load_params

@@ -39,8 +39,9 @@ NO_WORKER_TIMEOUT = 30.0
 #: Seconds between two looks at the cluster while waiting for results.
 POLL_S = 0.5
 #: None, or a list to which every task submitted to a cluster is appended as ``{"key": ...,
-#: "after": [keys]}``: the tasks it waited for (the previous :meth:`TaskRunner.run` call's, a
-#: barrier; or the task whose result asked for it, :meth:`TaskRunner.stream`). The chains of
+#: "after": [keys], "submitted": time.time()}``: the tasks it waited for (the previous
+#: :meth:`TaskRunner.run` call's, a barrier; or the task whose result asked for it,
+#: :meth:`TaskRunner.stream`) and when it was submitted. The chains of
 #: this graph bound the speedup (benchmarks/bench_scale.py reads it).
 TRACE: list | None = None
 
@@ -339,7 +340,9 @@ class TaskRunner:
     @staticmethod
     def _trace(futures, after) -> None:
         if TRACE is not None:
-            TRACE.extend({"key": f.key, "after": list(after)} for f in futures)
+            import time
+            now = time.time()                  # the clock of dask's task stream
+            TRACE.extend({"key": f.key, "after": list(after), "submitted": now} for f in futures)
 
     def _wait(self, futures, bar, on_done=None, sizes=None) -> None:
         """Wait for ``futures``, updating ``bar``; ``on_done(future)`` (if given) is called on
