@@ -269,7 +269,7 @@ def main() -> int:
     S, W, C, d = chain["serial_s"], chain["work_s"], chain["longest_chain_s"], chain["dispatch_s"]
     critical = S + C
     M = args.predict
-    predict = {M: S + max(C, (W + d) / M)}
+    predict = {m: S + max(C, (W + d) / m) for m in sorted({2, M})}
     print()
     print(f"{'workers':>7} {'seconds':>8} {'speedup':>8} {'efficiency':>10}")
     for r in rows:
@@ -277,8 +277,9 @@ def main() -> int:
     print(f"critical path (tasks sized for {M} workers): serial {S:.2f} s + longest task chain {C:.2f} s = "
           f"{critical:.2f} s; work {W:.2f} s, dispatch {d:.2f} s; speedup bound T(1) / critical path = "
           f"{one['seconds'] / critical:.1f}")
-    print(f"predicted on {M} workers: S + max(C, (W + d) / {M}) = {predict[M]:.1f} s, {one['seconds'] / predict[M]:.1f}x "
-          f"the measured 1 worker")
+    for m in predict:
+        print(f"predicted on {m} workers: S + max(C, (W + d) / {m}) = {predict[m]:.1f} s, "
+              f"{one['seconds'] / predict[m]:.1f}x the measured 1 worker")
     if whole is not None:
         for n in range(2, args.workers + 1):
             per = ", ".join(f"{x:.2f}x" for x in whole["speedup_per_round"][str(n)])

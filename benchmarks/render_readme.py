@@ -396,7 +396,7 @@ def scale_block(data: dict) -> str:
             rows.append(f"| {SCALE_LABELS[key]} | {NM} | {NM} | | | |")
             continue
         w, r = d.get("whole_command"), d["run"]
-        M = next(iter(d["predicted_s"]), "16")
+        M = max(d["predicted_s"], key=int, default="16")
         pred = (f"S {d['serial_s']:.2f} s + C {d['longest_chain_s']:.2f} s, W {d['work_s']:.1f} s"
                 + (f" + d {d['dispatch_s']:.1f} s" if "dispatch_s" in d else "") + ": "
                 f"{sec(d['predicted_s'][M])} on {M}, {d['rows'][0]['seconds'] / d['predicted_s'][M]:.1f}x the "
