@@ -5,6 +5,7 @@ when the command is ended by SIGTERM."""
 import json
 import os
 import signal
+import socket
 import subprocess
 import sys
 import time
@@ -60,8 +61,11 @@ def test_more_workers_than_cores_warns_in_one_line(monkeypatch, capsys):
     assert err == "haa-sym: warning: --scheduler local:3: 3 worker processes on 2 cores; they share the cores " \
                   "(no faster than local:2)\n"
     # loopback, no dashboard (nor the workers'), one thread per worker process
+    # and the scheduler's HTTP server on a free loopback port, not 8787 (which another program
+    # may hold: dask then moved to another port and warned on stderr)
     assert started == [dict(n_workers=3, threads_per_worker=1, processes=True, host="127.0.0.1",
                             dashboard_address=None, worker_dashboard_address=None,
+                            scheduler_kwargs={"dashboard": False, "dashboard_address": "127.0.0.1:0"},
                             silence_logs=started[0]["silence_logs"])]
     with pytest.raises(Refuse):
         with tasks.cluster("local:2"):
@@ -195,17 +199,30 @@ def test_regions_robust_on_local_2_listens_on_loopback_and_writes_the_in_process
     argv = ["regions", "--robust", "--leg-mode", "box", "--P-gain", "log:1:2000:40", "--D-gain", "lin:1:50:20",
             "-q"]
     remote = tmp_path / "remote.npz"
-    proc = subprocess.Popen([sys.executable, "-m", "haa_sym.cli", *argv, "--scheduler", "local:2",
-                             "--out", str(remote)], stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
-                            env=ENV, cwd=tmp_path, start_new_session=True)
+    # dask's default port of the scheduler's HTTP server held (as a cluster of the two-terminal
+    # recipe holds it): the command neither needs it nor warns
+    held = socket.socket()
     try:
-        seen, sockets = _watch(proc)
-        out, err = proc.communicate(timeout=300)
+        held.bind(("127.0.0.1", 8787))
+        held.listen()
+    except OSError:
+        pass                                     # another program holds it: the same test
+    try:
+        proc = subprocess.Popen([sys.executable, "-m", "haa_sym.cli", *argv, "--scheduler", "local:2",
+                                 "--out", str(remote)], stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
+                                env=ENV, cwd=tmp_path, start_new_session=True)
+        try:
+            seen, sockets = _watch(proc)
+            out, err = proc.communicate(timeout=300)
+        finally:
+            if proc.poll() is None:
+                os.killpg(proc.pid, signal.SIGKILL)
     finally:
-        if proc.poll() is None:
-            os.killpg(proc.pid, signal.SIGKILL)
+        held.close()
     assert proc.returncode == 0, err
+    assert err == ""
     assert len({port for _, _, port in sockets}) >= 3, sockets   # the scheduler's and each worker's port
+    assert 8787 not in {port for _, _, port in sockets}
     assert {ip for _, ip, _ in sockets} == {"127.0.0.1"}, sockets
     assert _gone(seen) == []
     local = tmp_path / "local.npz"

@@ -59,6 +59,8 @@ LOCAL_START_TIMEOUT = 120.0
 #: command's main thread waits for the workers, holding no lock; in a forked worker the command's
 #: SIGTERM handler restores the default action (``haa_sym.cli``: SIGTERM ends a worker as before).
 LOCAL_START_METHOD = "fork" if sys.platform == "linux" else "spawn"
+#: The local scheduler's HTTP server: no dashboard, a free port of the loopback interface.
+SCHEDULER_HTTP = {"dashboard": False, "dashboard_address": "127.0.0.1:0"}
 
 
 def local_workers(spec) -> int | None:
@@ -99,12 +101,14 @@ def cluster(spec):
     from distributed import Client, LocalCluster
     cl = client = None
     try:
-        # dashboard_address=None: no HTTP server at all (a dashboard would listen on every
-        # interface unless given 127.0.0.1; docs/schedule.md); the workers' too
+        # no dashboard (the scheduler's and the workers'). The scheduler starts its HTTP server
+        # (the /health and /metrics routes) even so, on dashboard_address, by default 8787 of
+        # host: given a free port of 127.0.0.1, so that another program on 8787 (a cluster of
+        # docs/schedule.md's recipe, another command's) neither clashes nor makes dask warn
         with dask.config.set({"distributed.worker.multiprocessing-method": LOCAL_START_METHOD}):
             cl = LocalCluster(n_workers=n, threads_per_worker=1, processes=True, host="127.0.0.1",
                               dashboard_address=None, worker_dashboard_address=None,
-                              silence_logs=logging.ERROR)
+                              scheduler_kwargs=SCHEDULER_HTTP, silence_logs=logging.ERROR)
         client = Client(cl)
         client.wait_for_workers(n, timeout=LOCAL_START_TIMEOUT)
         yield client
