@@ -13,13 +13,22 @@ tasks' own durations, not sharing a core) with the tasks sized as for M workers 
 sized to the workers: more workers, smaller tasks, shorter chains):
 
 - work W: the sum of the tasks' compute times;
-- serial S: the time in which no task ran (the command's own computation between and around the
-  tasks, the scheduling latency; on one worker also each task's dispatch, so S errs long);
+- serial S: the time in which no task ran and none was waiting to run (the command's own
+  computation between and around the task lists: it does not shrink with workers);
+- dispatch d: the time in which no task ran while some were submitted (each task's trip through
+  the scheduler to the single worker); on M workers these trips overlap, so it is counted with the
+  work, ``(W + d) / M`` (before issue 27's second round it was counted in S, which erred long);
 - longest chain C: the heaviest chain of tasks that waited for one another
   (:data:`haa_sym.io.tasks.TRACE`: a ``run`` waits for the previous ``run``'s tasks; a
-  ``stream`` follow-up for the task that asked for it);
-- predicted time on M workers: ``S + max(C, W / M)``, and the bound on the speedup
+  ``stream`` follow-up for the task that asked for it), each link with its share of d;
+- predicted time on M workers: ``S + max(C, (W + d) / M)``, and the bound on the speedup
   ``T(1) / (S + C)`` however many workers (the critical path S + C).
+
+``--whole R`` also times the whole command as a user runs it, ``python -m haa_sym.cli ...
+--scheduler local:N`` in a new process (imports, the cluster's start and stop, every task), for
+N = 1, 2, ..., alternating, R rounds: each round's local:1 / local:N ratio is taken from runs a few
+seconds apart (the other jobs of a shared machine change within a minute), and the JSON keeps
+every run with the cores free before it.
 
 Before each run it measures how many of n cores are free now (:func:`capacity`: n spinning
 processes against one; the load average of a shared virtual machine does not say it).
@@ -28,13 +37,15 @@ Prints a table and writes ``results_scale_<preset>.json`` into ``$HAA_SYM_BENCH_
 bench-results/). Not part of ``make bench``.
 
 Usage: python benchmarks/bench_scale.py [--workers N] [--predict M] [--preset nonlinear|schedule]
-       [--repeats R] [-- haa-sym ARGS ...]
+       [--repeats R] [--whole R] [--no-warm] [-- haa-sym ARGS ...]
 """
 from __future__ import annotations
 
 import argparse
 import logging
 import os
+import statistics
+import subprocess
 import sys
 import tempfile
 import time
@@ -115,8 +126,20 @@ def analyse(trace: list, stream: list, t0: float, t1: float) -> dict:
         longest[r["key"]] = dur.get(r["key"], 0.0) + max((longest.get(k, 0.0) for k in r["after"]), default=0.0)
     intervals = [iv for k in keys for iv in span.get(k, ())]
     busy = _union([(max(a, t0), min(b, t1)) for a, b in intervals if b > t0 and a < t1])
+    # from a task's submission to its end it is running or waiting to run: idle time inside these
+    # spans is dispatch, outside them the command's own serial computation
+    ends = {k: max(b for _, b in span[k]) for k in span}
+    live = _union([(max(r["submitted"], t0), min(ends[r["key"]], t1)) for r in trace
+                   if r["key"] in ends and "submitted" in r and ends[r["key"]] > t0])
+    dispatch = max(0.0, live - busy)
+    gap = dispatch / max(1, len(keys))
+    links: dict = {}
+    for r in trace:
+        links[r["key"]] = dur.get(r["key"], 0.0) + gap + max((links.get(k, 0.0) for k in r["after"]), default=0.0)
     return {"tasks": len(keys), "tasks_missing_from_stream": len(missing), "work_s": float(sum(dur.values())),
-            "busy_s": busy, "serial_s": (t1 - t0) - busy, "longest_chain_s": max(longest.values(), default=0.0),
+            "busy_s": busy, "idle_s": (t1 - t0) - busy, "dispatch_s": dispatch, "serial_s": (t1 - t0) - live,
+            "longest_chain_s": max(links.values(), default=0.0),
+            "longest_chain_without_dispatch_s": max(longest.values(), default=0.0),
             "longest_task_s": max(dur.values(), default=0.0)}
 
 
@@ -155,12 +178,48 @@ def run_once(argv: list[str], n: int, out: Path, sized_for: int | None = None) -
             "output": _output_bytes(out)}
 
 
+def whole_runs(argv: list[str], workers: int, rounds: int, out: Path) -> dict:
+    """The whole command in a new process (``python -m haa_sym.cli ... --scheduler local:N``),
+    N = 1..workers alternating, ``rounds`` times; every run's wall time, the cores free and the
+    load before it, and whether its output has the bytes of the first."""
+    env = {**os.environ, "PYTHONPATH": os.pathsep.join([str(ROOT / "src")] + [p for p in [os.environ.get("PYTHONPATH")]
+                                                                            if p])}
+    runs, first = [], None
+    for r in range(rounds):
+        for n in range(1, workers + 1):
+            load, cores = os.getloadavg()[0], capacity(workers)
+            t = time.perf_counter()
+            proc = subprocess.run([sys.executable, "-m", "haa_sym.cli", *argv, "-q", "--scheduler", f"local:{n}"],
+                                  env=env, capture_output=True, text=True)
+            wall = time.perf_counter() - t
+            if proc.returncode != 0:
+                raise SystemExit(f"the command failed (exit {proc.returncode}): {proc.stderr.strip()[-400:]}")
+            got = _output_bytes(out)
+            first = got if first is None else first
+            runs.append({"round": r, "workers": n, "seconds": wall, "cores_available_before": round(cores, 2),
+                         "load_1min_before": round(load, 2), "same_output": got == first})
+            print(f"  whole command, round {r + 1}, local:{n}: {wall:6.2f} s (cores free before {cores:.2f} of "
+                  f"{workers}, load {load:.2f})", flush=True)
+    by_n = {n: [x["seconds"] for x in runs if x["workers"] == n] for n in range(1, workers + 1)}
+    ratios = {n: [a / b for a, b in zip(by_n[1], by_n[n])] for n in range(2, workers + 1)}
+    return {"runs": runs, "same_output": all(x["same_output"] for x in runs),
+            "best_s": {str(n): min(v) for n, v in by_n.items()},
+            "median_s": {str(n): statistics.median(v) for n, v in by_n.items()},
+            "speedup_of_best": {str(n): min(by_n[1]) / min(by_n[n]) for n in ratios},
+            "speedup_per_round": {str(n): v for n, v in ratios.items()},
+            "cores_available_before": [x["cores_available_before"] for x in runs]}
+
+
 def main() -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--workers", type=int, default=os.cpu_count() or 1, help="up to N workers (default: the cores)")
     ap.add_argument("--predict", type=int, default=16, help="predict the time on M workers (default 16)")
     ap.add_argument("--preset", choices=sorted(PRESETS), default="nonlinear")
     ap.add_argument("--repeats", type=int, default=1, help="runs per worker count, the fastest kept")
+    ap.add_argument("--whole", type=int, default=0, metavar="R",
+                    help="also time the whole command (--scheduler local:N, a new process) R rounds, N alternating")
+    ap.add_argument("--no-warm", action="store_true",
+                    help="only the whole-command rounds and the critical path (no warm-cluster table)")
     ap.add_argument("command", nargs=argparse.REMAINDER, help="-- haa-sym ARGS (with --out FILE)")
     args = ap.parse_args()
     bench = Run("bench_scale.py")
@@ -176,7 +235,8 @@ def main() -> int:
             argv = [a.format(limits_file=limits_file, out=Path(tmp) / "out") for a in PRESETS[name]]
             out = Path(argv[argv.index("--out") + 1])
         rows = []
-        for n in range(1, args.workers + 1):
+        whole = whole_runs(argv, args.workers, args.whole, out) if args.whole else None
+        for n in range(1, 1 + (1 if args.no_warm else args.workers)):
             best = None
             for _ in range(max(1, args.repeats)):
                 load, cores = os.getloadavg()[0], capacity(n)
@@ -195,9 +255,9 @@ def main() -> int:
         # the chains of the predicted cluster: tasks sized for --predict workers, run on one
         chain = run_once(argv, 1, out, sized_for=args.predict)
         print(f" 1 worker, tasks sized for {args.predict}: {chain['seconds']:.2f} s, work {chain['work_s']:.2f} s "
-              f"in {chain['tasks']} tasks, serial {chain['serial_s']:.2f} s, longest chain "
-              f"{chain['longest_chain_s']:.2f} s", flush=True)
-    same = all(r["output"] == rows[0]["output"] for r in rows + [chain])
+              f"in {chain['tasks']} tasks, serial {chain['serial_s']:.2f} s, dispatch {chain['dispatch_s']:.2f} s, "
+              f"longest chain {chain['longest_chain_s']:.2f} s", flush=True)
+    same = all(r["output"] == rows[0]["output"] for r in rows + [chain]) and (whole is None or whole["same_output"])
     for r in rows + [chain]:
         del r["output"]
     one = rows[0]
@@ -206,24 +266,33 @@ def main() -> int:
         r["efficiency"] = r["speedup"] / r["workers"]
     # the prediction for M workers from the run on one worker with tasks sized for M (task
     # durations not inflated by sharing the cores; the chains of M's task sizes)
-    S, W, C = chain["serial_s"], chain["work_s"], chain["longest_chain_s"]
+    S, W, C, d = chain["serial_s"], chain["work_s"], chain["longest_chain_s"], chain["dispatch_s"]
     critical = S + C
     M = args.predict
-    predict = {M: S + max(C, W / M)}
+    predict = {m: S + max(C, (W + d) / m) for m in sorted({2, M})}
     print()
     print(f"{'workers':>7} {'seconds':>8} {'speedup':>8} {'efficiency':>10}")
     for r in rows:
         print(f"{r['workers']:7d} {r['seconds']:8.2f} {r['speedup']:8.2f} {r['efficiency']:10.2f}")
     print(f"critical path (tasks sized for {M} workers): serial {S:.2f} s + longest task chain {C:.2f} s = "
-          f"{critical:.2f} s; work {W:.2f} s; speedup bound T(1) / critical path = {one['seconds'] / critical:.1f}")
-    print(f"predicted on {M} workers: S + max(C, W / {M}) = {predict[M]:.1f} s, {one['seconds'] / predict[M]:.1f}x "
-          f"the measured 1 worker")
+          f"{critical:.2f} s; work {W:.2f} s, dispatch {d:.2f} s; speedup bound T(1) / critical path = "
+          f"{one['seconds'] / critical:.1f}")
+    for m in predict:
+        print(f"predicted on {m} workers: S + max(C, (W + d) / {m}) = {predict[m]:.1f} s, "
+              f"{one['seconds'] / predict[m]:.1f}x the measured 1 worker")
+    if whole is not None:
+        for n in range(2, args.workers + 1):
+            per = ", ".join(f"{x:.2f}x" for x in whole["speedup_per_round"][str(n)])
+            print(f"whole command local:1 -> local:{n}: best {whole['best_s']['1']:.2f} s -> {whole['best_s'][str(n)]:.2f} s "
+                  f"({whole['speedup_of_best'][str(n)]:.2f}x); per round {per}; cores free before the runs "
+                  f"{min(whole['cores_available_before']):.2f}-{max(whole['cores_available_before']):.2f} of "
+                  f"{args.workers}")
     print(f"same output at every worker count: {same}; machine: {bench.info['cpu_model']}, "
           f"{bench.info['cpu_count']} cores")
     res = {"command": ["haa-sym", *argv], "preset": name, "rows": rows, "chain_run": chain, "same_output": same,
-           "critical_path_s": critical, "serial_s": S, "longest_chain_s": C, "work_s": W,
+           "critical_path_s": critical, "serial_s": S, "longest_chain_s": C, "work_s": W, "dispatch_s": d,
            "predicted_s": {str(m): t for m, t in predict.items()},
-           "speedup_bound": one["seconds"] / critical}
+           "speedup_bound": one["seconds"] / critical, "whole_command": whole}
     print(f"wrote {bench.write(f'results_scale_{name}.json', res)}")
     return 0 if same else 1
 

@@ -9,7 +9,14 @@ table ``results_identify.json``, ``results_simulate.json``, ``results_nonlinear_
 ``results_explore.json``, ``results_exact_passivity.json`` in ``$HAA_SYM_BENCH_DIR``, default ``bench-results/``); a file that is missing leaves its cells as
 "not measured". Nothing outside the markers is touched.
 
-Usage: python benchmarks/render_readme.py [--results DIR] [--page docs/benchmarks.md] [--check]
+A second block, between ``<!-- bench-scale:start -->`` and ``<!-- bench-scale:end -->`` (the
+section "Scaling with workers"), is rendered from ``results_scale_nonlinear.json`` and
+``results_scale_schedule.json`` of ``benchmarks/bench_scale.py``: the whole command on
+``--scheduler local:1`` and ``local:2`` side by side, the cores free before the runs, and the
+critical path's prediction. ``bench_scale.py`` is not part of ``make bench``, so when neither file
+is there that block is left as it is (``make bench-readme`` after ``make bench`` keeps it).
+
+Usage: python benchmarks/render_readme.py [--results DIR] [--page docs/benchmarks.md] [--check] [--scale-only]
 ``--check`` writes nothing and exits 1 if the page's block differs from what the JSON gives.
 Standard library only (``make bench-readme`` runs it with the system python).
 """
@@ -24,6 +31,12 @@ from pathlib import Path
 
 ROOT = Path(__file__).resolve().parent.parent
 START, END = "<!-- bench:start -->", "<!-- bench:end -->"
+SCALE_START, SCALE_END = "<!-- bench-scale:start -->", "<!-- bench-scale:end -->"
+SCALE_FILES = {"nonlinear": "results_scale_nonlinear.json", "schedule": "results_scale_schedule.json"}
+SCALE_LABELS = {"nonlinear": "`regions --nonlinear`, the issue's 60 x 40 map (HyQ, `V_max` 24 V, `Fc_m` 0.02 Nm)",
+                "schedule": "`schedule`, its default 30 x 20 grid"}
+TARGET_SPEEDUP_2 = 1.7        # issue 27: local:1 -> local:2 on the 2-core machines
+TARGET_SPEEDUP_16 = 10.0      # issue 27: 1 -> 16 workers, the nonlinear map
 FILES = {"baselines": "results_baselines.json", "regions": "results_regions.json",
          "boundary": "results_boundary.json", "schedule": "results_schedule.json",
          # issues 17-19: identification, the nonlinear simulation and its maps, the explorer
@@ -375,11 +388,53 @@ def render(data) -> str:
     return "\n".join(lines) + "\n"
 
 
-def splice(page: str, block: str, name: str = "the page") -> str:
-    i, j = page.find(START), page.find(END)
+def load_scale(results: Path) -> dict:
+    out = {}
+    for key, name in SCALE_FILES.items():
+        f = results / name
+        out[key] = json.loads(f.read_text()) if f.is_file() else None
+    return out
+
+
+def scale_block(data: dict) -> str:
+    """The block of the section "Scaling with workers": one row per command of bench_scale.py's
+    JSON (its ``--whole`` rounds: the whole command, ``--scheduler local:1`` against ``local:2``)."""
+    rows = ["| command (`bench_scale.py`) | `local:1`, whole command | `local:2` | speedup: best / each round "
+            f"(target {TARGET_SPEEDUP_2:g}x) | cores free before the runs (of 2), load | critical path, predicted "
+            "on 16 workers |", "|---|---|---|---|---|---|"]
+    for key, d in data.items():
+        if d is None:
+            rows.append(f"| {SCALE_LABELS[key]} | {NM} | {NM} | | | |")
+            continue
+        w, r = d.get("whole_command"), d["run"]
+        M = max(d["predicted_s"], key=int, default="16")
+        pred = (f"S {d['serial_s']:.2f} s + C {d['longest_chain_s']:.2f} s, W {d['work_s']:.1f} s"
+                + (f" + d {d['dispatch_s']:.1f} s" if "dispatch_s" in d else "") + ": "
+                f"{sec(d['predicted_s'][M])} on {M}, {d['rows'][0]['seconds'] / d['predicted_s'][M]:.1f}x the "
+                f"1-worker run ({sec(d['rows'][0]['seconds'])})")
+        if key == "nonlinear":
+            pred += f" (target {TARGET_SPEEDUP_16:g}x)"
+        if w is None:
+            rows.append(f"| {SCALE_LABELS[key]} | {NM} | {NM} | | | {pred} |")
+            continue
+        per = ", ".join(f"{x:.2f}x" for x in w["speedup_per_round"]["2"])
+        free = w["cores_available_before"]
+        loads = [x["load_1min_before"] for x in w["runs"]]
+        best = w["speedup_of_best"]["2"]
+        rows.append(f"| {SCALE_LABELS[key]}, {len(w['speedup_per_round']['2'])} rounds, {r['date'][:16].replace('T', ' ')} UTC | "
+                    f"{sec(w['best_s']['1'])} (median {sec(w['median_s']['1'])}) | {sec(w['best_s']['2'])} (median "
+                    f"{sec(w['median_s']['2'])}) | **{best:.2f}x** ({met(best >= TARGET_SPEEDUP_2)}) / {per} | "
+                    f"{min(free):.2f}-{max(free):.2f}, load {min(loads):.1f}-{max(loads):.1f} | {pred} |")
+    same = all(d is None or d["same_output"] for d in data.values())
+    note = ("Every run wrote the same bytes." if same else "**Some runs wrote other bytes** (see the JSON).")
+    return "\n".join([SCALE_START, *rows, "", note, SCALE_END]) + "\n"
+
+
+def splice(page: str, block: str, name: str = "the page", start: str = START, end: str = END) -> str:
+    i, j = page.find(start), page.find(end)
     if i < 0 or j < i:
-        raise SystemExit(f"{name} has no {START} ... {END} block")
-    return page[:i] + block.rstrip("\n") + page[j + len(END):]
+        raise SystemExit(f"{name} has no {start} ... {end} block")
+    return page[:i] + block.rstrip("\n") + page[j + len(end):]
 
 
 def main(argv=None) -> int:
@@ -390,9 +445,14 @@ def main(argv=None) -> int:
     ap.add_argument("--page", "--readme", dest="readme", type=Path, default=ROOT / "docs" / "benchmarks.md",
                     help="the Markdown file holding the block (default docs/benchmarks.md)")
     ap.add_argument("--check", action="store_true", help="exit 1 if the page's block is not what the JSON gives")
+    ap.add_argument("--scale-only", action="store_true",
+                    help="only the block of bench_scale.py (its JSON alone in --results; the other block kept)")
     args = ap.parse_args(argv)
     old = args.readme.read_text()
-    new = splice(old, render(load(args.results)), str(args.readme))
+    new = old if args.scale_only else splice(old, render(load(args.results)), str(args.readme))
+    scale = load_scale(args.results)
+    if any(d is not None for d in scale.values()):
+        new = splice(new, scale_block(scale), str(args.readme), SCALE_START, SCALE_END)
     if args.check:
         if new != old:
             sys.stdout.writelines(difflib.unified_diff(old.splitlines(True), new.splitlines(True),

@@ -44,7 +44,7 @@ def test_regions_nonlinear_writes_classes_next_to_the_linear_map(tmp_path, capsy
 @pytest.mark.parametrize("argv, message", [
     (["--nonlinear"], "limits: the parameter file has no [limits] section"),
     (["--duration", "2"], "--duration applies to the nonlinear map; allowed: with --nonlinear"),
-    (["--scheduler", "tcp://127.0.0.1:1"], "--scheduler applies to the nonlinear map"),
+    (["--scheduler", "tcp://127.0.0.1:1"], "--scheduler applies to the nonlinear map and the robust region"),
     (["--max-duration", "5"], "--max-duration applies to the nonlinear map"),
     (["--nonlinear", "--duration", "2", "--max-duration", "1"], "limits: the parameter file has no [limits]"),
     (["--nonlinear", "--robust"], "--nonlinear with --robust; allowed: one of them"),

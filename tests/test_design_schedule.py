@@ -156,10 +156,11 @@ def test_bad_input_one_message_nothing_written(tmp_path, assert_refused, argv, m
 
 
 def test_progress_counts_the_tasks_in_process(capsys):
-    from haa_sym.design.schedule import _Runner, _task_map
+    from haa_sym.analysis.robust import feasible_task
+    from haa_sym.design.schedule import _Runner
     p = load_params()
     r = _Runner(None, True)
-    out = r.run(_task_map, [(p, {}, np.array([10.0, 100.0]), np.array([1.0, 5.0]), b, p.controller.alpha,
-                             ("stable", "pm"), None) for b in (0.5, 1.0, 2.0)], "schedule: maps")
+    out = r.run(feasible_task, [(p, {}, np.array([10.0, 100.0]), np.array([1.0, 5.0]), b, p.controller.alpha,
+                                 ("stable", "pm"), None) for b in (0.5, 1.0, 2.0)], "schedule: maps")
     assert len(out) == 3 and all(o.shape == (2, 2) for o in out)
     assert "3/3" in capsys.readouterr().err

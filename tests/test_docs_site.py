@@ -1,6 +1,7 @@
 """The documentation site (issue 26, item 14): its pages are all in the toctree of docs/index.md,
 the build is `make docs` with warnings as errors, the benchmark tables live on a page of their own
 and the renderer writes there, and the README stays a short guide."""
+import json
 import re
 import sys
 
@@ -46,3 +47,35 @@ def test_the_readme_is_short():
     assert len(readme.splitlines()) < 100
     assert "pip install 'haa_sym[" not in readme         # not on an index: the extras from a checkout
     assert "pip install -e '.[explore]'" in readme
+
+
+def test_the_scale_block_is_rendered_from_bench_scales_json_and_kept_without_it(tmp_path):
+    # issue 27: local:1 against local:2, whole command, from benchmarks/bench_scale.py --whole
+    page = (ROOT / "docs" / "benchmarks.md").read_text()
+    assert page.count(render_readme.SCALE_START) == 1 and page.count(render_readme.SCALE_END) == 1
+    copy = tmp_path / "benchmarks.md"
+    copy.write_text(page)
+    results = tmp_path / "results"
+    results.mkdir()
+    runs = [{"round": r, "workers": n, "seconds": s, "cores_available_before": 1.9, "load_1min_before": 0.5,
+             "same_output": True} for r, (n, s) in enumerate([(1, 12.0), (2, 6.5), (1, 11.0), (2, 6.6)])]
+    whole = {"runs": runs, "same_output": True, "best_s": {"1": 11.0, "2": 6.5}, "median_s": {"1": 11.5, "2": 6.55},
+             "speedup_of_best": {"2": 11.0 / 6.5}, "speedup_per_round": {"2": [12.0 / 6.5, 11.0 / 6.6]},
+             "cores_available_before": [1.9] * 4}
+    data = {"run": {"date": "2026-11-26T17:00:00+00:00"}, "rows": [{"seconds": 30.0}], "same_output": True,
+            "serial_s": 0.5, "longest_chain_s": 0.6, "work_s": 29.0, "predicted_s": {"16": 2.4},
+            "whole_command": whole}
+    (results / "results_scale_schedule.json").write_text(json.dumps(data))
+    assert render_readme.main(["--results", str(results), "--page", str(copy), "--scale-only"]) == 0
+    new = copy.read_text()
+    block = new.split(render_readme.SCALE_START)[1].split(render_readme.SCALE_END)[0]
+    row = next(line for line in block.splitlines() if line.startswith("| `schedule`"))
+    assert "11.0 s (median 11.5 s)" in row and "**1.69x** (NOT met) / 1.85x, 1.67x" in row
+    assert "2.40 s on 16, 12.5x the 1-worker run" in row
+    assert "| `regions --nonlinear`" in block and "not measured" in block
+    # the other block and the text around are the page's
+    assert new.split(render_readme.SCALE_START)[0] == page.split(render_readme.SCALE_START)[0]
+    assert new.split(render_readme.SCALE_END)[1] == page.split(render_readme.SCALE_END)[1]
+    # without bench_scale.py's JSON (make bench-readme after make bench) the block stays
+    assert render_readme.main(["--results", str(tmp_path / "none"), "--page", str(copy)]) == 0
+    assert copy.read_text().count(row) == 1

@@ -4,6 +4,8 @@ were the serial part on a cluster), a cluster's ``run`` groups small calls into 
 worker, and the task graph is recorded for benchmarks/bench_scale.py."""
 import threading
 
+import numpy as np
+
 import pytest
 
 import haa_sym.design.schedule as sch
@@ -69,3 +71,94 @@ def test_stream_records_which_task_asked_for_which():
     firsts = {t["key"] for t in trace[:2]}
     assert all(t["after"] == [] for t in trace[:2])
     assert all(len(t["after"]) == 1 and t["after"][0] in firsts for t in trace[2:])
+
+
+def test_the_robust_region_maps_each_configuration_as_a_task_once():
+    # issue 27, item 2: regions --robust on the task runner; the doubling (2, 3, ... configurations)
+    # maps only the configurations it has not mapped yet, and the result is the in-process one
+    distributed = pytest.importorskip("distributed")
+    from haa_sym.analysis.robust import robust_region
+    loop = ClosedLoop(load_params())
+    P, D = [5.0, 50.0, 300.0, 2000.0], [1.0, 10.0, 40.0]
+    local = robust_region(loop, P, D)
+    with distributed.LocalCluster(n_workers=2, threads_per_worker=1, processes=False,
+                                  dashboard_address=None) as cl, distributed.Client(cl) as client:
+        tasks.TRACE = []
+        try:
+            remote = robust_region(loop, P, D, scheduler=client)
+            trace = tasks.TRACE
+        finally:
+            tasks.TRACE = None
+    assert remote.feasible.tobytes() == local.feasible.tobytes() and remote.history == local.history
+    assert 0 < remote.feasible.sum() < remote.feasible.size
+    # one task per configuration: the ends, then one midpoint per doubling
+    assert len(trace) == remote.n_configurations == local.n_configurations
+
+
+def test_start_submits_without_a_barrier_and_collects_in_order():
+    distributed = pytest.importorskip("distributed")
+    with distributed.LocalCluster(n_workers=2, threads_per_worker=1, processes=False,
+                                  dashboard_address=None) as cl, distributed.Client(cl) as client:
+        r = TaskRunner(client, False)
+        tasks.TRACE = []
+        try:
+            first = r.run(pow, [(k, 2) for k in range(3)], "squares")
+            later = r.start(pow, [(k, 3) for k in range(20)], "cubes")
+            then = r.run(pow, [(k, 4) for k in range(3)], "fourth powers")
+            trace = tasks.TRACE
+        finally:
+            tasks.TRACE = None
+        assert later() == [k ** 3 for k in range(20)] and first == [0, 1, 4] and then == [0, 1, 16]
+    squares, cubes = {t["key"] for t in trace[:3]}, {t["key"] for t in trace[3:-3]}
+    assert len(cubes) == 2 * tasks.CHUNKS_PER_WORKER
+    # the started tasks waited for the run before them; the next run waited for that run too,
+    # not for the started ones
+    assert all(set(t["after"]) == squares for t in trace[3:])
+    # in-process, the calls run when their results are asked for
+    calls = []
+    r = TaskRunner(None, False)
+    later = r.start(lambda x: calls.append(x) or x, [(1,), (2,)], "later")
+    assert calls == []
+    assert later() == [1, 2] and sorted(calls) == [1, 2]
+
+
+def _depth(trace) -> int:
+    """Task lists that waited for one another: the longest chain of the trace, in tasks."""
+    depth: dict = {}
+    for t in trace:
+        depth[t["key"]] = 1 + max((depth[k] for k in t["after"]), default=0)
+    return max(depth.values())
+
+
+GRID = ([5.0, 300.0], [1.0, 20.0, 40.0])
+SMALL = dict(beta_range=(0.5, 4.0), beta_tol=0.25, cell_subdivisions=2)
+
+
+def test_the_schedule_waits_for_few_task_lists_and_its_point_check_for_none():
+    # issue 27: the first task lists compute what the next leg level and the point check will ask
+    # for, and the bandwidths run beside the cell check: maps, refinement and the cell check's
+    # passes (on the default grid 5 task lists, where there were 11)
+    distributed = pytest.importorskip("distributed")
+    labels = []
+    run = TaskRunner.run
+
+    def counting(self, fn, args_list, label, unit="task"):
+        labels.append((label, len(args_list)))
+        return run(self, fn, args_list, label, unit)
+    with distributed.LocalCluster(n_workers=2, threads_per_worker=1, processes=False,
+                                  dashboard_address=None) as cl, distributed.Client(cl) as client:
+        tasks.TRACE = []
+        TaskRunner.run = counting
+        try:
+            s = sch.schedule(ClosedLoop(load_params()), *GRID, scheduler=client, progress=False, **SMALL)
+            trace = tasks.TRACE
+        finally:
+            tasks.TRACE = None
+            TaskRunner.run = run
+    local = sch.schedule(ClosedLoop(load_params()), *GRID, progress=False, **SMALL)
+    assert s.csv_text() == local.csv_text() and s.feasible.any()
+    assert [n for label, n in labels if label == "schedule: point check"] == [0]
+    passes = s.meta["cell_check_passes"]
+    assert passes >= 1
+    # the bandwidths (started after the refinement) beside the first pass: no list of their own
+    assert _depth(trace) == 2 + passes, (labels, passes)

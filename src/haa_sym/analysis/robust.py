@@ -44,10 +44,11 @@ from haa_sym.analysis.regions import CHUNK, region_map
 from haa_sym.loop import ClosedLoop, loop_first
 from haa_sym.errors import ParameterError
 from haa_sym.io.budget import check_memory, sweep_bytes
+from haa_sym.io.tasks import TaskRunner
 from haa_sym.model.params import Params, gain_array
 
 __all__ = ["LEG_MODES", "REQUIREMENTS", "meets", "leg_ends", "leg_values", "leg_text", "leg_configurations", "feasible_map",
-           "RobustRegion", "robust_region", "check_uncertainty", "uncertainty_text", "Relative", "UNCERTAINTY_ON_LEG",
+           "feasible_task", "RobustRegion", "robust_region", "check_uncertainty", "uncertainty_text", "Relative", "UNCERTAINTY_ON_LEG",
            "UNCERTAINTY_ON_LEG_DEFAULT", "uncertainty_box", "uncertainty_meta", "box_text"]
 
 LEG_MODES = ("segment", "box")
@@ -321,6 +322,15 @@ def feasible_map(loop, P_gain, D_gain, beta: float, alpha: float, *,
     return meets(m, req)
 
 
+def feasible_task(params, config, P, D, beta, alpha, requirements, options, backend: str = "auto") -> np.ndarray:
+    """:func:`feasible_map` of the loop of ``params`` with the plant overrides ``config``: a task
+    of plain data (what a dask worker runs; :mod:`haa_sym.io.tasks`). The worker builds the loop
+    itself: its compiled library and sampled plants are memoised per process
+    (:mod:`haa_sym.compiled.cache`), so a worker's later tasks of the same configuration reuse them."""
+    return feasible_map(ClosedLoop(params.with_values(**config), options, backend), P, D, beta, alpha,
+                        requirements=requirements)
+
+
 def meets(decisions, requirements) -> np.ndarray:
     """Where ``decisions`` (anything with ``stable``, ``low_pm``, ``passive``: a region map or
     point decisions) meet ``requirements``: stable, and PM >= 30 deg and passive if required."""
@@ -357,7 +367,8 @@ def _doubling(n: int) -> int:
 @loop_first
 def robust_region(loop, P_gain, D_gain, *, beta: float | None = None, alpha: float | None = None,
                   requirements=("stable", "pm"), leg=None, leg_mode: str = "segment",
-                  uncertainty=None, max_per_axis: int = MAX_LEG_POINTS) -> RobustRegion:
+                  uncertainty=None, max_per_axis: int = MAX_LEG_POINTS, scheduler=None,
+                  progress: bool | None = False) -> RobustRegion:
     """The gains meeting ``requirements`` for every leg configuration of the range.
 
     Parameters
@@ -382,6 +393,13 @@ def robust_region(loop, P_gain, D_gain, *, beta: float | None = None, alpha: flo
     max_per_axis : int
         Stop doubling at this many configurations per axis (``converged`` says whether the
         last doubling changed nothing).
+    scheduler : None, str or distributed.Client
+        Where the configurations' maps run, one task each (:func:`feasible_task`): None (default)
+        in this process, one after the other (each map runs its own chunks on two threads);
+        ``"local:N"`` a local cluster of N worker processes (:func:`haa_sym.io.tasks.cluster`);
+        an address or a Client: that dask.distributed cluster. The result is the same, byte for byte.
+    progress : bool or None
+        The progress bar of the maps' tasks (:func:`haa_sym.io.progress.progress`); default off.
 
     Returns
     -------
@@ -402,31 +420,39 @@ def robust_region(loop, P_gain, D_gain, *, beta: float | None = None, alpha: flo
                      f"configurations on n_omega = {n_omega} frequencies")
 
     def region(configs):
-        check(len(set(maps) | {tuple(sorted(c.items())) for c in configs}))
+        keys = [tuple(sorted(c.items())) for c in configs]
+        check(len(set(maps) | set(keys)))
+        # the configurations not mapped yet, one task each (the doubling keeps the others' maps)
+        todo = list({k: c for k, c in zip(keys, configs) if k not in maps}.items())
+        res = runner.run(feasible_task, [(params, c, P, D, beta, alpha, req, loop.options, loop.backend)
+                                         for _, c in todo], "regions --robust: leg configurations", "map")
+        maps.update((k, np.asarray(r, bool)) for (k, _), r in zip(todo, res))
         out = np.ones((P.size, D.size), bool)
-        for c in configs:
-            key = tuple(sorted(c.items()))
-            if key not in maps:
-                maps[key] = feasible_map(ClosedLoop(params.with_values(**c), loop.options, loop.backend),
-                                         P, D, beta, alpha, requirements=req)
-            out &= maps[key]
+        for k in keys:
+            out &= maps[k]
         return out
 
-    n = 2
-    configs = leg_configurations(params, n, leg=leg, leg_mode=leg_mode, uncertainty=uncertainty)
-    current = region(configs)
-    history = [(len(configs), int(current.sum()))]
-    converged = False
-    while _doubling(n) <= max_per_axis:
-        n2 = _doubling(n)
-        configs2 = leg_configurations(params, n2, leg=leg, leg_mode=leg_mode, uncertainty=uncertainty)
-        nxt = region(configs2)
-        history.append((len(configs2), int(nxt.sum())))
-        same = np.array_equal(nxt, current)
-        n, configs, current = n2, configs2, nxt
-        if same:
-            converged = True
-            break
+    # in-process: one map at a time (threads=1), each map running its chunks on two threads as
+    # before; on a cluster, one map per worker
+    runner = TaskRunner(scheduler, progress, threads=1)
+    try:
+        n = 2
+        configs = leg_configurations(params, n, leg=leg, leg_mode=leg_mode, uncertainty=uncertainty)
+        current = region(configs)
+        history = [(len(configs), int(current.sum()))]
+        converged = False
+        while _doubling(n) <= max_per_axis:
+            n2 = _doubling(n)
+            configs2 = leg_configurations(params, n2, leg=leg, leg_mode=leg_mode, uncertainty=uncertainty)
+            nxt = region(configs2)
+            history.append((len(configs2), int(nxt.sum())))
+            same = np.array_equal(nxt, current)
+            n, configs, current = n2, configs2, nxt
+            if same:
+                converged = True
+                break
+    finally:
+        runner.close()
     extra = {"uncertainty": uncertainty_meta(check_uncertainty(params, uncertainty, leg))} if uncertainty else {}
     return RobustRegion(P, D, current, len(configs), n, converged, history, configs,
                         loop.provenance(leg=list(leg_ends(params, leg)), leg_mode=leg_mode,

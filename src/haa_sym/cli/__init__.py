@@ -122,7 +122,15 @@ def _sigterm_unwinds():
         yield
         return
 
+    owner = os.getpid()
+
     def terminate(signum, frame):
+        if os.getpid() != owner:
+            # a process forked from this one (a local:N worker, haa_sym.io.tasks.LOCAL_START_METHOD)
+            # inherited the handler: it ends as SIGTERM's default action would end it
+            signal.signal(signal.SIGTERM, signal.SIG_DFL)
+            os.kill(os.getpid(), signal.SIGTERM)
+            return
         raise Terminated()
     previous = signal.signal(signal.SIGTERM, terminate)
     try:

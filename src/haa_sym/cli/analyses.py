@@ -61,10 +61,12 @@ def _cmd_regions(args) -> int:
     nonlinear_only = [f for f, given in (("--experiment", args.experiment is not None),
                                          ("--amplitude", args.amplitude is not None),
                                          ("--duration", args.duration is not None),
-                                         ("--max-duration", args.max_duration is not None),
-                                         ("--scheduler", args.scheduler is not None)) if given]
+                                         ("--max-duration", args.max_duration is not None)) if given]
     if nonlinear_only and not args.nonlinear:
         raise ParameterError(f"{nonlinear_only[0]} applies to the nonlinear map; allowed: with --nonlinear")
+    if args.scheduler is not None and not (args.nonlinear or args.robust):
+        raise ParameterError("--scheduler applies to the nonlinear map and the robust region (their tasks); "
+                             "allowed: with --nonlinear or --robust")
     if args.nonlinear and (args.robust or args.measured):
         raise ParameterError(f"--nonlinear with {'--robust' if args.robust else '--measured'}; allowed: one of them")
     if args.nonlinear:
@@ -131,7 +133,8 @@ def _robust_regions(args, loop, out, plot, P, D) -> int:
     fit, points = _uncertainty(args, loop.params, _leg(args, loop.params)), _measured(args)
     leg_line = _say_leg(loop.params, _leg(args, loop.params), args.leg_mode, fit)
     r = robust_region(loop, P, D, requirements=_requirements(args), leg=_leg(args, loop.params),
-                      leg_mode=args.leg_mode, uncertainty=(fit["box"] or None) if fit else None)
+                      leg_mode=args.leg_mode, uncertainty=(fit["box"] or None) if fit else None,
+                      scheduler=args.scheduler, progress=None)
     message(leg_line)
     counts, drawn = _agreement(loop, points, P, D, r.configurations)
     meta = {**r.meta, "n_configurations": r.n_configurations, "converged": r.converged, "history": r.history,
@@ -476,7 +479,8 @@ def register(sub) -> dict:
     r.add_argument("--max-duration", type=float, metavar="S",
                    help=f"with --nonlinear: points still growing or undecided are run again, {EXTEND_FACTOR:g}x longer "
                         f"each time, up to S seconds (default max({DEFAULT_MAX_DURATION:g}, --duration))")
-    r.add_argument("--scheduler", help="with --nonlinear: " + SCHEDULER_HELP)
+    r.add_argument("--scheduler", help="with --nonlinear or --robust: where their tasks run (a simulation's "
+                   "points; a leg configuration's map): " + SCHEDULER_HELP)
     bd = sub.add_parser("boundary", help="exact stability, phase-margin and passivity boundaries in the "
                         "(P_gain, D_gain) plane (parameter-space method)")
     _common(bd)

@@ -60,6 +60,14 @@ existing dask.distributed cluster (``scheduler`` = its address or a ``distribute
 where small calls go in groups, a few per worker (:meth:`haa_sym.io.tasks.TaskRunner.run`). The
 result is the same, byte for byte.
 
+Each task list waits for the one before it (a barrier: what to compute next depends on the
+results), so on a cluster their number, not only their work, sets the time. The first task list
+therefore also maps the configurations the doubling's second level will ask for and the beta = 1
+comparison (both always needed), the first refinement also decides those configurations and each
+point at its coarse answer (what the point check re-decides), and the torque bandwidths run
+beside the cell check (:meth:`haa_sym.io.tasks.TaskRunner.start`): on the default grid 5 task
+lists (maps, refinement, three cell-check passes) where there were 11, the same decisions.
+
 Example
 -------
 >>> from haa_sym import ClosedLoop, load_params
@@ -78,7 +86,7 @@ import numpy as np
 
 from haa_sym._version import __version__
 from haa_sym.analysis.decide import decide_points
-from haa_sym.analysis.robust import (MAX_LEG_POINTS, _check_requirements, check_uncertainty, feasible_map,
+from haa_sym.analysis.robust import (MAX_LEG_POINTS, _check_requirements, check_uncertainty, feasible_task,
                                      leg_configurations, leg_ends, leg_values, meets)
 from haa_sym.analysis.torque import torque_bandwidth
 from haa_sym.design.schedule_table import ScheduleTable
@@ -247,12 +255,8 @@ def table_from_csv(text: str, source: str, meta: dict, field: str = "--schedule"
 
 
 # ------------------------------------------------------------------------------ the tasks
-# Module-level functions of plain data: what a dask worker runs (one map or one point set).
-
-def _task_map(params, config, P, D, beta, alpha, requirements, options):
-    return feasible_map(ClosedLoop(params.with_values(**config), options), P, D, beta, alpha,
-                        requirements=requirements)
-
+# Module-level functions of plain data: what a dask worker runs (one point set; one map is
+# haa_sym.analysis.robust.feasible_task).
 
 def _task_points(params, config, P, D, beta, alpha, requirements, options):
     loop = ClosedLoop(params.with_values(**config), options)
@@ -268,30 +272,47 @@ def _Runner(scheduler, progress):
     return TaskRunner(scheduler, progress, connect_timeout=CONNECT_TIMEOUT)
 
 
-def _verify(runner, params, configs, P, D, fine, alphas, best_k, req, options):
+def _key(config: dict) -> tuple:
+    """A leg configuration as a dict key."""
+    return tuple(sorted(config.items()))
+
+
+def _verify(runner, params, configs, P, D, fine, alphas, best_k, req, options, decided=None):
     """Re-decide every answer point by point (:func:`haa_sym.analysis.decide.decide_points`, the
     maps' own rule with exactly located crossovers) at every leg configuration, and lower a
     point's beta until it holds: the maps decide whole segments from a few probes. Every
-    (beta, configuration) group of a round is a task (:func:`_task_points`). Returns the new
+    (beta, configuration) group of a round is a task (:func:`_task_points`), every alpha's in
+    the same task list. ``decided`` ({(configuration key, beta index, alpha index): {flat point
+    index: bool}}): decisions of :func:`_task_points` made before (the refinement's), reused and
+    extended; a point's decision does not depend on the others decided with it. Returns the new
     indices and how many points were lowered."""
+    decided = {} if decided is None else decided
     PP, DD = np.meshgrid(P, D, indexing="ij")
     PP, DD = PP.ravel(), DD.ravel()
     best_k = best_k.copy()
     lowered = set()
-    for a in range(alphas.size):
-        todo = np.flatnonzero(best_k[a] >= 0)
-        while todo.size:
-            bad = np.zeros(best_k.shape[1], bool)
-            groups = [(k, todo[best_k[a, todo] == k]) for k in np.unique(best_k[a, todo])]
-            res = runner.run(_task_points, [(params, c, PP[pts], DD[pts], float(fine[k]), float(alphas[a]), req,
-                                             options) for k, pts in groups for c in configs], "schedule: point check")
-            for g, (k, pts) in enumerate(groups):
-                for r in res[g * len(configs):(g + 1) * len(configs)]:
-                    bad[pts[~np.asarray(r, bool)]] = True
-            todo = np.flatnonzero(bad)
-            lowered.update(todo.tolist())
-            best_k[a, todo] -= 1                # -1: no beta of the range is left
-            todo = todo[best_k[a, todo] >= 0]
+    todo = {a: np.flatnonzero(best_k[a] >= 0) for a in range(alphas.size)}
+    while any(t.size for t in todo.values()):
+        jobs = []
+        for a, t in todo.items():
+            for k in np.unique(best_k[a, t]).tolist():
+                pts = t[best_k[a, t] == k]
+                for c in configs:
+                    done = decided.setdefault((_key(c), k, a), {})
+                    missing = [p for p in pts.tolist() if p not in done]
+                    if missing:
+                        jobs.append((c, k, a, missing))
+        res = runner.run(_task_points, [(params, c, PP[m], DD[m], float(fine[k]), float(alphas[a]), req, options)
+                                        for c, k, a, m in jobs], "schedule: point check")
+        for (c, k, a, m), r in zip(jobs, res):
+            decided[(_key(c), k, a)].update(zip(m, np.asarray(r, bool).tolist()))
+        for a, t in todo.items():
+            ok = np.array([all(decided[(_key(c), int(best_k[a, p]), a)][p] for c in configs) for p in t.tolist()],
+                          bool)
+            bad = t[~ok] if t.size else t
+            lowered.update(bad.tolist())
+            best_k[a, bad] -= 1                 # -1: no beta of the range is left
+            todo[a] = bad[best_k[a, bad] >= 0]
     return best_k, len(lowered)
 
 
@@ -518,21 +539,33 @@ def schedule(loop, P_gain=None, D_gain=None, *, beta_range=(0.1, 8.0), beta_tol:
         maps: dict = {}                     # (config key, beta index, alpha index) -> (n_P, n_D) bool
         points: dict = {}                   # (config key, beta index, alpha index) -> {flat index: bool}
 
-        def key_of(c):
-            return tuple(sorted(c.items()))
+        key_of = _key
 
-        def coarse_maps(configs):
+        alpha_1 = float(ctrl.alpha if alpha is None else alpha)
+        fixed_maps: dict = {}               # config key -> (n_P, n_D) bool at beta = 1, alpha_1
+
+        def map_round(configs, fixed_configs=()):
+            """One task list: the coarse maps of ``configs`` and the beta = 1 maps of
+            ``fixed_configs`` not computed yet."""
             todo = [(c, k, a) for c in configs for k in coarse for a in range(alphas.size)
                     if (key_of(c), k, a) not in maps]
-            res = runner.run(_task_map, [(params, c, P, D, float(fine[k]), float(alphas[a]), req, options)
-                                         for c, k, a in todo], "schedule: maps")
+            todo_1 = list({key_of(c): c for c in fixed_configs if key_of(c) not in fixed_maps}.values())
+            res = runner.run(feasible_task, [(params, c, P, D, float(fine[k]), float(alphas[a]), req, options)
+                                             for c, k, a in todo]
+                             + [(params, c, P, D, 1.0, alpha_1, req, options) for c in todo_1], "schedule: maps")
             for (c, k, a), r in zip(todo, res):
                 maps[(key_of(c), k, a)] = np.asarray(r, bool)
+            for c, r in zip(todo_1, res[len(todo):]):
+                fixed_maps[key_of(c)] = np.asarray(r, bool)
 
-        def solve(configs):
-            coarse_maps(configs)
+        def solve(configs, ahead=()):
+            """Each point's largest beta feasible at every configuration of ``configs``; the fine
+            values of its bracket are decided for ``ahead`` too (the next doubling's new
+            configurations, whose brackets are mostly the same), in the same task list."""
+            map_round(configs)
             n_pts = P.size * D.size
             best_k = np.full((alphas.size, n_pts), -1)
+            needs, todo = [], []
             for a in range(alphas.size):
                 F = np.ones((coarse.size, n_pts), bool)
                 for c in configs:
@@ -546,19 +579,27 @@ def schedule(loop, P_gain=None, D_gain=None, *, beta_range=(0.1, 8.0), beta_tol:
                 for p in np.flatnonzero(any_ok & (kc < coarse.size - 1)):
                     for k in range(coarse[kc[p]] + 1, coarse[kc[p] + 1]):
                         need.setdefault(k, []).append(p)
-                todo = []
-                for c in configs:
-                    for k, pts in need.items():
+                needs.append(need)
+                # and at each point's coarse answer (the answer when no fine value above it holds),
+                # which the point check (_verify) decides next: in this task list, so that the
+                # point check usually finds every decision made and runs no task list of its own
+                check = dict(need)
+                for p in np.flatnonzero(any_ok):
+                    check.setdefault(int(coarse[kc[p]]), []).append(p)
+                for c in [*configs, *ahead]:
+                    for k, pts in check.items():
                         done = points.setdefault((key_of(c), k, a), {})
                         missing = [p for p in pts if p not in done]
                         if missing:
-                            todo.append((c, k, missing))
-                PP, DD = np.meshgrid(P, D, indexing="ij")
-                PP, DD = PP.ravel(), DD.ravel()
-                res = runner.run(_task_points, [(params, c, PP[m], DD[m], float(fine[k]), float(alphas[a]), req, options)
-                                                for c, k, m in todo], "schedule: refine")
-                for (c, k, m), r in zip(todo, res):
-                    points[(key_of(c), k, a)].update(zip(m, np.asarray(r, bool).tolist()))
+                            todo.append((c, k, a, missing))
+            # every alpha's refinement in one task list (the grid's points made after the maps,
+            # whose tasks check the memory budget first)
+            PP, DD = (x.ravel() for x in np.meshgrid(P, D, indexing="ij"))
+            res = runner.run(_task_points, [(params, c, PP[m], DD[m], float(fine[k]), float(alphas[a]), req, options)
+                                            for c, k, a, m in todo], "schedule: refine")
+            for (c, k, a, m), r in zip(todo, res):
+                points[(key_of(c), k, a)].update(zip(m, np.asarray(r, bool).tolist()))
+            for a, need in enumerate(needs):
                 for k in sorted(need):
                     ok = np.array([all(points[(key_of(c), k, a)][p] for c in configs) for p in need[k]])
                     pts = np.array(need[k])
@@ -568,7 +609,16 @@ def schedule(loop, P_gain=None, D_gain=None, *, beta_range=(0.1, 8.0), beta_tol:
         try:
             n = 2
             configs = leg_configurations(params, n, leg=leg, leg_mode=leg_mode, uncertainty=uncertainty)
-            current = solve(configs)
+            # Speculation without waste: the doubling always goes on to 3 configurations per axis
+            # (it compares two levels), and the beta = 1 comparison is made at the last level,
+            # which holds the level-3 configurations. So the first task list maps them all, and
+            # the first refinement decides the level-3 configurations at the level-2 brackets:
+            # 2 task lists where there were 5 (each a barrier of the cluster).
+            ahead = leg_configurations(params, 3, leg=leg, leg_mode=leg_mode, uncertainty=uncertainty) \
+                if 3 <= max_per_axis else configs
+            map_round(ahead, ahead)
+            new = [c for c in ahead if key_of(c) not in {key_of(x) for x in configs}]
+            current = solve(configs, new)
             history = [(len(configs), int((current.max(axis=0) >= 0).sum()))]
             converged = False
             while 2 * n - 1 <= max_per_axis:
@@ -581,46 +631,51 @@ def schedule(loop, P_gain=None, D_gain=None, *, beta_range=(0.1, 8.0), beta_tol:
                 if same:
                     converged = True
                     break
-            current, lowered = _verify(runner, params, configs, P, D, fine, alphas, current, req, options)
-            # beta = 1 (the file's own torque gains) at the file's alpha, for the comparison
-            alpha_1 = float(ctrl.alpha if alpha is None else alpha)
-            res = runner.run(_task_map, [(params, c, P, D, 1.0, alpha_1, req, options) for c in configs],
-                             "schedule: beta = 1")
-            fixed = np.logical_and.reduce([np.asarray(r, bool) for r in res])
+            current, lowered = _verify(runner, params, configs, P, D, fine, alphas, current, req, options, points)
+            # beta = 1 (the file's own torque gains) at the file's alpha, for the comparison (the
+            # level-3 configurations' maps were made in the first task list)
+            map_round([], configs)
+            fixed = np.logical_and.reduce([fixed_maps[key_of(c)] for c in configs])
             # the torque bandwidths the table reports (and ties between alphas need), as tasks:
             # the leg free in the air, at each point's largest beta and every alpha reaching it,
             # and at beta = 1
             free_params = _free_in_the_air(params)
             pairs = sorted({(int(current[:, p].max()), a) for p in np.flatnonzero(current.max(axis=0) >= 0)
                             for a in range(alphas.size) if current[a, p] == current[:, p].max()})
-            res = runner.run(_task_bandwidth, [(free_params, options, loop.backend, float(fine[k]),
-                                                float(alphas[a])) for k, a in pairs]
-                             + [(free_params, options, loop.backend, 1.0, alpha_1)], "schedule: bandwidths")
-            bw_cache = dict(zip(pairs, res[:-1]))
-            bw_1 = res[-1]
-        finally:
-            runner.close()
+            # started, not waited for: with one alpha the cell check does not need them, and its
+            # first task list runs beside them on a cluster (no barrier between the two)
+            bandwidths = runner.start(_task_bandwidth, [(free_params, options, loop.backend, float(fine[k]),
+                                                         float(alphas[a])) for k, a in pairs]
+                                      + [(free_params, options, loop.backend, 1.0, alpha_1)], "schedule: bandwidths")
+            bw: dict = {}
 
-        # per point: the alpha with the largest beta, ties to the larger torque bandwidth
-        def bandwidth(k, a):
-            return bw_cache[(k, a)]
-        n_pts = P.size * D.size
-        beta_out, alpha_out, bw_out = np.full(n_pts, np.nan), np.full(n_pts, np.nan), np.full(n_pts, np.nan)
-        feasible = current.max(axis=0) >= 0
-        for p in np.flatnonzero(feasible):
-            kmax = current[:, p].max()
-            cand = [a for a in range(alphas.size) if current[a, p] == kmax]
-            a = max(cand, key=lambda a: (bandwidth(kmax, a), -a)) if len(cand) > 1 else cand[0]
-            beta_out[p], alpha_out[p], bw_out[p] = fine[kmax], alphas[a], bandwidth(kmax, a)
-        shape = (P.size, D.size)
-        K = np.full(n_pts, -1)
-        K[feasible] = current.max(axis=0)[feasible]
-        K = K.reshape(shape)
-        runner = _Runner(scheduler, progress)
-        try:
+            def collected() -> dict:
+                """{(beta index, alpha index): bandwidth, "beta_1": at beta = 1}, waited for once."""
+                if not bw:
+                    res = bandwidths()
+                    bw.update(zip(pairs, res[:-1]), beta_1=res[-1])
+                return bw
+
+            # per point: the alpha with the largest beta, ties to the larger torque bandwidth
+            n_pts = P.size * D.size
+            beta_out, alpha_out, bw_out = np.full(n_pts, np.nan), np.full(n_pts, np.nan), np.full(n_pts, np.nan)
+            a_out = np.zeros(n_pts, int)
+            feasible = current.max(axis=0) >= 0
+            for p in np.flatnonzero(feasible):
+                kmax = current[:, p].max()
+                cand = [a for a in range(alphas.size) if current[a, p] == kmax]
+                a = max(cand, key=lambda a: (collected()[(kmax, a)], -a)) if len(cand) > 1 else cand[0]
+                beta_out[p], alpha_out[p], a_out[p] = fine[kmax], alphas[a], a
+            shape = (P.size, D.size)
+            K = np.full(n_pts, -1)
+            K[feasible] = current.max(axis=0)[feasible]
+            K = K.reshape(shape)
             K_table, cell_safe, n_failed, n_lowered_pts, n_given_up, n_passes = _check_cells(
                 runner, params, configs, P, D, fine, K, np.nan_to_num(alpha_out.reshape(shape)), req, options,
                 int(cell_subdivisions), None if cell_rounds is None else int(cell_rounds))
+            for p in np.flatnonzero(feasible):
+                bw_out[p] = collected()[(int(current[:, p].max()), int(a_out[p]))]
+            bw_1 = collected()["beta_1"]
         finally:
             runner.close()
     finally:

@@ -39,8 +39,9 @@ NO_WORKER_TIMEOUT = 30.0
 #: Seconds between two looks at the cluster while waiting for results.
 POLL_S = 0.5
 #: None, or a list to which every task submitted to a cluster is appended as ``{"key": ...,
-#: "after": [keys]}``: the tasks it waited for (the previous :meth:`TaskRunner.run` call's, a
-#: barrier; or the task whose result asked for it, :meth:`TaskRunner.stream`). The chains of
+#: "after": [keys], "submitted": time.time()}``: the tasks it waited for (the previous
+#: :meth:`TaskRunner.run` call's, a barrier; or the task whose result asked for it,
+#: :meth:`TaskRunner.stream`) and when it was submitted. The chains of
 #: this graph bound the speedup (benchmarks/bench_scale.py reads it).
 TRACE: list | None = None
 
@@ -49,6 +50,17 @@ TRACE: list | None = None
 LOCAL = "local:"
 #: Seconds for a local cluster's N workers to start and register.
 LOCAL_START_TIMEOUT = 120.0
+#: How ``local:N`` starts its worker processes (dask's ``distributed.worker.multiprocessing-method``,
+#: set for this cluster only): "fork" on Linux, where a forked worker inherits the command's
+#: imported haa_sym, numpy and compiled library and is up in about 0.1 s; "spawn" (dask's default)
+#: elsewhere, where fork is unsafe (macOS) or missing (Windows), a new interpreter that imports
+#: them again (about 1.2 s for two workers on this 2-core machine, which every command paid before
+#: issue 27's second round; docs/schedule.md). The fork is made by dask's event-loop thread while the
+#: command's main thread waits for the workers, holding no lock; in a forked worker the command's
+#: SIGTERM handler restores the default action (``haa_sym.cli``: SIGTERM ends a worker as before).
+LOCAL_START_METHOD = "fork" if sys.platform == "linux" else "spawn"
+#: The local scheduler's HTTP server: no dashboard, a free port of the loopback interface.
+SCHEDULER_HTTP = {"dashboard": False, "dashboard_address": "127.0.0.1:0"}
 
 
 def local_workers(spec) -> int | None:
@@ -85,14 +97,18 @@ def cluster(spec):
         # allowed (a test of the scheduling), but more processes than cores share them
         print(f"haa-sym: warning: --scheduler {spec}: {n} worker processes on {cores} cores; they share the "
               f"cores (no faster than local:{cores})", file=sys.stderr)
+    import dask
     from distributed import Client, LocalCluster
     cl = client = None
     try:
-        # dashboard_address=None: no HTTP server at all (a dashboard would listen on every
-        # interface unless given 127.0.0.1; docs/schedule.md); the workers' too
-        cl = LocalCluster(n_workers=n, threads_per_worker=1, processes=True, host="127.0.0.1",
-                          dashboard_address=None, worker_dashboard_address=None,
-                          silence_logs=logging.ERROR)
+        # no dashboard (the scheduler's and the workers'). The scheduler starts its HTTP server
+        # (the /health and /metrics routes) even so, on dashboard_address, by default 8787 of
+        # host: given a free port of 127.0.0.1, so that another program on 8787 (a cluster of
+        # docs/schedule.md's recipe, another command's) neither clashes nor makes dask warn
+        with dask.config.set({"distributed.worker.multiprocessing-method": LOCAL_START_METHOD}):
+            cl = LocalCluster(n_workers=n, threads_per_worker=1, processes=True, host="127.0.0.1",
+                              dashboard_address=None, worker_dashboard_address=None,
+                              scheduler_kwargs=SCHEDULER_HTTP, silence_logs=logging.ERROR)
         client = Client(cl)
         client.wait_for_workers(n, timeout=LOCAL_START_TIMEOUT)
         yield client
@@ -201,23 +217,9 @@ class TaskRunner:
             return []
         with progress_bar(len(args_list), label, unit, self.progress) as bar:
             if self.client is not None:
-                # a cluster task costs milliseconds of scheduling and transfer: small calls go in
-                # groups, CHUNKS_PER_WORKER a worker; every n-th call to a group (neighbouring
-                # calls cost alike, e.g. one leg configuration's maps), so the groups take about
-                # the same time and the slowest decides little
-                n = max(1, min(len(args_list), CHUNKS_PER_WORKER * self.workers()))
-                groups = [args_list[g::n] for g in range(n)]
-                futures = [self.client.submit(_call_each, fn, g, pure=False) for g in groups]
-                self._trace(futures, self._before)
-                self._before = [f.key for f in futures]
-                try:
-                    self._wait(futures, bar, sizes={f: len(g) for f, g in zip(futures, groups)})
-                    out = [None] * len(args_list)
-                    for g, rs in enumerate(self.client.gather(futures)):
-                        out[g::n] = rs
-                    return out
-                finally:
-                    self.client.cancel([f for f in futures if not f.done()])
+                submitted = self._submit(fn, args_list)
+                self._before = [f.key for f in submitted[0]]
+                return self._gather(*submitted, bar)
             if self.threads == 1:
                 out = []
                 for a in args_list:
@@ -234,6 +236,41 @@ class TaskRunner:
             tasks = [dask.delayed(fn, pure=False)(*a, dask_key_name=f"task-{k}") for k, a in enumerate(args_list)]
             with _Bar():
                 return list(dask.compute(*tasks, scheduler="threads", num_workers=self.threads))
+
+    def start(self, fn, args_list: list, label: str, unit: str = "task"):
+        """:meth:`run` without the wait: returns a function of no argument that returns the
+        results. On a cluster the tasks are submitted now and run while the command goes on, so
+        the task lists that follow do not wait for them (no barrier); in-process they run when
+        the results are asked for."""
+        if self.client is None or not args_list:
+            return lambda: self.run(fn, args_list, label, unit)
+        submitted = self._submit(fn, args_list)
+
+        def collect():
+            with progress_bar(len(args_list), label, unit, self.progress) as bar:
+                return self._gather(*submitted, bar)
+        return collect
+
+    def _submit(self, fn, args_list: list):
+        """A cluster's tasks of ``args_list``: small calls go in groups, CHUNKS_PER_WORKER a
+        worker (a cluster task costs milliseconds of scheduling and transfer); every n-th call to
+        a group (neighbouring calls cost alike, e.g. one leg configuration's maps), so the groups
+        take about the same time and the slowest decides little. Returns (futures, groups, n)."""
+        n = max(1, min(len(args_list), CHUNKS_PER_WORKER * self.workers()))
+        groups = [args_list[g::n] for g in range(n)]
+        futures = [self.client.submit(_call_each, fn, g, pure=False) for g in groups]
+        self._trace(futures, self._before)
+        return futures, groups, n
+
+    def _gather(self, futures, groups, n, bar) -> list:
+        try:
+            self._wait(futures, bar, sizes={f: len(g) for f, g in zip(futures, groups)})
+            out = [None] * sum(len(g) for g in groups)
+            for g, rs in enumerate(self.client.gather(futures)):
+                out[g::n] = rs
+            return out
+        finally:
+            self.client.cancel([f for f in futures if not f.done()])
 
     def workers(self) -> int:
         """How many tasks run at once: the cluster's worker threads, else the in-process threads."""
@@ -307,7 +344,9 @@ class TaskRunner:
     @staticmethod
     def _trace(futures, after) -> None:
         if TRACE is not None:
-            TRACE.extend({"key": f.key, "after": list(after)} for f in futures)
+            import time
+            now = time.time()                  # the clock of dask's task stream
+            TRACE.extend({"key": f.key, "after": list(after), "submitted": now} for f in futures)
 
     def _wait(self, futures, bar, on_done=None, sizes=None) -> None:
         """Wait for ``futures``, updating ``bar``; ``on_done(future)`` (if given) is called on
