@@ -354,9 +354,6 @@ def main(argv: list[str] | None = None) -> int:
     return 1 if n_fail else 0
 
 
-if __name__ == "__main__":
-    sys.exit(main())
-
 
 # --- the controller structures (haa_sym.model.structures; docs/model.md, "Controller structures") --
 #: The torque loop's values a file without one is checked with (the rows test identities, which
@@ -477,3 +474,7 @@ def row_structures(params: Params) -> list[Row]:
                         f"Z at {w.size} frequencies: max relative difference {z_err:.2g} (tolerance 1e-9) "
                         f"({time.time() - t:.1f} s)"))
     return rows
+
+
+if __name__ == "__main__":
+    sys.exit(main())
