@@ -153,9 +153,10 @@ def _validation_cases(args, experiments, inputs, outputs, base_params, fitted_lo
     cases = []
     for e, full in zip(experiments, fitted_logs):
         n = e.log.samples
-        cases.append((e.log.name, Experiment(full, e.params, e.configuration), 0, n))
+        cases.append((e.log.name, Experiment(full, e.params, e.configuration, outputs=e.outputs), 0, n))
         if full.samples > n:
-            cases.append((f"{e.log.name}:holdout", Experiment(full, e.params, e.configuration), n, full.samples))
+            cases.append((f"{e.log.name}:holdout", Experiment(full, e.params, e.configuration, outputs=e.outputs),
+                          n, full.samples))
     wins = args.validate_window
     if len(wins) not in (0, 1, len(args.validate)) or (wins and not args.validate):
         raise ParameterError(f"--validate-window given {len(wins)} times for {len(args.validate)} --validate logs; "
