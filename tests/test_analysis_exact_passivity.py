@@ -239,7 +239,9 @@ def test_exact_decisions_against_lifting_on_maps(name):
     with its sign (the decision); a point the exact test calls non-passive where mu_2M < 0 is
     certified by the lifting alone."""
     M, rtol = LEVELS[name]
-    p = load_params(name)
+    # the QDD leg under the paper's structure ([controller.paper]): its own, impedance_current,
+    # has no passive point on this corner, and the check wants both decisions
+    p = load_params(name).with_values(structure="paper") if name == "qdd_leg" else load_params(name)
     loop = ClosedLoop(p, LoopOptions(passivity="exact"))
     PP, DD = np.meshgrid(*MAPS[name])
     P, D = PP.ravel(), DD.ravel()
@@ -304,11 +306,11 @@ def test_delayed_drive_passive_point_qdd_and_refusals():
     """QDD at a passive point with a half-sample dead time: the lifting's mu_128 is the exact mu
     to 1e-10 (it converges faster than 1/M there) and both say passive; a dead time 1e-5 Ts off a
     whole sample is refused (its aliasing sums would need millions of harmonics), one line."""
-    p = load_params("qdd_leg").with_values(delay_drive=0.5e-3)
+    p = load_params("qdd_leg").with_values(structure="paper", delay_drive=0.5e-3)
     loop = ClosedLoop(p, LoopOptions(passivity="exact"))
     mu, w = _exact_mu(loop, 1.0, 3.6)
     m128 = lifted_mu(loop, 1.0, 3.6, w, 128)[0]
     assert mu[0] > 0.2 and -1e-10 < m128 - mu[0] < 1e-10
-    bad = ClosedLoop(load_params("qdd_leg").with_values(delay_drive=1.00001e-3), LoopOptions(passivity="exact"))
+    bad = ClosedLoop(load_params("qdd_leg").with_values(structure="paper", delay_drive=1.00001e-3), LoopOptions(passivity="exact"))
     with pytest.raises(ParameterError, match="delay_drive = 0.00100001 s"):
         _exact_mu(bad, 1.0, 3.6)
