@@ -1,0 +1,59 @@
+"""The field's classic results as tests against their closed forms (issue 24 item 4,
+docs/passivity.md, "Classic results"), through the actuator-file path (Params, ClosedLoop and
+the exact test of ``passivity=exact``), not through hand-built plants.
+
+Colgate and Schenkel (1997): a mass m with physical damping b, its position sampled at Ts, the
+virtual wall u = -K x[k] - B (x[k] - x[k-1]) / Ts through a zero-order hold, is passive iff
+b >= K Ts / 2 + |B|. Here the wall is ``model/haptic_wall.toml`` (direct drive N = 1,
+structure ``impedance_current``, backward difference) with J_m = m, B_m = b and Ts set: its
+P_gain and D_gain are the wall's K and B on the rotor angle and velocity (the current command
+T / (k_t N) times k_t N gives back the torque), so the closed form is the boundary in
+(P_gain, D_gain).
+"""
+import numpy as np
+import pytest
+from scipy.optimize import brentq
+
+from haa_sym import ClosedLoop, load_params
+from haa_sym.analysis.sampled_port import loop_exact_forms, passivity_excess
+from haa_sym.loop.options import LoopOptions
+from haa_sym.model.params import apply_sets
+
+TOL = LoopOptions().passivity_tol_exact
+
+
+def _wall_loop(m, b, Ts, passivity="exact", n_omega=200):
+    p = apply_sets(load_params("haptic_wall"), dict(J_m=m, B_m=b, Ts=Ts))
+    return ClosedLoop(p, LoopOptions(passivity=passivity, n_omega=n_omega))
+
+
+def _exact_K_max(m, b, Ts, B, n_omega=200):
+    """The exact test's largest passive P_gain on the line D_gain = B (bisection to 1e-12)."""
+    loop = _wall_loop(m, b, Ts, n_omega=n_omega)
+    F = loop_exact_forms(loop, loop.options.numerics.omega(Ts), 1.0, 0.0)
+    K_cs = 2 * (b - B) / Ts                                           # Colgate-Schenkel
+    deficit = lambda K: F.worst(np.array([[1.0, K, B]]))[0][0] - TOL
+    assert deficit(0.999 * K_cs) < 0 < deficit(1.001 * K_cs)
+    return brentq(deficit, 0.999 * K_cs, 1.001 * K_cs, xtol=1e-12 * K_cs), K_cs
+
+
+def test_colgate_schenkel_through_the_file_few():
+    """Four (m, b, Ts, B) at the ends of the ranges: the exact boundary K_max = 2 (b - B) / Ts
+    within 1e-6 relative."""
+    for m, b, Ts, B in ((0.01, 0.1, 1e-4, 0.0), (10.0, 10.0, 1e-2, 3.0), (1.0, 1.0, 1e-3, 0.5),
+                        (1.142e-4, 0.002, 1e-3, 0.0)):
+        K, K_cs = _exact_K_max(m, b, Ts, B)
+        assert abs(K / K_cs - 1) < 1e-6, (m, b, Ts, B, K, K_cs)
+
+
+def test_colgate_schenkel_through_the_file_random():
+    """50 random (m, b, Ts), Ts 0.1-10 ms, D_gain B in [0, 0.8 b): the exact boundary equals
+    2 (b - B) / Ts within 1e-6 relative (B >= 0: the supremum is at Nyquist, on the grid)."""
+    rng = np.random.default_rng(4)
+    worst = 0.0
+    for _ in range(50):
+        m, b, Ts = 10 ** rng.uniform(-4, 1), 10 ** rng.uniform(-3, 1), 10 ** rng.uniform(-4, -2)
+        B = rng.uniform(0, 0.8) * b
+        K, K_cs = _exact_K_max(m, b, Ts, B, n_omega=100)
+        worst = max(worst, abs(K / K_cs - 1))
+    assert worst < 1e-6, worst
