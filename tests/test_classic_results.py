@@ -46,6 +46,7 @@ def test_colgate_schenkel_through_the_file_few():
         assert abs(K / K_cs - 1) < 1e-6, (m, b, Ts, B, K, K_cs)
 
 
+@pytest.mark.slow
 def test_colgate_schenkel_through_the_file_random():
     """50 random (m, b, Ts), Ts 0.1-10 ms, D_gain B in [0, 0.8 b): the exact boundary equals
     2 (b - B) / Ts within 1e-6 relative (B >= 0: the supremum is at Nyquist, on the grid)."""
@@ -98,3 +99,85 @@ def test_sea_without_spring_damping_renders_no_stiffness_above_the_spring(struct
         assert not np.any(passive & (P > K_bar)), (test, P[passive].max())
     P, D, passive = _sea_map(500.0, structure, "exact")
     assert np.any(passive & (P > K_bar))
+
+
+# --- the continuous-time limit of a PI-torque-controlled SEA -----------------------------------
+
+SIMPLE_SEA = """
+[about]
+name = "simple SEA for the continuous-time limit"
+description = "rotor, spring, link with a weak ground spring (no free mode at P_gain = 0)"
+[about.references]
+t = "tests/test_classic_results.py"
+[motor]
+L   = { value = 1e-6, unit = "H",       source = "-", description = "small: R/L = 1e6 rad/s, the current quasi-static" }
+R   = { value = 1.0,  unit = "Ohm",     source = "-", description = "-" }
+k_t = { value = 0.1,  unit = "Nm/A",    source = "-", description = "-" }
+k_w = { value = 0.1,  unit = "Vs/rad",  source = "-", description = "-" }
+J_m = { value = 0.01, unit = "kg m^2",  source = "-", description = "-" }
+B_m = { value = 0.05, unit = "Nms/rad", source = "-", description = "-" }
+N   = { value = 1,    unit = "-",       source = "-", description = "-" }
+[bodies.link]
+J = { value = 0.001, unit = "kg m^2",  source = "-", description = "-" }
+B = { value = 0.001, unit = "Nms/rad", source = "-", description = "-" }
+K = { value = 1.0,   unit = "Nm/rad",  source = "-", description = "-" }
+[couplings.spring]
+between = ["rotor", "link"]
+K = { value = 100.0, unit = "Nm/rad",  source = "-", description = "-" }
+D = { value = 0.0,   unit = "Nms/rad", source = "-", description = "-" }
+[sensors]
+torque = "spring"
+torque_damping = false
+encoder = "link"
+port = "link"
+[controller]
+structure = "torque_pi"
+Ts    = { value = 1e-5,  unit = "s",        source = "-", description = "-" }
+N_av  = { value = 1,     unit = "samples",  source = "-", description = "-" }
+beta  = { value = 1.0,   unit = "-",        source = "-", description = "-" }
+P_t0  = { value = 10.0,  unit = "V/Nm",     source = "-", description = "-" }
+I_t0  = { value = 100.0, unit = "V/(Nm s)", source = "-", description = "-" }
+"""
+
+
+def _pi_sea_closed_form():
+    """Re Z(j w) of the continuous SEA under a PI on the spring torque (motor J s^2 th_m + b s
+    th_m = u - T, u = -(P + I/s) T, T = k (th_m - th_l), massless output, Z = F / (s th_l)):
+    ``(Re Z, the factor whose sign decides)``."""
+    import sympy as sp
+    s, w = sp.symbols("s omega")
+    J, b, k, P, I = sp.symbols("J b k P I", positive=True)
+    tm, tl, T = sp.symbols("theta_m theta_l T")
+    sol = sp.solve([J * s**2 * tm + b * s * tm + (P + I / s) * T + T, T - k * (tm - tl)], [tm, T], dict=True)[0]
+    Z = sp.simplify(-sol[T] / (s * tl))
+    w = sp.symbols("omega", positive=True)
+    re = sp.factor(sp.simplify(sp.re(sp.expand_complex(Z.subs(s, sp.I * w)))))
+    num, den = sp.fraction(re)
+    Zd = sp.denom(sp.together(Z)).subs(s, sp.I * w)
+    # the denominator is |d(j w)|^2 > 0: the sign is the numerator's, k^2 w^2 (b (1 + P) - I J)
+    assert sp.simplify(den - sp.expand(Zd * sp.conjugate(Zd))) == 0
+    assert sp.simplify(num - k**2 * w**2 * (b * (1 + P) - I * J)) == 0
+    return (J, b, P, I), b * (1 + P) / J
+
+
+def test_pi_torque_sea_continuous_limit(tmp_path):
+    """The continuous PI-torque-controlled SEA is passive iff I <= (b / J)(1 + P) (derived here
+    with sympy; any spring k). The map's exact decision (torque loop alone, P_gain = D_gain = 0,
+    structure torque_pi) on a simple SEA file (P = P_t0 k_t N / R, I = I_t0 k_t N / R,
+    b = B_m + k_t k_w N^2 / R, J = J_m N^2) agrees as Ts -> 0: measured threshold I_t0 = 118.69
+    at Ts = 10 us, 119.69 at 1 us, the closed form 120 (the gap scales with the lag Ts/2 + L/R)."""
+    (J, b, P, I), I_max = _pi_sea_closed_form()
+    f = tmp_path / "simple_sea.toml"
+    f.write_text(SIMPLE_SEA)
+    p0 = load_params(f)
+    m = p0.plant.as_dict()
+    g = m["k_t"] * m["N"] / m["R"]                                    # V -> Nm of motor torque, quasi-static
+    vals = {J: m["J_m"] * m["N"] ** 2, b: (m["B_m"] + m["k_t"] * m["k_w"] / m["R"]) * m["N"] ** 2,
+            P: p0.controller.P_t0 * g}
+    It0_max = float(I_max.subs(vals)) / g
+    assert abs(It0_max - 120.0) < 1e-9
+    from haa_sym.analysis.passivity import passivity
+    for Ts, below in ((1e-5, 0.98), (1e-6, 0.995)):
+        decide = [bool(passivity(ClosedLoop(p0.with_values(Ts=Ts, I_t0=It0_max * fr), LoopOptions(passivity="exact")),
+                                 np.array([0.0]), np.array([0.0])).passive[0]) for fr in (below, 1.0, 1.02)]
+        assert decide == [True, False, False], (Ts, decide)
