@@ -167,13 +167,20 @@ def test_harmonic_sums_against_brute_force():
 @pytest.mark.parametrize("name", ["hyq_haa", "sea", "qdd_leg"])
 def test_schur_responses_equal_direct_solves(name):
     """The vectorised Schur evaluation of the plant's responses (the harmonics of the sums)
-    equals one pivoted solve per frequency, 3 rad/s to 1e6 rad/s, to 1e-10 relative."""
+    equals a 30-digit solve per frequency, 3 rad/s to 1e6 rad/s, to 1e-10 relative."""
     from haa_sym.analysis.sampled_port import _loop_pieces, _responses
     loop = ClosedLoop(load_params(name), LoopOptions(passivity="exact"))
     A, bu, bf, cv, Cy = _loop_pieces(loop)
     s = 1j * np.concatenate([np.logspace(0.5, 6, 40), -np.logspace(0.5, 6, 7)])[None, :]
     got = _responses(A, bu, bf, cv, Cy, s)
-    X = np.array([np.linalg.solve(sv * np.eye(A.shape[0]) - A, np.concatenate([bu, bf], axis=1)) for sv in s[0]])
+    # the reference solves in 30 digits: a double-precision LU loses up to 2.4e-9 on QDD's
+    # current-commanded plant at 7e4 rad/s (its torque-free position response is 1e-11 there)
+    import mpmath
+    rhs = np.concatenate([bu, bf], axis=1)
+    with mpmath.workdps(30):
+        X = np.array([[[complex(x) for x in mpmath.lu_solve(mpmath.matrix((sv * np.eye(A.shape[0]) - A).tolist()),
+                                                            mpmath.matrix(col.tolist()))] for col in rhs.T]
+                      for sv in s[0]]).transpose(0, 2, 1)
     ref = ((cv @ X[..., :1])[:, 0, 0], (cv @ X[..., 1:])[:, 0, 0], (Cy @ X[..., 1:])[..., 0])
     for g, r in zip(got, ref):
         g = g[0]
@@ -239,8 +246,7 @@ def test_exact_decisions_against_lifting_on_maps(name):
     with its sign (the decision); a point the exact test calls non-passive where mu_2M < 0 is
     certified by the lifting alone."""
     M, rtol = LEVELS[name]
-    # the QDD leg under the paper's structure ([controller.paper]): its own, impedance_current,
-    # has no passive point on this corner, and the check wants both decisions
+    # QDD on the paper's structure (its [controller.paper]), the loop with passive points here
     p = load_params(name).with_values(structure="paper") if name == "qdd_leg" else load_params(name)
     loop = ClosedLoop(p, LoopOptions(passivity="exact"))
     PP, DD = np.meshgrid(*MAPS[name])
@@ -306,11 +312,13 @@ def test_delayed_drive_passive_point_qdd_and_refusals():
     """QDD at a passive point with a half-sample dead time: the lifting's mu_128 is the exact mu
     to 1e-10 (it converges faster than 1/M there) and both say passive; a dead time 1e-5 Ts off a
     whole sample is refused (its aliasing sums would need millions of harmonics), one line."""
+    # the paper's structure (the file's [controller.paper]): the point the docs measured, passive
+    # there; the file's own impedance_current loop is not passive at it (mu -81 at 664 rad/s)
     p = load_params("qdd_leg").with_values(structure="paper", delay_drive=0.5e-3)
     loop = ClosedLoop(p, LoopOptions(passivity="exact"))
     mu, w = _exact_mu(loop, 1.0, 3.6)
     m128 = lifted_mu(loop, 1.0, 3.6, w, 128)[0]
     assert mu[0] > 0.2 and -1e-10 < m128 - mu[0] < 1e-10
-    bad = ClosedLoop(load_params("qdd_leg").with_values(structure="paper", delay_drive=1.00001e-3), LoopOptions(passivity="exact"))
+    bad = ClosedLoop(load_params("qdd_leg").with_values(delay_drive=1.00001e-3), LoopOptions(passivity="exact"))
     with pytest.raises(ParameterError, match="delay_drive = 0.00100001 s"):
         _exact_mu(bad, 1.0, 3.6)

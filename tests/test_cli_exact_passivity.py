@@ -10,13 +10,9 @@ from haa_sym.analysis.regions import RegionMap
 from haa_sym.cli import main
 from haa_sym.loop.options import LoopOptions
 
-# the QDD leg under the paper's structure (its file's [controller.paper]): the bundled actuator
-# with points passive under both tests (its own structure, impedance_current, has none at these gains)
+# the paper's structure on QDD (its [controller.paper]): the loop these tests were measured on,
+# with passive points (the file's own impedance_current loop has few at these gains)
 FAST = ["--params", "qdd_leg", "--set", "structure=paper", "--option", "n_omega=200"]
-
-
-def _qdd():
-    return load_params("qdd_leg").with_values(structure="paper")
 
 
 def test_contact_exact(tmp_path, capsys):
@@ -58,7 +54,7 @@ def test_boundary_exact(tmp_path, capsys):
                                                                 "passivity (Nyquist)"}
     P = np.concatenate([c["P_gain"] for c in curves])[::10]
     D = np.concatenate([c["D_gain"] for c in curves])[::10]
-    loop = ClosedLoop(_qdd(), LoopOptions(passivity="exact", n_omega=200))
+    loop = ClosedLoop(load_params("qdd_leg").with_values(structure="paper"), LoopOptions(passivity="exact", n_omega=200))
     on, lo, hi = (passivity(loop, P, D * f) for f in (1.0, 0.99, 1.01))
     assert np.all(np.isnan(on.phase_excess_deg)) and np.all(np.abs(on.dissipation_deficit) < 1e-4)
     assert np.all(lo.passive != hi.passive)
@@ -92,7 +88,7 @@ def test_a_map_written_before_the_deficit_field_loads(tmp_path):
     """An npz without `dissipation_deficit` (written before issue 24 gave the exact test its own
     field) loads with it NaN, the rest unchanged."""
     from haa_sym.analysis.regions import region_map
-    m = region_map(ClosedLoop(_qdd(), LoopOptions(n_omega=200)), [1.0, 10.0], [1.0, 3.6],
+    m = region_map(ClosedLoop(load_params("qdd_leg"), LoopOptions(n_omega=200)), [1.0, 10.0], [1.0, 3.6],
                    method="grid", progress=False)
     arrays = {k: v for k, v in np.load(m.save(tmp_path / "new.npz")).items() if k != "dissipation_deficit"}
     np.savez(tmp_path / "old.npz", **arrays)

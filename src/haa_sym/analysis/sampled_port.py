@@ -55,7 +55,7 @@ import scipy.linalg
 from haa_sym.analysis.sweep import colgate_factor, gain_rows, phase_excess, product_form
 from haa_sym.compiled.cache import BoundedCache, array_key
 from haa_sym.errors import ParameterError
-from haa_sym.loop.plant import continuous_plant, with_lag
+from haa_sym.loop.plant import continuous_plant, current_commanded, with_lag
 from haa_sym.loop.statespace import controller_batch
 
 __all__ = ["harmonic_sums", "ExactForms", "exact_forms", "HarmonicSums", "N_SERIES", "RADIUS_FACTOR",
@@ -475,7 +475,10 @@ def _loop_pieces(loop):
         raise ParameterError("passivity = 'exact' with port = 'encoder_average': that port reads the "
                              "controller's sampled estimate, not a continuous velocity; allowed: port = "
                              "'dtheta_<body>' with passivity = 'exact', or passivity = 'corrected_phase'")
-    cont = with_lag(continuous_plant(params.plant, loop.backend), params.drive.tau_drive)
+    # the plant the loop's P_d is sampled from (ClosedLoop.plant): a current-commanded structure
+    # imposes the current, so its command column and its mechanics are those of current_commanded
+    cont = with_lag(current_commanded(continuous_plant(params.plant, loop.backend), loop.structure.command == "current"),
+                    params.drive.tau_drive)
     names = cont.output_names
     # the controller's inputs, in its order (haa_sym.loop.statespace.CONTROLLER_INPUTS)
     C_y = cont.C[[names.index("theta_encoder"), names.index(loop.torque_output)]]

@@ -25,7 +25,7 @@ import numpy as np
 import scipy.linalg
 
 from haa_sym.analysis.sweep import blas_limits
-from haa_sym.loop.plant import continuous_plant, with_lag
+from haa_sym.loop.plant import continuous_plant, current_commanded, with_lag
 from haa_sym.loop.statespace import controller_batch
 
 __all__ = ["lifted_mu", "sampled_data_mu", "loop_plant"]
@@ -35,7 +35,9 @@ def loop_plant(loop):
     """(A, b_u, b_f, c_v, C_y) of ``loop``'s continuous plant (drive lag included), C_y the rows of
     the controller's inputs (theta_encoder, the torque signal)."""
     params = loop.params
-    cont = with_lag(continuous_plant(params.plant, loop.backend), params.drive.tau_drive)
+    # a current-commanded structure's plant: the current imposed, the command its column
+    cont = with_lag(current_commanded(continuous_plant(params.plant, loop.backend), loop.structure.command == "current"),
+                    params.drive.tau_drive)
     names = cont.output_names
     C_y = cont.C[[names.index("theta_encoder"), names.index(loop.torque_output)]]
     return cont.A, cont.B[:, :1], cont.B[:, 2:3], cont.C[[names.index(loop.options.structure.port)]], C_y
