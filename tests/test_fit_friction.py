@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 import scipy.integrate
 
-from haa_sym.fit.friction import _dd2, friction_entries, simulate_friction
+from haa_sym.fit.friction import _phi1, _phi_s, friction_entries, simulate_friction
 from haa_sym.fit.identify import Experiment, identify
 from haa_sym.fit.model import open_loop_model
 from haa_sym.io.logs import Log, read_log
@@ -59,15 +59,19 @@ def _reference(m, fr, dt, u, fc):
     return np.array(X) @ m.C.T + u @ m.D.T
 
 
-def test_second_divided_difference_against_its_definition():
+def test_the_modes_scalar_functions_against_mpmath():
+    """(e^w - 1) / w and int_0^1 tau e^{w tau} d tau (the substeps' matrices' modal factors)
+    against mpmath at 80 digits, near 0 (series, cancellation) and far from it."""
+    import mpmath
+    mpmath.mp.dps = 80
     rng = np.random.default_rng(1)
-    a = rng.normal(size=50) * 3 + 1j * rng.normal(size=50) * 3
-    b = rng.normal(size=50) * 3 + 1j * rng.normal(size=50) * 3
-    direct = ((np.exp(a) - np.exp(b)) / (a - b) - (np.exp(b) - 1) / b) / a
-    assert np.allclose(_dd2(a, b), direct, rtol=1e-10)
-    # confluent: exp[a, a, 0] = (e^a (a - 1) + 1) / a^2
-    z = np.array([1e-3 + 0j, 0.3 + 0.2j, 5 - 2j, -40 + 0j])
-    assert np.allclose(_dd2(z, z), (np.exp(z) * (z - 1) + 1) / z ** 2, rtol=1e-7)
+    w = np.concatenate([(rng.normal(size=40) + 1j * rng.normal(size=40)) * s for s in (1e-6, 1e-2, 0.7, 3.0, 30.0)]
+                       + [np.array([0.0, 1e-300, 1.0, -1.0, 2j, -40.0])])
+    z = [mpmath.mpc(v) for v in w]
+    ref1 = [complex(mpmath.expm1(v) / v) if v != 0 else 1.0 for v in z]
+    refs = [complex((mpmath.exp(v) * (v - 1) + 1) / v ** 2) if abs(v) > 1e-20 else 0.5 + complex(v) / 3 for v in z]
+    assert np.allclose(_phi1(w), ref1, rtol=1e-14, atol=0)
+    assert np.allclose(_phi_s(w), refs, rtol=1e-13, atol=0)
 
 
 def test_sensitivities_match_finite_differences():
