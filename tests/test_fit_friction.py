@@ -220,6 +220,28 @@ def test_friction_on_stamps_with_lag_delay_and_segments_reduces_to_the_linear_pa
         assert np.abs(dy_fr[j] - dy_lin[j]).max() <= 1e-4 * np.abs(dy_lin[j]).max(), k
 
 
+def test_delay_derivative_with_the_switches_on_the_stamps():
+    """A uniform log whose delay is a whole number of periods (every switch on a stamp: no grid
+    interval of its own, so a scheme that differentiates interval lengths must keep them as
+    intervals of length 0): with Fc -> 0 d y / d delay equals the linear path's exact one, and with
+    friction the forward difference (the switch moving into the intervals: the substeps on its
+    other side differ, so the scheme's two one-sided derivatives differ by its own error, 3e-3)."""
+    from haa_sym.fit.friction import simulate_friction_stamps
+    from haa_sym.fit.model import simulate_stamps
+    P, keys, m, fr, _, u = _drive_case(1e-12)
+    t = np.arange(u.shape[0]) * 2e-3
+    kw = dict(delay=0.004, delay_key=3, starts=(0,), estimate=(False,))
+    y_lin, dy_lin, _ = simulate_stamps(m, t, u, **kw)
+    y_fr, dy_fr, _ = simulate_friction_stamps(m, fr, t, u, **kw)
+    assert np.abs(dy_lin[3]).max() > 0
+    assert np.abs(dy_fr[3] - dy_lin[3]).max() <= 1e-4 * np.abs(dy_lin[3]).max()
+    P, keys, m, fr, _, u = _drive_case(0.03)
+    y, dy, _ = simulate_friction_stamps(m, fr, t, u, **kw)
+    e = 1e-8
+    yp = simulate_friction_stamps(m, fr, t, u, **{**kw, "delay": 0.004 + e}, sensitivities=False)[0]
+    assert np.abs((yp - y) / e - dy[3]).max() <= 1e-4 * np.abs(dy[3]).max()
+
+
 def test_friction_on_stamps_sensitivities_match_finite_differences():
     """With friction at stick-slip strength and the delay: d y / d p of the stamped friction path
     (segments from rest) against central differences of the same simulation."""

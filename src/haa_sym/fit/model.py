@@ -421,14 +421,17 @@ def modal_check(A: np.ndarray, what: str = "the model") -> None:
                              "log from rest without delay_drive, or parameters whose modes are distinct")
 
 
-def stamp_grid(t: np.ndarray, u: np.ndarray, delay: float, starts):
+def stamp_grid(t: np.ndarray, u: np.ndarray, delay: float, starts, on_stamps: bool = False):
     """The simulation grid of a log's own stamps ``t`` (s, N) with its first (command) input column
     delayed by ``delay`` (s): the grid of both the linear path (:func:`simulate_stamps`) and the
     friction path (:func:`haa_sym.fit.friction.simulate_friction_stamps`).
 
     The grid points are the stamps and the delayed command's switches t_j + delay inside a
     segment's span (``starts``: first sample of each segment); a switch within 1e-9 median periods
-    of a stamp is the stamp. On each grid interval every input is constant: the stamp's inputs,
+    of a stamp is the stamp: left out, or with ``on_stamps`` kept as a point of its own at the
+    stamp, after it (an interval of length 0 whose end moves with the delay: a scheme that
+    differentiates its intervals' lengths needs it, the linear path's exact derivative does not).
+    On each grid interval every input is constant: the stamp's inputs,
     the command as the motor gets it (held from before a segment's start into it).
 
     Returns
@@ -446,7 +449,11 @@ def stamp_grid(t: np.ndarray, u: np.ndarray, delay: float, starts):
     keep = (seg_sw >= 0) & (sw < t[np.maximum(ends[np.maximum(seg_sw, 0)] - 1, 0)] - tol)
     near = np.searchsorted(t, sw)
     on_stamp = (np.abs(t[np.clip(near, 0, N - 1)] - sw) <= tol) | (np.abs(t[np.clip(near - 1, 0, N - 1)] - sw) <= tol)
-    sw = sw[keep & ~on_stamp & (delay > 0)]
+    if on_stamps:
+        hit = np.where(np.abs(t[np.clip(near, 0, N - 1)] - sw) <= tol, np.clip(near, 0, N - 1), np.clip(near - 1, 0, N - 1))
+        sw = np.where(on_stamp, t[hit], sw)[keep & (delay > 0)]
+    else:
+        sw = sw[keep & ~on_stamp & (delay > 0)]
     grid = np.concatenate([t, sw])
     order = np.argsort(grid, kind="stable")
     grid = grid[order]
@@ -454,6 +461,9 @@ def stamp_grid(t: np.ndarray, u: np.ndarray, delay: float, starts):
     stamp_of = np.searchsorted(t, grid + tol, side="right") - 1       # the stamp whose input holds
     cmd_of = np.clip(np.searchsorted(t, grid - delay + tol, side="right") - 1, 0, N - 1)
     ug = u[stamp_of].copy()
+    if on_stamps:
+        # a stamp with a switch on it holds the old command over the interval of length 0 after it
+        cmd_of[samp] = np.clip(np.searchsorted(t, grid[samp] - delay - tol, side="right") - 1, 0, N - 1)
     ug[:, 0] = u[cmd_of, 0]                                           # the command as the motor gets it
     return grid, ug, samp, order >= N
 
