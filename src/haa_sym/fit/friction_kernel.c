@@ -86,18 +86,17 @@ int haa_fit_friction(int K, int n, int m, int nf, int np_, const int *nsub, cons
                 a[i] = acc + acu;
             }
             /* Newton on F(T) = T + Fc tanh((a_c + M T) / vs) = 0: each F_b rises with T_b
-             * (M's diagonal h/J > 0), the root is unique in [-Fc, Fc]; the step is halved until
-             * |F| falls */
+             * (M's diagonal h/J > 0), the root is unique in [-Fc, Fc] */
             int it;
+            double norm = 0.0;
+            for (int b = 0; b < nf; ++b) {
+                double acc = a[csel[b]];
+                for (int c = 0; c < nf; ++c) acc += Gk[csel[b] * mw + m + c] * T[c];
+                th[b] = tanh(acc / vs);
+                F[b] = T[b] + Fc[b] * th[b];
+                norm += fabs(F[b]);
+            }
             for (it = 0; it < 100; ++it) {
-                double norm = 0.0;
-                for (int b = 0; b < nf; ++b) {
-                    double acc = a[csel[b]];
-                    for (int c = 0; c < nf; ++c) acc += Gk[csel[b] * mw + m + c] * T[c];
-                    th[b] = tanh(acc / vs);
-                    F[b] = T[b] + Fc[b] * th[b];
-                    norm += fabs(F[b]);
-                }
                 if (norm <= 1e-15 * scale) break;
                 for (int b = 0; b < nf; ++b) {
                     double sl = Fc[b] / vs * (1.0 - th[b] * th[b]);
@@ -105,19 +104,27 @@ int haa_fit_friction(int K, int n, int m, int nf, int np_, const int *nsub, cons
                     dT[b] = -F[b];
                 }
                 if (solve_small(nf, Jm, dT)) { fail = 1; break; }
-                double lam = 1.0, T1[NFMAX];
+                /* the step is halved until |F| falls; the residual and tanh at the accepted point
+                 * are the next iteration's */
+                double lam = 1.0, T1[NFMAX], th1[NFMAX], F1[NFMAX], n1 = 0.0;
                 for (int tries = 0; tries < 60; ++tries, lam *= 0.5) {
-                    double n1 = 0.0;
+                    n1 = 0.0;
                     for (int b = 0; b < nf; ++b) T1[b] = T[b] + lam * dT[b];
                     for (int b = 0; b < nf; ++b) {
                         double acc = a[csel[b]];
                         for (int c = 0; c < nf; ++c) acc += Gk[csel[b] * mw + m + c] * T1[c];
-                        n1 += fabs(T1[b] + Fc[b] * tanh(acc / vs));
+                        th1[b] = tanh(acc / vs);
+                        F1[b] = T1[b] + Fc[b] * th1[b];
+                        n1 += fabs(F1[b]);
                     }
                     if (n1 < norm || tries == 59) break;
                 }
                 double moved = 0.0;
-                for (int b = 0; b < nf; ++b) { moved += fabs(T1[b] - T[b]); T[b] = T1[b]; }
+                for (int b = 0; b < nf; ++b) {
+                    moved += fabs(T1[b] - T[b]);
+                    T[b] = T1[b]; th[b] = th1[b]; F[b] = F1[b];
+                }
+                norm = n1;
                 if (moved <= 1e-16 * scale) break;
             }
             if (it == 100) fail = 1;
