@@ -176,15 +176,16 @@ def _phi_s(w: np.ndarray) -> np.ndarray:
     form elsewhere (e^w (w - 1) + 1 >= 0.03 there: at most 1.5 digits cancel)."""
     w = np.asarray(w, complex)
     small = np.abs(w) < 0.25
-    ws = np.where(small, w, 0.0)
+    wl = np.where(small, 1.0, w)
+    with np.errstate(over="ignore", invalid="ignore"):
+        out = (np.exp(wl) * (wl - 1.0) + 1.0) / (wl * wl)
+    ws = w[small]
     term, acc = np.ones_like(ws), np.full_like(ws, 0.5)
     for k in range(1, 14):
         term = term * ws / k
         acc = acc + term / (k + 2)
-    wl = np.where(small, 1.0, w)
-    with np.errstate(over="ignore", invalid="ignore"):
-        big = (np.exp(wl) * (wl - 1.0) + 1.0) / (wl * wl)
-    return np.where(small, acc, big)
+    out[small] = acc
+    return out
 
 
 @dataclass(frozen=True)
@@ -294,13 +295,14 @@ def _run_c(f, md, nsub, h, mats, dl, dkey, u, fr: Friction, x0, s0, sens):
     p = md.X.shape[0] if sens else 0
     X = np.empty((K + 1, n))
     S = np.empty((p, K + 1, n))
+    kterms = np.array([np.any(md.Dd[j]) or np.any(md.YT[j]) for j in range(md.X.shape[0])] or [0], np.int32)
     work = np.empty(5 * n)
     dummy = np.zeros(1)
     c = np.ascontiguousarray
     args = [ctypes.c_int(K), ctypes.c_int(n), ctypes.c_int(m), ctypes.c_int(len(fr.Fc)), ctypes.c_int(p),
             _ptr(nsub, ctypes.c_int), _ptr(h), _ptr(Phi), _ptr(G), _ptr(Gs if sens else dummy),
             _ptr(GY if sens else dummy), _ptr(md.Dd), _ptr(md.X), _ptr(c(md.A)), _ptr(c(md.BW)),
-            _ptr(dl), ctypes.c_int(-1 if dkey is None else dkey),
+            _ptr(dl), ctypes.c_int(-1 if dkey is None else dkey), _ptr(kterms, ctypes.c_int),
             _ptr(u), _ptr(fr.sel, ctypes.c_int), _ptr(fr.Fc), ctypes.c_double(fr.v_s), _ptr(fr.key_index, ctypes.c_int),
             _ptr(x0), _ptr(s0 if sens else dummy), ctypes.c_int(int(sens)), _ptr(X), _ptr(S if sens else dummy),
             _ptr(work)]
@@ -460,42 +462,36 @@ def simulate_friction(model: PlantModel, fr: Friction, dt, u, x0=None, sensitivi
     return y, dy
 
 
-#: Gauss-Newton steps of a segment's estimated initial state at most (friction makes the outputs
-#: nonlinear in it; from rest the first step is the linear estimate, the next ones correct the
-#: stick/slip pattern it changes), and the size of a step that ends them, relative to the
-#: segment's weighted outputs (1e-6: far below the 1 % noise, so the fit's cost does not see it)
-MAX_STATE_STEPS = 8
+#: Chord steps of a segment's estimated initial state, from rest: the first is the linear part's
+#: estimate (exact without friction), the second corrects the stick/slip pattern it changes (a
+#: third moved the ITregear chirp's values by < 0.3 % of their intervals and made the cost rougher).
+STATE_STEPS = 2
+#: A step smaller than this, relative to the segment's weighted outputs, ends them (the linear case)
 STATE_STEP_RTOL = 1e-6
-#: The chord's steps leave out the state directions whose free response is below this fraction of
-#: the largest (the fast modes' and, on the real SEA, a 1e5 1/s pair seen at one stamp): along them
-#: the outputs respond to the state through the friction, not as the linear part says, and the
-#: iteration stalled at steps of 1e-2 of the outputs until MAX_STATE_STEPS (the ITregear chirp:
-#: 2454 simulations in the fit; 1323 with this). The rank and Kaufman's basis keep 1e-9.
+#: The later steps leave out the state directions whose free response is below this fraction of
+#: the largest (the fast modes': on the ITregear SEA a pair at 1e5 1/s, seen at one stamp): along
+#: them the outputs respond to the state through the friction, not as the linear part says (with
+#: them the chirp's second pass took 22-24 iterations, without 8). The first step, the rank and
+#: Kaufman's basis keep 1e-9 (exact without friction).
 STATE_RCOND = 1e-3
-
 
 def simulate_friction_stamps(model: PlantModel, fr: Friction, t: np.ndarray, u: np.ndarray, *, delay: float = 0.0,
                              delay_key: int | None = None, starts=(0,), estimate=(False,), y=None, weights=None,
                              sensitivities: bool = True, max_substep: float = DEFAULT_MAX_SUBSTEP,
-                             state_cache: dict | None = None, order: int = 2):
+                             order: int = 2):
     """The friction simulation on a log as measured: what :func:`haa_sym.fit.model.simulate_stamps`
     is for the linear model, with the same arguments and returns.
 
     The log's own stamps ``t`` with the command delayed by ``delay`` and switching inside the
     intervals (the one grid of both paths, :func:`haa_sym.fit.model.stamp_grid`); every segment
     (``starts``) simulated on its own, from rest or, where ``estimate``, from an initial state
-    estimated on the weighted output error by a chord (quasi-Newton) iteration whose matrix is the
-    linear part's free response (at most :data:`MAX_STATE_STEPS` simulations without
-    sensitivities; a step that raises the cost is quartered); the keys' sensitivities at that
-    state, projected onto the complement of the free response's directions (variable projection,
+    estimated on the weighted output error by :data:`STATE_STEPS` chord (quasi-Newton) steps from
+    rest whose matrix is the linear part's free response (simulations without sensitivities); the
+    keys' sensitivities at that state, projected onto the complement of the free response's directions (variable projection,
     Kaufman's Jacobian, as the linear path: exact without friction, the linear part's directions
     with it). ``delay_key``: the delay's derivative is the scheme's own, exact: the switches move
     with the delay, so the grid intervals they end or start lengthen or shorten (d length / d delay
     = +-1), each substep's by that over its count, at fixed substep counts.
-
-    ``state_cache``: a dict kept by the caller between calls on one log: each estimated state
-    starts from the last one found (the fit's next point is near; the iteration ends at the same
-    minimum, in fewer steps).
 
     Returns
     -------
@@ -540,8 +536,6 @@ def simulate_friction_stamps(model: PlantModel, fr: Friction, t: np.ndarray, u: 
     rank = 0
     for g, (s, e) in enumerate(zip(starts, ends)):
         x0 = np.zeros(n)
-        if estimate[g] and state_cache is not None and state_cache.get(g) is not None:
-            x0 = state_cache[g].copy()
         if estimate[g]:
             # the state's directions: the linear part's free response C e^{A (t_k - t_s)} at the
             # segment's stamps (exact without friction; with it, the chord of a quasi-Newton
@@ -554,23 +548,17 @@ def simulate_friction_stamps(model: PlantModel, fr: Friction, t: np.ndarray, u: 
             bases[g] = U[:, :r]
             rank += r
             yw = y[s:e] / w
-            best = None                 # (cost, x0) of the best state simulated
-            for _ in range(MAX_STATE_STEPS):
+            # a fixed number of chord steps from rest, no line search: the state is then a smooth
+            # function of the keys, which Levenberg-Marquardt needs (an iteration run to a
+            # tolerance, restarted from the last state and with steps rejected, made the cost
+            # depend on the fit's history: on the ITregear chirp 19-27 iterations of the second
+            # pass instead of 8, and it stalled at steps of 1e-2 of the outputs until 8 simulations)
+            for i in range(STATE_STEPS):
                 res = (yw - run(g, x0, False)[0] / w).ravel()
-                cost = float(res @ res)
-                if best is not None and not cost < best[0]:
-                    # the outputs are nonlinear in the state (friction): a step that raised the
-                    # cost is quartered from the best state instead
-                    x0 = best[1] + (x0 - best[1]) / 4
-                    continue
-                best = (cost, x0)
-                step = np.linalg.lstsq(Pw, res, rcond=STATE_RCOND)[0]
+                step = np.linalg.lstsq(Pw, res, rcond=1e-9 if i == 0 else STATE_RCOND)[0]
+                x0 = x0 + step
                 if np.linalg.norm(Pw @ step) <= STATE_STEP_RTOL * max(np.linalg.norm(yw), 1e-300):
                     break
-                x0 = x0 + step
-            x0 = best[1]
-        if estimate[g] and state_cache is not None:
-            state_cache[g] = x0
         if sensitivities:
             ys[s:e], dys[:, s:e] = run(g, x0, True)
         else:

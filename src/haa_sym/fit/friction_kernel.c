@@ -10,7 +10,7 @@
  *   pre = P sigma + Dd_j v + GY_j ut  (+ dl_k (A x+ + BW ut) for the delay's key),
  *   r_c = pre[c] - (X_j x+)[c],   (I - Dg M) dT = Dg r_c + q,   sigma+ = pre + H dT,
  * with M = H[c, :], Dg = diag(-Fc/v_s sech^2(v/v_s)), q_b = -tanh(v_b/v_s) when key j is Fc_b;
- * dl_k: the substep's length's derivative along the delay.
+ * dl_k: the substep's length's derivative along the delay; kterms[j] = 0: Dd_j and GY_j are 0.
  * Layouts are C order: P (K, n, n), G, Gs (K, n, mw), GY (np, K, n, mw), Dd, Xk (np, n, n),
  * A (n, n), BW (n, mw), u (K, m), X (K + 1, n), S (np, K + 1, n); mw = m + nf. Returns 0, or 1
  * when a Newton solve did not converge (the caller refuses the point). */
@@ -48,7 +48,7 @@ static int solve_small(int nf, double *A, double *b)
 int haa_fit_friction(int K, int n, int m, int nf, int np_, const int *nsub, const double *hs,
                      const double *P, const double *G, const double *Gs, const double *GY,
                      const double *Dd, const double *Xk, const double *A, const double *BW,
-                     const double *dl, int dkey,
+                     const double *dl, int dkey, const int *kterms,
                      const double *u, const int *csel, const double *Fc, double vs,
                      const int *fck, const double *x0, const double *s0, int sens,
                      double *X, double *S, double *work)
@@ -153,8 +153,11 @@ int haa_fit_friction(int K, int n, int m, int nf, int np_, const int *nsub, cons
                     const double *GYk = GY + ((size_t)j * K + k) * n * mw;
                     for (int i = 0; i < n; ++i) {
                         double acc = 0.0;
-                        for (int l = 0; l < n; ++l) acc += Pk[i * n + l] * sj[l] + Ddj[i * n + l] * v[l];
-                        for (int l = 0; l < mw; ++l) acc += GYk[i * mw + l] * ut[l];
+                        for (int l = 0; l < n; ++l) acc += Pk[i * n + l] * sj[l];
+                        if (kterms[j]) {      /* a key of A, B or W (not a friction torque, the delay) */
+                            for (int l = 0; l < n; ++l) acc += Ddj[i * n + l] * v[l];
+                            for (int l = 0; l < mw; ++l) acc += GYk[i * mw + l] * ut[l];
+                        }
                         pre[i] = acc;
                     }
                     if (j == dkey && dl[k] != 0.0) {
