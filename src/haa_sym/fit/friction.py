@@ -11,8 +11,8 @@ file's ``friction_velocity``. The model is
 u held over each interval [t_k, t_k+1) of the log (zero-order hold), the intervals dt_k any
 positive numbers (a uniform log is the special case).
 
-**The scheme: exact linear part, friction implicit at each substep's end.** Each interval is cut
-into n_k = ceil(dt_k / max_substep) equal substeps h_k; per substep
+**The scheme: exact linear part, friction implicit at each substep's end, extrapolated.** Each
+interval is cut into n_k = ceil(dt_k / max_substep) equal substeps h_k; per substep
 
     x+ = Phi(h) x + Gamma(h) u + Gamma_W(h) T,   T = T(x+),
 
@@ -22,22 +22,28 @@ costs nothing and is exact), the friction torque held over the substep at its va
 implicit: at stick the smooth model is a viscous slope Fc / v_s, and Fc / (v_s J) h is 10-100 on
 a drive's rotor at a 2 ms sample (the RMD X8 SEA: J_m 3.5e-4 kg m^2, Fc_m 0.01 Nm, v_s 0.01
 rad/s: 3,000 1/s); the end-point rule damps it as 1 / (1 + slope h), L-stable, where an explicit
-stage diverges and the trapezoidal rule rings (ratio -> -1). It is first order in the friction
-torque's change over a substep, which is small while sliding (T ~ +-Fc) and bounded by Fc per
-reversal; ``max_substep`` (default :data:`DEFAULT_MAX_SUBSTEP`) sets that error, measured in
-docs/identify.md ("Friction and offsets") against ``scipy.integrate.solve_ivp``.
+stage diverges and the trapezoidal rule rings (ratio -> -1). It is first order: at a velocity
+reversal the torque's switch falls, on average, half a substep early. The default (``order`` 2)
+runs it twice, at h and h / 2, and takes 2 y(h / 2) - y(h) (Richardson): the mean of that shift
+cancels, the stability function 2 / (1 - z/2)^2 - 1 / (1 - z) still goes to 0 for a stiff stick
+slope, and the rms error against ``scipy.integrate.solve_ivp`` falls about 4x per halving of h
+(docs/identify.md, "Friction and offsets"; what remains is where in a substep a reversal falls).
+``max_substep`` (default :data:`DEFAULT_MAX_SUBSTEP`) is the coarse run's.
 
 **Matrices for every interval length, with exact derivatives.** Every interval has its own
 length (a log's own stamps), so the ZOH comes from one eigendecomposition A = V diag(lambda) V^-1
 per evaluation: Phi(h) = V diag(e^{lambda h}) V^-1, [Gamma, Gamma_W](h) = V diag(psi(lambda))
-V^-1 [B, W] with psi(lambda) = h phi_1(lambda h); a batched matrix exponential per interval cost
-46 s for 17,000 intervals here. The derivatives along each key (dA, dB, dW exact from CasADi)
-are the Daleckii-Krein formulas: dPhi = V (F o V^-1 dA V) V^-1 with F_ij = h exp[a_i, a_j]
-(a = lambda h; first divided difference of exp), dGamma = V ((Psi o V^-1 dA V) V^-1 [B, W] +
-diag(psi) V^-1 [dB, dW]) with Psi_ij = h^2 exp[a_i, a_j, 0] (second divided difference),
-evaluated without cancellation (:func:`_dd1`, :func:`_dd2`). A nearly defective A (eigenvector
-matrix condition above :data:`MAX_EIGVEC_COND`) is refused: the modal formulas lose accuracy
-there.
+V^-1 [B, W] with psi(lambda) = h phi_1(lambda h), each for all intervals at once as one matrix
+product of the modes' scalar functions (K, n) with a constant (n, n^2) matrix. The derivatives
+along each key (dA, dB, dW exact from CasADi) are the Daleckii-Krein formulas with the first
+divided difference split into its nodes (:class:`_Modal`): with X_j the solution of
+A X - X A = dA_j off A's eigenbasis diagonal and Dd_j that diagonal,
+d e^{A h} = e^{A h} X_j - X_j e^{A h} + h e^{A h} Dd_j and the same for its integral, so in the
+shifted sensitivity sigma_j = s_j + X_j x no per-interval matrix depends on the key except
+Psi1(h) (X_j [B, W] + d[B, W]_j) (n x (m + nf)): the per-key (K, n, n) matrices, 0.5 s of an
+evaluation before, are gone. It divides by lambda_a - lambda_b: two coinciding modes (closer than
+:data:`MODE_GAP` of the largest) are refused, and a nearly defective A (eigenvector matrix
+condition above :data:`MAX_EIGVEC_COND`) too.
 
 **The recursion** over samples and substeps (the state, the Newton solve and each key's
 sensitivity, the step's exact derivative) is C (``friction_kernel.c``), compiled once like the
@@ -62,9 +68,11 @@ from haa_sym.model.drive import DRIVE_KEYS
 __all__ = ["Friction", "friction_entries", "simulate_friction", "simulate_friction_stamps", "DEFAULT_MAX_SUBSTEP",
            "MAX_EIGVEC_COND", "is_friction_key"]
 
-#: Longest substep (s) of the friction integration: a 2 ms log sample is cut in 8. Measured
-#: (docs/identify.md): the RMD X8 SEA with Fc_m at stick-slip, against solve_ivp.
-DEFAULT_MAX_SUBSTEP = 2.5e-4
+#: Longest substep (s) of the friction integration's coarse run (the fine one halves it). Measured
+#: (docs/identify.md): the RMD X8 SEA with Fc_m at stick-slip against solve_ivp, rms 1.0e-3 of each
+#: output's peak (the first-order scheme at 0.25 ms, the default before: 9.3e-4), at a third of
+#: its substeps on the ITregear chirp.
+DEFAULT_MAX_SUBSTEP = 5e-4
 #: Condition number of the eigenvector matrix above which the modal formulas are refused.
 MAX_EIGVEC_COND = 1e10
 #: Smallest distance of two modes, relative to the largest |lambda| (at least 1 1/s), the modal

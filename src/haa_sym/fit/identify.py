@@ -96,11 +96,12 @@ class FitOptions:
         A residual series is called white when the test's p-value is at least this (0.05).
     max_substep : float
         Longest substep (s) of the friction simulation (:mod:`haa_sym.fit.friction`), used when
-        friction is in the model (default 2.5e-4 s; docs/identify.md, "Friction and offsets").
+        friction is in the model (default 5e-4 s: the coarse run of Richardson's extrapolation;
+        docs/identify.md, "Friction and offsets").
     """
 
     min_periods: float = 3.0
-    max_substep: float = 2.5e-4
+    max_substep: float = 5e-4
     max_iterations: int = 50
     tolerance: float = 1e-10
     max_step: float = 1.0
@@ -689,7 +690,8 @@ def identify(experiments: list[Experiment], keys: tuple[str, ...], inputs: tuple
                           "friction_velocity": experiments[0].params.limits.friction_velocity,
                           "max_substep": opt.max_substep, "method": "exact ZOH per substep of the log's own "
                           "intervals (the delayed command switching inside them, segments from estimated states), "
-                          "friction torque implicit at each substep's end; d/d delay_drive a forward difference"}
+                          "friction torque implicit at each substep's end, Richardson-extrapolated over substeps h "
+                          "and h / 2 (second order); d/d delay_drive the scheme's exact derivative"}
                          if use_friction else None),
             "offsets": list(offsets),
             "logs": {e.log.name: {"sha256": e.log.sha256, "samples": e.log.samples, "configuration": e.configuration}
