@@ -390,7 +390,6 @@ def _states(model, fr, md, dt, nsub, u, x0, s0, sens, dlen, dkey, backend, mats=
     f = _kernel() if backend in ("auto", "c") else None
     if backend == "c" and f is None:
         raise ParameterError("friction simulation: backend 'c' without a C compiler; allowed: 'auto', 'python'")
-    p, n = md.X.shape[0], md.A.shape[0]
     dl = np.zeros(dt.size) if dlen is None else np.ascontiguousarray(dlen / nsub, float)
     sig0 = (s0 + md.X @ x0) if sens else None
     args = (md, nsub, np.ascontiguousarray(h), mats, dl, dkey, u, fr, x0, sig0, sens)
@@ -495,9 +494,9 @@ def simulate_friction_stamps(model: PlantModel, fr: Friction, t: np.ndarray, u: 
     (``starts``) simulated on its own, from rest or, where ``estimate``, from an initial state
     estimated on the weighted output error by :data:`STATE_STEPS` chord (quasi-Newton) steps from
     rest whose matrix is the linear part's free response (simulations without sensitivities); the
-    keys' sensitivities at that state, projected onto the complement of the free response's directions (variable projection,
-    Kaufman's Jacobian, as the linear path: exact without friction, the linear part's directions
-    with it). ``delay_key``: the delay's derivative is the scheme's own, exact: the switches move
+    keys' sensitivities at that state, projected onto the complement of the free response's
+    directions (variable projection, Kaufman's Jacobian, as the linear path: exact without
+    friction, the linear part's directions with it). ``delay_key``: the delay's derivative is the scheme's own, exact: the switches move
     with the delay, so the grid intervals they end or start lengthen or shorten (d length / d delay
     = +-1), each substep's by that over its count, at fixed substep counts.
 

@@ -450,7 +450,8 @@ def stamp_grid(t: np.ndarray, u: np.ndarray, delay: float, starts, on_stamps: bo
     near = np.searchsorted(t, sw)
     on_stamp = (np.abs(t[np.clip(near, 0, N - 1)] - sw) <= tol) | (np.abs(t[np.clip(near - 1, 0, N - 1)] - sw) <= tol)
     if on_stamps:
-        hit = np.where(np.abs(t[np.clip(near, 0, N - 1)] - sw) <= tol, np.clip(near, 0, N - 1), np.clip(near - 1, 0, N - 1))
+        above, below = np.clip(near, 0, N - 1), np.clip(near - 1, 0, N - 1)
+        hit = np.where(np.abs(t[above] - sw) <= tol, above, below)
         sw = np.where(on_stamp, t[hit], sw)[keep & (delay > 0)]
     else:
         sw = sw[keep & ~on_stamp & (delay > 0)]
