@@ -183,8 +183,7 @@ def test_stiffness_ramp_run50_with_friction():
     """The 2 Nm stiffness ramps (real logs, their own stamps and gaps, the file's drive lag and
     delay, offsets on both outputs, Fc_m on the rotor at v_s = 1e-3 rad/s): run 50's K_spring
     between 2100 and 2350 Nm/rad, and run 50's HAC interval covering run 51's value (measured:
-    2288.8 [2261.9, 2316.0] against 2301.9; the white-noise interval [2284.8, 2292.8] does not).
-    About 33 s (run 51's 20 segments: 26 iterations of the second pass)."""
+    2289.4 [2264.7, 2314.4] against 2279.7; the white-noise interval [2286.1, 2292.6] does not)."""
     p = load_params(DATA / "rmdx8_sea.toml")
     p = dataclasses.replace(p, limits=dataclasses.replace(p.limits, friction={"m": 0.02}, friction_velocity=1e-3))
     fits = {}
