@@ -337,6 +337,12 @@ def features_table(data) -> list[str]:
                         f"{c['repeats']}) | {sec(c['haa_sym_identify_s'])} vs {sec(c['scipy_least_squares_dlsim_s'])} "
                         f"(**{ratio(c['ratio'])}**; the fits alone {ratio(c['in_process']['ratio'])}) | "
                         f"5x: {met(c['ratio'] >= 5)} |")
+        c = d.get("real_chirp")
+        rows.append(f"| 23: `haa-sym identify`, {c['case']}, {count(c['samples'])} samples, {len(c['keys'])} keys, "
+                    f"whole process (`bench_identify.py`, best of {c['repeats']}) | {sec(c['haa_sym_identify_s'])} | "
+                    f"{c['target_s']:g} s: {met(c['met'])} |" if c is not None else
+                    f"| 23: `haa-sym identify`, real ITregear chirp with lag, delay and friction (`bench_identify.py`) "
+                    f"| {NM} | 10 s |")
     else:
         rows.append(f"| 17, 23: `haa-sym identify` (`bench_identify.py`) | {NM} | 5x |")
     s = data["simulate"]

@@ -99,14 +99,17 @@ def coloured_experiment(model, p, *, seed=0, duration=25.0, Ts=1e-3, rho=0.9, no
 
 def friction_experiment(model, p, *, Fc, v_s, seed=0, duration=6.0, Ts=1e-3, rho=0.9, noise=0.01,
                         outputs=("torque", "theta"), tau_drive=0.0, delay_drive=0.0, amplitude=None,
-                        substeps=20, noise_seeds=(0,)):
+                        substeps=20, noise_seeds=(0,), from_zero=False):
     """(t, u, [y_noisy per noise seed], y_clean) of a current-driven experiment with Coulomb friction
     T = -Fc tanh(w_m / v_s) on the rotor (``model``'s current-driven states; the rotor's velocity is
     the second, its inertia ``p["J_m"]``), a first-order drive lag and a dead time (a whole number
     of sub-steps Ts / ``substeps``). Integrated here, independently of haa_sym.fit.friction: the
     linear part exactly over each sub-step (scipy ``expm`` of [A, [B_c, W]]), the friction torque
     held over the sub-step at its value at the sub-step's start (explicit: stable while
-    Fc h / (v_s J_m) < 2, checked), the command c(t - delay) held over the sub-step."""
+    Fc h / (v_s J_m) < 2, checked), the command c(t - delay) held over the sub-step, 0 before the
+    log. ``from_zero``: the first command sample is 0 as well (the command before a log is not in
+    it: identify holds the first sample back to before the start, this generator 0; with the first
+    sample 0 the two agree, else the first delay's worth of command differs and offsets theta)."""
     A, B, C, D = model(p, True)
     n0 = A.shape[0]
     W = np.zeros(n0)
@@ -126,6 +129,8 @@ def friction_experiment(model, p, *, Fc, v_s, seed=0, duration=6.0, Ts=1e-3, rho
     b, a = scipy.signal.butter(4, 0.25)
     u = scipy.signal.lfilter(b, a, rng.standard_normal(N + 200))[200:]
     u *= (amplitude or 5.0) / np.std(u)
+    if from_zero:
+        u[0] = 0.0
     n = A.shape[0]
     BW = np.column_stack([B[:, 0], W])
     E = scipy.linalg.expm(np.block([[A, BW], [np.zeros((2, n + 2))]]) * h)

@@ -133,21 +133,21 @@ def test_friction_generator_without_friction_is_the_linear_generator():
 
 @pytest.mark.slow
 def test_lag_delay_friction_within_3_percent_and_hac_covers_18_of_20():
-    """20 AR(1) noise seeds (lag-1 0.9, 1 %) on one 9 s run with a drive lag, a fractional delay and
+    """20 AR(1) noise seeds (lag-1 0.9, 1 %) on one 3 s run with a drive lag, a fractional delay and
     Coulomb friction from tests/identify_coloured.friction_experiment (its own explicit-friction
-    integration on 50 us sub-steps, not haa_sym.fit.friction): K_hd, J_link, tau_drive,
-    delay_drive, Fc_m started 20-25 % off, every key within 3 % (asserted) and ci95 (HAC) covering
-    the truth in >= 18 of 20 for every key (the issue's criterion: marked xfail when it does not
-    hold). Measured (docs/identify.md): at substeps of 62.5 us, HAC 17, 19, 19, 19, 18 of 20
-    (ci95_white 10, 11, 12, 14, 6); at the default 0.25 ms, HAC 8, 6, 18, 7, 15 (white 2, 0, 8, 0,
-    2): the friction scheme's first-order error biases the values by 0.1-0.3 %, as much as these
-    intervals are wide. Worst error 0.3 % (62.5 us), 0.6 % (0.25 ms)."""
+    integration on 12.5 us sub-steps, not haa_sym.fit.friction; the command from 0, as identify
+    holds it before the log): K_hd, J_link, tau_drive, delay_drive, Fc_m started 20-25 % off, at
+    the default max_substep, every key within 3 % and ci95 (HAC) covering the truth in >= 18 of 20
+    for every key (the issue's criterion). Measured (docs/identify.md): HAC 19, 19, 19, 20, 19
+    (ci95_white 7, 8, 8, 10, 11), worst error 0.4 %. 3 s (min_periods 1: the link's slowest mode is
+    2.8 s) so that the 20 fits take about 10 s; the 9 s run's numbers are in the docs."""
     import dataclasses
     from identify_coloured import friction_experiment
     P = load_params(actuator_path("harmonic_drive"))
     p = P.plant.as_dict()
     _, u, ys, _ = friction_experiment(two_mass, p, Fc=FR_TRUTH["Fc_m"], v_s=FR_VS, tau_drive=FR_TRUTH["tau_drive"],
-                                      delay_drive=FR_TRUTH["delay_drive"], duration=9.0, noise_seeds=range(20))
+                                      delay_drive=FR_TRUTH["delay_drive"], duration=3.0, noise_seeds=range(20),
+                                      substeps=80, from_zero=True)
     start = dataclasses.replace(P, limits=dataclasses.replace(P.limits, friction={"m": 0.75 * FR_TRUTH["Fc_m"]},
                                                               friction_velocity=FR_VS),
                                 drive=P.drive.replace(tau_drive=1.2 * FR_TRUTH["tau_drive"],
@@ -157,9 +157,8 @@ def test_lag_delay_friction_within_3_percent_and_hac_covers_18_of_20():
     covered = dict.fromkeys(keys, 0)
     for s, y in enumerate(ys):
         log = Log(f"s{s}.csv", 1e-3, {"current": u, "torque": y[:, 0], "theta": y[:, 1]}, {}, "0" * 64)
-        r = identify([Experiment(log, start)], keys, ("current",), OUTPUTS, FitOptions(max_substep=6.25e-5))
+        r = identify([Experiment(log, start)], keys, ("current",), OUTPUTS, FitOptions(min_periods=1))
         for k, v, (lo, hi) in zip(r.keys, r.value, r.ci95):
             assert abs(v / FR_TRUTH[k] - 1) < 0.03, (s, k, v)
             covered[k] += lo <= FR_TRUTH[k] <= hi
-    if min(covered.values()) < 18:
-        pytest.xfail(f"HAC coverage below 18 of 20: {covered}")
+    assert min(covered.values()) >= 18, covered

@@ -1,14 +1,19 @@
-/* The friction simulation of haa_sym.fit.friction: the recursion over samples and substeps.
+/* The friction simulation of haa_sym.fit.friction: the recursion over grid intervals and substeps.
  *
  * Per substep of interval k (length h_k, n_sub[k] substeps, the matrices of that length):
- *   a  = P x + G[:, :m] u_k,   x+ = a + H T,   H = G[:, m:],
- *   T_b = -Fc_b tanh(x+[c_b] / v_s)            (implicit in T: nf equations, Newton),
- * and, per key j, the exact derivative of that step:
- *   r  = P s + dP x + dG[:, :m] u + dH T,   (I - Dg M) dT = Dg (r[c]) + q,   s+ = r + H dT,
- * with M = H[c, :], Dg = diag(-Fc/v_s sech^2(v/v_s)), q_b = -tanh(v_b/v_s) when key j is Fc_b.
- * Layouts are C order: P (K, n, n), G (K, n, mw), dP (np, K, n, n), dG (np, K, n, mw),
- * u (K, m), X (K + 1, n), S (np, K + 1, n); mw = m + nf.  Returns 0, or 1 when a Newton
- * solve did not converge (the caller refuses the point). */
+ *   px = P x,  a = px + G[:, :m] u,   x+ = a + H T,   H = G[:, m:],
+ *   T_b = -Fc_b tanh(x+[c_b] / v_s)            (implicit in T: nf equations, Newton).
+ * Sensitivities, per key j, in the shifted variable sigma_j = s_j + X_j x (X_j the solution of
+ * A X - X A = dA_j off A's eigenbasis diagonal, Dd_j its diagonal part: then
+ * d e^{A h} = e^{A h} X - X e^{A h} + h e^{A h} Dd, and the same for its integral), exact:
+ *   v   = h px + Gs ut                           (ut = [u; T]; Gs = int_0^h s e^{A s} ds [B, W]),
+ *   pre = P sigma + Dd_j v + GY_j ut  (+ dl_k (A x+ + BW ut) for the delay's key),
+ *   r_c = pre[c] - (X_j x+)[c],   (I - Dg M) dT = Dg r_c + q,   sigma+ = pre + H dT,
+ * with M = H[c, :], Dg = diag(-Fc/v_s sech^2(v/v_s)), q_b = -tanh(v_b/v_s) when key j is Fc_b;
+ * dl_k: the substep's length's derivative along the delay; kterms[j] = 0: Dd_j and GY_j are 0.
+ * Layouts are C order: P (K, n, n), G, Gs (K, n, mw), GY (np, K, n, mw), Dd, Xk (np, n, n),
+ * A (n, n), BW (n, mw), u (K, m), X (K + 1, n), S (np, K + 1, n); mw = m + nf. Returns 0, or 1
+ * when a Newton solve did not converge (the caller refuses the point). */
 #include <math.h>
 #include <string.h>
 
@@ -40,22 +45,30 @@ static int solve_small(int nf, double *A, double *b)
     return 0;
 }
 
-int haa_fit_friction(int K, int n, int m, int nf, int np_, const int *nsub,
-                     const double *P, const double *G, const double *dP, const double *dG,
+int haa_fit_friction(int K, int n, int m, int nf, int np_, const int *nsub, const double *hs,
+                     const double *P, const double *G, const double *Gs, const double *GY,
+                     const double *Dd, const double *Xk, const double *A, const double *BW,
+                     const double *dl, int dkey, const int *kterms,
                      const double *u, const int *csel, const double *Fc, double vs,
                      const int *fck, const double *x0, const double *s0, int sens,
                      double *X, double *S, double *work)
 {
     const int mw = m + nf;
-    double *a = work, *xn = work + n, *r = work + 2 * n;          /* 3 n doubles */
-    double T[NFMAX], v[NFMAX], F[NFMAX], Jm[NFMAX * NFMAX], dT[NFMAX], Dg[NFMAX], th[NFMAX];
+    double *a = work, *xn = work + n, *px = work + 2 * n, *v = work + 3 * n, *pre = work + 4 * n;  /* 5 n */
+    double T[NFMAX], F[NFMAX], Jm[NFMAX * NFMAX], dT[NFMAX], Dg[NFMAX], th[NFMAX], ut[64];
     int fail = 0;
+    double scale = 0.0;
+    for (int b = 0; b < nf; ++b) scale += Fc[b];
+    if (!(scale > 0)) scale = 1.0;
+    if (mw > 64) return 1;
     memcpy(X, x0, sizeof(double) * n);
     if (sens)
         for (int j = 0; j < np_; ++j) memcpy(S + (size_t)j * (K + 1) * n, s0 + (size_t)j * n, sizeof(double) * n);
     for (int b = 0; b < nf; ++b) T[b] = 0.0;
     for (int k = 0; k < K; ++k) {
         const double *Pk = P + (size_t)k * n * n, *Gk = G + (size_t)k * n * mw, *uk = u + (size_t)k * m;
+        const double *Gsk = Gs + (size_t)k * n * mw;
+        const double h = hs[k];
         double *xk = X + (size_t)(k + 1) * n;
         memcpy(xk, X + (size_t)k * n, sizeof(double) * n);
         if (sens)
@@ -63,57 +76,65 @@ int haa_fit_friction(int K, int n, int m, int nf, int np_, const int *nsub,
                 double *Sj = S + (size_t)j * (K + 1) * n;
                 memcpy(Sj + (size_t)(k + 1) * n, Sj + (size_t)k * n, sizeof(double) * n);
             }
+        for (int l = 0; l < m; ++l) ut[l] = uk[l];
         for (int sub = 0; sub < nsub[k]; ++sub) {
             for (int i = 0; i < n; ++i) {
-                double acc = 0.0;
+                double acc = 0.0, acu = 0.0;
                 for (int l = 0; l < n; ++l) acc += Pk[i * n + l] * xk[l];
-                for (int l = 0; l < m; ++l) acc += Gk[i * mw + l] * uk[l];
-                a[i] = acc;
+                for (int l = 0; l < m; ++l) acu += Gk[i * mw + l] * uk[l];
+                px[i] = acc;
+                a[i] = acc + acu;
             }
             /* Newton on F(T) = T + Fc tanh((a_c + M T) / vs) = 0: each F_b rises with T_b
-             * (M's diagonal h/J > 0), the root is unique in [-Fc, Fc]; the step is halved until
-             * |F| falls */
+             * (M's diagonal h/J > 0), the root is unique in [-Fc, Fc] */
             int it;
+            double norm = 0.0;
+            for (int b = 0; b < nf; ++b) {
+                double acc = a[csel[b]];
+                for (int c = 0; c < nf; ++c) acc += Gk[csel[b] * mw + m + c] * T[c];
+                th[b] = tanh(acc / vs);
+                F[b] = T[b] + Fc[b] * th[b];
+                norm += fabs(F[b]);
+            }
             for (it = 0; it < 100; ++it) {
-                double norm = 0.0;
-                for (int b = 0; b < nf; ++b) {
-                    double acc = a[csel[b]];
-                    for (int c = 0; c < nf; ++c) acc += Gk[csel[b] * mw + m + c] * T[c];
-                    v[b] = acc; th[b] = tanh(acc / vs);
-                    F[b] = T[b] + Fc[b] * th[b];
-                    norm += fabs(F[b]);
-                }
-                double scale = 0.0;
-                for (int b = 0; b < nf; ++b) scale += Fc[b];
-                if (norm <= 1e-15 * (scale > 0 ? scale : 1.0)) break;
+                if (norm <= 1e-15 * scale) break;
                 for (int b = 0; b < nf; ++b) {
                     double sl = Fc[b] / vs * (1.0 - th[b] * th[b]);
                     for (int c = 0; c < nf; ++c) Jm[b * nf + c] = (b == c) + sl * Gk[csel[b] * mw + m + c];
                     dT[b] = -F[b];
                 }
                 if (solve_small(nf, Jm, dT)) { fail = 1; break; }
-                double lam = 1.0, T1[NFMAX];
+                /* the step is halved until |F| falls; the residual and tanh at the accepted point
+                 * are the next iteration's */
+                double lam = 1.0, T1[NFMAX], th1[NFMAX], F1[NFMAX], n1 = 0.0;
                 for (int tries = 0; tries < 60; ++tries, lam *= 0.5) {
-                    double n1 = 0.0;
+                    n1 = 0.0;
                     for (int b = 0; b < nf; ++b) T1[b] = T[b] + lam * dT[b];
                     for (int b = 0; b < nf; ++b) {
                         double acc = a[csel[b]];
                         for (int c = 0; c < nf; ++c) acc += Gk[csel[b] * mw + m + c] * T1[c];
-                        n1 += fabs(T1[b] + Fc[b] * tanh(acc / vs));
+                        th1[b] = tanh(acc / vs);
+                        F1[b] = T1[b] + Fc[b] * th1[b];
+                        n1 += fabs(F1[b]);
                     }
                     if (n1 < norm || tries == 59) break;
                 }
                 double moved = 0.0;
-                for (int b = 0; b < nf; ++b) { moved += fabs(T1[b] - T[b]); T[b] = T1[b]; }
-                if (moved <= 1e-16 * (scale > 0 ? scale : 1.0)) break;
+                for (int b = 0; b < nf; ++b) {
+                    moved += fabs(T1[b] - T[b]);
+                    T[b] = T1[b]; th[b] = th1[b]; F[b] = F1[b];
+                }
+                norm = n1;
+                if (moved <= 1e-16 * scale) break;
             }
             if (it == 100) fail = 1;
             for (int b = 0; b < nf; ++b) {
                 double acc = a[csel[b]];
                 for (int c = 0; c < nf; ++c) acc += Gk[csel[b] * mw + m + c] * T[c];
-                v[b] = acc; th[b] = tanh(acc / vs);
+                th[b] = tanh(acc / vs);
                 T[b] = -Fc[b] * th[b];
                 Dg[b] = -Fc[b] / vs * (1.0 - th[b] * th[b]);
+                ut[m + b] = T[b];
             }
             for (int i = 0; i < n; ++i) {
                 double acc = a[i];
@@ -121,23 +142,42 @@ int haa_fit_friction(int K, int n, int m, int nf, int np_, const int *nsub,
                 xn[i] = acc;
             }
             if (sens) {
+                for (int i = 0; i < n; ++i) {
+                    double acc = h * px[i];
+                    for (int l = 0; l < mw; ++l) acc += Gsk[i * mw + l] * ut[l];
+                    v[i] = acc;
+                }
                 for (int j = 0; j < np_; ++j) {
                     double *sj = S + (size_t)j * (K + 1) * n + (size_t)(k + 1) * n;
-                    const double *dPk = dP + ((size_t)j * K + k) * n * n, *dGk = dG + ((size_t)j * K + k) * n * mw;
+                    const double *Ddj = Dd + (size_t)j * n * n, *Xj = Xk + (size_t)j * n * n;
+                    const double *GYk = GY + ((size_t)j * K + k) * n * mw;
                     for (int i = 0; i < n; ++i) {
                         double acc = 0.0;
-                        for (int l = 0; l < n; ++l) acc += Pk[i * n + l] * sj[l] + dPk[i * n + l] * xk[l];
-                        for (int l = 0; l < m; ++l) acc += dGk[i * mw + l] * uk[l];
-                        for (int c = 0; c < nf; ++c) acc += dGk[i * mw + m + c] * T[c];
-                        r[i] = acc;
+                        for (int l = 0; l < n; ++l) acc += Pk[i * n + l] * sj[l];
+                        if (kterms[j]) {      /* a key of A, B or W (not a friction torque, the delay) */
+                            for (int l = 0; l < n; ++l) acc += Ddj[i * n + l] * v[l];
+                            for (int l = 0; l < mw; ++l) acc += GYk[i * mw + l] * ut[l];
+                        }
+                        pre[i] = acc;
+                    }
+                    if (j == dkey && dl[k] != 0.0) {
+                        /* the delay moves this interval's ends: d x+ / d h = A x+ + [B, W] ut per substep */
+                        for (int i = 0; i < n; ++i) {
+                            double acc = 0.0;
+                            for (int l = 0; l < n; ++l) acc += A[i * n + l] * xn[l];
+                            for (int l = 0; l < mw; ++l) acc += BW[i * mw + l] * ut[l];
+                            pre[i] += dl[k] * acc;
+                        }
                     }
                     for (int b = 0; b < nf; ++b) {
+                        double rc = pre[csel[b]];
+                        for (int l = 0; l < n; ++l) rc -= Xj[csel[b] * n + l] * xn[l];
                         for (int c = 0; c < nf; ++c) Jm[b * nf + c] = (b == c) - Dg[b] * Gk[csel[b] * mw + m + c];
-                        dT[b] = Dg[b] * r[csel[b]] + (fck[b] == j ? -th[b] : 0.0);
+                        dT[b] = Dg[b] * rc + (fck[b] == j ? -th[b] : 0.0);
                     }
-                    if (solve_small(nf, Jm, dT)) fail = 1;
+                    if (nf && solve_small(nf, Jm, dT)) fail = 1;
                     for (int i = 0; i < n; ++i) {
-                        double acc = r[i];
+                        double acc = pre[i];
                         for (int c = 0; c < nf; ++c) acc += Gk[i * mw + m + c] * dT[c];
                         sj[i] = acc;
                     }

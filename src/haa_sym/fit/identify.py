@@ -96,11 +96,12 @@ class FitOptions:
         A residual series is called white when the test's p-value is at least this (0.05).
     max_substep : float
         Longest substep (s) of the friction simulation (:mod:`haa_sym.fit.friction`), used when
-        friction is in the model (default 2.5e-4 s; docs/identify.md, "Friction and offsets").
+        friction is in the model (default 5e-4 s: the coarse run of Richardson's extrapolation;
+        docs/identify.md, "Friction and offsets").
     """
 
     min_periods: float = 3.0
-    max_substep: float = 2.5e-4
+    max_substep: float = 5e-4
     max_iterations: int = 50
     tolerance: float = 1e-10
     max_step: float = 1.0
@@ -196,8 +197,7 @@ def _uniform_path(exp: Experiment, keys, opt) -> bool:
 
 def simulate_log(exp: Experiment, inputs, outputs=None, keys=(), values=(), *, options: "FitOptions | None" = None,
                  loop_options=None, sensitivities: bool = False, u: np.ndarray | None = None,
-                 y: np.ndarray | None = None, scale: np.ndarray | None = None, friction: dict | None = None,
-                 state_cache: dict | None = None):
+                 y: np.ndarray | None = None, scale: np.ndarray | None = None, friction: dict | None = None):
     """The model's outputs on ``exp``'s log, simulated as a fit simulates it: the one simulation
     path of the fit and of its validation (:func:`validate`).
 
@@ -225,9 +225,6 @@ def simulate_log(exp: Experiment, inputs, outputs=None, keys=(), values=(), *, o
     friction : dict, optional
         ``Fc_*`` (Nm) over the file's [limits]; with any friction (or an ``Fc_*`` key) the log is
         simulated with Coulomb friction (:func:`_friction_run`).
-    state_cache : dict, optional
-        Kept by the caller between calls on this log: the friction path's estimated states start
-        from the last ones (:func:`haa_sym.fit.friction.simulate_friction_stamps`).
 
     Returns
     -------
@@ -248,7 +245,7 @@ def simulate_log(exp: Experiment, inputs, outputs=None, keys=(), values=(), *, o
     if scale is None:
         scale = np.maximum(np.std(y, axis=0), 1e-300)
     if inputs[0] != "torque_ref" and _uses_friction(exp, keys, friction):
-        return _friction_run(exp, keys, values, inputs, outs, friction, u, y, scale, opt, sensitivities, state_cache)
+        return _friction_run(exp, keys, values, inputs, outs, friction, u, y, scale, opt, sensitivities)
     model = _model(exp, keys, values, inputs, outs, loop_options)
     if not hasattr(model, "A"):                                     # the sampled torque loop
         return simulate(model, u, sensitivities) + (0,)
@@ -364,8 +361,7 @@ def _uses_friction(exp: Experiment, keys, friction) -> bool:
     return any(is_friction_key(k) for k in keys) or any(v > 0 for v in _friction_of(exp, friction).values())
 
 
-def _friction_run(exp: Experiment, keys, values, inputs, outputs, friction, u, y, scale, opt, sens,
-                  state_cache=None):
+def _friction_run(exp: Experiment, keys, values, inputs, outputs, friction, u, y, scale, opt, sens):
     """:func:`simulate_log`'s friction path: the plant behind the file's drive (its lag a state
     appended after the plant's, no friction on it), Coulomb friction on the rotor and the bodies
     (:mod:`haa_sym.fit.friction`), on the log's own stamps with the delayed command and its
@@ -388,8 +384,7 @@ def _friction_run(exp: Experiment, keys, values, inputs, outputs, friction, u, y
     return simulate_friction_stamps(model, fr, log.t, u, delay=params.drive.delay_drive,
                                     delay_key=keys.index("delay_drive") if "delay_drive" in keys else None,
                                     starts=log.starts, estimate=_estimated(exp, opt), y=y, weights=scale,
-                                    sensitivities=sens, max_substep=opt.max_substep,
-                                    state_cache=state_cache)
+                                    sensitivities=sens, max_substep=opt.max_substep)
 
 
 def _check_keys(exps, keys, inputs, friction=None):
@@ -581,7 +576,6 @@ def identify(experiments: list[Experiment], keys: tuple[str, ...], inputs: tuple
         scale = list(sigma)
 
         cache: dict = {}
-        states = [{} for _ in experiments]       # the friction path's last estimated states, per log
         offset_of: dict = {}          # the offsets each cached point's simulation found, per log
 
         def run(theta, sens=True):
@@ -590,10 +584,10 @@ def identify(experiments: list[Experiment], keys: tuple[str, ...], inputs: tuple
             key = theta.tobytes()
             if key not in cache or (sens and cache[key][1] is None):
                 errs, sens_, n0, offs = [], [], 0, {}
-                for e, o, u, y, w, sc in zip(experiments, outs, U, Y, scale, states):
+                for e, o, u, y, w in zip(experiments, outs, U, Y, scale):
                     yp, dy, n_init = simulate_log(e, inputs, o, keys, np.exp(theta), options=opt,
                                                   loop_options=loop_options, sensitivities=sens, u=u, y=y, scale=w,
-                                                  friction=friction, state_cache=sc)
+                                                  friction=friction)
                     off_cols = [o.index(x) for x in offsets if x in o]
                     if off_cols:
                         # variable projection of the offsets: the model plus the mean error (after the
@@ -696,7 +690,8 @@ def identify(experiments: list[Experiment], keys: tuple[str, ...], inputs: tuple
                           "friction_velocity": experiments[0].params.limits.friction_velocity,
                           "max_substep": opt.max_substep, "method": "exact ZOH per substep of the log's own "
                           "intervals (the delayed command switching inside them, segments from estimated states), "
-                          "friction torque implicit at each substep's end; d/d delay_drive a forward difference"}
+                          "friction torque implicit at each substep's end, Richardson-extrapolated over substeps h "
+                          "and h / 2 (second order); d/d delay_drive the scheme's exact derivative"}
                          if use_friction else None),
             "offsets": list(offsets),
             "logs": {e.log.name: {"sha256": e.log.sha256, "samples": e.log.samples, "configuration": e.configuration}

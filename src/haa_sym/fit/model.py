@@ -38,7 +38,7 @@ from haa_sym.errors import ParameterError
 from haa_sym.model.actuator import Actuator
 from haa_sym.model.drive import DRIVE_KEYS
 
-__all__ = ["PlantModel", "Sampled", "plant_derivatives", "sample", "simulate", "output_rows"]
+__all__ = ["PlantModel", "Sampled", "plant_derivatives", "sample", "simulate", "output_rows", "stamp_grid"]
 
 
 @functools.lru_cache(maxsize=None)
@@ -421,6 +421,54 @@ def modal_check(A: np.ndarray, what: str = "the model") -> None:
                              "log from rest without delay_drive, or parameters whose modes are distinct")
 
 
+def stamp_grid(t: np.ndarray, u: np.ndarray, delay: float, starts, on_stamps: bool = False):
+    """The simulation grid of a log's own stamps ``t`` (s, N) with its first (command) input column
+    delayed by ``delay`` (s): the grid of both the linear path (:func:`simulate_stamps`) and the
+    friction path (:func:`haa_sym.fit.friction.simulate_friction_stamps`).
+
+    The grid points are the stamps and the delayed command's switches t_j + delay inside a
+    segment's span (``starts``: first sample of each segment); a switch within 1e-9 median periods
+    of a stamp is the stamp: left out, or with ``on_stamps`` kept as a point of its own at the
+    stamp, after it (an interval of length 0 whose end moves with the delay: a scheme that
+    differentiates its intervals' lengths needs it, the linear path's exact derivative does not).
+    On each grid interval every input is constant: the stamp's inputs,
+    the command as the motor gets it (held from before a segment's start into it).
+
+    Returns
+    -------
+    grid : (G,) the points (s); ug : (G, m) the inputs held from each point; samp : (N,) the grid
+    positions of the stamps; moves : (G,) bool, the points that are switches (they move with the
+    delay: d point / d delay = 1).
+    """
+    N = t.size
+    starts = np.asarray(starts, int)
+    ends = np.append(starts[1:], N)                                   # exclusive
+    tol = 1e-9 * float(np.median(np.diff(t))) if N > 1 else 0.0
+    sw = t + delay
+    seg_sw = np.searchsorted(t[starts], sw, side="right") - 1
+    keep = (seg_sw >= 0) & (sw < t[np.maximum(ends[np.maximum(seg_sw, 0)] - 1, 0)] - tol)
+    near = np.searchsorted(t, sw)
+    on_stamp = (np.abs(t[np.clip(near, 0, N - 1)] - sw) <= tol) | (np.abs(t[np.clip(near - 1, 0, N - 1)] - sw) <= tol)
+    if on_stamps:
+        above, below = np.clip(near, 0, N - 1), np.clip(near - 1, 0, N - 1)
+        hit = np.where(np.abs(t[above] - sw) <= tol, above, below)
+        sw = np.where(on_stamp, t[hit], sw)[keep & (delay > 0)]
+    else:
+        sw = sw[keep & ~on_stamp & (delay > 0)]
+    grid = np.concatenate([t, sw])
+    order = np.argsort(grid, kind="stable")
+    grid = grid[order]
+    samp = np.flatnonzero(order < N)                                  # grid positions of the stamps, in order
+    stamp_of = np.searchsorted(t, grid + tol, side="right") - 1       # the stamp whose input holds
+    cmd_of = np.clip(np.searchsorted(t, grid - delay + tol, side="right") - 1, 0, N - 1)
+    ug = u[stamp_of].copy()
+    if on_stamps:
+        # a stamp with a switch on it holds the old command over the interval of length 0 after it
+        cmd_of[samp] = np.clip(np.searchsorted(t, grid[samp] - delay - tol, side="right") - 1, 0, N - 1)
+    ug[:, 0] = u[cmd_of, 0]                                           # the command as the motor gets it
+    return grid, ug, samp, order >= N
+
+
 def simulate_stamps(model: PlantModel, t: np.ndarray, u: np.ndarray, *, delay: float = 0.0,
                     delay_key: int | None = None, starts=(0,), estimate=(False,), y=None, weights=None,
                     sensitivities: bool = True):
@@ -455,26 +503,11 @@ def simulate_stamps(model: PlantModel, t: np.ndarray, u: np.ndarray, *, delay: f
     beta = Vi @ B                                                     # (n, m)
     starts = np.asarray(starts, int)
     ends = np.append(starts[1:], N)                                   # exclusive
-    tol = 1e-9 * float(np.median(np.diff(t))) if N > 1 else 0.0
-    # the grid: the stamps and the delayed command's switches inside a segment's span
-    sw = t + delay
-    seg_sw = np.searchsorted(t[starts], sw, side="right") - 1
-    keep = (seg_sw >= 0) & (sw < t[np.maximum(ends[np.maximum(seg_sw, 0)] - 1, 0)] - tol)
-    near = np.searchsorted(t, sw)
-    on_stamp = (np.abs(t[np.clip(near, 0, N - 1)] - sw) <= tol) | (np.abs(t[np.clip(near - 1, 0, N - 1)] - sw) <= tol)
-    sw = sw[keep & ~on_stamp & (delay > 0)]
-    grid = np.concatenate([t, sw])
-    order = np.argsort(grid, kind="stable")
-    grid = grid[order]
-    samp = np.flatnonzero(order < N)                                  # grid positions of the stamps, in order
+    grid, ug, samp, _ = stamp_grid(t, u, delay, starts)
     G = grid.size
     seg_start_grid = samp[starts]
     cut = np.zeros(G, bool)
     cut[seg_start_grid] = True
-    stamp_of = np.searchsorted(t, grid + tol, side="right") - 1       # the stamp whose input holds
-    cmd_of = np.clip(np.searchsorted(t, grid - delay + tol, side="right") - 1, 0, N - 1)
-    ug = u[stamp_of].copy()
-    ug[:, 0] = u[cmd_of, 0]                                           # the command as the motor gets it
     h = np.diff(grid)                                                 # (G-1,)
     link = ~cut[1:]                                                   # interval i joins point i to i+1
     a = np.where(link[:, None], np.exp(np.outer(h, lam)), 0.0)        # (G-1, n)
