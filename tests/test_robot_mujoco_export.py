@@ -22,8 +22,9 @@ D_GAIN = {"hyq_haa": 5.0, "sea": 1.0, "qdd_leg": 1.0}
 
 def _export(tmp_path, name, P, D, *extra):
     out = tmp_path / f"{name}.xml"
+    paper = ["--set", "structure=paper"] if name == "qdd_leg" else []       # as _params
     assert main(["export-mujoco", "--params", f"model/{name}.toml", "--P-gain", repr(P), "--D-gain", repr(D),
-                 "--out", str(out), *extra]) == 0
+                 "--out", str(out), *paper, *extra]) == 0
     spec = importlib.util.spec_from_file_location(f"{name}_controller_{abs(hash((P, D)))}",
                                                   tmp_path / f"{name}_controller.py")
     module = importlib.util.module_from_spec(spec)
@@ -64,13 +65,20 @@ def _growth(torque):
     return np.ptp(d[-q:]) / np.ptp(d[-2 * q:-q])
 
 
+def _params(name):
+    """The bundled file; the QDD leg under the paper's structure (its own, impedance_current,
+    commands a current, which export-mujoco refuses)."""
+    p = load_params(f"model/{name}.toml")
+    return p.with_values(structure="paper") if name == "qdd_leg" else p
+
+
 @pytest.mark.slow
 @pytest.mark.parametrize("name", ["hyq_haa", "sea", "qdd_leg"])
 def test_mujoco_equals_simulate(tmp_path, name):
     """A disturbance step and a torque-reference step in MuJoCo equal haa-sym simulate (no
     limits) within 1 % of each signal's peak, at a stable point and one close to the boundary;
     the point the map calls unstable grows in MuJoCo."""
-    loop = ClosedLoop(load_params(f"model/{name}.toml"))
+    loop = ClosedLoop(_params(name))
     D = D_GAIN[name]
     pts = gain_points(loop, D)
     assert _radius(loop, pts["stable"], D) < 1 and NEAR_RADIUS - 1e-6 < _radius(loop, pts["near"], D) < 1
@@ -101,7 +109,7 @@ def test_mujoco_with_a_drive_equals_simulate(tmp_path, name):
     """With a [drive] (lag 3 Ts, dead time 1.4 Ts) the callback's delay line and lag make MuJoCo
     equal haa-sym simulate (no limits, the drive exact) within 1 % of each signal's peak, at a
     stable point and one close to the boundary of the loop with the drive."""
-    base = load_params(f"model/{name}.toml")
+    base = _params(name)
     Ts = base.controller.Ts
     sets = [f"{k}={v * Ts!r}" for k, v in DRIVE_TS.items()]
     loop = ClosedLoop(base.with_values(**{k: v * Ts for k, v in DRIVE_TS.items()}))
@@ -171,6 +179,12 @@ def test_bad_input_one_line_nothing_written(tmp_path, capsys):
         err = capsys.readouterr().err.strip().splitlines()
         assert len(err) == 1 and err[0].startswith("haa-sym: error:") and word in err[0], err
         assert list(tmp_path.iterdir()) == []
+    # a current-commanded structure (the QDD leg's own): refused, naming the structure
+    assert main(["export-mujoco", "--params", "qdd_leg", "--P-gain", "50", "--D-gain", "1", "--out",
+                 str(tmp_path / "q.xml")]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "impedance_current" in err[0] and "structure=paper" in err[0], err
+    assert list(tmp_path.iterdir()) == []
 
 
 def test_mujoco_absent(tmp_path, capsys, monkeypatch):

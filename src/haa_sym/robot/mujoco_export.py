@@ -96,6 +96,13 @@ def _check(loop, P_gain, D_gain, integrator, steps_per_sample):
     if isinstance(steps_per_sample, bool) or not isinstance(steps_per_sample, (int, np.integer)) \
             or not 1 <= steps_per_sample <= 10000:
         raise ParameterError(f"steps_per_sample = {steps_per_sample!r}; allowed: an integer in [1, 10000]")
+    if loop.structure.command != "voltage":
+        # the MJCF's motor is a dcmotor driven by the controller's voltage; a current command
+        # (impedance_current: the QDD leg's own structure, the haptic wall) needs a torque-source
+        # actuator instead, not written yet
+        raise ParameterError(f"{params.source} [controller]: structure = {params.controller.structure!r} commands a "
+                             "current; allowed for export-mujoco: a voltage-commanded structure (paper, torque_pi, "
+                             "torque_pi_ff; e.g. --set structure=paper for the QDD leg)")
     if params.plant.k_w <= 0:
         raise ParameterError(f"{params.source} [motor]: k_w = {params.plant.k_w!r}; allowed: k_w > 0 for the MuJoCo "
                              "export (its dcmotor has one constant sqrt(k_t k_w) for torque and back-EMF)")
