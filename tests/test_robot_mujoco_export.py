@@ -17,7 +17,7 @@ EXPERIMENTS = {"disturbance-step": "T_dist", "torque-step": "T_ff"}
 DURATION = 0.4          # s: 401 samples
 NEAR_RADIUS = 0.9995    # the point "close to the boundary": spectral radius of the sampled loop
 UNSTABLE_RADIUS = 1.002
-D_GAIN = {"hyq_haa": 5.0, "sea": 1.0, "qdd_leg": 1.0}
+D_GAIN = {"hyq_haa": 5.0, "sea": 1.0, "qdd_leg": 1.0, "haptic_wall": 0.0}   # the wall's B = 0: Colgate's K < 4
 
 
 def _export(tmp_path, name, P, D, *extra):
@@ -65,7 +65,7 @@ def _growth(torque):
 
 
 @pytest.mark.slow
-@pytest.mark.parametrize("name", ["hyq_haa", "sea", "qdd_leg"])
+@pytest.mark.parametrize("name", ["hyq_haa", "sea", "qdd_leg", "haptic_wall"])
 def test_mujoco_equals_simulate(tmp_path, name):
     """A disturbance step and a torque-reference step in MuJoCo equal haa-sym simulate (no
     limits) within 1 % of each signal's peak, at a stable point and one close to the boundary;
@@ -159,6 +159,22 @@ def test_model_structure(tmp_path):
     assert m.opt.timestep == pytest.approx(1e-5) and m.opt.integrator == mujoco.mjtIntegrator.mjINT_RK4
     Ac = controller_batch(ClosedLoop(load_params("model/hyq_haa.toml")), 200.0, 5.0)[0][0]
     assert np.array_equal(ctl.AC, Ac)
+
+
+@pytest.mark.parametrize("name, sets, kind", [("qdd_leg", (), "motor"), ("qdd_leg", ("structure=paper",), "dcmotor"),
+                                              ("haptic_wall", (), "motor")])
+def test_current_command_is_a_motor_actuator(tmp_path, name, sets, kind):
+    """A current-commanded structure (impedance_current) drives a `motor` whose control is k_t I;
+    a voltage-commanded one the dcmotor. Both carry gear N, armature J_m and damping B_m (what
+    import-robot reads back)."""
+    ctl = _export(tmp_path, name, 2.0, 0.0, *(a for s in sets for a in ("--set", s)))
+    text = (tmp_path / f"{name}.xml").read_text()
+    assert f"<{kind} name=\"motor\"" in text and ("<dcmotor" in text) == (kind == "dcmotor")
+    m = mujoco.MjModel.from_xml_path(str(tmp_path / f"{name}.xml"))
+    p = load_params(f"model/{name}.toml").plant
+    assert (m.actuator_gear[0, 0], m.actuator_armature[0], m.actuator_damping[0]) == (p.N, p.J_m, p.B_m)
+    assert ctl.COMMAND == ("voltage" if kind == "dcmotor" else "current")
+    assert ctl.COMMAND_SCALE == (p.k_t if kind == "motor" else pytest.approx((p.k_t / p.k_w) ** 0.5))
 
 
 def test_bad_input_one_line_nothing_written(tmp_path, capsys):
