@@ -96,7 +96,7 @@ DRIVE_TS = {"tau_drive": 3.0, "delay_drive": 1.4}       # in samples Ts: a lag a
 
 
 @pytest.mark.slow
-@pytest.mark.parametrize("name", ["hyq_haa", "sea"])
+@pytest.mark.parametrize("name", ["hyq_haa", "sea", "qdd_leg"])
 def test_mujoco_with_a_drive_equals_simulate(tmp_path, name):
     """With a [drive] (lag 3 Ts, dead time 1.4 Ts) the callback's delay line and lag make MuJoCo
     equal haa-sym simulate (no limits, the drive exact) within 1 % of each signal's peak, at a

@@ -324,7 +324,9 @@ class Controller:
         """The motor current (A): the dcmotor's state, or the current command in effect."""
         if COMMAND == "voltage":
             return float(data.act[0]) * CURRENT_SCALE
-        return (self.drive(data.time) if TAU_DRIVE or DELAY_DRIVE else float(data.ctrl[0])) * CURRENT_SCALE
+        if TAU_DRIVE or DELAY_DRIVE:
+            return self.drive(data.time)             # the drive's output is the current itself (A)
+        return float(data.ctrl[0]) * CURRENT_SCALE   # the held control k_t I
 
     def measured_torque(self, data):
         if self.tendon is None:                      # k_t N I: the current estimate
