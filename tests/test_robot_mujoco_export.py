@@ -17,14 +17,13 @@ EXPERIMENTS = {"disturbance-step": "T_dist", "torque-step": "T_ff"}
 DURATION = 0.4          # s: 401 samples
 NEAR_RADIUS = 0.9995    # the point "close to the boundary": spectral radius of the sampled loop
 UNSTABLE_RADIUS = 1.002
-D_GAIN = {"hyq_haa": 5.0, "sea": 1.0, "qdd_leg": 1.0}
+D_GAIN = {"hyq_haa": 5.0, "sea": 1.0, "qdd_leg": 1.0, "haptic_wall": 0.0}   # the wall's B = 0: Colgate's K < 4
 
 
 def _export(tmp_path, name, P, D, *extra):
     out = tmp_path / f"{name}.xml"
-    paper = ["--set", "structure=paper"] if name == "qdd_leg" else []       # as _params
     assert main(["export-mujoco", "--params", f"model/{name}.toml", "--P-gain", repr(P), "--D-gain", repr(D),
-                 "--out", str(out), *paper, *extra]) == 0
+                 "--out", str(out), *extra]) == 0
     spec = importlib.util.spec_from_file_location(f"{name}_controller_{abs(hash((P, D)))}",
                                                   tmp_path / f"{name}_controller.py")
     module = importlib.util.module_from_spec(spec)
@@ -65,20 +64,13 @@ def _growth(torque):
     return np.ptp(d[-q:]) / np.ptp(d[-2 * q:-q])
 
 
-def _params(name):
-    """The bundled file; the QDD leg under the paper's structure (its own, impedance_current,
-    commands a current, which export-mujoco refuses)."""
-    p = load_params(f"model/{name}.toml")
-    return p.with_values(structure="paper") if name == "qdd_leg" else p
-
-
 @pytest.mark.slow
-@pytest.mark.parametrize("name", ["hyq_haa", "sea", "qdd_leg"])
+@pytest.mark.parametrize("name", ["hyq_haa", "sea", "qdd_leg", "haptic_wall"])
 def test_mujoco_equals_simulate(tmp_path, name):
     """A disturbance step and a torque-reference step in MuJoCo equal haa-sym simulate (no
     limits) within 1 % of each signal's peak, at a stable point and one close to the boundary;
     the point the map calls unstable grows in MuJoCo."""
-    loop = ClosedLoop(_params(name))
+    loop = ClosedLoop(load_params(f"model/{name}.toml"))
     D = D_GAIN[name]
     pts = gain_points(loop, D)
     assert _radius(loop, pts["stable"], D) < 1 and NEAR_RADIUS - 1e-6 < _radius(loop, pts["near"], D) < 1
@@ -104,12 +96,12 @@ DRIVE_TS = {"tau_drive": 3.0, "delay_drive": 1.4}       # in samples Ts: a lag a
 
 
 @pytest.mark.slow
-@pytest.mark.parametrize("name", ["hyq_haa", "sea"])
+@pytest.mark.parametrize("name", ["hyq_haa", "sea", "qdd_leg"])
 def test_mujoco_with_a_drive_equals_simulate(tmp_path, name):
     """With a [drive] (lag 3 Ts, dead time 1.4 Ts) the callback's delay line and lag make MuJoCo
     equal haa-sym simulate (no limits, the drive exact) within 1 % of each signal's peak, at a
     stable point and one close to the boundary of the loop with the drive."""
-    base = _params(name)
+    base = load_params(f"model/{name}.toml")
     Ts = base.controller.Ts
     sets = [f"{k}={v * Ts!r}" for k, v in DRIVE_TS.items()]
     loop = ClosedLoop(base.with_values(**{k: v * Ts for k, v in DRIVE_TS.items()}))
@@ -169,6 +161,22 @@ def test_model_structure(tmp_path):
     assert np.array_equal(ctl.AC, Ac)
 
 
+@pytest.mark.parametrize("name, sets, kind", [("qdd_leg", (), "motor"), ("qdd_leg", ("structure=paper",), "dcmotor"),
+                                              ("haptic_wall", (), "motor")])
+def test_current_command_is_a_motor_actuator(tmp_path, name, sets, kind):
+    """A current-commanded structure (impedance_current) drives a `motor` whose control is k_t I;
+    a voltage-commanded one the dcmotor. Both carry gear N, armature J_m and damping B_m (what
+    import-robot reads back)."""
+    ctl = _export(tmp_path, name, 2.0, 0.0, *(a for s in sets for a in ("--set", s)))
+    text = (tmp_path / f"{name}.xml").read_text()
+    assert f"<{kind} name=\"motor\"" in text and ("<dcmotor" in text) == (kind == "dcmotor")
+    m = mujoco.MjModel.from_xml_path(str(tmp_path / f"{name}.xml"))
+    p = load_params(f"model/{name}.toml").plant
+    assert (m.actuator_gear[0, 0], m.actuator_armature[0], m.actuator_damping[0]) == (p.N, p.J_m, p.B_m)
+    assert ctl.COMMAND == ("voltage" if kind == "dcmotor" else "current")
+    assert ctl.COMMAND_SCALE == (p.k_t if kind == "motor" else pytest.approx((p.k_t / p.k_w) ** 0.5))
+
+
 def test_bad_input_one_line_nothing_written(tmp_path, capsys):
     cases = [(["--out", str(tmp_path / "m.txt")], "unsupported file type"),
              (["--set", "k_w=0", "--out", str(tmp_path / "m.xml")], "k_w"),
@@ -179,12 +187,6 @@ def test_bad_input_one_line_nothing_written(tmp_path, capsys):
         err = capsys.readouterr().err.strip().splitlines()
         assert len(err) == 1 and err[0].startswith("haa-sym: error:") and word in err[0], err
         assert list(tmp_path.iterdir()) == []
-    # a current-commanded structure (the QDD leg's own): refused, naming the structure
-    assert main(["export-mujoco", "--params", "qdd_leg", "--P-gain", "50", "--D-gain", "1", "--out",
-                 str(tmp_path / "q.xml")]) == 2
-    err = capsys.readouterr().err.strip().splitlines()
-    assert len(err) == 1 and "impedance_current" in err[0] and "structure=paper" in err[0], err
-    assert list(tmp_path.iterdir()) == []
 
 
 def test_mujoco_absent(tmp_path, capsys, monkeypatch):

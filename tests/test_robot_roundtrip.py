@@ -14,8 +14,6 @@ pytestmark = pytest.mark.skipif(not mujoco_available(), reason="MuJoCo (haa_sym[
 @pytest.mark.parametrize("name", ["hyq_haa", "sea", "qdd_leg"])
 def test_export_then_import_gives_the_same_values(tmp_path, capsys, name):
     params = load_params(f"model/{name}.toml")
-    if name == "qdd_leg":                       # export-mujoco takes a voltage command
-        params = params.with_values(structure="paper")
     port = params.plant.topology.port
     xml = tmp_path / f"{name}.xml"
     xml.write_text(export_mujoco(ClosedLoop(params), 100.0, 1.0).xml)

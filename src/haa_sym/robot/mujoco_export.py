@@ -15,6 +15,11 @@ controller's Ts. The model, per the chain equations of docs/model.md:
   dcmotor has one constant K = sqrt(k_t k_w) for both; the callback scales the voltage by
   sqrt(k_t / k_w), which makes the current state sqrt(k_t / k_w) I and the coil equation and the
   torque exactly the chain's (a no-op when k_t = k_w);
+* for a current-commanded structure (``structure.command == "current"``, e.g.
+  ``impedance_current``: the electrical state imposed, :func:`haa_sym.loop.plant.current_commanded`)
+  the motor is MuJoCo's ``motor`` on the ``rotor`` joint, ``gear`` = N, with the same ``armature``
+  J_m and ``damping`` B_m: its control is the motor torque k_t I, I the current command after the
+  drive (no coil, no back-EMF: the drive's current loop imposes I);
 * each coupling is a fixed tendon with the joint coefficients (+1, -1): its length is
   theta_a - theta_b, its ``stiffness`` K and ``damping`` D give the spring-damper torque
   -T on a and +T on b. MuJoCo has no series elastic element (mujoco issue #1524); a tendon spans
@@ -96,14 +101,7 @@ def _check(loop, P_gain, D_gain, integrator, steps_per_sample):
     if isinstance(steps_per_sample, bool) or not isinstance(steps_per_sample, (int, np.integer)) \
             or not 1 <= steps_per_sample <= 10000:
         raise ParameterError(f"steps_per_sample = {steps_per_sample!r}; allowed: an integer in [1, 10000]")
-    if loop.structure.command != "voltage":
-        # the MJCF's motor is a dcmotor driven by the controller's voltage; a current command
-        # (impedance_current: the QDD leg's own structure, the haptic wall) needs a torque-source
-        # actuator instead, not written yet
-        raise ParameterError(f"{params.source} [controller]: structure = {params.controller.structure!r} commands a "
-                             "current; allowed for export-mujoco: a voltage-commanded structure (paper, torque_pi, "
-                             "torque_pi_ff; e.g. --set structure=paper for the QDD leg)")
-    if params.plant.k_w <= 0:
+    if loop.structure.command == "voltage" and params.plant.k_w <= 0:
         raise ParameterError(f"{params.source} [motor]: k_w = {params.plant.k_w!r}; allowed: k_w > 0 for the MuJoCo "
                              "export (its dcmotor has one constant sqrt(k_t k_w) for torque and back-EMF)")
 
@@ -117,7 +115,8 @@ def export_mujoco(loop, P_gain: float, D_gain: float, *, controller_module: str 
     ----------
     loop : ClosedLoop
         Plant, controller and options (the analysed loop); its ``[drive]`` (lag, dead time)
-        runs in the controller module, between the controller's voltage and the dcmotor.
+        runs in the controller module, between the controller's command and the motor (the
+        dcmotor's voltage, or for a current-commanded structure the current of a ``motor``).
     P_gain, D_gain : float
         Impedance gains of Eq. (8), Nm/rad and Nms/rad.
     controller_module : str
@@ -128,24 +127,32 @@ def export_mujoco(loop, P_gain: float, D_gain: float, *, controller_module: str 
         MuJoCo's integrator (:data:`INTEGRATORS`; default :data:`DEFAULT_INTEGRATOR`).
     steps_per_sample : int, optional
         MuJoCo steps per controller sample: ``timestep`` = Ts / steps_per_sample (s). Default the
-        larger of :data:`DEFAULT_STEPS_PER_SAMPLE` and ceil(ELECTRICAL_STEPS Ts R / L).
+        larger of :data:`DEFAULT_STEPS_PER_SAMPLE` and ceil(ELECTRICAL_STEPS Ts R / L) (the
+        coil's bound; a current command has no coil state: :data:`DEFAULT_STEPS_PER_SAMPLE`).
 
     Returns
     -------
     MujocoExport
     """
     params = loop.params
+    command = loop.structure.command
     if steps_per_sample is None:
         v0 = params.plant.as_dict()
-        steps_per_sample = max(DEFAULT_STEPS_PER_SAMPLE,
-                               math.ceil(ELECTRICAL_STEPS * params.controller.Ts * v0["R"] / v0["L"] - 1e-9))
+        # the dcmotor's first-order coil integration ties h to L / R; an imposed current has no coil
+        electrical = math.ceil(ELECTRICAL_STEPS * params.controller.Ts * v0["R"] / v0["L"] - 1e-9) \
+            if command == "voltage" else 0
+        steps_per_sample = max(DEFAULT_STEPS_PER_SAMPLE, electrical)
     _check(loop, P_gain, D_gain, integrator, steps_per_sample)
     plant, top, Ts = params.plant, params.plant.topology, params.controller.Ts
     v = plant.as_dict()
     h = Ts / steps_per_sample
     Ac, Bc, Cc, Dc = (m[0] for m in controller_batch(loop, float(P_gain), float(D_gain)))
     # the torque the loop reads (loop.torque_output: the file's torque_damping or the option's)
-    if top.sensor == "current":
+    if top.sensor == "current" and command == "current":
+        # k_t N I with I the current in effect at the sample instant (the held command, or the
+        # drive's lag output), as haa-sym simulate reads the imposed current
+        torque = {"kind": "command", "k_t_N": v["k_t"] * v["N"]}
+    elif top.sensor == "current":
         # k_t N I from the dcmotor's current state (the actuator's force is computed after the
         # control callback, so at a sample instant it is the previous step's)
         torque = {"kind": "current", "k_t_N": v["k_t"] * v["N"]}
@@ -155,24 +162,29 @@ def export_mujoco(loop, P_gain: float, D_gain: float, *, controller_module: str 
                   "D": v[f"D_{top.sensor}"] if damped else 0.0}
     names = ("rotor",) + tuple(b.name for b in top.bodies)
     k_t, k_w, N = v["k_t"], v["k_w"], v["N"]
+    # the actuator's control per unit of the controller's command: the dcmotor's scaled voltage
+    # (one constant sqrt(k_t k_w)), or the motor torque k_t I of the current command I
+    command_scale = math.sqrt(k_t / k_w) if command == "voltage" else k_t
     meta = {"haa_sym": __version__, "source": params.source, "P_gain": float(P_gain), "D_gain": float(D_gain),
             "Ts": Ts, "timestep": h, "controller_module": controller_module, "steps_per_sample": steps_per_sample, "integrator": integrator,
             "joints": list(names), "encoder_joint": top.encoder, "port_joint": top.port, "torque": torque,
-            "voltage_scale": math.sqrt(k_t / k_w), "current_scale": math.sqrt(k_w / k_t), "gear": N,
+            "command": command, "command_scale": command_scale,
+            "current_scale": math.sqrt(k_w / k_t) if command == "voltage" else 1.0 / k_t, "gear": N,
             "tau_drive": params.drive.tau_drive, "delay_drive": params.drive.delay_drive,
             "controller_inputs": list(CONTROLLER_INPUTS), "controller_outputs": list(CONTROLLER_OUTPUTS),
             "Ac": Ac.tolist(), "Bc": Bc.tolist(), "Cc": Cc.tolist(), "Dc": Dc.tolist(),
             "configuration": params.configuration_name if hasattr(params, "configuration_name") else None}
-    return MujocoExport(_xml(params, names, h, integrator, controller_module),
+    return MujocoExport(_xml(params, names, h, integrator, controller_module, command),
                         _controller_text(meta, xml_name), meta)
 
 
-def _xml(params, names, h, integrator, controller_module) -> str:
+def _xml(params, names, h, integrator, controller_module, command) -> str:
     plant, top = params.plant, params.plant.topology
     v = plant.as_dict()
     # the rotor's own body carries a negligible inertia (MuJoCo wants a moving body to have one):
-    # its inertia is the dcmotor's armature J_m, reflected by gear^2
-    eps = 1e-12 * v["J_m"] * v["N"] ** 2
+    # its inertia is the motor's armature J_m, reflected by gear^2; at least 1e-12 kg m^2, 1000x
+    # MuJoCo's floor mjMINVAL = 1e-15 (a direct-drive rotor, J_m 1e-4 and N 1, was below it)
+    eps = max(1e-12 * v["J_m"] * v["N"] ** 2, 1e-12)
     lines = [f"<!-- {params.source}: exported by haa-sym {__version__} (export-mujoco); the controller runs in "
              f"{controller_module}.py (docs/robot.md, 'Export to MuJoCo'). Every hinge is a body's absolute "
              "angle about x (rad); rotor = theta_m / N. -->",
@@ -204,10 +216,14 @@ def _xml(params, names, h, integrator, controller_module) -> str:
                       f"      <joint joint={quoteattr(c.b)} coef=\"-1\"/>",
                       "    </fixed>"])
     lines.append("  </tendon>")
-    lines.extend(["  <actuator>",
-                  f"    <dcmotor name=\"motor\" joint=\"rotor\" gear=\"{_f(v['N'])}\" resistance=\"{_f(v['R'])}\" "
-                  f"motorconst=\"{_f(v['k_t'])} {_f(v['k_w'])}\" inductance=\"{_f(v['L'])} 0\" "
-                  f"armature=\"{_f(v['J_m'])}\" damping=\"{_f(v['B_m'])} 0 0\"/>",
+    rotor = f"armature=\"{_f(v['J_m'])}\" damping=\"{_f(v['B_m'])} 0 0\""
+    if command == "voltage":
+        motor = (f"    <dcmotor name=\"motor\" joint=\"rotor\" gear=\"{_f(v['N'])}\" resistance=\"{_f(v['R'])}\" "
+                 f"motorconst=\"{_f(v['k_t'])} {_f(v['k_w'])}\" inductance=\"{_f(v['L'])} 0\" {rotor}/>")
+    else:
+        # the drive imposes the current: the control is the motor torque k_t I (Nm, motor side)
+        motor = f"    <motor name=\"motor\" joint=\"rotor\" gear=\"{_f(v['N'])}\" {rotor}/>"
+    lines.extend(["  <actuator>", motor,
                   "  </actuator>",
                   "</mujoco>", ""])
     return "\n".join(lines)
@@ -232,7 +248,7 @@ def _controller_text(meta: dict, xml_name: str) -> str:
     return _CONTROLLER_TEMPLATE.format(
         version=meta["haa_sym"], source=meta["source"], module=meta["controller_module"], P=meta["P_gain"], D=meta["D_gain"], xml_name=xml_name,
         Ts=repr(meta["Ts"]), steps=meta["steps_per_sample"], encoder=repr(meta["encoder_joint"]),
-        port=repr(meta["port_joint"]), torque=repr(meta["torque"]), vscale=repr(meta["voltage_scale"]),
+        port=repr(meta["port_joint"]), torque=repr(meta["torque"]), command=repr(meta["command"]), cscale=repr(meta["command_scale"]),
         iscale=repr(meta["current_scale"]), gear=repr(meta["gear"]), tau=repr(meta["tau_drive"]),
         delay=repr(meta["delay_drive"]), **mat)
 
@@ -243,11 +259,12 @@ D_gain = {D!r} Nms/rad, running on {xml_name} in a MuJoCo control callback at Ts
 
 The controller is the sampled state space of haa_sym.loop.statespace.controller_batch (the loop
 the maps analyse): inputs u = [encoder angle (rad), measured torque (Nm), T_ff (Nm), theta_ref
-(rad)], outputs [V (V, the voltage applied after the loop's delay), T_ref (Nm)]; per sample
-y = CC x + DC u, then x = AC x + BC u. The voltage is held until the next sample, then passes
-the drive: the dead time DELAY_DRIVE (the held command switches at t_k + DELAY_DRIVE) and the
-first-order lag TAU_DRIVE (its exact solution between switches, at every call's time), and is
-the dcmotor's input.
+(rad)], outputs [u (the command after the loop's delay: COMMAND, a voltage V or a current A), T_ref
+(Nm)]; per sample y = CC x + DC u, then x = AC x + BC u. The command is held until the next
+sample, then passes the drive: the dead time DELAY_DRIVE (the held command switches at
+t_k + DELAY_DRIVE) and the first-order lag TAU_DRIVE (its exact solution between switches, at
+every call's time), and is the motor's input (times COMMAND_SCALE: the dcmotor's voltage, or the
+motor torque k_t I of a current command).
 
     python {{this file}} --experiment disturbance-step --amplitude 1 --duration 1   # a run, summarised
     >>> import {module}; r = {module}.run(1.0, T_dist=1.0)                    # from Python
@@ -266,8 +283,11 @@ ENCODER = {encoder}            # the joint the encoder reads (rotor: theta_m / N
 PORT = {port}                  # the joint the external torque T_dist acts on
 TORQUE = {torque}              # the measured torque: a tendon's spring (and damper), or k_t N I
 GEAR = {gear}                  # N
-VOLTAGE_SCALE = {vscale}       # sqrt(k_t / k_w): MuJoCo's dcmotor has one constant sqrt(k_t k_w)
-CURRENT_SCALE = {iscale}       # sqrt(k_w / k_t): the dcmotor's current state to the motor's current (A)
+COMMAND = {command}            # what the controller commands: "voltage" (a dcmotor) or "current" (a motor)
+COMMAND_SCALE = {cscale}       # the actuator's control per unit command: sqrt(k_t / k_w) (MuJoCo's
+                               # dcmotor has one constant sqrt(k_t k_w)), or k_t (the motor torque k_t I)
+CURRENT_SCALE = {iscale}       # to the motor's current (A): from the dcmotor's current state, sqrt(k_w / k_t),
+                               # or from the motor's control, 1 / k_t
 TAU_DRIVE = {tau}              # s, the drive's first-order lag (0: none)
 DELAY_DRIVE = {delay}          # s, the drive's dead time on the command (0: none)
 AC = np.array({Ac})
@@ -279,8 +299,8 @@ COLUMNS = ("time", "theta", "velocity", "torque", "torque_ref", "voltage", "curr
 
 class Controller:
     """The control callback (``mujoco.set_mjcb_control(Controller(model, data))``): at every
-    sample instant k TS it reads the sensors, steps the controller and sets the voltage; between
-    them it does nothing (the voltage is held). ``T_dist`` (Nm on PORT), ``T_ff`` (Nm) and
+    sample instant k TS it reads the sensors, steps the controller and sets the command; between
+    them it does nothing (the command is held). ``T_dist`` (Nm on PORT), ``T_ff`` (Nm) and
     ``theta_ref`` (rad) are constant inputs from t = 0 (set them before a run); ``log`` collects
     one row per sample (COLUMNS)."""
 
@@ -292,15 +312,25 @@ class Controller:
         self.queue, self.v_in, self.v_lag, self.s = [], 0.0, 0.0, 0.0
         self.T_dist, self.T_ff, self.theta_ref = T_dist, T_ff, theta_ref
         self.h = model.opt.timestep
+        self.rk4 = model.opt.integrator == mujoco.mjtIntegrator.mjINT_RK4
+        self.pending, self.calls = -1, 0
         self.q_enc = model.jnt_qposadr[model.joint(ENCODER).id]
         port = model.joint(PORT).id
         self.q_port, self.v_port = model.jnt_qposadr[port], model.jnt_dofadr[port]
         self.tendon = model.tendon(TORQUE["name"]).id if TORQUE["kind"] == "tendon" else None
         self.log = []
 
+    def current(self, data):
+        """The motor current (A): the dcmotor's state, or the current command in effect."""
+        if COMMAND == "voltage":
+            return float(data.act[0]) * CURRENT_SCALE
+        if TAU_DRIVE or DELAY_DRIVE:
+            return self.drive(data.time)             # the drive's output is the current itself (A)
+        return float(data.ctrl[0]) * CURRENT_SCALE   # the held control k_t I
+
     def measured_torque(self, data):
         if self.tendon is None:                      # k_t N I: the current estimate
-            return TORQUE["k_t_N"] * float(data.act[0]) * CURRENT_SCALE
+            return TORQUE["k_t_N"] * self.current(data)
         return TORQUE["K"] * float(data.ten_length[self.tendon]) + TORQUE["D"] * float(data.ten_velocity[self.tendon])
 
     def drive(self, t):
@@ -320,21 +350,28 @@ class Controller:
     def __call__(self, model, data):
         k = int(round(data.time / TS))
         if k != self.k and abs(data.time - k * TS) <= 0.25 * self.h:
-            self.sample(k, data)                     # a sample instant (its first call)
+            # RK4's last stage of the step ending at t_k is a call at t_k too, on the stage's
+            # state x + h k3 and still under the old command: the sample is the step's start
+            # (mj_step's mj_forward, the second call at t_k; the first at t = 0 and without stages)
+            self.calls = self.calls + 1 if self.pending == k else 1
+            self.pending = k
+            if k == 0 or not self.rk4 or self.calls == 2:
+                self.sample(k, data)
         if TAU_DRIVE or DELAY_DRIVE:
-            data.ctrl[0] = self.drive(data.time) * VOLTAGE_SCALE
+            data.ctrl[0] = self.drive(data.time) * COMMAND_SCALE
 
     def sample(self, k, data):
         self.k = k
         u = np.array([data.qpos[self.q_enc], self.measured_torque(data), self.T_ff, self.theta_ref])
+        current = self.current(data)                 # before this sample's command takes effect
         y = CC @ self.x + DC @ u
         self.x = AC @ self.x + BC @ u
         if TAU_DRIVE or DELAY_DRIVE:
             self.queue.append((k * TS + DELAY_DRIVE, float(y[0])))
         else:
-            data.ctrl[0] = y[0] * VOLTAGE_SCALE
+            data.ctrl[0] = y[0] * COMMAND_SCALE
         data.qfrc_applied[self.v_port] = self.T_dist
-        self.log.append((k * TS, u[0], data.qvel[self.v_port], u[1], y[1], y[0], data.act[0] * CURRENT_SCALE))
+        self.log.append((k * TS, u[0], data.qvel[self.v_port], u[1], y[1], y[0], current))
 
 
 def load():
