@@ -77,6 +77,20 @@ def test_more_workers_than_cores_warns_in_one_line(monkeypatch, capsys):
     assert tasks.LOCAL_START_METHOD == ("fork" if sys.platform == "linux" else "spawn")
 
 
+def _blas_threads():
+    import threadpoolctl
+    return sorted({d["num_threads"] for d in threadpoolctl.threadpool_info() if d["user_api"] == "blas"})
+
+
+def test_local_workers_run_one_blas_thread():
+    """A worker is one thread: a forked worker inherits the command's OpenBLAS with a thread per
+    core (dask's OMP_NUM_THREADS=1 comes too late for it), so local:N limits it to one."""
+    import numpy  # noqa: F401 - OpenBLAS loaded in the command before the fork, as in a command
+    with tasks.cluster("local:2") as client:
+        got = client.run(_blas_threads)
+    assert len(got) == 2 and all(v == [1] for v in got.values()), got
+
+
 def test_other_values_pass_through():
     for spec in (None, "tcp://127.0.0.1:8786"):
         with tasks.cluster(spec) as s:

@@ -111,6 +111,9 @@ def cluster(spec):
                               scheduler_kwargs=SCHEDULER_HTTP, silence_logs=logging.ERROR)
         client = Client(cl)
         client.wait_for_workers(n, timeout=LOCAL_START_TIMEOUT)
+        # every worker (and one a nanny restarts) on one BLAS thread (haa_sym.io.worker_plugins)
+        from haa_sym.io.worker_plugins import OneBlasThread
+        client.register_plugin(OneBlasThread(), name="haa_sym-one-blas-thread")
         yield client
     finally:
         if client is not None:
