@@ -128,7 +128,8 @@ def test_the_delayed_current_commanded_plant_is_the_hand_built_one(tmp_path, nam
     rng = np.random.default_rng(1)
     t = np.arange(n) * Ts
     for u in (np.eye(1, n, 3).ravel(), rng.standard_normal(n)):
-        u = u.copy()
+        # the fit holds a segment's first command into the delay before it (the command before
+        # the log is its first, haa_sym.fit.model.stamp_grid); the reference starts from zero
         u[0] = 0.0
         log = tmp_path / "pulse.csv"
         log.write_text("time,current,theta\n" + "".join(f"{float(a)!r},{float(b)!r},0\n" for a, b in zip(t, u)))
