@@ -109,5 +109,5 @@ def test_short_log_and_unobservable_key_are_refused(tmp_path):
     with pytest.raises(ParameterError, match=r"3 s long, 3 periods of the model's slowest mode"):
         identify([Experiment(log, params)], ("K_bar",), ("current",), ("torque", "theta"))
     assert 3 * slow > 3.0
-    with pytest.raises(ParameterError, match="--fit R: with --input current"):
+    with pytest.raises(ParameterError, match=r"--fit R: the current-commanded model .* does not contain L, R, k_w"):
         identify([Experiment(log, params)], ("R",), ("current",), ("torque", "theta"))

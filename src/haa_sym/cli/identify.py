@@ -70,6 +70,9 @@ def register(sub) -> dict:
     p.add_argument("--max-angle", type=float, default=MAX_ANGLE, metavar="RAD",
                    help="largest span of a log's theta column: the model is linear about an operating point "
                         "(default %(default)g rad)")
+    p.add_argument("--max-substep", type=float, default=FitOptions().max_substep, metavar="SECONDS",
+                   help="longest substep of the friction simulation (with Fc_* fitted or in the file's [limits]; "
+                        "default %(default)g s; a light rotor with strong friction needs less: docs/identify.md)")
     p.add_argument("--initial-state", choices=INITIAL_STATES, default=FitOptions().initial_state,
                    help="a log's first segment starts at rest (checked) or from an estimated state (default "
                         "%(default)s; segments after gaps and windows inside a log are always estimated)")
@@ -193,6 +196,7 @@ def run(args) -> int:
         raise ParameterError(f"--min-periods {args.min_periods!r}; allowed: a number >= 0")
     if not args.max_angle > 0:
         raise ParameterError(f"--max-angle {args.max_angle!r}; allowed: an angle > 0 (rad)")
+    FitOptions(max_substep=args.max_substep)   # checks --max-substep before the logs are read
     out = _check_out(args.out, "identify", "--out", (".toml",))
     report = _check_out(args.report, "identify", "--report", (".json",))
     plot = _check_out(args.plot, "identify", "--plot")
@@ -255,7 +259,7 @@ def run(args) -> int:
             check_file(target, flag)
     cases = _validation_cases(args, experiments, inputs, outputs, validate_params, fitted_logs)
     loop = ClosedLoop(experiments[0].params, loop_options, basis=False)
-    options = FitOptions(min_periods=args.min_periods, initial_state=args.initial_state)
+    options = FitOptions(min_periods=args.min_periods, initial_state=args.initial_state, max_substep=args.max_substep)
     result = identify(experiments, keys, inputs, outputs, options, loop_options,
                       provenance={**loop.provenance(), "params_file": str(path)}, figure_data=plot is not None,
                       offsets=offsets)

@@ -32,6 +32,7 @@ from haa_sym.fit.friction import friction_entries, is_friction_key, simulate_fri
 from haa_sym.fit.model import modal_check, open_loop_model, sample, simulate, simulate_stamps
 from haa_sym.io.budget import check_memory, fit_bytes
 from haa_sym.io.logs import OUTPUTS, Log
+from haa_sym.model import structures
 from haa_sym.model.drive import DRIVE_KEYS
 
 __all__ = ["FitOptions", "FitResult", "Experiment", "identify", "INPUT_MODES", "INITIAL_STATES", "simulate_log",
@@ -44,6 +45,9 @@ INPUT_MODES = ("voltage", "current", "torque_ref")
 # the well-posed fits of the synthetic logs give 6-200, a near-collinear pair
 # (e.g. an inertia and a stiffness seen only through their ratio) 1e12 and above
 CONDITION_LIMIT = 1e10
+# the keys of the motor's electrical equation L dI_m/dt = V_m - R I_m - k_w dtheta_m: a current-
+# commanded model (--input current) does not contain them
+ELECTRICAL_KEYS = ("L", "R", "k_w")
 Z95 = 1.959963984540054          # the two-sided 95 % point of the normal distribution
 # how ci95 is computed (FitOptions.intervals): the name and the text the report and the fitted
 # file give
@@ -116,6 +120,10 @@ class FitOptions:
     def __post_init__(self):
         if self.intervals not in INTERVAL_METHODS:
             raise ParameterError(f"FitOptions.intervals {self.intervals!r}; allowed: {list(INTERVAL_METHODS)}")
+        ms = self.max_substep
+        if isinstance(ms, bool) or not isinstance(ms, (int, float)) or not 0 < ms < float("inf"):
+            raise ParameterError(f"--max-substep {ms!r}; allowed: a positive finite number of seconds (the "
+                                 "friction simulation's longest substep)")
 
 
 #: A log fitted from rest must start there: each output's first sample within this fraction of
@@ -414,20 +422,40 @@ def _check_keys(exps, keys, inputs, friction=None):
         if k not in top.parameter_keys:
             raise ParameterError(f"--fit {k}: not a plant parameter of {top.source}; allowed: "
                                  f"{list(top.parameter_keys) + list(DRIVE_KEYS)}")
+        if inputs[0] == "current" and k in ELECTRICAL_KEYS:
+            # the drive's current loop imposes I_m: the electrical equation L dI/dt = V - R I - k_w w
+            # is not in the model (haa_sym.fit.model._open_loop removes its state), so these keys
+            # act on nothing the log shows
+            kept = [x for x in top.parameter_keys if x not in ELECTRICAL_KEYS]
+            raise ParameterError(f"--fit {k}: the current-commanded model (--input current: the drive imposes the "
+                                 f"current, the electrical state removed) does not contain "
+                                 f"{', '.join(ELECTRICAL_KEYS)}; allowed: its keys "
+                                 f"{kept + list(DRIVE_KEYS) + ['Fc_m'] + [f'Fc_{b}' for b in top.body_names]}")
         for e in exps:
             v = getattr(e.params.plant, k)
             if not v > 0:
                 raise ParameterError(f"--fit {k}: initial value {v!r} (domain {top.domain[k]}); allowed: a "
                                      f"positive start (fitted as log {k}; --set {k}=VALUE)")
-        if inputs[0] == "current" and k in ("L", "R", "k_w"):
-            raise ParameterError(f"--fit {k}: with --input current the drive imposes the current, so {k} "
-                                 "does not act on the outputs; allowed: mechanical keys")
         confs = {e.configuration for e in exps if e.configuration and
                  k in e.params.configurations.get(e.configuration, {})}
         if confs:
             raise ParameterError(f"--fit {k}: configuration {sorted(confs)[0]} sets it (the fitted file's entry "
                                  "would not be the value the log was fitted with); allowed: keys the configurations "
                                  "leave alone")
+
+
+def _check_command(exps, inputs):
+    """``--input torque_ref`` needs the file's torque loop: a current-commanded structure
+    (``impedance_current``: the impedance PD's T_ref / (k_t N) is the drive's current command) has
+    none, and its logs are fitted from that command, ``--input current``."""
+    if inputs[0] != "torque_ref":
+        return
+    for e in exps:
+        name = e.params.controller.structure
+        if structures.get(name).command == "current":
+            raise ParameterError(f"--input torque_ref: {e.params.source} has structure = {name!r}, whose controller "
+                                 "commands the motor's current (T_ref / (k_t N)) through no torque loop; allowed: "
+                                 "--input current (the log's current command, A)")
 
 
 def _check_drive_key(exps, k, inputs):
@@ -511,6 +539,7 @@ def identify(experiments: list[Experiment], keys: tuple[str, ...], inputs: tuple
                              "followed by ,T_dist")
     if not outputs or any(o not in OUTPUTS for o in outputs) or len(set(outputs)) != len(outputs):
         raise ParameterError(f"--output {','.join(outputs)}; allowed: distinct names of {list(OUTPUTS)}")
+    _check_command(experiments, inputs)
     _check_keys(experiments, keys, inputs, friction)
     if opt.initial_state not in INITIAL_STATES:
         raise ParameterError(f"--initial-state {opt.initial_state!r}; allowed: one of {list(INITIAL_STATES)}")
