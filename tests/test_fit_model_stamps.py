@@ -1,13 +1,14 @@
 """haa_sym.fit.model.simulate_stamps (issue 23, logs as measured): the exact per-interval ZOH
 with the drive's lag and a fractional delay switching inside the intervals, a gap restarting the
 recursion, and estimated initial states, against an independent simulation (one matrix
-exponential per sub-interval, written here) and its derivatives against central differences."""
+exponential per sub-interval, tests/stamps_reference.py) and its derivatives against central
+differences."""
 import numpy as np
 import pytest
-import scipy.linalg
 
 from haa_sym.errors import ParameterError
 from haa_sym.fit.model import PlantModel, modal_check, simulate_stamps, with_drive_lag
+from stamps_reference import jittered_log, reference_stamps
 
 KEYS = ("k", "c", "tau_drive", "delay_drive")
 
@@ -26,36 +27,12 @@ def _model(th):
 
 
 def _reference(th, t, u, starts, x0s):
-    """Sample by sample, every switch of the delayed command inside an interval its own
-    sub-interval, each one exact by expm of [[A, B], [0, 0]]."""
-    mm, d = _model(th), th[3]
-    n = mm.A.shape[0]
-    M = np.zeros((n + 1, n + 1))
-    M[:n, :n], M[:n, n] = mm.A, mm.B[:, 0]
-    ends = list(starts[1:]) + [t.size]
-    ys = []
-    for s, e, x0 in zip(starts, ends, x0s):
-        x = np.array(x0, float)
-        for k in range(s, e):
-            ys.append(mm.C @ x)
-            if k == e - 1:
-                break
-            ev = [t[k]] + sorted(tj + d for tj in t if t[k] < tj + d < t[k + 1]) + [t[k + 1]]
-            for a0, a1 in zip(ev[:-1], ev[1:]):
-                j = max(np.searchsorted(t, a0 - d + 1e-12, side="right") - 1, 0)   # the command in effect
-                E = scipy.linalg.expm(M * (a1 - a0))
-                x = E[:n, :n] @ x + E[:n, n] * u[j, 0]
-    return np.array(ys)
+    return reference_stamps(_model(th), th[3], t, u, starts, x0s)
 
 
 @pytest.fixture(scope="module")
 def log():
-    rng = np.random.default_rng(0)
-    n = 300
-    t = np.cumsum(rng.uniform(0.5e-3, 3e-3, n))       # 0.5-3 ms: jitter of the ITregear logs' kind
-    t -= t[0]
-    t[150:] += 0.05                                    # a 50 ms gap: a second segment
-    return t, rng.standard_normal((n, 1))
+    return jittered_log(0)
 
 
 def test_exact_against_an_independent_simulation_with_lag_delay_and_gap(log):

@@ -1,17 +1,16 @@
 """haa_sym.fit.model.simulate_stamps on a model with an integrator (issue 23): the bundled harmonic
 drive with its link free (K_link = 0, the file's own remark: "a marginal position mode"), voltage-
 and current-driven, on jittered stamps with a gap and a fractional delay of the command, against an
-independent simulation (one scipy matrix exponential per sub-interval, written here) and its
-derivatives against central differences. Until the sensitivities were taken in A's eigenbasis such
-a model was refused (X = [[A, B], [0, 0]] is defective when A has a zero mode)."""
+independent simulation (one scipy matrix exponential per sub-interval, tests/stamps_reference.py)
+and its derivatives against central differences. Until the sensitivities were taken in A's
+eigenbasis such a model was refused (X = [[A, B], [0, 0]] is defective when A has a zero mode)."""
 import mpmath
 import numpy as np
 import pytest
-import scipy.linalg
 
-from haa_sym.analysis.sweep import blas_limits
 from haa_sym.fit.model import _divided2, modal_check, open_loop_model, sample, simulate, simulate_stamps, with_drive_lag
 from haa_sym.model.params import load_params
+from stamps_reference import jittered_log, reference_stamps
 
 PLANT_KEYS = ("J_link", "B_link", "K_hd", "D_hd")
 KEYS = PLANT_KEYS + ("delay_drive",)
@@ -26,42 +25,12 @@ def _model(inp, th):
 
 
 def _reference(inp, th, t, u, starts, x0s):
-    """Sample by sample, every switch of the delayed command inside an interval its own
-    sub-interval, each one exact by expm of [[A, B], [0, 0]] (the command held); BLAS on one
-    thread (600 small exponentials: threads only contend, 30x slower on a loaded machine)."""
-    with blas_limits(1):
-        return _reference_run(inp, th, t, u, starts, x0s)
-
-
-def _reference_run(inp, th, t, u, starts, x0s):
-    mm, d = _model(inp, th), th[4]
-    n = mm.A.shape[0]
-    M = np.zeros((n + 1, n + 1))
-    M[:n, :n], M[:n, n] = mm.A, mm.B[:, 0]
-    ends = list(starts[1:]) + [t.size]
-    ys, sw = [], t + d
-    for s, e, x0 in zip(starts, ends, x0s):
-        x = np.array(x0, float)
-        for k in range(s, e):
-            ys.append(mm.C @ x)
-            if k == e - 1:
-                break
-            ev = [t[k]] + list(sw[(sw > t[k]) & (sw < t[k + 1])]) + [t[k + 1]]
-            for a0, a1 in zip(ev[:-1], ev[1:]):
-                j = max(np.searchsorted(t, a0 - d + 1e-12, side="right") - 1, 0)   # the command in effect
-                E = scipy.linalg.expm(M * (a1 - a0))
-                x = E[:n, :n] @ x + E[:n, n] * u[j, 0]
-    return np.array(ys)
+    return reference_stamps(_model(inp, th), th[4], t, u, starts, x0s)
 
 
 @pytest.fixture(scope="module")
 def log():
-    rng = np.random.default_rng(3)
-    n = 300
-    t = np.cumsum(rng.uniform(0.5e-3, 3e-3, n))            # 0.5-3 ms
-    t -= t[0]
-    t[150:] += 0.05                                         # a 50 ms gap: a second segment
-    return t, rng.standard_normal((n, 1))
+    return jittered_log(3)
 
 
 @pytest.mark.parametrize("inp", ["voltage", "current"])

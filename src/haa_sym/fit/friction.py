@@ -184,14 +184,17 @@ def _phi_s(w: np.ndarray) -> np.ndarray:
     form elsewhere (e^w (w - 1) + 1 >= 0.03 there: at most 1.5 digits cancel)."""
     w = np.asarray(w, complex)
     small = np.abs(w) < 0.25
-    wl = np.where(small, 1.0, w)
+    out = np.empty_like(w)
+    wl = w[~small]
     with np.errstate(over="ignore", invalid="ignore"):
-        out = (np.exp(wl) * (wl - 1.0) + 1.0) / (wl * wl)
+        out[~small] = (np.exp(wl) * (wl - 1.0) + 1.0) / (wl * wl)
     ws = w[small]
     term, acc = np.ones_like(ws), np.full_like(ws, 0.5)
+    # times the reciprocal: numpy divides a complex by a real k as (re, im) * (1 / k) (Smith's
+    # rule with a zero imaginary part), the same numbers at a third of the time
     for k in range(1, 14):
-        term = term * ws / k
-        acc = acc + term / (k + 2)
+        term = term * ws * (1.0 / k)
+        acc = acc + term * (1.0 / (k + 2))
     out[small] = acc
     return out
 

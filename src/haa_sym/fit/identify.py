@@ -39,6 +39,10 @@ __all__ = ["FitOptions", "FitResult", "Experiment", "identify", "INPUT_MODES", "
            "validate", "refuse_unreliable", "CONDITION_LIMIT", "INTERVAL_METHODS"]
 
 INPUT_MODES = ("voltage", "current", "torque_ref")
+#: Levenberg-Marquardt does not simulate a step within this relative distance of one it has just
+#: simulated and rejected: at lam 1e-5 .. 1e-2 the ramp fits' steps (docs/identify.md) differ by
+#: 2e-4 .. 8e-3 and each was rejected again, a simulation apiece.
+SAME_STEP = 1e-2
 # the scaled normal matrix's condition number above which the fitted keys are refused
 # (refuse_unreliable): the normal equations have then lost ten of their sixteen digits and the keys
 # of its near-null direction change the outputs together. Measured (docs/identify.md, "Refusals"):
@@ -742,7 +746,15 @@ def _interval(theta: np.ndarray, cov: np.ndarray) -> np.ndarray:
 def _levenberg_marquardt(evaluate, theta, opt: FitOptions, keys, tolerance: float | None = None):
     """Minimise |r(theta)|^2 from ``theta``: Levenberg-Marquardt (Marquardt's diagonal scaling)
     with the exact Jacobian. Returns (theta, iterations, converged): not converged when
-    ``max_iterations`` ran out while the cost still fell by more than the tolerance."""
+    ``max_iterations`` ran out while the cost still fell by more than the tolerance.
+
+    Converged, too, when a rejected step changed the cost by no more than the tolerance and the
+    linear model predicted no larger decrease for it (MINPACK lmder's ``ftol`` test): a larger
+    lam only shortens the step, so what the rest of the ladder (each rung a simulation) could
+    still gain is below the tolerance. A step within :data:`SAME_STEP` of one already simulated
+    and rejected is not simulated again (lam far below the scaled H's spectrum barely moves it).
+    """
+    tol = opt.tolerance if tolerance is None else tolerance
     r, J = evaluate(theta)
     cost = float(r @ r)
     norms = np.linalg.norm(J, axis=0)
@@ -754,21 +766,28 @@ def _levenberg_marquardt(evaluate, theta, opt: FitOptions, keys, tolerance: floa
     it, done, improved = 0, False, True
     for it in range(1, opt.max_iterations + 1):
         H, g = J.T @ J, J.T @ r
-        improved = False
+        improved, rejected = False, None
         while lam < 1e12:
             step = np.linalg.solve(H + lam * np.diag(np.diag(H)), -g)
             big = np.max(np.abs(step))
             if big > opt.max_step:
                 step *= opt.max_step / big
+            if rejected is not None and np.linalg.norm(step - rejected) <= SAME_STEP * np.linalg.norm(rejected):
+                lam *= 10
+                continue
             r1, J1 = evaluate(theta + step)
             c1 = float(r1 @ r1)
             if np.isfinite(c1) and c1 < cost:
                 theta, r, J, improved = theta + step, r1, J1, True
-                done = (cost - c1) <= (opt.tolerance if tolerance is None else tolerance) * cost \
-                    or np.max(np.abs(step)) < 1e-10
+                done = (cost - c1) <= tol * cost or np.max(np.abs(step)) < 1e-10
                 cost = c1
                 lam = max(lam / 10, 1e-12)
                 break
+            predicted = cost - float(np.sum((r + J @ step) ** 2))
+            if np.isfinite(c1) and c1 - cost <= tol * cost and predicted <= tol * cost:
+                done = True
+                break
+            rejected = step
             lam *= 10
         if not improved or done:
             break

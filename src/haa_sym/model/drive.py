@@ -37,12 +37,12 @@ haa_sym.errors.ParameterError: f.toml [drive]: tau_drive = -1.0 is out of range;
 """
 from __future__ import annotations
 
-import math
 from dataclasses import dataclass, field
 from typing import Mapping
 
 from haa_sym.errors import ParameterError
 from haa_sym.model.actuator import check_keys, entry_values
+from haa_sym.model.units import check_number
 
 __all__ = ["Drive", "DRIVE_KEYS", "DRIVE_UNITS", "DRIVE_RANGE", "parse_drive", "check_drive_value", "drive_allowed"]
 
@@ -64,19 +64,8 @@ def drive_allowed(key: str) -> str:
 def check_drive_value(key: str, value: object, where: str) -> float:
     """One drive entry checked: a finite number within :data:`DRIVE_RANGE` (``where`` prefixes
     the message when given)."""
-    where = f"{where}: " if where else ""
-    if isinstance(value, bool) or not isinstance(value, (int, float)):
-        raise ParameterError(f"{where}{key} = {value!r} is not a number; allowed: {drive_allowed(key)}")
-    try:
-        finite = math.isfinite(value)
-    except OverflowError:
-        finite = False
-    if not finite:
-        raise ParameterError(f"{where}{key} = {value!r} is not finite; allowed: {drive_allowed(key)}")
     lo, hi = DRIVE_RANGE[key]
-    if not lo <= value <= hi:
-        raise ParameterError(f"{where}{key} = {value!r} is out of range; allowed: {drive_allowed(key)}")
-    return float(value)
+    return check_number(key, value, drive_allowed(key), where, low=lo, high=hi)
 
 
 @dataclass(frozen=True)

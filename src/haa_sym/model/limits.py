@@ -30,12 +30,12 @@ haa_sym.errors.ParameterError: f.toml [limits]: unknown key(s) ['Fc_L3']; allowe
 """
 from __future__ import annotations
 
-import math
 from dataclasses import dataclass, field, replace
 from typing import Mapping
 
 from haa_sym.errors import ParameterError
 from haa_sym.model.actuator import check_keys, entry_values
+from haa_sym.model.units import check_number
 
 __all__ = ["Limits", "FRICTION_MODELS", "DEFAULT_FRICTION_MODEL", "DEFAULT_FRICTION_VELOCITY",
            "limit_units", "parse_limits", "FRICTION_SET_KEYS", "with_friction_sets"]
@@ -99,22 +99,12 @@ def limit_units(bodies) -> dict[str, str | None]:
     return {k: ({**units, **fr}.get(k)) for k in keys}
 
 
+# the domains of _FIXED and _FRICTION as bounds of check_number
+_BOUNDS = {">0": dict(low=0.0, low_open=True), ">=0": dict(low=0.0), "int>=1": dict(low=1, integer=True)}
+
+
 def _check(key, value, domain, allowed, where):
-    if isinstance(value, bool) or not isinstance(value, (int, float)):
-        raise ParameterError(f"{where}: {key} = {value!r} is not a number; allowed: {allowed}")
-    try:
-        finite = math.isfinite(value)
-    except OverflowError:
-        finite = False
-    if not finite:
-        raise ParameterError(f"{where}: {key} = {value!r} is not finite; allowed: {allowed}")
-    if domain == "int>=1":
-        if not float(value).is_integer() or value < 1:
-            raise ParameterError(f"{where}: {key} = {value!r} is out of range; allowed: {allowed}")
-        return int(value)
-    if (domain == ">0" and not value > 0) or (domain == ">=0" and not value >= 0):
-        raise ParameterError(f"{where}: {key} = {value!r} is out of range; allowed: {allowed}")
-    return float(value)
+    return check_number(key, value, allowed, where, **_BOUNDS[domain])
 
 
 def parse_limits(table: object, bodies, source: str = "<memory>",

@@ -42,7 +42,7 @@ from haa_sym.model.filters import PARAMETERS as FILTER_PARAMETERS
 from haa_sym.model.drive import DRIVE_KEYS, DRIVE_UNITS, Drive, drive_allowed, parse_drive
 from haa_sym.model.limits import Limits, parse_limits
 from haa_sym.model.resources import data_dir
-from haa_sym.model.units import CONTROLLER_UNITS
+from haa_sym.model.units import CONTROLLER_UNITS, check_number
 
 __all__ = [
     "ParameterError",
@@ -478,6 +478,10 @@ def default_params_path() -> Path:
     return data_dir("model") / "hyq_haa.toml"
 
 
+# the number domains besides "int>=1" (its messages are its own) as bounds of check_number
+_BOUNDS = {">0": dict(low=0.0, low_open=True), ">=0": dict(low=0.0), "Ts": dict(low=TS_RANGE[0], high=TS_RANGE[1])}
+
+
 def _check_value(key: str, value: object, domain: str, where: str | None = None) -> float | int:
     """``value`` of ``key`` checked against ``domain``; the message names where, key, value, allowed."""
     prefix = f"{where}: " if where else ""
@@ -493,32 +497,22 @@ def _check_value(key: str, value: object, domain: str, where: str | None = None)
     allowed = _DOMAIN_TEXT[domain]
     if value is None:
         raise ParameterError(f"{prefix}{key} = None is missing; allowed: {allowed}")
-    if isinstance(value, bool) or not isinstance(value, (int, float)):
-        raise ParameterError(f"{prefix}{key} = {value!r} is not a number; allowed: {allowed}")
-    if domain == "int>=1" and isinstance(value, int):
+    if domain != "int>=1":
+        return check_number(key, value, allowed, where, **_BOUNDS[domain])
+    if isinstance(value, int) and not isinstance(value, bool):
         # a Python int is exact at any size: a huge one is out of range, not "not finite" or
         # "not an integer" (its float would be)
         if not 1 <= value <= INT_MAX:
             raise ParameterError(f"{prefix}{key} = {value!r} is out of range; allowed: {allowed}"
                                  + (f" and <= {INT_MAX}" if value > INT_MAX else ""))
         return value
-    try:
-        finite = math.isfinite(value)
-    except OverflowError:                      # an integer beyond the float range (TOML allows it)
-        finite = False
-    if not finite:
-        raise ParameterError(f"{prefix}{key} = {value!r} is not finite; allowed: {allowed}")
-    if domain == "int>=1":
-        if not float(value).is_integer():
-            raise ParameterError(f"{prefix}{key} = {value!r} is not an integer; allowed: {allowed}")
-        if not 1 <= value <= INT_MAX:
-            raise ParameterError(f"{prefix}{key} = {value!r} is out of range; allowed: {allowed}"
-                                 + (f" and <= {INT_MAX}" if value > INT_MAX else ""))
-        return int(value)
-    if (domain == ">0" and not value > 0) or (domain == ">=0" and not value >= 0) or \
-            (domain == "Ts" and not TS_RANGE[0] <= value <= TS_RANGE[1]):
-        raise ParameterError(f"{prefix}{key} = {value!r} is out of range; allowed: {allowed}")
-    return float(value)
+    check_number(key, value, allowed, where)            # a finite number (a float here)
+    if not float(value).is_integer():
+        raise ParameterError(f"{prefix}{key} = {value!r} is not an integer; allowed: {allowed}")
+    if not 1 <= value <= INT_MAX:
+        raise ParameterError(f"{prefix}{key} = {value!r} is out of range; allowed: {allowed}"
+                             + (f" and <= {INT_MAX}" if value > INT_MAX else ""))
+    return int(value)
 
 
 def _check_fields(obj, domain: Mapping[str, str]) -> None:

@@ -37,12 +37,13 @@ haa_sym.errors.ParameterError: f.toml [couplings.p]: K: unit = 'Nm' has no angle
 """
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 from functools import lru_cache
 
 from haa_sym.errors import ParameterError
 
-__all__ = ["Kind", "KINDS", "CONTROLLER_UNITS", "to_si", "kind_rows"]
+__all__ = ["Kind", "KINDS", "CONTROLLER_UNITS", "to_si", "check_number", "kind_rows"]
 
 
 @dataclass(frozen=True)
@@ -201,6 +202,35 @@ def to_si(value, unit, si: str | None, where: str, key: str):
         return float(value) * factor
     except OverflowError:                 # an integer beyond the float range: the domain check names it
         return value
+
+
+def check_number(key: str, value: object, allowed: str, where: str | None = None, *,
+                 low: float | None = None, high: float | None = None, low_open: bool = False,
+                 integer: bool = False) -> float | int:
+    """The domain check of a number entry once :func:`to_si` has converted it (``[limits]``,
+    ``[drive]``): a finite number (a bool is not one) within ``[low, high]`` (``(low, high]`` with
+    ``low_open``; None: unbounded), a whole number with ``integer``. Each failure is one error
+    naming ``where``, the key, the value and ``allowed`` (what is allowed, in words).
+
+    Returns
+    -------
+    float or int
+        ``value`` as a float, or as an int with ``integer``.
+    """
+    prefix = f"{where}: " if where else ""
+    if isinstance(value, bool) or not isinstance(value, (int, float)):
+        raise ParameterError(f"{prefix}{key} = {value!r} is not a number; allowed: {allowed}")
+    try:
+        finite = math.isfinite(value)
+    except OverflowError:                      # an integer beyond the float range (TOML allows it)
+        finite = False
+    if not finite:
+        raise ParameterError(f"{prefix}{key} = {value!r} is not finite; allowed: {allowed}")
+    if ((integer and not float(value).is_integer())
+            or (low is not None and (value <= low if low_open else value < low))
+            or (high is not None and value > high)):
+        raise ParameterError(f"{prefix}{key} = {value!r} is out of range; allowed: {allowed}")
+    return int(value) if integer else float(value)
 
 
 def kind_rows(keys_units: dict[str, str]) -> list[str]:
