@@ -50,8 +50,8 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from haa_sym.analysis.oscillation import SATURATING_FRACTION, VERDICTS, classify
-from haa_sym.analysis.simulate import (DEFAULT_RTOL, FORCED_EXPERIMENTS, _Setup, batch_setup, limits_act_every_step,
-                                       simulate_batch)
+from haa_sym.analysis.simulate import (DEFAULT_RTOL, FORCED_EXPERIMENTS, _Setup, batch_setup, continuable,
+                                       limits_act_every_step, simulate_batch)
 from haa_sym.errors import ParameterError
 from haa_sym.io.formats import save_npz
 from haa_sym.io.tasks import TaskRunner
@@ -154,22 +154,28 @@ def _recent(cache: dict, key, make):
     return value
 
 
-def _warm(params, options, backend, limits, experiment, amplitude, duration, seed, rtol):
+def _warm(params, options, backend, limits, experiment, amplitude, duration, seed, rtol, scale_duration=None):
     """(loop, setup) of these inputs: built at this process's first task of them, then reused."""
     lk = pickle.dumps((params, options, backend))
     loop = _recent(_LOOPS, lk, lambda: ClosedLoop(params, options, basis=False, backend=backend))
-    sk = (lk, pickle.dumps((limits, experiment, amplitude, duration, seed, rtol)))
-    setup = _recent(_SETUPS, sk, lambda: batch_setup(loop, limits, experiment, amplitude, duration, seed, rtol))
+    sk = (lk, pickle.dumps((limits, experiment, amplitude, duration, seed, rtol, scale_duration)))
+    setup = _recent(_SETUPS, sk, lambda: batch_setup(loop, limits, experiment, amplitude, duration, seed, rtol,
+                                                     scale_duration))
     return loop, setup
 
 
-def _task(params, options, backend, limits, P, D, experiment, amplitude, duration, seed, rtol, stable):
+def _task(params, options, backend, limits, P, D, experiment, amplitude, duration, seed, rtol, stable,
+          scale_duration=None, start=None, continue_to=None):
     """One task of plain data (what a dask worker runs); the loop and the setup come from the
-    process's :func:`_warm` cache."""
-    loop, setup = _warm(params, options, backend, limits, experiment, amplitude, duration, seed, rtol)
+    process's :func:`_warm` cache. ``start``, ``continue_to``: the runs continue the points'
+    shorter ones and return the state a run of ``continue_to`` s continues
+    (:func:`haa_sym.analysis.simulate.simulate_batch`)."""
+    loop, setup = _warm(params, options, backend, limits, experiment, amplitude, duration, seed, rtol,
+                        scale_duration)
     b = simulate_batch(loop, P, D, limits=limits, experiment=experiment, amplitude=amplitude,
-                       duration=duration, seed=seed, rtol=rtol, linear_stable=stable, setup=setup)
-    return b.oscillation, b.tail_saturation, b.cycle_amplitude, b.cycle_frequency
+                       duration=duration, seed=seed, rtol=rtol, linear_stable=stable, setup=setup,
+                       start=start, continue_to=continue_to)
+    return b.oscillation, b.tail_saturation, b.cycle_amplitude, b.cycle_frequency, b.continuations
 
 
 def task_size(points: int, workers: int, given: int | None = None) -> int:
@@ -189,7 +195,7 @@ def nonlinear_map(loop, P_gain, D_gain, *, limits: Limits | None = None, experim
                   max_duration: float | None = None, seed: int = 0,
                   rtol: float = DEFAULT_RTOL, saturating_fraction: float = SATURATING_FRACTION,
                   scheduler=None, progress: bool | None = None,
-                  points_per_task: int | None = None) -> NonlinearMap:
+                  points_per_task: int | None = None, continue_runs: bool = True) -> NonlinearMap:
     """Class every point of the P_gain x D_gain grid from a simulation with the limits.
 
     Parameters
@@ -218,6 +224,11 @@ def nonlinear_map(loop, P_gain, D_gain, *, limits: Limits | None = None, experim
     points_per_task : int, optional
         Gain points per first-run task (>= 1); default: sized to the workers
         (:func:`task_size`). The classes do not depend on it.
+    continue_runs : bool
+        Default True: a longer run continues the point's last run from the state where it
+        stopped (:func:`haa_sym.analysis.simulate.continuable` experiments and limits; else from
+        t = 0); False: from t = 0. The same numbers either way (the friction integrator's error
+        scale is the first run's in both), False costing the samples of every shorter run again.
 
     Returns
     -------
@@ -253,6 +264,12 @@ def nonlinear_map(loop, P_gain, D_gain, *, limits: Limits | None = None, experim
     stable = np.asarray(loop.stability(PP, DD).stable, bool)
     always = limits_act_every_step(limits)
     forced = experiment in FORCED_EXPERIMENTS
+    # a longer run continues the point's last one where its inputs allow (not the chirp, not
+    # noise with jitter: simulate.continuable), with the first run's friction error scale
+    if not isinstance(continue_runs, bool):
+        raise ParameterError(f"continue_runs = {continue_runs!r}; allowed: True or False")
+    scale_s = setup.duration if continuable(setup) else None
+    cont = continue_runs and scale_s is not None
 
     n_pts = PP.size
     kind = np.empty(n_pts, dtype=object)    # a later run's kind may be a longer string
@@ -262,11 +279,20 @@ def nonlinear_map(loop, P_gain, D_gain, *, limits: Limits | None = None, experim
     depth = np.zeros(n_pts, int)            # how many times a point was run again
     simulated = [0]                         # controller steps over every run
     again = (CLASSES.index("growing"), CLASSES.index("undecided"))
+    state = np.full(n_pts, None, dtype=object)      # per point the Continuation of its last run
 
-    def task(idx, seconds):
-        simulated[0] += idx.size * (int(np.ceil(seconds / setup.Ts - 1e-9)) + 1)
+    def samples(seconds):
+        return int(np.ceil(seconds / setup.Ts - 1e-9)) + 1
+
+    def longer_than(seconds):
+        # by samples: 3 x 0.15 s is 0.44999... s, the samples of max_duration = 0.45 s
+        return min(seconds * EXTEND_FACTOR, max_duration) if samples(seconds) < samples(max_duration) else None
+
+    def task(idx, seconds, start=None):
+        simulated[0] += idx.size * (samples(seconds) - (0 if start is None else start[0].k))
         return (loop.params, loop.options, loop.backend, limits, PP[idx], DD[idx], experiment, setup.amplitude,
-                seconds, seed, rtol, stable[idx].astype(float))
+                seconds, seed, rtol, stable[idx].astype(float), scale_s, start,
+                longer_than(seconds) if cont else None)
 
     def chunks(idx, per):
         # strided, not contiguous: a point's cost grows with its gains (the friction integrator's
@@ -290,20 +316,26 @@ def nonlinear_map(loop, P_gain, D_gain, *, limits: Limits | None = None, experim
 
         def then(a, result):
             idx, seconds = where.pop(id(a)), seconds_of.pop(id(a))
-            k2, t2, a2, f2 = result
+            k2, t2, a2, f2, c2 = result
             kind[idx], ts[idx], amp[idx], freq[idx] = k2, t2, a2, f2
             run_s[idx] = seconds
             cls[idx] = classify(kind[idx], ts[idx], stable[idx], always, saturating_fraction, forced)
-            if seconds >= max_duration:
+            if longer_than(seconds) is None:
                 return []
-            longer = idx[np.isin(cls[idx], again)]
+            rerun = np.isin(cls[idx], again)
+            longer = idx[rerun]
             if not longer.size:
                 return []
-            nxt = min(seconds * EXTEND_FACTOR, max_duration)
+            if c2 is not None:                          # kept for the points run again only
+                state[longer] = [c for c, r in zip(c2, rerun) if r]
+            nxt = longer_than(seconds)
             depth[longer] += 1
             out = []
-            for c in chunks(longer, max(1, int(round(per * setup.duration / nxt)))):
-                b = task(c, nxt)
+            # a continued run costs its new samples only: the task size by those
+            new_s = nxt - seconds if cont else nxt
+            for c in chunks(longer, max(1, int(round(per * setup.duration / new_s)))):
+                b = task(c, nxt, list(state[c]) if cont else None)
+                state[c] = None
                 where[id(b)], seconds_of[id(b)] = c, nxt
                 out.append((b, int(depth[c[0]])))
             return out
@@ -317,7 +349,7 @@ def nonlinear_map(loop, P_gain, D_gain, *, limits: Limits | None = None, experim
         duration=setup.duration, max_duration=max_duration, extend_factor=EXTEND_FACTOR, longer_rounds=rounds,
         seed=seed, rtol=rtol, limits=limits.active, limits_act_every_step=always,
         saturating_fraction=saturating_fraction, samples_per_run=setup.n,
-        samples_simulated=simulated[0],
+        samples_simulated=simulated[0], longer_runs_continue=cont, friction_scale_duration=scale_s,
         scheduler="in-process" if scheduler is None else "dask.distributed",
         rules="docs/simulate.md, Nonlinear maps", P_gain_unit="Nm/rad", D_gain_unit="Nms/rad",
         cycle_amplitude_unit="Nm", cycle_frequency_unit="Hz")
