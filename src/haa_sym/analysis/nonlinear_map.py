@@ -23,16 +23,22 @@ arrives (:meth:`TaskRunner.stream`), ahead of the first runs still waiting. Task
 workers (:func:`task_size`). Each point's runs depend on that point alone, so the classes, and every
 array of the map, are the same bytes whatever the order, the task size or the scheduler.
 
-A longer run starts again from t = 0 rather than continuing from the state where the shorter
-one stopped, although the C loop returns that state: a continued run would not be the same run.
-The friction integrator's error bound is relative to each state's peak over the whole run
-without friction (:func:`haa_sym.analysis.simulate._run`), which a longer run raises, so the
-substeps it chooses, and the trace, would differ in the last bits; the chirp's sweep rate
-depends on the run's length; and the verdict reads the last half of the whole run (its
-saturation and oscillation), which a continuation would have to ship back from the first part.
-The price: HyQ with 24 V and 0.02 Nm rotor friction, 60 x 40 points, runs 162 of its 2,400 points
-again, 58 % of the simulated samples; continuing would cut a point run up to 10 s from 1 + 3 + 9
-+ 10 = 23 simulated seconds to 10, about a third of the map's work, but give other bytes.
+A longer run continues the point's last run from the state where it stopped
+(``continue_runs``, default True; :class:`haa_sym.analysis.simulate.Continuation`): the plant's
+and the controller's state, the drive's delay line and the friction integrator's level come out of
+the C loop and go back in, the inputs are the longer run's from that sample on, so the run takes
+exactly the steps of one run from t = 0 (the same bits). Two choices make that so. The friction
+integrator's error bound is relative to each state's peak in the run without friction over the
+first run's length (``scale_duration``), for every length of the point (a run's own length before
+2026-11-26: a longer run raised it). The verdict reads the last half of the whole run, which with
+EXTEND_FACTOR = 3 lies in the continuation except after a length capped at ``max_duration``
+(9 -> 10 s reads from 5 s): each run returns, with its state, the outputs from the first sample
+the next length's verdict reads (:func:`haa_sym.analysis.simulate.keep_from`; 9 -> 10 s: 4,001
+samples) and of the samples before only their saturation flags and the torque's peak. The chirp
+(its sweep rate set by the run's length) and torque noise with jitter (the jitter's draws follow
+the noise's n) are run again from t = 0 (:func:`haa_sym.analysis.simulate.continuable`).
+HyQ with 24 V and 0.02 Nm rotor friction, 60 x 40 points: 162 of its 2,400 points run again,
+3.78 M simulated samples instead of 5.74 M, the same classes (docs/simulate.md).
 
 Example
 -------
