@@ -503,8 +503,9 @@ class Continuation:
         The first sample whose outputs are kept: :func:`keep_from` of the longer run.
     rows : ndarray, (k - keep_from, len(SIM_COLUMNS))
         The outputs of samples keep_from .. k - 1.
-    saturated_head : ndarray of bool, (keep_from,)
-        The saturation flags of the samples before (the saturation time is over the whole run).
+    saturated_head : ndarray of int
+        The samples before keep_from that were in saturation (the saturation time is over the
+        whole run), by index: most points never saturate, and a task ships every point's state.
     torque_peak_head : float
         max |torque| over the samples before (the oscillation classifier's hysteresis floor).
     """
@@ -615,7 +616,7 @@ def _continuation(setup: _Setup, start: Continuation | None, y: np.ndarray, end,
     keep = max(first, min(keep_from(setup.Ts, n_next), k0 + y.shape[0]))
     cut = rows[:keep - first]
     sat_col, t_col = L.SIM_COLUMNS.index("saturated"), L.SIM_COLUMNS.index("torque")
-    head_sat = cut[:, sat_col] > 0.5
+    head_sat = first + np.flatnonzero(cut[:, sat_col] > 0.5)
     head_peak = float(np.abs(cut[:, t_col]).max()) if cut.shape[0] else 0.0
     if start is not None:
         head_sat = np.concatenate([start.saturated_head, head_sat])
@@ -661,7 +662,12 @@ def _result(loop, setup, P_gain, D_gain, y, info, linear=None, head: Continuatio
     y, time = y[:k - first], setup.time[first:k]
     col = {c: y[:, i] for i, c in enumerate(L.SIM_COLUMNS)}
     sat = col["saturated"] > 0.5
-    sat_all = sat if head is None else np.concatenate([head.saturated_head, sat])
+    if head is None:
+        sat_all = sat
+    else:
+        sat_all = np.zeros(k, bool)
+        sat_all[head.saturated_head] = True
+        sat_all[first:] = sat
     dt = np.diff(np.append(setup.time[:k], setup.time[k - 1] + setup.Ts)) if k else np.zeros(0)
     sat_time = float(dt[sat_all].sum())
     forced = setup.experiment in FORCED_EXPERIMENTS
@@ -686,7 +692,7 @@ def _result(loop, setup, P_gain, D_gain, y, info, linear=None, head: Continuatio
         {"amplitude_Nm": amp, "frequency_Hz": None if math.isnan(freq) else freq, "signal": "torque",
          "periodic": osc.kind == "sustained"},
         verdict=verdict, diverged_at_s=None if math.isnan(diverged_at) else diverged_at,
-        samples_written=k - first, continued_from_sample=k0 or None,
+        samples_written=k - first, **({"continued_from_sample": k0, "first_sample_written": first} if k0 else {}),
         linear={"stable": lin, "spectral_radius": None if np.isnan(radius) else float(radius)},
         verdict_rules="docs/simulate.md, The verdict of a run")
     return Simulation(time.copy(), col["theta"], col["velocity"], col["torque"], col["torque_ref"],
