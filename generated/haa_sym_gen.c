@@ -13222,8 +13222,10 @@ CASADI_SYMBOL_EXPORT int haa_columns(void* f, void* work, casadi_int n_in,
  * generated function through CasADi costs more than the step itself. x (nx) and xc (nc) hold
  * the initial state and return the final one; exo holds n_steps columns of n_exo reals (delta
  * is its last row); y receives n_steps columns of n_y reals; xpeak (nx reals, or NULL) receives
- * max_k |x_i| over the sample instants. Returns 0, 1 if a function failed, 2 if out of memory,
- * 3 if n_pieces < 1 or whole < 0. */
+ * max_k |x_i| over the sample instants. carry (3 + whole + n_pieces reals, or NULL) receives the
+ * delay line at the end, and with carry_in = 1 gives it at the start (haa_carry_out: a run
+ * continued from the state where the last one stopped). Returns 0, 1 if a function failed, 2 if
+ * out of memory, 3 if n_pieces < 1 or whole < 0. */
 /* The work arrays of the sample loops: the sample function and the plant step are called in
  * turn, so arg, res, iw and w are sized for the larger of the two; w carries `extra` more reals
  * after the functions' own (the loop's vectors, from haa_work.extra). */
@@ -13305,14 +13307,31 @@ static void haa_delay_pieces(haa_delay* d, const casadi_real* u, casadi_int n_u,
   }
 }
 
-static void haa_delay_init(haa_delay* d, casadi_real* ring, casadi_int whole, casadi_int n_pieces) {
+/* the delay line as the previous segment left it (carry: see haa_carry_out), or empty (carry NULL) */
+static void haa_delay_init(haa_delay* d, casadi_real* ring, casadi_int whole, casadi_int n_pieces,
+                           const casadi_real* carry) {
   casadi_int i;
   d->ring = ring;
   d->size = whole + n_pieces;
-  d->head = 0;
+  d->head = carry ? (casadi_int)carry[2] : 0;
   d->whole = whole;
   d->n_pieces = n_pieces;
-  for (i = 0; i < d->size; ++i) ring[i] = 0;
+  for (i = 0; i < d->size; ++i) ring[i] = carry ? carry[3 + i] : 0;
+}
+
+/* The loop's state besides x and xc, so that a run continues where the last segment stopped
+ * (haa_sym.analysis.simulate, Continuation): carry = [lev, err_last, head, ring[0 .. whole +
+ * n_pieces - 1]] (3 + whole + n_pieces reals), read at the start when carry_in is 1 and written
+ * at the end (lev and err_last: haa_simulate_adaptive's level kept last and its difference;
+ * head and ring: the drive's delay line). A run of n1 samples and its continuation over n2
+ * then take exactly the steps of one run of n1 + n2 samples. */
+static void haa_carry_out(casadi_real* carry, const haa_delay* d, casadi_int lev, casadi_real err_last) {
+  casadi_int i;
+  if (!carry) return;
+  carry[0] = (casadi_real)lev;
+  carry[1] = err_last;
+  carry[2] = (casadi_real)d->head;
+  for (i = 0; i < d->size; ++i) carry[3 + i] = d->ring[i];
 }
 
 CASADI_SYMBOL_EXPORT int haa_simulate(void* sample, void* sample_work, void* step, void* step_work,
@@ -13322,7 +13341,7 @@ CASADI_SYMBOL_EXPORT int haa_simulate(void* sample, void* sample_work, void* ste
                                       const casadi_real* plant, casadi_real* y, casadi_int n_y,
                                       casadi_real* xpeak, casadi_int n_steps, casadi_int n_pieces,
                                       casadi_int plant_stride, const casadi_real* piece_frac,
-                                      casadi_int whole) {
+                                      casadi_int whole, casadi_real* carry, casadi_int carry_in) {
   casadi_int k, j, p;
   int flag;
   haa_work m;
@@ -13344,7 +13363,7 @@ CASADI_SYMBOL_EXPORT int haa_simulate(void* sample, void* sample_work, void* ste
     xc2 = x2 + nx;
     up = xc2 + nc;
     sp = up + n_pieces * n_u;
-    haa_delay_init(&d, sp + n_pieces, whole, n_pieces);
+    haa_delay_init(&d, sp + n_pieces, whole, n_pieces, carry_in ? carry : NULL);
     if (xpeak)
       for (j = 0; j < nx; ++j) xpeak[j] = 0;
     for (k = 0; k < n_steps && !flag; ++k) {
@@ -13374,6 +13393,7 @@ CASADI_SYMBOL_EXPORT int haa_simulate(void* sample, void* sample_work, void* ste
         }
       }
     }
+    haa_carry_out(carry, &d, 0, 0);
     haa_work_free(&m);
   }
   return flag;
@@ -13397,7 +13417,8 @@ CASADI_SYMBOL_EXPORT int haa_simulate(void* sample, void* sample_work, void* ste
  * With a drive delay the sample runs in n_pieces pieces as in haa_simulate, both at the level
  * tested (2^lev substeps each), piece p from its own tables at plant + p plant_stride: with a
  * fractional delay the substeps end exactly at the command's switch.
- * levels receives the level used per sample (as a real). Returns as haa_simulate; 3 if
+ * levels receives the level used per sample (as a real). carry and carry_in as haa_simulate's,
+ * with the level kept last and its difference too. Returns as haa_simulate; 3 if
  * n_levels < 2, n_pieces < 1 or whole < 0. */
 #define HAA_DROP 32.0
 /* the table of the friction's slopes at x (see haa_simulate_adaptive) */
@@ -13471,7 +13492,8 @@ CASADI_SYMBOL_EXPORT int haa_simulate_adaptive(
     const casadi_real* stick_rows, casadi_int n_rows, const casadi_real* slopes,
     casadi_int n_slopes, casadi_real* y,
     casadi_int n_y, casadi_real* levels, casadi_int n_steps, casadi_int n_pieces,
-    casadi_int plant_stride, const casadi_real* piece_frac, casadi_int whole) {
+    casadi_int plant_stride, const casadi_real* piece_frac, casadi_int whole, casadi_real* carry,
+    casadi_int carry_in) {
   casadi_int k, i, lev = 0;
   int flag;
   haa_work m;
@@ -13496,7 +13518,11 @@ CASADI_SYMBOL_EXPORT int haa_simulate_adaptive(
     xc2 = tmp + nx;
     up = xc2 + nc;
     sp = up + n_pieces * n_u;
-    haa_delay_init(&d, sp + n_pieces, whole, n_pieces);
+    haa_delay_init(&d, sp + n_pieces, whole, n_pieces, carry_in ? carry : NULL);
+    if (carry && carry_in) {
+      lev = (casadi_int)carry[0];
+      err_last = carry[1];
+    }
     for (k = 0; k < n_steps && !flag; ++k) {
       const casadi_real* e = exo + k * n_exo;
       if (haa_sample(sample, &m, x, xc, xc2, nc, e, ctrl, u, y + k * n_y)) {
@@ -13534,6 +13560,7 @@ CASADI_SYMBOL_EXPORT int haa_simulate_adaptive(
       for (i = 0; i < nx; ++i) x[i] = xb[i];
       levels[k] = (casadi_real)lev;
     }
+    haa_carry_out(carry, &d, lev, err_last);
     haa_work_free(&m);
   }
   return flag;

@@ -23,16 +23,22 @@ arrives (:meth:`TaskRunner.stream`), ahead of the first runs still waiting. Task
 workers (:func:`task_size`). Each point's runs depend on that point alone, so the classes, and every
 array of the map, are the same bytes whatever the order, the task size or the scheduler.
 
-A longer run starts again from t = 0 rather than continuing from the state where the shorter
-one stopped, although the C loop returns that state: a continued run would not be the same run.
-The friction integrator's error bound is relative to each state's peak over the whole run
-without friction (:func:`haa_sym.analysis.simulate._run`), which a longer run raises, so the
-substeps it chooses, and the trace, would differ in the last bits; the chirp's sweep rate
-depends on the run's length; and the verdict reads the last half of the whole run (its
-saturation and oscillation), which a continuation would have to ship back from the first part.
-The price: HyQ with 24 V and 0.02 Nm rotor friction, 60 x 40 points, runs 162 of its 2,400 points
-again, 58 % of the simulated samples; continuing would cut a point run up to 10 s from 1 + 3 + 9
-+ 10 = 23 simulated seconds to 10, about a third of the map's work, but give other bytes.
+A longer run continues the point's last run from the state where it stopped
+(``continue_runs``, default True; :class:`haa_sym.analysis.simulate.Continuation`): the plant's
+and the controller's state, the drive's delay line and the friction integrator's level come out of
+the C loop and go back in, the inputs are the longer run's from that sample on, so the run takes
+exactly the steps of one run from t = 0 (the same bits). Two choices make that so. The friction
+integrator's error bound is relative to each state's peak in the run without friction over the
+first run's length (``scale_duration``), for every length of the point (a run's own length before
+2026-11-26: a longer run raised it). The verdict reads the last half of the whole run, which with
+EXTEND_FACTOR = 3 lies in the continuation except after a length capped at ``max_duration``
+(9 -> 10 s reads from 5 s): each run returns, with its state, the outputs from the first sample
+the next length's verdict reads (:func:`haa_sym.analysis.simulate.keep_from`; 9 -> 10 s: 4,001
+samples) and of the samples before only their saturation flags and the torque's peak. The chirp
+(its sweep rate set by the run's length) and torque noise with jitter (the jitter's draws follow
+the noise's n) are run again from t = 0 (:func:`haa_sym.analysis.simulate.continuable`).
+HyQ with 24 V and 0.02 Nm rotor friction, 60 x 40 points: 162 of its 2,400 points run again,
+3.78 M simulated samples instead of 5.74 M, the same classes (docs/simulate.md).
 
 Example
 -------
@@ -50,8 +56,8 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from haa_sym.analysis.oscillation import SATURATING_FRACTION, VERDICTS, classify
-from haa_sym.analysis.simulate import (DEFAULT_RTOL, FORCED_EXPERIMENTS, _Setup, batch_setup, limits_act_every_step,
-                                       simulate_batch)
+from haa_sym.analysis.simulate import (DEFAULT_RTOL, FORCED_EXPERIMENTS, _Setup, batch_setup, continuable,
+                                       limits_act_every_step, simulate_batch)
 from haa_sym.errors import ParameterError
 from haa_sym.io.formats import save_npz
 from haa_sym.io.tasks import TaskRunner
@@ -154,22 +160,28 @@ def _recent(cache: dict, key, make):
     return value
 
 
-def _warm(params, options, backend, limits, experiment, amplitude, duration, seed, rtol):
+def _warm(params, options, backend, limits, experiment, amplitude, duration, seed, rtol, scale_duration=None):
     """(loop, setup) of these inputs: built at this process's first task of them, then reused."""
     lk = pickle.dumps((params, options, backend))
     loop = _recent(_LOOPS, lk, lambda: ClosedLoop(params, options, basis=False, backend=backend))
-    sk = (lk, pickle.dumps((limits, experiment, amplitude, duration, seed, rtol)))
-    setup = _recent(_SETUPS, sk, lambda: batch_setup(loop, limits, experiment, amplitude, duration, seed, rtol))
+    sk = (lk, pickle.dumps((limits, experiment, amplitude, duration, seed, rtol, scale_duration)))
+    setup = _recent(_SETUPS, sk, lambda: batch_setup(loop, limits, experiment, amplitude, duration, seed, rtol,
+                                                     scale_duration))
     return loop, setup
 
 
-def _task(params, options, backend, limits, P, D, experiment, amplitude, duration, seed, rtol, stable):
+def _task(params, options, backend, limits, P, D, experiment, amplitude, duration, seed, rtol, stable,
+          scale_duration=None, start=None, continue_to=None):
     """One task of plain data (what a dask worker runs); the loop and the setup come from the
-    process's :func:`_warm` cache."""
-    loop, setup = _warm(params, options, backend, limits, experiment, amplitude, duration, seed, rtol)
+    process's :func:`_warm` cache. ``start``, ``continue_to``: the runs continue the points'
+    shorter ones and return the state a run of ``continue_to`` s continues
+    (:func:`haa_sym.analysis.simulate.simulate_batch`)."""
+    loop, setup = _warm(params, options, backend, limits, experiment, amplitude, duration, seed, rtol,
+                        scale_duration)
     b = simulate_batch(loop, P, D, limits=limits, experiment=experiment, amplitude=amplitude,
-                       duration=duration, seed=seed, rtol=rtol, linear_stable=stable, setup=setup)
-    return b.oscillation, b.tail_saturation, b.cycle_amplitude, b.cycle_frequency
+                       duration=duration, seed=seed, rtol=rtol, linear_stable=stable, setup=setup,
+                       start=start, continue_to=continue_to)
+    return b.oscillation, b.tail_saturation, b.cycle_amplitude, b.cycle_frequency, b.continuations
 
 
 def task_size(points: int, workers: int, given: int | None = None) -> int:
@@ -189,7 +201,7 @@ def nonlinear_map(loop, P_gain, D_gain, *, limits: Limits | None = None, experim
                   max_duration: float | None = None, seed: int = 0,
                   rtol: float = DEFAULT_RTOL, saturating_fraction: float = SATURATING_FRACTION,
                   scheduler=None, progress: bool | None = None,
-                  points_per_task: int | None = None) -> NonlinearMap:
+                  points_per_task: int | None = None, continue_runs: bool = True) -> NonlinearMap:
     """Class every point of the P_gain x D_gain grid from a simulation with the limits.
 
     Parameters
@@ -218,6 +230,11 @@ def nonlinear_map(loop, P_gain, D_gain, *, limits: Limits | None = None, experim
     points_per_task : int, optional
         Gain points per first-run task (>= 1); default: sized to the workers
         (:func:`task_size`). The classes do not depend on it.
+    continue_runs : bool
+        Default True: a longer run continues the point's last run from the state where it
+        stopped (:func:`haa_sym.analysis.simulate.continuable` experiments and limits; else from
+        t = 0); False: from t = 0. The same numbers either way (the friction integrator's error
+        scale is the first run's in both), False costing the samples of every shorter run again.
 
     Returns
     -------
@@ -253,6 +270,12 @@ def nonlinear_map(loop, P_gain, D_gain, *, limits: Limits | None = None, experim
     stable = np.asarray(loop.stability(PP, DD).stable, bool)
     always = limits_act_every_step(limits)
     forced = experiment in FORCED_EXPERIMENTS
+    # a longer run continues the point's last one where its inputs allow (not the chirp, not
+    # noise with jitter: simulate.continuable), with the first run's friction error scale
+    if not isinstance(continue_runs, bool):
+        raise ParameterError(f"continue_runs = {continue_runs!r}; allowed: True or False")
+    scale_s = setup.duration if continuable(setup) else None
+    cont = continue_runs and scale_s is not None
 
     n_pts = PP.size
     kind = np.empty(n_pts, dtype=object)    # a later run's kind may be a longer string
@@ -262,11 +285,20 @@ def nonlinear_map(loop, P_gain, D_gain, *, limits: Limits | None = None, experim
     depth = np.zeros(n_pts, int)            # how many times a point was run again
     simulated = [0]                         # controller steps over every run
     again = (CLASSES.index("growing"), CLASSES.index("undecided"))
+    state = np.full(n_pts, None, dtype=object)      # per point the Continuation of its last run
 
-    def task(idx, seconds):
-        simulated[0] += idx.size * (int(np.ceil(seconds / setup.Ts - 1e-9)) + 1)
+    def samples(seconds):
+        return int(np.ceil(seconds / setup.Ts - 1e-9)) + 1
+
+    def longer_than(seconds):
+        # by samples: 3 x 0.15 s is 0.44999... s, the samples of max_duration = 0.45 s
+        return min(seconds * EXTEND_FACTOR, max_duration) if samples(seconds) < samples(max_duration) else None
+
+    def task(idx, seconds, start=None):
+        simulated[0] += idx.size * (samples(seconds) - (0 if start is None else start[0].k))
         return (loop.params, loop.options, loop.backend, limits, PP[idx], DD[idx], experiment, setup.amplitude,
-                seconds, seed, rtol, stable[idx].astype(float))
+                seconds, seed, rtol, stable[idx].astype(float), scale_s, start,
+                longer_than(seconds) if cont else None)
 
     def chunks(idx, per):
         # strided, not contiguous: a point's cost grows with its gains (the friction integrator's
@@ -290,20 +322,27 @@ def nonlinear_map(loop, P_gain, D_gain, *, limits: Limits | None = None, experim
 
         def then(a, result):
             idx, seconds = where.pop(id(a)), seconds_of.pop(id(a))
-            k2, t2, a2, f2 = result
+            k2, t2, a2, f2, c2 = result
             kind[idx], ts[idx], amp[idx], freq[idx] = k2, t2, a2, f2
             run_s[idx] = seconds
             cls[idx] = classify(kind[idx], ts[idx], stable[idx], always, saturating_fraction, forced)
-            if seconds >= max_duration:
+            if longer_than(seconds) is None:
                 return []
-            longer = idx[np.isin(cls[idx], again)]
+            rerun = np.isin(cls[idx], again)
+            longer = idx[rerun]
             if not longer.size:
                 return []
-            nxt = min(seconds * EXTEND_FACTOR, max_duration)
+            if c2 is not None:                          # kept for the points run again only
+                state[longer] = [c for c, r in zip(c2, rerun) if r]
+            nxt = longer_than(seconds)
             depth[longer] += 1
             out = []
+            # sized by the run's length, not its new samples: a continued run's task then holds
+            # less work than a first-run task (2/3 to 1/10 of it), so that the chain of a point's
+            # reruns, the critical path on many workers, is short
             for c in chunks(longer, max(1, int(round(per * setup.duration / nxt)))):
-                b = task(c, nxt)
+                b = task(c, nxt, list(state[c]) if cont else None)
+                state[c] = None
                 where[id(b)], seconds_of[id(b)] = c, nxt
                 out.append((b, int(depth[c[0]])))
             return out
@@ -317,7 +356,7 @@ def nonlinear_map(loop, P_gain, D_gain, *, limits: Limits | None = None, experim
         duration=setup.duration, max_duration=max_duration, extend_factor=EXTEND_FACTOR, longer_rounds=rounds,
         seed=seed, rtol=rtol, limits=limits.active, limits_act_every_step=always,
         saturating_fraction=saturating_fraction, samples_per_run=setup.n,
-        samples_simulated=simulated[0],
+        samples_simulated=simulated[0], longer_runs_continue=cont, friction_scale_duration=scale_s,
         scheduler="in-process" if scheduler is None else "dask.distributed",
         rules="docs/simulate.md, Nonlinear maps", P_gain_unit="Nm/rad", D_gain_unit="Nms/rad",
         cycle_amplitude_unit="Nm", cycle_frequency_unit="Hz")

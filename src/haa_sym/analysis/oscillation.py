@@ -17,7 +17,7 @@ import numpy as np
 
 from haa_sym.errors import ParameterError
 
-__all__ = ["Oscillation", "limit_cycle", "theil_sen_slope", "classify", "OSCILLATION_KINDS", "VERDICTS",
+__all__ = ["Oscillation", "limit_cycle", "tail_start", "theil_sen_slope", "classify", "OSCILLATION_KINDS", "VERDICTS",
            "SATURATING_FRACTION", "THEIL_SEN_MAX_POINTS", "ACF_PEAK_FRACTION", "ACF_MIN", "IRREGULAR_CHUNKS",
            "IRREGULAR_GROWTH_TOL"]
 
@@ -203,9 +203,17 @@ def _period(x: np.ndarray, max_lag: int) -> float | None:
     return P
 
 
+def tail_start(t, settle: float = 0.5) -> int:
+    """Index of the first sample of the tail :func:`limit_cycle` analyses: the first t_i >= t_0 +
+    ``settle`` (t_(n-1) - t_0), ``t`` increasing. A caller that keeps only a trace's tail (a run
+    continued in segments, :mod:`haa_sym.analysis.nonlinear_map`) keeps it from here."""
+    t = np.asarray(t, float).ravel()
+    return int(np.argmax(t >= t[0] + settle * (t[-1] - t[0])))
+
+
 def limit_cycle(t, y, *, settle: float = 0.5, min_cycles: int = 3, growth_tol: float = 0.01,
                 hysteresis: float | None = None, noise_factor: float = 4.0,
-                resolution: float = 0.0) -> Oscillation:
+                resolution: float = 0.0, peak: float | None = None) -> Oscillation:
     """Detect a sustained oscillation in the trace ``y(t)`` after its transient.
 
     Parameters
@@ -230,6 +238,10 @@ def limit_cycle(t, y, *, settle: float = 0.5, min_cycles: int = 3, growth_tol: f
         The trace's quantisation step (trace unit), if known; default 0. The default hysteresis
         is at least one step, so a signal toggling between two levels is an oscillation only if
         it spans more than one step.
+    peak : float, optional
+        The largest |y| of the whole trace when ``t``, ``y`` are only its tail (with ``settle =
+        0``: a run continued in segments keeps its tail and this number, :func:`tail_start`);
+        default max |y| of ``y``. It enters only the default hysteresis's floor.
 
     Returns
     -------
@@ -250,12 +262,12 @@ def limit_cycle(t, y, *, settle: float = 0.5, min_cycles: int = 3, growth_tol: f
         raise ParameterError(f"settle = {settle!r}; allowed: 0 <= settle < 1 (a fraction of the duration)")
     if not (isinstance(min_cycles, int) and min_cycles >= 2):
         raise ParameterError(f"min_cycles = {min_cycles!r}; allowed: an integer >= 2")
-    tail = t >= t[0] + settle * (t[-1] - t[0])
-    tt, yy = t[tail], y[tail]
+    i0 = tail_start(t, settle)
+    tt, yy = t[i0:], y[i0:]
     offset = float(yy.mean())
     noise = _noise_rms(yy)
     h = hysteresis if hysteresis is not None else \
-        max(noise_factor * noise, resolution, 1e-9 * float(np.abs(y).max()))
+        max(noise_factor * noise, resolution, 1e-9 * (float(np.abs(y).max()) if peak is None else peak))
     none = Oscillation("none", np.nan, np.nan, np.nan, np.nan, np.nan, 0.0, 0, offset, float(h), noise)
     x = yy - offset
     # is there an oscillation beyond the band at all? A Schmitt trigger: the state is the side

@@ -40,7 +40,8 @@ from dataclasses import dataclass, field
 import numpy as np
 import scipy.linalg
 
-from haa_sym.analysis.oscillation import SATURATING_FRACTION, VERDICTS, Oscillation, classify, limit_cycle
+from haa_sym.analysis.oscillation import (SATURATING_FRACTION, VERDICTS, Oscillation, classify, limit_cycle,
+                                          tail_start)
 from haa_sym.analysis.sweep import blas_limits
 from haa_sym.compiled import layout as L
 from haa_sym.compiled.generated import evaluators
@@ -53,7 +54,8 @@ from haa_sym.loop.statespace import controller_batch
 from haa_sym.model.actuator import ROTOR
 from haa_sym.model.limits import Limits
 
-__all__ = ["EXPERIMENTS", "FORCED_EXPERIMENTS", "CSV_COLUMNS", "Simulation", "SimulationBatch", "simulate",
+__all__ = ["EXPERIMENTS", "FORCED_EXPERIMENTS", "CSV_COLUMNS", "Simulation", "SimulationBatch", "Continuation",
+           "continuable", "keep_from", "simulate",
            "simulate_batch", "DEFAULT_RTOL", "MAX_SAMPLES", "limits_act_every_step", "linear_verdict"]
 
 #: The experiments (docs/simulate.md): what ``amplitude`` A is and where it enters.
@@ -143,7 +145,8 @@ class SimulationBatch:
     (the torque's peak-to-peak swing over the last quarter of the run over the quarter's before),
     ``oscillation`` (the kind :func:`haa_sym.analysis.oscillation.limit_cycle` found in the torque's
     last half: none, decaying, sustained, growing; "non-finite"), ``tail_saturation`` (the fraction
-    of the last half's samples in saturation) and ``status``: each point's verdict
+    of the last half's samples in saturation), ``continuations`` (with ``continue_to``: per point
+    the :class:`Continuation` a longer run starts from) and ``status``: each point's verdict
     (:data:`haa_sym.analysis.oscillation.VERDICTS`, by :func:`haa_sym.analysis.oscillation.classify`
     from the run and the linear loop's decision; "undecided" where that is unknown and the run
     cannot tell)."""
@@ -159,6 +162,7 @@ class SimulationBatch:
     meta: dict = field(repr=False)
     oscillation: np.ndarray | None = field(repr=False, default=None)
     tail_saturation: np.ndarray | None = field(repr=False, default=None)
+    continuations: list | None = field(repr=False, default=None)
 
 
 def _pad(M, rows, cols):
@@ -210,7 +214,8 @@ def _number(name, value, allowed, test):
 class _Setup:
     """Everything of one simulation but the gains' controller: plant matrices, limits, inputs."""
 
-    def __init__(self, loop, limits, experiment, amplitude, duration, seed, chirp_f1, excitation=None):
+    def __init__(self, loop, limits, experiment, amplitude, duration, seed, chirp_f1, excitation=None,
+                 scale_duration=None):
         params, ctrl = loop.params, loop.params.controller
         self.Ts = Ts = ctrl.Ts
         if experiment not in EXPERIMENTS:
@@ -232,6 +237,12 @@ class _Setup:
             raise ParameterError(f"limits = {lim!r}; allowed: a haa_sym.model.limits.Limits or None "
                                  "(the parameter file's [limits])")
         self.limits, self.experiment, self.duration, self.n, self.seed = lim, experiment, duration, n, seed
+        # the friction integrator's error scale: the no-friction run's state peaks over its first
+        # scale_duration seconds (default the whole run; _run)
+        self.scale_duration = duration if scale_duration is None else _number(
+            "scale_duration", scale_duration, f"a number of seconds in (0, duration = {duration:g}]",
+            lambda v: 0 < v <= duration)
+        self.n_scale = min(n, int(math.ceil(self.scale_duration / Ts - 1e-9)) + 1)
         top = params.plant.topology
         motor = _continuous(params.plant, loop.backend)
         # a current-commanded structure (impedance_current): the plant without the electrical
@@ -470,9 +481,66 @@ class _Setup:
         return out.ravel()
 
 
-def _run(loop, setup: _Setup, P_gain, D_gain, controller=None):
-    """(y (n, len(SIM_COLUMNS)), integrator info) of one gain point; ``controller`` its
-    (Ac, Bc, Cc, Dc) if already built (a batch builds them all in one call)."""
+@dataclass(frozen=True)
+class Continuation:
+    """Where a run of one gain point stopped, and what of it the summaries of a longer run read
+    (docs/simulate.md, "Nonlinear maps"): enough to continue it to a longer run that takes
+    exactly the steps of one run from t = 0 (:func:`simulate_batch`'s ``start``).
+
+    Attributes
+    ----------
+    k : int
+        Samples done: the state is at the sample instant t_k.
+    x, xc : ndarray
+        The plant's and the controller's state (the generated loop's capacity-padded vectors).
+    carry : ndarray
+        The C loop's other state: the friction integrator's level and difference, the drive's
+        delay line (:meth:`haa_sym.compiled.generated.Evaluators.run_simulation`).
+    scale : ndarray or None
+        The friction integrator's error scale (the no-friction run's peaks over the first
+        ``scale_duration``; None without friction).
+    keep_from : int
+        The first sample whose outputs are kept: :func:`keep_from` of the longer run.
+    rows : ndarray, (k - keep_from, len(SIM_COLUMNS))
+        The outputs of samples keep_from .. k - 1.
+    saturated_head : ndarray of int
+        The samples before keep_from that were in saturation (the saturation time is over the
+        whole run), by index: most points never saturate, and a task ships every point's state.
+    torque_peak_head : float
+        max |torque| over the samples before (the oscillation classifier's hysteresis floor).
+    """
+
+    k: int
+    x: np.ndarray
+    xc: np.ndarray
+    carry: np.ndarray
+    scale: np.ndarray | None
+    keep_from: int
+    rows: np.ndarray
+    saturated_head: np.ndarray
+    torque_peak_head: float
+
+
+def keep_from(Ts: float, n: int) -> int:
+    """The first sample whose outputs the verdict and the summaries of a run of ``n`` samples read:
+    the oscillation classifier's tail (:func:`haa_sym.analysis.oscillation.tail_start` of the
+    nominal instants, its default settle), the last half (tail saturation) and the last two
+    quarters (growth) and tenth (final angle) of :func:`simulate_batch`."""
+    return min(n // 2, n - 2 * max(1, n // 4), tail_start(np.arange(n) * Ts))
+
+
+def continuable(setup: _Setup) -> bool:
+    """Whether a run's inputs up to t do not depend on its length, so that a longer run can
+    continue a shorter one: not the chirp (its sweep rate is set by the run's length) and not
+    torque noise with jitter (the jitter's draws follow the noise's n draws of the one seeded
+    stream); every other experiment and limit is."""
+    return setup.experiment not in FORCED_EXPERIMENTS and not (setup.limits.torque_noise and setup.limits.jitter)
+
+
+def _run(loop, setup: _Setup, P_gain, D_gain, controller=None, start: Continuation | None = None):
+    """(y (n - k0, len(SIM_COLUMNS)), integrator info, end state (x, xc, carry, scale)) of one gain
+    point from sample k0 = ``start.k`` (0 without ``start``) to the setup's last; ``controller``
+    its (Ac, Bc, Cc, Dc) if already built (a batch builds them all in one call)."""
     Ac, Bc, Cc, Dc = controller if controller is not None else \
         (m[0] for m in controller_batch(loop, P_gain, D_gain))
     nc = Ac.shape[0]
@@ -483,30 +551,41 @@ def _run(loop, setup: _Setup, P_gain, D_gain, controller=None):
                  q_theta=setup.q_theta, q_T=setup.q_T,
                  **{k: v[None, :] for k, v in setup.rows.items()},
                  **{k: v[None, :] if np.ndim(v) else v for k, v in setup.windows.items()})
-    x0 = _pad(setup.x0[:, None], cx, 1).ravel()
-    xc0 = np.zeros(cc)
+    if start is None:
+        k0, x0, xc0, carry = 0, _pad(setup.x0[:, None], cx, 1).ravel(), np.zeros(cc), None
+    else:
+        k0, x0, xc0, carry = start.k, start.x, start.xc, start.carry
+    exo = setup.exo[:, k0:]
 
-    def run(n_sub, parts, kind=setup.kind, **kw):
+    def run(n_sub, parts, kind=setup.kind, exo=exo, x0=x0, xc0=xc0, carry=carry, **kw):
         # one parameter vector (or set of tables) per piece of the sample interval, in turn
         plant = parts if isinstance(parts, np.ndarray) else \
             np.concatenate([_pack(L.sim_plant_layout(kind, cx), **p) for p in parts])
-        y, _x, _xc, extra = ev.run_simulation(names["sample"], names[kind], n_sub, x0, xc0, setup.exo,
-                                              ctrl, plant, pieces=setup.piece_frac, whole=setup.whole, **kw)
-        return y, extra
+        y, x, xc, extra, c = ev.run_simulation(names["sample"], names[kind], n_sub, x0, xc0, exo, ctrl, plant,
+                                               pieces=setup.piece_frac, whole=setup.whole, carry=carry, **kw)
+        return y, extra, (x, xc, c)
 
     if setup.kind == "jitter":      # [A, B] padded block by block: the u columns follow all cx states
         M = np.hstack([_pad(setup.A, cx, cx), _pad(setup.Bu, cx, len(L.SIM_U))])
         parts = [dict(p, M=M) for p in setup.plant_parts]
-        return run(setup.n_sub0, parts)[0], {"integrator": "jitter", "n_sub": setup.n_sub0}
+        y, _e, end = run(setup.n_sub0, parts)
+        return y, {"integrator": "jitter", "n_sub": setup.n_sub0}, end + (None,)
     if setup.kind == "zoh":
-        return run(setup.n_sub0, setup.plant_parts)[0], {"integrator": "zoh", "n_sub": 1}
+        y, _e, end = run(setup.n_sub0, setup.plant_parts)
+        return y, {"integrator": "zoh", "n_sub": 1}, end + (None,)
     # Coulomb friction: the error is measured against each state's peak in the same run without
-    # friction (exact ZOH, a fraction of the cost); per sample the driver halves the substep
-    # until two successive levels agree within SAMPLE_TOL_FRACTION rtol of those peaks and keeps the finer one
-    # (RK4: its local error is about 1/15 of the difference; the local errors of the samples
-    # add up over a run, hence the margin)
-    _y, peaks = run(1, setup.zoh_parts, kind="zoh", peaks=True)
-    scale = np.maximum(_pad(peaks[:, None], cx, 1).ravel(), 1e-12)
+    # friction (exact ZOH, a fraction of the cost) over its first scale_duration (default the
+    # whole run; a map's continued runs keep their first run's: one scale for every length);
+    # per sample the driver halves the substep until two successive levels agree within
+    # SAMPLE_TOL_FRACTION rtol of those peaks and keeps the finer one (RK4: its local error is
+    # about 1/15 of the difference; the local errors of the samples add up over a run, hence
+    # the margin)
+    if start is None:
+        _y, peaks, _end = run(1, setup.zoh_parts, kind="zoh", peaks=True, exo=setup.exo[:, :setup.n_scale],
+                              x0=x0, xc0=xc0, carry=None)
+        scale = np.maximum(_pad(peaks[:, None], cx, 1).ravel(), 1e-12)
+    else:
+        scale = start.scale
     # the tanh's slope at the sample's velocity, to the nearest of SLOPES, goes into the exact
     # linear part (a table per combination over the bodies), so that the explicit stages see
     # only its change over the sample: at stick the slope is steep (Fc / v_s), while sliding
@@ -520,12 +599,30 @@ def _run(loop, setup: _Setup, P_gain, D_gain, controller=None):
         setup.etd_cache = (cx, np.concatenate([setup.etd_tables(combos, cx, h) for h in setup.spans]))
     rows = np.zeros((nf, cx))
     rows[np.arange(nf), setup.friction[0]] = 1.0 / setup.limits.friction_velocity
-    y, lev = run(LEVELS, setup.etd_cache[1], scale=scale, tol=setup.rtol * SAMPLE_TOL_FRACTION,
-                 stick_rows=rows, slopes=slopes)
+    y, lev, end = run(LEVELS, setup.etd_cache[1], scale=scale, tol=setup.rtol * SAMPLE_TOL_FRACTION,
+                      stick_rows=rows, slopes=slopes)
     subs = 2.0 ** lev
     return y, {"integrator": "etdrk4, substeps per sample by step doubling", "n_sub": float(subs.mean()),
-               "n_sub_max": int(subs.max()), "rtol": setup.rtol,
-               "sample_tol": setup.rtol * SAMPLE_TOL_FRACTION}
+               "n_sub_max": int(subs.max()) if subs.size else 1, "rtol": setup.rtol,
+               "sample_tol": setup.rtol * SAMPLE_TOL_FRACTION}, end + (scale,)
+
+
+def _continuation(setup: _Setup, start: Continuation | None, y: np.ndarray, end, n_next: int) -> Continuation:
+    """The :class:`Continuation` of a run that ended with outputs ``y`` (its samples from
+    ``start.k``, or 0) and state ``end`` (:func:`_run`), keeping what a run of ``n_next``
+    samples reads."""
+    k0, first = (0, 0) if start is None else (start.k, start.keep_from)
+    rows = y if start is None else np.concatenate([start.rows, y])        # samples first .. k - 1
+    keep = max(first, min(keep_from(setup.Ts, n_next), k0 + y.shape[0]))
+    cut = rows[:keep - first]
+    sat_col, t_col = L.SIM_COLUMNS.index("saturated"), L.SIM_COLUMNS.index("torque")
+    head_sat = first + np.flatnonzero(cut[:, sat_col] > 0.5)
+    head_peak = float(np.abs(cut[:, t_col]).max()) if cut.shape[0] else 0.0
+    if start is not None:
+        head_sat = np.concatenate([start.saturated_head, head_sat])
+        head_peak = max(head_peak, start.torque_peak_head)
+    x, xc, carry, scale = end
+    return Continuation(k0 + y.shape[0], x, xc, carry, scale, keep, rows[keep - first:].copy(), head_sat, head_peak)
 
 
 def limits_act_every_step(lim: Limits) -> bool:
@@ -551,22 +648,36 @@ def _first_non_finite(y) -> int:
     return int(np.argmax(bad)) if bad.any() else y.shape[0]
 
 
-def _result(loop, setup, P_gain, D_gain, y, info, linear=None):
-    # a run that overflowed ends at its first non-finite sample: what follows is not data
-    k, y_rows = _first_non_finite(y), y.shape[0]
-    diverged_at = float(setup.time[k]) if k < y.shape[0] else math.nan
-    y, time = y[:k], setup.time[:k]
+def _result(loop, setup, P_gain, D_gain, y, info, linear=None, head: Continuation | None = None):
+    """The :class:`Simulation` of a run's outputs ``y``; with ``head`` (the :class:`Continuation`
+    the run continued), ``y`` holds its samples from ``head.k`` on and the columns returned
+    those from ``head.keep_from`` on, the verdict and the saturation time being the whole run's."""
+    k0, first = (0, 0) if head is None else (head.k, head.keep_from)
+    if head is not None:
+        y = np.concatenate([head.rows, y])
+    # a run that overflowed ends at its first non-finite sample: what follows is not data (the
+    # samples before a continuation were finite: a diverged run is not continued)
+    k, y_rows = first + _first_non_finite(y), first + y.shape[0]
+    diverged_at = float(setup.time[k]) if k < y_rows else math.nan
+    y, time = y[:k - first], setup.time[first:k]
     col = {c: y[:, i] for i, c in enumerate(L.SIM_COLUMNS)}
     sat = col["saturated"] > 0.5
-    dt = np.diff(np.append(time, time[-1] + setup.Ts)) if k else np.zeros(0)
-    sat_time = float(dt[sat].sum())
+    if head is None:
+        sat_all = sat
+    else:
+        sat_all = np.zeros(k, bool)
+        sat_all[head.saturated_head] = True
+        sat_all[first:] = sat
+    dt = np.diff(np.append(setup.time[:k], setup.time[k - 1] + setup.Ts)) if k else np.zeros(0)
+    sat_time = float(dt[sat_all].sum())
     forced = setup.experiment in FORCED_EXPERIMENTS
     diverged = k < y_rows
-    osc = None if diverged else trace_oscillation(setup, col["torque"])
+    osc = None if diverged else trace_oscillation(setup, col["torque"], first,
+                                                  0.0 if head is None else head.torque_peak_head)
     amp, freq = (osc.amplitude, osc.frequency_hz) if osc is not None and osc.kind in ("sustained", "irregular") \
         and not forced else (math.nan, math.nan)
     stable, radius = linear if linear is not None else (math.nan, math.nan)
-    tail_sat = float(sat[k // 2:].mean()) if not diverged and k else math.nan
+    tail_sat = float(sat_all[k // 2:].mean()) if not diverged and k else math.nan
     # a run too short to judge its trace (trace_oscillation gives None) is no oscillation: the
     # linear-regime and saturation rules decide it, else it is undecided (it was "diverged at nan")
     kind = "non-finite" if diverged else ("too short" if osc is None else osc.kind)
@@ -581,20 +692,32 @@ def _result(loop, setup, P_gain, D_gain, y, info, linear=None):
         {"amplitude_Nm": amp, "frequency_Hz": None if math.isnan(freq) else freq, "signal": "torque",
          "periodic": osc.kind == "sustained"},
         verdict=verdict, diverged_at_s=None if math.isnan(diverged_at) else diverged_at,
-        samples_written=k, linear={"stable": lin, "spectral_radius": None if np.isnan(radius) else float(radius)},
+        samples_written=k - first, **({"continued_from_sample": k0, "first_sample_written": first} if k0 else {}),
+        linear={"stable": lin, "spectral_radius": None if np.isnan(radius) else float(radius)},
         verdict_rules="docs/simulate.md, The verdict of a run")
     return Simulation(time.copy(), col["theta"], col["velocity"], col["torque"], col["torque_ref"],
                       col["voltage"], col["current"], sat, sat_time, amp, freq, meta, osc, verdict, diverged_at,
                       lin, float(radius))
 
 
-def trace_oscillation(setup, torque) -> Oscillation | None:
+def trace_oscillation(setup, torque, first: int = 0, head_peak: float = 0.0) -> Oscillation | None:
     """The oscillation of the torque signal over the run's last half (the one trace classifier,
     :func:`haa_sym.analysis.oscillation.limit_cycle`, its defaults; the torque quantum as its
-    resolution; on the nominal instants k Ts, jitter or not); None if the run overflowed."""
-    if not np.all(np.isfinite(torque)) or len(torque) < 8:
+    resolution; on the nominal instants k Ts, jitter or not); None if the run overflowed.
+    ``torque`` is the run's signal from sample ``first`` on (a continued run keeps its tail,
+    :func:`keep_from`), ``head_peak`` max |torque| over the samples before: the classifier then
+    sees the same tail and hysteresis as on the whole signal."""
+    n = first + len(torque)
+    if not np.all(np.isfinite(torque)) or n < 8:
         return None
-    return limit_cycle(np.arange(len(torque)) * setup.Ts, torque, resolution=setup.q_T)
+    t = np.arange(n) * setup.Ts
+    if not first:
+        return limit_cycle(t, torque, resolution=setup.q_T)
+    i0 = tail_start(t)
+    if i0 < first:
+        raise ValueError(f"a continued run kept its torque from sample {first}, its tail starts at {i0}")
+    return limit_cycle(t[i0:], torque[i0 - first:], settle=0.0, resolution=setup.q_T,
+                       peak=max(head_peak, float(np.abs(torque).max())))
 
 
 @loop_first
@@ -643,7 +766,7 @@ def simulate(loop, P_gain: float, D_gain: float, *, limits: Limits | None = None
     with blas_limits(1):
         setup = _Setup(loop, limits, experiment, amplitude, duration, seed, chirp_f1, excitation)
         setup.rtol = _number("rtol", rtol, "a number in (0, 0.1)", lambda v: 0 < v < 0.1)
-        y, info = _run(loop, setup, P, D)
+        y, info, _end = _run(loop, setup, P, D)
         st, rad = linear_verdict(loop, P, D)
         return _result(loop, setup, P, D, y, info, (float(st[0]), float(rad[0])))
 
@@ -652,12 +775,21 @@ def simulate(loop, P_gain: float, D_gain: float, *, limits: Limits | None = None
 def simulate_batch(loop, P_gain, D_gain, *, limits: Limits | None = None,
                    experiment: str = "disturbance-step", amplitude: float | None = None,
                    duration: float = 1.0, seed: int = 0, rtol: float = DEFAULT_RTOL,
-                   linear_stable=None, setup: _Setup | None = None) -> SimulationBatch:
+                   linear_stable=None, setup: _Setup | None = None, scale_duration: float | None = None,
+                   start=None, continue_to: float | None = None) -> SimulationBatch:
     """:func:`simulate` at k gain points (``P_gain``, ``D_gain`` broadcast), summarised per point
     (:class:`SimulationBatch`); the plant's matrices and the inputs are built once.
     ``linear_stable``: the linear loop's decision per point if known (1, 0 or NaN), else
     computed (:func:`linear_verdict`). ``setup``: :func:`batch_setup` of the same loop and
-    arguments, if already built (a worker keeps it for its next tasks)."""
+    arguments, if already built (a worker keeps it for its next tasks).
+
+    Continued runs (docs/simulate.md, "Nonlinear maps"): ``scale_duration`` (s, default
+    ``duration``) is the horizon of the friction integrator's error scale (:func:`batch_setup`);
+    ``start``: per point a :class:`Continuation` (or None: from t = 0) that the run continues from
+    its sample ``k`` to ``duration``, the same steps as a run from t = 0 with the same
+    ``scale_duration`` (:func:`continuable` setups only); ``continue_to`` (s): the batch returns
+    per point in ``continuations`` the :class:`Continuation` from which a run of that length
+    continues this one."""
     P, D = (np.atleast_1d(np.asarray(v, float)).ravel() for v in np.broadcast_arrays(P_gain, D_gain))
     if not (np.all(np.isfinite(P)) and np.all(np.isfinite(D))):
         raise ParameterError("P_gain, D_gain: not finite; allowed: finite gains (Nm/rad, Nms/rad)")
@@ -665,45 +797,67 @@ def simulate_batch(loop, P_gain, D_gain, *, limits: Limits | None = None,
         if linear_stable is None:
             linear_stable = linear_verdict(loop, P, D)[0]
         stable = np.broadcast_to(np.asarray(linear_stable, float), P.shape)
-        return _batch(loop, P, D, limits, experiment, amplitude, duration, seed, rtol, stable, setup)
+        if setup is None:
+            setup = batch_setup(loop, limits, experiment, amplitude, duration, seed, rtol, scale_duration)
+        starts = [None] * P.size if start is None else list(start)
+        n_next = None
+        if continue_to is not None or any(c is not None for c in starts):
+            if not continuable(setup):
+                raise ParameterError(f"experiment = {experiment!r} with limits {setup.limits.active}: its runs "
+                                     "cannot be continued; allowed: a run from t = 0 (docs/simulate.md)")
+            if len(starts) != P.size or any(c is not None and not 0 < c.k < setup.n for c in starts):
+                raise ParameterError(f"start: {len(starts)} continuations for {P.size} points; allowed: one per "
+                                     f"point, None or stopped before the run's {setup.n} samples")
+        if continue_to is not None:
+            n_next = int(math.ceil(_number("continue_to", continue_to, f"seconds >= duration ({setup.duration:g})",
+                                           lambda v: v >= setup.duration) / setup.Ts - 1e-9)) + 1
+        return _batch(loop, P, D, setup, stable, starts, n_next)
 
 
-def batch_setup(loop, limits, experiment, amplitude, duration, seed, rtol) -> _Setup:
+def batch_setup(loop, limits, experiment, amplitude, duration, seed, rtol, scale_duration=None) -> _Setup:
     """The setup :func:`simulate_batch` builds for its runs (plant matrices, inputs, the friction
-    integrator's tables once built): reusable for further batches of the same arguments."""
+    integrator's tables once built): reusable for further batches of the same arguments.
+    ``scale_duration`` (s, default ``duration``): the friction integrator's error is bounded
+    relative to each state's peak over this first part of the run without friction; a map
+    whose runs continue in segments gives every length its first run's."""
     with blas_limits(1):
-        setup = _Setup(loop, limits, experiment, amplitude, duration, seed, None)
+        setup = _Setup(loop, limits, experiment, amplitude, duration, seed, None, scale_duration=scale_duration)
     setup.rtol = _number("rtol", rtol, "a number in (0, 0.1)", lambda v: 0 < v < 0.1)
     return setup
 
 
-def _batch(loop, P, D, limits, experiment, amplitude, duration, seed, rtol, stable, setup=None):
-    if setup is None:
-        setup = batch_setup(loop, limits, experiment, amplitude, duration, seed, rtol)
+def _batch(loop, P, D, setup, stable, starts, n_next):
     k = P.size
     sat, amp, freq, fin, growth = (np.empty(k) for _ in range(5))
     status, kinds = np.empty(k, dtype=object), np.empty(k, dtype=object)
     tail_sat = np.empty(k)
     tail = max(1, setup.n // 10)
+    q = max(1, setup.n // 4)
+    conts = [None] * k if n_next is not None else None
     # every point's controller in one call: its exact element arithmetic (Fractions) per call
     # cost more than a 1 s run of the C loop
     ctrls = controller_batch(loop, P, D)
     for i in range(k):
-        y, _info = _run(loop, setup, P[i], D[i], tuple(m[i] for m in ctrls))
-        r = _result(loop, setup, P[i], D[i], y, _info, (stable[i], math.nan))
+        y, _info, end = _run(loop, setup, P[i], D[i], tuple(m[i] for m in ctrls), starts[i])
+        r = _result(loop, setup, P[i], D[i], y, _info, (stable[i], math.nan), starts[i])
+        if conts is not None:
+            conts[i] = _continuation(setup, starts[i], y, end, n_next)
         sat[i], amp[i], freq[i] = r.saturation_time, r.cycle_amplitude, r.cycle_frequency
         status[i] = r.verdict
         kinds[i] = "non-finite" if r.oscillation is None else r.oscillation.kind
         if r.oscillation is None:                        # diverged: no summary of a trace cut short
             fin[i] = growth[i] = tail_sat[i] = math.nan
             continue
+        # the columns of a continued run start at its sample first (keep_from): the windows
+        # below are counted from the end
+        first = setup.n - len(r.torque)
         fin[i] = r.theta[-tail:].mean()
         # the torque's swing over the last quarter of the run and the quarter's before
-        q = max(1, setup.n // 4)
         swing = [np.ptp(r.torque[-(j + 1) * q:len(r.torque) - j * q]) for j in (0, 1)]
         growth[i] = swing[0] / swing[1] if swing[1] > 0 else (math.inf if swing[0] > 0 else 1.0)
-        tail_sat[i] = r.saturated[setup.n // 2:].mean()
-    meta = loop.provenance(analysis="simulate_batch", experiment=experiment, amplitude=setup.amplitude,
-                           duration=setup.duration, seed=seed, limits=setup.limits.active)
+        tail_sat[i] = r.saturated[setup.n // 2 - first:].mean()
+    meta = loop.provenance(analysis="simulate_batch", experiment=setup.experiment, amplitude=setup.amplitude,
+                           duration=setup.duration, seed=setup.seed, limits=setup.limits.active,
+                           scale_duration=setup.scale_duration)
     return SimulationBatch(P, D, sat, amp, freq, fin, growth, status.astype(str), meta, kinds.astype(str),
-                           tail_sat)
+                           tail_sat, conts)

@@ -434,7 +434,7 @@ class Evaluators:
     def run_simulation(self, sample: str, step: str, n_sub: int, x: np.ndarray, xc: np.ndarray,
                        exo: np.ndarray, ctrl: np.ndarray, plant: np.ndarray, *, scale=None,
                        tol: float | None = None, peaks: bool = False, stick_rows=None,
-                       slopes=(0.0,), pieces=(1.0,), whole: int = 0):
+                       slopes=(0.0,), pieces=(1.0,), whole: int = 0, carry=None):
         """Run the simulation's sample loop (``codegen/driver.c``): per column of ``exo``
         (n_exo x n_steps) the generated ``sample`` function, then ``step`` n_sub times
         (``haa_simulate``); or, with ``scale`` and ``tol``, ``plant`` holding
@@ -449,10 +449,16 @@ class Evaluators:
         ``whole + len(pieces) - 1 - p`` before (0 before t = 0) and the jitter share ``delta``
         x ``pieces[p]`` (the driver's docstring in ``codegen/driver.c``).
 
-        Returns ``(y, x_final, xc_final, extra)`` with ``y`` of shape (n_steps, n_y); ``extra``
-        is the level per sample (adaptive), the peak |x_i| over the sample instants
-        (``peaks``), else None. Compiled: one C call for the whole run. VM: the same loop in
-        Python over CasADi's VM (slow; the same numbers up to rounding).
+        ``carry``: the loop's state besides ``x`` and ``xc`` as the last segment left it
+        (:meth:`carry_size` reals: the adaptive level kept last and its difference, the delay
+        line; ``codegen/driver.c``, ``haa_carry_out``), or None for a run from t = 0. With it, a
+        run of n1 samples continued over n2 more (``x``, ``xc``, ``carry`` of the first passed
+        to the second) takes exactly the steps of one run of n1 + n2 samples.
+
+        Returns ``(y, x_final, xc_final, extra, carry_final)`` with ``y`` of shape (n_steps,
+        n_y); ``extra`` is the level per sample (adaptive), the peak |x_i| over the sample
+        instants (``peaks``), else None. Compiled: one C call for the whole run. VM: the same
+        loop in Python over CasADi's VM (slow; the same numbers up to rounding).
         """
         fs, fp = self[sample], self[step]
         x = np.array(x, dtype=float).copy()
@@ -469,6 +475,11 @@ class Evaluators:
         slopes = np.ascontiguousarray(slopes, dtype=float)
         pieces = np.ascontiguousarray(pieces, dtype=float)
         n_pieces, whole = len(pieces), int(whole)
+        carry_in = carry is not None
+        carry = np.zeros(self.carry_size(whole, n_pieces)) if carry is None else \
+            np.array(carry, dtype=float).copy()
+        if carry.size != self.carry_size(whole, n_pieces):
+            raise ValueError(f"carry has {carry.size} values, expected {self.carry_size(whole, n_pieces)}")
         stride = len(slopes) ** len(rows) * levels * psize if adaptive else psize
         if n_pieces < 1 or whole < 0 or plant.size != n_pieces * stride:
             raise ValueError(f"{step}: plant has {plant.size} values, expected {n_pieces} pieces x "
@@ -482,7 +493,7 @@ class Evaluators:
             raise ValueError(f"{sample}: exo has {n_exo} rows, expected {fs.numel_in(2)}")
         if self.backend != "compiled":
             return self._simulate_vm(fs, fp, n_sub, x, xc, exo, ctrl, plant, scale, tol, peaks, rows,
-                                     slopes, pieces, whole)
+                                     slopes, pieces, whole, carry if carry_in else None)
         lib = self._cdll()
         y = np.empty((n, n_y))
         vp = ctypes.c_void_p
@@ -497,29 +508,43 @@ class Evaluators:
                                              float(tol), rows.ctypes.data, len(rows),
                                              slopes.ctypes.data, len(slopes), y.ctypes.data, n_y,
                                              extra.ctypes.data, n, n_pieces, stride,
-                                             pieces.ctypes.data, whole)
+                                             pieces.ctypes.data, whole, carry.ctypes.data, int(carry_in))
         else:
             extra = np.empty(x.size) if peaks else None
             flag = lib.haa_simulate(*fns, int(n_sub), x.size, xc.size, fp.numel_in(1),
                                     x.ctypes.data, xc.ctypes.data, exo.ctypes.data, n_exo,
                                     ctrl.ctypes.data, plant.ctypes.data, y.ctypes.data, n_y,
                                     None if extra is None else extra.ctypes.data, n, n_pieces, stride,
-                                    pieces.ctypes.data, whole)
+                                    pieces.ctypes.data, whole, carry.ctypes.data, int(carry_in))
         if flag:
             raise RuntimeError(f"generated {sample} / {step} failed (code {flag})")
-        return y, x, xc, extra
+        return y, x, xc, extra, carry
 
     @staticmethod
-    def _simulate_vm(fs, fp, n_sub, x, xc, exo, ctrl, plant, scale, tol, peaks, rows, slopes, pieces, whole):
+    def carry_size(whole: int, n_pieces: int) -> int:
+        """Reals of :meth:`run_simulation`'s ``carry``: level, difference, the delay line's head
+        and its ``whole + n_pieces`` commands."""
+        return 3 + int(whole) + int(n_pieces)
+
+    @staticmethod
+    def _simulate_vm(fs, fp, n_sub, x, xc, exo, ctrl, plant, scale, tol, peaks, rows, slopes, pieces, whole,
+                     carry=None):
         """:meth:`run_simulation` in Python over CasADi's VM: the C drivers' loops, line by line."""
         n = exo.shape[1]
         y = np.empty((n, fs.numel_out(2)))
         psize = fp.numel_in(3)
         n_pieces = len(pieces)
         stride = plant.size // n_pieces
-        ring = np.zeros(whole + n_pieces)          # the drive's delay line, newest first
+        size = whole + n_pieces
+        # the drive's delay line, newest first (the C ring read from its head backwards)
+        ring = np.zeros(size)
         extra = np.empty(n) if scale is not None else (np.zeros(x.size) if peaks else None)
         lev, err_last = 0, tol + 1 if tol is not None else 0.0
+        if carry is not None:
+            head = int(carry[2])
+            ring = np.array([carry[3 + (head - j) % size] for j in range(size)])
+            if scale is not None:
+                lev, err_last = int(carry[0]), float(carry[1])
 
         def table(xx, p):
             index = sum(int(np.argmin(np.abs(1 - np.tanh(rows[r] @ xx) ** 2 - slopes))) * len(slopes) ** r
@@ -561,7 +586,12 @@ class Evaluators:
                 xa = xb
             x = xb
             extra[k] = lev
-        return y, x, xc, extra
+        # the C layout of the carry with head = 0: the command j samples back at index -j
+        c_ring = np.empty(size)
+        c_ring[(-np.arange(size)) % size] = ring
+        out = np.concatenate([[lev if scale is not None else 0, err_last if scale is not None else 0.0, 0.0],
+                              c_ring])
+        return y, x, xc, extra, out
 
     def _cdll(self):
         if getattr(self, "_lib", None) is None:
@@ -574,10 +604,10 @@ class Evaluators:
             lib.haa_simulate.restype = ctypes.c_int
             ll, vp = ctypes.c_longlong, ctypes.c_void_p
             lib.haa_simulate.argtypes = [vp] * 4 + [ll] * 4 + [vp] * 3 + [ll] + [vp] * 3 + [ll] + [vp, ll] + \
-                [ll, ll, vp, ll]
+                [ll, ll, vp, ll, vp, ll]
             lib.haa_simulate_adaptive.restype = ctypes.c_int
             lib.haa_simulate_adaptive.argtypes = [vp] * 4 + [ll] * 5 + [vp] * 3 + [ll] + [vp] * 3 + \
-                [ctypes.c_double, vp, ll, vp, ll, vp, ll, vp, ll, ll, ll, vp, ll]
+                [ctypes.c_double, vp, ll, vp, ll, vp, ll, vp, ll, ll, ll, vp, ll, vp, ll]
             self._lib = lib
         return self._lib
 
