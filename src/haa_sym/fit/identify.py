@@ -503,6 +503,10 @@ def _slow_period(model) -> float:
     return float(2 * np.pi / use.min()) if use.size else 0.0
 
 
+#: A key whose column of the Jacobian (the outputs' sensitivity to its logarithm) is below this
+#: fraction of the largest key's is refused: the logs do not see it (the normal matrix would be
+#: singular to rounding).
+DEAD_SENSITIVITY = 1e-12
 #: The friction simulation's error the default substep allows: the step-doubling estimate
 #: rms(y(h) - y(h / 2)) of the extrapolated scheme's error at h, over each output's standard
 #: deviation in the log, the largest over the logs and outputs. Measured (docs/identify.md, "The
@@ -729,19 +733,23 @@ def identify(experiments: list[Experiment], keys: tuple[str, ...], inputs: tuple
 
         # the first pass only finds the neighbourhood (its weights are provisional); the second,
         # with the noise levels of the residuals as weights, converges
-        theta, it1, _ = _levenberg_marquardt(evaluate, theta0, opt, keys, tolerance=opt.first_pass_tolerance)
+        origin: dict = {}
+        theta, it1, _ = _levenberg_marquardt(evaluate, theta0, opt, keys, tolerance=opt.first_pass_tolerance,
+                                             origin=origin)
         it2, scale0 = 0, sigma
         for n_pass in range(max(opt.max_reweights, 1)):
             new = [np.maximum(np.sqrt(np.mean(err ** 2, axis=0)), 1e-12 * s) for err, s in zip(run(theta)[0], scale0)]
             if n_pass and all(np.all(np.abs(a / b - 1) <= opt.reweight_rtol) for a, b in zip(new, sigma)):
                 break
             sigma = new          # evaluate() reads sigma when called: the new weights apply
-            theta, it, converged = _levenberg_marquardt(evaluate, theta, opt, keys)
+            theta, it, converged = _levenberg_marquardt(evaluate, theta, opt, keys, origin=origin)
             it2 += it
         for refit in range(SUBSTEP_REFITS + 1) if use_friction else ():
             h = sub["opt"].max_substep
+            # the fit's own run at h is cached (without offsets: those it adds would show in the difference)
+            y_h = None if offsets else [y - err for y, err in zip(Y, run(theta, False)[0])]
             sub["error"] = _substep_error(experiments, outs, inputs, keys, np.exp(theta), sub["opt"], U, Y, friction,
-                                          h)[0]
+                                          h, y_h)[0]
             if sub["error"] <= SUBSTEP_RTOL or refit == SUBSTEP_REFITS:
                 break
             if opt.max_substep is not None:
@@ -760,7 +768,7 @@ def identify(experiments: list[Experiment], keys: tuple[str, ...], inputs: tuple
                                         start=h / 2)
             sub["opt"], sub["levels"] = dataclasses.replace(opt, max_substep=h), sub["levels"] + levels
             cache.clear()
-            theta, it, converged = _levenberg_marquardt(evaluate, theta, sub["opt"], keys)
+            theta, it, converged = _levenberg_marquardt(evaluate, theta, sub["opt"], keys, origin=origin)
             it2 += it
         if use_friction and opt.max_substep is None and sub["error"] > SUBSTEP_RTOL:
             warnings.warn(f"the friction simulation's estimated error at the fitted values is {sub['error']:.2g} of "
@@ -856,17 +864,38 @@ def _interval(theta: np.ndarray, cov: np.ndarray) -> np.ndarray:
     return np.exp(np.column_stack([theta - Z95 * sd, theta + Z95 * sd]))
 
 
-def _levenberg_marquardt(evaluate, theta, opt: FitOptions, keys, tolerance: float | None = None):
+def _levenberg_marquardt(evaluate, theta, opt: FitOptions, keys, tolerance: float | None = None,
+                         origin: dict | None = None):
     """Minimise |r(theta)|^2 from ``theta``: Levenberg-Marquardt (Marquardt's diagonal scaling)
     with the exact Jacobian. Returns (theta, iterations, converged): not converged when
-    ``max_iterations`` ran out while the cost still fell by more than the tolerance."""
+    ``max_iterations`` ran out while the cost still fell by more than the tolerance.
+
+    ``origin``: an empty dict on the fit's first call, which records there the start
+    (``theta``) and each key's sensitivity over the largest (``ratio``); the later calls (the
+    reweighted passes) read it, so that a key whose sensitivity is below
+    :data:`DEAD_SENSITIVITY` is refused with the true reason: never seen at its start, or run by
+    the earlier passes to where the logs no longer see it."""
     r, J = evaluate(theta)
     cost = float(r @ r)
     norms = np.linalg.norm(J, axis=0)
-    dead = [k for k, nrm in zip(keys, norms) if not nrm > 1e-12 * max(norms.max(), 1e-300)]
+    ratio = norms / max(norms.max(), 1e-300)
+    if origin is not None and not origin:
+        origin.update(theta=theta.copy(), ratio=ratio)
+    dead = [i for i, x in enumerate(ratio) if not x > DEAD_SENSITIVITY]
     if dead:
-        raise ParameterError(f"--fit {dead[0]}: the logged outputs do not depend on it (zero sensitivity); "
-                             "allowed: keys the chosen --input/--output observe")
+        i = dead[0]
+        big = keys[int(np.argmax(norms))]
+        if origin and origin["ratio"][i] > DEAD_SENSITIVITY:
+            v0, v = np.exp(origin["theta"][i]), np.exp(theta[i])
+            raise ParameterError(
+                f"--fit {keys[i]}: the fit ran it from {v0:.4g} to {v:.4g}, where the logs no longer see it (the "
+                f"outputs' sensitivity to log {keys[i]} {ratio[i]:.2g} of log {big}'s, below {DEAD_SENSITIVITY:g}; "
+                f"{origin['ratio'][i]:.2g} at the start): these logs do not determine it (the logs do not excite "
+                "what it sets, e.g. a stiffness whose mode lies above their band runs towards rigid); allowed: keys "
+                "the logs observe (hold it at a known value, a richer input)")
+        raise ParameterError(f"--fit {keys[i]}: the logged outputs do not depend on it at {np.exp(theta[i]):.4g} "
+                             f"(their sensitivity to log {keys[i]} {ratio[i]:.2g} of log {big}'s, below "
+                             f"{DEAD_SENSITIVITY:g}); allowed: keys the chosen --input/--output observe")
     lam = 1e-3
     it, done, improved = 0, False, True
     for it in range(1, opt.max_iterations + 1):
