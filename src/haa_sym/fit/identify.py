@@ -524,6 +524,11 @@ SUBSTEP_GROSS = 1e-2
 SUBSTEP_HALVINGS = 6
 #: Refits at a finer substep when the fitted values need one (the search ran at the start values).
 SUBSTEP_REFITS = 2
+#: The default's substep is not rechecked at the fitted values when its estimate at the start was
+#: below SUBSTEP_RTOL over this: the estimate changed at most 3.5x between start and fit in the
+#: cases measured (the haptic wall at 0.5 ms, Fc_m and tau_drive 1.5x off: 2.9e-2 -> 0.10), and a
+#: recheck costs a simulation at h / 2 (on the ITregear ramps' 3-4-iteration fits a fifth of the fit).
+SUBSTEP_RECHECK_MARGIN = 10
 
 
 def _substep_error(experiments, outs, inputs, keys, values, opt, U, Y, friction, h, y_h=None):
@@ -544,9 +549,12 @@ def _substep_error(experiments, outs, inputs, keys, values, opt, U, Y, friction,
     return err, halves
 
 
-def safe_substep(experiments, outs, inputs, keys, values, opt, U, Y, friction, start=DEFAULT_MAX_SUBSTEP):
+def safe_substep(experiments, outs, inputs, keys, values, opt, U, Y, friction, start=DEFAULT_MAX_SUBSTEP,
+                 y_start=None):
     """The longest substep start / 2^k (k <= :data:`SUBSTEP_HALVINGS`) whose estimated error
     (:func:`_substep_error`) is within :data:`SUBSTEP_RTOL`, at ``values``.
+
+    ``y_start``: the runs at ``start`` when known (the fit's own first evaluation).
 
     Returns
     -------
@@ -562,7 +570,7 @@ def safe_substep(experiments, outs, inputs, keys, values, opt, U, Y, friction, s
     ParameterError
         No substep down to start / 2^SUBSTEP_HALVINGS is accurate enough.
     """
-    h, prev, levels = start, None, []
+    h, prev, levels = start, y_start, []
     for _ in range(SUBSTEP_HALVINGS + 1):
         err, prev = _substep_error(experiments, outs, inputs, keys, values, opt, U, Y, friction, h, prev)
         levels.append([h, err])
@@ -691,9 +699,6 @@ def identify(experiments: list[Experiment], keys: tuple[str, ...], inputs: tuple
         # the friction simulation's substep: given, or the longest one accurate at the start values
         # (SUBSTEP_RTOL); checked again at the fitted values below
         sub = {"opt": opt, "levels": [], "error": None}
-        if use_friction and opt.max_substep is None:
-            h, _, sub["levels"] = safe_substep(experiments, outs, inputs, keys, np.exp(theta0), opt, U, Y, friction)
-            sub["opt"] = dataclasses.replace(opt, max_substep=h)
 
         def run(theta, sens=True):
             """Unweighted errors y - y_model and, with ``sens``, d y_model / d log p, per log; a
@@ -724,6 +729,26 @@ def identify(experiments: list[Experiment], keys: tuple[str, ...], inputs: tuple
                 offset_of[key] = offs
             return cache[key]
 
+        def model_runs(theta, sens):
+            """The model's outputs per log at ``theta`` (the cached run's, its offsets taken off)."""
+            errs = run(theta, sens)[0]
+            offs = offset_of.get(theta.tobytes(), {})
+            out = []
+            for e, o, y, err in zip(experiments, outs, Y, errs):
+                yp = y - err
+                for c, x in enumerate(o):
+                    yp[:, c] -= offs.get(e.log.name, {}).get(x, 0.0)
+                out.append(yp)
+            return out
+
+        if use_friction and opt.max_substep is None:
+            # the fit's first evaluation (at 0.5 ms) is the search's first run: only the finer ones cost
+            h, _, sub["levels"] = safe_substep(experiments, outs, inputs, keys, np.exp(theta0), opt, U, Y, friction,
+                                               y_start=model_runs(theta0, True))
+            sub["opt"] = dataclasses.replace(opt, max_substep=h)
+            if h != DEFAULT_MAX_SUBSTEP:
+                cache.clear()
+
         def evaluate(theta, sens=True):
             errs, dys, _ = run(theta, sens)
             r = np.concatenate([(err / s).ravel() for err, s in zip(errs, sigma)])
@@ -744,10 +769,14 @@ def identify(experiments: list[Experiment], keys: tuple[str, ...], inputs: tuple
             sigma = new          # evaluate() reads sigma when called: the new weights apply
             theta, it, converged = _levenberg_marquardt(evaluate, theta, opt, keys, origin=origin)
             it2 += it
-        for refit in range(SUBSTEP_REFITS + 1) if use_friction else ():
+        recheck = use_friction and not (opt.max_substep is None and
+                                        sub["levels"][-1][1] <= SUBSTEP_RTOL / SUBSTEP_RECHECK_MARGIN)
+        if use_friction and not recheck:
+            sub["error"], sub["at"] = sub["levels"][-1][1], "start values"
+        for refit in range(SUBSTEP_REFITS + 1) if recheck else ():
+            sub["at"] = "fitted values"
             h = sub["opt"].max_substep
-            # the fit's own run at h is cached (without offsets: those it adds would show in the difference)
-            y_h = None if offsets else [y - err for y, err in zip(Y, run(theta, False)[0])]
+            y_h = model_runs(theta, False)           # the fit's own run at h, cached
             sub["error"] = _substep_error(experiments, outs, inputs, keys, np.exp(theta), sub["opt"], U, Y, friction,
                                           h, y_h)[0]
             if sub["error"] <= SUBSTEP_RTOL or refit == SUBSTEP_REFITS:
@@ -841,7 +870,8 @@ def identify(experiments: list[Experiment], keys: tuple[str, ...], inputs: tuple
                           "max_substep_rule": ("given (--max-substep)" if opt.max_substep is not None else
                                                f"default: the longest {DEFAULT_MAX_SUBSTEP:g} s / 2^k whose "
                                                f"estimated error is within {SUBSTEP_RTOL:g}"),
-                          "substep_error": sub["error"], "substep_search": sub["levels"],
+                          "substep_error": sub["error"], "substep_error_at": sub.get("at"),
+                          "substep_search": sub["levels"],
                           "method": "exact ZOH per substep of the log's own "
                           "intervals (the delayed command switching inside them, segments from estimated states), "
                           "friction torque implicit at each substep's end, Richardson-extrapolated over substeps h "
