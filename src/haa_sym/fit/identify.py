@@ -898,17 +898,15 @@ def _levenberg_marquardt(evaluate, theta, opt: FitOptions, keys, tolerance: floa
                          origin: dict | None = None):
     """Minimise |r(theta)|^2 from ``theta``: Levenberg-Marquardt (Marquardt's diagonal scaling)
     with the exact Jacobian. Returns (theta, iterations, converged): not converged when
-    ``max_iterations`` ran out while the cost still fell by more than the tolerance.
-
-    ``origin``: an empty dict on the fit's first call, which records there the start
-    (``theta``) and each key's sensitivity over the largest (``ratio``); the later calls (the
-    reweighted passes) read it, so that a key whose sensitivity is below
-    :data:`DEAD_SENSITIVITY` is refused with the true reason: never seen at its start, or run by
-    the earlier passes to where the logs no longer see it."""
+    ``max_iterations`` ran out while the cost still fell by more than the tolerance."""
     r, J = evaluate(theta)
     cost = float(r @ r)
     norms = np.linalg.norm(J, axis=0)
     ratio = norms / max(norms.max(), 1e-300)
+    # ``origin``: an empty dict on the fit's first call records the start and each key's
+    # sensitivity over the largest there; the later calls (the reweighted passes) read it, so that
+    # a key below DEAD_SENSITIVITY is refused with the true reason: never seen at its start, or run
+    # by the earlier passes to where the logs no longer see it (it used to say "zero sensitivity")
     if origin is not None and not origin:
         origin.update(theta=theta.copy(), ratio=ratio)
     dead = [i for i, x in enumerate(ratio) if not x > DEAD_SENSITIVITY]
