@@ -8,7 +8,7 @@ import scipy.signal
 
 from haa_sym.check.reference import closed_loop_matrices
 from haa_sym.errors import ParameterError
-from haa_sym.fit.identify import Experiment, identify
+from haa_sym.fit.identify import Experiment, FitOptions, identify
 from haa_sym.io.logs import Log, read_log
 from haa_sym.loop import ClosedLoop
 from haa_sym.model.params import actuator_path, load_params
@@ -111,3 +111,34 @@ def test_short_log_and_unobservable_key_are_refused(tmp_path):
     assert 3 * slow > 3.0
     with pytest.raises(ParameterError, match=r"--fit R: the current-commanded model .* does not contain L, R, k_w"):
         identify([Experiment(log, params)], ("R",), ("current",), ("torque", "theta"))
+
+
+def test_a_key_the_fit_ran_out_of_sight_is_refused_as_that_not_as_zero_sensitivity():
+    """The dead-sensitivity check of a later pass named a key the first pass had run to where the
+    logs no longer see it "zero sensitivity" (the QDD leg's K_gb, fitted with all its mechanical
+    keys and k_t: its gearbox mode above the log's band, its sensitivity 1e-3 of k_t's at the
+    start, the first pass ran it from 3400 to 2e8 Nm/rad). Now the refusal says the run and both
+    numbers; a key dead at its start still says the outputs do not depend on it, with the number."""
+    from haa_sym.fit.identify import DEAD_SENSITIVITY, _levenberg_marquardt
+    t = np.linspace(0.0, 1.0, 50)
+    y = 2.0 * t + 0.5 * np.sin(7 * t)
+
+    def evaluate(theta, sens=True):
+        a, b = np.exp(theta)
+        r = y - a * t - b * np.sin(7 * t)
+        return r, np.column_stack([-a * t, -b * np.sin(7 * t)])    # d r / d log p: b's falls with b
+
+    opt = FitOptions()
+    origin = {}
+    theta, _, _ = _levenberg_marquardt(evaluate, np.log([1.5, 0.4]), opt, ("a", "b"), origin=origin)
+    assert np.allclose(np.exp(theta), [2.0, 0.5]) and origin["ratio"][1] > 0.1
+    with pytest.raises(ParameterError) as e:
+        _levenberg_marquardt(evaluate, np.log([2.0, 1e-14]), opt, ("a", "b"), origin=origin)
+    msg = str(e.value)
+    assert msg.startswith("--fit b: the fit ran it from 0.4 to 1e-14, where the logs no longer see it"), msg
+    assert f"below {DEAD_SENSITIVITY:g}" in msg and "zero sensitivity" not in msg
+    with pytest.raises(ParameterError) as e:
+        _levenberg_marquardt(evaluate, np.log([2.0, 1e-14]), opt, ("a", "b"), origin={})
+    ratio = 1e-14 * np.linalg.norm(np.sin(7 * t)) / (2.0 * np.linalg.norm(t))
+    assert str(e.value).startswith("--fit b: the logged outputs do not depend on it at 1e-14 (their sensitivity "
+                                   f"to log b {ratio:.2g} of log a's"), str(e.value)

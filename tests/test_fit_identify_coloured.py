@@ -137,10 +137,11 @@ def test_lag_delay_friction_within_3_percent_and_hac_covers_18_of_20():
     Coulomb friction from tests/identify_coloured.friction_experiment (its own explicit-friction
     integration on 12.5 us sub-steps, not haa_sym.fit.friction; the command from 0, as identify
     holds it before the log): K_hd, J_link, tau_drive, delay_drive, Fc_m started 20-25 % off, at
-    the default max_substep, every key within 3 % and ci95 (HAC) covering the truth in >= 18 of 20
-    for every key (the issue's criterion). Measured (docs/identify.md): HAC 19, 19, 19, 20, 19
-    (ci95_white 7, 8, 8, 10, 11), worst error 0.4 %. 3 s (min_periods 1: the link's slowest mode is
-    2.8 s) so that the 20 fits take about 10 s; the 9 s run's numbers are in the docs."""
+    the default max_substep (chosen per fit: 0.125 ms here), every key within 3 % and ci95 (HAC)
+    covering the truth in >= 18 of 20 for every key (the issue's criterion). Measured
+    (docs/identify.md): HAC 19, 20, 19, 20, 20 (ci95_white 7, 8, 8, 12, 9), worst error 0.35 %. 3 s
+    (min_periods 1: the link's slowest mode is 2.8 s) so that the 20 fits take about 16 s; the 9 s
+    run's numbers are in the docs."""
     import dataclasses
     from identify_coloured import friction_experiment
     P = load_params(actuator_path("harmonic_drive"))

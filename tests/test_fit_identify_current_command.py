@@ -197,16 +197,35 @@ def test_identify_recovers_the_qdd_leg_from_its_current_log(tmp_path, delay):
 
 
 @pytest.mark.slow
-def test_identify_recovers_the_haptic_walls_friction(tmp_path):
+def test_identify_recovers_the_haptic_walls_friction(tmp_path, capsys):
     """With brush friction Fc_m 3 mNm (v_s 0.01 rad/s) in the device: J_m, B_m, tau_drive, Fc_m
-    fitted together at --max-substep 5e-5 s (the default 5e-4 s stopped at its iteration limit
-    with tau_drive 2.3 ms: the stick slope Fc / (v_s J_m) = 3000 1/s of this light rotor)."""
+    fitted together at the default substep, which identify chooses for this log (the fixed 0.5 ms
+    of before stopped at its iteration limit with tau_drive 2.3 ms: the stick slope
+    Fc / (v_s J_m) = 3000 1/s of this light rotor, whose angle integrates the scheme's error)."""
     f = _file(tmp_path, "haptic_wall", _drive(4e-4, 5e-4) + "\n[limits]\nFc_m = 0.003\n")
     truth = {"J_m": 1.0e-4, "B_m": 0.0025, "tau_drive": 4e-4}
     log = _simulate(tmp_path, f, 1, 0.001, 0.05, truth)
-    rep = _identify(tmp_path, f, log, tuple(truth) + ("Fc_m",), {"tau_drive": 6e-4, "Fc_m": 0.002},
-                    "--max-substep", "5e-5")
+    rep = _identify(tmp_path, f, log, tuple(truth) + ("Fc_m",), {"tau_drive": 6e-4, "Fc_m": 0.002})
     _check(rep, {**truth, "Fc_m": 0.003}, {"J_m": 0.002, "B_m": 0.002, "tau_drive": 0.02, "Fc_m": 0.002})
+    fr = rep["meta"]["friction"]
+    # the substep used, and why: its estimated error within the bound, the coarser ones' not
+    assert fr["max_substep"] < 5e-4 and fr["substep_error"] <= 5e-4, fr
+    assert all(e > 5e-4 for h, e in fr["substep_search"] if h > fr["max_substep"]), fr
+    assert rep["residuals"]["run.csv"]["theta"]["white"]
+    # a given --max-substep coarser than that: 0.125 ms is used with a one-line warning naming
+    # the bound; 0.5 ms (estimated error 0.07 of the angle's spread) is refused
+    capsys.readouterr()
+    for h, code in (("1.25e-4", 0), ("5e-4", 2)):
+        assert main(["identify", "--params", str(f), "--log", str(log), "--input", "current", "--output", "theta",
+                     "--fit", "J_m,B_m,tau_drive,Fc_m", "--set", "tau_drive=0.0006", "--set", "Fc_m=0.002", "--out",
+                     str(tmp_path / f"f{h}.toml"), "-q", "--max-substep", h]) == code
+        err = capsys.readouterr().err
+        lines = [x for x in err.splitlines() if x.startswith("haa-sym:")]
+        assert len(lines) == 1, err
+        assert lines[0].startswith(("haa-sym: warning: " if code == 0 else "haa-sym: error: ")
+                                   + f"--max-substep {float(h):g} s: the friction simulation's estimated error"), lines
+        assert f"a substep of {fr['max_substep']:.3g} s or less keeps it" in lines[0], lines
+        assert (tmp_path / f"f{h}.toml").exists() == (code == 0)
 
 
 @pytest.fixture(scope="module")

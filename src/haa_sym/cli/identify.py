@@ -72,7 +72,9 @@ def register(sub) -> dict:
                         "(default %(default)g rad)")
     p.add_argument("--max-substep", type=float, default=FitOptions().max_substep, metavar="SECONDS",
                    help="longest substep of the friction simulation (with Fc_* fitted or in the file's [limits]; "
-                        "default %(default)g s; a light rotor with strong friction needs less: docs/identify.md)")
+                        "default: chosen per fit, the longest 5e-4 s / 2^k whose estimated error is within 5e-4 of "
+                        "the outputs' spread; a given value is used, with a warning when it is less accurate: "
+                        "docs/identify.md)")
     p.add_argument("--initial-state", choices=INITIAL_STATES, default=FitOptions().initial_state,
                    help="a log's first segment starts at rest (checked) or from an estimated state (default "
                         "%(default)s; segments after gaps and windows inside a log are always estimated)")

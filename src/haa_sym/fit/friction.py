@@ -28,7 +28,10 @@ runs it twice, at h and h / 2, and takes 2 y(h / 2) - y(h) (Richardson): the mea
 cancels, the stability function 2 / (1 - z/2)^2 - 1 / (1 - z) still goes to 0 for a stiff stick
 slope, and the rms error against ``scipy.integrate.solve_ivp`` falls 3.7-3.8x a halving of h
 below 0.5 ms on the test's log (docs/identify.md, "Friction and offsets"; what remains is where in a substep a reversal falls).
-``max_substep`` (default :data:`DEFAULT_MAX_SUBSTEP`) is the coarse run's.
+``max_substep`` (default :data:`DEFAULT_MAX_SUBSTEP`) is the coarse run's; identify chooses it per
+fit (:func:`haa_sym.fit.identify.safe_substep`: the longest DEFAULT_MAX_SUBSTEP / 2^k whose
+step-doubling error estimate is small on the logs), since the error at a given stick slope
+h Fc / (v_s J) differs 30-300x between logs (it accumulates in a free rotor's angle).
 
 **Matrices for every interval length, with exact derivatives.** Every interval has its own
 length (a log's own stamps), so the ZOH comes from one eigendecomposition A = V diag(lambda) V^-1
@@ -68,7 +71,8 @@ from haa_sym.model.drive import DRIVE_KEYS
 __all__ = ["Friction", "friction_entries", "simulate_friction", "simulate_friction_stamps", "DEFAULT_MAX_SUBSTEP",
            "MAX_EIGVEC_COND", "is_friction_key"]
 
-#: Longest substep (s) of the friction integration's coarse run (the fine one halves it). Measured
+#: Longest substep (s) of the friction integration's coarse run (the fine one halves it), and the
+#: first one identify's default tries (:func:`haa_sym.fit.identify.safe_substep`). Measured
 #: (docs/identify.md): the RMD X8 SEA with Fc_m at stick-slip against solve_ivp, rms 1.0e-3 of each
 #: output's peak (the first-order scheme at 0.25 ms, the default before: 9.3e-4), at a third of
 #: its substeps on the ITregear chirp.

@@ -18,7 +18,9 @@ and an unconverged fit (docs/identify.md).
 """
 from __future__ import annotations
 
+import dataclasses
 import datetime
+import warnings
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -28,7 +30,8 @@ from haa_sym.errors import ParameterError
 from haa_sym.fit.closed import torque_loop_model
 from haa_sym.fit.diagnostics import (WHITENESS_LAGS, WHITENESS_LEVEL, fit_quality, hac_covariance,
                                      near_null_keys, whiteness)
-from haa_sym.fit.friction import friction_entries, is_friction_key, simulate_friction_stamps
+from haa_sym.fit.friction import (DEFAULT_MAX_SUBSTEP, friction_entries, is_friction_key,
+                                  simulate_friction_stamps)
 from haa_sym.fit.model import modal_check, open_loop_model, sample, simulate, simulate_stamps
 from haa_sym.io.budget import check_memory, fit_bytes
 from haa_sym.io.logs import OUTPUTS, Log
@@ -102,14 +105,17 @@ class FitOptions:
         Lags of the Ljung-Box test of each log's and output's residuals (default 20; even).
     whiteness_level : float
         A residual series is called white when the test's p-value is at least this (0.05).
-    max_substep : float
+    max_substep : float or None
         Longest substep (s) of the friction simulation (:mod:`haa_sym.fit.friction`), used when
-        friction is in the model (default 5e-4 s: the coarse run of Richardson's extrapolation;
-        docs/identify.md, "Friction and offsets").
+        friction is in the model. None (default): chosen per fit by :func:`safe_substep`, the
+        longest of 5e-4 s / 2^k whose estimated error is within :data:`SUBSTEP_RTOL`; a given
+        value is used as it is, with a warning when its estimated error at the fitted values is
+        above :data:`SUBSTEP_RTOL`, refused above :data:`SUBSTEP_GROSS` (docs/identify.md,
+        "The default substep").
     """
 
     min_periods: float = 3.0
-    max_substep: float = 5e-4
+    max_substep: float | None = None
     max_iterations: int = 50
     tolerance: float = 1e-10
     max_step: float = 1.0
@@ -125,7 +131,7 @@ class FitOptions:
         if self.intervals not in INTERVAL_METHODS:
             raise ParameterError(f"FitOptions.intervals {self.intervals!r}; allowed: {list(INTERVAL_METHODS)}")
         ms = self.max_substep
-        if isinstance(ms, bool) or not isinstance(ms, (int, float)) or not 0 < ms < float("inf"):
+        if ms is not None and (isinstance(ms, bool) or not isinstance(ms, (int, float)) or not 0 < ms < float("inf")):
             raise ParameterError(f"--max-substep {ms!r}; allowed: a positive finite number of seconds (the "
                                  "friction simulation's longest substep)")
 
@@ -303,6 +309,10 @@ def validate(result: "FitResult", cases, loop_options=None, options: "FitOptions
         Per case ``name``, ``t`` (s), ``measured`` and ``fitted`` over the scored samples, for a figure.
     """
     quality, traces = {}, []
+    fr = result.meta.get("friction")
+    if fr and (options is None or options.max_substep is None):
+        # the fit's own substep (chosen per fit by default)
+        options = dataclasses.replace(options or FitOptions(), max_substep=fr["max_substep"])
     with blas_limits(1):
         for label, exp, start, stop in cases:
             if result.inputs[0] == "torque_ref":
@@ -396,7 +406,7 @@ def _friction_run(exp: Experiment, keys, values, inputs, outputs, friction, u, y
     return simulate_friction_stamps(model, fr, log.t, u, delay=params.drive.delay_drive,
                                     delay_key=keys.index("delay_drive") if "delay_drive" in keys else None,
                                     starts=log.starts, estimate=_estimated(exp, opt), y=y, weights=scale,
-                                    sensitivities=sens, max_substep=opt.max_substep)
+                                    sensitivities=sens, max_substep=opt.max_substep or DEFAULT_MAX_SUBSTEP)
 
 
 def _check_keys(exps, keys, inputs, friction=None):
@@ -495,6 +505,86 @@ def _slow_period(model) -> float:
     osc = mag[(np.abs(lam.imag) > 1e-9 * np.maximum(mag, 1e-300))]
     use = osc if osc.size else mag[mag > 1e-9 * max(1.0, mag.max())]
     return float(2 * np.pi / use.min()) if use.size else 0.0
+
+
+#: A key whose column of the Jacobian (the outputs' sensitivity to its logarithm) is below this
+#: fraction of the largest key's is refused: the logs do not see it (the normal matrix would be
+#: singular to rounding).
+DEAD_SENSITIVITY = 1e-12
+#: The friction simulation's error the default substep allows: the step-doubling estimate
+#: rms(y(h) - y(h / 2)) of the extrapolated scheme's error at h, over each output's standard
+#: deviation in the log, the largest over the logs and outputs. Measured (docs/identify.md, "The
+#: default substep"): the haptic wall's four-key fit (1 % noise) is inside every ci95 with white
+#: residuals at an estimate of 2.1e-4 (h = 62.5 us) and biased outside tau_drive's ci95 with
+#: coloured residuals at 1.3e-3 (125 us); the ITregear chirp's estimate at 0.5 ms is 3.8e-4, its
+#: values within a tenth of their intervals of the 0.25 ms fit's. 5e-4 lies between (their
+#: geometric mean 5.3e-4) and keeps the real logs at 0.5 ms.
+SUBSTEP_RTOL = 5e-4
+#: A given ``--max-substep`` whose estimated error at the fitted values is above this is refused:
+#: the haptic wall's 0.5 ms (estimate 0.10, ten times its noise) stopped at the iteration limit
+#: with tau_drive 5.7x its truth; at 0.25 ms (1.1e-2) the error still equals the noise.
+SUBSTEP_GROSS = 1e-2
+#: Halvings of :data:`haa_sym.fit.friction.DEFAULT_MAX_SUBSTEP` the default's search tries (to 7.8 us).
+SUBSTEP_HALVINGS = 6
+#: Refits at a finer substep when the fitted values need one (the search ran at the start values).
+SUBSTEP_REFITS = 2
+#: The default's substep is not rechecked at the fitted values when its estimate at the start was
+#: below SUBSTEP_RTOL over this: the estimate changed at most 3.5x between start and fit in the
+#: cases measured (the haptic wall at 0.5 ms, Fc_m and tau_drive 1.5x off: 2.9e-2 -> 0.10), and a
+#: recheck costs a simulation at h / 2 (on the ITregear ramps' 3-4-iteration fits a fifth of the fit).
+SUBSTEP_RECHECK_MARGIN = 10
+
+
+def _substep_error(experiments, outs, inputs, keys, values, opt, U, Y, friction, h, y_h=None):
+    """The step-doubling estimate of the friction simulation's error at substep ``h`` (s):
+    max over logs and outputs of rms(y(h) - y(h / 2)) / std(measured output) (the extrapolated
+    scheme converges 4-8x a halving on these logs, so this is y(h)'s error to within its first
+    digit). ``y_h``: the runs at ``h`` when known. Returns (error, the runs at h / 2)."""
+    err, halves = 0.0, []
+    for i, (e, o, u, y) in enumerate(zip(experiments, outs, U, Y)):
+        sd = np.maximum(np.std(y, axis=0), 1e-300)
+        runs = []
+        for step in ((h,) if y_h is None else ()) + (h / 2,):
+            runs.append(simulate_log(e, inputs, o, keys, values, options=dataclasses.replace(opt, max_substep=step),
+                                     u=u, y=y, scale=sd, friction=friction)[0])
+        a, b = (runs[0], runs[1]) if y_h is None else (y_h[i], runs[0])
+        err = max(err, float(np.max(np.sqrt(np.mean((a - b) ** 2, axis=0)) / sd)))
+        halves.append(b)
+    return err, halves
+
+
+def safe_substep(experiments, outs, inputs, keys, values, opt, U, Y, friction, start=DEFAULT_MAX_SUBSTEP,
+                 y_start=None):
+    """The longest substep start / 2^k (k <= :data:`SUBSTEP_HALVINGS`) whose estimated error
+    (:func:`_substep_error`) is within :data:`SUBSTEP_RTOL`, at ``values``.
+
+    ``y_start``: the runs at ``start`` when known (the fit's own first evaluation).
+
+    Returns
+    -------
+    h : float
+        The substep (s).
+    error : float
+        Its estimated error.
+    levels : list of [h, error]
+        Every substep tried.
+
+    Raises
+    ------
+    ParameterError
+        No substep down to start / 2^SUBSTEP_HALVINGS is accurate enough.
+    """
+    h, prev, levels = start, y_start, []
+    for _ in range(SUBSTEP_HALVINGS + 1):
+        err, prev = _substep_error(experiments, outs, inputs, keys, values, opt, U, Y, friction, h, prev)
+        levels.append([h, err])
+        if err <= SUBSTEP_RTOL:
+            return h, err, levels
+        h /= 2
+    raise ParameterError(f"friction simulation: no substep down to {levels[-1][0]:.3g} s brings its estimated error "
+                         f"within {SUBSTEP_RTOL:g} of the outputs' spread ({levels[-1][1]:.3g} there); allowed: a "
+                         "smoother friction (a larger friction_velocity), or --max-substep given (used as it is, "
+                         "its error reported)")
 
 
 def identify(experiments: list[Experiment], keys: tuple[str, ...], inputs: tuple[str, ...],
@@ -610,6 +700,9 @@ def identify(experiments: list[Experiment], keys: tuple[str, ...], inputs: tuple
 
         cache: dict = {}
         offset_of: dict = {}          # the offsets each cached point's simulation found, per log
+        # the friction simulation's substep: given, or the longest one accurate at the start values
+        # (SUBSTEP_RTOL); checked again at the fitted values below
+        sub = {"opt": opt, "levels": [], "error": None}
 
         def run(theta, sens=True):
             """Unweighted errors y - y_model and, with ``sens``, d y_model / d log p, per log; a
@@ -618,7 +711,7 @@ def identify(experiments: list[Experiment], keys: tuple[str, ...], inputs: tuple
             if key not in cache or (sens and cache[key][1] is None):
                 errs, sens_, n0, offs = [], [], 0, {}
                 for e, o, u, y, w in zip(experiments, outs, U, Y, scale):
-                    yp, dy, n_init = simulate_log(e, inputs, o, keys, np.exp(theta), options=opt,
+                    yp, dy, n_init = simulate_log(e, inputs, o, keys, np.exp(theta), options=sub["opt"],
                                                   loop_options=loop_options, sensitivities=sens, u=u, y=y, scale=w,
                                                   friction=friction)
                     off_cols = [o.index(x) for x in offsets if x in o]
@@ -640,6 +733,26 @@ def identify(experiments: list[Experiment], keys: tuple[str, ...], inputs: tuple
                 offset_of[key] = offs
             return cache[key]
 
+        def model_runs(theta, sens):
+            """The model's outputs per log at ``theta`` (the cached run's, its offsets taken off)."""
+            errs = run(theta, sens)[0]
+            offs = offset_of.get(theta.tobytes(), {})
+            out = []
+            for e, o, y, err in zip(experiments, outs, Y, errs):
+                yp = y - err
+                for c, x in enumerate(o):
+                    yp[:, c] -= offs.get(e.log.name, {}).get(x, 0.0)
+                out.append(yp)
+            return out
+
+        if use_friction and opt.max_substep is None:
+            # the fit's first evaluation (at 0.5 ms) is the search's first run: only the finer ones cost
+            h, _, sub["levels"] = safe_substep(experiments, outs, inputs, keys, np.exp(theta0), opt, U, Y, friction,
+                                               y_start=model_runs(theta0, True))
+            sub["opt"] = dataclasses.replace(opt, max_substep=h)
+            if h != DEFAULT_MAX_SUBSTEP:
+                cache.clear()
+
         def evaluate(theta, sens=True):
             errs, dys, _ = run(theta, sens)
             r = np.concatenate([(err / s).ravel() for err, s in zip(errs, sigma)])
@@ -649,15 +762,51 @@ def identify(experiments: list[Experiment], keys: tuple[str, ...], inputs: tuple
 
         # the first pass only finds the neighbourhood (its weights are provisional); the second,
         # with the noise levels of the residuals as weights, converges
-        theta, it1, _ = _levenberg_marquardt(evaluate, theta0, opt, keys, tolerance=opt.first_pass_tolerance)
+        origin: dict = {}
+        theta, it1, _ = _levenberg_marquardt(evaluate, theta0, opt, keys, tolerance=opt.first_pass_tolerance,
+                                             origin=origin)
         it2, scale0 = 0, sigma
         for n_pass in range(max(opt.max_reweights, 1)):
             new = [np.maximum(np.sqrt(np.mean(err ** 2, axis=0)), 1e-12 * s) for err, s in zip(run(theta)[0], scale0)]
             if n_pass and all(np.all(np.abs(a / b - 1) <= opt.reweight_rtol) for a, b in zip(new, sigma)):
                 break
             sigma = new          # evaluate() reads sigma when called: the new weights apply
-            theta, it, converged = _levenberg_marquardt(evaluate, theta, opt, keys)
+            theta, it, converged = _levenberg_marquardt(evaluate, theta, opt, keys, origin=origin)
             it2 += it
+        recheck = use_friction and not (opt.max_substep is None and
+                                        sub["levels"][-1][1] <= SUBSTEP_RTOL / SUBSTEP_RECHECK_MARGIN)
+        if use_friction and not recheck:
+            sub["error"], sub["at"] = sub["levels"][-1][1], "start values"
+        for refit in range(SUBSTEP_REFITS + 1) if recheck else ():
+            sub["at"] = "fitted values"
+            h = sub["opt"].max_substep
+            y_h = model_runs(theta, False)           # the fit's own run at h, cached
+            sub["error"] = _substep_error(experiments, outs, inputs, keys, np.exp(theta), sub["opt"], U, Y, friction,
+                                          h, y_h)[0]
+            if sub["error"] <= SUBSTEP_RTOL or refit == SUBSTEP_REFITS:
+                break
+            if opt.max_substep is not None:
+                safe = safe_substep(experiments, outs, inputs, keys, np.exp(theta), opt, U, Y, friction,
+                                    start=min(h, DEFAULT_MAX_SUBSTEP) / 2)[0]
+                words = (f"--max-substep {h:g} s: the friction simulation's estimated error at the fitted values is "
+                         f"{sub['error']:.2g} of the outputs' spread (allowed {SUBSTEP_RTOL:g}; a substep of {safe:.3g} "
+                         "s or less keeps it)")
+                if sub["error"] > SUBSTEP_GROSS:
+                    raise ParameterError(f"{words}, above {SUBSTEP_GROSS:g}: the values would be wrong; allowed: "
+                                         f"--max-substep {safe:.3g} or less, or the default (chosen per fit)")
+                warnings.warn(f"{words}: the values carry its bias")
+                break
+            # the fitted values need a finer substep than the start's: refit from them at it
+            h, _, levels = safe_substep(experiments, outs, inputs, keys, np.exp(theta), opt, U, Y, friction,
+                                        start=h / 2)
+            sub["opt"], sub["levels"] = dataclasses.replace(opt, max_substep=h), sub["levels"] + levels
+            cache.clear()
+            theta, it, converged = _levenberg_marquardt(evaluate, theta, sub["opt"], keys, origin=origin)
+            it2 += it
+        if use_friction and opt.max_substep is None and sub["error"] > SUBSTEP_RTOL:
+            warnings.warn(f"the friction simulation's estimated error at the fitted values is {sub['error']:.2g} of "
+                          f"the outputs' spread at the substep {sub['opt'].max_substep:.3g} s after {SUBSTEP_REFITS} "
+                          f"refits (allowed {SUBSTEP_RTOL:g}): the values carry its bias")
         r, J = evaluate(theta)
         n_initial = run(theta)[2]
         pred = [y - err for y, err in zip(Y, run(theta)[0])]
@@ -721,7 +870,13 @@ def identify(experiments: list[Experiment], keys: tuple[str, ...], inputs: tuple
             "residuals": residuals,
             "friction": ({"start": {f"Fc_{b}": v for b, v in _friction_of(experiments[0], friction).items()},
                           "friction_velocity": experiments[0].params.limits.friction_velocity,
-                          "max_substep": opt.max_substep, "method": "exact ZOH per substep of the log's own "
+                          "max_substep": sub["opt"].max_substep,
+                          "max_substep_rule": ("given (--max-substep)" if opt.max_substep is not None else
+                                               f"default: the longest {DEFAULT_MAX_SUBSTEP:g} s / 2^k whose "
+                                               f"estimated error is within {SUBSTEP_RTOL:g}"),
+                          "substep_error": sub["error"], "substep_error_at": sub.get("at"),
+                          "substep_search": sub["levels"],
+                          "method": "exact ZOH per substep of the log's own "
                           "intervals (the delayed command switching inside them, segments from estimated states), "
                           "friction torque implicit at each substep's end, Richardson-extrapolated over substeps h "
                           "and h / 2 (second order); d/d delay_drive the scheme's exact derivative"}
@@ -743,7 +898,8 @@ def _interval(theta: np.ndarray, cov: np.ndarray) -> np.ndarray:
     return np.exp(np.column_stack([theta - Z95 * sd, theta + Z95 * sd]))
 
 
-def _levenberg_marquardt(evaluate, theta, opt: FitOptions, keys, tolerance: float | None = None):
+def _levenberg_marquardt(evaluate, theta, opt: FitOptions, keys, tolerance: float | None = None,
+                         origin: dict | None = None):
     """Minimise |r(theta)|^2 from ``theta``: Levenberg-Marquardt (Marquardt's diagonal scaling)
     with the exact Jacobian. Returns (theta, iterations, converged): not converged when
     ``max_iterations`` ran out while the cost still fell by more than the tolerance.
@@ -758,10 +914,28 @@ def _levenberg_marquardt(evaluate, theta, opt: FitOptions, keys, tolerance: floa
     r, J = evaluate(theta)
     cost = float(r @ r)
     norms = np.linalg.norm(J, axis=0)
-    dead = [k for k, nrm in zip(keys, norms) if not nrm > 1e-12 * max(norms.max(), 1e-300)]
+    ratio = norms / max(norms.max(), 1e-300)
+    # ``origin``: an empty dict on the fit's first call records the start and each key's
+    # sensitivity over the largest there; the later calls (the reweighted passes) read it, so that
+    # a key below DEAD_SENSITIVITY is refused with the true reason: never seen at its start, or run
+    # by the earlier passes to where the logs no longer see it (it used to say "zero sensitivity")
+    if origin is not None and not origin:
+        origin.update(theta=theta.copy(), ratio=ratio)
+    dead = [i for i, x in enumerate(ratio) if not x > DEAD_SENSITIVITY]
     if dead:
-        raise ParameterError(f"--fit {dead[0]}: the logged outputs do not depend on it (zero sensitivity); "
-                             "allowed: keys the chosen --input/--output observe")
+        i = dead[0]
+        big = keys[int(np.argmax(norms))]
+        if origin and origin["ratio"][i] > DEAD_SENSITIVITY:
+            v0, v = np.exp(origin["theta"][i]), np.exp(theta[i])
+            raise ParameterError(
+                f"--fit {keys[i]}: the fit ran it from {v0:.4g} to {v:.4g}, where the logs no longer see it (the "
+                f"outputs' sensitivity to log {keys[i]} {ratio[i]:.2g} of log {big}'s, below {DEAD_SENSITIVITY:g}; "
+                f"{origin['ratio'][i]:.2g} at the start): these logs do not determine it (the logs do not excite "
+                "what it sets, e.g. a stiffness whose mode lies above their band runs towards rigid); allowed: keys "
+                "the logs observe (hold it at a known value, a richer input)")
+        raise ParameterError(f"--fit {keys[i]}: the logged outputs do not depend on it at {np.exp(theta[i]):.4g} "
+                             f"(their sensitivity to log {keys[i]} {ratio[i]:.2g} of log {big}'s, below "
+                             f"{DEAD_SENSITIVITY:g}); allowed: keys the chosen --input/--output observe")
     lam = 1e-3
     it, done, improved = 0, False, True
     for it in range(1, opt.max_iterations + 1):
