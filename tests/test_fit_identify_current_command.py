@@ -274,3 +274,44 @@ def test_max_substep_is_checked(tmp_path, wall_log, capsys, value):
     assert len(err.splitlines()) == 1 and err.startswith(f"haa-sym: error: --max-substep {float(value)!r}; allowed: a "
                                                          "positive finite number of seconds"), err
     assert not out.exists()
+
+
+def _refused(keys, value, initial, near):
+    from haa_sym.errors import ParameterError
+    from haa_sym.fit.identify import FitResult, refuse_unreliable
+    n = len(keys)
+    r = FitResult(keys=keys, value=np.array(value), initial=np.array(initial), ci95=np.zeros((n, 2)),
+                  covariance=np.eye(n), rms_initial={}, rms_fitted={}, iterations=1, samples=10, sampling={},
+                  outputs=("theta",), inputs=("current",),
+                  meta={"condition_number": 3.2e13, "near_null_keys": near, "converged": True})
+    with pytest.raises(ParameterError) as e:
+        refuse_unreliable(r)
+    return str(e.value)
+
+
+def test_a_near_null_direction_along_one_key_says_the_logs_do_not_determine_it():
+    """One key alone in the near-null direction (the QDD leg's tau_drive run to 0 by delay_drive,
+    docs/identify.md, "Current-commanded drives") is not a group to 'tell apart': the line says the
+    logs do not determine it, with its start and where the fit took it; a group keeps its words."""
+    one = _refused(("J_m", "tau_drive"), [7e-5, 1.52e-11], [6.3e-5, 1e-3], ["tau_drive"])
+    assert "these logs do not determine tau_drive (run from 0.001 to 1.52e-11) (condition number 3.2e+13" in one, one
+    assert "apart" not in one
+    two = _refused(("k_t", "J_m"), [0.07, 1e-4], [0.075, 1e-4], ["k_t", "J_m"])
+    assert "these logs cannot tell k_t, J_m apart (condition number" in two, two
+
+
+@pytest.mark.slow
+def test_the_qdd_legs_lag_and_delay_together_are_refused_naming_the_lag(tmp_path, capsys):
+    """The QDD leg's lag 0.5 ms behind a 1.5 ms delay, J_m, B_m, tau_drive, delay_drive fitted
+    together: the lag runs to 0 and the delay takes the whole 2 ms; one line, exit 2, nothing written."""
+    f = _file(tmp_path, "qdd_leg", _drive(5e-4, 1.5e-3))
+    log = _simulate(tmp_path, f, 5, 0.05, 0.5, {"J_m": 7e-5, "B_m": 5e-4, "tau_drive": 5e-4})
+    capsys.readouterr()
+    out = tmp_path / "fitted.toml"
+    assert main(["identify", "--params", str(f), "--log", str(log), "--input", "current", "--output", "theta",
+                 "--fit", "J_m,B_m,tau_drive,delay_drive", "--set", "B_m=0.001", "--set", "tau_drive=0.001",
+                 "--out", str(out), "-q"]) == 2
+    err = capsys.readouterr().err.strip()
+    assert len(err.splitlines()) == 1 and err.startswith(
+        "haa-sym: error: --fit J_m,B_m,tau_drive,delay_drive: these logs do not determine tau_drive (run from 0.001 to "), err
+    assert not out.exists()

@@ -196,3 +196,12 @@ def test_mujoco_absent(tmp_path, capsys, monkeypatch):
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 1 and "haa_sym[mujoco]" in err[0]
     assert list(tmp_path.iterdir()) == []
+
+
+def test_the_summary_counts_one_hinge_in_the_singular(tmp_path, capsys):
+    """The haptic wall's rotor-only chain: `1 hinge (rotor)`; the QDD leg's two: `2 hinges`."""
+    pytest.importorskip("mujoco")
+    for name, words in (("haptic_wall", "export-mujoco: 1 hinge (rotor), "), ("qdd_leg", "export-mujoco: 2 hinges (")):
+        assert main(["export-mujoco", "--params", name, "--P-gain", "1", "--D-gain", "0",
+                     "--out", str(tmp_path / f"{name}.xml")]) == 0
+        assert capsys.readouterr().out.startswith(words), name

@@ -22,8 +22,8 @@ from haa_sym.loop.options import parse_options
 from haa_sym.model import filters
 from haa_sym.model.motor import motor_constants_warning
 from haa_sym.model.drive import DRIVE_KEYS, DRIVE_UNITS
-from haa_sym.model.params import (CONTROLLER_KEYS, CONTROLLER_UNITS, actuator_path, apply_sets,
-                                  load_params, parse_set)
+from haa_sym.model.params import (ALIASES, CONTROLLER_KEYS, CONTROLLER_UNITS, actuator_path, apply_sets,
+                                  bundled_actuators, load_params, parse_set)
 
 
 OUTPUT_SUFFIXES = {"regions": (".npz",), "passivity": (".csv", ".json"), "step": (".csv",),
@@ -43,7 +43,14 @@ class _Parser(argparse.ArgumentParser):
         self.exit(2, f"haa-sym: error: {message}; see `{self.prog} --help`\n")
 
 
-PARAMS_HELP = ("actuator: a TOML parameter file or a bundled name (hyq_haa or hyq, sea, harmonic_drive; "
+def _bundled_names() -> str:
+    """The bundled actuators' names with their aliases, from the model directory itself (a file
+    added there is named in every command's --help without editing this text)."""
+    alias = {stem: a for a, stem in ALIASES.items()}
+    return ", ".join(f"{n} or {alias[n]}" if n in alias else n for n in bundled_actuators())
+
+
+PARAMS_HELP = (f"actuator: a TOML parameter file or a bundled name ({_bundled_names()}; "
                "`haa-sym actuators` lists them with their files); default: hyq_haa")
 
 

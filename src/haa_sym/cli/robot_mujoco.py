@@ -33,7 +33,8 @@ def _cmd_export_mujoco(args) -> int:
         tx.write_text(out, ex.xml, "--out")
         tx.write_text(controller, ex.controller, "--out")
     m = ex.meta
-    print(f"export-mujoco: {len(m['joints'])} hinges ({', '.join(m['joints'])}), controller of order "
+    n = len(m['joints'])
+    print(f"export-mujoco: {n} hinge{'' if n == 1 else 's'} ({', '.join(m['joints'])}), controller of order "
           f"{len(m['Ac'])} at Ts = {m['Ts']:g} s, {m['integrator']} at timestep {m['timestep']:.4g} s "
           f"({m['steps_per_sample']} per sample); wrote {out} and {controller}")
     return 0

@@ -352,7 +352,14 @@ def refuse_unreliable(result: "FitResult", allow_unconverged: bool = False,
     cond = result.meta["condition_number"]
     if not cond <= condition_limit:
         group = result.meta.get("near_null_keys") or list(result.keys)
-        raise ParameterError(f"--fit {','.join(result.keys)}: these logs cannot tell {', '.join(group)} apart "
+        if len(group) == 1:
+            # a near-null direction along one key is no pair to tell apart: the logs do not see that
+            # key where the fit took it (e.g. the QDD leg's tau_drive run to 0 with delay_drive free)
+            i = result.keys.index(group[0])
+            what = (f"do not determine {group[0]} (run from {result.initial[i]:.3g} to {result.value[i]:.3g})")
+        else:
+            what = f"cannot tell {', '.join(group)} apart"
+        raise ParameterError(f"--fit {','.join(result.keys)}: these logs {what} "
                              f"(condition number {cond:.3g} of the scaled normal matrix, above {condition_limit:.0e}); "
                              "allowed: keys the logs distinguish (fit fewer keys, log more outputs, a richer input)")
     if not result.meta["converged"] and not allow_unconverged:

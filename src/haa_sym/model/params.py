@@ -443,8 +443,8 @@ ALIASES: dict[str, str] = {"hyq": "hyq_haa"}
 
 
 def bundled_actuators() -> dict[str, Path]:
-    """The bundled actuators by name: ``{stem: path}`` of :func:`builtin_actuators` (``hyq_haa``,
-    ``sea``, ``harmonic_drive``), in the source tree or inside the installed package."""
+    """The bundled actuators by name: ``{stem: path}`` of :func:`builtin_actuators` (``haptic_wall``,
+    ``harmonic_drive``, ``hyq_haa``, ``qdd_leg``, ``sea``), in the source tree or inside the installed package."""
     return {p.stem: p for p in builtin_actuators()}
 
 
@@ -711,7 +711,7 @@ def load_params(path: str | Path | None = None) -> Params:
     ----------
     path : str, os.PathLike or None
         TOML file, or the name of a bundled actuator (``"hyq_haa"`` or ``"hyq"``, ``"sea"``,
-        ``"harmonic_drive"``, ``"qdd_leg"``; :func:`actuator_path`: an existing file wins);
+        ``"harmonic_drive"``, ``"qdd_leg"``, ``"haptic_wall"``; :func:`actuator_path`: an existing file wins);
         default the bundled ``model/hyq_haa.toml``. Anything else is a :class:`ParameterError`.
 
     Returns
