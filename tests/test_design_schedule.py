@@ -5,11 +5,11 @@ for at least one of them; the CSV, the embedded C, the dask cluster and bad inpu
 import csv
 import ctypes
 import io
-import subprocess
 
 import numpy as np
 import pytest
 
+from c_build import shared_library
 from haa_sym import ClosedLoop, load_params
 from haa_sym.check import reference as ref
 from haa_sym.cli import main
@@ -81,8 +81,6 @@ def test_runs_on_the_other_built_in_actuators(name):
 
 @pytest.mark.slow
 def test_cli_csv_has_the_issue_columns_and_the_c_lookup_returns_it(tmp_path, capsys):
-    from haa_sym.errors import NoCompiler
-    from haa_sym.compiled.generated import Compiler
     out = tmp_path / "s.csv"
     assert main(["schedule", "--P-gain", "log:5:2000:5", "--D-gain", "lin:1:50:4", "--beta-tol", "0.05",
                  "--out", str(out), "--c-out", str(tmp_path), "--plot", str(tmp_path / "s.png"), "-q"]) == 0
@@ -97,15 +95,7 @@ def test_cli_csv_has_the_issue_columns_and_the_c_lookup_returns_it(tmp_path, cap
             assert float(r[2]) > 0 and float(r[4]) > 0
         else:
             assert r[2] == r[3] == r[4] == ""
-    try:
-        cc = Compiler().argv
-    except NoCompiler as exc:
-        pytest.skip(str(exc))
-    lib = tmp_path / "libs.so"
-    proc = subprocess.run([*cc, "-std=c99", "-Wall", "-Wextra", "-Werror", "-pedantic", "-O2", "-fPIC", "-shared",
-                           "-o", str(lib), str(tmp_path / "haa_schedule.c"), "-lm"], capture_output=True, text=True)
-    assert proc.returncode == 0, proc.stderr
-    f = ctypes.CDLL(str(lib)).haa_schedule_lookup
+    f = shared_library(tmp_path / "haa_schedule.c", tmp_path / "libs.so").haa_schedule_lookup
     f.argtypes = [ctypes.c_double, ctypes.c_double, ctypes.POINTER(ctypes.c_double), ctypes.POINTER(ctypes.c_double)]
     f.restype = ctypes.c_int
     rows = list(csv.DictReader(io.StringIO(out.read_text())))

@@ -12,29 +12,18 @@ import sys
 import numpy as np
 import pytest
 
-from haa_sym.errors import NoCompiler
-from haa_sym.compiled.generated import Compiler
 from haa_sym.io.outputs import Transaction
 from haa_sym.errors import ParameterError
+from c_build import STRICT, compiler
 from haa_sym.design.schedule_c import (HEADER, NAN, NO_SAFE_GAIN, OK, OUTSIDE, SOURCE, ScheduleTable, c_code,
                                        lookup, write_c)
 
-STRICT = ("-std=c99", "-pedantic", "-Wall", "-Wextra", "-Werror", "-Wconversion", "-Wshadow",
-          "-Wdouble-promotion", "-Wstrict-prototypes", "-Wmissing-prototypes", "-Wfloat-equal",
-          "-Wvla", "-ffp-contract=off")
 META = {"actuator": "hyq_haa.toml", "source": "model/hyq_haa.toml",
         "requirements": {"stable": True, "phase_margin_deg": 30.0, "passive": False},
         "tolerances": {"beta": 1e-3}, "haa_sym_version": "test"}
 
 
 GOLDEN = pathlib.Path(__file__).resolve().parent / "golden" / "schedule_c"
-
-
-def _compiler() -> list[str]:
-    try:
-        return Compiler().argv                     # CC, else cc/gcc/clang, as the evaluators
-    except NoCompiler as exc:
-        pytest.skip(str(exc))
 
 
 def synthetic(n_P=13, n_D=8, alpha=True) -> ScheduleTable:
@@ -53,7 +42,7 @@ def synthetic(n_P=13, n_D=8, alpha=True) -> ScheduleTable:
 def build(table, directory, *, shared=True, extra=()) -> ctypes.CDLL | None:
     write_c(table, directory)
     lib = directory / "libhaa_schedule.so"
-    cmd = [*_compiler(), *STRICT, "-O2", *extra, str(directory / SOURCE)]
+    cmd = [*compiler(), *STRICT, "-O2", *extra, str(directory / SOURCE)]
     cmd += ["-fPIC", "-shared", "-o", str(lib), "-lm"] if shared else ["-c", "-o", str(lib) + ".o"]
     proc = subprocess.run(cmd, capture_output=True, text=True)
     assert proc.returncode == 0, proc.stderr
@@ -442,7 +431,7 @@ def test_cost_of_one_call(tmp_path, record_property):
     write_c(table, tmp_path)
     (tmp_path / "bench.c").write_text(BENCH)
     exe = tmp_path / "bench"
-    proc = subprocess.run([*_compiler(), *STRICT, "-O2", str(tmp_path / "bench.c"),
+    proc = subprocess.run([*compiler(), *STRICT, "-O2", str(tmp_path / "bench.c"),
                            str(tmp_path / SOURCE), "-o", str(exe), "-lm"], capture_output=True, text=True)
     assert proc.returncode == 0, proc.stderr
     ns, *_ = map(float, subprocess.run([str(exe)], capture_output=True, text=True, check=True).stdout.split())

@@ -7,20 +7,18 @@ import csv
 import ctypes
 import io
 import math
-import subprocess
 
 import numpy as np
 import pytest
 
+from c_build import shared_library
 from haa_sym import ClosedLoop, load_params
 from haa_sym.analysis.robust import leg_configurations
 from haa_sym.check import reference as ref
 from haa_sym.check.reference_margins import reference_crossovers
 from haa_sym.cli import main
-from haa_sym.compiled.generated import Compiler
 from haa_sym.design.schedule import schedule
 from haa_sym.design.schedule_c import NAN, NO_SAFE_GAIN, OK, OUTSIDE, ScheduleTable, lookup, write_c
-from haa_sym.errors import NoCompiler
 
 P_GRID, D_GRID = np.geomspace(5.0, 2000.0, 7), np.linspace(1.0, 50.0, 5)
 N_UNIFORM, N_NEAR = 70, 40          # random points: anywhere, and in safe cells next to unsafe ones
@@ -110,18 +108,9 @@ def test_off_grid_betas_are_safe_at_three_leg_configurations(hyq):
 
 @pytest.fixture(scope="module")
 def c_lookup(hyq, tmp_path_factory):
-    try:
-        cc = Compiler().argv
-    except NoCompiler as exc:
-        pytest.skip(str(exc))
     d = tmp_path_factory.mktemp("c")
     write_c(hyq[2], d)
-    lib = d / "libs.so"
-    proc = subprocess.run([*cc, "-std=c99", "-pedantic", "-Wall", "-Wextra", "-Werror", "-Wconversion",
-                           "-ffp-contract=off", "-O2", "-fPIC", "-shared", "-o", str(lib), str(d / "haa_schedule.c"),
-                           "-lm"], capture_output=True, text=True)
-    assert proc.returncode == 0, proc.stderr
-    f = ctypes.CDLL(str(lib)).haa_schedule_lookup
+    f = shared_library(d / "haa_schedule.c", d / "libs.so").haa_schedule_lookup
     f.argtypes = [ctypes.c_double, ctypes.c_double, ctypes.POINTER(ctypes.c_double),
                   ctypes.POINTER(ctypes.c_double)]
     f.restype = ctypes.c_int

@@ -139,6 +139,22 @@ def _gone(pids: set[int], timeout: float = 10.0) -> list[int]:
     return alive
 
 
+def _run_on_local_2(argv, out: Path, cwd: Path):
+    """``haa-sym ARGV --scheduler local:2 --out OUT`` in a new process of its own session, watched
+    to its end (killed with its tree if the test fails first): (returncode, stdout, stderr, every
+    pid of its tree, every listening socket of it)."""
+    proc = subprocess.Popen([sys.executable, "-m", "haa_sym.cli", *argv, "--scheduler", "local:2",
+                             "--out", str(out)], stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
+                            env=ENV, cwd=cwd, start_new_session=True)
+    try:
+        seen, sockets = _watch(proc)
+        stdout, stderr = proc.communicate(timeout=300)
+    finally:
+        if proc.poll() is None:
+            os.killpg(proc.pid, signal.SIGKILL)
+    return proc.returncode, stdout, stderr, seen, sockets
+
+
 def _params_file(tmp_path) -> Path:
     p = tmp_path / "hyq_limits.toml"
     p.write_text((ROOT / "model" / "hyq_haa.toml").read_text() + "\n[limits]\nV_max = 24.0\n")
@@ -151,16 +167,8 @@ def test_regions_nonlinear_on_local_2_listens_on_loopback_gives_the_bytes_and_le
     argv = ["regions", "--params", str(p), "--set", "beta=3", "--P-gain", "log:300:20000:6",
             "--D-gain", "lin:1:40:4", "--nonlinear", "--duration", "0.4", "--max-duration", "1.2", "-q"]
     remote = tmp_path / "remote.npz"
-    proc = subprocess.Popen([sys.executable, "-m", "haa_sym.cli", *argv, "--scheduler", "local:2",
-                             "--out", str(remote)], stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
-                            env=ENV, cwd=tmp_path, start_new_session=True)
-    try:
-        seen, sockets = _watch(proc)
-        out, err = proc.communicate(timeout=300)
-    finally:
-        if proc.poll() is None:
-            os.killpg(proc.pid, signal.SIGKILL)
-    assert proc.returncode == 0, err
+    rc, _, err, seen, sockets = _run_on_local_2(argv, remote, tmp_path)
+    assert rc == 0, err
     assert err == ""                                  # no log lines of the cluster
     # the command, its scheduler (in the command's process) and the two worker processes
     assert len(seen) >= 3, seen
@@ -222,18 +230,10 @@ def test_regions_robust_on_local_2_listens_on_loopback_and_writes_the_in_process
     except OSError:
         pass                                     # another program holds it: the same test
     try:
-        proc = subprocess.Popen([sys.executable, "-m", "haa_sym.cli", *argv, "--scheduler", "local:2",
-                                 "--out", str(remote)], stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
-                                env=ENV, cwd=tmp_path, start_new_session=True)
-        try:
-            seen, sockets = _watch(proc)
-            out, err = proc.communicate(timeout=300)
-        finally:
-            if proc.poll() is None:
-                os.killpg(proc.pid, signal.SIGKILL)
+        rc, _, err, seen, sockets = _run_on_local_2(argv, remote, tmp_path)
     finally:
         held.close()
-    assert proc.returncode == 0, err
+    assert rc == 0, err
     assert err == ""
     assert len({port for _, _, port in sockets}) >= 3, sockets   # the scheduler's and each worker's port
     assert 8787 not in {port for _, _, port in sockets}

@@ -5,26 +5,21 @@ follows the exact curves between them, the golden C, and bad input."""
 import ctypes
 import difflib
 import pathlib
-import subprocess
 
 import numpy as np
 import pytest
 import yaml
 
+from c_build import shared_library
 from haa_sym import ClosedLoop, grid, load_params
 from haa_sym.analysis.decide import decide_points
 from haa_sym.analysis.regions import region_map
 from haa_sym.analysis.robust import meets
 from haa_sym.cli import main
-from haa_sym.compiled.generated import Compiler
-from haa_sym.errors import NoCompiler
 from haa_sym.robot import ros2
 
 P_SPEC, D_SPEC = "log:1:20000:30", "lin:1:50:8"
 REQ = ("stable", "pm")
-STRICT = ("-std=c99", "-pedantic", "-Wall", "-Wextra", "-Werror", "-Wconversion", "-Wshadow",
-          "-Wdouble-promotion", "-Wstrict-prototypes", "-Wmissing-prototypes", "-Wfloat-equal", "-Wvla",
-          "-ffp-contract=off")
 META = {"actuator": "HyQ HAA joint", "source": "hyq_haa.toml", "configuration": None,
         "requirements": "stable, phase margin >= 30 deg", "map": f"P_gain {P_SPEC} x D_gain {D_SPEC}"}
 GOLDEN = pathlib.Path(__file__).resolve().parent / "golden" / "haa_region"
@@ -49,17 +44,9 @@ def truth(loop, P, D):
 
 @pytest.fixture(scope="module")
 def clib(region, tmp_path_factory):
-    try:
-        cc = Compiler().argv
-    except NoCompiler as exc:
-        pytest.skip(str(exc))
     d = tmp_path_factory.mktemp("region_c")
     ros2.write_c(*region, META, d)
-    lib = d / "libhaa_region.so"
-    proc = subprocess.run([*cc, *STRICT, "-O2", "-fPIC", "-shared", "-o", str(lib), str(d / ros2.SOURCE)],
-                          capture_output=True, text=True)
-    assert proc.returncode == 0, proc.stderr
-    f = ctypes.CDLL(str(lib)).haa_region_contains
+    f = shared_library(d / ros2.SOURCE, d / "libhaa_region.so").haa_region_contains
     f.argtypes, f.restype = [ctypes.c_double, ctypes.c_double], ctypes.c_int
     return lambda P, D: np.array([f(float(p), float(q)) for p, q in zip(P, D)], bool)
 

@@ -4,7 +4,6 @@ by the schedule's own writer into --c-out, named in the YAML; the C compiles str
 the CSV's beta at every grid point and the Python twin's value between them."""
 import ctypes
 import math
-import subprocess
 
 import numpy as np
 import pytest
@@ -14,7 +13,8 @@ from haa_sym.cli import main
 from haa_sym.design.schedule import Schedule, table_from_csv
 from haa_sym.design.schedule_table import OK, lookup
 
-from test_design_schedule_c import STRICT, _compiler, clook
+from c_build import shared_library
+from test_design_schedule_c import clook
 
 MAP = ["--P-gain", "log:1:2000:8", "--D-gain", "lin:10:50:2"]
 
@@ -47,11 +47,7 @@ def test_schedule_lookup_emitted_with_the_region(tmp_path, capsys):
     (entry,) = doc.values()
     assert "haa_schedule_lookup() in haa_schedule.c" in entry["stiffness"]["description"]
     assert "schedule.csv" in entry["damping"]["description"]
-    lib_path = tmp_path / "libs.so"
-    proc = subprocess.run([*_compiler(), *STRICT, "-O2", str(c_dir / "haa_schedule.c"), "-fPIC", "-shared",
-                           "-o", str(lib_path), "-lm"], capture_output=True, text=True)
-    assert proc.returncode == 0, proc.stderr
-    lib = ctypes.CDLL(str(lib_path))
+    lib = shared_library(c_dir / "haa_schedule.c", tmp_path / "libs.so")
     lib.haa_schedule_lookup.argtypes = [ctypes.c_double, ctypes.c_double, ctypes.POINTER(ctypes.c_double),
                                         ctypes.POINTER(ctypes.c_double)]
     lib.haa_schedule_lookup.restype = ctypes.c_int

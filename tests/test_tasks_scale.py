@@ -2,9 +2,8 @@
 point check and the torque bandwidths run as tasks (not in the command's own thread, where they
 were the serial part on a cluster), a cluster's ``run`` groups small calls into a few tasks per
 worker, and the task graph is recorded for benchmarks/bench_scale.py."""
+import contextlib
 import threading
-
-import numpy as np
 
 import pytest
 
@@ -12,6 +11,20 @@ import haa_sym.design.schedule as sch
 from haa_sym import ClosedLoop, load_params
 from haa_sym.io import tasks
 from haa_sym.io.tasks import TaskRunner
+
+
+@contextlib.contextmanager
+def traced_cluster(n_workers=2):
+    """(client, trace) of an in-process dask cluster of one-thread workers, with every task
+    submitted in the block recorded in ``trace`` (:data:`haa_sym.io.tasks.TRACE`)."""
+    distributed = pytest.importorskip("distributed")
+    with distributed.LocalCluster(n_workers=n_workers, threads_per_worker=1, processes=False,
+                                  dashboard_address=None) as cl, distributed.Client(cl) as client:
+        trace = tasks.TRACE = []
+        try:
+            yield client, trace
+        finally:
+            tasks.TRACE = None
 
 
 def test_the_point_check_and_the_bandwidths_run_as_tasks(monkeypatch):
@@ -36,17 +49,10 @@ def test_the_point_check_and_the_bandwidths_run_as_tasks(monkeypatch):
 
 
 def test_a_cluster_run_groups_small_calls_and_keeps_their_order():
-    distributed = pytest.importorskip("distributed")
-    with distributed.LocalCluster(n_workers=2, threads_per_worker=1, processes=False,
-                                  dashboard_address=None) as cl, distributed.Client(cl) as client:
+    with traced_cluster() as (client, trace):
         r = TaskRunner(client, False)
-        tasks.TRACE = []
-        try:
-            out = r.run(pow, [(k, 2) for k in range(100)], "squares")
-            again = r.run(pow, [(k, 3) for k in range(5)], "cubes")
-            trace = tasks.TRACE
-        finally:
-            tasks.TRACE = None
+        out = r.run(pow, [(k, 2) for k in range(100)], "squares")
+        again = r.run(pow, [(k, 3) for k in range(5)], "cubes")
     assert out == [k ** 2 for k in range(100)] and again == [k ** 3 for k in range(5)]
     first = tasks.CHUNKS_PER_WORKER * 2
     assert len(trace) == first + 5                  # 100 calls in 8 tasks; 5 calls in 5
@@ -56,17 +62,11 @@ def test_a_cluster_run_groups_small_calls_and_keeps_their_order():
 
 
 def test_stream_records_which_task_asked_for_which():
-    distributed = pytest.importorskip("distributed")
-    with distributed.LocalCluster(n_workers=1, threads_per_worker=1, processes=False,
-                                  dashboard_address=None) as cl, distributed.Client(cl) as client:
+    seen = []
+    with traced_cluster(1) as (client, trace):
         r = TaskRunner(client, False)
-        tasks.TRACE, seen = [], []
-        try:
-            r.stream(pow, [(2, 1), (3, 1)], lambda a, res: (seen.append(res) or [((res, 2), 1)] if a[1] == 1 else []),
-                     "powers")
-            trace = tasks.TRACE
-        finally:
-            tasks.TRACE = None
+        r.stream(pow, [(2, 1), (3, 1)], lambda a, res: (seen.append(res) or [((res, 2), 1)] if a[1] == 1 else []),
+                 "powers")
     assert sorted(seen) == [2, 3] and len(trace) == 4
     firsts = {t["key"] for t in trace[:2]}
     assert all(t["after"] == [] for t in trace[:2])
@@ -76,19 +76,12 @@ def test_stream_records_which_task_asked_for_which():
 def test_the_robust_region_maps_each_configuration_as_a_task_once():
     # issue 27, item 2: regions --robust on the task runner; the doubling (2, 3, ... configurations)
     # maps only the configurations it has not mapped yet, and the result is the in-process one
-    distributed = pytest.importorskip("distributed")
     from haa_sym.analysis.robust import robust_region
     loop = ClosedLoop(load_params())
     P, D = [5.0, 50.0, 300.0, 2000.0], [1.0, 10.0, 40.0]
     local = robust_region(loop, P, D)
-    with distributed.LocalCluster(n_workers=2, threads_per_worker=1, processes=False,
-                                  dashboard_address=None) as cl, distributed.Client(cl) as client:
-        tasks.TRACE = []
-        try:
-            remote = robust_region(loop, P, D, scheduler=client)
-            trace = tasks.TRACE
-        finally:
-            tasks.TRACE = None
+    with traced_cluster() as (client, trace):
+        remote = robust_region(loop, P, D, scheduler=client)
     assert remote.feasible.tobytes() == local.feasible.tobytes() and remote.history == local.history
     assert 0 < remote.feasible.sum() < remote.feasible.size
     # one task per configuration: the ends, then one midpoint per doubling
@@ -96,18 +89,11 @@ def test_the_robust_region_maps_each_configuration_as_a_task_once():
 
 
 def test_start_submits_without_a_barrier_and_collects_in_order():
-    distributed = pytest.importorskip("distributed")
-    with distributed.LocalCluster(n_workers=2, threads_per_worker=1, processes=False,
-                                  dashboard_address=None) as cl, distributed.Client(cl) as client:
+    with traced_cluster() as (client, trace):
         r = TaskRunner(client, False)
-        tasks.TRACE = []
-        try:
-            first = r.run(pow, [(k, 2) for k in range(3)], "squares")
-            later = r.start(pow, [(k, 3) for k in range(20)], "cubes")
-            then = r.run(pow, [(k, 4) for k in range(3)], "fourth powers")
-            trace = tasks.TRACE
-        finally:
-            tasks.TRACE = None
+        first = r.run(pow, [(k, 2) for k in range(3)], "squares")
+        later = r.start(pow, [(k, 3) for k in range(20)], "cubes")
+        then = r.run(pow, [(k, 4) for k in range(3)], "fourth powers")
         assert later() == [k ** 3 for k in range(20)] and first == [0, 1, 4] and then == [0, 1, 16]
     squares, cubes = {t["key"] for t in trace[:3]}, {t["key"] for t in trace[3:-3]}
     assert len(cubes) == 2 * tasks.CHUNKS_PER_WORKER
@@ -138,22 +124,17 @@ def test_the_schedule_waits_for_few_task_lists_and_its_point_check_for_none():
     # issue 27: the first task lists compute what the next leg level and the point check will ask
     # for, and the bandwidths run beside the cell check: maps, refinement and the cell check's
     # passes (on the default grid 5 task lists, where there were 11)
-    distributed = pytest.importorskip("distributed")
     labels = []
     run = TaskRunner.run
 
     def counting(self, fn, args_list, label, unit="task"):
         labels.append((label, len(args_list)))
         return run(self, fn, args_list, label, unit)
-    with distributed.LocalCluster(n_workers=2, threads_per_worker=1, processes=False,
-                                  dashboard_address=None) as cl, distributed.Client(cl) as client:
-        tasks.TRACE = []
+    with traced_cluster() as (client, trace):
         TaskRunner.run = counting
         try:
             s = sch.schedule(ClosedLoop(load_params()), *GRID, scheduler=client, progress=False, **SMALL)
-            trace = tasks.TRACE
         finally:
-            tasks.TRACE = None
             TaskRunner.run = run
     local = sch.schedule(ClosedLoop(load_params()), *GRID, progress=False, **SMALL)
     assert s.csv_text() == local.csv_text() and s.feasible.any()
