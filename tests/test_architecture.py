@@ -148,3 +148,53 @@ def test_no_import_circle():
         if v not in index:
             strongconnect(v)
     assert not circles, f"import circles: {circles}"
+
+
+# --- the imports that are not import statements -----------------------------------------------------
+# haa_sym's public names and haa-sym's commands are imported on first use through importlib
+# (haa_sym.__getattr__, haa_sym.cli.COMMANDS; docs/startup.md), which the ast rules above do not
+# see: the modules they name obey the same layers.
+def _dynamic_imports():
+    import haa_sym
+    import haa_sym.cli
+    yield from (("haa_sym", m) for m in sorted(set(haa_sym._LAZY.values())))
+    yield from (("haa_sym.cli", m) for m in sorted({m for m, _help in haa_sym.cli.COMMANDS.values()}))
+
+
+@pytest.mark.parametrize("importer,module", list(_dynamic_imports()))
+def test_lazy_imports_name_modules_downward(importer, module):
+    assert module in MODULES, f"{importer} names {module}, which is no module of src/haa_sym"
+    assert _layer(module) <= _layer(importer), f"{importer} imports {module} from a higher layer"
+
+
+def test_every_public_name_resolves():
+    """Every name of ``haa_sym.__all__`` is an attribute of the package (``from haa_sym import X``
+    and ``haa_sym.X``), the object of the module that defines it, and listed by ``dir``."""
+    import importlib
+
+    import haa_sym
+    assert set(haa_sym.__all__) <= set(dir(haa_sym))
+    for name in haa_sym.__all__:
+        value = getattr(haa_sym, name)
+        assert value is getattr(importlib.import_module(haa_sym._LAZY[name]), name), name
+    namespace: dict = {}
+    exec("from haa_sym import *", namespace)
+    assert set(haa_sym.__all__) <= set(namespace)
+    assert haa_sym.__version__ == haa_sym._version.version()
+    with pytest.raises(AttributeError, match="no attribute 'not_a_name'"):
+        haa_sym.not_a_name
+
+
+def test_every_command_has_its_arguments_and_handler():
+    """Each command of haa_sym.cli.COMMANDS is defined by its module's ARGUMENTS, and every
+    command a module defines is listed (no command left out of ``haa-sym --help``)."""
+    import importlib
+
+    import haa_sym.cli
+    listed: dict = {}
+    for command, (module, _help) in haa_sym.cli.COMMANDS.items():
+        listed.setdefault(module, set()).add(command)
+    for module, commands in listed.items():
+        arguments = importlib.import_module(module).ARGUMENTS
+        assert set(arguments) == commands, module
+        assert all(callable(add) and callable(run) for add, run in arguments.values()), module

@@ -141,7 +141,7 @@ def golden_region():
 
 
 def test_emitted_c_equals_the_golden_files(update_golden, monkeypatch):
-    monkeypatch.setattr(ros2, "__version__", "golden")
+    monkeypatch.setattr(ros2, "version", lambda: "golden")
     header, source = ros2.c_code(*golden_region(), META)
     problems = []
     for name, text in ((ros2.HEADER, header), (ros2.SOURCE, source)):

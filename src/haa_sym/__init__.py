@@ -5,19 +5,67 @@ Torque and Velocity Feedback Loops". The numeric runtime (this namespace) never 
 Layers, bottom to top (docs/architecture.md): ``errors``, ``model``, ``io``, ``symbolic``,
 ``compiled``, ``loop``, ``analysis``, ``design``, ``check``, ``paper``, ``cli``. Analyses take
 the closed loop first: ``region_map(ClosedLoop(params, options), P_gain, D_gain)``.
+
+The public names below are imported on first use (PEP 562 ``__getattr__``, as numpy and scipy
+do): ``import haa_sym`` itself imports nothing heavy, so that a command, or a program that needs
+one submodule, does not pay for the whole API (scipy.linalg, CasADi, the analyses; docs/startup.md).
+``from haa_sym import X`` and ``haa_sym.X`` work as before.
 """
-from haa_sym._version import __version__
-from haa_sym.analysis.margins import PhaseMargins, phase_margins
-from haa_sym.analysis.passivity import PassivityResult, passivity
-from haa_sym.analysis.regions import RegionMap, region_map
-from haa_sym.errors import ParameterError
-from haa_sym.io.gridspec import grid
-from haa_sym.loop import (AnalysisConventions, ClosedLoop, FrequencyGrid, LoopOptions, LoopStructure,
-                          StabilityResult)
-from haa_sym.model.actuator import Body, Coupling, Topology
-from haa_sym.model.params import Controller, Params, Plant, load_params
+from __future__ import annotations
+
+import importlib
+from typing import TYPE_CHECKING
+
+# public name -> the module defining it (the one place a name of __all__ is bound)
+_LAZY = {
+    "__version__": "haa_sym._version",
+    "PhaseMargins": "haa_sym.analysis.margins", "phase_margins": "haa_sym.analysis.margins",
+    "PassivityResult": "haa_sym.analysis.passivity", "passivity": "haa_sym.analysis.passivity",
+    "RegionMap": "haa_sym.analysis.regions", "region_map": "haa_sym.analysis.regions",
+    "ParameterError": "haa_sym.errors",
+    "grid": "haa_sym.io.gridspec",
+    "AnalysisConventions": "haa_sym.loop", "ClosedLoop": "haa_sym.loop", "FrequencyGrid": "haa_sym.loop",
+    "LoopOptions": "haa_sym.loop", "LoopStructure": "haa_sym.loop", "StabilityResult": "haa_sym.loop",
+    "Body": "haa_sym.model.actuator", "Coupling": "haa_sym.model.actuator", "Topology": "haa_sym.model.actuator",
+    "Controller": "haa_sym.model.params", "Params": "haa_sym.model.params", "Plant": "haa_sym.model.params",
+    "load_params": "haa_sym.model.params",
+}
+
+# the subpackages: ``haa_sym.loop`` after ``import haa_sym`` imports it, as scipy's submodules
+_SUBMODULES = frozenset({"_version", "analysis", "check", "cli", "compiled", "design", "errors", "explore", "fit",
+                         "io", "loop", "model", "paper", "robot", "symbolic", "verify"})
 
 __all__ = ["__version__", "Controller", "ParameterError", "Params", "Plant", "Topology", "Body", "Coupling",
            "load_params", "ClosedLoop", "LoopOptions", "LoopStructure", "AnalysisConventions", "FrequencyGrid",
            "StabilityResult", "RegionMap", "grid", "region_map", "PassivityResult", "passivity", "PhaseMargins",
            "phase_margins"]
+
+if TYPE_CHECKING:                    # static analysers and IDEs see the names as plain imports
+    from haa_sym._version import __version__
+    from haa_sym.analysis.margins import PhaseMargins, phase_margins
+    from haa_sym.analysis.passivity import PassivityResult, passivity
+    from haa_sym.analysis.regions import RegionMap, region_map
+    from haa_sym.errors import ParameterError
+    from haa_sym.io.gridspec import grid
+    from haa_sym.loop import (AnalysisConventions, ClosedLoop, FrequencyGrid, LoopOptions, LoopStructure,
+                              StabilityResult)
+    from haa_sym.model.actuator import Body, Coupling, Topology
+    from haa_sym.model.params import Controller, Params, Plant, load_params
+
+
+def __getattr__(name: str):
+    """A public name's (or subpackage's) first use imports its module and binds the name here
+    (later uses are plain attribute look-ups); anything else is an AttributeError, as without
+    this hook."""
+    if name in _SUBMODULES:
+        return importlib.import_module(f"haa_sym.{name}")      # the import binds it here
+    module = _LAZY.get(name)
+    if module is None:
+        raise AttributeError(f"module 'haa_sym' has no attribute {name!r}")
+    value = getattr(importlib.import_module(module), name)
+    globals()[name] = value
+    return value
+
+
+def __dir__() -> list[str]:
+    return sorted(set(globals()) | set(__all__))

@@ -1,4 +1,10 @@
-"""The installed distribution's version (bottom layer: provenance records it)."""
+"""The installed distribution's version (bottom layer: provenance records it).
+
+Read when first asked for, not at import: ``importlib.metadata`` imports ``email`` and friends,
+about 0.05 s that a command which records no version (``--help``, ``stability``) need not pay
+(docs/startup.md). :func:`version` is the one reader (cached); ``haa_sym._version.__version__`` and
+``haa_sym.__version__`` are the same string through PEP 562 ``__getattr__``."""
+import functools
 
 
 def _version() -> str:
@@ -17,4 +23,14 @@ def _version() -> str:
             return "0+unknown"
 
 
-__version__ = _version()
+@functools.cache
+def version() -> str:
+    """The version string every output records (``haa-sym --version``, provenance, the
+    schedule's CSV, the exported files): :func:`_version`, read once per process."""
+    return _version()
+
+
+def __getattr__(name: str):
+    if name == "__version__":
+        return version()
+    raise AttributeError(f"module 'haa_sym._version' has no attribute {name!r}")

@@ -20,8 +20,6 @@ from dataclasses import dataclass, field, replace
 
 import numpy as np
 
-from tqdm.auto import tqdm
-
 from haa_sym.analysis.sampled_port import MEASURES, passivity_excess, passivity_tolerance
 from haa_sym.analysis.sweep import BLAS_THREADS, blas_limits
 from haa_sym.errors import ParameterError
@@ -104,6 +102,8 @@ def _excess(loop, P_gain, D_gain, beta, alpha) -> float:
 
 def _scan(loop, key, base, K_env, P_gain, D_gain, beta, alpha, progress, passivity):
     """Spectral radius and (where stable, if ``passivity``) phase excess at every stiffness."""
+    # tqdm.auto imports asyncio (about 0.05 s): only a contact scan pays it, not every importer
+    from tqdm.auto import tqdm
     rho = np.empty(K_env.size)
     excess = np.full(K_env.size, np.nan)
     for i, K in enumerate(tqdm(K_env, desc="contact stiffness", leave=False,

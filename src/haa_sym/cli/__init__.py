@@ -45,6 +45,7 @@ from __future__ import annotations
 
 import argparse
 import contextlib
+import importlib
 import os
 import re
 import signal
@@ -52,31 +53,92 @@ import sys
 import threading
 import warnings
 
-from haa_sym._version import __version__
+from haa_sym._version import version
 from haa_sym.errors import CompilerError, ParameterError, StaleGeneratedCode, Terminated
 from haa_sym.io.inputs import command_scope
 from haa_sym.io.progress import set_progress
 
-from haa_sym.cli import analyses, describe, explore, identify, robot_import, robot_mujoco, robot_ros2, simulate, tune
-from haa_sym.cli.common import _Parser, _progress_flags
+from haa_sym.cli.parsing import _Parser, _progress_flags
 
-# every module adding commands: register(sub) -> {command: run(args) -> exit status}
-COMMAND_MODULES = (analyses, identify, tune, simulate, describe, explore, robot_import, robot_mujoco, robot_ros2)
+# Every command: the module that defines its arguments and runs it, and its line in `haa-sym
+# --help`, in that listing's order. A command's module is imported only when that command is
+# given (docs/startup.md): building the parser of `haa-sym schedule` imports neither the fit, nor
+# the explorer, nor the robot tools, nor the other analyses. Each module has
+# ARGUMENTS = {command: (add_arguments(parser), run(args) -> exit status)}.
+COMMANDS = {
+    "verify": ("haa_sym.cli.paper", "check the paper's equations"),
+    "compile": ("haa_sym.cli.actuators", "compile the plant of an actuator file into the cache (ahead of first use)"),
+    "actuators": ("haa_sym.cli.actuators", "the bundled actuators: name, description, configurations and file path"),
+    "options": ("haa_sym.cli.actuators", "every --set key of an actuator (unit, value, allowed) and every --option "
+                "(type, default, allowed)"),
+    "stability": ("haa_sym.cli.analyses", "stability of gain points, one line each"),
+    "regions": ("haa_sym.cli.analyses", "stability / PM / passivity map on a gain grid (Figs. 8-11)"),
+    "boundary": ("haa_sym.cli.analyses", "exact stability, phase-margin and passivity boundaries in the "
+                 "(P_gain, D_gain) plane (parameter-space method)"),
+    "schedule": ("haa_sym.cli.schedule", "torque-gain scheduler: the largest beta per impedance that keeps "
+                 "the joint stable with PM >= 30 deg for every leg configuration (CSV, embedded C)"),
+    "contact": ("haa_sym.cli.analyses", "environment stiffnesses where the loop is unstable, or stable but not "
+                "passive (exact ends)"),
+    "passivity": ("haa_sym.cli.analyses", "passivity of Z(z) at gain pairs (Table 2, Fig. 12)"),
+    "step": ("haa_sym.cli.analyses", "unit torque step, impedance loop open (Fig. 7)"),
+    "margins": ("haa_sym.cli.analyses", "phase and gain margins of the torque and impedance loops at gain points"),
+    "reproduce": ("haa_sym.cli.paper", "every figure and table of the paper, and REPORT.md"),
+    "identify": ("haa_sym.cli.identify", "fit parameters of an actuator file to logged experiments (CSV logs)"),
+    "tune": ("haa_sym.cli.tune", "the torque PI (P_t0, I_t0) of widest torque bandwidth with PM >= 30 deg and "
+             "GM >= 12 dB at every configuration (Sec. 3.2), written as a new actuator file"),
+    "simulate": ("haa_sym.cli.simulate", "nonlinear simulation with the [limits] of the parameter file "
+                 "(saturation, friction, quantisation, noise, jitter)"),
+    "describe": ("haa_sym.cli.describe", "describing-function predictions of limit cycles (saturation, "
+                 "quantisation, Coulomb friction) at one gain point"),
+    "explore": ("haa_sym.cli.explore", "interactive gain explorer in the browser (needs haa_sym[explore])"),
+    "import-robot": ("haa_sym.cli.robot_import", "a joint's leg inertia and gravity stiffness over configurations, "
+                     "from a URDF or MJCF, into an actuator file (needs haa_sym[mujoco])"),
+    "export-mujoco": ("haa_sym.cli.robot_mujoco", "an MJCF of the actuator and a Python module running the "
+                      "analysed controller in a MuJoCo control callback (haa_sym[mujoco])"),
+    "export-ros2": ("haa_sym.cli.robot_ros2", "the certified region as ros2_control parameters (generate_"
+                    "parameter_library YAML, bounds = the largest box inside it) and as C (haa_region_contains)"),
+}
+
+
+class _Commands(argparse._SubParsersAction):
+    """argparse's sub-commands, each one's arguments added when it is the command given: every
+    command is listed (name and help line) by ``haa-sym --help``, but only the command parsed
+    imports its module (:data:`COMMANDS`) and gets its arguments; ``runs`` collects its handler.
+    argparse calls this action with the command's name and the arguments after it, so which
+    command runs is argparse's decision, never a second reading of argv."""
+
+    def __init__(self, *args, **kwargs):
+        super().__init__(*args, **kwargs)
+        self.runs = {}
+
+    def __call__(self, parser, namespace, values, option_string=None):
+        name = values[0]
+        if name in COMMANDS and name not in self.runs:
+            command = self._name_parser_map[name]
+            add_arguments, self.runs[name] = importlib.import_module(COMMANDS[name][0]).ARGUMENTS[name]
+            add_arguments(command)
+            # also after the command (haa-sym reproduce --quiet); SUPPRESS keeps the global value
+            _progress_flags(command, argparse.SUPPRESS)
+        super().__call__(parser, namespace, values, option_string)
+
+
+def parser() -> tuple[argparse.ArgumentParser, _Commands]:
+    """``haa-sym``'s parser, with every command listed but none of their arguments added (the
+    command parsed adds its own), and its sub-commands action (``.runs``: the handlers)."""
+    ap = _Parser(prog="haa-sym", description=__doc__.splitlines()[0],
+                 formatter_class=argparse.RawDescriptionHelpFormatter, epilog=__doc__)
+    ap.add_argument("--version", action=_Version)
+    _progress_flags(ap, False)
+    sub = ap.add_subparsers(dest="cmd", required=True, action=_Commands)
+    for name, (_module, help_line) in COMMANDS.items():
+        sub.add_parser(name, help=help_line)
+    return ap, sub
 
 
 def main(argv: list[str] | None = None) -> int:
-    ap = _Parser(prog="haa-sym", description=__doc__.splitlines()[0],
-                 formatter_class=argparse.RawDescriptionHelpFormatter, epilog=__doc__)
-    ap.add_argument("--version", action="version", version=f"%(prog)s {__version__}")
-    _progress_flags(ap, False)
-    sub = ap.add_subparsers(dest="cmd", required=True)
-    runs = {}
-    for module in COMMAND_MODULES:
-        runs.update(module.register(sub))
-    for command in sub.choices.values():
-        # also after the command (haa-sym reproduce --quiet); SUPPRESS keeps the global value
-        _progress_flags(command, argparse.SUPPRESS)
+    ap, sub = parser()
     args = ap.parse_args(argv)
+    runs = sub.runs
     set_progress(False if args.quiet else True if args.progress else None)
     # every input file a command reads is recorded, and no output may replace one of them
     with _sigterm_unwinds(), command_scope(), _condensed_warnings() as floating:
@@ -86,6 +148,15 @@ def main(argv: list[str] | None = None) -> int:
               f"{', '.join(sorted(set(floating.values())))}): inputs near the ends of double precision; "
               "check the result, or use values of physical size", file=sys.stderr)
     return status
+
+
+class _Version(argparse._VersionAction):
+    """argparse's ``--version`` (the same help line and output), the version read only when the
+    flag is given: reading it imports ``importlib.metadata`` (haa_sym._version)."""
+
+    def __call__(self, parser, namespace, values, option_string=None):
+        self.version = f"%(prog)s {version()}"
+        super().__call__(parser, namespace, values, option_string)
 
 
 # numpy's floating-point RuntimeWarnings ("overflow encountered in multiply")

@@ -1,9 +1,9 @@
-"""The analysis commands of ``haa-sym``: verify, compile, actuators, options, stability, regions,
-boundary, schedule, contact, passivity, step, margins and reproduce."""
+"""The analysis commands of ``haa-sym`` on one closed loop: stability, regions, boundary,
+contact, passivity, step and margins (schedule: haa_sym.cli.schedule; the actuator files'
+commands: haa_sym.cli.actuators; verify and reproduce: haa_sym.cli.paper)."""
 from __future__ import annotations
 
 import json
-import sys
 
 import numpy as np
 
@@ -17,36 +17,20 @@ from haa_sym.analysis.simulate import EXPERIMENTS
 from haa_sym.analysis.robust import box_text, robust_region
 from haa_sym.analysis.sampled_port import MEASURES
 from haa_sym.analysis.torque import STEP_CONVENTION, describe_step, step_response, torque_bandwidth
-from haa_sym.check.verify import main as verify_main
-from haa_sym.compiled.generated import evaluators
-from haa_sym.compiled.plant_code import compile_topology
-from haa_sym.design.schedule import CELL_ROUNDS, schedule
-from haa_sym.design.schedule_c import check_c_directory, write_c
 from haa_sym.errors import ParameterError
 from haa_sym.io.formats import result_arrays, save_json, save_npz
-from haa_sym.io.gridspec import GRID_SYNTAX, grid
-from haa_sym.io.outputs import Transaction, csv_text
+from haa_sym.io.outputs import csv_text
 from haa_sym.io.progress import message
 from haa_sym.io.tasks import local_workers
-from haa_sym.loop import ClosedLoop, LoopOptions
-from haa_sym.loop.options import ALLOWED as OPTION_ALLOWED
+from haa_sym.loop import ClosedLoop
 from haa_sym.model.limits import limit_units
-from haa_sym.model.params import ALIASES, actuator_path, bundled_actuators, load_params, set_keys
-from haa_sym.paper.reproduce import reproduce
 
-from haa_sym.cli.common import (MAP_D_GAIN, PARAMS_HELP, POINTS_ROLE, TITLE_HELP, _axis, _common,
+from haa_sym.cli.common import (MAP_D_GAIN, POINTS_ROLE, SCHEDULER_HELP, TITLE_HELP, _axis, _common,
                                 _gain_flags, _leg, _leg_args, _map_args, _params, _parse_options, _plots,
                                 _points, _requirements, _say_leg, _setup, _write_outputs, _wrote,
                                 _agreement, _agreement_text, _measured, _uncertainty, measured_torque)
 
 
-SCHEDULER_HELP = ("local:N starts a cluster of N worker processes on this machine (127.0.0.1, stopped at the "
-                  "end; N up to the cores), or the address of a running dask.distributed scheduler, e.g. "
-                  "tcp://127.0.0.1:8786 (docs/schedule.md); default: in-process")
-
-
-def _cmd_verify(args) -> int:
-    return verify_main(["--params", str(actuator_path(args.params, "--params"))] if args.params else [])
 
 
 def _cmd_regions(args) -> int:
@@ -214,65 +198,6 @@ def _cmd_contact(args) -> int:
     return 0
 
 
-def _range(text: str, flag: str, what: str) -> tuple[float, float]:
-    lo, sep, hi = str(text).partition(":")
-    try:
-        r = (float(lo), float(hi)) if sep else None
-    except ValueError:
-        r = None
-    if r is None or not (0 < r[0] < r[1] < float("inf")):
-        raise ParameterError(f"{flag} {text!r}; allowed: LO:HI with 0 < LO < HI ({what})")
-    return r
-
-
-def _cmd_schedule(args) -> int:
-    local_workers(args.scheduler)            # a bad local:N is refused before any work
-    loop, out, plot = _setup(args, "schedule")
-    if args.c_out is not None:
-        check_c_directory(args.c_out)
-    P, D = _axis(args, "P_gain"), _axis(args, "D_gain")
-    beta_range = _range(args.beta_range, "--beta-range", "the torque-gain scale beta, Eq. 7")
-    alphas = None if args.alpha_values is None else grid(args.alpha_values, "--alpha-values")
-    fit = _uncertainty(args, loop.params, _leg(args, loop.params))
-    leg_line = _say_leg(loop.params, _leg(args, loop.params), args.leg_mode, fit)
-    s = schedule(loop, P, D, beta_range=beta_range, beta_tol=args.beta_tol, alpha_values=alphas,
-                 requirements=_requirements(args), leg=_leg(args, loop.params), leg_mode=args.leg_mode,
-                 uncertainty=(fit["box"] or None) if fit else None, scheduler=args.scheduler,
-                 cell_rounds=args.cell_rounds)
-    message(leg_line)
-    if not s.feasible.any():
-        with_alpha = f" with --alpha-values {args.alpha_values}" if args.alpha_values is not None else ""
-        raise ParameterError(f"--beta-range {args.beta_range}{with_alpha}: no beta in the range meets "
-                             f"{'+'.join(s.meta['requirements'])} for every leg configuration at any impedance of "
-                             "the grid; allowed: a range (or requirements) that some impedance meets")
-    table = s.table() if args.c_out is not None else None
-    with Transaction() as tx:
-        if out:
-            s.save_csv(out, tx, "--out")
-        if table is not None:
-            write_c(table, args.c_out, tx)
-        if plot:
-            _plots().save_figure(_plots().plot_schedule(s, title=args.figure_title), plot, tx, "--plot")
-    feas = int(s.feasible.sum())
-    at_limit = int(s.beta_at_limit.sum())
-    if at_limit:
-        # one line: the range, not the model, limits these rows (their bandwidth gain is the range's)
-        print(f"warning: {at_limit} of {feas} feasible impedances have beta at the top of --beta-range "
-              f"({beta_range[1]:g}): the range, not the model, limits them (CSV column beta_at_limit); raise "
-              "the range's top if the hardware takes more", file=sys.stderr)
-    unsafe = int((~s.beta_fixed_feasible & s.feasible).sum())
-    print(f"{s.feasible.size} impedances: {feas} with a robust beta in [{beta_range[0]:g}, {beta_range[1]:g}] "
-          f"(tolerance {args.beta_tol:g}; leg {s.meta['leg'][0]}..{s.meta['leg'][1]}"
-          + ("".join(f", {k} {lo:.4g}..{hi:.4g}" for k, (lo, hi) in s.meta["uncertainty"].items())
-             if s.meta["uncertainty"] else "") + f", {s.n_configurations} "
-          f"configurations{'' if s.converged else ', NOT converged'}); beta = 1 fails for some "
-          f"{'configuration' if s.meta['uncertainty'] else 'leg'} at {unsafe} of "
-          f"them; lookup safe on {s.meta['cells_safe']} of {s.meta['cells']} cells ({s.meta['cell_subdivisions'] + 1}^2 "
-          f"sub-grid checked, {s.meta['grid_points_lowered_by_cell_check']} grid values lowered)"
-          + _wrote(out) + (f"; C in {args.c_out}" if args.c_out else ""))
-    return 0
-
-
 def _cmd_passivity(args) -> int:
     loop, out, plot = _setup(args, "passivity")
     P, D = _points(args)
@@ -372,86 +297,12 @@ def _cmd_stability(args) -> int:
     return 0
 
 
-def _cmd_reproduce(args) -> int:
-    params = _params(args)
-    options = _parse_options(args.option)
-    reproduce(args.out, params, options, quick=args.quick, field="--out")
-    return 0
-
-
-def _cmd_actuators(args) -> int:
-    """The bundled actuators: name (and alias), what they are, their configurations and file."""
-    aliases = {n: a for a, n in ALIASES.items()}
-    for name, path in bundled_actuators().items():
-        params = load_params(path)
-        alias = f" (alias {aliases[name]})" if name in aliases else ""
-        print(f"{name}{alias}: {params.about.get('name', '')}\n"
-              f"  {params.about.get('description', '')}\n"
-              f"  configurations: {', '.join(params.configurations) or 'none'}\n"
-              f"  file: {path}")
-    print("(--params NAME or --params FILE anywhere; copy a file to describe another actuator, "
-          "docs/model.md \"Actuator files\")")
-    return 0
-
-
-def _table(rows: list[tuple], header: tuple[str, ...]) -> str:
-    rows = [header] + [tuple(str(c) for c in r) for r in rows]
-    widths = [max(len(r[i]) for r in rows) for i in range(len(header) - 1)]
-    return "\n".join("  " + "  ".join(c.ljust(w) for c, w in zip(r, widths)) + "  " + r[-1] for r in rows)
-
-
-def _cmd_options(args) -> int:
-    """What --set and --option accept: keys with units, allowed values and the current value."""
-    params = _params(args)
-    print(f"--set KEY=VALUE, keys of {params.source} ({params.about.get('name', '')}"
-          f"{', configuration ' + args.configuration if args.configuration else ''}):")
-    print(_table([(k, u, "-" if v is None else f"{v:g}" if isinstance(v, float) else v, allowed)
-                  for k, u, allowed, v in set_keys(params)], ("key", "unit", "value", "allowed")))
-    resolved = LoopOptions().resolved(params.plant.topology)
-    print("--option KEY=VALUE, fields of haa_sym.LoopOptions (docs/model.md, \"Options\"):")
-    rows = []
-    for name in LoopOptions.field_names():
-        kind, optional = LoopOptions.field_type(name)
-        default = LoopOptions.field_default(name)
-        shown = (f"none (here {getattr(resolved, name)})" if default is None
-                 else str(default).lower() if isinstance(default, bool) else str(default))
-        rows.append((name, kind.__name__ + (" or none" if optional else ""), shown, OPTION_ALLOWED[name]))
-    print(_table(rows, ("option", "type", "default", "allowed")))
-    print(f"--P-gain (Nm/rad) and --D-gain (Nms/rad): {GRID_SYNTAX} (haa-sym --help: which commands "
-          "take a map's axes and which take points)")
-    return 0
-
-
-def _cmd_compile(args) -> int:
-    args.file = str(actuator_path(args.file, "ACTUATOR"))
-    params = load_params(args.file)
-    top = params.plant.topology
-    entry = evaluators().code.manifest["topologies"].get(top.fingerprint)
-    if entry is not None:
-        print(f"{args.file}: topology {top.fingerprint[:12]} is built in ({entry['function']} in "
-              "the generated code); nothing to compile")
-        return 0
-    code = compile_topology(top, quiet=args.quiet)
-    where = code.library if code.library is not None else f"{code.casadi_file} (CasADi's virtual machine)"
-    print(f"{args.file}: topology {top.fingerprint[:12]} ({top.describe()}) compiled: {where}")
-    return 0
-
-
-
-def register(sub) -> dict:
-    """Add the analysis commands to ``sub`` (argparse subparsers); returns {command: run(args) -> exit status}."""
-    v = sub.add_parser("verify", help="check the paper's equations")
-    v.add_argument("--params", metavar="NAME|FILE", help=PARAMS_HELP)
-    c = sub.add_parser("compile", help="compile the plant of an actuator file into the cache (ahead of first use)")
-    c.add_argument("file", metavar="ACTUATOR", help="actuator file (TOML) or bundled name (haa-sym actuators)")
-    sub.add_parser("actuators", help="the bundled actuators: name, description, configurations and file path")
-    op = sub.add_parser("options", help="every --set key of an actuator (unit, value, allowed) and every --option "
-                        "(type, default, allowed)")
-    _common(op)                          # the values shown are those after --configuration and --set
-    s = sub.add_parser("stability", help="stability of gain points, one line each")
+def _stability_args(s) -> None:
     _common(s)
     _gain_flags(s, None, None, POINTS_ROLE + ", one line each")
-    r = sub.add_parser("regions", help="stability / PM / passivity map on a gain grid (Figs. 8-11)")
+
+
+def _regions_args(r) -> None:
     _common(r)
     _map_args(r, MAP_D_GAIN, "an axis of the map (every P_gain with every D_gain)", ".npz")
     r.add_argument("--radius", action="store_true",
@@ -481,29 +332,14 @@ def register(sub) -> dict:
                         f"each time, up to S seconds (default max({DEFAULT_MAX_DURATION:g}, --duration))")
     r.add_argument("--scheduler", help="with --nonlinear or --robust: where their tasks run (a simulation's "
                    "points; a leg configuration's map): " + SCHEDULER_HELP)
-    bd = sub.add_parser("boundary", help="exact stability, phase-margin and passivity boundaries in the "
-                        "(P_gain, D_gain) plane (parameter-space method)")
+
+
+def _boundary_args(bd) -> None:
     _common(bd)
     _map_args(bd, MAP_D_GAIN, "its range is the box searched", ".json")
-    sc = sub.add_parser("schedule", help="torque-gain scheduler: the largest beta per impedance that keeps "
-                        "the joint stable with PM >= 30 deg for every leg configuration (CSV, embedded C)")
-    _common(sc)
-    _gain_flags(sc, "log:1:2000:30", "lin:1:50:20", "an axis of the schedule's table (at least 2 values, "
-                "P_gain > 0)")
-    sc.add_argument("--beta-range", default="0.1:8", help="LO:HI of beta (default 0.1:8)")
-    sc.add_argument("--beta-tol", type=float, default=0.02, help="relative step of the beta grid (default 0.02)")
-    sc.add_argument("--alpha-values", help="schedule alpha too, from these values (grid spec, e.g. 0,0.5,0.94)")
-    _leg_args(sc)
-    sc.add_argument("--scheduler", help=SCHEDULER_HELP)
-    sc.add_argument("--cell-rounds", type=int, default=CELL_ROUNDS, metavar="N",
-                    help=f"rounds of the cell check between grid points; cells still failing in the last are given "
-                         f"up (no safe gain) instead of lowering shared corners (default {CELL_ROUNDS}; docs/schedule.md)")
-    sc.add_argument("--out", help="output .csv")
-    sc.add_argument("--c-out", help="directory for haa_schedule.h and haa_schedule.c")
-    sc.add_argument("--plot", help="output figure (.png/.pdf/.svg)")
-    sc.add_argument("--title", help=TITLE_HELP)
-    ct = sub.add_parser("contact", help="environment stiffnesses where the loop is unstable, or stable but not "
-                        "passive (exact ends)")
+
+
+def _contact_args(ct) -> None:
     _common(ct)
     ct.add_argument("--K-range", default="1:100000", help="LO:HI environment stiffness, Nm/rad (default 1:100000)")
     ct.add_argument("--n-scan", type=int, default=400, help="log-spaced stiffnesses that bracket the ends (default 400)")
@@ -513,26 +349,31 @@ def register(sub) -> dict:
     ct.add_argument("--out", help="output .json")
     ct.add_argument("--plot", help="output figure (.png/.pdf/.svg)")
     ct.add_argument("--title", help=TITLE_HELP)
-    p = sub.add_parser("passivity", help="passivity of Z(z) at gain pairs (Table 2, Fig. 12)")
+
+
+def _passivity_args(p) -> None:
     _common(p)
     _gain_flags(p, "0,200,20000", "0,10,50", POINTS_ROLE + " (Table 2's columns)")
     p.add_argument("--out", help="output .csv or .json")
     p.add_argument("--plot", help="corrected phase of Z, figure file")
     p.add_argument("--title", help=TITLE_HELP)
-    st = sub.add_parser("step", help="unit torque step, impedance loop open (Fig. 7)")
+
+
+def _step_args(st) -> None:
     _common(st)
     st.add_argument("--duration", type=float, default=0.3, help="seconds")
     st.add_argument("--out", help="output .csv")
     st.add_argument("--plot", help="figure file")
     st.add_argument("--title", help=TITLE_HELP)
-    mg = sub.add_parser("margins", help="phase and gain margins of the torque and impedance loops at gain points")
+
+
+def _margins_args(mg) -> None:
     _common(mg)
     _gain_flags(mg, "0", "0", POINTS_ROLE)
-    rp = sub.add_parser("reproduce", help="every figure and table of the paper, and REPORT.md")
-    _common(rp)
-    rp.add_argument("--out", default="results")
-    rp.add_argument("--quick", action="store_true", help="coarse grids (for tests)")
-    return {"verify": _cmd_verify, "stability": _cmd_stability, "regions": _cmd_regions, "boundary": _cmd_boundary,
-            "schedule": _cmd_schedule, "contact": _cmd_contact, "passivity": _cmd_passivity, "step": _cmd_step,
-            "margins": _cmd_margins, "reproduce": _cmd_reproduce, "compile": _cmd_compile,
-            "actuators": _cmd_actuators, "options": _cmd_options}
+
+
+# {command: (add its arguments to its parser, run(args) -> exit status)}: haa_sym.cli.COMMANDS
+ARGUMENTS = {"stability": (_stability_args, _cmd_stability), "regions": (_regions_args, _cmd_regions),
+             "boundary": (_boundary_args, _cmd_boundary), "contact": (_contact_args, _cmd_contact),
+             "passivity": (_passivity_args, _cmd_passivity), "step": (_step_args, _cmd_step),
+             "margins": (_margins_args, _cmd_margins)}

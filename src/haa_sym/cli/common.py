@@ -35,14 +35,6 @@ _parse_set = parse_set
 _parse_options = parse_options
 
 
-class _Parser(argparse.ArgumentParser):
-    """argparse with the project's error form: one line, exit status 2 (argparse's own usage
-    block is what ``--help`` is for)."""
-
-    def error(self, message: str):
-        self.exit(2, f"haa-sym: error: {message}; see `{self.prog} --help`\n")
-
-
 def _bundled_names() -> str:
     """The bundled actuators' names with their aliases, from the model directory itself (a file
     added there is named in every command's --help without editing this text)."""
@@ -318,15 +310,6 @@ def _requirements(args):
 
 
 
-def _progress_flags(p: argparse.ArgumentParser, default) -> None:
-    g = p.add_mutually_exclusive_group()
-    g.add_argument("-q", "--quiet", action="store_true", default=default,
-                   help="no progress bars or progress messages on stderr")
-    g.add_argument("--progress", action="store_true", default=default,
-                   help="progress bars on stderr from the start, also when it is not a terminal "
-                        "(default: on a terminal, for work longer than 2 s)")
-
-
 # The D_gain axis of the maps (regions, boundary): the paper's Figs. 8-11 and model/paper.toml
 # start at 1 Nms/rad, and one default for both means `boundary` finds the curves `regions --plot`
 # draws. (boundary used 0..50 before issue 16; D_gain = 0 remains reachable with --D-gain.)
@@ -334,6 +317,11 @@ MAP_D_GAIN = "lin:1:50:100"
 TITLE_HELP = ("text above the figure's automatic title (the actuator, then what differs from its file: --set values "
               "and non-default --option values), on a line of its own")
 POINTS_ROLE = "points: the i-th P_gain with the i-th D_gain, one value pairing with all"
+# where the tasks of regions --nonlinear/--robust and schedule run (haa_sym.io.tasks)
+
+SCHEDULER_HELP = ("local:N starts a cluster of N worker processes on this machine (127.0.0.1, stopped at the "
+                  "end; N up to the cores), or the address of a running dask.distributed scheduler, e.g. "
+                  "tcp://127.0.0.1:8786 (docs/schedule.md); default: in-process")
 
 
 def _map_args(parser, D_default: str, what: str, suffix: str) -> None:

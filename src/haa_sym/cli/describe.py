@@ -114,9 +114,7 @@ def _with_confirmation(d: dict, conf: list) -> dict:
     return d
 
 
-def register(sub) -> dict:
-    p = sub.add_parser("describe", help="describing-function predictions of limit cycles (saturation, "
-                                        "quantisation, Coulomb friction) at one gain point")
+def _arguments(p) -> None:
     _common(p)
     _gain_flags(p, "0", "0", "one gain point (0 and 0: the torque loop alone)")
     p.add_argument("--limit", action="append", default=[], metavar="KEY=VALUE", help=LIMIT_HELP)
@@ -125,4 +123,7 @@ def register(sub) -> dict:
     p.add_argument("--out", help="the predictions as JSON (.json)")
     p.add_argument("--plot", help="Nyquist-type figure of G and -1/N(A) with the predicted cycles (.png, .pdf, .svg)")
     p.add_argument("--title", help=TITLE_HELP)
-    return {"describe": _cmd_describe}
+
+
+# {command: (add its arguments to its parser, run(args) -> exit status)}: haa_sym.cli.COMMANDS
+ARGUMENTS = {"describe": (_arguments, _cmd_describe)}

@@ -51,13 +51,14 @@ def _cmd_explore(args) -> int:
     return 0
 
 
-def register(sub) -> dict:
-    """Add ``explore`` to ``sub`` (argparse subparsers); returns {command: run(args) -> exit status}."""
-    e = sub.add_parser("explore", help="interactive gain explorer in the browser (needs haa_sym[explore])")
+def _arguments(e) -> None:
     e.add_argument("--params", metavar="NAME|FILE", help=PARAMS_HELP)
     e.add_argument("--port", type=int, default=DEFAULT_PORT, help=f"port on 127.0.0.1 (default {DEFAULT_PORT})")
     e.add_argument("--no-browser", action="store_true", help="do not open the page in a browser")
     e.add_argument("--allow", action="append", metavar="FILE|DIR",
                    help="a file, or a directory (with everything below it), the page may read besides the current "
                         "directory and --params (repeatable; e.g. a schedule or measured-points CSV kept elsewhere)")
-    return {"explore": _cmd_explore}
+
+
+# {command: (add its arguments to its parser, run(args) -> exit status)}: haa_sym.cli.COMMANDS
+ARGUMENTS = {"explore": (_arguments, _cmd_explore)}

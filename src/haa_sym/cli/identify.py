@@ -32,9 +32,9 @@ from haa_sym.cli.common import PARAMS_HELP, _check_out, _parse_options, _params,
 
 
 
-def register(sub) -> dict:
-    p = sub.add_parser("identify", help="fit parameters of an actuator file to logged experiments (CSV logs)",
-                       description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+def _arguments(p) -> None:
+    p.description = __doc__
+    p.formatter_class = argparse.RawDescriptionHelpFormatter
     p.add_argument("--params", metavar="NAME|FILE", help=PARAMS_HELP)
     p.add_argument("--log", action="append", required=True, metavar="LOG.csv",
                    help="a CSV log: header with time (s) and the signals (voltage, current, T_dist, torque_ref; "
@@ -95,7 +95,6 @@ def register(sub) -> dict:
                    help="the parameter file with the fitted values, their source and ci95")
     p.add_argument("--report", metavar="fit.json", help="the fit as JSON (parameters, rms_error, samples, sampling, meta)")
     p.add_argument("--plot", metavar="fit.png", help="measured against predicted: time traces and Bode (H1, coherence)")
-    return {"identify": run}
 
 
 def _is_limit_set(item: str) -> bool:
@@ -316,3 +315,8 @@ def run(args) -> int:
     print(f"{result.samples} samples, {result.iterations} iterations; rms error {rms}; wrote {out}"
           + (f", {report}" if report else "") + (f", {plot}" if plot else ""))
     return 0
+
+
+
+# {command: (add its arguments to its parser, run(args) -> exit status)}: haa_sym.cli.COMMANDS
+ARGUMENTS = {"identify": (_arguments, run)}

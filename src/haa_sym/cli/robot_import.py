@@ -51,10 +51,7 @@ def _cmd_import_robot(args) -> int:
     return 0
 
 
-def register(sub) -> dict:
-    """Add ``import-robot`` to ``sub`` (argparse subparsers); returns {command: run(args) -> exit status}."""
-    p = sub.add_parser("import-robot", help="a joint's leg inertia and gravity stiffness over configurations, from a "
-                       "URDF or MJCF, into an actuator file (needs haa_sym[mujoco])")
+def _arguments(p) -> None:
     p.add_argument("description", metavar="DESCRIPTION", help="the robot's URDF (<robot>) or MJCF (<mujoco>) file")
     p.add_argument("--joint", required=True, metavar="NAME", help="the hinge joint of the actuator (e.g. lf_haa_joint)")
     p.add_argument("--configuration", action="append", required=True, metavar="NAME:JOINT=VALUE[,JOINT=VALUE...]",
@@ -68,4 +65,7 @@ def register(sub) -> dict:
     p.add_argument("--skip", metavar="NAME[,NAME...]", help="flat names the import leaves as the merged file has them "
                    "(e.g. B_L2: keep an identified damping rather than the description's)")
     p.add_argument("--out", required=True, help="the actuator file written (.toml); never one of the inputs")
-    return {"import-robot": _cmd_import_robot}
+
+
+# {command: (add its arguments to its parser, run(args) -> exit status)}: haa_sym.cli.COMMANDS
+ARGUMENTS = {"import-robot": (_arguments, _cmd_import_robot)}

@@ -40,9 +40,7 @@ def _cmd_export_mujoco(args) -> int:
     return 0
 
 
-def register(sub) -> dict:
-    p = sub.add_parser("export-mujoco", help="an MJCF of the actuator and a Python module running the analysed "
-                                             "controller in a MuJoCo control callback (haa_sym[mujoco])")
+def _arguments(p) -> None:
     _common(p)
     _gain_flags(p, None, None, "the controller's gain point")
     p.add_argument("--out", required=True, metavar="model.xml",
@@ -51,4 +49,7 @@ def register(sub) -> dict:
                    help=f"MuJoCo's integrator (default {DEFAULT_INTEGRATOR})")
     p.add_argument("--steps-per-sample", type=int, default=None, metavar="N",
                    help="MuJoCo steps per controller sample (timestep Ts / N); default max(100, ceil(50 Ts R / L))")
-    return {"export-mujoco": _cmd_export_mujoco}
+
+
+# {command: (add its arguments to its parser, run(args) -> exit status)}: haa_sym.cli.COMMANDS
+ARGUMENTS = {"export-mujoco": (_arguments, _cmd_export_mujoco)}

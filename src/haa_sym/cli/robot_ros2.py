@@ -7,7 +7,7 @@ import math
 import sys
 from pathlib import Path
 
-from haa_sym._version import __version__
+from haa_sym._version import version
 from haa_sym.design.schedule import table_from_csv
 from haa_sym.design.schedule_c import HEADER as SCHEDULE_HEADER, SOURCE as SCHEDULE_SOURCE, check_c_directory
 from haa_sym.io.inputs import read_text
@@ -42,7 +42,7 @@ def _cmd_export_ros2(args) -> int:
                                   {"actuator": str(params.about.get("name") or Path(params.source).stem),
                                    "requirements": "those of the haa-sym schedule run that wrote the CSV",
                                    "tolerances": "those of the haa-sym schedule run that wrote the CSV",
-                                   "haa_sym_version": __version__})
+                                   "haa_sym_version": version()})
     try:
         req = ros2._check_requirements(_requirements(args))
     except ParameterError:
@@ -82,10 +82,7 @@ def _cmd_export_ros2(args) -> int:
     return 0
 
 
-def register(sub) -> dict:
-    """Add ``export-ros2`` to ``sub`` (argparse subparsers); returns {command: run(args) -> exit status}."""
-    p = sub.add_parser("export-ros2", help="the certified region as ros2_control parameters (generate_parameter_"
-                       "library YAML, bounds = the largest box inside it) and as C (haa_region_contains)")
+def _arguments(p) -> None:
     _common(p)
     _gain_flags(p, P_GAIN, MAP_D_GAIN, "an axis of the map the region is read from (at least 2 values; a log: "
                 "axis is measured in log for the box)")
@@ -101,4 +98,7 @@ def register(sub) -> dict:
     p.add_argument("--region-rtol", type=float, default=ros2.REGION_RTOL, metavar="RTOL",
                    help="relative tolerance in P_gain of the table's interpolation between rows "
                         f"(default {ros2.REGION_RTOL:g})")
-    return {"export-ros2": _cmd_export_ros2}
+
+
+# {command: (add its arguments to its parser, run(args) -> exit status)}: haa_sym.cli.COMMANDS
+ARGUMENTS = {"export-ros2": (_arguments, _cmd_export_ros2)}

@@ -247,9 +247,7 @@ def _predictions(loop, P, D, s, cols) -> list[tuple[str, str, dict | None]]:
     return out
 
 
-def register(sub) -> dict:
-    p = sub.add_parser("simulate", help="nonlinear simulation with the [limits] of the parameter file "
-                                        "(saturation, friction, quantisation, noise, jitter)")
+def _arguments(p) -> None:
     _common(p)
     _gain_flags(p, None, None, "one gain point")
     p.add_argument("--experiment", required=True, choices=list(EXPERIMENTS), metavar="KIND",
@@ -272,4 +270,7 @@ def register(sub) -> dict:
                         "velocity; docs/simulate.md)")
     p.add_argument("--log-noise", type=float, default=0.0, metavar="FRACTION",
                    help="Gaussian noise on the log's outputs, FRACTION x each one's standard deviation (default 0)")
-    return {"simulate": _cmd_simulate}
+
+
+# {command: (add its arguments to its parser, run(args) -> exit status)}: haa_sym.cli.COMMANDS
+ARGUMENTS = {"simulate": (_arguments, _cmd_simulate)}

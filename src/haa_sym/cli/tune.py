@@ -171,10 +171,7 @@ def _cmd_tune(args) -> int:
     return 0
 
 
-def register(sub) -> dict:
-    """Add ``tune`` to ``sub`` (argparse subparsers); returns {command: run(args) -> exit status}."""
-    t = sub.add_parser("tune", help="the torque PI (P_t0, I_t0) of widest torque bandwidth with PM >= 30 deg and "
-                       "GM >= 12 dB at every configuration (Sec. 3.2), written as a new actuator file")
+def _arguments(t) -> None:
     t.add_argument("--params", metavar="NAME|FILE", help=PARAMS_HELP)
     t.add_argument("--out", required=True, help="the tuned actuator file (.toml): the input's text with P_t0 "
                    "and I_t0 replaced, their descriptions saying the rule")
@@ -213,4 +210,7 @@ def register(sub) -> dict:
     t.add_argument("--bandwidth", choices=tuple(BANDWIDTH_DEFINITIONS), default=d.bandwidth,
                    help="the bandwidth maximised and reported: tracking (default), where the tracking error "
                         "|1 - H_T| first reaches -3 dB; magnitude, the paper's -3 dB of |H_T| (Sec. 3.3)")
-    return {"tune": _cmd_tune}
+
+
+# {command: (add its arguments to its parser, run(args) -> exit status)}: haa_sym.cli.COMMANDS
+ARGUMENTS = {"tune": (_arguments, _cmd_tune)}

@@ -84,7 +84,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from haa_sym._version import __version__
+from haa_sym._version import version
 from haa_sym.analysis.decide import decide_points
 from haa_sym.analysis.robust import (MAX_LEG_POINTS, _check_requirements, check_uncertainty, feasible_task,
                                      leg_configurations, leg_ends, leg_values, meets)
@@ -689,7 +689,7 @@ def schedule(loop, P_gain=None, D_gain=None, *, beta_range=(0.1, 8.0), beta_tol:
             "leg": list(ends), "leg_mode": leg_mode, "leg_values": leg_values(params, leg, leg_mode, uncertainty),
             "uncertainty": {k: list(v) for k, v in check_uncertainty(params, uncertainty, leg).items()}
             if uncertainty else None,
-            "haa_sym": __version__,
+            "haa_sym": version(),
             "scheduler": "dask threads (in-process)" if spec is None else "dask.distributed",
             "torque_bandwidth_beta_1_rad_s": bw_1, "lowered_by_point_check": lowered,
             "cell_subdivisions": int(cell_subdivisions), "cells_failed_check": n_failed,

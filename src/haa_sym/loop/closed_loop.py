@@ -36,7 +36,7 @@ from fractions import Fraction
 
 import numpy as np
 
-from haa_sym._version import __version__
+from haa_sym._version import version
 from haa_sym.compiled.cache import BoundedCache, array_key
 from haa_sym.compiled.generated import evaluators
 from haa_sym.loop.exact import bilinear, polymul, polysub, to_float, transfer_polynomials
@@ -595,7 +595,7 @@ class ClosedLoop:
         """What produced a result of this loop: parameters, options (file defaults resolved),
         versions, the generated-code hash, the backend that evaluated it, and ``extra``."""
         ev = evaluators(self.backend)
-        return {"params": self.params.to_dict(), "options": self.options.to_dict(), "haa_sym": __version__,
+        return {"params": self.params.to_dict(), "options": self.options.to_dict(), "haa_sym": version(),
                 "generated_source_sha256": ev.code.manifest["source_sha256"], **extra, "backend": ev.backend}
 
 

@@ -49,7 +49,7 @@ from xml.sax.saxutils import quoteattr
 
 import numpy as np
 
-from haa_sym._version import __version__
+from haa_sym._version import version
 from haa_sym.errors import ParameterError
 from haa_sym.loop.statespace import CONTROLLER_INPUTS, CONTROLLER_OUTPUTS, controller_batch
 
@@ -165,7 +165,7 @@ def export_mujoco(loop, P_gain: float, D_gain: float, *, controller_module: str 
     # the actuator's control per unit of the controller's command: the dcmotor's scaled voltage
     # (one constant sqrt(k_t k_w)), or the motor torque k_t I of the current command I
     command_scale = math.sqrt(k_t / k_w) if command == "voltage" else k_t
-    meta = {"haa_sym": __version__, "source": params.source, "P_gain": float(P_gain), "D_gain": float(D_gain),
+    meta = {"haa_sym": version(), "source": params.source, "P_gain": float(P_gain), "D_gain": float(D_gain),
             "Ts": Ts, "timestep": h, "controller_module": controller_module, "steps_per_sample": steps_per_sample, "integrator": integrator,
             "joints": list(names), "encoder_joint": top.encoder, "port_joint": top.port, "torque": torque,
             "command": command, "command_scale": command_scale,
@@ -185,7 +185,7 @@ def _xml(params, names, h, integrator, controller_module, command) -> str:
     # its inertia is the motor's armature J_m, reflected by gear^2; at least 1e-12 kg m^2, 1000x
     # MuJoCo's floor mjMINVAL = 1e-15 (a direct-drive rotor, J_m 1e-4 and N 1, was below it)
     eps = max(1e-12 * v["J_m"] * v["N"] ** 2, 1e-12)
-    lines = [f"<!-- {params.source}: exported by haa-sym {__version__} (export-mujoco); the controller runs in "
+    lines = [f"<!-- {params.source}: exported by haa-sym {version()} (export-mujoco); the controller runs in "
              f"{controller_module}.py (docs/robot.md, 'Export to MuJoCo'). Every hinge is a body's absolute "
              "angle about x (rad); rotor = theta_m / N. -->",
              f"<mujoco model={quoteattr(params.source)}>",

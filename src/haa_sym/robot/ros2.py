@@ -39,7 +39,7 @@ from pathlib import Path
 
 import numpy as np
 
-from haa_sym._version import __version__
+from haa_sym._version import version
 from haa_sym.analysis.boundaries.classify import row_cuts
 from haa_sym.analysis.boundaries.stability import stability_boundary
 from haa_sym.analysis.decide import decide_points
@@ -439,12 +439,12 @@ def params_yaml(box: Box, meta: dict, controller: str = CONTROLLER_NAME) -> str:
              f"{box.D_hi:.6g}] Nms/rad (area in {box.P_measure} P_gain x {box.D_measure} D_gain) inside the "
              f"region where {meta['requirements']} hold for {meta['actuator']} ({meta['source']}"
              + (f", configuration {meta['configuration']}" if meta.get("configuration") else "")
-             + f"), by haa_sym {__version__}; the region itself is haa_region_contains() in haa_region.c; "
+             + f"), by haa_sym {version()}; the region itself is haa_region_contains() in haa_region.c; "
              + (f"the torque-gain schedule ({meta['schedule']}) is haa_schedule_lookup() in haa_schedule.c; "
                 if meta.get("schedule") else "")
              + "default: the box's centre")
     lines = [f"# generate_parameter_library parameters of a joint impedance controller, written by haa_sym "
-             f"{__version__} (haa-sym export-ros2).",
+             f"{version()} (haa-sym export-ros2).",
              "# The bounds are a box inside the certified region, not the region: check the pair (stiffness, "
              "damping)", "# with haa_region_contains() (haa_region.h) before using it.", f"{controller}:"]
     for name, unit, lo, hi, default, what in (
@@ -470,7 +470,7 @@ def c_code(table: RegionTable, box: Box, meta: dict) -> tuple[str, str]:
     prov += [f"requirements: {_text(meta['requirements'])}", f"map: {_text(meta['map'])}",
              f"beta: {_text(t.meta['beta'])}, alpha: {_text(t.meta['alpha'])}"]
     header = _render(HEADER, {
-        "version": _text(__version__), "provenance": prov,
+        "version": _text(version()), "provenance": prov,
         "n_rows": str(n), "n_map_rows": str(t.meta["map_rows"]), "n_intervals": str(m),
         "rtol": _text(t.meta["rtol"]), "min_dd": _text(t.meta["min_dD"]), "end_rtol": _text(t.meta["end_rtol"]),
         "p_gain_min": _num(t.P_range[0]), "p_gain_max": _num(t.P_range[1]),
@@ -480,7 +480,7 @@ def c_code(table: RegionTable, box: Box, meta: dict) -> tuple[str, str]:
         "n_bytes": str(8 * (n + 2 * m) + 4 * (n + 1)),
     }, wrap_comment=True)
     source = _render(SOURCE, {
-        "version": _text(__version__),
+        "version": _text(version()),
         "d_rows": _rows([_num(v) for v in t.D_rows], 4),
         "row_start": _rows([str(int(v)) for v in t.start], 12),
         "lo": _rows([_num(v) for v in t.lo], 4) if m else ["0.0"],
