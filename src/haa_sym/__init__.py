@@ -14,43 +14,24 @@ one submodule, does not pay for the whole API (scipy.linalg, CasADi, the analyse
 from __future__ import annotations
 
 import importlib
-from typing import TYPE_CHECKING
 
-# public name -> the module defining it (the one place a name of __all__ is bound)
+# public name -> the module defining it: the package's API (__all__), each name in one place
 _LAZY = {
     "__version__": "haa_sym._version",
-    "PhaseMargins": "haa_sym.analysis.margins", "phase_margins": "haa_sym.analysis.margins",
+    "Controller": "haa_sym.model.params", "ParameterError": "haa_sym.errors", "Params": "haa_sym.model.params",
+    "Plant": "haa_sym.model.params", "Topology": "haa_sym.model.actuator", "Body": "haa_sym.model.actuator",
+    "Coupling": "haa_sym.model.actuator", "load_params": "haa_sym.model.params", "ClosedLoop": "haa_sym.loop",
+    "LoopOptions": "haa_sym.loop", "LoopStructure": "haa_sym.loop", "AnalysisConventions": "haa_sym.loop",
+    "FrequencyGrid": "haa_sym.loop", "StabilityResult": "haa_sym.loop", "RegionMap": "haa_sym.analysis.regions",
+    "grid": "haa_sym.io.gridspec", "region_map": "haa_sym.analysis.regions",
     "PassivityResult": "haa_sym.analysis.passivity", "passivity": "haa_sym.analysis.passivity",
-    "RegionMap": "haa_sym.analysis.regions", "region_map": "haa_sym.analysis.regions",
-    "ParameterError": "haa_sym.errors",
-    "grid": "haa_sym.io.gridspec",
-    "AnalysisConventions": "haa_sym.loop", "ClosedLoop": "haa_sym.loop", "FrequencyGrid": "haa_sym.loop",
-    "LoopOptions": "haa_sym.loop", "LoopStructure": "haa_sym.loop", "StabilityResult": "haa_sym.loop",
-    "Body": "haa_sym.model.actuator", "Coupling": "haa_sym.model.actuator", "Topology": "haa_sym.model.actuator",
-    "Controller": "haa_sym.model.params", "Params": "haa_sym.model.params", "Plant": "haa_sym.model.params",
-    "load_params": "haa_sym.model.params",
+    "PhaseMargins": "haa_sym.analysis.margins", "phase_margins": "haa_sym.analysis.margins",
 }
+__all__ = list(_LAZY)
 
 # the subpackages: ``haa_sym.loop`` after ``import haa_sym`` imports it, as scipy's submodules
 _SUBMODULES = frozenset({"_version", "analysis", "check", "cli", "compiled", "design", "errors", "explore", "fit",
                          "io", "loop", "model", "paper", "robot", "symbolic", "verify"})
-
-__all__ = ["__version__", "Controller", "ParameterError", "Params", "Plant", "Topology", "Body", "Coupling",
-           "load_params", "ClosedLoop", "LoopOptions", "LoopStructure", "AnalysisConventions", "FrequencyGrid",
-           "StabilityResult", "RegionMap", "grid", "region_map", "PassivityResult", "passivity", "PhaseMargins",
-           "phase_margins"]
-
-if TYPE_CHECKING:                    # static analysers and IDEs see the names as plain imports
-    from haa_sym._version import __version__
-    from haa_sym.analysis.margins import PhaseMargins, phase_margins
-    from haa_sym.analysis.passivity import PassivityResult, passivity
-    from haa_sym.analysis.regions import RegionMap, region_map
-    from haa_sym.errors import ParameterError
-    from haa_sym.io.gridspec import grid
-    from haa_sym.loop import (AnalysisConventions, ClosedLoop, FrequencyGrid, LoopOptions, LoopStructure,
-                              StabilityResult)
-    from haa_sym.model.actuator import Body, Coupling, Topology
-    from haa_sym.model.params import Controller, Params, Plant, load_params
 
 
 def __getattr__(name: str):
