@@ -28,7 +28,9 @@ sized to the workers: more workers, smaller tasks, shorter chains):
 --scheduler local:N`` in a new process (imports, the cluster's start and stop, every task), for
 N = 1, 2, ..., alternating, R rounds: each round's local:1 / local:N ratio is taken from runs a few
 seconds apart (the other jobs of a shared machine change within a minute), and the JSON keeps
-every run with the cores free before it.
+every run with the cores free before it. Each round also measures the machine's ceiling for the
+command: N copies of the local:1 command at once against one alone (:func:`whole_runs`): the
+speedup no scheduling can beat on this machine.
 
 Before each run it measures how many of n cores are free now (:func:`capacity`: n spinning
 processes against one; the load average of a shared virtual machine does not say it).
@@ -178,19 +180,36 @@ def run_once(argv: list[str], n: int, out: Path, sized_for: int | None = None) -
             "output": _output_bytes(out)}
 
 
+def _copy_argv(argv: list[str], out: Path, k: int) -> list[str]:
+    """``argv`` writing to its own file (copy ``k`` of the ceiling's concurrent runs)."""
+    i = argv.index("--out") + 1
+    return [*argv[:i], str(out.with_name(f"{out.stem}.copy{k}{out.suffix}")), *argv[i + 1:]]
+
+
 def whole_runs(argv: list[str], workers: int, rounds: int, out: Path) -> dict:
     """The whole command in a new process (``python -m haa_sym.cli ... --scheduler local:N``),
     N = 1..workers alternating, ``rounds`` times; every run's wall time, the cores free and the
-    load before it, and whether its output has the bytes of the first."""
+    load before it, and whether its output has the bytes of the first.
+
+    And each round the machine's ceiling for this command: ``workers`` copies of the local:1
+    command started at once (each its own process, worker and output file), against the local:1
+    run of the same round: ``workers * t(local:1) / t(copies)``. Independent copies share
+    nothing (no scheduler, no barrier, their serial parts run side by side too), so no scheduling
+    of one command over ``workers`` processes can beat it: what is left between the measured
+    speedup and this ceiling is the command's; what is left between the ceiling and ``workers``
+    is the machine's (cores that are not whole cores for this code, e.g. two hyperthreads or a
+    shared virtual machine's)."""
     env = {**os.environ, "PYTHONPATH": os.pathsep.join([str(ROOT / "src")] + [p for p in [os.environ.get("PYTHONPATH")]
                                                                             if p])}
-    runs, first = [], None
+    runs, first, ceilings = [], None, []
+
+    def command(args, n):
+        return [sys.executable, "-m", "haa_sym.cli", *args, "-q", "--scheduler", f"local:{n}"]
     for r in range(rounds):
         for n in range(1, workers + 1):
             load, cores = os.getloadavg()[0], capacity(workers)
             t = time.perf_counter()
-            proc = subprocess.run([sys.executable, "-m", "haa_sym.cli", *argv, "-q", "--scheduler", f"local:{n}"],
-                                  env=env, capture_output=True, text=True)
+            proc = subprocess.run(command(argv, n), env=env, capture_output=True, text=True)
             wall = time.perf_counter() - t
             if proc.returncode != 0:
                 raise SystemExit(f"the command failed (exit {proc.returncode}): {proc.stderr.strip()[-400:]}")
@@ -200,6 +219,19 @@ def whole_runs(argv: list[str], workers: int, rounds: int, out: Path) -> dict:
                          "load_1min_before": round(load, 2), "same_output": got == first})
             print(f"  whole command, round {r + 1}, local:{n}: {wall:6.2f} s (cores free before {cores:.2f} of "
                   f"{workers}, load {load:.2f})", flush=True)
+        if workers > 1:
+            t = time.perf_counter()
+            procs = [subprocess.Popen(command(_copy_argv(argv, out, k), 1), env=env, stdout=subprocess.DEVNULL,
+                                      stderr=subprocess.PIPE, text=True) for k in range(workers)]
+            errs = [p.communicate()[1] for p in procs]
+            wall = time.perf_counter() - t
+            for p, e in zip(procs, errs):
+                if p.returncode != 0:
+                    raise SystemExit(f"a copy of the command failed (exit {p.returncode}): {e.strip()[-400:]}")
+            alone = runs[-workers]["seconds"]                 # this round's local:1
+            ceilings.append(workers * alone / wall)
+            print(f"  {workers} copies of local:1 at once, round {r + 1}: {wall:6.2f} s against {alone:.2f} s alone: "
+                  f"the machine's ceiling for this command {ceilings[-1]:.2f}x", flush=True)
     by_n = {n: [x["seconds"] for x in runs if x["workers"] == n] for n in range(1, workers + 1)}
     ratios = {n: [a / b for a, b in zip(by_n[1], by_n[n])] for n in range(2, workers + 1)}
     return {"runs": runs, "same_output": all(x["same_output"] for x in runs),
@@ -207,6 +239,7 @@ def whole_runs(argv: list[str], workers: int, rounds: int, out: Path) -> dict:
             "median_s": {str(n): statistics.median(v) for n, v in by_n.items()},
             "speedup_of_best": {str(n): min(by_n[1]) / min(by_n[n]) for n in ratios},
             "speedup_per_round": {str(n): v for n, v in ratios.items()},
+            "ceiling_per_round": ceilings,
             "cores_available_before": [x["cores_available_before"] for x in runs]}
 
 
@@ -287,6 +320,12 @@ def main() -> int:
                   f"({whole['speedup_of_best'][str(n)]:.2f}x); per round {per}; cores free before the runs "
                   f"{min(whole['cores_available_before']):.2f}-{max(whole['cores_available_before']):.2f} of "
                   f"{args.workers}")
+        if whole["ceiling_per_round"]:
+            n = args.workers
+            per = ", ".join(f"{x:.2f}x" for x in whole["ceiling_per_round"])
+            share = ", ".join(f"{a / c:.2f}" for a, c in zip(whole["speedup_per_round"][str(n)], whole["ceiling_per_round"]))
+            print(f"the machine's ceiling for this command ({n} copies of local:1 at once): per round {per}; "
+                  f"local:{n}'s speedup / ceiling per round {share}")
     print(f"same output at every worker count: {same}; machine: {bench.info['cpu_model']}, "
           f"{bench.info['cpu_count']} cores")
     res = {"command": ["haa-sym", *argv], "preset": name, "rows": rows, "chain_run": chain, "same_output": same,
