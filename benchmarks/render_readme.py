@@ -419,6 +419,9 @@ def scale_block(data: dict) -> str:
                 + (f" + d {d['dispatch_s']:.1f} s" if "dispatch_s" in d else "") + ": "
                 f"{sec(d['predicted_s'][M])} on {M}, {d['rows'][0]['seconds'] / d['predicted_s'][M]:.1f}x the "
                 f"1-worker run ({sec(d['rows'][0]['seconds'])})")
+        if w is not None and "predicted_s" in w:
+            pred += (f"; whole command F {w['fixed_s']:.2f} s + that: {sec(w['predicted_s'][M])}, "
+                     f"{w['best_s']['1'] / w['predicted_s'][M]:.1f}x the whole `local:1`")
         if key == "nonlinear":
             pred += f" (target {TARGET_SPEEDUP_16:g}x)"
         if w is None:

@@ -61,7 +61,8 @@ def test_the_scale_block_is_rendered_from_bench_scales_json_and_kept_without_it(
              "same_output": True} for r, (n, s) in enumerate([(1, 12.0), (2, 6.5), (1, 11.0), (2, 6.6)])]
     whole = {"runs": runs, "same_output": True, "best_s": {"1": 11.0, "2": 6.5}, "median_s": {"1": 11.5, "2": 6.55},
              "speedup_of_best": {"2": 11.0 / 6.5}, "speedup_per_round": {"2": [12.0 / 6.5, 11.0 / 6.6]},
-             "ceiling_per_round": [1.90, 1.70], "cores_available_before": [1.9] * 4}
+             "ceiling_per_round": [1.90, 1.70], "cores_available_before": [1.9] * 4,
+             "fixed_s": 0.9, "predicted_s": {"16": 3.3}}
     data = {"run": {"date": "2026-11-26T17:00:00+00:00"}, "rows": [{"seconds": 30.0}], "same_output": True,
             "serial_s": 0.5, "longest_chain_s": 0.6, "work_s": 29.0, "predicted_s": {"16": 2.4},
             "whole_command": whole}
@@ -74,6 +75,8 @@ def test_the_scale_block_is_rendered_from_bench_scales_json_and_kept_without_it(
     # the machine's ceiling each round, and the speedup's share of it (12 / 6.5 / 1.9 = 0.97, 11 / 6.6 / 1.7 = 0.98)
     assert "| 1.90x, 1.70x (0.97, 0.98) |" in row
     assert "2.40 s on 16, 12.5x the 1-worker run" in row
+    # and the whole command's: F + the warm prediction, against the best whole local:1 (11.0 / 3.3)
+    assert "whole command F 0.90 s + that: 3.30 s, 3.3x the whole `local:1`" in row
     assert "| `regions --nonlinear`" in block and "not measured" in block
     # the other block and the text around are the page's
     assert new.split(render_readme.SCALE_START)[0] == page.split(render_readme.SCALE_START)[0]
