@@ -72,12 +72,14 @@ def row_state_space(params: Params) -> Row:
         # rational points: a rational identity of bounded degree checked exactly in QQ
         sub = {syms[k]: sp.Rational(rng.randint(1, 97), rng.randint(1, 13)) for k in HYQ.parameter_keys}
         s0 = sp.Rational(rng.randint(1, 500), rng.randint(1, 7))
-        A, B, C = (sp.Matrix(M.subs(sub)).applyfunc(sp.Rational) for M in (ss.A, ss.B, ss.C))
+        # xreplace, not subs: every symbol gets a rational at once, the same expressions at a
+        # twentieth of subs's cost (subs re-walks and re-matches each expression per symbol)
+        A, B, C = (sp.Matrix(M.xreplace(sub)).applyfunc(sp.Rational) for M in (ss.A, ss.B, ss.C))
         G_ss = C * (s0 * sp.eye(7) - A).LUsolve(B)
+        at_point = [ei.xreplace({**sub, eom.s: s0}) for ei in eqs]
         for j, inp in enumerate(eom.INPUT_NAMES):
-            e = [sp.together(ei.subs(sub).subs(eom.s, s0)
-                             .subs({sp.Symbol(n): int(n == inp) for n in eom.INPUT_NAMES}))
-                 for ei in eqs]
+            e = [sp.together(ei.xreplace({sp.Symbol(n): sp.Integer(n == inp) for n in eom.INPUT_NAMES}))
+                 for ei in at_point]
             M, rhs = sp.linear_eq_to_matrix([sp.numer(x) for x in e], unknowns)
             sol = M.LUsolve(rhs)
             th_m, th_1 = sol[1], sol[2]
@@ -226,15 +228,18 @@ def row_chain_state_space(params: Params, n_points: int = 3) -> Row:
     for _ in range(n_points):
         sub = {syms[k]: sp.Rational(rng.randint(1, 97), rng.randint(1, 13)) for k in top.parameter_keys}
         s0 = sp.Rational(rng.randint(1, 500), rng.randint(1, 7))
-        A, B, C = (sp.Matrix(M.subs(sub)) for M in (ss.A, ss.B, ss.C))
+        # xreplace: all symbols to rationals at once (row_state_space)
+        A, B, C = (sp.Matrix(M.xreplace(sub)) for M in (ss.A, ss.B, ss.C))
         G_ss = C * (s0 * sp.eye(n) - A).LUsolve(B)
+        at_point = [ei.xreplace({**sub, chain.s: s0}) for ei in eqs]
+        outs_at_point = [y.xreplace({**sub, chain.s: s0}) for y in outputs]
         for j, inp in enumerate(top.input_names):
-            e = [sp.together(ei.subs(sub).subs(chain.s, s0)
-                             .subs({sp.Symbol(x): int(x == inp) for x in top.input_names})) for ei in eqs]
+            e = [sp.together(ei.xreplace({sp.Symbol(x): sp.Integer(x == inp) for x in top.input_names}))
+                 for ei in at_point]
             M, rhs = sp.linear_eq_to_matrix([sp.numer(x) for x in e], unknowns)
             sol = dict(zip(unknowns, M.LUsolve(rhs)))
-            for i, y in enumerate(outputs):
-                val = y.subs(sub).subs(chain.s, s0).subs(sol)
+            for i, y in enumerate(outs_at_point):
+                val = y.xreplace(sol)
                 worst = max(worst, abs(sp.Rational(sp.nsimplify(G_ss[i, j] - val))))
     nb, nc = len(top.bodies), len(top.couplings)
     return Row(f"Chain equations ({nb} bod{'y' if nb == 1 else 'ies'}, {nc} coupling{'' if nc == 1 else 's'}): state space "
