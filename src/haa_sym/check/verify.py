@@ -136,14 +136,15 @@ def row_p1_roots(params: Params) -> list[Row]:
     for cfg in sorted(params.configurations):
         pc = params.configuration(cfg)
         p1 = tt.paper_polynomials(syms)["p1"]
-        r0 = sp.Poly(p1.subs(_rational_params(pc, syms, K_L2=0)), eom.s)
+        # the rational values once (nsimplify is the costly part); xreplace: every symbol at once
+        sub = _rational_params(pc, syms, K_L2=0)
+        r0 = sp.Poly(p1.xreplace(sub), eom.s)
         roots = sorted((complex(z) for z in r0.nroots(n=30)), key=lambda z: -z.real)
         real = all(abs(z.imag) < 1e-12 for z in roots)
         zero = abs(roots[0]) < 1e-12
         # the pole at zero of G_tVC (Eq. 3, alpha = 0.94) cancels with z1 = 0
-        sub = _rational_params(pc, syms, K_L2=0)
-        P = {k: v.subs(sub) for k, v in tt.paper_polynomials(syms).items()}
-        vc = tt.vc_gain_simplified(syms, sp.Rational(94, 100)).subs(sub)
+        P = {k: v.xreplace(sub) for k, v in tt.paper_polynomials(syms).items()}
+        vc = tt.vc_gain_simplified(syms, sp.Rational(94, 100)).xreplace(sub)
         num = sp.Poly(syms["k_t"].subs(sub) * (sub[syms["D_hd"]] * eom.s + sub[syms["K_hd"]]) * P["p1"], eom.s)
         den = sp.Poly(sub[syms["N"]] * (P["p1"] * P["q1"] + (P["q2"] - vc * eom.s) * P["q3"]), eom.s)
         pole0 = den.eval(0) == 0 and num.eval(0) == 0
@@ -154,7 +155,7 @@ def row_p1_roots(params: Params) -> list[Row]:
                         "roots of p1 [1/s]: " + ", ".join(f"{z.real:.6g}" for z in roots)
                         + f"; numerator and denominator vanish at s=0: {pole0}; after cancelling: "
                         f"no pole at 0: {cancelled}"))
-        pk = sp.Poly(p1.subs(_rational_params(pc, syms)), eom.s)
+        pk = sp.Poly(p1.xreplace(_rational_params(pc, syms)), eom.s)
         rk = sorted((complex(z) for z in pk.nroots(n=30)), key=lambda z: -z.real)
         nearest = rk[:2]
         ok = all(abs(z.imag) > 0 for z in nearest) and abs(nearest[0] - nearest[1].conjugate()) < 1e-9
@@ -454,8 +455,8 @@ def row_structures(params: Params) -> list[Row]:
                        "zd": horner(el["z_delay"].numerator, z0) / horner(el["z_delay"].denominator, z0),
                        **{f: horner(el[f].numerator, z0) / horner(el[f].denominator, z0) for f in ("F_d", "F_vc")}}
                 Den = dz * horner(el["z_delay"].denominator, z0) * horner(el["I_z"].denominator, z0) * horner(lcm_c, z0)
-                rd = Rd.subs({**{S[n]: sp.Rational(v.numerator, v.denominator) for n, v in val.items()},
-                              **{s_: sp.Rational(v.numerator, v.denominator) for s_, v in gains.items()}})
+                rd = Rd.xreplace({**{S[n]: sp.Rational(v.numerator, v.denominator) for n, v in val.items()},
+                                  **{s_: sp.Rational(v.numerator, v.denominator) for s_, v in gains.items()}})
                 ratios.add(sp.Rational(horner(chi, z0).numerator, horner(chi, z0).denominator) / (rd * sp.Rational(
                     Den.numerator, Den.denominator)))
         chi_ok = len(ratios) == 1 and next(iter(ratios)) != 0
