@@ -55,13 +55,11 @@ docs: $(STAMP)
 	@echo "docs/_build/html/index.html"
 
 ## The test suite without the tests marked slow (under 2 min); `make test-slow` runs those.
-## Two processes (pytest-xdist, a test file at a time: --dist loadfile, so that a file's module
-## fixtures - a schedule, compiled actuators - are built once, not once per process; one BLAS
-## thread each, tests/conftest.py): 90 s with 170 CPU s against 100 s with 189 handing out single
-## tests, on the idle 2-core machine (2026-11-26, 1,776 tests). The slow tests (clusters, ports,
-## a browser) stay in one process.
+## Two processes (pytest-xdist, tests handed out one by one): 83-91 s against 123-134 s in one on
+## the shared 2-core machine (2026-11-26, load 1.6-3.2). The slow tests (clusters, ports, a
+## browser) stay in one process.
 test: $(STAMP)
-	$(PY) -m pytest -q -m "not slow" -n 2 --dist loadfile $(PYTEST_ARGS)
+	$(PY) -m pytest -q -m "not slow" -n 2 $(PYTEST_ARGS)
 
 ## The tests marked slow (a wheel, C libraries, a dask cluster, the quick reproduction, the
 ## explorer in headless chromium, ...).
