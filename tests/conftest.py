@@ -1,9 +1,21 @@
 import os
 import pathlib
+import sys
 
-import pytest
+# One BLAS thread per xdist worker: `make test` runs two workers on the 2-core machine, and
+# OpenBLAS (numpy's) otherwise starts a thread per core in each of them, four BLAS threads
+# spinning on two cores (measured on margins/boundaries/regions/plots with -n 2: 60-67 CPU s with
+# the default, 51-53 with one thread each). OpenBLAS reads the variable only when it loads, so it
+# is set here, before numpy is imported; the subprocesses the tests start inherit it. A value the
+# user set is kept; a run without xdist keeps OpenBLAS's default, and so does a worker where a
+# plugin loaded numpy first (too late then; only slower, not wrong).
+if os.environ.get("PYTEST_XDIST_WORKER") and "numpy" not in sys.modules:
+    for _var in ("OPENBLAS_NUM_THREADS", "OMP_NUM_THREADS", "MKL_NUM_THREADS"):
+        os.environ.setdefault(_var, "1")
 
-from haa_sym.model.params import load_params
+import pytest  # noqa: E402
+
+from haa_sym.model.params import load_params  # noqa: E402
 
 ROOT = pathlib.Path(__file__).resolve().parents[1]
 

@@ -116,8 +116,14 @@ def test_bad_input_names_the_field(params):
 # With the SEA's tuned PI its torque loop alone turns unstable at beta 3.98 (model/sea.toml's
 # header): at beta 7.6 only 2 of this grid's 126 points would be stable. The lightly damped modes
 # this case is for (71 stable points, 30 of them low-PM) are the first PI's, so sea-7.6 keeps it.
-@pytest.mark.parametrize("path,beta,changes", [(SEA, 1.0, {}), (SEA, 3.0, {}), (SEA, 7.6, SEA_FIRST_PI),
-                                               (HD, 1.0, {}), (HD, 3.0, {}), (HD, 7.6, {})],
+# beta 1 and 3 run with the slow tests (2-3.5 CPU s each, 126 reference points on 200,000
+# frequencies): the default suite keeps the two hard cases (beta 7.6, the light modes), and the
+# crossovers themselves at every (actuator, beta) above; the maps' low-PM wiring is checked
+# against low_pm_reference by test_loop_drive, test_loop_structures and test_io_measured too.
+@pytest.mark.parametrize("path,beta,changes", [pytest.param(SEA, 1.0, {}, marks=pytest.mark.slow),
+                                               pytest.param(SEA, 3.0, {}, marks=pytest.mark.slow), (SEA, 7.6, SEA_FIRST_PI),
+                                               pytest.param(HD, 1.0, {}, marks=pytest.mark.slow),
+                                               pytest.param(HD, 3.0, {}, marks=pytest.mark.slow), (HD, 7.6, {})],
                          ids=["sea-1", "sea-3", "sea-7.6-first-PI", "hd-1", "hd-3", "hd-7.6"])
 def test_low_pm_maps_equal_the_reference_away_from_the_boundary(path, beta, changes):
     """The issue's acceptance: low-PM maps of the bundled SEA and harmonic drive at beta 1, 3 and

@@ -86,8 +86,13 @@ def test_local_workers_run_one_blas_thread():
     """A worker is one thread: a forked worker inherits the command's OpenBLAS with a thread per
     core (dask's OMP_NUM_THREADS=1 comes too late for it), so local:N limits it to one."""
     import numpy  # noqa: F401 - OpenBLAS loaded in the command before the fork, as in a command
-    with tasks.cluster("local:2") as client:
-        got = client.run(_blas_threads)
+    from threadpoolctl import threadpool_limits
+    # the command's OpenBLAS on two threads when it forks: an xdist worker runs on one
+    # (tests/conftest.py), which the forked workers would inherit without the plugin
+    with threadpool_limits(limits=2, user_api="blas"):
+        assert _blas_threads() == [2]
+        with tasks.cluster("local:2") as client:
+            got = client.run(_blas_threads)
     assert len(got) == 2 and all(v == [1] for v in got.values()), got
 
 

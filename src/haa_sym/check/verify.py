@@ -72,12 +72,14 @@ def row_state_space(params: Params) -> Row:
         # rational points: a rational identity of bounded degree checked exactly in QQ
         sub = {syms[k]: sp.Rational(rng.randint(1, 97), rng.randint(1, 13)) for k in HYQ.parameter_keys}
         s0 = sp.Rational(rng.randint(1, 500), rng.randint(1, 7))
-        A, B, C = (sp.Matrix(M.subs(sub)).applyfunc(sp.Rational) for M in (ss.A, ss.B, ss.C))
+        # xreplace, not subs: every symbol gets a rational at once, the same expressions at a
+        # twentieth of subs's cost (subs re-walks and re-matches each expression per symbol)
+        A, B, C = (sp.Matrix(M.xreplace(sub)).applyfunc(sp.Rational) for M in (ss.A, ss.B, ss.C))
         G_ss = C * (s0 * sp.eye(7) - A).LUsolve(B)
+        at_point = [ei.xreplace({**sub, eom.s: s0}) for ei in eqs]
         for j, inp in enumerate(eom.INPUT_NAMES):
-            e = [sp.together(ei.subs(sub).subs(eom.s, s0)
-                             .subs({sp.Symbol(n): int(n == inp) for n in eom.INPUT_NAMES}))
-                 for ei in eqs]
+            e = [sp.together(ei.xreplace({sp.Symbol(n): sp.Integer(n == inp) for n in eom.INPUT_NAMES}))
+                 for ei in at_point]
             M, rhs = sp.linear_eq_to_matrix([sp.numer(x) for x in e], unknowns)
             sol = M.LUsolve(rhs)
             th_m, th_1 = sol[1], sol[2]
@@ -134,14 +136,15 @@ def row_p1_roots(params: Params) -> list[Row]:
     for cfg in sorted(params.configurations):
         pc = params.configuration(cfg)
         p1 = tt.paper_polynomials(syms)["p1"]
-        r0 = sp.Poly(p1.subs(_rational_params(pc, syms, K_L2=0)), eom.s)
+        # the rational values once (nsimplify is the costly part); xreplace: every symbol at once
+        sub = _rational_params(pc, syms, K_L2=0)
+        r0 = sp.Poly(p1.xreplace(sub), eom.s)
         roots = sorted((complex(z) for z in r0.nroots(n=30)), key=lambda z: -z.real)
         real = all(abs(z.imag) < 1e-12 for z in roots)
         zero = abs(roots[0]) < 1e-12
         # the pole at zero of G_tVC (Eq. 3, alpha = 0.94) cancels with z1 = 0
-        sub = _rational_params(pc, syms, K_L2=0)
-        P = {k: v.subs(sub) for k, v in tt.paper_polynomials(syms).items()}
-        vc = tt.vc_gain_simplified(syms, sp.Rational(94, 100)).subs(sub)
+        P = {k: v.xreplace(sub) for k, v in tt.paper_polynomials(syms).items()}
+        vc = tt.vc_gain_simplified(syms, sp.Rational(94, 100)).xreplace(sub)
         num = sp.Poly(syms["k_t"].subs(sub) * (sub[syms["D_hd"]] * eom.s + sub[syms["K_hd"]]) * P["p1"], eom.s)
         den = sp.Poly(sub[syms["N"]] * (P["p1"] * P["q1"] + (P["q2"] - vc * eom.s) * P["q3"]), eom.s)
         pole0 = den.eval(0) == 0 and num.eval(0) == 0
@@ -152,7 +155,7 @@ def row_p1_roots(params: Params) -> list[Row]:
                         "roots of p1 [1/s]: " + ", ".join(f"{z.real:.6g}" for z in roots)
                         + f"; numerator and denominator vanish at s=0: {pole0}; after cancelling: "
                         f"no pole at 0: {cancelled}"))
-        pk = sp.Poly(p1.subs(_rational_params(pc, syms)), eom.s)
+        pk = sp.Poly(p1.xreplace(_rational_params(pc, syms)), eom.s)
         rk = sorted((complex(z) for z in pk.nroots(n=30)), key=lambda z: -z.real)
         nearest = rk[:2]
         ok = all(abs(z.imag) > 0 for z in nearest) and abs(nearest[0] - nearest[1].conjugate()) < 1e-9
@@ -226,15 +229,18 @@ def row_chain_state_space(params: Params, n_points: int = 3) -> Row:
     for _ in range(n_points):
         sub = {syms[k]: sp.Rational(rng.randint(1, 97), rng.randint(1, 13)) for k in top.parameter_keys}
         s0 = sp.Rational(rng.randint(1, 500), rng.randint(1, 7))
-        A, B, C = (sp.Matrix(M.subs(sub)) for M in (ss.A, ss.B, ss.C))
+        # xreplace: all symbols to rationals at once (row_state_space)
+        A, B, C = (sp.Matrix(M.xreplace(sub)) for M in (ss.A, ss.B, ss.C))
         G_ss = C * (s0 * sp.eye(n) - A).LUsolve(B)
+        at_point = [ei.xreplace({**sub, chain.s: s0}) for ei in eqs]
+        outs_at_point = [y.xreplace({**sub, chain.s: s0}) for y in outputs]
         for j, inp in enumerate(top.input_names):
-            e = [sp.together(ei.subs(sub).subs(chain.s, s0)
-                             .subs({sp.Symbol(x): int(x == inp) for x in top.input_names})) for ei in eqs]
+            e = [sp.together(ei.xreplace({sp.Symbol(x): sp.Integer(x == inp) for x in top.input_names}))
+                 for ei in at_point]
             M, rhs = sp.linear_eq_to_matrix([sp.numer(x) for x in e], unknowns)
             sol = dict(zip(unknowns, M.LUsolve(rhs)))
-            for i, y in enumerate(outputs):
-                val = y.subs(sub).subs(chain.s, s0).subs(sol)
+            for i, y in enumerate(outs_at_point):
+                val = y.xreplace(sol)
                 worst = max(worst, abs(sp.Rational(sp.nsimplify(G_ss[i, j] - val))))
     nb, nc = len(top.bodies), len(top.couplings)
     return Row(f"Chain equations ({nb} bod{'y' if nb == 1 else 'ies'}, {nc} coupling{'' if nc == 1 else 's'}): state space "
@@ -449,8 +455,8 @@ def row_structures(params: Params) -> list[Row]:
                        "zd": horner(el["z_delay"].numerator, z0) / horner(el["z_delay"].denominator, z0),
                        **{f: horner(el[f].numerator, z0) / horner(el[f].denominator, z0) for f in ("F_d", "F_vc")}}
                 Den = dz * horner(el["z_delay"].denominator, z0) * horner(el["I_z"].denominator, z0) * horner(lcm_c, z0)
-                rd = Rd.subs({**{S[n]: sp.Rational(v.numerator, v.denominator) for n, v in val.items()},
-                              **{s_: sp.Rational(v.numerator, v.denominator) for s_, v in gains.items()}})
+                rd = Rd.xreplace({**{S[n]: sp.Rational(v.numerator, v.denominator) for n, v in val.items()},
+                                  **{s_: sp.Rational(v.numerator, v.denominator) for s_, v in gains.items()}})
                 ratios.add(sp.Rational(horner(chi, z0).numerator, horner(chi, z0).denominator) / (rd * sp.Rational(
                     Den.numerator, Den.denominator)))
         chi_ok = len(ratios) == 1 and next(iter(ratios)) != 0

@@ -86,6 +86,7 @@ import numpy as np
 
 from haa_sym._version import version
 from haa_sym.analysis.decide import decide_points
+from haa_sym.analysis.regions import check_map_budget
 from haa_sym.analysis.robust import (MAX_LEG_POINTS, _check_requirements, check_uncertainty, feasible_task,
                                      leg_configurations, leg_ends, leg_values, meets)
 from haa_sym.analysis.torque import torque_bandwidth
@@ -512,6 +513,9 @@ def schedule(loop, P_gain=None, D_gain=None, *, beta_range=(0.1, 8.0), beta_tol:
             raise ParameterError(f"{name}: {arr.size} value(s); allowed: at least 2, strictly increasing")
     if P[0] <= 0:
         raise ParameterError(f"P_gain starts at {P[0]:g}; allowed: P_gain > 0 (the schedule interpolates in log P_gain)")
+    # every task's map is P x D: refused here, before the cluster, dask's import and the task
+    # list (the tasks' own gate in region_map said the same after 1-3 s of them)
+    check_map_budget(loop, P.size, D.size)
     req = _check_requirements(requirements)
     if isinstance(cell_subdivisions, bool) or not isinstance(cell_subdivisions, (int, np.integer)) \
             or not 1 <= cell_subdivisions <= 64:
