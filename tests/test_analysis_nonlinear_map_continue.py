@@ -37,6 +37,23 @@ def test_continued_reruns_give_the_map_of_reruns_from_zero(max_duration, limits,
     assert zero.meta["samples_simulated"] - cont.meta["samples_simulated"] == again * n(0.15)
 
 
+def test_noise_with_jitter_continues_to_the_map_of_reruns_from_zero():
+    """Torque noise with jitter (the jitter's own seeded stream, issue 27): the reruns continue,
+    and give the map of reruns from t = 0 for fewer samples."""
+    loop = ClosedLoop(load_params().with_values(beta=3.0))
+    kw = dict(limits=Limits(V_max=24.0, torque_noise=0.05, jitter=2e-6), duration=0.15, max_duration=0.45,
+              seed=2, progress=False, points_per_task=2)
+    cont = nonlinear_map(loop, P, D, **kw)
+    zero = nonlinear_map(loop, P, D, continue_runs=False, **kw)
+    assert cont.meta["longer_runs_continue"] and not zero.meta["longer_runs_continue"]
+    again = int((cont.run_duration > 0.15).sum())
+    assert again >= 2                                                  # points were run again
+    for name, a in cont.arrays().items():
+        assert np.array_equal(a, zero.arrays()[name], equal_nan=True), name
+    n = lambda s: int(np.ceil(s / loop.params.controller.Ts - 1e-9)) + 1      # noqa: E731
+    assert zero.meta["samples_simulated"] - cont.meta["samples_simulated"] == again * n(0.15)
+
+
 def test_the_chirp_reruns_from_zero_and_continue_runs_is_checked():
     loop = ClosedLoop(load_params().with_values(beta=3.0))
     m = nonlinear_map(loop, [20000.0], [10.0], limits=Limits(V_max=24.0), experiment="chirp", duration=0.1,

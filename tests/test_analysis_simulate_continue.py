@@ -7,8 +7,9 @@ import numpy as np
 import pytest
 
 from haa_sym import ClosedLoop, load_params
-from haa_sym.analysis.simulate import (Continuation, _run, batch_setup, keep_from,
+from haa_sym.analysis.simulate import (Continuation, _run, batch_setup, continuable, keep_from,
                                        simulate_batch)
+from haa_sym.compiled import layout as L
 from haa_sym.errors import ParameterError
 from haa_sym.model.limits import Limits
 
@@ -50,11 +51,36 @@ def test_continued_runs_are_the_run_from_zero_bit_for_bit(i):
     (Limits(V_max=24.0, friction={"m": 0.02}), dict(tau_drive=0.002, delay_drive=0.0023)),   # fractional + whole
     (Limits(V_max=24.0, torque_noise=0.05, encoder_counts=4096), dict(delay_drive=0.002)),
     (Limits(V_max=24.0, jitter=2e-5), dict(delay_drive=0.0004)),
+    # the jitter's own stream: its draws up to a sample do not depend on the noise's n (issue 27)
+    (Limits(V_max=24.0, torque_noise=0.05, jitter=2e-5), dict(delay_drive=0.0004)),
     (Limits(V_max=24.0, I_max=5.0, friction={"m": 0.02, "L1": 0.05}), {}),
 ])
 def test_continued_runs_with_the_drive_noise_and_jitter(limits, values):
     y, whole = _split(_loop(**values), limits, 20000.0, 10.0, [0.06, 0.15])
     assert np.array_equal(y, whole)
+
+
+def test_the_noise_and_the_jitter_draw_from_their_own_seeded_streams():
+    """docs/simulate.md, "The sampled-data model": the noise from ``default_rng(seed)`` (its draws
+    as before issue 27), the jitter from the seed's first spawned ``SeedSequence``; neither depends
+    on the other being on, nor on the run's length."""
+    loop, seed, n = _loop(), 3, 51
+    Ts = loop.params.controller.Ts
+
+    def setup(lim, T=(n - 1) * Ts):
+        return batch_setup(loop, lim, "disturbance-step", None, T, seed, 1e-6)
+
+    sigma, q = 1e-5, 0.01
+    both, noise, jitter = setup(Limits(torque_noise=q, jitter=sigma)), setup(Limits(torque_noise=q)), \
+        setup(Limits(jitter=sigma))
+    i = L.SIM_EXO.index("noise_T")
+    assert np.array_equal(noise.exo[i], q * np.random.default_rng(seed).standard_normal(n))
+    eps = np.clip(sigma * np.random.default_rng(np.random.SeedSequence(seed).spawn(1)[0]).standard_normal(n),
+                  -3 * sigma, 3 * sigma)
+    assert np.array_equal(jitter.time, np.arange(n) * Ts + np.concatenate([[0.0], eps[:-1]]))
+    assert np.array_equal(both.exo[i], noise.exo[i]) and np.array_equal(both.time, jitter.time)
+    longer = setup(Limits(torque_noise=q, jitter=sigma), 2 * (n - 1) * Ts)
+    assert np.array_equal(longer.time[:n], both.time) and np.array_equal(longer.exo[:, :n], both.exo)
 
 
 def test_the_vm_loop_continues_like_the_c_loop():
@@ -97,9 +123,21 @@ def test_batch_summaries_of_a_continued_run_are_the_whole_runs(limits):
             assert c.saturated_head.size and ref.saturation_time[0] > 0
 
 
-def test_what_cannot_be_continued_is_refused():
+def test_the_chirp_cannot_be_continued_and_noise_with_jitter_can():
     loop = _loop()
-    for lim, exp in ((BENCH, "chirp"), (Limits(torque_noise=0.01, jitter=1e-5), "disturbance-step")):
-        with pytest.raises(ParameterError, match="cannot be continued"):
-            simulate_batch(loop, [100.0], [5.0], limits=lim, experiment=exp, duration=0.05, continue_to=0.1,
-                           linear_stable=np.nan)
+    with pytest.raises(ParameterError, match="cannot be continued"):
+        simulate_batch(loop, [100.0], [5.0], limits=BENCH, experiment="chirp", duration=0.05, continue_to=0.1,
+                       linear_stable=np.nan)
+    noisy = Limits(V_max=24.0, torque_noise=0.05, jitter=2e-5)
+    assert continuable(batch_setup(loop, noisy, "disturbance-step", None, 0.05, 0, 1e-6))
+    # simulate_batch continued 0.05 -> 0.12 s is the run from 0, summaries and kept columns
+    kw = dict(limits=noisy, linear_stable=np.nan, seed=5)
+    b = simulate_batch(loop, P, D, duration=0.05, continue_to=0.12, **kw)
+    b = simulate_batch(loop, P, D, duration=0.12, start=b.continuations, continue_to=0.12, **kw)
+    ref = simulate_batch(loop, P, D, duration=0.12, continue_to=0.12, **kw)
+    for f in ("status", "oscillation"):
+        assert list(getattr(b, f)) == list(getattr(ref, f)), f
+    for f in ("cycle_amplitude", "tail_saturation", "saturation_time", "final_theta", "growth"):
+        np.testing.assert_array_equal(getattr(b, f), getattr(ref, f), err_msg=f)
+    for c, r in zip(b.continuations, ref.continuations):
+        assert c.k == r.k and np.array_equal(c.rows, r.rows) and np.array_equal(c.x, r.x)

@@ -68,6 +68,12 @@ def vc0(p):
     return p.N * (p.k_w + p.R * p.B_m / p.k_t)
 
 
+def _jitter_draws(seed, n):
+    """The jitter's N(0, 1) draws: the seed's first spawned stream (docs/simulate.md, "The
+    sampled-data model"; the noise's is default_rng(seed))."""
+    return np.random.default_rng(np.random.SeedSequence(seed).spawn(1)[0]).standard_normal(n)
+
+
 def hand_simulation(params, P, D, lim: Limits, n, *, T_ff=0.0, T_dist=0.0, jitter_eps=None, tau=0.0,
                     delay=0.0):
     """Sample by sample: read, control, saturate, hold, integrate to the next instant. ``tau``,
@@ -181,7 +187,7 @@ def test_jitter_agrees_with_exact_transitions_over_the_jittered_intervals():
     sim = simulate(ClosedLoop(params, basis=False), 300.0, 4.0, limits=lim, experiment="disturbance-step",
                    amplitude=2.0, duration=(n - 1) * Ts, seed=7)
     eps = np.zeros(n + 1)
-    eps[1:] = np.clip(sigma * np.random.default_rng(7).standard_normal(n), -3 * sigma, 3 * sigma)
+    eps[1:] = np.clip(sigma * _jitter_draws(7, n), -3 * sigma, 3 * sigma)
     assert np.allclose(sim.time, np.arange(n) * Ts + eps[:n], rtol=0, atol=1e-18)
     t, ref = hand_simulation(params, 300.0, 4.0, lim, n, T_dist=2.0, jitter_eps=eps)
     _compare(sim, ref, 1e-8)
@@ -252,7 +258,7 @@ def test_drive_delay_with_jitter_switches_at_its_fraction_of_the_interval():
     sim = simulate(ClosedLoop(params, basis=False), 300.0, 4.0, limits=lim, experiment="disturbance-step",
                    amplitude=2.0, duration=(n - 1) * Ts, seed=7)
     eps = np.zeros(n + 1)
-    eps[1:] = np.clip(sigma * np.random.default_rng(7).standard_normal(n), -3 * sigma, 3 * sigma)
+    eps[1:] = np.clip(sigma * _jitter_draws(7, n), -3 * sigma, 3 * sigma)
     t, ref = hand_simulation(params, 300.0, 4.0, lim, n, T_dist=2.0, jitter_eps=eps, tau=0.002,
                              delay=1.4 * Ts)
     _compare(sim, ref, 1e-8)

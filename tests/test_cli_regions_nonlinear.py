@@ -41,11 +41,31 @@ def test_regions_nonlinear_writes_classes_next_to_the_linear_map(tmp_path, capsy
     assert f"{(names == 'limit cycle').sum()} limit cycle" in text
 
 
+def test_no_continue_runs_reaches_the_map(tmp_path, capsys):
+    # issue 27: the longer runs continue the shorter ones unless --no-continue-runs; one point at
+    # the 24 V cycle, still settling at 0.1 s (growing), so run again to 0.3 s
+    p = _params_file(tmp_path, SUPPLY)
+    nl = {}
+    for flag in ((), ("--no-continue-runs",)):
+        out = tmp_path / f"map{len(flag)}.npz"
+        rc = main(["regions", "--params", str(p), "--set", "beta=3", "--P-gain", "20000", "--D-gain", "10",
+                   "--nonlinear", "--duration", "0.1", "--max-duration", "0.3", "--out", str(out), *flag])
+        assert rc == 0, capsys.readouterr().err
+        z = np.load(out)
+        assert float(z["run_duration"][0, 0]) == pytest.approx(0.3)
+        nl[bool(flag)] = json.loads(str(z["meta"]))["nonlinear"]
+    assert nl[False]["longer_runs_continue"] and not nl[True]["longer_runs_continue"]
+    # 101 + the 200 samples of the continuation, or 101 + 301 from t = 0
+    assert (nl[False]["samples_simulated"], nl[True]["samples_simulated"]) == (301, 402)
+    assert nl[False]["counts"] == nl[True]["counts"]
+
+
 @pytest.mark.parametrize("argv, message", [
     (["--nonlinear"], "limits: the parameter file has no [limits] section"),
     (["--duration", "2"], "--duration applies to the nonlinear map; allowed: with --nonlinear"),
     (["--scheduler", "tcp://127.0.0.1:1"], "--scheduler applies to the nonlinear map and the robust region"),
     (["--max-duration", "5"], "--max-duration applies to the nonlinear map"),
+    (["--no-continue-runs"], "--no-continue-runs applies to the nonlinear map; allowed: with --nonlinear"),
     (["--nonlinear", "--duration", "2", "--max-duration", "1"], "limits: the parameter file has no [limits]"),
     (["--nonlinear", "--robust"], "--nonlinear with --robust; allowed: one of them"),
 ])

@@ -35,8 +35,9 @@ EXTEND_FACTOR = 3 lies in the continuation except after a length capped at ``max
 (9 -> 10 s reads from 5 s): each run returns, with its state, the outputs from the first sample
 the next length's verdict reads (:func:`haa_sym.analysis.simulate.keep_from`; 9 -> 10 s: 4,001
 samples) and of the samples before only their saturation flags and the torque's peak. The chirp
-(its sweep rate set by the run's length) and torque noise with jitter (the jitter's draws follow
-the noise's n) are run again from t = 0 (:func:`haa_sym.analysis.simulate.continuable`).
+(its sweep rate set by the run's length) is run again from t = 0
+(:func:`haa_sym.analysis.simulate.continuable`); torque noise with jitter continues since
+2026-11-26 (each draws from its own seeded stream, :data:`haa_sym.analysis.simulate.JITTER_STREAM`).
 HyQ with 24 V and 0.02 Nm rotor friction, 60 x 40 points: 162 of its 2,400 points run again,
 3.78 M simulated samples instead of 5.74 M, the same classes (docs/simulate.md).
 
@@ -270,8 +271,8 @@ def nonlinear_map(loop, P_gain, D_gain, *, limits: Limits | None = None, experim
     stable = np.asarray(loop.stability(PP, DD).stable, bool)
     always = limits_act_every_step(limits)
     forced = experiment in FORCED_EXPERIMENTS
-    # a longer run continues the point's last one where its inputs allow (not the chirp, not
-    # noise with jitter: simulate.continuable), with the first run's friction error scale
+    # a longer run continues the point's last one where its inputs allow (not the chirp:
+    # simulate.continuable), with the first run's friction error scale
     if not isinstance(continue_runs, bool):
         raise ParameterError(f"continue_runs = {continue_runs!r}; allowed: True or False")
     scale_s = setup.duration if continuable(setup) else None

@@ -55,7 +55,7 @@ from haa_sym.model.actuator import ROTOR
 from haa_sym.model.limits import Limits
 
 __all__ = ["EXPERIMENTS", "FORCED_EXPERIMENTS", "CSV_COLUMNS", "Simulation", "SimulationBatch", "Continuation",
-           "continuable", "keep_from", "simulate",
+           "continuable", "JITTER_STREAM", "keep_from", "simulate",
            "simulate_batch", "DEFAULT_RTOL", "MAX_SAMPLES", "limits_act_every_step", "linear_verdict"]
 
 #: The experiments (docs/simulate.md): what ``amplitude`` A is and where it enters.
@@ -90,6 +90,13 @@ SLOPES = ((0.0, 0.03, 0.06, 0.125, 0.25, 0.5, 0.75, 1.0), (0.0, 0.03, 0.06, 0.12
 MAX_SAMPLES = 50_000_000
 CHIRP_F0 = 0.1               # Hz
 JITTER_CLIP = 3.0            # the sample offsets are Gaussian clipped to +-3 sigma
+#: The jitter's random stream: the child of the seed's ``SeedSequence`` with this spawn key
+#: (``SeedSequence(seed).spawn(1)[0]``); the torque noise's is ``default_rng(seed)`` itself. Each
+#: limit draws from its own stream, so that its draws up to a sample depend neither on the run's
+#: length nor on the other limit (a longer run continues a shorter one: :func:`continuable`), and
+#: the noise's draws are those of before 2026-11-26, when the jitter's followed the noise's n
+#: draws in the one stream (docs/simulate.md, "The sampled-data model")
+JITTER_STREAM = 0
 # |lambda_max delta| / n_sub of each jitter substep's series (codegen/sim_kernels.py)
 JITTER_STEP_BOUND = 0.5
 #: The simulation's state of a current command held without a lag: the current the motor carried
@@ -312,7 +319,6 @@ class _Setup:
             raise ParameterError(f"{where}: jitter = {jitter!r} s rms; allowed: < Ts / {2 * JITTER_CLIP:g} = "
                                  f"{Ts / (2 * JITTER_CLIP):g} s (the sample instants must stay ordered)")
         # exogenous inputs
-        rng = np.random.default_rng(seed)
         exo = np.zeros((len(L.SIM_EXO), n))
         k = L.SIM_EXO.index
         t_nom = np.arange(n) * Ts
@@ -340,9 +346,10 @@ class _Setup:
             # a rotor-only file's port is the rotor, whose state is theta_m
             self.x0[states.index("theta_m" if top.port == ROTOR else f"theta_{top.port}")] = A_
         if lim.torque_noise:
-            exo[k("noise_T")] = lim.torque_noise * rng.standard_normal(n)
+            exo[k("noise_T")] = lim.torque_noise * np.random.default_rng(seed).standard_normal(n)
         eps = np.zeros(n + 1)
         if jitter:
+            rng = np.random.default_rng(np.random.SeedSequence(seed, spawn_key=(JITTER_STREAM,)))
             eps[1:] = np.clip(jitter * rng.standard_normal(n), -JITTER_CLIP * jitter, JITTER_CLIP * jitter)
             exo[k("delta")] = np.diff(eps)
         self.time = t_nom + eps[:n]
@@ -531,10 +538,11 @@ def keep_from(Ts: float, n: int) -> int:
 
 def continuable(setup: _Setup) -> bool:
     """Whether a run's inputs up to t do not depend on its length, so that a longer run can
-    continue a shorter one: not the chirp (its sweep rate is set by the run's length) and not
-    torque noise with jitter (the jitter's draws follow the noise's n draws of the one seeded
-    stream); every other experiment and limit is."""
-    return setup.experiment not in FORCED_EXPERIMENTS and not (setup.limits.torque_noise and setup.limits.jitter)
+    continue a shorter one: not the chirp (its sweep rate is set by the run's length); every other
+    experiment and limit is (the torque noise and the jitter draw from their own seeded streams,
+    :data:`JITTER_STREAM`; before 2026-11-26 the jitter's draws followed the noise's n in one
+    stream, and noise with jitter was not)."""
+    return setup.experiment not in FORCED_EXPERIMENTS
 
 
 def _run(loop, setup: _Setup, P_gain, D_gain, controller=None, start: Continuation | None = None):
@@ -743,7 +751,8 @@ def simulate(loop, P_gain: float, D_gain: float, *, limits: Limits | None = None
     duration : float
         Seconds; the run has ceil(duration / Ts) + 1 samples from t = 0.
     seed : int
-        Seed of the torque noise and the jitter (numpy ``default_rng``).
+        Seed of the torque noise (numpy ``default_rng(seed)``) and of the jitter (its own stream
+        from the same seed, :data:`JITTER_STREAM`).
     rtol : float
         Error bound of the friction integrator (relative to each state's peak over the run
         without friction); per sample the step-doubling difference is held to
@@ -803,8 +812,8 @@ def simulate_batch(loop, P_gain, D_gain, *, limits: Limits | None = None,
         n_next = None
         if continue_to is not None or any(c is not None for c in starts):
             if not continuable(setup):
-                raise ParameterError(f"experiment = {experiment!r} with limits {setup.limits.active}: its runs "
-                                     "cannot be continued; allowed: a run from t = 0 (docs/simulate.md)")
+                raise ParameterError(f"experiment = {experiment!r}: its runs cannot be continued (its input "
+                                     "depends on the run's length); allowed: a run from t = 0 (docs/simulate.md)")
             if len(starts) != P.size or any(c is not None and not 0 < c.k < setup.n for c in starts):
                 raise ParameterError(f"start: {len(starts)} continuations for {P.size} points; allowed: one per "
                                      f"point, None or stopped before the run's {setup.n} samples")

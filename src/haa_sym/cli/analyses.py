@@ -45,7 +45,8 @@ def _cmd_regions(args) -> int:
     nonlinear_only = [f for f, given in (("--experiment", args.experiment is not None),
                                          ("--amplitude", args.amplitude is not None),
                                          ("--duration", args.duration is not None),
-                                         ("--max-duration", args.max_duration is not None)) if given]
+                                         ("--max-duration", args.max_duration is not None),
+                                         ("--no-continue-runs", not args.continue_runs)) if given]
     if nonlinear_only and not args.nonlinear:
         raise ParameterError(f"{nonlinear_only[0]} applies to the nonlinear map; allowed: with --nonlinear")
     if args.scheduler is not None and not (args.nonlinear or args.robust):
@@ -83,7 +84,7 @@ def _nonlinear_regions(args, loop, out, plot, P, D) -> int:
     file's [limits] (docs/simulate.md, "Nonlinear maps"), in one npz."""
     nl = nonlinear_map(loop, P, D, experiment=args.experiment or "disturbance-step", amplitude=args.amplitude,
                        duration=DEFAULT_DURATION if args.duration is None else args.duration,
-                       max_duration=args.max_duration, scheduler=args.scheduler)
+                       max_duration=args.max_duration, scheduler=args.scheduler, continue_runs=args.continue_runs)
     m = region_map(loop, P, D, radius=args.radius, method=args.method)
 
     def write(path, tx):
@@ -330,6 +331,10 @@ def _regions_args(r) -> None:
     r.add_argument("--max-duration", type=float, metavar="S",
                    help=f"with --nonlinear: points still growing or undecided are run again, {EXTEND_FACTOR:g}x longer "
                         f"each time, up to S seconds (default max({DEFAULT_MAX_DURATION:g}, --duration))")
+    r.add_argument("--no-continue-runs", dest="continue_runs", action="store_false",
+                   help="with --nonlinear: run every longer run from t = 0 instead of continuing the point's "
+                        "shorter run from where it stopped (the default; the same map to the bit, for fewer "
+                        "simulated samples): to check that against runs from t = 0, or to time the difference")
     r.add_argument("--scheduler", help="with --nonlinear or --robust: where their tasks run (a simulation's "
                    "points; a leg configuration's map): " + SCHEDULER_HELP)
 

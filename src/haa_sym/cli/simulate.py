@@ -169,7 +169,8 @@ def _log_args(args, params):
 def _log_text(args, loop, P, D, s) -> str:
     """The run as identify's CSV log: ``#`` lines saying how it was made, then ``time`` and the
     signals; the outputs with Gaussian noise of ``--log-noise`` times each one's standard
-    deviation (seeded by --seed, after the run's own draws), the inputs exact (as logged)."""
+    deviation (seeded by --seed: its own stream, ``default_rng([seed, 1])``, apart from the run's
+    noise and jitter), the inputs exact (as logged)."""
     cols = s.columns()
     rng = np.random.default_rng([args.seed, 1])
     data = {}
@@ -256,7 +257,8 @@ def _arguments(p) -> None:
                    help="the experiment's amplitude A (Nm or rad); default "
                         + ", ".join(f"{k} {v:g}" for k, v in DEFAULT_AMPLITUDE.items()))
     p.add_argument("--duration", type=float, required=True, metavar="S", help="seconds")
-    p.add_argument("--seed", type=int, default=0, help="seed of the torque noise and the jitter (default 0)")
+    p.add_argument("--seed", type=int, default=0,
+                   help="seed of the torque noise, the jitter, --log-noise and a prbs excitation (default 0)")
     p.add_argument("--out", help="output .csv: " + ", ".join(CSV_COLUMNS))
     p.add_argument("--plot", help="figure file (.png/.pdf/.svg)")
     p.add_argument("--meta", help="the run's metadata as JSON (.json): the verdict, the linear verdict, the "
