@@ -406,8 +406,8 @@ def scale_block(data: dict) -> str:
     """The block of the section "Scaling with workers": one row per command of bench_scale.py's
     JSON (its ``--whole`` rounds: the whole command, ``--scheduler local:1`` against ``local:2``)."""
     rows = ["| command (`bench_scale.py`) | `local:1`, whole command | `local:2` | speedup: best / each round "
-            f"(target {TARGET_SPEEDUP_2:g}x) | the machine's ceiling: 2 copies of `local:1` at once, each round (speedup "
-            "/ ceiling) | cores free before the runs (of 2), load | critical path, predicted on 16 workers |",
+            f"(target {TARGET_SPEEDUP_2:g}x) | reference: 2 copies of `local:1` at once, each round (speedup "
+            "/ reference) | cores free before the runs (of 2), load | critical path, predicted on 16 workers |",
             "|---|---|---|---|---|---|---|"]
     for key, d in data.items():
         if d is None:
@@ -431,12 +431,12 @@ def scale_block(data: dict) -> str:
         free = w["cores_available_before"]
         loads = [x["load_1min_before"] for x in w["runs"]]
         best = w["speedup_of_best"]["2"]
-        cap = w.get("ceiling_per_round") or []
-        ceiling = (", ".join(f"{c:.2f}x" for c in cap) + " ("
+        cap = w.get("copies_speedup_per_round") or []
+        copies = (", ".join(f"{c:.2f}x" for c in cap) + " ("
                    + ", ".join(f"{a / c:.2f}" for a, c in zip(w["speedup_per_round"]["2"], cap)) + ")") if cap else NM
         rows.append(f"| {SCALE_LABELS[key]}, {len(w['speedup_per_round']['2'])} rounds, {r['date'][:16].replace('T', ' ')} UTC | "
                     f"{sec(w['best_s']['1'])} (median {sec(w['median_s']['1'])}) | {sec(w['best_s']['2'])} (median "
-                    f"{sec(w['median_s']['2'])}) | **{best:.2f}x** ({met(best >= TARGET_SPEEDUP_2)}) / {per} | {ceiling} | "
+                    f"{sec(w['median_s']['2'])}) | **{best:.2f}x** ({met(best >= TARGET_SPEEDUP_2)}) / {per} | {copies} | "
                     f"{min(free):.2f}-{max(free):.2f}, load {min(loads):.1f}-{max(loads):.1f} | {pred} |")
     same = all(d is None or d["same_output"] for d in data.values())
     note = ("Every run wrote the same bytes." if same else "**Some runs wrote other bytes** (see the JSON).")
