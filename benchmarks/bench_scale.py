@@ -23,14 +23,16 @@ sized to the workers: more workers, smaller tasks, shorter chains):
   ``stream`` follow-up for the task that asked for it), each link with its share of d;
 - predicted time on M workers: ``S + max(C, (W + d) / M)``, and the bound on the speedup
   ``T(1) / (S + C)`` however many workers (the critical path S + C);
-- with ``--whole``, the whole command's: the fixed part F (one whole ``local:1`` command, probed
-  (:func:`fixed_part`): from its launch to its first task's submission and from its last task
-  list's return to its end) plus that prediction, against the best whole ``local:1`` command.
+- with ``--whole``, the whole command's: the fixed part F (of the fastest whole ``local:1`` run,
+  probed (:data:`PROBE`): from its launch to its first task's submission and from its last task
+  list's return to its end) plus that prediction, against that run.
 
 ``--whole R`` also times the whole command as a user runs it, ``python -m haa_sym.cli ...
 --scheduler local:N`` in a new process (imports, the cluster's start and stop, every task), for
-N = 1, 2, ..., alternating, R rounds: each round's local:1 / local:N ratio is taken from runs a few
-seconds apart (the other jobs of a shared machine change within a minute), and the JSON keeps
+N = 1, 2, ..., alternating, R rounds (each run probed, so that its time splits into the task
+lists' span, from the first task's submission to the last task list's return, and F outside it:
+the span's speedup is what the workers give, F is what they cannot): each round's local:1 /
+local:N ratio is taken from runs a few seconds apart (the other jobs of a shared machine change within a minute), and the JSON keeps
 every run with the cores free before it. Each round also runs N copies of the local:1 command at
 once against one alone (:func:`whole_runs`): a reference for what this machine gives this
 command's work done N times side by side.
@@ -217,24 +219,6 @@ sys.exit(code)
 """
 
 
-def fixed_part(argv: list[str], env: dict) -> dict:
-    """The whole ``local:1`` command's part outside its task lists, measured in one run
-    (:data:`PROBE`): from the process's launch to its first task's submission (Python's start,
-    the imports, the parameters, the cluster's start) plus from its last task list's return to
-    the process's end (the output, the cluster's stop). The command's own computation between
-    task lists is the serial part S, counted apart."""
-    t0 = time.time()
-    proc = subprocess.run([sys.executable, "-c", PROBE, *argv, "-q", "--scheduler", "local:1"], env=env,
-                          capture_output=True, text=True)
-    t1 = time.time()
-    if proc.returncode != 0:
-        raise SystemExit(f"the command failed (exit {proc.returncode}): {proc.stderr.strip()[-400:]}")
-    marks = json.loads(proc.stderr.strip().splitlines()[-1])
-    before, after = marks["first_submit"] - t0, t1 - marks["last_return"]
-    return {"before_first_task_s": before, "after_last_task_s": after, "fixed_s": before + after,
-            "seconds": t1 - t0}
-
-
 def _copy_argv(argv: list[str], out: Path, k: int) -> list[str]:
     """``argv`` writing to its own file (copy ``k`` of the reference's concurrent runs)."""
     i = argv.index("--out") + 1
@@ -263,17 +247,25 @@ def whole_runs(argv: list[str], workers: int, rounds: int, out: Path) -> dict:
     for r in range(rounds):
         for n in range(1, workers + 1):
             load, cores = os.getloadavg()[0], capacity(workers)
-            t = time.perf_counter()
-            proc = subprocess.run(command(argv, n), env=env, capture_output=True, text=True)
-            wall = time.perf_counter() - t
+            # probed (PROBE): the same command in one process, with the two marks that split its
+            # time into the task lists' span and the part outside them (F)
+            t0, t = time.time(), time.perf_counter()
+            proc = subprocess.run([sys.executable, "-c", PROBE, *command(argv, n)[3:]], env=env, capture_output=True,
+                                  text=True)
+            wall, t1 = time.perf_counter() - t, time.time()
             if proc.returncode != 0:
                 raise SystemExit(f"the command failed (exit {proc.returncode}): {proc.stderr.strip()[-400:]}")
+            marks = json.loads(proc.stderr.strip().splitlines()[-1])
+            before, after = marks["first_submit"] - t0, t1 - marks["last_return"]
             got = _output_bytes(out)
             first = got if first is None else first
             runs.append({"round": r, "workers": n, "seconds": wall, "cores_available_before": round(cores, 2),
-                         "load_1min_before": round(load, 2), "same_output": got == first})
-            print(f"  whole command, round {r + 1}, local:{n}: {wall:6.2f} s (cores free before {cores:.2f} of "
-                  f"{workers}, load {load:.2f})", flush=True)
+                         "load_1min_before": round(load, 2), "same_output": got == first,
+                         "before_first_task_s": before, "after_last_task_s": after,
+                         "task_lists_s": wall - before - after})
+            print(f"  whole command, round {r + 1}, local:{n}: {wall:6.2f} s, of which {wall - before - after:.2f} s "
+                  f"from the first task's submission to the last task list's return (cores free before "
+                  f"{cores:.2f} of {workers}, load {load:.2f})", flush=True)
         if workers > 1:
             t = time.perf_counter()
             procs = [subprocess.Popen(command(_copy_argv(argv, out, k), 1), env=env, stdout=subprocess.DEVNULL,
@@ -287,17 +279,22 @@ def whole_runs(argv: list[str], workers: int, rounds: int, out: Path) -> dict:
             copies.append(workers * alone / wall)
             print(f"  {workers} copies of local:1 at once, round {r + 1}: {wall:6.2f} s against {alone:.2f} s alone: "
                   f"{copies[-1]:.2f}x (the reference)", flush=True)
-    fixed = fixed_part(argv, env)
-    print(f"  whole command local:1, probed: {fixed['seconds']:.2f} s, of which {fixed['before_first_task_s']:.2f} s "
+    # the fixed part F: that of the fastest local:1 run (the one the prediction is compared with)
+    best1 = min((x for x in runs if x["workers"] == 1), key=lambda x: x["seconds"])
+    fixed = {"before_first_task_s": best1["before_first_task_s"], "after_last_task_s": best1["after_last_task_s"],
+             "fixed_s": best1["before_first_task_s"] + best1["after_last_task_s"], "seconds": best1["seconds"]}
+    print(f"  whole command local:1, best: {fixed['seconds']:.2f} s, of which {fixed['before_first_task_s']:.2f} s "
           f"before its first task and {fixed['after_last_task_s']:.2f} s after its last", flush=True)
     by_n = {n: [x["seconds"] for x in runs if x["workers"] == n] for n in range(1, workers + 1)}
     ratios = {n: [a / b for a, b in zip(by_n[1], by_n[n])] for n in range(2, workers + 1)}
+    span = {n: [x["task_lists_s"] for x in runs if x["workers"] == n] for n in range(1, workers + 1)}
+    inside = {str(n): [a / b for a, b in zip(span[1], span[n])] for n in range(2, workers + 1)}
     return {"runs": runs, "same_output": all(x["same_output"] for x in runs),
             "best_s": {str(n): min(v) for n, v in by_n.items()},
             "median_s": {str(n): statistics.median(v) for n, v in by_n.items()},
             "speedup_of_best": {str(n): min(by_n[1]) / min(by_n[n]) for n in ratios},
             "speedup_per_round": {str(n): v for n, v in ratios.items()},
-            "copies_speedup_per_round": copies, "fixed": fixed,
+            "copies_speedup_per_round": copies, "fixed": fixed, "task_lists_speedup_per_round": inside,
             "cores_available_before": [x["cores_available_before"] for x in runs]}
 
 
@@ -374,7 +371,7 @@ def main() -> int:
     fixed = None
     if whole is not None:
         # what a whole command pays outside its task lists (Python's start, the imports, the
-        # cluster's start and stop, the output), probed in one local:1 run; the whole command on
+        # cluster's start and stop, the output), probed in the fastest local:1 run; the whole command on
         # M workers is predicted as that plus the warm prediction (the start of M forked workers
         # counted as that of one: not measured here)
         fixed = whole["fixed"]["fixed_s"]
@@ -385,8 +382,10 @@ def main() -> int:
               f"{whole['best_s']['1'] / (fixed + predict[M]):.1f}x the best whole local:1 command")
         for n in range(2, args.workers + 1):
             per = ", ".join(f"{x:.2f}x" for x in whole["speedup_per_round"][str(n)])
+            inside = ", ".join(f"{x:.2f}x" for x in whole["task_lists_speedup_per_round"][str(n)])
             print(f"whole command local:1 -> local:{n}: best {whole['best_s']['1']:.2f} s -> {whole['best_s'][str(n)]:.2f} s "
-                  f"({whole['speedup_of_best'][str(n)]:.2f}x); per round {per}; cores free before the runs "
+                  f"({whole['speedup_of_best'][str(n)]:.2f}x); per round {per}; the task lists' span alone per "
+                  f"round {inside}; cores free before the runs "
                   f"{min(whole['cores_available_before']):.2f}-{max(whole['cores_available_before']):.2f} of "
                   f"{args.workers}")
         if whole["copies_speedup_per_round"]:

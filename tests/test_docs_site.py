@@ -62,7 +62,7 @@ def test_the_scale_block_is_rendered_from_bench_scales_json_and_kept_without_it(
     whole = {"runs": runs, "same_output": True, "best_s": {"1": 11.0, "2": 6.5}, "median_s": {"1": 11.5, "2": 6.55},
              "speedup_of_best": {"2": 11.0 / 6.5}, "speedup_per_round": {"2": [12.0 / 6.5, 11.0 / 6.6]},
              "copies_speedup_per_round": [1.90, 1.70], "cores_available_before": [1.9] * 4,
-             "fixed_s": 0.9, "predicted_s": {"16": 3.3}}
+             "fixed_s": 0.9, "predicted_s": {"16": 3.3}, "task_lists_speedup_per_round": {"2": [1.95, 1.90]}}
     data = {"run": {"date": "2026-11-26T17:00:00+00:00"}, "rows": [{"seconds": 30.0}], "same_output": True,
             "serial_s": 0.5, "longest_chain_s": 0.6, "work_s": 29.0, "predicted_s": {"16": 2.4},
             "whole_command": whole}
@@ -72,6 +72,8 @@ def test_the_scale_block_is_rendered_from_bench_scales_json_and_kept_without_it(
     block = new.split(render_readme.SCALE_START)[1].split(render_readme.SCALE_END)[0]
     row = next(line for line in block.splitlines() if line.startswith("| `schedule`"))
     assert "11.0 s (median 11.5 s)" in row and "**1.69x** (NOT met) / 1.85x, 1.67x" in row
+    # and each round's speedup of the task lists' span alone (without the fixed part)
+    assert "1.85x, 1.67x; the task lists' span alone 1.95x, 1.90x |" in row
     # the two copies' speedup each round (the reference), and the speedup's share of it (12 / 6.5 / 1.9 = 0.97, 11 / 6.6 / 1.7 = 0.98)
     assert "| 1.90x, 1.70x (0.97, 0.98) |" in row
     assert "2.40 s on 16, 12.5x the 1-worker run" in row
