@@ -1,7 +1,5 @@
 """``python -m haa_sym.cli``."""
-import sys
-
-from haa_sym.cli import main
+from haa_sym.cli import entry
 
 if __name__ == "__main__":
-    sys.exit(main())
+    entry()

@@ -237,8 +237,12 @@ class TaskRunner:
                     if str(key[0] if isinstance(key, tuple) else key).startswith("task-"):
                         bar.update(1)
             tasks = [dask.delayed(fn, pure=False)(*a, dask_key_name=f"task-{k}") for k, a in enumerate(args_list)]
-            with _Bar():
-                return list(dask.compute(*tasks, scheduler="threads", num_workers=self.threads))
+            # a pool of this call's own, shut down when it returns: dask's default pool for
+            # num_workers stays alive with its idle non-daemon threads until the interpreter
+            # ends, and the CLI's quick exit (haa_sym.cli.end) waits for no such thread
+            from concurrent.futures import ThreadPoolExecutor
+            with _Bar(), ThreadPoolExecutor(self.threads, thread_name_prefix="haa_sym-task") as pool:
+                return list(dask.compute(*tasks, scheduler="threads", pool=pool))
 
     def start(self, fn, args_list: list, label: str, unit: str = "task"):
         """:meth:`run` without the wait: returns a function of no argument that returns the
