@@ -208,14 +208,14 @@ def timed(name):
     setattr(tasks.TaskRunner, name, f)
 for name in ("run", "stream", "start"):
     timed(name)
-from haa_sym.cli import main
+from haa_sym.cli import end, main
 try:
     code = main(sys.argv[1:])
 except SystemExit as e:
     code = e.code
 first = min((t["submitted"] for t in tasks.TRACE), default=0.0)
 print(json.dumps({"first_submit": first, "last_return": last[0]}), file=sys.stderr)
-sys.exit(code)
+end(code)                                   # as haa-sym ends (haa_sym.cli.entry)
 """
 
 
