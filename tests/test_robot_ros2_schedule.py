@@ -75,6 +75,9 @@ def test_new_csv_gives_the_cell_checked_table_and_its_c(tmp_path, capsys):
     """The CSV holds the lookup: table_from_csv is Schedule.table() (lowered corners, given-up
     cells, the scheduled alpha bit for bit) and export-ros2 writes schedule --c-out's C, no warning."""
     path, s = _csv(tmp_path)
+    # a plain CSV, as every CSV of the project: numpy.genfromtxt reads its columns and rows
+    data = np.genfromtxt(path, delimiter=",", names=True, dtype=None, encoding="utf-8")
+    assert data.dtype.names == CSV_COLUMNS and data.size == s.feasible.size
     ref = s.table()
     table = table_from_csv(path.read_text(), str(path), {})
     for name in ("P_gain", "D_gain", "feasible", "cell_safe"):
@@ -179,7 +182,8 @@ def _beta_above(text):
 
 def _meta_without_actuator(text):
     import json
-    obj = json.loads(list(csv.reader(io.StringIO(text)))[1][-1])
+    import urllib.parse
+    obj = json.loads(urllib.parse.unquote(list(csv.reader(io.StringIO(text)))[1][-1]))
     del obj["provenance"]["actuator"]
     return {(0, "table_meta"): json.dumps(obj)}
 

@@ -82,6 +82,7 @@ import csv
 import io
 import json
 import math
+import urllib.parse
 
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -180,10 +181,10 @@ class Schedule:
         lines = [",".join(CSV_COLUMNS)]
         n_P, n_D = self.feasible.shape
         # the header provenance of table() and whether alpha is scheduled, as one JSON object (its
-        # floats round-trip), CSV-quoted: read back, the lookup's header is table()'s
+        # floats round-trip): read back, the lookup's header is table()'s
         meta = {"alpha_scheduled": bool(self.meta.get("alpha_scheduled")), "provenance": self._table_meta()}
         meta["provenance"]["source"] = Path(meta["provenance"]["source"]).name   # no machine's path in the data
-        quoted = '"' + json.dumps(meta).replace('"', '""') + '"'
+        quoted = _meta_cell(meta)
         for i, P in enumerate(self.P_gain):
             for j, D in enumerate(self.D_gain):
                 ok = bool(self.feasible[i, j])
@@ -229,6 +230,17 @@ class Schedule:
 CSV_CELL_CHECK = ("not checked: the table was rebuilt from the schedule's CSV, which holds beta at the grid points "
                   "(not the corner values the cell check lowered, nor its safe cells); the cell-checked table is "
                   "haa-sym schedule --c-out's")
+
+
+# Characters of the table_meta JSON written as %XX: the delimiter, numpy.genfromtxt's comment
+# mark, and the escape itself. The cell then needs no CSV quoting, and every CSV of the project
+# reads with numpy.genfromtxt (tests/test_paper_reproduce.py), pandas and the csv module alike.
+_META_ESCAPED = ",#%"
+
+
+def _meta_cell(obj: dict) -> str:
+    """``table_meta``'s cell: ``obj`` as JSON (ASCII), :data:`_META_ESCAPED` as ``%XX``."""
+    return "".join(f"%{ord(c):02X}" if c in _META_ESCAPED else c for c in json.dumps(obj))
 
 
 def _csv_rows(text: str, where: str):
@@ -378,14 +390,14 @@ def _table_meta_csv(provenance: list, source: str, where: str) -> tuple[dict, bo
     ``source`` naming the CSV and the parameter file the schedule read; and whether alpha is
     scheduled."""
     allowed = ("one row (the first, as written) with a JSON object {\"alpha_scheduled\": true or false, "
-               "\"provenance\": {...}}, the others empty")
+               "\"provenance\": {...}}, its ',' '#' '%' written %2C %23 %25, the others empty")
     if len(provenance) != 1:
         raise ParameterError(f"{where}: table_meta in {len(provenance)} rows"
                              + (f" ({', '.join(str(n) for n, _ in provenance[:4])})" if provenance else "")
                              + f"; allowed: {allowed}")
     n, text = provenance[0]
     try:
-        obj = json.loads(text)
+        obj = json.loads(urllib.parse.unquote(text, errors="strict"))
     except ValueError:
         obj = None
     if not (isinstance(obj, dict) and set(obj) == {"alpha_scheduled", "provenance"}
