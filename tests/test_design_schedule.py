@@ -68,6 +68,34 @@ def test_infeasible_points_have_no_robust_beta_on_the_coarse_grid(hyq_schedule):
                        for c in leg_configurations(params, 2))
 
 
+def test_csv_holds_the_cell_checked_table_export_ros2_emits_its_c(hyq_schedule, tmp_path, capsys):
+    """The CSV of a run whose cell check lowered corner values and gave up cells: table_from_csv is
+    Schedule.table() exactly, and export-ros2 --schedule writes the C of schedule --c-out (the
+    header's source entry apart), without the unchecked-table warning."""
+    from haa_sym.design.schedule import table_from_csv
+    from haa_sym.design.schedule_c import write_c
+    from test_robot_ros2_schedule import MAP, _source
+    s = hyq_schedule
+    f = s.feasible
+    corners = f[:-1, :-1] & f[1:, :-1] & f[:-1, 1:] & f[1:, 1:]
+    assert (s.table_beta[f] < s.beta[f]).any() and (corners & ~s.cell_safe).any()   # the check did change the table
+    path = tmp_path / "schedule.csv"
+    path.write_text(s.csv_text())
+    ref, table = s.table(), table_from_csv(path.read_text(), str(path), {})
+    for name in ("P_gain", "D_gain", "feasible", "cell_safe"):
+        np.testing.assert_array_equal(getattr(table, name), getattr(ref, name), err_msg=name)
+    assert np.array_equal(table.beta, ref.beta, equal_nan=True) and table.alpha is ref.alpha is None
+    assert main(["export-ros2", *MAP, "--schedule", str(path), "--out", str(tmp_path / "p.yaml"),
+                 "--c-out", str(tmp_path / "ros2")]) == 0
+    assert "warning" not in capsys.readouterr().err
+    write_c(ref, tmp_path / "schedule")
+    assert (tmp_path / "ros2" / "haa_schedule.c").read_bytes() == (tmp_path / "schedule" / "haa_schedule.c").read_bytes()
+    mine, theirs = (_source((tmp_path / d / "haa_schedule.h").read_text()) for d in ("ros2", "schedule"))
+    assert mine[0] == theirs[0]
+    assert (theirs[1], mine[1]) == ("source: hyq_haa.toml",
+                                    "source: schedule.csv (haa-sym schedule --out of hyq_haa.toml, cell-checked)")
+
+
 @pytest.mark.slow
 @pytest.mark.parametrize("name", ["sea", "harmonic_drive"])
 def test_runs_on_the_other_built_in_actuators(name):

@@ -159,7 +159,8 @@ def test_schedule_on_a_real_scheduler_and_worker_gives_the_in_process_bytes(tmp_
     assert main(["schedule", "-q", *SMALL, "--out", str(local)]) == 0
     assert "impedances" in proc.stdout and "12 impedances" in capsys.readouterr().out
     assert remote.read_bytes() == local.read_bytes()
-    assert local.read_text().startswith("P_gain,D_gain,beta,alpha,torque_bandwidth_rad_s,feasible,beta_at_limit\n")
+    assert local.read_text().startswith("P_gain,D_gain,beta,alpha,torque_bandwidth_rad_s,feasible,beta_at_limit,"
+                                      "table_beta,cell_safe,table_meta\n")
 
 
 @pytest.mark.slow

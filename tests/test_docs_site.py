@@ -86,3 +86,12 @@ def test_the_scale_block_is_rendered_from_bench_scales_json_and_kept_without_it(
     # without bench_scale.py's JSON (make bench-readme after make bench) the block stays
     assert render_readme.main(["--results", str(tmp_path / "none"), "--page", str(copy)]) == 0
     assert copy.read_text().count(row) == 1
+
+
+def test_every_column_of_the_schedule_csv_is_documented():
+    """docs/schedule.md's table of the CSV has a row for each column haa-sym schedule --out writes,
+    in the order written, and no other."""
+    from haa_sym.design.schedule import CSV_COLUMNS
+    page = (ROOT / "docs" / "schedule.md").read_text()
+    section = page.split("## The CSV (`--out`)", 1)[1].split("\n## ", 1)[0]
+    assert tuple(re.findall(r"^\| `(\w+)` \|", section, re.M)) == CSV_COLUMNS

@@ -8,7 +8,7 @@ import sys
 from pathlib import Path
 
 from haa_sym._version import version
-from haa_sym.design.schedule import table_from_csv
+from haa_sym.design.schedule import CSV_CELL_CHECK, table_from_csv
 from haa_sym.design.schedule_c import HEADER as SCHEDULE_HEADER, SOURCE as SCHEDULE_SOURCE, check_c_directory
 from haa_sym.io.inputs import read_text
 from haa_sym.errors import ParameterError
@@ -37,7 +37,8 @@ def _cmd_export_ros2(args) -> int:
     check_c_directory(args.c_out, "--c-out", names=names)
     schedule = None
     if args.schedule is not None:
-        # the schedule's CSV (haa-sym schedule --out) as its lookup, checked before any work
+        # the schedule's CSV (haa-sym schedule --out) as its lookup, checked before any work; the
+        # provenance given here is used only for a CSV without the lookup's columns (an older one)
         schedule = table_from_csv(read_text(args.schedule, "--schedule", limit=MAX_SCHEDULE_BYTES), args.schedule,
                                   {"actuator": str(params.about.get("name") or Path(params.source).stem),
                                    "requirements": "those of the haa-sym schedule run that wrote the CSV",
@@ -66,7 +67,7 @@ def _cmd_export_ros2(args) -> int:
                              "gains meet them")
     box = ros2.certified_box(loop, table, req, _measure(args.P_gain), _measure(args.D_gain))
     ros2.write_outputs(out, args.c_out, table, box, meta, args.controller, schedule)
-    if schedule is not None:
+    if schedule is not None and schedule.meta["cell_check"] == CSV_CELL_CHECK:
         print(f"haa-sym: warning: --schedule {args.schedule}: the lookup's cells are not checked (the CSV holds beta "
               "at the grid points only); haa-sym schedule --c-out writes the cell-checked table", file=sys.stderr)
     P0, D0 = box.centre
@@ -91,8 +92,9 @@ def _arguments(p) -> None:
     p.add_argument("--out", required=True, help="the parameter file (.yaml)")
     p.add_argument("--c-out", required=True, metavar="DIR", help="directory for haa_region.h and haa_region.c")
     p.add_argument("--schedule", metavar="SCHEDULE.csv", help="also emit the torque-gain schedule's lookup "
-                   "(haa_schedule.h/.c, haa_schedule_lookup) into --c-out, from the CSV of haa-sym schedule --out; "
-                   "its cells unchecked (docs/robot.md; the cell-checked table is haa-sym schedule --c-out's)")
+                   "(haa_schedule.h/.c, haa_schedule_lookup) into --c-out, from the CSV of haa-sym schedule --out: the "
+                   "cell-checked table of its --c-out (an older CSV without the lookup's columns: unchecked, with a "
+                   "warning; docs/robot.md)")
     p.add_argument("--controller", default=ros2.CONTROLLER_NAME,
                    help=f"the YAML's top-level entry (the generated C++ namespace; default {ros2.CONTROLLER_NAME})")
     p.add_argument("--region-rtol", type=float, default=ros2.REGION_RTOL, metavar="RTOL",

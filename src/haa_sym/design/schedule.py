@@ -78,9 +78,14 @@ Example
 from __future__ import annotations
 
 import contextlib
+import csv
+import io
+import json
 import math
+import urllib.parse
 
 from dataclasses import dataclass, field
+from pathlib import Path
 
 import numpy as np
 
@@ -90,7 +95,7 @@ from haa_sym.analysis.regions import check_map_budget
 from haa_sym.analysis.robust import (MAX_LEG_POINTS, _check_requirements, check_uncertainty, feasible_task,
                                      leg_configurations, leg_ends, leg_values, meets)
 from haa_sym.analysis.torque import torque_bandwidth
-from haa_sym.design.schedule_table import ScheduleTable
+from haa_sym.design.schedule_table import META_KEYS, ScheduleTable
 from haa_sym.errors import ParameterError
 from haa_sym.io.gridspec import grid
 from haa_sym.io.outputs import write_text
@@ -99,10 +104,15 @@ from haa_sym.io.tasks import DEFAULT_CONNECT_TIMEOUT, TaskRunner, cluster
 from haa_sym.loop import ClosedLoop, loop_first
 from haa_sym.model.params import Params, gain_array
 
-__all__ = ["Schedule", "schedule", "beta_grid", "CSV_COLUMNS", "DEFAULT_P_GAIN", "DEFAULT_D_GAIN",
-           "table_from_csv", "CSV_CELL_CHECK"]
+__all__ = ["Schedule", "schedule", "beta_grid", "CSV_COLUMNS", "CSV_COLUMNS_UNCHECKED", "DEFAULT_P_GAIN",
+           "DEFAULT_D_GAIN", "table_from_csv", "CSV_CELL_CHECK"]
 
-CSV_COLUMNS = ("P_gain", "D_gain", "beta", "alpha", "torque_bandwidth_rad_s", "feasible", "beta_at_limit")
+# The columns of haa-sym schedule --out (docs/schedule.md, "The CSV"): the schedule at each grid
+# point, then the cell-checked lookup table (what --c-out emits) so that the CSV alone rebuilds it.
+CSV_COLUMNS = ("P_gain", "D_gain", "beta", "alpha", "torque_bandwidth_rad_s", "feasible", "beta_at_limit",
+               "table_beta", "cell_safe", "table_meta")
+# The columns of the CSVs written before the lookup's columns existed: still read, as an unchecked table.
+CSV_COLUMNS_UNCHECKED = CSV_COLUMNS[:7]
 # HyQ's locomotion range (the issue): P_gain log 1..2000 Nm/rad, D_gain 1..50 Nms/rad
 DEFAULT_P_GAIN = "log:1:2000:30"
 DEFAULT_D_GAIN = "lin:1:50:20"
@@ -165,17 +175,30 @@ class Schedule:
     cell_safe: np.ndarray = None
 
     def csv_text(self) -> str:
-        """One row per grid point, columns :data:`CSV_COLUMNS` (empty numbers where infeasible)."""
+        """One row per grid point, columns :data:`CSV_COLUMNS` (docs/schedule.md, "The CSV"): the
+        schedule (empty numbers where infeasible), then the lookup table :meth:`table` emits
+        (``table_beta``, ``cell_safe``, ``table_meta`` on the first row), exactly."""
         lines = [",".join(CSV_COLUMNS)]
+        n_P, n_D = self.feasible.shape
+        # the header provenance of table() and whether alpha is scheduled, as one JSON object (its
+        # floats round-trip): read back, the lookup's header is table()'s
+        meta = {"alpha_scheduled": bool(self.meta.get("alpha_scheduled")), "provenance": self._table_meta()}
+        meta["provenance"]["source"] = Path(meta["provenance"]["source"]).name   # no machine's path in the data
+        quoted = _meta_cell(meta)
         for i, P in enumerate(self.P_gain):
             for j, D in enumerate(self.D_gain):
                 ok = bool(self.feasible[i, j])
                 num = (lambda v: f"{v:.12g}" if ok and np.isfinite(v) else "")
+                # the shortest text that reads back as the same double: alpha and table_beta are
+                # the lookup's values, which must come back bit for bit (beta is for reading)
+                exact = (lambda v: repr(float(v)) if ok and np.isfinite(v) else "")
+                cell = ("" if i == n_P - 1 or j == n_D - 1 else "true" if self.cell_safe[i, j] else "false")
                 # the grid exactly (17 digits round-trip): fed back to the C lookup, a grid point
                 # must hit the table's grid point, not a neighbour's cell
-                lines.append(f"{P:.17g},{D:.17g},{num(self.beta[i, j])},{num(self.alpha[i, j])},"
+                lines.append(f"{P:.17g},{D:.17g},{num(self.beta[i, j])},{exact(self.alpha[i, j])},"
                              f"{num(self.torque_bandwidth_rad_s[i, j])},{'true' if ok else 'false'},"
-                             f"{'true' if self.beta_at_limit[i, j] else 'false'}")
+                             f"{'true' if self.beta_at_limit[i, j] else 'false'},{exact(self.table_beta[i, j])},"
+                             f"{cell},{quoted if i == j == 0 else ''}")
         return "\n".join(lines) + "\n"
 
     def save_csv(self, path, tx=None, field: str | None = None):
@@ -187,72 +210,208 @@ class Schedule:
         if not self.feasible.any():
             raise ParameterError("the schedule has no feasible point, so there is no gain to emit; "
                                  "allowed: a beta range or requirements that some impedance meets")
+        alpha = self.alpha if self.meta.get("alpha_scheduled") else None
+        return ScheduleTable(self.P_gain, self.D_gain, self.table_beta, self.feasible, self._table_meta(),
+                             alpha=alpha, cell_safe=self.cell_safe)
+
+    def _table_meta(self) -> dict:
+        """The lookup header's provenance (:data:`haa_sym.design.schedule_table.META_KEYS` and more)."""
         m = self.meta
-        meta = {"actuator": m["actuator"], "source": m["source"], "requirements": m["requirements"],
+        return {"actuator": m["actuator"], "source": m["source"], "requirements": list(m["requirements"]),
                 "tolerances": {"beta_tol": m["beta_tol"], "pm_deg": 30.0},
-                "haa_sym_version": m["haa_sym"], "leg": m["leg"], "leg_mode": m["leg_mode"],
-                "leg_configurations": self.n_configurations, "beta_range": m["beta_range"],
+                "haa_sym_version": m["haa_sym"], "leg": list(m["leg"]), "leg_mode": m["leg_mode"],
+                "leg_configurations": int(self.n_configurations), "beta_range": list(m["beta_range"]),
                 "cell_check": m["cell_check"]}
-        alpha = self.alpha if m.get("alpha_scheduled") else None
-        return ScheduleTable(self.P_gain, self.D_gain, self.table_beta, self.feasible, meta, alpha=alpha,
-                             cell_safe=self.cell_safe)
 
 
-#: What the header of a lookup rebuilt from the CSV says about its cells: the CSV holds the
-#: schedule at the grid points only (its ``beta``), not the cell-checked corner values.
+#: What the header of a lookup rebuilt from a CSV without the lookup's columns
+#: (:data:`CSV_COLUMNS_UNCHECKED`, written before they existed) says about its cells: such a CSV
+#: holds the schedule at the grid points only (its ``beta``), not the cell-checked corner values.
 CSV_CELL_CHECK = ("not checked: the table was rebuilt from the schedule's CSV, which holds beta at the grid points "
                   "(not the corner values the cell check lowered, nor its safe cells); the cell-checked table is "
                   "haa-sym schedule --c-out's")
 
 
+# Characters of the table_meta JSON written as %XX: the delimiter, numpy.genfromtxt's comment
+# mark, and the escape itself. The cell then needs no CSV quoting, and every CSV of the project
+# reads with numpy.genfromtxt (tests/test_paper_reproduce.py), pandas and the csv module alike.
+_META_ESCAPED = ",#%"
+
+
+def _meta_cell(obj: dict) -> str:
+    """``table_meta``'s cell: ``obj`` as JSON (ASCII), :data:`_META_ESCAPED` as ``%XX``."""
+    return "".join(f"%{ord(c):02X}" if c in _META_ESCAPED else c for c in json.dumps(obj))
+
+
+def _csv_rows(text: str, where: str):
+    """``(header, [(line number, cells)])`` of a CSV text, blank lines skipped, cells stripped."""
+    try:
+        rows = [(n, [c.strip() for c in r]) for n, r in _numbered(csv.reader(io.StringIO(text, newline="")))
+                if any(c.strip() for c in r)]
+    except csv.Error as exc:
+        raise ParameterError(f"{where}: not a CSV file ({exc}); allowed: a CSV of haa-sym schedule --out") from None
+    return (rows[0][1] if rows else []), rows[1:]
+
+
+def _numbered(reader):
+    """``(first line number of the row, row)`` for each row of a ``csv.reader``."""
+    start = 1
+    for row in reader:
+        yield start, row
+        start = reader.line_num + 1
+
+
 def table_from_csv(text: str, source: str, meta: dict, field: str = "--schedule") -> ScheduleTable:
     """A :class:`ScheduleTable` from the text of :meth:`Schedule.csv_text` (``haa-sym schedule
-    --out``): its grid, ``beta`` and ``feasible``; ``alpha`` where the CSV's feasible rows do not
-    all share one value (a scheduled alpha). The cells are those with four feasible corners,
-    unchecked (:data:`CSV_CELL_CHECK`). ``meta``: the header's provenance (:data:`META_KEYS` of
-    :mod:`haa_sym.design.schedule_table`), ``source`` added.
+    --out``; docs/schedule.md, "The CSV").
+
+    With the columns :data:`CSV_COLUMNS`: the cell-checked table :meth:`Schedule.table` builds,
+    the same arrays (``table_beta``, ``feasible``, ``alpha`` where the schedule scheduled it,
+    ``cell_safe``) and the CSV's provenance (``table_meta``), its ``source`` naming the CSV and
+    the parameter file the schedule read; ``meta`` is not used. With the older columns
+    :data:`CSV_COLUMNS_UNCHECKED`: the grid, ``beta`` and ``feasible``; ``alpha`` where the
+    feasible rows do not all share one value; the cells those with four feasible corners,
+    unchecked (:data:`CSV_CELL_CHECK`), and ``meta`` (:data:`META_KEYS` of
+    :mod:`haa_sym.design.schedule_table`) the header's provenance, ``source`` added.
 
     Raises
     ------
     ParameterError
-        One line naming ``field``, the file, the row or column at fault and what is allowed.
+        One line naming ``field``, the file, the row (its line number) or column at fault and
+        what is allowed.
     """
     where = f"{field} {source!r}"
-    lines = [ln for ln in text.splitlines() if ln.strip()]
-    if not lines or tuple(c.strip() for c in lines[0].split(",")) != CSV_COLUMNS:
-        raise ParameterError(f"{where}: header {lines[0][:80] if lines else ''!r}; allowed: a CSV of haa-sym "
-                             f"schedule --out, columns {','.join(CSV_COLUMNS)}")
+    header, body = _csv_rows(text, where)
+    checked = tuple(header) == CSV_COLUMNS
+    if not checked and tuple(header) != CSV_COLUMNS_UNCHECKED:
+        raise ParameterError(f"{where}: header {','.join(header)[:80]!r}; allowed: a CSV of haa-sym schedule --out, "
+                             f"columns {','.join(CSV_COLUMNS)} (or, from a CSV written before the lookup's columns "
+                             f"existed, the first {len(CSV_COLUMNS_UNCHECKED)} of them: an unchecked table)")
+    columns = CSV_COLUMNS if checked else CSV_COLUMNS_UNCHECKED
     rows = []
-    for n, line in enumerate(lines[1:], start=2):
-        cells = [c.strip() for c in line.split(",")]
+    for n, cells in body:
+        line = ",".join(cells)
         try:
-            if len(cells) != len(CSV_COLUMNS) or cells[5] not in ("true", "false"):
+            if len(cells) != len(columns) or cells[5] not in ("true", "false"):
                 raise ValueError
             ok = cells[5] == "true"
             P, D = float(cells[0]), float(cells[1])
             beta = float(cells[2]) if ok else math.nan
             alpha = float(cells[3]) if ok and cells[3] else math.nan
         except ValueError:
-            raise ParameterError(f"{where}: row {n} {line[:80]!r}; allowed: {len(CSV_COLUMNS)} columns, numbers "
+            raise ParameterError(f"{where}: row {n} {line[:80]!r}; allowed: {len(columns)} columns, numbers "
                                  "P_gain, D_gain, beta (and alpha) where feasible is true, feasible true or false")
-        rows.append((P, D, beta, alpha, ok))
+        if checked:
+            tb = _table_beta(cells, ok, f"{where}: row {n}: table_beta")
+            if cells[8] not in ("true", "false", ""):
+                raise ParameterError(f"{where}: row {n}: cell_safe = {cells[8]!r}; allowed: true or false (the cell "
+                                     "whose lowest P_gain and D_gain corner is this point), empty on the last "
+                                     "P_gain and the last D_gain of the grid")
+            rows.append((P, D, beta, alpha, ok, tb, cells[8], cells[9], n))
+        else:
+            rows.append((P, D, beta, alpha, ok, beta, "", "", n))
     P = np.array(sorted({r[0] for r in rows}))
     D = np.array(sorted({r[1] for r in rows}))
     if len(rows) != P.size * D.size:
         raise ParameterError(f"{where}: {len(rows)} rows for {P.size} P_gain x {D.size} D_gain values; allowed: "
                              "one row per point of a rectangular grid")
-    beta, alpha = np.full((P.size, D.size), math.nan), np.full((P.size, D.size), math.nan)
-    feasible = np.zeros((P.size, D.size), bool)
-    seen = np.zeros((P.size, D.size), bool)
-    for Pv, Dv, b, a, ok in rows:
+    shape = (P.size, D.size)
+    beta, alpha, table_beta = np.full(shape, math.nan), np.full(shape, math.nan), np.full(shape, math.nan)
+    feasible, seen = np.zeros(shape, bool), np.zeros(shape, bool)
+    cell_safe = np.zeros((P.size - 1, D.size - 1), bool)
+    provenance = []
+    for Pv, Dv, b, a, ok, tb, safe, tm, n in rows:
         i, j = int(np.searchsorted(P, Pv)), int(np.searchsorted(D, Dv))
         if seen[i, j]:
             raise ParameterError(f"{where}: the point P_gain {Pv!r}, D_gain {Dv!r} twice; allowed: each point once")
-        seen[i, j], beta[i, j], alpha[i, j], feasible[i, j] = True, b, a, ok
-    a_ok = alpha[feasible]
-    scheduled = a_ok.size and np.all(np.isfinite(a_ok)) and np.ptp(a_ok) > 0
-    return ScheduleTable(P, D, beta, feasible, {**meta, "source": source, "cell_check": CSV_CELL_CHECK},
-                         alpha=alpha if scheduled else None)
+        seen[i, j], beta[i, j], alpha[i, j], feasible[i, j], table_beta[i, j] = True, b, a, ok, tb
+        if not checked:
+            continue
+        last = i == P.size - 1 or j == D.size - 1
+        if (safe == "") != last:
+            raise ParameterError(f"{where}: row {n}: cell_safe = {safe!r} at P_gain {Pv!r}, D_gain {Dv!r}; allowed: "
+                                 + ("empty on the last P_gain and the last D_gain of the grid (no cell starts there)"
+                                    if last else "true or false (the cell whose lowest corner this point is)"))
+        if safe == "true":
+            cell_safe[i, j] = True
+        if tm:
+            provenance.append((n, tm))
+    if checked:
+        _check_cells_csv(cell_safe, feasible, rows, P, D, where)
+        meta, alpha_scheduled = _table_meta_csv(provenance, source, where)
+    else:
+        meta = {**meta, "source": source, "cell_check": CSV_CELL_CHECK}
+        a_ok = alpha[feasible]
+        alpha_scheduled = a_ok.size and np.all(np.isfinite(a_ok)) and np.ptp(a_ok) > 0
+        cell_safe = None
+    try:
+        return ScheduleTable(P, D, table_beta, feasible, meta, alpha=alpha if alpha_scheduled else None,
+                             cell_safe=cell_safe)
+    except ParameterError as exc:
+        raise ParameterError(f"{where}: {exc}") from None
+
+
+def _table_beta(cells: list, ok: bool, what: str) -> float:
+    """A row's ``table_beta``: where feasible, a finite number > 0 that is not above the row's
+    beta (compared at beta's 12 digits, as the CSV prints it: rounding keeps the order); empty
+    where infeasible."""
+    text = cells[7]
+    if not ok:
+        if text:
+            raise ParameterError(f"{what} = {text!r} at an infeasible point (feasible false); allowed: empty")
+        return math.nan
+    try:
+        v = float(text)
+    except ValueError:
+        v = math.nan
+    if not (math.isfinite(v) and v > 0):
+        raise ParameterError(f"{what} = {text!r} at a feasible point; allowed: a finite number > 0 (the corner "
+                             "value the lookup interpolates)")
+    if float(f"{v:.12g}") > float(cells[2]):
+        raise ParameterError(f"{what} = {text!r} is above the row's beta = {cells[2]}; allowed: at most beta (the "
+                             "cell check only lowers corner values)")
+    return v
+
+
+def _check_cells_csv(cell_safe, feasible, rows, P, D, where) -> None:
+    """A safe cell needs four feasible corners (else no beta qualifies at one: no safe gain)."""
+    corners = feasible[:-1, :-1] & feasible[1:, :-1] & feasible[:-1, 1:] & feasible[1:, 1:]
+    bad = cell_safe & ~corners
+    if bad.any():
+        i, j = (int(k) for k in np.argwhere(bad)[0])
+        n = next(r[8] for r in rows if r[0] == P[i] and r[1] == D[j])
+        raise ParameterError(f"{where}: row {n}: cell_safe = 'true' at P_gain {float(P[i])!r}, D_gain "
+                             f"{float(D[j])!r}, but a corner of its cell is infeasible; allowed: true only where "
+                             "the cell's four corners are feasible")
+
+
+def _table_meta_csv(provenance: list, source: str, where: str) -> tuple[dict, bool]:
+    """The lookup header's provenance from the CSV's ``table_meta`` (one row's JSON object), its
+    ``source`` naming the CSV and the parameter file the schedule read; and whether alpha is
+    scheduled."""
+    allowed = ("one row (the first, as written) with a JSON object {\"alpha_scheduled\": true or false, "
+               "\"provenance\": {...}}, its ',' '#' '%' written %2C %23 %25, the others empty")
+    if len(provenance) != 1:
+        raise ParameterError(f"{where}: table_meta in {len(provenance)} rows"
+                             + (f" ({', '.join(str(n) for n, _ in provenance[:4])})" if provenance else "")
+                             + f"; allowed: {allowed}")
+    n, text = provenance[0]
+    try:
+        obj = json.loads(urllib.parse.unquote(text, errors="strict"))
+    except ValueError:
+        obj = None
+    if not (isinstance(obj, dict) and set(obj) == {"alpha_scheduled", "provenance"}
+            and isinstance(obj["alpha_scheduled"], bool) and isinstance(obj["provenance"], dict)
+            and isinstance(obj["provenance"].get("source"), str)):
+        raise ParameterError(f"{where}: row {n}: table_meta = {text[:60]!r}; allowed: {allowed}, the provenance "
+                             "with a source")
+    meta = dict(obj["provenance"])
+    missing = [k for k in META_KEYS if k not in meta]
+    if missing:
+        raise ParameterError(f"{where}: row {n}: table_meta's provenance lacks {missing}; allowed: the keys "
+                             f"{list(META_KEYS)} of the lookup header's provenance (more allowed)")
+    meta["source"] = f"{source} (haa-sym schedule --out of {meta['source']}, cell-checked)"
+    return meta, obj["alpha_scheduled"]
 
 
 # ------------------------------------------------------------------------------ the tasks
