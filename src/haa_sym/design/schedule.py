@@ -451,6 +451,7 @@ def _verify(runner, params, configs, P, D, fine, alphas, best_k, req, options, d
     PP, DD = PP.ravel(), DD.ravel()
     best_k = best_k.copy()
     lowered = set()
+    config_keys = [_key(c) for c in configs]
     todo = {a: np.flatnonzero(best_k[a] >= 0) for a in range(alphas.size)}
     while any(t.size for t in todo.values()):
         jobs = []
@@ -467,7 +468,7 @@ def _verify(runner, params, configs, P, D, fine, alphas, best_k, req, options, d
         for (c, k, a, m), r in zip(jobs, res):
             decided[(_key(c), k, a)].update(zip(m, np.asarray(r, bool).tolist()))
         for a, t in todo.items():
-            ok = np.array([all(decided[(_key(c), int(best_k[a, p]), a)][p] for c in configs) for p in t.tolist()],
+            ok = np.array([all(decided[(ck, int(best_k[a, p]), a)][p] for ck in config_keys) for p in t.tolist()],
                           bool)
             bad = t[~ok] if t.size else t
             lowered.update(bad.tolist())
@@ -503,8 +504,19 @@ def _check_cells(runner, params, configs, P, D, fine, K, alpha_pt, req, options,
     s = np.arange(n_sub + 1) / n_sub
     tt, uu = (x.ravel() for x in np.meshgrid(s, s, indexing="ij"))
     W = np.stack([(1 - tt) * (1 - uu), tt * (1 - uu), (1 - tt) * uu, tt * uu], axis=1)
+    # The sub-grid's P and D values, made once: a sub-point is named by its global sub-grid
+    # indices (cell i's t-th P value is index i * n_sub + t), so that neighbouring cells share
+    # their edge points' decisions (edges exactly the grid's values) and a decision's key is
+    # four Python numbers made from arrays, not converted one by one (the cell check's Python
+    # between its passes is on the critical path of a cluster run: issue 27).
+    ti, ui = (np.rint(x * n_sub).astype(int) for x in (tt, uu))
     log_step = np.log(P[1:] / P[:-1])
-    decided: dict = {}                       # (k, alpha, P, D) -> meets at every configuration
+    P_sub, D_sub = np.empty((P.size - 1) * n_sub + 1), np.empty((D.size - 1) * n_sub + 1)
+    for i in range(P.size - 1):
+        P_sub[i * n_sub + ti] = np.where(tt == 1, P[i + 1], P[i] * np.exp(tt * log_step[i]))
+    for j in range(D.size - 1):
+        D_sub[j * n_sub + ui] = np.where(uu == 1, D[j + 1], D[j] + uu * (D[j + 1] - D[j]))
+    decided: dict = {}                       # (k, alpha, P index, D index) -> meets at every configuration
     failed_once, lowered_pts, given_up = set(), set(), 0
     passes = [0]
 
@@ -513,17 +525,16 @@ def _check_cells(runner, params, configs, P, D, fine, K, alpha_pt, req, options,
 
     def sub_points(i, j, drop=0):
         ci, cj = corners(i, j)
-        b, a = W @ fine[K[ci, cj] - drop], W @ alpha_pt[ci, cj]
+        b = W @ fine[K[ci, cj] - drop]
         if np.all(alpha_pt[ci, cj] == alpha_pt[i, j]):
-            a = np.full(tt.size, alpha_pt[i, j])   # one alpha exactly: one decision call per beta
-        # edges exactly the grid's, so neighbouring cells share their edge points' decisions
-        Ps = np.where(tt == 1, P[i + 1], P[i] * np.exp(tt * log_step[i]))
-        Ds = np.where(uu == 1, D[j + 1], D[j] + uu * (D[j + 1] - D[j]))
+            a = [float(alpha_pt[i, j])] * tt.size  # one alpha exactly: one decision call per beta
+        else:
+            a = (W @ alpha_pt[ci, cj]).tolist()
         klo = np.clip(np.searchsorted(fine, b * (1 + 1e-12), side="right") - 1, 0, fine.size - 1)
         on_grid = np.abs(fine[klo] - b) <= 1e-12 * b          # a corner: its own grid value
         khi = np.where(on_grid, klo, np.minimum(klo + 1, fine.size - 1))
-        return [(int(k), float(x), float(p), float(d)) for kk in (klo, khi)
-                for k, x, p, d in zip(kk, a, Ps, Ds)]
+        gp, gd = (i * n_sub + ti).tolist(), (j * n_sub + ui).tolist()
+        return list(zip(np.concatenate([klo, khi]).tolist(), a + a, gp + gp, gd + gd))
 
     def holds(probes):
         """{(i, j, drop): the cell's sub-grid meets the requirements with its corners lowered
@@ -537,13 +548,13 @@ def _check_cells(runner, params, configs, P, D, fine, K, alpha_pt, req, options,
         if need:
             passes[0] += 1
             groups = [(k, a, sorted(pd)) for (k, a), pd in sorted(need.items())]
-            tasks = [(params, c, np.array([p for p, _ in pd]), np.array([d for _, d in pd]), float(fine[k]), a,
+            tasks = [(params, c, P_sub[[p for p, _ in pd]], D_sub[[d for _, d in pd]], float(fine[k]), a,
                       req, options) for k, a, pd in groups for c in configs]
             res = runner.run(_task_points, tasks, f"schedule: cells (pass {passes[0]})")
             for g, (k, a, pd) in enumerate(groups):
                 ok = np.logical_and.reduce([np.asarray(r, bool)
                                             for r in res[g * len(configs):(g + 1) * len(configs)]])
-                decided.update({(k, a, p, d): bool(o) for (p, d), o in zip(pd, ok)})
+                decided.update(zip(((k, a, p, d) for p, d in pd), ok.tolist()))
         return {q: all(decided[key] for key in pts) for q, pts in keys.items()}
 
     todo = {(int(i), int(j)) for i, j in np.argwhere(safe)}
@@ -764,7 +775,8 @@ def schedule(loop, P_gain=None, D_gain=None, *, beta_range=(0.1, 8.0), beta_tol:
                 points[(key_of(c), k, a)].update(zip(m, np.asarray(r, bool).tolist()))
             for a, need in enumerate(needs):
                 for k in sorted(need):
-                    ok = np.array([all(points[(key_of(c), k, a)][p] for c in configs) for p in need[k]])
+                    got = [points[(key_of(c), k, a)] for c in configs]
+                    ok = np.array([all(g[p] for g in got) for p in need[k]])
                     pts = np.array(need[k])
                     best_k[a, pts[ok]] = np.maximum(best_k[a, pts[ok]], k)
             return best_k
