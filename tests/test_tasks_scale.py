@@ -4,6 +4,7 @@ were the serial part on a cluster), a cluster's ``run`` groups small calls into 
 worker, and the task graph is recorded for benchmarks/bench_scale.py."""
 import contextlib
 import threading
+import time
 
 import pytest
 
@@ -106,6 +107,31 @@ def test_start_submits_without_a_barrier_and_collects_in_order():
     later = r.start(lambda x: calls.append(x) or x, [(1,), (2,)], "later")
     assert calls == []
     assert later() == [1, 2] and sorted(calls) == [1, 2]
+
+
+def _stamp(tag, seconds):
+    time.sleep(seconds)
+    return tag, time.monotonic()
+
+
+def test_background_tasks_give_way_to_every_later_task_list():
+    """start(background=True): the later lists' tasks go first (they would otherwise wait behind
+    every started call), the started calls run in what idle time is left, one call a task."""
+    with traced_cluster(1) as (client, trace):
+        r = TaskRunner(client, False)
+        later = r.start(_stamp, [("background", 0.05)] * 10, "background", background=True)
+        first = r.run(_stamp, [("list", 0.01)] * 4, "a later task list")
+        done = max(t for _, t in first)
+        got = later()
+        assert [tag for tag, _ in got] == ["background"] * 10
+        # at most the calls the worker had begun or been given (dask gives a one-thread worker
+        # two tasks at a time) before the later list arrived; in submission order, all ten
+        assert sum(t < done for _, t in got) <= 2
+        assert len(trace) == 10 + 4
+        # the same without background: the later list waits behind the started calls
+        later = r.start(_stamp, [("started", 0.02)] * 10, "started")
+        first = r.run(_stamp, [("list", 0.01)] * 4, "a later task list")
+        assert sum(t < max(t for _, t in first) for _, t in later()) >= 8
 
 
 def _depth(trace) -> int:

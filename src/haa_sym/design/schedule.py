@@ -506,56 +506,84 @@ def _check_cells(runner, params, configs, P, D, fine, K, alpha_pt, req, options,
     W = np.stack([(1 - tt) * (1 - uu), tt * (1 - uu), (1 - tt) * uu, tt * uu], axis=1)
     # The sub-grid's P and D values, made once: a sub-point is named by its global sub-grid
     # indices (cell i's t-th P value is index i * n_sub + t), so that neighbouring cells share
-    # their edge points' decisions (edges exactly the grid's values) and a decision's key is
-    # four Python numbers made from arrays, not converted one by one (the cell check's Python
-    # between its passes is on the critical path of a cluster run: issue 27).
-    ti, ui = (np.rint(x * n_sub).astype(int) for x in (tt, uu))
+    # their edge points' decisions (edges exactly the grid's values).
+    ti, ui = (np.rint(x * n_sub).astype(np.int64) for x in (tt, uu))
     log_step = np.log(P[1:] / P[:-1])
     P_sub, D_sub = np.empty((P.size - 1) * n_sub + 1), np.empty((D.size - 1) * n_sub + 1)
     for i in range(P.size - 1):
         P_sub[i * n_sub + ti] = np.where(tt == 1, P[i + 1], P[i] * np.exp(tt * log_step[i]))
     for j in range(D.size - 1):
         D_sub[j * n_sub + ui] = np.where(uu == 1, D[j + 1], D[j] + uu * (D[j + 1] - D[j]))
-    decided: dict = {}                       # (k, alpha, P index, D index) -> meets at every configuration
+    # A decision (beta index k, alpha, P index, D index) -> "meets at every configuration" is
+    # kept as one integer code, sorted, with its answer: a pass's sub-points are made, looked up
+    # and grouped as arrays (the cell check's Python between its passes is on the critical path
+    # of a cluster run, issue 27: 0.39 s on the default grid when made point by point).
+    alpha_ids: dict = {}                     # alpha (a float) -> its number in the codes
+    dims = (fine.size, P_sub.size, D_sub.size)
+    codes, answers = np.empty(0, np.int64), np.empty(0, bool)
     failed_once, lowered_pts, given_up = set(), set(), 0
     passes = [0]
 
     def corners(i, j):
         return [i, i + 1, i, i + 1], [j, j, j + 1, j + 1]
 
-    def sub_points(i, j, drop=0):
-        ci, cj = corners(i, j)
-        b = W @ fine[K[ci, cj] - drop]
-        if np.all(alpha_pt[ci, cj] == alpha_pt[i, j]):
-            a = [float(alpha_pt[i, j])] * tt.size  # one alpha exactly: one decision call per beta
-        else:
-            a = (W @ alpha_pt[ci, cj]).tolist()
+    def sub_codes(Q):
+        """The decisions' codes of probes ``Q`` ((n, 3): i, j, drop), (n, 2 * sub-points): each
+        sub-point at the two beta-grid values bracketing its interpolated beta."""
+        I, J, drop = Q[:, 0], Q[:, 1], Q[:, 2]
+        ci, cj = np.stack([I, I + 1, I, I + 1], 1), np.stack([J, J, J + 1, J + 1], 1)
+        b = fine[K[ci, cj] - drop[:, None]] @ W.T
+        al = alpha_pt[ci, cj]
+        A = np.repeat(al[:, :1], tt.size, axis=1)       # one alpha exactly: one decision call per beta
+        for r in np.flatnonzero(np.any(al != al[:, :1], axis=1)):
+            A[r] = W @ al[r]
         klo = np.clip(np.searchsorted(fine, b * (1 + 1e-12), side="right") - 1, 0, fine.size - 1)
         on_grid = np.abs(fine[klo] - b) <= 1e-12 * b          # a corner: its own grid value
         khi = np.where(on_grid, klo, np.minimum(klo + 1, fine.size - 1))
-        gp, gd = (i * n_sub + ti).tolist(), (j * n_sub + ui).tolist()
-        return list(zip(np.concatenate([klo, khi]).tolist(), a + a, gp + gp, gd + gd))
+        values, inverse = np.unique(A, return_inverse=True)
+        ids = np.array([alpha_ids.setdefault(x, len(alpha_ids)) for x in values.tolist()], np.int64)
+        a_id = ids[inverse.reshape(A.shape)]
+        gp, gd = I[:, None] * n_sub + ti, J[:, None] * n_sub + ui
+        if len(alpha_ids) * math.prod(dims) >= 2 ** 63:        # pragma: no cover - far beyond any budget
+            raise ParameterError("the cell check's sub-grid is too large to name its points; allowed: fewer "
+                                 "grid points, beta values or cell_subdivisions")
+        return np.concatenate([((a_id * dims[0] + k) * dims[1] + gp) * dims[2] + gd for k in (klo, khi)], axis=1)
+
+    def lookup(q):
+        """(found, answer) of codes ``q``."""
+        at = np.minimum(np.searchsorted(codes, q), max(codes.size - 1, 0))
+        found = (codes[at] == q) if codes.size else np.zeros(q.shape, bool)
+        return found, (answers[at] if codes.size else found) & found
 
     def holds(probes):
         """{(i, j, drop): the cell's sub-grid meets the requirements with its corners lowered
         by ``drop``}, deciding what is not decided yet in one pass (one task list)."""
-        keys = {q: sub_points(*q) for q in sorted(probes)}
-        need: dict = {}
-        for pts in keys.values():
-            for key in pts:
-                if key not in decided:
-                    need.setdefault(key[:2], set()).add(key[2:])
-        if need:
+        nonlocal codes, answers
+        qs = sorted(probes)
+        q = sub_codes(np.array(qs, np.int64).reshape(-1, 3))
+        found, _ = lookup(q)
+        need = np.unique(q[~found])
+        if need.size:
             passes[0] += 1
-            groups = [(k, a, sorted(pd)) for (k, a), pd in sorted(need.items())]
-            tasks = [(params, c, P_sub[[p for p, _ in pd]], D_sub[[d for _, d in pd]], float(fine[k]), a,
-                      req, options) for k, a, pd in groups for c in configs]
+            gd = need % dims[2]
+            gp = need // dims[2] % dims[1]
+            k = need // (dims[2] * dims[1]) % dims[0]
+            a = np.array(list(alpha_ids), float)[need // (dims[2] * dims[1] * dims[0])]
+            order = np.lexsort((gd, gp, a, k))              # by beta, then alpha, P, D
+            need, gd, gp, k, a = need[order], gd[order], gp[order], k[order], a[order]
+            cut = np.flatnonzero((np.diff(k) != 0) | (np.diff(a) != 0)) + 1
+            groups = np.split(np.arange(need.size), cut)
+            tasks = [(params, c, P_sub[gp[g]], D_sub[gd[g]], float(fine[k[g[0]]]), float(a[g[0]]), req, options)
+                     for g in groups for c in configs]
             res = runner.run(_task_points, tasks, f"schedule: cells (pass {passes[0]})")
-            for g, (k, a, pd) in enumerate(groups):
-                ok = np.logical_and.reduce([np.asarray(r, bool)
-                                            for r in res[g * len(configs):(g + 1) * len(configs)]])
-                decided.update(zip(((k, a, p, d) for p, d in pd), ok.tolist()))
-        return {q: all(decided[key] for key in pts) for q, pts in keys.items()}
+            ok = np.concatenate([np.logical_and.reduce([np.asarray(r, bool)
+                                                        for r in res[n * len(configs):(n + 1) * len(configs)]])
+                                 for n in range(len(groups))])
+            codes, answers = np.concatenate([codes, need]), np.concatenate([answers, ok])
+            order = np.argsort(codes, kind="stable")
+            codes, answers = codes[order], answers[order]
+        _, ok = lookup(q)
+        return dict(zip(qs, ok.all(axis=1).tolist()))
 
     todo = {(int(i), int(j)) for i, j in np.argwhere(safe)}
     rounds = 0
@@ -817,11 +845,13 @@ def schedule(loop, P_gain=None, D_gain=None, *, beta_range=(0.1, 8.0), beta_tol:
             free_params = _free_in_the_air(params)
             pairs = sorted({(int(current[:, p].max()), a) for p in np.flatnonzero(current.max(axis=0) >= 0)
                             for a in range(alphas.size) if current[a, p] == current[:, p].max()})
-            # started, not waited for: with one alpha the cell check does not need them, and its
-            # first task list runs beside them on a cluster (no barrier between the two)
+            # started, not waited for: with one alpha the cell check does not need them; on a
+            # cluster they run in the background, in the workers' idle time at the end of each of
+            # the cell check's passes (no barrier between the two, and none added to the passes)
             bandwidths = runner.start(_task_bandwidth, [(free_params, options, loop.backend, float(fine[k]),
                                                          float(alphas[a])) for k, a in pairs]
-                                      + [(free_params, options, loop.backend, 1.0, alpha_1)], "schedule: bandwidths")
+                                      + [(free_params, options, loop.backend, 1.0, alpha_1)], "schedule: bandwidths",
+                                      background=True)
             bw: dict = {}
 
             def collected() -> dict:

@@ -159,6 +159,8 @@ def connect(Client, address: str, timeout: float = DEFAULT_CONNECT_TIMEOUT):
 #: grouped (:func:`_call_each`) so that a map of many small calls does not pay a cluster task's
 #: milliseconds for each.
 CHUNKS_PER_WORKER = 4
+#: dask priority of :meth:`TaskRunner.start`'s background tasks (the others' is 0: higher first).
+BACKGROUND_PRIORITY = -1
 
 
 def _call_each(fn, args_list: list) -> list:
@@ -244,28 +246,36 @@ class TaskRunner:
             with _Bar(), ThreadPoolExecutor(self.threads, thread_name_prefix="haa_sym-task") as pool:
                 return list(dask.compute(*tasks, scheduler="threads", pool=pool))
 
-    def start(self, fn, args_list: list, label: str, unit: str = "task"):
+    def start(self, fn, args_list: list, label: str, unit: str = "task", background: bool = False):
         """:meth:`run` without the wait: returns a function of no argument that returns the
         results. On a cluster the tasks are submitted now and run while the command goes on, so
         the task lists that follow do not wait for them (no barrier); in-process they run when
-        the results are asked for."""
+        the results are asked for.
+
+        ``background``: on a cluster, every task submitted later (by :meth:`run`, :meth:`start`
+        or :meth:`stream`) goes first (dask's priority), so these fill the workers' idle time at
+        the end of each later task list (one worker still busy with the list's last group, the
+        others waiting for the next list) instead of delaying the lists; in groups of one call
+        each: a worker idle at a list's end takes one short call, not a group of them."""
         if self.client is None or not args_list:
             return lambda: self.run(fn, args_list, label, unit)
-        submitted = self._submit(fn, args_list)
+        submitted = self._submit(fn, args_list, BACKGROUND_PRIORITY if background else 0,
+                                 len(args_list) if background else None)
 
         def collect():
             with progress_bar(len(args_list), label, unit, self.progress) as bar:
                 return self._gather(*submitted, bar)
         return collect
 
-    def _submit(self, fn, args_list: list):
+    def _submit(self, fn, args_list: list, priority: int = 0, n: int | None = None):
         """A cluster's tasks of ``args_list``: small calls go in groups, CHUNKS_PER_WORKER a
-        worker (a cluster task costs milliseconds of scheduling and transfer); every n-th call to
-        a group (neighbouring calls cost alike, e.g. one leg configuration's maps), so the groups
-        take about the same time and the slowest decides little. Returns (futures, groups, n)."""
-        n = max(1, min(len(args_list), CHUNKS_PER_WORKER * self.workers()))
+        worker (a cluster task costs milliseconds of scheduling and transfer), or ``n`` groups;
+        every n-th call to a group (neighbouring calls cost alike, e.g. one leg configuration's
+        maps), so the groups take about the same time and the slowest decides little. Returns
+        (futures, groups, n)."""
+        n = max(1, min(len(args_list), CHUNKS_PER_WORKER * self.workers() if n is None else n))
         groups = [args_list[g::n] for g in range(n)]
-        futures = [self.client.submit(_call_each, fn, g, pure=False) for g in groups]
+        futures = [self.client.submit(_call_each, fn, g, pure=False, priority=priority) for g in groups]
         self._trace(futures, self._before)
         return futures, groups, n
 
