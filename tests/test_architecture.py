@@ -36,10 +36,9 @@ LAYERS = (
 # scipy.signal (about 0.7 s, it pulls scipy.stats), scipy.stats and scipy.optimize (0.25-0.5 s) only
 # by the few functions that use them (the cross-check's reference, a fit's figure, root finding),
 # so that a command which does not need them starts without them (tests/test_cli_startup.py);
-# haa_sym.io.worker_plugins (it imports distributed: only when a local:N cluster starts)
 LAZY_ALLOWED = ("sympy", "dask", "distributed", "control", "matplotlib", "pint", "haa_sym.symbolic",
                 "haa_sym.io.plots", "panel", "bokeh", "tornado", "scipy.signal", "scipy.stats", "scipy.optimize",
-                "mujoco", "haa_sym.io.worker_plugins")
+                "mujoco")
 
 
 def _modules():

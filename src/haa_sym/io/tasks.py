@@ -99,7 +99,17 @@ def cluster(spec):
               f"cores (no faster than local:{cores})", file=sys.stderr)
     import dask
     from distributed import Client, LocalCluster
+    from threadpoolctl import threadpool_limits
     cl = client = None
+    # One BLAS thread in every worker: a *forked* worker (LOCAL_START_METHOD) inherits this
+    # process's OpenBLAS, initialised with a thread per core (dask's OMP_NUM_THREADS=1, its
+    # nanny's pre-spawn environment, is read by OpenBLAS only when it loads: each forked worker
+    # of local:2 ran two BLAS threads on this 2-core machine, and local:1's one worker could use
+    # both cores, which a one-worker baseline must not). Limited here, before the forks, for the
+    # cluster's life (a worker a nanny restarts is forked from this process too): where a worker
+    # plugin did it, its round trip to every worker cost the start 0.02 s on 2 workers and
+    # 0.15 s on 16. This process's own BLAS is on one thread meanwhile (its work is the tasks').
+    blas = threadpool_limits(limits=1, user_api="blas")
     try:
         # no dashboard (the scheduler's and the workers'). The scheduler starts its HTTP server
         # (the /health and /metrics routes) even so, on dashboard_address, by default 8787 of
@@ -111,15 +121,15 @@ def cluster(spec):
                               scheduler_kwargs=SCHEDULER_HTTP, silence_logs=logging.ERROR)
         client = Client(cl)
         client.wait_for_workers(n, timeout=LOCAL_START_TIMEOUT)
-        # every worker (and one a nanny restarts) on one BLAS thread (haa_sym.io.worker_plugins)
-        from haa_sym.io.worker_plugins import OneBlasThread
-        client.register_plugin(OneBlasThread(), name="haa_sym-one-blas-thread")
         yield client
     finally:
-        if client is not None:
-            client.close()
-        if cl is not None:
-            cl.close()
+        try:
+            if client is not None:
+                client.close()
+            if cl is not None:
+                cl.close()
+        finally:
+            blas.restore_original_limits()
 
 
 def connect(Client, address: str, timeout: float = DEFAULT_CONNECT_TIMEOUT):
