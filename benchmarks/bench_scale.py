@@ -25,7 +25,10 @@ sized to the workers: more workers, smaller tasks, shorter chains):
   ``T(1) / (S + C)`` however many workers (the critical path S + C);
 - with ``--whole``, the whole command's: the fixed part F (of the fastest whole ``local:1`` run,
   probed (:data:`PROBE`): from its launch to its first task's submission and from its last task
-  list's return to its end) plus that prediction, against that run.
+  list's return to its end), plus what starting and stopping M workers costs the command's
+  process more than one (its CPU time, :func:`cluster_cpu`: the scheduler, the nannies and the
+  client are in that process, so it is serial on any machine; the workers' own starts are not,
+  on M cores), plus that prediction, against that run.
 
 ``--whole R`` also times the whole command as a user runs it, ``python -m haa_sym.cli ...
 --scheduler local:N`` in a new process (imports, the cluster's start and stop, every task), for
@@ -219,6 +222,41 @@ end(code)                                   # as haa-sym ends (haa_sym.cli.entry
 """
 
 
+#: Run as ``python -c CLUSTER_CPU N``: the command process's CPU seconds (all its threads: the
+#: scheduler, the nannies and the client live in it) to start and stop ``--scheduler local:N``
+#: (haa_sym.io.tasks.cluster, as a command does), printed as JSON on the last line of stdout.
+CLUSTER_CPU = """
+import json, resource, sys
+import haa_sym.design.schedule, distributed            # the command's imports, not timed
+from haa_sym.io.tasks import cluster
+def cpu():
+    r = resource.getrusage(resource.RUSAGE_SELF)
+    return r.ru_utime + r.ru_stime
+c = cpu()
+with cluster(f"local:{int(sys.argv[1])}"):
+    up = cpu()
+print(json.dumps({"start_s": up - c, "stop_s": cpu() - up}))
+"""
+
+
+def cluster_cpu(n: int, repeats: int = 3) -> dict:
+    """The command process's CPU seconds to start and stop a local cluster of ``n`` workers (the
+    fastest of ``repeats`` runs, each in a new process): serial whatever the cores (the
+    scheduler's, the nannies' and the client's work is in that process), while each worker's own
+    start runs in its process, beside the others on a machine with the cores for them."""
+    env = {**os.environ, "PYTHONPATH": os.pathsep.join([str(ROOT / "src")] + [p for p in [os.environ.get("PYTHONPATH")]
+                                                                            if p])}
+    best = None
+    for _ in range(repeats):
+        proc = subprocess.run([sys.executable, "-c", CLUSTER_CPU, str(n)], env=env, capture_output=True, text=True)
+        if proc.returncode != 0:
+            raise SystemExit(f"local:{n} did not start: {proc.stderr.strip()[-400:]}")
+        got = json.loads(proc.stdout.strip().splitlines()[-1])
+        if best is None or got["start_s"] + got["stop_s"] < best["start_s"] + best["stop_s"]:
+            best = got
+    return best
+
+
 def _copy_argv(argv: list[str], out: Path, k: int) -> list[str]:
     """``argv`` writing to its own file (copy ``k`` of the reference's concurrent runs)."""
     i = argv.index("--out") + 1
@@ -372,14 +410,22 @@ def main() -> int:
     if whole is not None:
         # what a whole command pays outside its task lists (Python's start, the imports, the
         # cluster's start and stop, the output), probed in the fastest local:1 run; the whole command on
-        # M workers is predicted as that plus the warm prediction (the start of M forked workers
-        # counted as that of one: not measured here)
+        # M workers is predicted as that plus the warm prediction plus what starting and stopping
+        # M workers costs the command's process more than one (its CPU time, measured here: the
+        # scheduler's, nannies' and client's work for each worker, serial on any machine)
         fixed = whole["fixed"]["fixed_s"]
+        cpu = {m: cluster_cpu(m) for m in sorted({1, 2, M})}
+        more = {m: max(0.0, sum(cpu[m].values()) - sum(cpu[1].values())) for m in predict}
         whole["fixed_s"] = fixed
-        whole["predicted_s"] = {str(m): fixed + t for m, t in predict.items()}
-        print(f"whole command: fixed part {fixed:.2f} s (probed: before the first task and after the last); "
-              f"predicted on {M} workers {fixed + predict[M]:.1f} s, "
-              f"{whole['best_s']['1'] / (fixed + predict[M]):.1f}x the best whole local:1 command")
+        whole["cluster_cpu_s"] = {str(m): v for m, v in cpu.items()}
+        whole["cluster_more_s"] = {str(m): v for m, v in more.items()}
+        whole["predicted_s"] = {str(m): fixed + more[m] + t for m, t in predict.items()}
+        print(f"starting and stopping local:N costs the command's process (CPU): "
+              + ", ".join(f"{m} worker(s) {cpu[m]['start_s']:.2f} + {cpu[m]['stop_s']:.2f} s" for m in cpu))
+        print(f"whole command: fixed part {fixed:.2f} s (probed: before the first task and after the last), "
+              f"{fixed + more[M]:.2f} s with {M} workers' start and stop; predicted on {M} workers "
+              f"{whole['predicted_s'][str(M)]:.1f} s, "
+              f"{whole['best_s']['1'] / whole['predicted_s'][str(M)]:.1f}x the best whole local:1 command")
         for n in range(2, args.workers + 1):
             per = ", ".join(f"{x:.2f}x" for x in whole["speedup_per_round"][str(n)])
             inside = ", ".join(f"{x:.2f}x" for x in whole["task_lists_speedup_per_round"][str(n)])

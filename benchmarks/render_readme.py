@@ -420,7 +420,12 @@ def scale_block(data: dict) -> str:
                 f"{sec(d['predicted_s'][M])} on {M}, {d['rows'][0]['seconds'] / d['predicted_s'][M]:.1f}x the "
                 f"1-worker run ({sec(d['rows'][0]['seconds'])})")
         if w is not None and "predicted_s" in w:
-            pred += (f"; whole command F {w['fixed_s']:.2f} s + that: {sec(w['predicted_s'][M])}, "
+            # F, and (since 2026-11-27) what M workers' start and stop cost the command's process
+            # more than one's
+            more = (w.get("cluster_more_s") or {}).get(M)
+            pred += (f"; whole command F {w['fixed_s']:.2f} s"
+                     + (f" + {M} workers' start and stop {more:.2f} s" if more is not None else "")
+                     + f" + that: {sec(w['predicted_s'][M])}, "
                      f"{w['best_s']['1'] / w['predicted_s'][M]:.1f}x the whole `local:1`")
         if key == "nonlinear":
             pred += f" (target {TARGET_SPEEDUP_16:g}x)"

@@ -79,6 +79,13 @@ def test_the_scale_block_is_rendered_from_bench_scales_json_and_kept_without_it(
     assert "2.40 s on 16, 12.5x the 1-worker run" in row
     # and the whole command's: F + the warm prediction, against the best whole local:1 (11.0 / 3.3)
     assert "whole command F 0.90 s + that: 3.30 s, 3.3x the whole `local:1`" in row
+    # and with what 16 workers' start and stop cost the command's process more than one's
+    whole.update(cluster_more_s={"16": 0.18}, predicted_s={"16": 3.48})
+    (results / "results_scale_schedule.json").write_text(json.dumps(data))
+    assert render_readme.main(["--results", str(results), "--page", str(copy), "--scale-only"]) == 0
+    row = next(line for line in copy.read_text().split(render_readme.SCALE_START)[1].splitlines()
+               if line.startswith("| `schedule`"))
+    assert "whole command F 0.90 s + 16 workers' start and stop 0.18 s + that: 3.48 s, 3.2x the whole" in row
     assert "| `regions --nonlinear`" in block and "not measured" in block
     # the other block and the text around are the page's
     assert new.split(render_readme.SCALE_START)[0] == page.split(render_readme.SCALE_START)[0]
