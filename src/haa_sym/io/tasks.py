@@ -407,6 +407,13 @@ class TaskRunner:
                     total += len(new)
             if not pending:
                 return
+            if done:
+                # a task finished: the cluster has a worker. The cluster is asked only after a
+                # wait in which none did: each ask is a round trip to the scheduler (its whole
+                # identity, every worker's metrics): after every finished task, 36 of them on the
+                # default schedule on local:2, 0.08 s of the command's own thread
+                idle_since = None
+                continue
             workers = len(self.client.scheduler_info().get("workers", {}))
             now = time.monotonic()
             if workers:
