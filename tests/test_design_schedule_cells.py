@@ -95,3 +95,45 @@ def test_a_chain_of_failing_cells_ends_after_cell_rounds_and_keeps_the_guarantee
         for k in (np.searchsorted(fine, b * (1 - 1e-12)), np.searchsorted(fine, b * (1 + 1e-12), "right") - 1):
             fb = fine[np.clip(k, 0, fine.size - 1)]
             assert np.all(((fb >= 7.0) & ~((Ps < 3.0) & (Ds < 10.0))) | (fb <= 3.0)), (i, j)
+
+
+class AlphaRule(Rule):
+    """As :class:`Rule`, with a limit that grows with alpha, and every alpha a task was asked at
+    recorded: where the corners' alphas differ the cell check interpolates alpha too."""
+
+    def __init__(self):
+        super().__init__()
+        self.alphas = set()
+
+    def run(self, fn, tasks, label, unit="task"):
+        self.passes += 1
+        self.alphas.update(a for *_, a, _, _ in tasks)
+        return [np.asarray(b <= limit(Ps, Ds) * (1 + 0.5 * (a - 1.0)) * (1 + 1e-12))
+                for _, _, Ps, Ds, b, a, _, _ in tasks]
+
+
+def test_interpolated_alphas_are_decided_at_their_own_values_and_keep_the_guarantee():
+    """The cell check names each decision by (beta, alpha, sub-grid indices): with alpha varying
+    from corner to corner (an alpha-scheduled table), the sub-points' alphas are bilinear in the
+    corners' and every safe cell holds at them, recomputed here."""
+    fine, _ = beta_grid((0.1, 8.0), 0.02)
+    K0 = np.full((P.size, D.size), fine.size - 1)
+    alpha = 0.6 + 0.1 * np.add.outer(np.arange(P.size), np.arange(D.size))      # 0.6 .. 1.4
+    runner = AlphaRule()
+    K, safe = _check_cells(runner, None, [{}], P, D, fine, K0, alpha, ("stable",), None, N_SUB)[:2]
+    assert safe.all() and np.any(K < K0)
+    s = np.arange(N_SUB + 1) / N_SUB
+    t, u = (x.ravel() for x in np.meshgrid(s, s, indexing="ij"))
+    asked = set()
+    for i, j in np.argwhere(safe):
+        ci, cj = [i, i + 1, i, i + 1], [j, j, j + 1, j + 1]
+        w = np.stack([(1 - t) * (1 - u), t * (1 - u), (1 - t) * u, t * u], axis=1)
+        b, a = w @ fine[K[ci, cj]], w @ alpha[ci, cj]
+        asked.update(a.tolist())
+        Ps, Ds = P[i] * (P[i + 1] / P[i]) ** t, D[j] + u * (D[j + 1] - D[j])
+        for k in (np.searchsorted(fine, b * (1 - 1e-12)), np.searchsorted(fine, b * (1 + 1e-12), "right") - 1):
+            fb = fine[np.clip(k, 0, fine.size - 1)]
+            assert np.all(fb <= limit(Ps, Ds) * (1 + 0.5 * (a - 1.0)) * (1 + 1e-12)), (i, j)
+    # the final corners' sub-points' alphas were all asked (to the last bit), and more than the
+    # corners' own values: interpolated ones
+    assert asked <= runner.alphas and len(runner.alphas) > np.unique(alpha).size
