@@ -432,7 +432,11 @@ def scale_block(data: dict) -> str:
         if w is None:
             rows.append(f"| {SCALE_LABELS[key]} | {NM} | {NM} | | | | {pred} |")
             continue
-        per = ", ".join(f"{x:.2f}x" for x in w["speedup_per_round"]["2"])
+        rounds = w["speedup_per_round"]["2"]
+        # best against best says what the code can do on this machine; the rounds that reached
+        # the target say how often it does here (a shared machine's speed moves within minutes)
+        hit = sum(x >= TARGET_SPEEDUP_2 for x in rounds)
+        per = ", ".join(f"{x:.2f}x" for x in rounds)
         if "task_lists_speedup_per_round" in w:
             # the span from the first task's submission to the last task list's return: what the
             # workers give, without the fixed part F that no worker shortens
@@ -446,7 +450,8 @@ def scale_block(data: dict) -> str:
                    + ", ".join(f"{a / c:.2f}" for a, c in zip(w["speedup_per_round"]["2"], cap)) + ")") if cap else NM
         rows.append(f"| {SCALE_LABELS[key]}, {len(w['speedup_per_round']['2'])} rounds, {r['date'][:16].replace('T', ' ')} UTC | "
                     f"{sec(w['best_s']['1'])} (median {sec(w['median_s']['1'])}) | {sec(w['best_s']['2'])} (median "
-                    f"{sec(w['median_s']['2'])}) | **{best:.2f}x** ({met(best >= TARGET_SPEEDUP_2)}) / {per} | {copies} | "
+                    f"{sec(w['median_s']['2'])}) | **{best:.2f}x** ({met(best >= TARGET_SPEEDUP_2)}; "
+                    f"{hit} of {len(rounds)} rounds) / {per} | {copies} | "
                     f"{min(free):.2f}-{max(free):.2f}, load {min(loads):.1f}-{max(loads):.1f} | {pred} |")
     same = all(d is None or d["same_output"] for d in data.values())
     note = ("Every run wrote the same bytes." if same else "**Some runs wrote other bytes** (see the JSON).")

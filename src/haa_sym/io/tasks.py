@@ -108,7 +108,8 @@ def cluster(spec):
     # both cores, which a one-worker baseline must not). Limited here, before the forks, for the
     # cluster's life (a worker a nanny restarts is forked from this process too): where a worker
     # plugin did it, its round trip to every worker cost the start 0.02 s on 2 workers and
-    # 0.15 s on 16. This process's own BLAS is on one thread meanwhile (its work is the tasks').
+    # 0.15-0.24 s on 16 (2 cores). This process's own BLAS is on one thread meanwhile (its
+    # work is the tasks').
     blas = threadpool_limits(limits=1, user_api="blas")
     try:
         # no dashboard (the scheduler's and the workers'). The scheduler starts its HTTP server
