@@ -88,7 +88,7 @@ def test_local_workers_run_one_blas_thread():
     import numpy  # noqa: F401 - OpenBLAS loaded in the command before the fork, as in a command
     from threadpoolctl import threadpool_limits
     # the command's OpenBLAS on two threads when it forks: an xdist worker runs on one
-    # (tests/conftest.py), which the forked workers would inherit without the plugin
+    # (tests/conftest.py), which the forked workers would inherit unless local:N limits it first
     with threadpool_limits(limits=2, user_api="blas"):
         assert _blas_threads() == [2]
         with tasks.cluster("local:2") as client:

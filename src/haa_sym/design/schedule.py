@@ -100,7 +100,7 @@ from haa_sym.errors import ParameterError
 from haa_sym.io.gridspec import grid
 from haa_sym.io.outputs import write_text
 from haa_sym.io.progress import message
-from haa_sym.io.tasks import DEFAULT_CONNECT_TIMEOUT, TaskRunner, cluster
+from haa_sym.io.tasks import DEFAULT_CONNECT_TIMEOUT, TaskRunner, cluster, local_workers
 from haa_sym.loop import ClosedLoop, loop_first
 from haa_sym.model.params import Params, gain_array
 
@@ -845,13 +845,16 @@ def schedule(loop, P_gain=None, D_gain=None, *, beta_range=(0.1, 8.0), beta_tol:
             free_params = _free_in_the_air(params)
             pairs = sorted({(int(current[:, p].max()), a) for p in np.flatnonzero(current.max(axis=0) >= 0)
                             for a in range(alphas.size) if current[a, p] == current[:, p].max()})
-            # started, not waited for: with one alpha the cell check does not need them; on a
-            # cluster they run in the background, in the workers' idle time at the end of each of
-            # the cell check's passes (no barrier between the two, and none added to the passes)
+            # started, not waited for: with one alpha the cell check does not need them; on the
+            # command's own local:N cluster they run in the background, in the workers' idle time
+            # at the end of each of the cell check's passes (no barrier between the two, and none
+            # added to the passes). Not on a cluster given by address: dask's priorities hold
+            # across its clients, and another client's work would always go first
+            # (docs/schedule.md, "Measured after the fifth round")
             bandwidths = runner.start(_task_bandwidth, [(free_params, options, loop.backend, float(fine[k]),
                                                          float(alphas[a])) for k, a in pairs]
                                       + [(free_params, options, loop.backend, 1.0, alpha_1)], "schedule: bandwidths",
-                                      background=True)
+                                      background=local_workers(spec) is not None)
             bw: dict = {}
 
             def collected() -> dict:

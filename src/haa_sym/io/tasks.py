@@ -109,9 +109,12 @@ def cluster(spec):
     # cluster's life (a worker a nanny restarts is forked from this process too): where a worker
     # plugin did it, its round trip to every worker cost the start 0.02 s on 2 workers and
     # 0.15-0.24 s on 16 (2 cores). This process's own BLAS is on one thread meanwhile (its
-    # work is the tasks').
-    blas = threadpool_limits(limits=1, user_api="blas")
+    # work is the tasks'; a library caller's other threads too, until the block ends). Where
+    # workers are spawned (not Linux) the limit does not reach them: there dask's pre-spawn
+    # environment (OMP_NUM_THREADS=1 unless the user set it) does, when their OpenBLAS loads.
+    blas = None
     try:
+        blas = threadpool_limits(limits=1, user_api="blas")
         # no dashboard (the scheduler's and the workers'). The scheduler starts its HTTP server
         # (the /health and /metrics routes) even so, on dashboard_address, by default 8787 of
         # host: given a free port of 127.0.0.1, so that another program on 8787 (a cluster of
@@ -130,7 +133,8 @@ def cluster(spec):
             if cl is not None:
                 cl.close()
         finally:
-            blas.restore_original_limits()
+            if blas is not None:
+                blas.restore_original_limits()
 
 
 def connect(Client, address: str, timeout: float = DEFAULT_CONNECT_TIMEOUT):
