@@ -1,11 +1,13 @@
-"""How a command scales with dask workers (issue 27, item 4): time, speedup, efficiency, and the
+"""How a command scales with workers (issue 27, item 4): time, speedup, efficiency, and the
 critical path that bounds the speedup.
 
 The command (a preset or any ``haa-sym`` command line after ``--``) is run in this process
-(``haa_sym.cli.main``) against a dask.distributed ``LocalCluster`` of 1, 2, ..., N worker
-processes (one thread each, 127.0.0.1, no dashboard; N the machine's cores unless given),
-started and warmed (haa_sym imported) before the timing; the cluster's start is timed apart
-(``--scheduler local:N`` pays it on every command). Every run's output must have the bytes of the
+(``haa_sym.cli.main``) on 1, 2, ..., N worker processes (one thread each; N the machine's cores
+unless given), started and warmed (haa_sym imported) before the timing, their start timed apart
+(``--scheduler local:N`` pays it on every command). ``--backend`` says which: ``pool`` (default),
+the local worker processes of ``--scheduler local:N`` (:class:`haa_sym.io.pool.LocalPool`); or
+``dask``, a dask.distributed ``LocalCluster`` on 127.0.0.1 given to the command by address, as
+a cluster of the two-terminal recipe is (its scheduler's dispatch per task is larger). Every run's output must have the bytes of the
 first (the npz's arrays; a CSV whole), else the script fails.
 
 The prediction for M workers (``--predict``, default 16) comes from one more run, on 1 worker (the
@@ -26,9 +28,9 @@ sized to the workers: more workers, smaller tasks, shorter chains):
 - with ``--whole``, the whole command's: the fixed part F (of the fastest whole ``local:1`` run,
   probed (:data:`PROBE`): from its launch to its first task's submission and from its last task
   list's return to its end), plus what starting and stopping M workers costs the command's
-  process more than one (its CPU time, :func:`cluster_cpu`: the scheduler, the nannies and the
-  client are in that process, so it is serial on any machine; the workers' own starts are not,
-  on M cores), plus that prediction, against that run.
+  process more than one (its CPU time, :func:`cluster_cpu`: the forks and the dispatcher thread
+  are in that process, so it is serial on any machine; the workers' own starts are not, on M
+  cores), plus that prediction, against that run.
 
 ``--whole R`` also times the whole command as a user runs it, ``python -m haa_sym.cli ...
 --scheduler local:N`` in a new process (imports, the cluster's start and stop, every task), for
@@ -47,11 +49,12 @@ Prints a table and writes ``results_scale_<preset>.json`` into ``$HAA_SYM_BENCH_
 bench-results/). Not part of ``make bench``.
 
 Usage: python benchmarks/bench_scale.py [--workers N] [--predict M] [--preset nonlinear|schedule]
-       [--repeats R] [--whole R] [--no-warm] [-- haa-sym ARGS ...]
+       [--backend pool|dask] [--repeats R] [--whole R] [--no-warm] [-- haa-sym ARGS ...]
 """
 from __future__ import annotations
 
 import argparse
+import contextlib
 import json
 import logging
 import os
@@ -154,19 +157,62 @@ def analyse(trace: list, stream: list, t0: float, t1: float) -> dict:
             "longest_task_s": max(dur.values(), default=0.0)}
 
 
-def run_once(argv: list[str], n: int, out: Path, sized_for: int | None = None) -> dict:
-    """One timed run of the command on a warm cluster of ``n`` workers; ``sized_for``: its tasks
-    sized as for that many workers (:meth:`TaskRunner.workers` patched in this process)."""
-    import distributed
+@contextlib.contextmanager
+def _serving(pool, spec: str):
+    """``--scheduler spec`` (local:N) runs on ``pool``, started and warm, for the block (every
+    module that took :func:`haa_sym.io.tasks.cluster` by name)."""
+    import haa_sym.design.schedule as schedule
+    from haa_sym.io import tasks
+    real = tasks.cluster
+
+    @contextlib.contextmanager
+    def warm(s):
+        if s == spec:
+            yield pool
+        else:
+            with real(s) as got:
+                yield got
+    tasks.cluster = schedule.cluster = warm
+    try:
+        yield
+    finally:
+        tasks.cluster = schedule.cluster = real
+
+
+def run_once(argv: list[str], n: int, out: Path, sized_for: int | None = None, backend: str = "pool") -> dict:
+    """One timed run of the command on ``n`` warm workers (``backend``: module docstring);
+    ``sized_for``: its tasks sized as for that many workers (:meth:`TaskRunner.workers` patched
+    in this process)."""
     from haa_sym.cli import main
     from haa_sym.io import tasks
     if sized_for is not None:
         real = tasks.TaskRunner.workers
         tasks.TaskRunner.workers = lambda self: sized_for
         try:
-            return run_once(argv, n, out)
+            return run_once(argv, n, out, backend=backend)
         finally:
             tasks.TaskRunner.workers = real
+    if backend == "pool":
+        # imported before the forks: the workers inherit them (as a command's workers do)
+        import haa_sym.analysis.nonlinear_map  # noqa: F401
+        import haa_sym.design.schedule  # noqa: F401
+        spec = f"local:{n}"
+        t = time.perf_counter()
+        with tasks.cluster(spec) as pool, _serving(pool, spec):
+            start_s = time.perf_counter() - t
+            tasks.TRACE = []
+            t0 = time.time()
+            p0 = time.perf_counter()
+            rc = main([*argv, "-q", "--scheduler", spec])
+            wall = time.perf_counter() - p0
+            t1 = time.time()
+            stream = pool.get_task_stream(start=t0 - 1)
+            trace, tasks.TRACE = tasks.TRACE, None
+        if rc != 0:
+            raise SystemExit(f"the command failed (exit {rc}): {' '.join(argv)}")
+        return {"workers": n, "seconds": wall, "cluster_start_s": start_s, **analyse(trace, stream, t0, t1),
+                "output": _output_bytes(out)}
+    import distributed
     t = time.perf_counter()
     with distributed.LocalCluster(n_workers=n, threads_per_worker=1, processes=True, host="127.0.0.1",
                                   dashboard_address=None, worker_dashboard_address=None,
@@ -223,11 +269,11 @@ end(code)                                   # as haa-sym ends (haa_sym.cli.entry
 
 
 #: Run as ``python -c CLUSTER_CPU N``: the command process's CPU seconds (all its threads: the
-#: scheduler, the nannies and the client live in it) to start and stop ``--scheduler local:N``
+#: forks and the pool's dispatcher live in it) to start and stop ``--scheduler local:N``
 #: (haa_sym.io.tasks.cluster, as a command does), printed as JSON on the last line of stdout.
 CLUSTER_CPU = """
 import json, resource, sys
-import haa_sym.design.schedule, distributed            # the command's imports, not timed
+import haa_sym.design.schedule                         # the command's imports, not timed
 from haa_sym.io.tasks import cluster
 def cpu():
     r = resource.getrusage(resource.RUSAGE_SELF)
@@ -240,10 +286,10 @@ print(json.dumps({"start_s": up - c, "stop_s": cpu() - up}))
 
 
 def cluster_cpu(n: int, repeats: int = 3) -> dict:
-    """The command process's CPU seconds to start and stop a local cluster of ``n`` workers (the
-    fastest of ``repeats`` runs, each in a new process): serial whatever the cores (the
-    scheduler's, the nannies' and the client's work is in that process), while each worker's own
-    start runs in its process, beside the others on a machine with the cores for them."""
+    """The command process's CPU seconds to start and stop ``local:n`` (the fastest of
+    ``repeats`` runs, each in a new process): serial whatever the cores (the forks and the
+    dispatcher's work are in that process), while each worker's own start runs in its process,
+    beside the others on a machine with the cores for them."""
     env = {**os.environ, "PYTHONPATH": os.pathsep.join([str(ROOT / "src")] + [p for p in [os.environ.get("PYTHONPATH")]
                                                                             if p])}
     best = None
@@ -341,6 +387,8 @@ def main() -> int:
     ap.add_argument("--workers", type=int, default=os.cpu_count() or 1, help="up to N workers (default: the cores)")
     ap.add_argument("--predict", type=int, default=16, help="predict the time on M workers (default 16)")
     ap.add_argument("--preset", choices=sorted(PRESETS), default="nonlinear")
+    ap.add_argument("--backend", choices=["pool", "dask"], default="pool",
+                    help="the warm runs' workers: local:N's processes (pool) or a dask LocalCluster by address")
     ap.add_argument("--repeats", type=int, default=1, help="runs per worker count, the fastest kept")
     ap.add_argument("--whole", type=int, default=0, metavar="R",
                     help="also time the whole command (--scheduler local:N, a new process) R rounds, N alternating")
@@ -366,7 +414,7 @@ def main() -> int:
             best = None
             for _ in range(max(1, args.repeats)):
                 load, cores = os.getloadavg()[0], capacity(n)
-                r = run_once(argv, n, out)
+                r = run_once(argv, n, out, backend=args.backend)
                 r["cores_available_before"] = round(cores, 2)
                 r["load_1min_before"] = round(load, 2)
                 r["load_1min_after"] = round(os.getloadavg()[0], 2)
@@ -379,7 +427,7 @@ def main() -> int:
                   f"{best['load_1min_after']:.2f}, cores available before {best['cores_available_before']:.2f} "
                   f"of {n}", flush=True)
         # the chains of the predicted cluster: tasks sized for --predict workers, run on one
-        chain = run_once(argv, 1, out, sized_for=args.predict)
+        chain = run_once(argv, 1, out, sized_for=args.predict, backend=args.backend)
         print(f" 1 worker, tasks sized for {args.predict}: {chain['seconds']:.2f} s, work {chain['work_s']:.2f} s "
               f"in {chain['tasks']} tasks, serial {chain['serial_s']:.2f} s, dispatch {chain['dispatch_s']:.2f} s, "
               f"longest chain {chain['longest_chain_s']:.2f} s", flush=True)
@@ -409,10 +457,10 @@ def main() -> int:
     fixed = None
     if whole is not None:
         # what a whole command pays outside its task lists (Python's start, the imports, the
-        # cluster's start and stop, the output), probed in the fastest local:1 run; the whole command on
+        # workers' start and stop, the output), probed in the fastest local:1 run; the whole command on
         # M workers is predicted as that plus the warm prediction plus what starting and stopping
         # M workers costs the command's process more than one (its CPU time, measured here: the
-        # scheduler's, nannies' and client's work for each worker, serial on any machine)
+        # forks and the dispatcher's work for each worker, serial on any machine)
         fixed = whole["fixed"]["fixed_s"]
         cpu = {m: cluster_cpu(m) for m in sorted({1, 2, M})}
         more = {m: max(0.0, sum(cpu[m].values()) - sum(cpu[1].values())) for m in predict}
@@ -443,7 +491,7 @@ def main() -> int:
                   f"reference's per round {share}")
     print(f"same output at every worker count: {same}; machine: {bench.info['cpu_model']}, "
           f"{bench.info['cpu_count']} cores")
-    res = {"command": ["haa-sym", *argv], "preset": name, "rows": rows, "chain_run": chain, "same_output": same,
+    res = {"command": ["haa-sym", *argv], "preset": name, "backend": args.backend, "rows": rows, "chain_run": chain, "same_output": same,
            "critical_path_s": critical, "serial_s": S, "longest_chain_s": C, "work_s": W, "dispatch_s": d,
            "predicted_s": {str(m): t for m, t in predict.items()},
            "speedup_bound": one["seconds"] / critical, "whole_command": whole}

@@ -1,7 +1,7 @@
-"""``--scheduler local:N`` (issue 27, item 3): a LocalCluster of N worker processes on 127.0.0.1,
-started and stopped by the command. Refused values are one line; the cluster's every listening
-socket is on loopback; the results are the in-process bytes; no process is left behind, also
-when the command is ended by SIGTERM."""
+"""``--scheduler local:N`` (issue 27, item 3): N worker processes (:class:`haa_sym.io.pool.LocalPool`),
+started and stopped by the command. Refused values are one line; nothing the command starts
+listens on any port (the pool's channels are pipes); the results are the in-process bytes; no
+process is left behind, also when the command is ended by SIGTERM."""
 import json
 import os
 import signal
@@ -44,55 +44,50 @@ def test_more_workers_than_cores_warns_in_one_line(monkeypatch, capsys):
     class Refuse(Exception):
         pass
 
-    class FakeCluster:                     # records the arguments, starts nothing
-        def __init__(self, **kw):
-            import dask
-            started.append(kw)
-            methods.append(dask.config.get("distributed.worker.multiprocessing-method"))
+    class FakePool:                        # records the arguments, starts nothing
+        def __init__(self, n):
+            started.append((n, os.environ.get("OMP_NUM_THREADS")))
             raise Refuse()
-    methods = []
-    import distributed
+    from haa_sym.io import pool
     monkeypatch.setattr(tasks.os, "cpu_count", lambda: 2)
-    monkeypatch.setattr(distributed, "LocalCluster", FakeCluster)
+    monkeypatch.setattr(tasks, "LocalPool", FakePool)
+    monkeypatch.delenv("OMP_NUM_THREADS", raising=False)
     with pytest.raises(Refuse):
         with tasks.cluster("local:3"):
             pass
     err = capsys.readouterr().err
     assert err == "haa-sym: warning: --scheduler local:3: 3 worker processes on 2 cores; they share the cores " \
                   "(no faster than local:2)\n"
-    # loopback, no dashboard (nor the workers'), one thread per worker process
-    # and the scheduler's HTTP server on a free loopback port, not 8787 (which another program
-    # may hold: dask then moved to another port and warned on stderr)
-    assert started == [dict(n_workers=3, threads_per_worker=1, processes=True, host="127.0.0.1",
-                            dashboard_address=None, worker_dashboard_address=None,
-                            scheduler_kwargs={"dashboard": False, "dashboard_address": "127.0.0.1:0"},
-                            silence_logs=started[0]["silence_logs"])]
     with pytest.raises(Refuse):
         with tasks.cluster("local:2"):
             pass
     assert capsys.readouterr().err == ""      # N = the cores: no warning
-    # on Linux the workers are forked from the command (its imports inherited: about 0.1 s a
-    # start instead of 1.2 s); dask's own default, spawn, elsewhere
-    assert methods == [tasks.LOCAL_START_METHOD] * 2
-    assert tasks.LOCAL_START_METHOD == ("fork" if sys.platform == "linux" else "spawn")
+    # a spawned worker (not Linux) reads OMP_NUM_THREADS=1 when its OpenBLAS loads; the
+    # command's environment is as it was after the start
+    assert started == [(3, "1"), (2, "1")] and "OMP_NUM_THREADS" not in os.environ
+    # on Linux the workers are forked from the command (its imports inherited: a start in
+    # milliseconds); spawn elsewhere
+    assert pool.START_METHOD == ("fork" if sys.platform == "linux" else "spawn")
 
 
 def _blas_threads():
     import threadpoolctl
-    return sorted({d["num_threads"] for d in threadpoolctl.threadpool_info() if d["user_api"] == "blas"})
+    time.sleep(0.2)                        # both workers busy at once: one answer each
+    return os.getpid(), sorted({d["num_threads"] for d in threadpoolctl.threadpool_info() if d["user_api"] == "blas"})
 
 
 def test_local_workers_run_one_blas_thread():
     """A worker is one thread: a forked worker inherits the command's OpenBLAS with a thread per
-    core (dask's OMP_NUM_THREADS=1 comes too late for it), so local:N limits it to one."""
+    core, so local:N limits it to one before the forks."""
     import numpy  # noqa: F401 - OpenBLAS loaded in the command before the fork, as in a command
     from threadpoolctl import threadpool_limits
     # the command's OpenBLAS on two threads when it forks: an xdist worker runs on one
     # (tests/conftest.py), which the forked workers would inherit unless local:N limits it first
     with threadpool_limits(limits=2, user_api="blas"):
-        assert _blas_threads() == [2]
-        with tasks.cluster("local:2") as client:
-            got = client.run(_blas_threads)
+        assert _blas_threads()[1] == [2]
+        with tasks.cluster("local:2") as pool:
+            got = dict(pool.gather([pool.submit(_blas_threads) for _ in range(2)]))
+        assert _blas_threads()[1] == [2]          # the command's own limit restored
     assert len(got) == 2 and all(v == [1] for v in got.values()), got
 
 
@@ -114,8 +109,8 @@ def _tree(root: psutil.Process) -> set[int]:
 
 
 def _listening(pids: set[int]) -> set[tuple[int, str, int]]:
-    # (pid, ip, port): a forked worker (tasks.LOCAL_START_METHOD) shares the scheduler's listening
-    # socket, which psutil names under one of the pids, so sockets are counted by port
+    # (pid, ip, port) of every listening TCP socket of the processes (UDP and unix sockets: the
+    # pool opens none either)
     return {(c.pid, c.laddr.ip, c.laddr.port) for c in psutil.net_connections("tcp")
             if c.status == psutil.CONN_LISTEN and c.pid in pids}
 
@@ -167,18 +162,18 @@ def _params_file(tmp_path) -> Path:
 
 
 @pytest.mark.slow
-def test_regions_nonlinear_on_local_2_listens_on_loopback_gives_the_bytes_and_leaves_nothing(tmp_path):
+def test_regions_nonlinear_on_local_2_listens_nowhere_gives_the_bytes_and_leaves_nothing(tmp_path):
     p = _params_file(tmp_path)
     argv = ["regions", "--params", str(p), "--set", "beta=3", "--P-gain", "log:300:20000:6",
             "--D-gain", "lin:1:40:4", "--nonlinear", "--duration", "0.4", "--max-duration", "1.2", "-q"]
     remote = tmp_path / "remote.npz"
     rc, _, err, seen, sockets = _run_on_local_2(argv, remote, tmp_path)
     assert rc == 0, err
-    assert err == ""                                  # no log lines of the cluster
-    # the command, its scheduler (in the command's process) and the two worker processes
+    assert err == ""                                  # no log lines of the pool
+    # the command and its two worker processes; no listening socket (a fortiori none beyond
+    # 127.0.0.1, issue 27's check: the pool's channels are pipes)
     assert len(seen) >= 3, seen
-    assert len({port for _, _, port in sockets}) >= 3, sockets   # the scheduler's and each worker's port
-    assert {ip for _, ip, _ in sockets} == {"127.0.0.1"}, sockets
+    assert sockets == set(), sockets
     assert _gone(seen) == []
     local = tmp_path / "local.npz"
     assert main([*argv, "--out", str(local)]) == 0
@@ -188,7 +183,7 @@ def test_regions_nonlinear_on_local_2_listens_on_loopback_gives_the_bytes_and_le
         if k != "meta":
             assert a[k].tobytes() == b[k].tobytes(), k
     ma, mb = json.loads(str(a["meta"])), json.loads(str(b["meta"]))
-    assert mb["nonlinear"].pop("scheduler") == "dask.distributed"
+    assert mb["nonlinear"].pop("scheduler") == "local worker processes"
     assert ma["nonlinear"].pop("scheduler") == "in-process"
     assert ma == mb
     assert len(set(a["nonlinear_class"].ravel())) >= 2
@@ -202,8 +197,8 @@ def test_sigterm_stops_the_local_cluster(tmp_path):
                              "--out", str(out)], stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
                             env=ENV, cwd=tmp_path, start_new_session=True)
     try:
-        # until both workers listen (the cluster is up and the command is computing)
-        seen, sockets = _watch(proc, until=lambda pids, s: len({port for _, _, port in s}) >= 3)
+        # until both workers run (the pool is up and the command is computing)
+        seen, sockets = _watch(proc, until=lambda pids, s: len(pids) >= 3)
         assert proc.poll() is None, proc.communicate()
         time.sleep(1.0)
         t0 = time.monotonic()
@@ -215,13 +210,13 @@ def test_sigterm_stops_the_local_cluster(tmp_path):
     assert proc.returncode == 143, err
     assert err.strip().splitlines()[-1] == "haa-sym: terminated (SIGTERM); no output written"
     assert time.monotonic() - t0 < 30
-    assert {ip for _, ip, _ in sockets} == {"127.0.0.1"}, sockets
-    assert _gone(seen) == [], "processes of the local cluster left behind"
+    assert sockets == set(), sockets
+    assert _gone(seen) == [], "worker processes left behind"
     assert not out.exists()
 
 
 @pytest.mark.slow
-def test_regions_robust_on_local_2_listens_on_loopback_and_writes_the_in_process_bytes(tmp_path):
+def test_regions_robust_on_local_2_listens_nowhere_and_writes_the_in_process_bytes(tmp_path):
     # issue 27, item 2: the leg range's (and an uncertainty box's) maps on the cluster's workers
     argv = ["regions", "--robust", "--leg-mode", "box", "--P-gain", "log:1:2000:40", "--D-gain", "lin:1:50:20",
             "-q"]
@@ -240,9 +235,7 @@ def test_regions_robust_on_local_2_listens_on_loopback_and_writes_the_in_process
         held.close()
     assert rc == 0, err
     assert err == ""
-    assert len({port for _, _, port in sockets}) >= 3, sockets   # the scheduler's and each worker's port
-    assert 8787 not in {port for _, _, port in sockets}
-    assert {ip for _, ip, _ in sockets} == {"127.0.0.1"}, sockets
+    assert sockets == set(), sockets
     assert _gone(seen) == []
     local = tmp_path / "local.npz"
     assert main([*argv, "--out", str(local)]) == 0

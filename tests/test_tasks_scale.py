@@ -14,13 +14,25 @@ from haa_sym.io import tasks
 from haa_sym.io.tasks import TaskRunner
 
 
+#: What the runner's cluster code drives: a dask cluster (``--scheduler ADDRESS``, here in-process)
+#: and the local worker processes of ``--scheduler local:N`` (:class:`haa_sym.io.pool.LocalPool`).
+BACKENDS = ["dask", "pool"]
+
+
 @contextlib.contextmanager
-def traced_cluster(n_workers=2):
-    """(client, trace) of an in-process dask cluster of one-thread workers, with every task
-    submitted in the block recorded in ``trace`` (:data:`haa_sym.io.tasks.TRACE`)."""
-    distributed = pytest.importorskip("distributed")
-    with distributed.LocalCluster(n_workers=n_workers, threads_per_worker=1, processes=False,
-                                  dashboard_address=None) as cl, distributed.Client(cl) as client:
+def traced_cluster(n_workers=2, backend="dask"):
+    """(client, trace) of ``n_workers`` one-thread workers (an in-process dask cluster, or a
+    LocalPool), with every task submitted in the block recorded in ``trace``
+    (:data:`haa_sym.io.tasks.TRACE`)."""
+    with contextlib.ExitStack() as stack:
+        if backend == "pool":
+            from haa_sym.io.pool import LocalPool
+            client = stack.enter_context(LocalPool(n_workers))
+        else:
+            distributed = pytest.importorskip("distributed")
+            cl = stack.enter_context(distributed.LocalCluster(n_workers=n_workers, threads_per_worker=1,
+                                                              processes=False, dashboard_address=None))
+            client = stack.enter_context(distributed.Client(cl))
         trace = tasks.TRACE = []
         try:
             yield client, trace
@@ -49,8 +61,9 @@ def test_the_point_check_and_the_bandwidths_run_as_tasks(monkeypatch):
     assert threads == {"decide": {False}, "bandwidth": {False}}
 
 
-def test_a_cluster_run_groups_small_calls_and_keeps_their_order():
-    with traced_cluster() as (client, trace):
+@pytest.mark.parametrize("backend", BACKENDS)
+def test_a_cluster_run_groups_small_calls_and_keeps_their_order(backend):
+    with traced_cluster(backend=backend) as (client, trace):
         r = TaskRunner(client, False)
         out = r.run(pow, [(k, 2) for k in range(100)], "squares")
         again = r.run(pow, [(k, 3) for k in range(5)], "cubes")
@@ -62,9 +75,10 @@ def test_a_cluster_run_groups_small_calls_and_keeps_their_order():
     assert all(sorted(t["after"]) == sorted(x["key"] for x in trace[:first]) for t in trace[first:])
 
 
-def test_stream_records_which_task_asked_for_which():
+@pytest.mark.parametrize("backend", BACKENDS)
+def test_stream_records_which_task_asked_for_which(backend):
     seen = []
-    with traced_cluster(1) as (client, trace):
+    with traced_cluster(1, backend) as (client, trace):
         r = TaskRunner(client, False)
         r.stream(pow, [(2, 1), (3, 1)], lambda a, res: (seen.append(res) or [((res, 2), 1)] if a[1] == 1 else []),
                  "powers")
@@ -74,14 +88,15 @@ def test_stream_records_which_task_asked_for_which():
     assert all(len(t["after"]) == 1 and t["after"][0] in firsts for t in trace[2:])
 
 
-def test_the_robust_region_maps_each_configuration_as_a_task_once():
+@pytest.mark.parametrize("backend", BACKENDS)
+def test_the_robust_region_maps_each_configuration_as_a_task_once(backend):
     # issue 27, item 2: regions --robust on the task runner; the doubling (2, 3, ... configurations)
     # maps only the configurations it has not mapped yet, and the result is the in-process one
     from haa_sym.analysis.robust import robust_region
     loop = ClosedLoop(load_params())
     P, D = [5.0, 50.0, 300.0, 2000.0], [1.0, 10.0, 40.0]
     local = robust_region(loop, P, D)
-    with traced_cluster() as (client, trace):
+    with traced_cluster(backend=backend) as (client, trace):
         remote = robust_region(loop, P, D, scheduler=client)
     assert remote.feasible.tobytes() == local.feasible.tobytes() and remote.history == local.history
     assert 0 < remote.feasible.sum() < remote.feasible.size
@@ -89,8 +104,9 @@ def test_the_robust_region_maps_each_configuration_as_a_task_once():
     assert len(trace) == remote.n_configurations == local.n_configurations
 
 
-def test_start_submits_without_a_barrier_and_collects_in_order():
-    with traced_cluster() as (client, trace):
+@pytest.mark.parametrize("backend", BACKENDS)
+def test_start_submits_without_a_barrier_and_collects_in_order(backend):
+    with traced_cluster(backend=backend) as (client, trace):
         r = TaskRunner(client, False)
         first = r.run(pow, [(k, 2) for k in range(3)], "squares")
         later = r.start(pow, [(k, 3) for k in range(20)], "cubes")
@@ -114,10 +130,11 @@ def _stamp(tag, seconds):
     return tag, time.monotonic()
 
 
-def test_background_tasks_give_way_to_every_later_task_list():
+@pytest.mark.parametrize("backend", BACKENDS)
+def test_background_tasks_give_way_to_every_later_task_list(backend):
     """start(background=True): the later lists' tasks go first (they would otherwise wait behind
     every started call), the started calls run in what idle time is left, one call a task."""
-    with traced_cluster(1) as (client, trace):
+    with traced_cluster(1, backend) as (client, trace):
         r = TaskRunner(client, False)
         later = r.start(_stamp, [("background", 0.05)] * 10, "background", background=True)
         first = r.run(_stamp, [("list", 0.01)] * 4, "a later task list")
@@ -125,7 +142,8 @@ def test_background_tasks_give_way_to_every_later_task_list():
         got = later()
         assert [tag for tag, _ in got] == ["background"] * 10
         # at most the calls the worker had begun or been given (dask gives a one-thread worker
-        # two tasks at a time) before the later list arrived; in submission order, all ten
+        # two tasks at a time, the pool one) before the later list arrived; in submission
+        # order, all ten
         assert sum(t < done for _, t in got) <= 2
         assert len(trace) == 10 + 4
         # the same without background: the later list waits behind the started calls
@@ -146,7 +164,8 @@ GRID = ([5.0, 300.0], [1.0, 20.0, 40.0])
 SMALL = dict(beta_range=(0.5, 4.0), beta_tol=0.25, cell_subdivisions=2)
 
 
-def test_the_schedule_waits_for_few_task_lists_and_its_point_check_for_none():
+@pytest.mark.parametrize("backend", BACKENDS)
+def test_the_schedule_waits_for_few_task_lists_and_its_point_check_for_none(backend):
     # issue 27: the first task lists compute what the next leg level and the point check will ask
     # for, and the bandwidths run beside the cell check: maps, refinement and the cell check's
     # passes (on the default grid 5 task lists, where there were 11)
@@ -156,7 +175,7 @@ def test_the_schedule_waits_for_few_task_lists_and_its_point_check_for_none():
     def counting(self, fn, args_list, label, unit="task"):
         labels.append((label, len(args_list)))
         return run(self, fn, args_list, label, unit)
-    with traced_cluster() as (client, trace):
+    with traced_cluster(backend=backend) as (client, trace):
         TaskRunner.run = counting
         try:
             s = sch.schedule(ClosedLoop(load_params()), *GRID, scheduler=client, progress=False, **SMALL)

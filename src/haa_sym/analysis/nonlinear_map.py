@@ -61,7 +61,7 @@ from haa_sym.analysis.simulate import (DEFAULT_RTOL, FORCED_EXPERIMENTS, _Setup,
                                        limits_act_every_step, simulate_batch)
 from haa_sym.errors import ParameterError
 from haa_sym.io.formats import save_npz
-from haa_sym.io.tasks import TaskRunner
+from haa_sym.io.tasks import TaskRunner, scheduler_kind
 from haa_sym.loop import ClosedLoop, loop_first
 from haa_sym.model.limits import Limits
 from haa_sym.model.params import gain_array
@@ -358,7 +358,7 @@ def nonlinear_map(loop, P_gain, D_gain, *, limits: Limits | None = None, experim
         seed=seed, rtol=rtol, limits=limits.active, limits_act_every_step=always,
         saturating_fraction=saturating_fraction, samples_per_run=setup.n,
         samples_simulated=simulated[0], longer_runs_continue=cont, friction_scale_duration=scale_s,
-        scheduler="in-process" if scheduler is None else "dask.distributed",
+        scheduler="in-process" if scheduler is None else scheduler_kind(scheduler),
         rules="docs/simulate.md, Nonlinear maps", P_gain_unit="Nm/rad", D_gain_unit="Nms/rad",
         cycle_amplitude_unit="Nm", cycle_frequency_unit="Hz")
     m = NonlinearMap(P, D, cls.reshape(shape), stable.reshape(shape), amp.reshape(shape), freq.reshape(shape),

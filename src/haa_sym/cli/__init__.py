@@ -242,7 +242,7 @@ def _sigterm_unwinds():
 
     def terminate(signum, frame):
         if os.getpid() != owner:
-            # a process forked from this one (a local:N worker, haa_sym.io.tasks.LOCAL_START_METHOD)
+            # a process forked from this one (a local:N worker, haa_sym.io.pool.START_METHOD)
             # inherited the handler: it ends as SIGTERM's default action would end it
             signal.signal(signal.SIGTERM, signal.SIG_DFL)
             os.kill(os.getpid(), signal.SIGTERM)

@@ -100,7 +100,7 @@ from haa_sym.errors import ParameterError
 from haa_sym.io.gridspec import grid
 from haa_sym.io.outputs import write_text
 from haa_sym.io.progress import message
-from haa_sym.io.tasks import DEFAULT_CONNECT_TIMEOUT, TaskRunner, cluster, local_workers
+from haa_sym.io.tasks import DEFAULT_CONNECT_TIMEOUT, TaskRunner, cluster, local_workers, scheduler_kind
 from haa_sym.loop import ClosedLoop, loop_first
 from haa_sym.model.params import Params, gain_array
 
@@ -898,7 +898,7 @@ def schedule(loop, P_gain=None, D_gain=None, *, beta_range=(0.1, 8.0), beta_tol:
             "uncertainty": {k: list(v) for k, v in check_uncertainty(params, uncertainty, leg).items()}
             if uncertainty else None,
             "haa_sym": version(),
-            "scheduler": "dask threads (in-process)" if spec is None else "dask.distributed",
+            "scheduler": "dask threads (in-process)" if spec is None else scheduler_kind(spec),
             "torque_bandwidth_beta_1_rad_s": bw_1, "lowered_by_point_check": lowered,
             "cell_subdivisions": int(cell_subdivisions), "cells_failed_check": n_failed,
             "grid_points_lowered_by_cell_check": n_lowered_pts, "cells_given_up": n_given_up,

@@ -1,9 +1,11 @@
-"""Lists of independent tasks run on dask: in-process (dask's threaded scheduler) or on a
-dask.distributed cluster (``--scheduler ADDRESS``), with a progress bar (:mod:`haa_sym.io.progress`).
+"""Lists of independent tasks run in-process (dask's threaded scheduler), on N local worker
+processes (``--scheduler local:N``) or on a dask.distributed cluster (``--scheduler ADDRESS``),
+with a progress bar (:mod:`haa_sym.io.progress`).
 
-``--scheduler local:N`` starts a ``distributed.LocalCluster`` of N one-thread worker processes on
-127.0.0.1 for the duration of one call (:func:`cluster`), and stops it, also on an error, Ctrl-C
-or SIGTERM.
+``--scheduler local:N`` starts a :class:`haa_sym.io.pool.LocalPool` of N one-thread worker
+processes for the duration of one call (:func:`cluster`), and stops it, also on an error, Ctrl-C
+or SIGTERM; the pool offers the part of a ``distributed.Client`` this runner uses, so the
+cluster code below drives both.
 
 A task is a module-level function of plain data (parameters, options, gain points): a worker
 process builds what it needs itself (the compiled library is loaded per process, never shipped).
@@ -25,9 +27,10 @@ import sys
 import threading
 
 from haa_sym.errors import ParameterError
+from haa_sym.io.pool import LocalPool, WorkerLost
 from haa_sym.io.progress import progress as progress_bar
 
-__all__ = ["TaskRunner", "connect", "cluster", "local_workers", "DEFAULT_CONNECT_TIMEOUT", "THREADS"]
+__all__ = ["TaskRunner", "connect", "cluster", "local_workers", "scheduler_kind", "DEFAULT_CONNECT_TIMEOUT", "THREADS"]
 
 #: Seconds to connect to a --scheduler and finish dask's handshake.
 DEFAULT_CONNECT_TIMEOUT = 5.0
@@ -48,19 +51,6 @@ TRACE: list | None = None
 
 #: The form of a local cluster's --scheduler value: ``local:N``.
 LOCAL = "local:"
-#: Seconds for a local cluster's N workers to start and register.
-LOCAL_START_TIMEOUT = 120.0
-#: How ``local:N`` starts its worker processes (dask's ``distributed.worker.multiprocessing-method``,
-#: set for this cluster only): "fork" on Linux, where a forked worker inherits the command's
-#: imported haa_sym, numpy and compiled library and is up in about 0.1 s; "spawn" (dask's default)
-#: elsewhere, where fork is unsafe (macOS) or missing (Windows), a new interpreter that imports
-#: them again (about 1.2 s for two workers on this 2-core machine, which every command paid before
-#: issue 27's second round; docs/schedule.md). The fork is made by dask's event-loop thread while the
-#: command's main thread waits for the workers, holding no lock; in a forked worker the command's
-#: SIGTERM handler restores the default action (``haa_sym.cli``: SIGTERM ends a worker as before).
-LOCAL_START_METHOD = "fork" if sys.platform == "linux" else "spawn"
-#: The local scheduler's HTTP server: no dashboard, a free port of the loopback interface.
-SCHEDULER_HTTP = {"dashboard": False, "dashboard_address": "127.0.0.1:0"}
 
 
 def local_workers(spec) -> int | None:
@@ -77,13 +67,18 @@ def local_workers(spec) -> int | None:
     return n
 
 
+def scheduler_kind(spec) -> str:
+    """What runs the tasks of a ``--scheduler`` value other than None, as results' metadata
+    name it: "local worker processes" (``local:N``, a LocalPool) or "dask.distributed"."""
+    return "local worker processes" if isinstance(spec, LocalPool) or local_workers(spec) else "dask.distributed"
+
+
 @contextlib.contextmanager
 def cluster(spec):
     """What :class:`TaskRunner` takes for ``spec``: ``spec`` itself, except for ``local:N``: a
-    ``distributed.Client`` of a ``LocalCluster`` started here (N worker processes of one thread
-    each, every service on 127.0.0.1: the scheduler's and workers' comm ports, no dashboard)
-    and stopped on leaving, whatever ends the block (an error, KeyboardInterrupt, or
-    :class:`haa_sym.errors.Terminated` on SIGTERM).
+    :class:`haa_sym.io.pool.LocalPool` of N one-thread worker processes started here (nothing
+    listens on a port) and stopped on leaving, whatever ends the block (an error,
+    KeyboardInterrupt, or :class:`haa_sym.errors.Terminated` on SIGTERM).
 
     One thread per process: a point's Python part holds the GIL (see
     :data:`haa_sym.analysis.nonlinear_map.IN_PROCESS_THREADS`), so cores are used by processes.
@@ -97,44 +92,44 @@ def cluster(spec):
         # allowed (a test of the scheduling), but more processes than cores share them
         print(f"haa-sym: warning: --scheduler {spec}: {n} worker processes on {cores} cores; they share the "
               f"cores (no faster than local:{cores})", file=sys.stderr)
-    import dask
-    from distributed import Client, LocalCluster
     from threadpoolctl import threadpool_limits
-    cl = client = None
-    # One BLAS thread in every worker: a *forked* worker (LOCAL_START_METHOD) inherits this
-    # process's OpenBLAS, initialised with a thread per core (dask's OMP_NUM_THREADS=1, its
-    # nanny's pre-spawn environment, is read by OpenBLAS only when it loads: each forked worker
-    # of local:2 ran two BLAS threads on this 2-core machine, and local:1's one worker could use
-    # both cores, which a one-worker baseline must not). Limited here, before the forks, for the
-    # cluster's life (a worker a nanny restarts is forked from this process too): where a worker
-    # plugin did it, its round trip to every worker cost the start 0.02 s on 2 workers and
-    # 0.15-0.24 s on 16 (2 cores). This process's own BLAS is on one thread meanwhile (its
-    # work is the tasks'; a library caller's other threads too, until the block ends). Where
-    # workers are spawned (not Linux) the limit does not reach them: there dask's pre-spawn
-    # environment (OMP_NUM_THREADS=1 unless the user set it) does, when their OpenBLAS loads.
-    blas = None
+    # One BLAS thread in every worker: a *forked* worker (haa_sym.io.pool.START_METHOD) inherits
+    # this process's OpenBLAS, initialised with a thread per core (an OMP_NUM_THREADS set now is
+    # read by OpenBLAS only when it loads): each worker of local:2 would run two BLAS threads on
+    # a 2-core machine, and local:1's one worker could use both cores, which a one-worker
+    # baseline must not. Limited here, before the forks, for the pool's life. This process's
+    # own BLAS is on one thread meanwhile (its work is the tasks'; a library caller's other
+    # threads too, until the block ends). Where workers are spawned (not Linux) the limit does
+    # not reach them: OMP_NUM_THREADS=1 is set for them below, read when their OpenBLAS loads.
+    blas = pool = None
     try:
         blas = threadpool_limits(limits=1, user_api="blas")
-        # no dashboard (the scheduler's and the workers'). The scheduler starts its HTTP server
-        # (the /health and /metrics routes) even so, on dashboard_address, by default 8787 of
-        # host: given a free port of 127.0.0.1, so that another program on 8787 (a cluster of
-        # docs/schedule.md's recipe, another command's) neither clashes nor makes dask warn
-        with dask.config.set({"distributed.worker.multiprocessing-method": LOCAL_START_METHOD}):
-            cl = LocalCluster(n_workers=n, threads_per_worker=1, processes=True, host="127.0.0.1",
-                              dashboard_address=None, worker_dashboard_address=None,
-                              scheduler_kwargs=SCHEDULER_HTTP, silence_logs=logging.ERROR)
-        client = Client(cl)
-        client.wait_for_workers(n, timeout=LOCAL_START_TIMEOUT)
-        yield client
+        with _environ(OMP_NUM_THREADS=os.environ.get("OMP_NUM_THREADS", "1")):
+            pool = LocalPool(n)
+        yield pool
     finally:
         try:
-            if client is not None:
-                client.close()
-            if cl is not None:
-                cl.close()
+            if pool is not None:
+                pool.close()
         finally:
             if blas is not None:
                 blas.restore_original_limits()
+
+
+@contextlib.contextmanager
+def _environ(**values):
+    """``os.environ`` with ``values`` for the block (a spawned worker's environment is the
+    parent's at its start)."""
+    old = {k: os.environ.get(k) for k in values}
+    os.environ.update(values)
+    try:
+        yield
+    finally:
+        for k, v in old.items():
+            if v is None:
+                os.environ.pop(k, None)
+            else:
+                os.environ[k] = v
 
 
 def connect(Client, address: str, timeout: float = DEFAULT_CONNECT_TIMEOUT):
@@ -190,8 +185,9 @@ class TaskRunner:
     ----------
     scheduler : None, str or distributed.Client
         None: dask's threaded scheduler in this process (:data:`THREADS` threads); an address
-        ("tcp://host:port"): connect to it (closed by :meth:`close`); ``"local:N"``: a local
-        cluster of N workers (:func:`cluster`; stopped by :meth:`close`); a Client: use it.
+        ("tcp://host:port"): connect to it (closed by :meth:`close`); ``"local:N"``: N local
+        worker processes (:func:`cluster`; stopped by :meth:`close`); a Client or a
+        :class:`haa_sym.io.pool.LocalPool`: use it.
     progress : bool or None
         The progress bar's setting (:func:`haa_sym.io.progress.progress`).
     connect_timeout : float
@@ -213,6 +209,9 @@ class TaskRunner:
         if local_workers(scheduler) is not None:
             self._local = contextlib.ExitStack()
             self.client = self._local.enter_context(cluster(scheduler))
+            return
+        if isinstance(scheduler, LocalPool):
+            self.client = scheduler
             return
         try:
             from distributed import Client
@@ -385,31 +384,53 @@ class TaskRunner:
         each finished one and returns new futures to wait for too. Stop with one line when the
         cluster has had no worker for :attr:`no_worker_timeout` s, or when a task killed the
         workers it ran on (dask's ``KilledWorker``, after its allowed failures): never wait for ever."""
+        import queue
         import time
-        from distributed import wait
-        from distributed.scheduler import KilledWorker
-        where = f"--scheduler {self.address!r}" if self.address else "the dask cluster"
+
+        if isinstance(self.client, LocalPool):      # no import of distributed for local:N
+            lost: tuple = (WorkerLost,)
+            where = f"--scheduler {self.address!r}" if self.address else "the local worker processes"
+        else:
+            from distributed.scheduler import KilledWorker
+            lost = (KilledWorker,)
+            where = f"--scheduler {self.address!r}" if self.address else "the dask cluster"
         sizes = {} if sizes is None else sizes             # calls per cluster task (run's groups)
+        # finished futures arrive on a queue (each future's done callback, in the pool's or the
+        # client's thread): a wait per finished task over every pending future (wait(...,
+        # FIRST_COMPLETED)) costs this thread time in the number pending, 473 of the nonlinear
+        # map's tasks on 16 workers, while it holds the GIL the pool's dispatcher needs
+        finished: queue.SimpleQueue = queue.SimpleQueue()
+
+        def track(fs):
+            for f in fs:
+                f.add_done_callback(finished.put)
         pending, idle_since = set(futures), None
         total = sum(sizes.get(f, 1) for f in futures)
+        track(futures)
         while pending:
+            done = set()
             try:
-                done, pending = wait(pending, timeout=POLL_S, return_when="FIRST_COMPLETED")
-            except TimeoutError:
-                done = set()
+                done.add(finished.get(timeout=POLL_S))
+                while True:
+                    done.add(finished.get_nowait())
+            except queue.Empty:
+                pass
+            done &= pending                  # (a future is put once; cancelled ones are not pending)
+            pending -= done
             bar.update(sum(sizes.get(f, 1) for f in done))
             for f in done:
                 if f.status == "error":
                     exc = f.exception()
-                    if isinstance(exc, KilledWorker):
+                    if isinstance(exc, lost):
                         raise ParameterError(f"{where}: a task ended {exc.__class__.__name__} (the worker "
-                                             "process running it died, each time it was retried: out of "
-                                             "memory, or killed); allowed: workers that stay up (check "
-                                             "their memory and logs)") from None
+                                             "process running it died, each time it was retried, or no "
+                                             "worker was left: out of memory, or killed); allowed: workers "
+                                             "that stay up (check their memory and logs)") from None
                 if on_done is not None:
                     new = on_done(f)             # raises the task's own error, if any
                     pending |= set(new)
                     total += len(new)
+                    track(new)
             if not pending:
                 return
             if done:

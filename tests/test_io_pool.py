@@ -1,0 +1,170 @@
+"""The local worker processes of ``--scheduler local:N`` (:class:`haa_sym.io.pool.LocalPool`):
+priorities, a worker's death (the task queued again for the others, given up after
+ALLOWED_FAILURES deaths, the command stopped with one line when no worker is left), errors that
+keep their type, and a close that leaves no process and does not wait for a running task."""
+import os
+import signal
+import subprocess
+import sys
+import time
+
+import psutil
+import pytest
+
+from haa_sym.errors import ParameterError
+from haa_sym.io.pool import ALLOWED_FAILURES, LocalPool, WorkerLost
+from haa_sym.io.tasks import TaskRunner
+
+from test_io_tasks_local import ENV, _gone, _watch
+
+
+def _nap(tag, seconds):
+    time.sleep(seconds)
+    return tag, os.getpid()
+
+
+def _die_if(tag, pid):
+    """Kills its worker when run on ``pid``'s process, or when pid is 0 (every time)."""
+    if pid in (0, os.getpid()):
+        os.kill(os.getpid(), signal.SIGKILL)
+    return tag
+
+
+def _fail(x):
+    raise ArithmeticError(f"task {x} failed")
+
+
+def _unpicklable():
+    return lambda: None
+
+
+def _workers(pool) -> list[int]:
+    return sorted(pool.nthreads())
+
+
+def test_results_in_order_and_errors_keep_their_type():
+    with LocalPool(2) as pool:
+        assert pool.gather([pool.submit(pow, k, 2) for k in range(50)]) == [k * k for k in range(50)]
+        f = pool.submit(_fail, 7)
+        with pytest.raises(ArithmeticError, match="task 7 failed"):
+            f.result()
+        assert f.status == "error"
+        f = pool.submit(_unpicklable)
+        with pytest.raises(RuntimeError, match="could not be sent back"):
+            f.result()
+        assert len(_workers(pool)) == 2             # neither error cost a worker
+        assert pool.gather([pool.submit(pow, 3, 3)]) == [27]
+
+
+def test_a_higher_priority_is_given_to_the_next_idle_worker_first():
+    with LocalPool(1) as pool:
+        first = pool.submit(_nap, "first", 0.3)      # the worker busy while the rest is queued
+        while not first.running():
+            time.sleep(0.001)
+        low = [pool.submit(_nap, f"low{k}", 0.0) for k in range(4)]
+        high = [pool.submit(_nap, f"high{k}", 0.0, priority=1) for k in range(4)]
+        pool.gather([first, *low, *high])
+        order = [r["key"] for r in sorted(pool.get_task_stream(), key=lambda r: r["startstops"][0]["start"])]
+    keys = [f.key for f in (first, *high, *low)]
+    assert order == keys                            # first (already running), then by priority, then FIFO
+
+
+def test_cancelled_queued_tasks_never_run():
+    with LocalPool(1) as pool:
+        busy = pool.submit(_nap, "busy", 0.3)
+        while not busy.running():
+            time.sleep(0.001)
+        queued = [pool.submit(_nap, k, 0.0) for k in range(3)]
+        pool.cancel(queued)
+        assert busy.result()[0] == "busy"
+        after = pool.submit(_nap, "after", 0.0)
+        assert after.result()[0] == "after"
+        ran = {r["key"] for r in pool.get_task_stream()}
+    assert all(f.cancelled() for f in queued) and ran == {busy.key, after.key}
+
+
+def _nap_noting(tag, seconds, path):
+    with open(path, "a") as f:
+        f.write(f"{os.getpid()}\n")
+    return _nap(tag, seconds)
+
+
+def test_a_killed_worker_costs_its_task_a_rerun_on_the_others(tmp_path):
+    note = tmp_path / "pids"
+    with LocalPool(3) as pool:
+        long = pool.submit(_nap_noting, "long", 1.0, str(note))
+        while not note.exists() or not note.read_text().endswith("\n"):
+            time.sleep(0.005)
+        victim = int(note.read_text())
+        others = [pool.submit(_nap, k, 0.05) for k in range(12)]
+        os.kill(victim, signal.SIGKILL)
+        assert [g[0] for g in pool.gather(others)] == list(range(12))
+        tag, pid = long.result(timeout=30)
+        assert tag == "long" and pid != victim
+        assert victim not in _workers(pool) and len(_workers(pool)) == 2
+    assert [int(p) for p in note.read_text().split()] == [victim, pid]     # run twice, finished once
+
+
+def test_a_task_that_kills_every_worker_is_given_up_after_the_allowed_failures():
+    n = ALLOWED_FAILURES + 1
+    with LocalPool(n) as pool:
+        bad = pool.submit(_die_if, "bad", 0)
+        with pytest.raises(WorkerLost, match=f"died {ALLOWED_FAILURES} times"):
+            bad.result(timeout=30)
+        assert len(_workers(pool)) == n - ALLOWED_FAILURES
+        assert pool.gather([pool.submit(pow, 2, 5)]) == [32]     # the rest still runs
+
+
+def test_the_runner_stops_with_one_line_when_no_worker_is_left():
+    with LocalPool(1) as pool:
+        runner = TaskRunner(pool, False)
+        t0 = time.monotonic()
+        with pytest.raises(ParameterError) as e:
+            runner.run(_die_if, [("x", 0)] + [("y", -1)] * 5, "dying")
+        assert time.monotonic() - t0 < 10
+    msg = str(e.value)
+    assert "\n" not in msg and msg.startswith("the local worker processes: a task ended WorkerLost")
+    assert "allowed: workers that stay up" in msg
+
+
+def test_close_abandons_a_running_task_and_leaves_no_process():
+    pool = LocalPool(2)
+    pids = set(_workers(pool))
+    pool.submit(_nap, "long", 60.0)
+    time.sleep(0.2)                                  # running
+    t0 = time.monotonic()
+    pool.close()
+    assert time.monotonic() - t0 < 2.0
+    assert _gone(pids, timeout=5) == []
+    with pytest.raises(RuntimeError, match="closed"):
+        pool.submit(pow, 1, 1)
+
+
+@pytest.mark.slow
+def test_schedule_on_local_2_finishes_on_the_other_worker_when_one_is_killed(tmp_path):
+    """Issue 27's check: a worker killed mid-run, the command finishes on the others, with the
+    bytes of an undisturbed run."""
+    out = tmp_path / "s.csv"
+    proc = subprocess.Popen([sys.executable, "-m", "haa_sym.cli", "schedule", "-q", "--scheduler", "local:2",
+                             "--out", str(out)], stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
+                            env=ENV, cwd=tmp_path, start_new_session=True)
+    try:
+        seen, _ = _watch(proc, until=lambda pids, s: len(pids) >= 3)
+        time.sleep(1.5)                              # computing
+        workers = psutil.Process(proc.pid).children()
+        assert len(workers) == 2, workers
+        workers[0].kill()
+        stdout, err = proc.communicate(timeout=300)
+    finally:
+        if proc.poll() is None:
+            os.killpg(proc.pid, signal.SIGKILL)
+    assert proc.returncode == 0, err
+    ref = tmp_path / "ref.csv"
+    undisturbed = subprocess.run([sys.executable, "-m", "haa_sym.cli", "schedule", "-q", "--scheduler", "local:2",
+                                  "--out", str(ref)], capture_output=True, text=True, env=ENV, cwd=tmp_path,
+                                 timeout=300)
+    assert undisturbed.returncode == 0, undisturbed.stderr
+    # the same messages (the schedule's own warning, nothing of the lost worker) and bytes
+    assert (stdout, err) == (undisturbed.stdout.replace("ref.csv", "s.csv"), undisturbed.stderr)
+    assert out.read_bytes() == ref.read_bytes()
+    assert _gone(seen) == []
