@@ -2,8 +2,8 @@
 command's process (issue 27, item 3, sixth round).
 
 A worker is a process forked from the command (on Linux; started with ``spawn`` elsewhere, where
-fork is unsafe or missing) that receives ``(key, fn, args)`` on a pipe, runs ``fn(*args)`` and
-sends back the result with the time it started and stopped. Nothing listens on any port: the
+fork is unsafe or missing) that receives a task (its key, and its function and arguments
+pickled) on a pipe, runs it and sends back the result with the time it started and stopped. Nothing listens on any port: the
 pipes are the only channel. The command keeps every task not yet given to a worker in a heap
 (higher ``priority`` first, then submission order) and gives one task at a time to an idle worker,
 so a task list submitted later with a higher priority overtakes the queue at once (dask's
@@ -17,9 +17,10 @@ nonlinear map sized for 16 workers: 1.34 s). Both bound what 16 workers can gain
 (docs/schedule.md, "Measured after the sixth round"). A cluster given by address stays dask's.
 
 A worker that dies (killed, out of memory) takes down only the task it was running: that task is
-queued again for the others, as dask resubmits it, up to :data:`ALLOWED_FAILURES` deaths (dask's
-``distributed.scheduler.allowed-failures``), then its future raises :class:`WorkerLost`; with no
-worker left every queued task raises it. A dead worker is not replaced (a fork from the
+queued again for the others, as dask resubmits it, until its deaths exceed
+:data:`ALLOWED_FAILURES` (dask's rule and default for ``distributed.scheduler.allowed-failures``:
+given up at the fourth), then its future raises :class:`WorkerLost`; with no worker left every
+queued task raises it. A dead worker is not replaced (a fork from the
 dispatcher thread while the command's thread runs is not safe): the command finishes on the
 others.
 
@@ -40,8 +41,8 @@ import time
 
 __all__ = ["LocalPool", "WorkerLost", "ALLOWED_FAILURES", "START_METHOD"]
 
-#: Deaths of the worker running a task before the task is given up (dask's default
-#: ``distributed.scheduler.allowed-failures``: a task that kills every worker it runs on).
+#: A task is given up when the workers that died running it exceed this many (dask's default
+#: ``distributed.scheduler.allowed-failures`` and its rule: a task that kills every worker it runs on).
 ALLOWED_FAILURES = 3
 #: How workers are started: "fork" on Linux (a worker inherits the command's imported haa_sym,
 #: numpy and compiled library and is up in milliseconds); "spawn" elsewhere (a new interpreter
@@ -52,7 +53,8 @@ STOP_TIMEOUT = 2.0
 
 
 class WorkerLost(RuntimeError):
-    """A task's worker died each time it ran it (:data:`ALLOWED_FAILURES`), or no worker is left."""
+    """A task's worker died each time it ran it (more than :data:`ALLOWED_FAILURES` times), no
+    worker is left, or the pool was stopped with the task unfinished."""
 
 
 class PoolFuture(concurrent.futures.Future):
@@ -73,8 +75,12 @@ class PoolFuture(concurrent.futures.Future):
 
 
 def _worker(conn) -> None:
-    """A worker process's loop: ``(key, fn, args)`` in, ``(key, ok, result, start, stop)`` out,
-    until ``None`` or the pipe closes."""
+    """A worker process's loop: ``(key, payload)`` in, ``payload`` the pickled ``(fn, args)``;
+    ``(key, ok, result, start, stop)`` out; until ``None`` or the pipe closes. The payload is
+    unpickled here, apart from the key, so that a task whose function or arguments do not load
+    in the worker (a function defined after the fork) fails as that task's error, not as a dead
+    worker."""
+    import pickle
     # SIGINT (Ctrl-C reaches the whole process group) is the command's to handle: it stops the
     # workers itself. SIGTERM ends a worker (the command's own handler, inherited by a fork,
     # would raise haa_sym.errors.Terminated mid-task).
@@ -87,9 +93,10 @@ def _worker(conn) -> None:
             return
         if msg is None:
             return
-        key, fn, args = msg
+        key, payload = msg
         start = time.time()                  # the clock of the task stream (dask's too)
         try:
+            fn, args = pickle.loads(payload)
             out, ok = fn(*args), True
         except BaseException as exc:         # noqa: BLE001 - the task's error, raised by its future
             out, ok = exc, False
@@ -114,6 +121,8 @@ class LocalPool:
 
     def __init__(self, n: int, start_method: str = START_METHOD):
         import multiprocessing               # here: a command that runs in-process never needs it
+        from multiprocessing.reduction import ForkingPickler
+        self._dumps = ForkingPickler.dumps
         ctx = multiprocessing.get_context(start_method)
         self._lock = threading.Lock()
         self._queue: list = []               # (-priority, order, key, fn, args, future)
@@ -125,6 +134,8 @@ class LocalPool:
         self._failures: dict = {}            # key -> deaths of the workers that ran it
         self._stream: list = []              # dask's task-stream records of finished tasks
         self._closed = False
+        self._broken: BaseException | None = None    # the dispatcher's own failure
+        self._thread = None
         try:
             for _ in range(n):
                 mine, theirs = ctx.Pipe(duplex=True)
@@ -133,12 +144,13 @@ class LocalPool:
                 theirs.close()
                 self._workers[proc.pid] = (proc, mine)
                 self._idle.append(proc.pid)
-        except BaseException:
+            self._wake_r, self._wake_w = multiprocessing.Pipe(duplex=False)
+            self._thread = threading.Thread(target=self._dispatch, name="haa_sym-pool", daemon=True)
+            self._thread.start()
+        except BaseException:                # Ctrl-C, SIGTERM or a failed fork: nothing left running
+            self._closed = True
             self._stop_workers()
             raise
-        self._wake_r, self._wake_w = multiprocessing.Pipe(duplex=False)
-        self._thread = threading.Thread(target=self._dispatch, name="haa_sym-pool", daemon=True)
-        self._thread.start()
 
     # -- the part of distributed.Client that TaskRunner uses ------------------------------------
     def submit(self, fn, *args, priority: int = 0, pure: bool = False, key: str | None = None) -> PoolFuture:
@@ -149,10 +161,12 @@ class LocalPool:
         with self._lock:
             if self._closed:
                 raise RuntimeError("the local pool is closed")
-            if not self._workers:
-                fut.set_exception(WorkerLost("no worker is left"))
-                return fut
-            heapq.heappush(self._queue, (-priority, next(self._order), name, fn, args, fut))
+            lost = self._lost_why()
+            if lost is None:
+                heapq.heappush(self._queue, (-priority, next(self._order), name, fn, args, fut))
+        if lost is not None:
+            fut.set_exception(WorkerLost(lost))
+            return fut
         self._wake_w.send_bytes(b"")
         return fut
 
@@ -165,7 +179,7 @@ class LocalPool:
 
     def nthreads(self) -> dict:
         with self._lock:
-            return {pid: 1 for pid in self._workers}
+            return {} if self._broken is not None else {pid: 1 for pid in self._workers}
 
     def scheduler_info(self) -> dict:
         return {"workers": self.nthreads()}
@@ -177,20 +191,24 @@ class LocalPool:
             return [r for r in self._stream if start is None or r["startstops"][0]["stop"] >= start]
 
     def close(self) -> None:
-        """Stop the workers (a running task is abandoned) and the dispatcher."""
+        """Stop the dispatcher and the workers: a running task is abandoned (its worker
+        terminated) and its future, as every queued one, raises WorkerLost."""
         with self._lock:
             if self._closed:
                 return
             self._closed = True
-            queued, self._queue = self._queue, []
-        for entry in queued:
-            entry[-1].cancel()
         try:
             self._wake_w.send_bytes(b"")
         except OSError:
             pass
         self._thread.join(STOP_TIMEOUT)
-        self._stop_workers()
+        with self._lock:
+            self._stop_workers()
+            left = [e[-1] for e in self._queue] + [e[-1] for e in self._running.values()]
+            self._queue, self._running = [], {}
+        for fut in left:
+            if not fut.done():
+                fut.set_exception(WorkerLost("the local worker processes were stopped"))
         for c in (self._wake_r, self._wake_w):
             c.close()
 
@@ -201,15 +219,34 @@ class LocalPool:
         self.close()
 
     # -- the dispatcher thread -------------------------------------------------------------------
+    def _lost_why(self) -> str | None:
+        """Why no task can run any more (under the lock), or None."""
+        if self._broken is not None:
+            return f"the local pool's dispatcher failed ({type(self._broken).__name__}: {self._broken})"
+        return None if self._workers else "no worker is left"
+
     def _dispatch(self) -> None:
+        try:
+            self._serve()
+        except BaseException as exc:         # noqa: BLE001 - every waiting future is told, none hangs
+            with self._lock:
+                self._broken = exc
+                left = [e[-1] for e in self._queue] + [e[-1] for e in self._running.values()]
+                self._queue, self._running = [], {}
+            for fut in left:
+                if not fut.done():
+                    fut.set_exception(WorkerLost(self._lost_why()))
+
+    def _serve(self) -> None:
         from multiprocessing.connection import wait
         while True:
             with self._lock:
                 if self._closed:
                     return
-                self._feed()
+                failed = self._feed()
                 conns = {c: pid for pid, (_, c) in self._workers.items()}
                 sentinels = {p.sentinel: pid for pid, (p, _) in self._workers.items()}
+            _fail(failed)
             ready = wait([self._wake_r, *conns, *sentinels])
             for r in ready:
                 if r is self._wake_r:
@@ -221,8 +258,11 @@ class LocalPool:
                 if r in sentinels and sentinels[r] in self._workers:
                     self._died(sentinels[r])
 
-    def _feed(self) -> None:
-        """Give queued tasks to idle workers (under the lock)."""
+    def _feed(self) -> list:
+        """Give queued tasks to idle workers (under the lock); returns the (future, error) pairs
+        of tasks that could not be sent, to be set after the lock is released (a future's
+        callbacks may call this pool)."""
+        failed = []
         while self._idle and self._queue:
             entry = heapq.heappop(self._queue)
             fut = entry[-1]
@@ -230,23 +270,41 @@ class LocalPool:
             # back to pending); any other is started here, or skipped if cancelled while queued
             if not fut.running() and not fut.set_running_or_notify_cancel():
                 continue
+            try:
+                payload = self._dumps((entry[3], entry[4]))
+            except Exception as exc:         # noqa: BLE001 - the task's function or arguments do not pickle
+                failed.append((fut, exc))
+                continue
             pid = self._idle.pop()
             try:
-                self._workers[pid][1].send((entry[2], entry[3], entry[4]))
-            except Exception as exc:         # noqa: BLE001 - the task's arguments do not pickle
-                self._idle.append(pid)
-                fut.set_exception(exc)
+                self._workers[pid][1].send((entry[2], bytes(payload)))
+            except OSError:
+                # the worker has died (its sentinel says so next): the task waits for another,
+                # and the dead worker is not idle any more
+                heapq.heappush(self._queue, entry)
                 continue
             self._running[pid] = entry
+        return failed
 
     def _finished(self, pid: int) -> None:
+        import pickle
+        if pid not in self._workers:
+            return
         conn = self._workers[pid][1]
         try:
-            key, ok, out, start, stop = conn.recv()
+            data = conn.recv_bytes()
         except (EOFError, OSError):
             return                           # the worker died: its sentinel says so
+        try:
+            key, ok, out, start, stop = pickle.loads(data)
+        except Exception as exc:             # noqa: BLE001 - a result that pickles but does not load here
+            key, ok, start, stop = None, False, time.time(), time.time()
+            out = RuntimeError(f"a task's result could not be loaded ({type(exc).__name__}: {exc})")
         with self._lock:
-            entry = self._running.pop(pid)
+            entry = self._running.pop(pid, None)
+            if entry is None:                # stopped meanwhile (close)
+                return
+            key = entry[2] if key is None else key
             self._idle.append(pid)
             self._failures.pop(key, None)
             self._stream.append({"key": key, "worker": f"local-{pid}",
@@ -255,7 +313,8 @@ class LocalPool:
             # command's thread, whose work on it (a stream's follow-up, the progress bar) holds
             # the GIL, and this thread waited for it to send the next task (2.8 ms between two
             # tasks of the nonlinear map on one worker, median, against about 1 ms of pickling)
-            self._feed()
+            failed = self._feed()
+        _fail(failed)
         fut = entry[-1]
         if ok:
             fut.set_result(out)
@@ -266,6 +325,8 @@ class LocalPool:
         """A worker's process ended: its task queued again, or given up."""
         lost = []
         with self._lock:
+            if pid not in self._workers:     # stopped meanwhile (close)
+                return
             proc, conn = self._workers.pop(pid)
             if pid in self._idle:
                 self._idle.remove(pid)
@@ -273,22 +334,23 @@ class LocalPool:
             if entry is not None:
                 key = entry[2]
                 self._failures[key] = self._failures.get(key, 0) + 1
-                if self._failures[key] >= ALLOWED_FAILURES:
-                    lost.append((entry[-1], f"the worker processes running task {key} died "
-                                            f"{ALLOWED_FAILURES} times (exit code {proc.exitcode})"))
+                # dask's rule: given up when its deaths exceed allowed-failures
+                if self._failures[key] > ALLOWED_FAILURES:
+                    lost.append((entry[-1], WorkerLost(f"the worker processes running task {key} died "
+                                                       f"{self._failures[key]} times (exit code {proc.exitcode})")))
                 else:
                     # a new future state cannot go back to pending: the entry keeps its future,
                     # already running, and is given to the next idle worker as it is
                     heapq.heappush(self._queue, entry)
             if not self._workers:
-                lost += [(e[-1], "no worker is left") for e in self._queue]
+                lost += [(e[-1], WorkerLost("no worker is left")) for e in self._queue]
                 self._queue = []
         conn.close()
-        for fut, why in lost:
-            if not fut.done():
-                fut.set_exception(WorkerLost(why))
+        _fail(lost)
 
     def _stop_workers(self) -> None:
+        """Every worker stopped: a busy one terminated, an idle one asked to end (under the lock
+        or before the dispatcher runs)."""
         for pid, (proc, conn) in list(self._workers.items()):
             if pid in self._running:
                 proc.terminate()             # its task abandoned (an error, Ctrl-C): no wait for it
@@ -308,3 +370,10 @@ class LocalPool:
                 proc.join()
             conn.close()
         self._workers.clear()
+        self._idle.clear()
+
+
+def _fail(pairs) -> None:
+    for fut, exc in pairs:
+        if not fut.done():
+            fut.set_exception(exc)
