@@ -319,7 +319,7 @@ TITLE_HELP = ("text above the figure's automatic title (the actuator, then what 
 POINTS_ROLE = "points: the i-th P_gain with the i-th D_gain, one value pairing with all"
 # where the tasks of regions --nonlinear/--robust and schedule run (haa_sym.io.tasks)
 
-SCHEDULER_HELP = ("local:N starts a cluster of N worker processes on this machine (127.0.0.1, stopped at the "
+SCHEDULER_HELP = ("local:N starts N worker processes on this machine (no network port; stopped at the "
                   "end; N up to the cores), or the address of a running dask.distributed scheduler, e.g. "
                   "tcp://127.0.0.1:8786 (docs/schedule.md); default: in-process")
 
