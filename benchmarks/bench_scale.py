@@ -192,47 +192,44 @@ def run_once(argv: list[str], n: int, out: Path, sized_for: int | None = None, b
             return run_once(argv, n, out, backend=backend)
         finally:
             tasks.TaskRunner.workers = real
-    if backend == "pool":
-        # imported before the forks: the workers inherit them (as a command's workers do)
-        import haa_sym.analysis.nonlinear_map  # noqa: F401
-        import haa_sym.design.schedule  # noqa: F401
-        spec = f"local:{n}"
-        t = time.perf_counter()
-        with tasks.cluster(spec) as pool, _serving(pool, spec):
-            start_s = time.perf_counter() - t
-            tasks.TRACE = []
-            t0 = time.time()
-            p0 = time.perf_counter()
-            rc = main([*argv, "-q", "--scheduler", spec])
-            wall = time.perf_counter() - p0
-            t1 = time.time()
-            stream = pool.get_task_stream(start=t0 - 1)
-            trace, tasks.TRACE = tasks.TRACE, None
-        if rc != 0:
-            raise SystemExit(f"the command failed (exit {rc}): {' '.join(argv)}")
-        return {"workers": n, "seconds": wall, "cluster_start_s": start_s, **analyse(trace, stream, t0, t1),
-                "output": _output_bytes(out)}
-    import distributed
     t = time.perf_counter()
-    with distributed.LocalCluster(n_workers=n, threads_per_worker=1, processes=True, host="127.0.0.1",
-                                  dashboard_address=None, worker_dashboard_address=None,
-                                  silence_logs=logging.ERROR) as cl, distributed.Client(cl) as client:
-        client.wait_for_workers(n)
-        _warm(client)
+    with _warm_workers(n, backend) as (spec, recorder):
         start_s = time.perf_counter() - t
         tasks.TRACE = []
-        client.get_task_stream()                       # start recording
         t0 = time.time()
         p0 = time.perf_counter()
-        rc = main([*argv, "-q", "--scheduler", cl.scheduler_address])
+        rc = main([*argv, "-q", "--scheduler", spec])
         wall = time.perf_counter() - p0
         t1 = time.time()
-        stream = client.get_task_stream(start=t0 - 1)
+        stream = recorder.get_task_stream(start=t0 - 1)
         trace, tasks.TRACE = tasks.TRACE, None
     if rc != 0:
         raise SystemExit(f"the command failed (exit {rc}): {' '.join(argv)}")
     return {"workers": n, "seconds": wall, "cluster_start_s": start_s, **analyse(trace, stream, t0, t1),
             "output": _output_bytes(out)}
+
+
+@contextlib.contextmanager
+def _warm_workers(n: int, backend: str):
+    """(the --scheduler value, what records the task stream) of ``n`` started, warm workers of
+    ``backend`` (module docstring)."""
+    from haa_sym.io import tasks
+    if backend == "pool":
+        # imported before the forks: the workers inherit them (as a command's workers do)
+        import haa_sym.analysis.nonlinear_map  # noqa: F401
+        import haa_sym.design.schedule  # noqa: F401
+        spec = f"local:{n}"
+        with tasks.cluster(spec) as pool, _serving(pool, spec):
+            yield spec, pool
+        return
+    import distributed
+    with distributed.LocalCluster(n_workers=n, threads_per_worker=1, processes=True, host="127.0.0.1",
+                                  dashboard_address=None, worker_dashboard_address=None,
+                                  silence_logs=logging.ERROR) as cl, distributed.Client(cl) as client:
+        client.wait_for_workers(n)
+        _warm(client)
+        client.get_task_stream()                       # start recording
+        yield cl.scheduler_address, client
 
 
 #: Run in a new process as ``python -c PROBE ARGS``: the command as a user runs it, with the time

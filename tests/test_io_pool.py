@@ -15,7 +15,7 @@ from haa_sym.errors import ParameterError
 from haa_sym.io.pool import ALLOWED_FAILURES, LocalPool, WorkerLost
 from haa_sym.io.tasks import TaskRunner
 
-from test_io_tasks_local import ENV, _gone, _watch
+from test_io_tasks_local import ENV, _gone, _watch, start_schedule_on_local_2
 
 
 def _nap(tag, seconds):
@@ -212,9 +212,7 @@ def test_schedule_on_local_2_finishes_on_the_other_worker_when_one_is_killed(tmp
     """Issue 27's check: a worker killed mid-run, the command finishes on the others, with the
     bytes of an undisturbed run."""
     out = tmp_path / "s.csv"
-    proc = subprocess.Popen([sys.executable, "-m", "haa_sym.cli", "schedule", "-q", "--scheduler", "local:2",
-                             "--out", str(out)], stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
-                            env=ENV, cwd=tmp_path, start_new_session=True)
+    proc = start_schedule_on_local_2(out, tmp_path)
     try:
         seen, _ = _watch(proc, until=lambda pids, s: len(pids) >= 3)
         time.sleep(1.0)

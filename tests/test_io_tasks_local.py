@@ -189,13 +189,18 @@ def test_regions_nonlinear_on_local_2_listens_nowhere_gives_the_bytes_and_leaves
     assert len(set(a["nonlinear_class"].ravel())) >= 2
 
 
+def start_schedule_on_local_2(out: Path, cwd: Path) -> subprocess.Popen:
+    """``haa-sym schedule -q --scheduler local:2 --out OUT`` on the default grid (long enough to
+    act on while it runs), started in a new process of its own session."""
+    return subprocess.Popen([sys.executable, "-m", "haa_sym.cli", "schedule", "-q", "--scheduler", "local:2",
+                             "--out", str(out)], stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
+                            env=ENV, cwd=cwd, start_new_session=True)
+
+
 @pytest.mark.slow
 def test_sigterm_stops_the_local_cluster(tmp_path):
-    # the default grid: long enough to be running when the signal comes
     out = tmp_path / "s.csv"
-    proc = subprocess.Popen([sys.executable, "-m", "haa_sym.cli", "schedule", "-q", "--scheduler", "local:2",
-                             "--out", str(out)], stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
-                            env=ENV, cwd=tmp_path, start_new_session=True)
+    proc = start_schedule_on_local_2(out, tmp_path)
     try:
         # until both workers run (the pool is up and the command is computing)
         seen, sockets = _watch(proc, until=lambda pids, s: len(pids) >= 3)
