@@ -98,3 +98,17 @@ def test_non_terminal_gets_periodic_plain_lines(monkeypatch, reset_progress):
         time.sleep(0.05)
         bar.update(2)
     assert log.getvalue() == ""
+
+
+def test_a_bar_leaves_no_thread_behind(reset_progress):
+    """No tqdm monitor thread: --scheduler local:N forks the command after its first bars
+    (haa_sym.io.pool), and a fork while another thread may hold a lock is unsafe."""
+    import threading
+
+    import tqdm
+    before = set(threading.enumerate())
+    with progress.progress(50, "work", "task", True) as bar:
+        for _ in range(50):
+            bar.update(1)
+    assert set(threading.enumerate()) - before == set()
+    assert tqdm.tqdm.monitor_interval == 10          # a library caller's tqdm keeps its own setting

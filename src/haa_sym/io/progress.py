@@ -131,17 +131,35 @@ def progress(total: int, desc: str, unit: str = "it", enabled: bool | None = Non
         Use as a context manager. PeriodicLines (plain lines every :data:`PERIOD_S` s) in the
         default mode when stderr is not a terminal.
     """
-    from tqdm import tqdm
     mode = _mode if enabled is None else enabled
     file = sys.stderr
     if mode is None and not _is_terminal(file):
         return PeriodicLines(total, desc, unit, file, PERIOD_S)
     ncols, nrows = _shape(file)
     # on a terminal the bar erases itself when done; forced (a log), its last state stays
-    return tqdm(total=total, desc=desc, unit=unit, file=file, leave=bool(mode),
+    return _bar_class()(total=total, desc=desc, unit=unit, file=file, leave=bool(mode),
                 # disable=None: tqdm shows the bar only when ``file`` is a terminal
                 disable=None if mode is None else not mode,
                 delay=0.0 if mode else DELAY_S, mininterval=MININTERVAL_S, ncols=ncols, nrows=nrows)
+
+
+_BAR: list = []
+
+
+def _bar_class():
+    """tqdm without its monitor thread (a class of its own: a library caller's tqdm keeps its
+    setting). The thread outlives every bar, and ``--scheduler local:N`` forks the worker
+    processes later in the same process (haa_sym.io.pool): a fork while another thread may hold
+    a lock (stderr's, tqdm's) can leave the child waiting on it for ever, and Python 3.12 warns
+    on it. The monitor only refreshes a bar whose updates stalled; these bars refresh on
+    ``mininterval`` and on every update."""
+    if not _BAR:
+        from tqdm import tqdm
+
+        class Bar(tqdm):
+            monitor_interval = 0
+        _BAR.append(Bar)
+    return _BAR[0]
 
 
 def message(text: str) -> None:
