@@ -28,13 +28,14 @@ ENV = {**os.environ, "PYTHONPATH": os.pathsep.join(
 
 
 @pytest.mark.parametrize("cmd", [["schedule"], ["regions", "--nonlinear"]])
-@pytest.mark.parametrize("value", ["local:0", "local:x", "local:", "local:1.5", "local:-2", "local: 2"])
+@pytest.mark.parametrize("value", ["local:0", "local:x", "local:", "local:1.5", "local:-2", "local: 2",
+                                   "local:100000", "local:99999999999999999999"])
 def test_a_bad_worker_count_is_one_line(cmd, value, capsys, tmp_path):
     out = tmp_path / ("s.csv" if cmd[0] == "schedule" else "m.npz")
     assert main([*cmd, "--scheduler", value, "--out", str(out)]) == 2
     err = capsys.readouterr().err
     assert err.count("\n") == 1 and err.startswith(f"haa-sym: error: --scheduler {value!r}: ")
-    assert "allowed: local:N with N >= 1" in err
+    assert "allowed: local:N with 1 <= N <= " in err
     assert not out.exists()
 
 
@@ -89,6 +90,37 @@ def test_local_workers_run_one_blas_thread():
             got = dict(pool.gather([pool.submit(_blas_threads) for _ in range(2)]))
         assert _blas_threads()[1] == [2]          # the command's own limit restored
     assert len(got) == 2 and all(v == [1] for v in got.values()), got
+
+
+def test_at_most_eight_worker_processes_per_core(monkeypatch):
+    # a large N forked until the kernel killed processes for memory (the command's and others')
+    monkeypatch.setattr(tasks.os, "cpu_count", lambda: 2)
+    assert tasks.local_workers("local:16") == 16
+    with pytest.raises(ParameterError, match=r"'local:17': .* from 1 to 16 \(8 per core, 2 cores\)"):
+        tasks.local_workers("local:17")
+    monkeypatch.setattr(tasks.os, "cpu_count", lambda: 16)
+    assert tasks.local_workers("local:128") == 128
+
+
+def test_a_refused_fork_is_one_line_and_leaves_no_worker(monkeypatch):
+    import multiprocessing.context
+    from haa_sym.io import pool
+    started = []
+    real = multiprocessing.context.ForkProcess.start
+
+    def start(self):
+        if started:
+            raise BlockingIOError(11, "Resource temporarily unavailable")
+        real(self)
+        started.append(self)
+    monkeypatch.setattr(multiprocessing.context.ForkProcess, "start", start)
+    monkeypatch.setattr(pool, "START_METHOD", "fork")
+    monkeypatch.setattr(pool.LocalPool.__init__, "__defaults__", ("fork",))
+    with pytest.raises(ParameterError, match=r"'local:2': the worker processes could not be started "
+                                             r"\(BlockingIOError: .*\); allowed: fewer workers"):
+        with tasks.cluster("local:2"):
+            pass
+    assert len(started) == 1 and _gone({started[0].pid}) == []
 
 
 def test_other_values_pass_through():

@@ -53,17 +53,27 @@ TRACE: list | None = None
 LOCAL = "local:"
 
 
+#: ``local:N`` accepts at most this many worker processes per core: more only share the cores
+#: (N above the cores is allowed, with a warning, to test the scheduling), and each is a process
+#: of its own (about 50 MB resident): ``local:100000`` forked until the kernel killed processes
+#: for memory, the command's and others' (2026-11-27).
+LOCAL_MAX_PER_CORE = 8
+
+
 def local_workers(spec) -> int | None:
     """N of a ``--scheduler local:N`` value, None for any other value (an address, a Client,
-    None); ParameterError unless N is an integer >= 1."""
+    None); ParameterError unless N is an integer from 1 to :data:`LOCAL_MAX_PER_CORE` times the
+    cores."""
     if not isinstance(spec, str) or not spec.startswith(LOCAL):
         return None
     text = spec[len(LOCAL):]
-    n = int(text) if text.isascii() and text.isdigit() else 0
-    if n < 1:
-        raise ParameterError(f"--scheduler {spec!r}: the number of worker processes is not an integer >= 1; "
-                             "allowed: local:N with N >= 1 (e.g. local:2), or the address of a running "
-                             "dask.distributed scheduler (tcp://127.0.0.1:8786)")
+    n = int(text) if text.isascii() and text.isdigit() and len(text) < 10 else 0
+    most = LOCAL_MAX_PER_CORE * (os.cpu_count() or 1)
+    if not 1 <= n <= most:
+        raise ParameterError(f"--scheduler {spec!r}: the number of worker processes is not an integer from 1 "
+                             f"to {most} ({LOCAL_MAX_PER_CORE} per core, {os.cpu_count() or 1} cores); allowed: "
+                             f"local:N with 1 <= N <= {most} (e.g. local:{os.cpu_count() or 1}), or the address "
+                             "of a running dask.distributed scheduler (tcp://127.0.0.1:8786)")
     return n
 
 
@@ -105,7 +115,12 @@ def cluster(spec):
     try:
         blas = threadpool_limits(limits=1, user_api="blas")
         with _environ(OMP_NUM_THREADS=os.environ.get("OMP_NUM_THREADS", "1")):
-            pool = LocalPool(n)
+            try:
+                pool = LocalPool(n)
+            except OSError as e:         # a fork refused (process or memory limits): the started ones are stopped
+                raise ParameterError(f"--scheduler {spec!r}: the worker processes could not be started "
+                                     f"({type(e).__name__}: {e}); allowed: fewer workers (local:N with a "
+                                     "smaller N) or no --scheduler") from None
         yield pool
     finally:
         try:
