@@ -30,8 +30,11 @@ def traced_cluster(n_workers=2, backend="dask"):
             client = stack.enter_context(LocalPool(n_workers))
         else:
             distributed = pytest.importorskip("distributed")
-            cl = stack.enter_context(distributed.LocalCluster(n_workers=n_workers, threads_per_worker=1,
-                                                              processes=False, dashboard_address=None))
+            # the scheduler's HTTP server (started even without a dashboard) on a free port, not
+            # 8787, which a test beside this one may hold (dask warned)
+            cl = stack.enter_context(distributed.LocalCluster(
+                n_workers=n_workers, threads_per_worker=1, processes=False, dashboard_address=None,
+                scheduler_kwargs={"dashboard": False, "dashboard_address": "127.0.0.1:0"}))
             client = stack.enter_context(distributed.Client(cl))
         trace = tasks.TRACE = []
         try:
