@@ -2,6 +2,7 @@
 priorities, a worker's death (the task queued again for the others, given up after
 ALLOWED_FAILURES deaths, the command stopped with one line when no worker is left), errors that
 keep their type, and a close that leaves no process and does not wait for a running task."""
+import contextlib
 import os
 import signal
 import subprocess
@@ -239,3 +240,39 @@ def test_schedule_on_local_2_finishes_on_the_other_worker_when_one_is_killed(tmp
     assert (stdout, err) == (undisturbed.stdout.replace("ref.csv", "s.csv"), undisturbed.stderr)
     assert out.read_bytes() == ref.read_bytes()
     assert _gone(seen) == []
+
+
+#: A command holding a pool of two idle workers: prints their pids, then waits to be killed.
+HOLDER = """
+import sys, time
+from haa_sym.io import pool
+if sys.argv[1] == "pipe-only":
+    pool._die_with_parent = lambda parent: None      # the pipe's end alone must end them
+p = pool.LocalPool(2)
+print(" ".join(map(str, sorted(p.nthreads()))), flush=True)
+time.sleep(600)
+"""
+
+
+@pytest.mark.parametrize("how", ["pdeathsig", "pipe-only"])
+def test_workers_end_when_the_command_is_killed(how):
+    """SIGKILL (or the kernel's out-of-memory killer) gives the command no time to stop its
+    workers: they end by themselves (Linux's parent-death signal; the closed pipe elsewhere,
+    which a fork's copies of the command's pipe ends kept open)."""
+    if how == "pdeathsig" and sys.platform != "linux":
+        pytest.skip("PR_SET_PDEATHSIG is Linux's")
+    proc = subprocess.Popen([sys.executable, "-c", HOLDER, how], stdout=subprocess.PIPE, text=True, env=ENV,
+                            start_new_session=True)
+    pids: set = set()
+    try:
+        pids = {int(p) for p in proc.stdout.readline().split()}
+        assert len(pids) == 2
+        proc.kill()
+        proc.wait(timeout=10)
+        assert _gone(pids, timeout=10) == []
+    finally:
+        if proc.poll() is None:
+            os.killpg(proc.pid, signal.SIGKILL)
+        for pid in pids:                             # whatever the test found left, not left here
+            with contextlib.suppress(ProcessLookupError):
+                os.kill(pid, signal.SIGKILL)

@@ -128,7 +128,7 @@ def test_other_values_pass_through():
         with tasks.cluster(spec) as s:
             assert s == spec
         assert tasks.local_workers(spec) is None
-    assert tasks.local_workers("local:4") == 4
+    assert tasks.local_workers("local:4") == 4 and tasks.local_workers("LOCAL:2") == 2
     with pytest.raises(ParameterError, match="local:0"):
         tasks.local_workers("local:0")
 

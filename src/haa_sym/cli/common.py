@@ -320,7 +320,7 @@ POINTS_ROLE = "points: the i-th P_gain with the i-th D_gain, one value pairing w
 # where the tasks of regions --nonlinear/--robust and schedule run (haa_sym.io.tasks)
 
 SCHEDULER_HELP = ("local:N starts N worker processes on this machine (no network port; stopped at the "
-                  "end; N up to the cores), or the address of a running dask.distributed scheduler, e.g. "
+                  "end; at most 8 per core, and above the cores they share them, with a warning), or the address of a running dask.distributed scheduler, e.g. "
                   "tcp://127.0.0.1:8786 (docs/schedule.md); default: in-process")
 
 

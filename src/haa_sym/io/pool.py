@@ -12,7 +12,7 @@ priorities on a cluster, :meth:`haa_sym.io.tasks.TaskRunner.start`).
 Why not dask's ``LocalCluster`` (what ``local:N`` started until this round): on the 2-core
 machines its start cost the command 0.45-0.55 s before the first task, serial on any machine
 (importing ``distributed``, 0.27-0.41 s, then the scheduler, the nannies and the workers' 0.15 s),
-and its scheduler, in the command's process, spends about 2.8 ms of it per task (473 tasks of the
+and a task's trip from the command to a worker and back took about 2.8 ms (473 tasks of the
 nonlinear map sized for 16 workers: 1.34 s). Both bound what 16 workers can gain
 (docs/schedule.md, "Measured after the sixth round"). A cluster given by address stays dask's.
 
@@ -74,7 +74,23 @@ class PoolFuture(concurrent.futures.Future):
         return "error" if self.exception() is not None else "finished"
 
 
-def _worker(conn) -> None:
+def _die_with_parent(parent: int) -> None:
+    """Linux: the kernel sends this process SIGKILL when the command's process (pid ``parent``)
+    dies (killed, out of memory), busy or not. Elsewhere a worker ends at its next read of the
+    closed pipe."""
+    if sys.platform != "linux":
+        return
+    try:
+        import ctypes
+        libc = ctypes.CDLL(None, use_errno=True)
+        libc.prctl(1, int(signal.SIGKILL), 0, 0, 0)          # PR_SET_PDEATHSIG
+    except (OSError, AttributeError):        # pragma: no cover - no prctl: the pipe's end still ends it
+        pass
+    if os.getppid() != parent:               # it died before the call: nobody will send the signal
+        os._exit(0)
+
+
+def _worker(conn, parent_ends=(), parent: int | None = None) -> None:
     """A worker process's loop: ``(key, payload)`` in, ``payload`` the pickled ``(fn, args)``;
     ``(key, ok, result, start, stop)`` out; until ``None`` or the pipe closes. The payload is
     unpickled here, apart from the key, so that a task whose function or arguments do not load
@@ -86,6 +102,12 @@ def _worker(conn) -> None:
     # would raise haa_sym.errors.Terminated mid-task).
     signal.signal(signal.SIGINT, signal.SIG_IGN)
     signal.signal(signal.SIGTERM, signal.SIG_DFL)
+    # a forked worker holds copies of the command's ends of its own pipe and of the workers forked
+    # before it: closed, so that the command's death closes this worker's pipe (EOF) and ends it
+    for c in parent_ends:
+        c.close()
+    if parent is not None:
+        _die_with_parent(parent)
     while True:
         try:
             msg = conn.recv()
@@ -139,7 +161,10 @@ class LocalPool:
         try:
             for _ in range(n):
                 mine, theirs = ctx.Pipe(duplex=True)
-                proc = ctx.Process(target=_worker, args=(theirs,), daemon=True, name="haa_sym-worker")
+                # the command's ends that a fork copies into the worker (a spawned worker gets
+                # only what it is given)
+                ends = [mine, *(c for _, c in self._workers.values())] if start_method == "fork" else []
+                proc = ctx.Process(target=_worker, args=(theirs, ends, os.getpid()), daemon=True, name="haa_sym-worker")
                 proc.start()
                 theirs.close()
                 self._workers[proc.pid] = (proc, mine)

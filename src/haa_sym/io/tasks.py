@@ -64,7 +64,7 @@ def local_workers(spec) -> int | None:
     """N of a ``--scheduler local:N`` value, None for any other value (an address, a Client,
     None); ParameterError unless N is an integer from 1 to :data:`LOCAL_MAX_PER_CORE` times the
     cores."""
-    if not isinstance(spec, str) or not spec.startswith(LOCAL):
+    if not isinstance(spec, str) or not spec.lower().startswith(LOCAL):   # LOCAL:2 too, not an address
         return None
     text = spec[len(LOCAL):]
     n = int(text) if text.isascii() and text.isdigit() and len(text) < 10 else 0
