@@ -1,7 +1,8 @@
 """The local worker processes of ``--scheduler local:N`` (:class:`haa_sym.io.pool.LocalPool`):
 priorities, a worker's death (the task queued again for the others, given up after
-ALLOWED_FAILURES deaths, the command stopped with one line when no worker is left), errors that
-keep their type, and a close that leaves no process and does not wait for a running task."""
+ALLOWED_FAILURES deaths, the worker replaced by a spawned one, the command stopped with one line
+when no worker is left), errors that keep their type, and a close that leaves no process and
+does not wait for a running task."""
 import contextlib
 import os
 import signal
@@ -13,7 +14,7 @@ import psutil
 import pytest
 
 from haa_sym.errors import ParameterError
-from haa_sym.io.pool import ALLOWED_FAILURES, LocalPool, WorkerLost
+from haa_sym.io.pool import ALLOWED_FAILURES, REPLACEMENTS_PER_WORKER, LocalPool, WorkerLost
 from haa_sym.io.tasks import TaskRunner
 
 from test_io_tasks_local import ENV, _gone, _watch, start_schedule_on_local_2
@@ -64,6 +65,16 @@ def _unpicklable():
 
 def _workers(pool) -> list[int]:
     return sorted(pool.nthreads())
+
+
+def _until(pool, check, timeout=20.0) -> list[int]:
+    """The pool's workers once ``check(workers)`` holds (a replacement is started by the pool's
+    thread after it sees the death)."""
+    deadline = time.monotonic() + timeout
+    while not check(_workers(pool)):
+        assert time.monotonic() < deadline, _workers(pool)
+        time.sleep(0.01)
+    return _workers(pool)
 
 
 def test_results_in_order_and_errors_keep_their_type():
@@ -132,16 +143,14 @@ def test_what_does_not_load_fails_its_task_and_keeps_the_worker():
 
 def test_an_idle_worker_that_died_costs_nothing(tmp_path):
     with LocalPool(2) as pool:
-        victim = _workers(pool)[0]
+        first = _workers(pool)
+        victim = first[0]
         os.kill(victim, signal.SIGKILL)
         # submitted at once, before or after the pool sees the death: every task finishes
         got = pool.gather([pool.submit(pow, k, 2) for k in range(40)])
         assert got == [k * k for k in range(40)]
-        deadline = time.monotonic() + 10
-        while victim in _workers(pool):
-            assert time.monotonic() < deadline
-            time.sleep(0.01)
-        assert len(_workers(pool)) == 1
+        now = _until(pool, lambda w: victim not in w and len(w) == 2)
+        assert first[1] in now                       # replaced, the other kept
 
 
 def _nap_noting(tag, seconds, path):
@@ -162,7 +171,7 @@ def test_a_killed_worker_costs_its_task_a_rerun_on_the_others(tmp_path):
         assert [g[0] for g in pool.gather(others)] == list(range(12))
         tag, pid = long.result(timeout=30)
         assert tag == "long" and pid != victim
-        assert victim not in _workers(pool) and len(_workers(pool)) == 2
+        assert victim not in _until(pool, lambda w: len(w) == 3)
     assert [int(p) for p in note.read_text().split()] == [victim, pid]     # run twice, finished once
 
 
@@ -172,11 +181,40 @@ def test_a_task_that_kills_every_worker_is_given_up_after_the_allowed_failures()
         bad = pool.submit(_die_if, "bad", 0)
         with pytest.raises(WorkerLost, match=f"died {deaths} times"):
             bad.result(timeout=30)
-        assert len(_workers(pool)) == 1
+        assert len(_until(pool, lambda w: len(w) == deaths + 1)) == deaths + 1     # each replaced
         assert pool.gather([pool.submit(pow, 2, 5)]) == [32]     # the rest still runs
 
 
-def test_the_runner_stops_with_one_line_when_no_worker_is_left():
+def test_one_worker_survives_its_death_on_a_spawned_replacement():
+    """local:1: the task that was running when its worker was killed runs again on the
+    replacement, a new interpreter (spawned) with one BLAS thread, as the forked workers."""
+    from haa_sym.io.tasks import one_blas_thread
+    from test_io_tasks_local import _blas_threads
+    with LocalPool(1, initializer=one_blas_thread) as pool:
+        (first,) = _workers(pool)
+        victim = pool.submit(_die_if, "victim", first)
+        assert victim.result(timeout=60) == "victim"
+        (second,) = _workers(pool)
+        assert second != first
+        pid, threads = pool.gather([pool.submit(_blas_threads)])[0]
+        assert pid == second and threads == [1]
+        assert psutil.Process(second).cmdline()[-2:] != psutil.Process(os.getpid()).cmdline()[-2:]
+
+
+def test_replacements_end_when_every_worker_they_get_is_killed():
+    """A machine that kills each worker it is given: at most REPLACEMENTS_PER_WORKER per worker,
+    then every queued task raises WorkerLost (no wait for ever)."""
+    with LocalPool(1) as pool:
+        futs = [pool.submit(_die_if, f"t{k}", 0) for k in range(REPLACEMENTS_PER_WORKER + 2)]
+        for f in futs:
+            with pytest.raises(WorkerLost):
+                f.result(timeout=120)
+        assert _until(pool, lambda w: not w) == []
+        with pytest.raises(WorkerLost, match="no worker is left"):
+            pool.submit(pow, 2, 2).result(timeout=5)
+
+
+def test_the_runner_stops_with_one_line_when_a_task_kills_every_worker():
     with LocalPool(1) as pool:
         runner = TaskRunner(pool, False)
         t0 = time.monotonic()
@@ -276,3 +314,49 @@ def test_workers_end_when_the_command_is_killed(how):
         for pid in pids:                             # whatever the test found left, not left here
             with contextlib.suppress(ProcessLookupError):
                 os.kill(pid, signal.SIGKILL)
+
+
+#: local:1 whose worker is killed; the replacement (spawned: its multiprocessing locks are named
+#: semaphores, which it removes when it ends normally) creates one, then the pool is closed.
+REPLACED = """
+import os, signal
+from haa_sym.io.pool import LocalPool
+
+def lock_in_worker(victim):
+    import multiprocessing
+    if os.getpid() == victim:
+        os.kill(victim, signal.SIGKILL)
+    global LOCK
+    LOCK = multiprocessing.Lock()
+    return os.getpid()
+
+if __name__ == "__main__":
+    with LocalPool(1) as pool:
+        (victim,) = pool.nthreads()
+        print(victim != pool.submit(lock_in_worker, victim).result(timeout=60), flush=True)
+"""
+
+
+def test_a_replacement_ends_normally_when_the_pool_closes(tmp_path):
+    """Linux's parent-death signal of a replacement is tied to the pool's thread that started it:
+    when that thread ended before the workers were stopped, the replacement was SIGKILLed at
+    every close (its named semaphore left behind, the resource tracker's warning on stderr)."""
+    script = tmp_path / "replaced.py"
+    script.write_text(REPLACED)
+    run = subprocess.run([sys.executable, str(script)], capture_output=True, text=True, env=ENV, timeout=120)
+    assert (run.returncode, run.stdout, run.stderr) == (0, "True\n", "")
+
+
+def test_no_worker_is_left_when_a_replacement_cannot_be_started(monkeypatch):
+    import multiprocessing.context
+
+    def refuse(self):
+        raise BlockingIOError(11, "Resource temporarily unavailable")
+    with LocalPool(1) as pool:
+        monkeypatch.setattr(multiprocessing.context.SpawnProcess, "start", refuse)
+        (victim,) = _workers(pool)
+        futs = [pool.submit(_die_if, "a", victim), pool.submit(pow, 2, 3)]
+        for f in futs:
+            with pytest.raises(WorkerLost, match="no worker is left"):
+                f.result(timeout=30)
+        assert _workers(pool) == []

@@ -46,8 +46,8 @@ def test_more_workers_than_cores_warns_in_one_line(monkeypatch, capsys):
         pass
 
     class FakePool:                        # records the arguments, starts nothing
-        def __init__(self, n):
-            started.append((n, os.environ.get("OMP_NUM_THREADS")))
+        def __init__(self, n, initializer=None):
+            started.append((n, initializer))
             raise Refuse()
     from haa_sym.io import pool
     monkeypatch.setattr(tasks.os, "cpu_count", lambda: 2)
@@ -63,9 +63,10 @@ def test_more_workers_than_cores_warns_in_one_line(monkeypatch, capsys):
         with tasks.cluster("local:2"):
             pass
     assert capsys.readouterr().err == ""      # N = the cores: no warning
-    # a spawned worker (not Linux) reads OMP_NUM_THREADS=1 when its OpenBLAS loads; the
-    # command's environment is as it was after the start
-    assert started == [(3, "1"), (2, "1")] and "OMP_NUM_THREADS" not in os.environ
+    # every worker (forked, spawned, a replacement) limits its own BLAS; the command's
+    # environment is left as it was
+    assert started == [(3, tasks.one_blas_thread), (2, tasks.one_blas_thread)]
+    assert "OMP_NUM_THREADS" not in os.environ
     # on Linux the workers are forked from the command (its imports inherited: a start in
     # milliseconds); spawn elsewhere
     assert pool.START_METHOD == ("fork" if sys.platform == "linux" else "spawn")
@@ -115,7 +116,7 @@ def test_a_refused_fork_is_one_line_and_leaves_no_worker(monkeypatch):
         started.append(self)
     monkeypatch.setattr(multiprocessing.context.ForkProcess, "start", start)
     monkeypatch.setattr(pool, "START_METHOD", "fork")
-    monkeypatch.setattr(pool.LocalPool.__init__, "__defaults__", ("fork",))
+    monkeypatch.setattr(pool.LocalPool.__init__, "__defaults__", ("fork", None))
     with pytest.raises(ParameterError, match=r"'local:2': the worker processes could not be started "
                                              r"\(BlockingIOError: .*\); allowed: fewer workers"):
         with tasks.cluster("local:2"):

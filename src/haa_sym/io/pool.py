@@ -19,10 +19,13 @@ nonlinear map sized for 16 workers: 1.34 s). Both bound what 16 workers can gain
 A worker that dies (killed, out of memory) takes down only the task it was running: that task is
 queued again for the others, as dask resubmits it, until its deaths exceed
 :data:`ALLOWED_FAILURES` (dask's rule and default for ``distributed.scheduler.allowed-failures``:
-given up at the fourth), then its future raises :class:`WorkerLost`; with no worker left every
-queued task raises it. A dead worker is not replaced (a fork from the
-dispatcher thread while the command's thread runs is not safe): the command finishes on the
-others.
+given up at the fourth), then its future raises :class:`WorkerLost`. A dead worker is replaced,
+as a dask nanny restarts its worker, by a *spawned* process (a new interpreter: a fork from the
+pool's thread while the command's thread runs could copy a lock another thread holds), so that
+``local:1`` survives its worker's death too; a replacement is up in about a second (its imports),
+the others keep working meanwhile. At most :data:`REPLACEMENTS_PER_WORKER` replacements per
+worker started: a machine that keeps killing them ends the command. With no worker left and
+none starting, every queued task raises :class:`WorkerLost`.
 
 The interface is the part of a ``distributed.Client`` that :class:`haa_sym.io.tasks.TaskRunner`
 uses (``submit``, ``gather``, ``cancel``, ``nthreads``, ``scheduler_info``, ``get_task_stream``),
@@ -39,7 +42,7 @@ import sys
 import threading
 import time
 
-__all__ = ["LocalPool", "WorkerLost", "ALLOWED_FAILURES", "START_METHOD"]
+__all__ = ["LocalPool", "WorkerLost", "ALLOWED_FAILURES", "REPLACEMENTS_PER_WORKER", "START_METHOD"]
 
 #: A task is given up when the workers that died running it exceed this many (dask's default
 #: ``distributed.scheduler.allowed-failures`` and its rule: a task that kills every worker it runs on).
@@ -48,6 +51,10 @@ ALLOWED_FAILURES = 3
 #: numpy and compiled library and is up in milliseconds); "spawn" elsewhere (a new interpreter
 #: that imports them again: fork is unsafe on macOS and missing on Windows).
 START_METHOD = "fork" if sys.platform == "linux" else "spawn"
+#: A pool of N workers replaces at most N times this many dead workers (so that a task that kills
+#: every worker still meets :data:`ALLOWED_FAILURES` on one worker, and a machine that kills every
+#: worker it is given does not get new ones for ever).
+REPLACEMENTS_PER_WORKER = ALLOWED_FAILURES + 1
 #: Seconds a worker has to end after it is asked to, before it is terminated.
 STOP_TIMEOUT = 2.0
 
@@ -76,8 +83,9 @@ class PoolFuture(concurrent.futures.Future):
 
 def _die_with_parent(parent: int) -> None:
     """Linux: the kernel sends this process SIGKILL when the command's process (pid ``parent``)
-    dies (killed, out of memory), busy or not. Elsewhere a worker ends at its next read of the
-    closed pipe."""
+    dies (killed, out of memory), busy or not; strictly, when the thread that started it ends
+    (the pool's thread for a replacement: it stops every worker before it ends). Elsewhere a
+    worker ends at its next read of the closed pipe."""
     if sys.platform != "linux":
         return
     try:
@@ -90,7 +98,7 @@ def _die_with_parent(parent: int) -> None:
         os._exit(0)
 
 
-def _worker(conn, parent_ends=(), parent: int | None = None) -> None:
+def _worker(conn, parent_ends=(), parent: int | None = None, initializer=None) -> None:
     """A worker process's loop: ``(key, payload)`` in, ``payload`` the pickled ``(fn, args)``;
     ``(key, ok, result, start, stop)`` out; until ``None`` or the pipe closes. The payload is
     unpickled here, apart from the key, so that a task whose function or arguments do not load
@@ -108,6 +116,8 @@ def _worker(conn, parent_ends=(), parent: int | None = None) -> None:
         c.close()
     if parent is not None:
         _die_with_parent(parent)
+    if initializer is not None:
+        initializer()
     while True:
         try:
             msg = conn.recv()
@@ -138,14 +148,22 @@ class LocalPool:
     n : int
         Worker processes (>= 1), started now.
     start_method : str
-        ``multiprocessing``'s start method (default :data:`START_METHOD`).
+        ``multiprocessing``'s start method of the first N (default :data:`START_METHOD`);
+        replacements are spawned.
+    initializer : callable, optional
+        Called by every worker (those started now and replacements) before its first task, as
+        ``concurrent.futures``' initializer; a module-level function (a spawned worker loads it).
     """
 
-    def __init__(self, n: int, start_method: str = START_METHOD):
+    def __init__(self, n: int, start_method: str = START_METHOD, initializer=None):
         import multiprocessing               # here: a command that runs in-process never needs it
         from multiprocessing.reduction import ForkingPickler
         self._dumps = ForkingPickler.dumps
         ctx = multiprocessing.get_context(start_method)
+        self._spawn = multiprocessing.get_context("spawn")
+        self._init = initializer
+        self._replacements = n * REPLACEMENTS_PER_WORKER
+        self._starting = 0                   # replacements being started (the pool is not empty)
         self._lock = threading.Lock()
         self._queue: list = []               # (-priority, order, key, fn, args, future)
         self._order = itertools.count()
@@ -164,7 +182,8 @@ class LocalPool:
                 # the command's ends that a fork copies into the worker (a spawned worker gets
                 # only what it is given)
                 ends = [mine, *(c for _, c in self._workers.values())] if start_method == "fork" else []
-                proc = ctx.Process(target=_worker, args=(theirs, ends, os.getpid()), daemon=True, name="haa_sym-worker")
+                proc = ctx.Process(target=_worker, args=(theirs, ends, os.getpid(), self._init), daemon=True,
+                                   name="haa_sym-worker")
                 proc.start()
                 theirs.close()
                 self._workers[proc.pid] = (proc, mine)
@@ -248,7 +267,7 @@ class LocalPool:
         """Why no task can run any more (under the lock), or None."""
         if self._broken is not None:
             return f"the local pool's dispatcher failed ({type(self._broken).__name__}: {self._broken})"
-        return None if self._workers else "no worker is left"
+        return None if self._workers or self._starting else "no worker is left"
 
     def _dispatch(self) -> None:
         try:
@@ -267,6 +286,10 @@ class LocalPool:
         while True:
             with self._lock:
                 if self._closed:
+                    # stopped by this thread: Linux's parent-death signal of a replacement is
+                    # tied to the thread that started it, this one (a replacement still winding
+                    # down when it ended would be killed: a spawned worker's semaphores leaked)
+                    self._stop_workers()
                     return
                 failed = self._feed()
                 conns = {c: pid for pid, (_, c) in self._workers.items()}
@@ -347,7 +370,7 @@ class LocalPool:
             fut.set_exception(out)
 
     def _died(self, pid: int) -> None:
-        """A worker's process ended: its task queued again, or given up."""
+        """A worker's process ended: its task queued again, or given up; the worker replaced."""
         lost = []
         with self._lock:
             if pid not in self._workers:     # stopped meanwhile (close)
@@ -367,10 +390,45 @@ class LocalPool:
                     # a new future state cannot go back to pending: the entry keeps its future,
                     # already running, and is given to the next idle worker as it is
                     heapq.heappush(self._queue, entry)
-            if not self._workers:
-                lost += [(e[-1], WorkerLost("no worker is left")) for e in self._queue]
-                self._queue = []
+            replace = not self._closed and self._replacements > 0
+            if replace:
+                self._replacements -= 1
+                self._starting += 1
         conn.close()
+        _fail(lost)
+        if replace:
+            self._replace()
+        self._fail_all_if_none_left()
+
+    def _replace(self) -> None:
+        """A new worker, spawned (a fork from this thread is not safe, module docstring)."""
+        proc = mine = None
+        try:
+            mine, theirs = self._spawn.Pipe(duplex=True)
+            proc = self._spawn.Process(target=_worker, args=(theirs, (), os.getpid(), self._init), daemon=True,
+                                       name="haa_sym-worker")
+            proc.start()
+            theirs.close()
+        except Exception:                    # noqa: BLE001 - no process (limits): the others go on, or none is left
+            proc = None
+        with self._lock:
+            self._starting -= 1
+            if proc is not None and not self._closed:
+                self._workers[proc.pid] = (proc, mine)
+                self._idle.append(proc.pid)
+                return
+        if proc is not None:                 # closed meanwhile: not left running
+            proc.terminate()
+            proc.join(STOP_TIMEOUT)
+        if mine is not None:
+            mine.close()
+
+    def _fail_all_if_none_left(self) -> None:
+        with self._lock:
+            if self._workers or self._starting:
+                return
+            lost = [(e[-1], WorkerLost("no worker is left")) for e in self._queue]
+            self._queue = []
         _fail(lost)
 
     def _stop_workers(self) -> None:

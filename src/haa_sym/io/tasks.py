@@ -102,49 +102,31 @@ def cluster(spec):
         # allowed (a test of the scheduling), but more processes than cores share them
         print(f"haa-sym: warning: --scheduler {spec}: {n} worker processes on {cores} cores; they share the "
               f"cores (no faster than local:{cores})", file=sys.stderr)
-    from threadpoolctl import threadpool_limits
-    # One BLAS thread in every worker: a *forked* worker (haa_sym.io.pool.START_METHOD) inherits
-    # this process's OpenBLAS, initialised with a thread per core (an OMP_NUM_THREADS set now is
-    # read by OpenBLAS only when it loads): each worker of local:2 would run two BLAS threads on
-    # a 2-core machine, and local:1's one worker could use both cores, which a one-worker
-    # baseline must not. Limited here, before the forks, for the pool's life. This process's
-    # own BLAS is on one thread meanwhile (its work is the tasks'; a library caller's other
-    # threads too, until the block ends). Where workers are spawned (not Linux) the limit does
-    # not reach them: OMP_NUM_THREADS=1 is set for them below, read when their OpenBLAS loads.
-    blas = pool = None
+    pool = None
     try:
-        blas = threadpool_limits(limits=1, user_api="blas")
-        with _environ(OMP_NUM_THREADS=os.environ.get("OMP_NUM_THREADS", "1")):
-            try:
-                pool = LocalPool(n)
-            except OSError as e:         # a fork refused (process or memory limits): the started ones are stopped
-                raise ParameterError(f"--scheduler {spec!r}: the worker processes could not be started "
-                                     f"({type(e).__name__}: {e}); allowed: fewer workers (local:N with a "
-                                     "smaller N) or no --scheduler") from None
+        try:
+            pool = LocalPool(n, initializer=one_blas_thread)
+        except OSError as e:             # a fork refused (process or memory limits): the started ones are stopped
+            raise ParameterError(f"--scheduler {spec!r}: the worker processes could not be started "
+                                 f"({type(e).__name__}: {e}); allowed: fewer workers (local:N with a "
+                                 "smaller N) or no --scheduler") from None
         yield pool
     finally:
-        try:
-            if pool is not None:
-                pool.close()
-        finally:
-            if blas is not None:
-                blas.restore_original_limits()
+        if pool is not None:
+            pool.close()
 
 
-@contextlib.contextmanager
-def _environ(**values):
-    """``os.environ`` with ``values`` for the block (a spawned worker's environment is the
-    parent's at its start)."""
-    old = {k: os.environ.get(k) for k in values}
-    os.environ.update(values)
-    try:
-        yield
-    finally:
-        for k, v in old.items():
-            if v is None:
-                os.environ.pop(k, None)
-            else:
-                os.environ[k] = v
+def one_blas_thread() -> None:
+    """A local worker's initializer: one BLAS thread. A worker is one thread (:func:`cluster`);
+    a *forked* worker inherits the command's OpenBLAS, initialised with a thread per core, so
+    each worker of local:2 would run two BLAS threads on a 2-core machine, and local:1's one
+    worker could use both cores, which a one-worker baseline must not. ``threadpool_limits``
+    reaches the libraries loaded already (a fork's, or a spawned worker's that its main module
+    imported); OMP_NUM_THREADS those loaded later (a spawned worker's numpy, with its first
+    task), as dask's workers set it."""
+    from threadpoolctl import threadpool_limits
+    os.environ["OMP_NUM_THREADS"] = "1"
+    threadpool_limits(limits=1, user_api="blas")
 
 
 def connect(Client, address: str, timeout: float = DEFAULT_CONNECT_TIMEOUT):
