@@ -185,11 +185,17 @@ def test_a_task_that_kills_every_worker_is_given_up_after_the_allowed_failures()
         assert pool.gather([pool.submit(pow, 2, 5)]) == [32]     # the rest still runs
 
 
-def test_one_worker_survives_its_death_on_a_spawned_replacement():
+@pytest.mark.parametrize("how", ["zygote", "spawned"])
+def test_one_worker_survives_its_death_on_a_replacement(how, monkeypatch):
     """local:1: the task that was running when its worker was killed runs again on the
-    replacement, a new interpreter (spawned) with one BLAS thread, as the forked workers."""
+    replacement, with one BLAS thread as the first workers: on Linux a fork of the pool's zygote
+    (a child of it, not of the command), elsewhere a spawned process (as without pidfd_open)."""
     from haa_sym.io.tasks import one_blas_thread
     from test_io_tasks_local import _blas_threads
+    if how == "spawned":
+        monkeypatch.delattr(os, "pidfd_open", raising=False)
+    elif not hasattr(os, "pidfd_open"):
+        pytest.skip("the zygote needs os.pidfd_open (Linux)")
     with LocalPool(1, initializer=one_blas_thread) as pool:
         (first,) = _workers(pool)
         victim = pool.submit(_die_if, "victim", first)
@@ -198,7 +204,13 @@ def test_one_worker_survives_its_death_on_a_spawned_replacement():
         assert second != first
         pid, threads = pool.gather([pool.submit(_blas_threads)])[0]
         assert pid == second and threads == [1]
-        assert psutil.Process(second).cmdline()[-2:] != psutil.Process(os.getpid()).cmdline()[-2:]
+        parent = psutil.Process(second).parent()
+        if how == "zygote":
+            assert parent.pid != os.getpid() and parent.parent().pid == os.getpid()
+            assert parent.name() == "haa_sym-zygote" and psutil.Process(second).name() == "haa_sym-worker"
+        else:
+            assert parent.pid == os.getpid()
+    assert _gone({first, second} | ({parent.pid} if how == "zygote" else set())) == []
 
 
 def test_replacements_end_when_every_worker_they_get_is_killed():
@@ -255,8 +267,9 @@ def test_schedule_on_local_2_finishes_on_the_other_worker_when_one_is_killed(tmp
     try:
         seen, _ = _watch(proc, until=lambda pids, s: len(pids) >= 3)
         time.sleep(1.0)
-        workers = psutil.Process(proc.pid).children()
-        assert len(workers) == 2, workers
+        children = psutil.Process(proc.pid).children()
+        workers = [c for c in children if c.name() == "haa_sym-worker"]
+        assert len(workers) == 2 and {c.name() for c in children} == {"haa_sym-worker", "haa_sym-zygote"}, children
         # killed while computing (its CPU time grows), not idle between task lists
         busy = sum(workers[0].cpu_times()[:2])
         deadline = time.monotonic() + 20
@@ -347,12 +360,22 @@ def test_a_replacement_ends_normally_when_the_pool_closes(tmp_path):
     assert (run.returncode, run.stdout, run.stderr) == (0, "True\n", "")
 
 
-def test_no_worker_is_left_when_a_replacement_cannot_be_started(monkeypatch):
+@pytest.mark.parametrize("how", ["zygote", "spawned"])
+def test_no_worker_is_left_when_a_replacement_cannot_be_started(how, monkeypatch):
     import multiprocessing.context
 
     def refuse(self):
         raise BlockingIOError(11, "Resource temporarily unavailable")
+    if how == "spawned":
+        monkeypatch.delattr(os, "pidfd_open", raising=False)
+    elif not hasattr(os, "pidfd_open"):
+        pytest.skip("the zygote needs os.pidfd_open (Linux)")
     with LocalPool(1) as pool:
+        if how == "zygote":                          # the zygote gone: no fork to ask for
+            zygote = [c for c in psutil.Process().children() if c.name() == "haa_sym-zygote"]
+            assert len(zygote) == 1
+            zygote[0].kill()
+            zygote[0].wait(10)
         monkeypatch.setattr(multiprocessing.context.SpawnProcess, "start", refuse)
         (victim,) = _workers(pool)
         futs = [pool.submit(_die_if, "a", victim), pool.submit(pow, 2, 3)]
@@ -360,3 +383,28 @@ def test_no_worker_is_left_when_a_replacement_cannot_be_started(monkeypatch):
             with pytest.raises(WorkerLost, match="no worker is left"):
                 f.result(timeout=30)
         assert _workers(pool) == []
+
+
+#: A script without a ``__main__`` guard, whose task function is defined in it (run with -c: no
+#: file), its one worker killed: the replacement must not run the script again (a spawned one
+#: does, and cannot load the function of a __main__ without a file).
+UNGUARDED = """
+import os, signal, sys
+from haa_sym.io.pool import LocalPool
+print("top level", flush=True)
+
+def where(victim):
+    if os.getpid() == victim:
+        os.kill(victim, signal.SIGKILL)
+    return os.getpid()
+
+with LocalPool(1) as pool:
+    (victim,) = pool.nthreads()
+    print(victim != pool.submit(where, victim).result(timeout=60), flush=True)
+"""
+
+
+@pytest.mark.skipif(not hasattr(os, "pidfd_open"), reason="the zygote needs os.pidfd_open (Linux)")
+def test_a_replacement_does_not_run_the_main_script_again():
+    run = subprocess.run([sys.executable, "-c", UNGUARDED], capture_output=True, text=True, env=ENV, timeout=120)
+    assert (run.returncode, run.stdout, run.stderr) == (0, "top level\nTrue\n", "")

@@ -20,12 +20,17 @@ A worker that dies (killed, out of memory) takes down only the task it was runni
 queued again for the others, as dask resubmits it, until its deaths exceed
 :data:`ALLOWED_FAILURES` (dask's rule and default for ``distributed.scheduler.allowed-failures``:
 given up at the fourth), then its future raises :class:`WorkerLost`. A dead worker is replaced,
-as a dask nanny restarts its worker, by a *spawned* process (a new interpreter: a fork from the
-pool's thread while the command's thread runs could copy a lock another thread holds), so that
-``local:1`` survives its worker's death too; a replacement is up in about a second (its imports),
-the others keep working meanwhile. At most :data:`REPLACEMENTS_PER_WORKER` replacements per
-worker started: a machine that keeps killing them ends the command. With no worker left and
-none starting, every queued task raises :class:`WorkerLost`.
+as a dask nanny restarts its worker, so that ``local:1`` survives its worker's death too. On
+Linux by a fork of a *zygote*: a process forked from the command with the first workers, one
+thread, that forks a worker on request and passes its pipe end (and a pidfd, the handle by which
+the command sees it end) back over its own pipe. A fork from the pool's thread while the
+command's thread runs could copy a lock another thread holds; a spawned process re-runs the
+user's ``__main__`` (a script without a ``__main__`` guard would run again, a function defined
+in a notebook would not load) and starts cold. The zygote's worker has the command's imports
+at the pool's start and takes a task within milliseconds. Elsewhere (spawned workers, and Linux
+without ``os.pidfd_open``) a replacement is spawned like the first workers. A pool of N replaces
+at most N x :data:`REPLACEMENTS_PER_WORKER` workers: a machine that keeps killing them ends the
+command. With no worker left and none starting, every queued task raises :class:`WorkerLost`.
 
 The interface is the part of a ``distributed.Client`` that :class:`haa_sym.io.tasks.TaskRunner`
 uses (``submit``, ``gather``, ``cancel``, ``nthreads``, ``scheduler_info``, ``get_task_stream``),
@@ -51,11 +56,12 @@ ALLOWED_FAILURES = 3
 #: numpy and compiled library and is up in milliseconds); "spawn" elsewhere (a new interpreter
 #: that imports them again: fork is unsafe on macOS and missing on Windows).
 START_METHOD = "fork" if sys.platform == "linux" else "spawn"
-#: A pool of N workers replaces at most N times this many dead workers (so that a task that kills
-#: every worker still meets :data:`ALLOWED_FAILURES` on one worker, and a machine that kills every
-#: worker it is given does not get new ones for ever).
+#: A pool of N workers replaces at most N times this many dead workers, counted over the pool
+#: (so that a task that kills every worker still meets :data:`ALLOWED_FAILURES` on one worker,
+#: and a machine that kills every worker it is given does not get new ones for ever).
 REPLACEMENTS_PER_WORKER = ALLOWED_FAILURES + 1
-#: Seconds a worker has to end after it is asked to, before it is terminated.
+#: Seconds a worker has to end after it is asked to, before it is terminated; and the zygote has
+#: to answer a request for a worker.
 STOP_TIMEOUT = 2.0
 
 
@@ -79,6 +85,18 @@ class PoolFuture(concurrent.futures.Future):
         if self.cancelled():
             return "cancelled"
         return "error" if self.exception() is not None else "finished"
+
+
+def _named(name: str) -> None:
+    """Linux: the process's name (``ps``, ``top``, ``psutil``'s name) says what it is: the
+    command's name otherwise, like the command's."""
+    if sys.platform != "linux":
+        return
+    try:
+        import ctypes
+        ctypes.CDLL(None).prctl(15, name.encode()[:15], 0, 0, 0)      # PR_SET_NAME
+    except (OSError, AttributeError):        # pragma: no cover - the name only
+        pass
 
 
 def _die_with_parent(parent: int) -> None:
@@ -108,6 +126,7 @@ def _worker(conn, parent_ends=(), parent: int | None = None, initializer=None) -
     # SIGINT (Ctrl-C reaches the whole process group) is the command's to handle: it stops the
     # workers itself. SIGTERM ends a worker (the command's own handler, inherited by a fork,
     # would raise haa_sym.errors.Terminated mid-task).
+    _named("haa_sym-worker")
     signal.signal(signal.SIGINT, signal.SIG_IGN)
     signal.signal(signal.SIGTERM, signal.SIG_DFL)
     # a forked worker holds copies of the command's ends of its own pipe and of the workers forked
@@ -140,6 +159,102 @@ def _worker(conn, parent_ends=(), parent: int | None = None, initializer=None) -
                                                 f"({type(exc).__name__}: {exc})"), start, stop))
 
 
+def _zygote(conn, parent_ends, parent: int, initializer) -> None:
+    """The zygote's loop (Linux): on each request a worker forked from this one-thread process,
+    its pid sent back, then its pipe end and a pidfd of it as file descriptors (SCM_RIGHTS); until
+    ``None`` or the pipe closes. Its children are reaped here (SIGCHLD); the command watches each
+    through its pidfd, which a reap does not close."""
+    from multiprocessing import reduction
+    from multiprocessing.connection import Pipe
+    _named("haa_sym-zygote")
+    signal.signal(signal.SIGINT, signal.SIG_IGN)
+    signal.signal(signal.SIGTERM, signal.SIG_DFL)
+    for c in parent_ends:
+        c.close()
+    _die_with_parent(parent)
+    signal.signal(signal.SIGCHLD, _reap)
+    me = os.getpid()
+    while True:
+        try:
+            msg = conn.recv()
+        except (EOFError, OSError):
+            return
+        if msg is None:
+            return
+        mine, theirs = Pipe(duplex=True)
+        # not reaped before its pidfd is open (a reaped pid may be another process's)
+        old = signal.pthread_sigmask(signal.SIG_BLOCK, {signal.SIGCHLD})
+        try:
+            pid = os.fork()
+            if pid == 0:                     # the worker
+                code = 0
+                try:
+                    signal.signal(signal.SIGCHLD, signal.SIG_DFL)
+                    signal.pthread_sigmask(signal.SIG_SETMASK, old)
+                    _worker(theirs, (conn, mine), me, initializer)
+                except BaseException:        # noqa: BLE001 - a worker's end, not the zygote's
+                    code = 1
+                finally:
+                    os._exit(code)
+            pidfd = os.pidfd_open(pid)
+        finally:
+            signal.pthread_sigmask(signal.SIG_SETMASK, old)
+        theirs.close()
+        try:
+            conn.send(pid)
+            reduction.send_handle(conn, mine.fileno(), parent)
+            reduction.send_handle(conn, pidfd, parent)
+        except OSError:
+            return
+        finally:
+            mine.close()
+            os.close(pidfd)
+
+
+def _reap(signum, frame) -> None:
+    while True:
+        try:
+            pid, _ = os.waitpid(-1, os.WNOHANG)
+        except ChildProcessError:
+            return
+        if pid == 0:
+            return
+
+
+class _Forked:
+    """A worker the zygote forked (not this process's child): the part of
+    ``multiprocessing.Process`` the pool uses, on a pidfd (no pid reuse can mislead it). Its exit
+    code is its parent's to read: None."""
+
+    exitcode = None
+
+    def __init__(self, pid: int, pidfd: int):
+        self.pid, self.sentinel = pid, pidfd
+
+    def is_alive(self) -> bool:
+        import select
+        return not select.select([self.sentinel], [], [], 0)[0]
+
+    def join(self, timeout: float | None = None) -> None:
+        import select
+        select.select([self.sentinel], [], [], timeout)
+
+    def terminate(self) -> None:
+        self._signal(signal.SIGTERM)
+
+    def kill(self) -> None:
+        self._signal(signal.SIGKILL)
+
+    def _signal(self, sig) -> None:
+        try:
+            signal.pidfd_send_signal(self.sentinel, sig)
+        except ProcessLookupError:
+            pass
+
+    def close(self) -> None:
+        os.close(self.sentinel)
+
+
 class LocalPool:
     """N worker processes of one thread each, with a priority queue in this process.
 
@@ -161,9 +276,12 @@ class LocalPool:
         self._dumps = ForkingPickler.dumps
         ctx = multiprocessing.get_context(start_method)
         self._spawn = multiprocessing.get_context("spawn")
+        if initializer is not None:
+            self._dumps(initializer)         # a spawned replacement loads it: refused now, not then
         self._init = initializer
         self._replacements = n * REPLACEMENTS_PER_WORKER
         self._starting = 0                   # replacements being started (the pool is not empty)
+        self._zygote = None                  # (process, connection): forks replacements (Linux)
         self._lock = threading.Lock()
         self._queue: list = []               # (-priority, order, key, fn, args, future)
         self._order = itertools.count()
@@ -188,6 +306,19 @@ class LocalPool:
                 theirs.close()
                 self._workers[proc.pid] = (proc, mine)
                 self._idle.append(proc.pid)
+            if start_method == "fork" and hasattr(os, "pidfd_open"):
+                mine, theirs = ctx.Pipe(duplex=True)
+                ends = [mine, *(c for _, c in self._workers.values())]
+                zygote = ctx.Process(target=_zygote, args=(theirs, ends, os.getpid(), self._init), daemon=True,
+                                     name="haa_sym-zygote")
+                try:
+                    zygote.start()
+                except BaseException:
+                    mine.close()
+                    raise
+                finally:
+                    theirs.close()
+                self._zygote = (zygote, mine)
             self._wake_r, self._wake_w = multiprocessing.Pipe(duplex=False)
             self._thread = threading.Thread(target=self._dispatch, name="haa_sym-pool", daemon=True)
             self._thread.start()
@@ -248,8 +379,7 @@ class LocalPool:
         self._thread.join(STOP_TIMEOUT)
         with self._lock:
             self._stop_workers()
-            left = [e[-1] for e in self._queue] + [e[-1] for e in self._running.values()]
-            self._queue, self._running = [], {}
+            left = self._abandoned()
         for fut in left:
             if not fut.done():
                 fut.set_exception(WorkerLost("the local worker processes were stopped"))
@@ -275,8 +405,8 @@ class LocalPool:
         except BaseException as exc:         # noqa: BLE001 - every waiting future is told, none hangs
             with self._lock:
                 self._broken = exc
-                left = [e[-1] for e in self._queue] + [e[-1] for e in self._running.values()]
-                self._queue, self._running = [], {}
+                self._stop_workers()         # before this thread ends (its replacements' parent-death signal)
+                left = self._abandoned()
             for fut in left:
                 if not fut.done():
                     fut.set_exception(WorkerLost(self._lost_why()))
@@ -286,11 +416,12 @@ class LocalPool:
         while True:
             with self._lock:
                 if self._closed:
-                    # stopped by this thread: Linux's parent-death signal of a replacement is
-                    # tied to the thread that started it, this one (a replacement still winding
-                    # down when it ended would be killed: a spawned worker's semaphores leaked)
+                    # stopped by this thread: Linux's parent-death signal of a spawned
+                    # replacement is tied to the thread that started it, this one (one still
+                    # winding down when it ended was killed: its semaphores leaked)
                     self._stop_workers()
-                    return
+                    left = self._abandoned()
+                    break
                 failed = self._feed()
                 conns = {c: pid for pid, (_, c) in self._workers.items()}
                 sentinels = {p.sentinel: pid for pid, (p, _) in self._workers.items()}
@@ -305,6 +436,7 @@ class LocalPool:
             for r in ready:
                 if r in sentinels and sentinels[r] in self._workers:
                     self._died(sentinels[r])
+        _fail([(f, WorkerLost("the local worker processes were stopped")) for f in left])
 
     def _feed(self) -> list:
         """Give queued tasks to idle workers (under the lock); returns the (future, error) pairs
@@ -384,8 +516,9 @@ class LocalPool:
                 self._failures[key] = self._failures.get(key, 0) + 1
                 # dask's rule: given up when its deaths exceed allowed-failures
                 if self._failures[key] > ALLOWED_FAILURES:
+                    code = "" if proc.exitcode is None else f" (exit code {proc.exitcode})"
                     lost.append((entry[-1], WorkerLost(f"the worker processes running task {key} died "
-                                                       f"{self._failures[key]} times (exit code {proc.exitcode})")))
+                                                       f"{self._failures[key]} times{code}")))
                 else:
                     # a new future state cannot go back to pending: the entry keeps its future,
                     # already running, and is given to the next idle worker as it is
@@ -395,22 +528,20 @@ class LocalPool:
                 self._replacements -= 1
                 self._starting += 1
         conn.close()
+        if isinstance(proc, _Forked):
+            proc.close()
         _fail(lost)
         if replace:
             self._replace()
         self._fail_all_if_none_left()
 
     def _replace(self) -> None:
-        """A new worker, spawned (a fork from this thread is not safe, module docstring)."""
+        """A new worker: the zygote's fork, else spawned (module docstring)."""
         proc = mine = None
         try:
-            mine, theirs = self._spawn.Pipe(duplex=True)
-            proc = self._spawn.Process(target=_worker, args=(theirs, (), os.getpid(), self._init), daemon=True,
-                                       name="haa_sym-worker")
-            proc.start()
-            theirs.close()
-        except Exception:                    # noqa: BLE001 - no process (limits): the others go on, or none is left
-            proc = None
+            proc, mine = self._from_zygote() if self._zygote is not None else self._spawned()
+        except Exception:                    # noqa: BLE001 - none started (limits, the zygote gone): the others go on
+            proc = mine = None
         with self._lock:
             self._starting -= 1
             if proc is not None and not self._closed:
@@ -423,6 +554,30 @@ class LocalPool:
         if mine is not None:
             mine.close()
 
+    def _from_zygote(self):
+        from multiprocessing import reduction
+        from multiprocessing.connection import Connection
+        conn = self._zygote[1]
+        conn.send(True)
+        if not conn.poll(STOP_TIMEOUT):
+            raise TimeoutError("the zygote did not answer")
+        pid = conn.recv()
+        mine = Connection(reduction.recv_handle(conn))
+        return _Forked(pid, reduction.recv_handle(conn)), mine
+
+    def _spawned(self):
+        mine, theirs = self._spawn.Pipe(duplex=True)
+        proc = self._spawn.Process(target=_worker, args=(theirs, (), os.getpid(), self._init), daemon=True,
+                                   name="haa_sym-worker")
+        try:
+            proc.start()
+        except BaseException:
+            mine.close()
+            raise
+        finally:
+            theirs.close()
+        return proc, mine
+
     def _fail_all_if_none_left(self) -> None:
         with self._lock:
             if self._workers or self._starting:
@@ -432,8 +587,9 @@ class LocalPool:
         _fail(lost)
 
     def _stop_workers(self) -> None:
-        """Every worker stopped: a busy one terminated, an idle one asked to end (under the lock
-        or before the dispatcher runs)."""
+        """Every worker stopped: a busy one terminated, an idle one asked to end; then the zygote
+        (its workers would get its parent-death signal) (under the lock or before the
+        dispatcher runs)."""
         for pid, (proc, conn) in list(self._workers.items()):
             if pid in self._running:
                 proc.terminate()             # its task abandoned (an error, Ctrl-C): no wait for it
@@ -442,18 +598,41 @@ class LocalPool:
                 conn.send(None)
             except OSError:
                 pass
-        deadline = time.monotonic() + STOP_TIMEOUT
-        for proc, conn in list(self._workers.values()):
-            proc.join(max(0.0, deadline - time.monotonic()))
-            if proc.is_alive():
-                proc.terminate()             # SIGTERM: a worker's default action (see _worker)
-                proc.join(STOP_TIMEOUT)
-            if proc.is_alive():
-                proc.kill()
-                proc.join()
-            conn.close()
+        members = list(self._workers.values())
         self._workers.clear()
         self._idle.clear()
+        _end(members, ask=False)
+        if self._zygote is not None:
+            zygote, self._zygote = self._zygote, None
+            _end([zygote], ask=True)
+
+    def _abandoned(self) -> list:
+        """The futures of every queued and running task, taken from the pool (under the lock)."""
+        left = [e[-1] for e in self._queue] + [e[-1] for e in self._running.values()]
+        self._queue, self._running = [], {}
+        return left
+
+
+def _end(members, ask: bool) -> None:
+    """Wait for (process, connection) pairs to end, terminated then killed past STOP_TIMEOUT;
+    ``ask``: sent ``None`` first."""
+    for _, conn in members if ask else ():
+        try:
+            conn.send(None)
+        except OSError:
+            pass
+    deadline = time.monotonic() + STOP_TIMEOUT
+    for proc, conn in members:
+        proc.join(max(0.0, deadline - time.monotonic()))
+        if proc.is_alive():
+            proc.terminate()                 # SIGTERM: a worker's default action (see _worker)
+            proc.join(STOP_TIMEOUT)
+        if proc.is_alive():
+            proc.kill()
+            proc.join()
+        conn.close()
+        if isinstance(proc, _Forked):
+            proc.close()
 
 
 def _fail(pairs) -> None:

@@ -102,6 +102,7 @@ def cluster(spec):
         # allowed (a test of the scheduling), but more processes than cores share them
         print(f"haa-sym: warning: --scheduler {spec}: {n} worker processes on {cores} cores; they share the "
               f"cores (no faster than local:{cores})", file=sys.stderr)
+    import threadpoolctl  # noqa: F401 - imported once here, before the forks, not by every worker
     pool = None
     try:
         try:
@@ -122,11 +123,16 @@ def one_blas_thread() -> None:
     each worker of local:2 would run two BLAS threads on a 2-core machine, and local:1's one
     worker could use both cores, which a one-worker baseline must not. ``threadpool_limits``
     reaches the libraries loaded already (a fork's, or a spawned worker's that its main module
-    imported); OMP_NUM_THREADS those loaded later (a spawned worker's numpy, with its first
-    task), as dask's workers set it."""
+    imported); the environment those loaded later (a spawned worker's numpy, with its first
+    task): OpenBLAS reads OPENBLAS_NUM_THREADS before OMP_NUM_THREADS, MKL its own."""
     from threadpoolctl import threadpool_limits
-    os.environ["OMP_NUM_THREADS"] = "1"
+    for key in BLAS_THREADS_ENV:
+        os.environ[key] = "1"
     threadpool_limits(limits=1, user_api="blas")
+
+
+#: The variables by which a BLAS loaded later learns its threads (:func:`one_blas_thread`).
+BLAS_THREADS_ENV = ("OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS", "OMP_NUM_THREADS")
 
 
 def connect(Client, address: str, timeout: float = DEFAULT_CONNECT_TIMEOUT):
