@@ -208,6 +208,9 @@ def test_one_worker_survives_its_death_on_a_replacement(how, monkeypatch):
         if how == "zygote":
             assert parent.pid != os.getpid() and parent.parent().pid == os.getpid()
             assert parent.name() == "haa_sym-zygote" and psutil.Process(second).name() == "haa_sym-worker"
+            proc, conn = pool._workers[second]
+            # the fds it came with are this process's alone (a later exec does not inherit them)
+            assert not os.get_inheritable(conn.fileno()) and not os.get_inheritable(proc.sentinel)
         else:
             assert parent.pid == os.getpid()
     assert _gone({first, second} | ({parent.pid} if how == "zygote" else set())) == []
@@ -396,8 +399,13 @@ print("top level", flush=True)
 def where(victim):
     if os.getpid() == victim:
         os.kill(victim, signal.SIGKILL)
+    print("from the replacement")             # buffered (stdout a pipe): flushed at its end
     return os.getpid()
 
+if len(sys.argv) > 1:                         # its fds numbered above select()'s 1024
+    import resource
+    resource.setrlimit(resource.RLIMIT_NOFILE, (4096, resource.getrlimit(resource.RLIMIT_NOFILE)[1]))
+    held = [os.open(os.devnull, os.O_RDONLY) for _ in range(1100)]
 with LocalPool(1) as pool:
     (victim,) = pool.nthreads()
     print(victim != pool.submit(where, victim).result(timeout=60), flush=True)
@@ -405,6 +413,11 @@ with LocalPool(1) as pool:
 
 
 @pytest.mark.skipif(not hasattr(os, "pidfd_open"), reason="the zygote needs os.pidfd_open (Linux)")
-def test_a_replacement_does_not_run_the_main_script_again():
-    run = subprocess.run([sys.executable, "-c", UNGUARDED], capture_output=True, text=True, env=ENV, timeout=120)
-    assert (run.returncode, run.stdout, run.stderr) == (0, "top level\nTrue\n", "")
+@pytest.mark.parametrize("fds", ["few", "over 1024"])
+def test_a_replacement_does_not_run_the_main_script_again(fds):
+    """Nor loses what a task printed; and its pidfd may be numbered above 1024 (no select())."""
+    env = {k: v for k, v in ENV.items() if k != "PYTHONUNBUFFERED"}
+    run = subprocess.run([sys.executable, "-c", UNGUARDED, *(["many"] if fds != "few" else [])],
+                         capture_output=True, text=True, env=env, timeout=120)
+    assert (run.returncode, sorted(run.stdout.splitlines()), run.stderr) == \
+        (0, ["True", "from the replacement", "top level"], "")

@@ -102,8 +102,8 @@ def _named(name: str) -> None:
 def _die_with_parent(parent: int) -> None:
     """Linux: the kernel sends this process SIGKILL when the command's process (pid ``parent``)
     dies (killed, out of memory), busy or not; strictly, when the thread that started it ends
-    (the pool's thread for a replacement: it stops every worker before it ends). Elsewhere a
-    worker ends at its next read of the closed pipe."""
+    (the pool's thread for a spawned replacement: it stops every worker before it ends; the
+    zygote for its workers). Elsewhere a worker ends at its next read of the closed pipe."""
     if sys.platform != "linux":
         return
     try:
@@ -165,7 +165,6 @@ def _zygote(conn, parent_ends, parent: int, initializer) -> None:
     ``None`` or the pipe closes. Its children are reaped here (SIGCHLD); the command watches each
     through its pidfd, which a reap does not close."""
     from multiprocessing import reduction
-    from multiprocessing.connection import Pipe
     _named("haa_sym-zygote")
     signal.signal(signal.SIGINT, signal.SIG_IGN)
     signal.signal(signal.SIGTERM, signal.SIG_DFL)
@@ -181,27 +180,16 @@ def _zygote(conn, parent_ends, parent: int, initializer) -> None:
             return
         if msg is None:
             return
-        mine, theirs = Pipe(duplex=True)
-        # not reaped before its pidfd is open (a reaped pid may be another process's)
-        old = signal.pthread_sigmask(signal.SIG_BLOCK, {signal.SIGCHLD})
         try:
-            pid = os.fork()
-            if pid == 0:                     # the worker
-                code = 0
-                try:
-                    signal.signal(signal.SIGCHLD, signal.SIG_DFL)
-                    signal.pthread_sigmask(signal.SIG_SETMASK, old)
-                    _worker(theirs, (conn, mine), me, initializer)
-                except BaseException:        # noqa: BLE001 - a worker's end, not the zygote's
-                    code = 1
-                finally:
-                    os._exit(code)
-            pidfd = os.pidfd_open(pid)
-        finally:
-            signal.pthread_sigmask(signal.SIG_SETMASK, old)
-        theirs.close()
+            pid, mine, pidfd = _fork_worker(conn, me, initializer)
+        except Exception as exc:             # noqa: BLE001 - this request's failure, told; the zygote goes on
+            try:
+                conn.send(("failed", f"{type(exc).__name__}: {exc}"))
+            except OSError:
+                return
+            continue
         try:
-            conn.send(pid)
+            conn.send(("forked", pid))
             reduction.send_handle(conn, mine.fileno(), parent)
             reduction.send_handle(conn, pidfd, parent)
         except OSError:
@@ -209,6 +197,43 @@ def _zygote(conn, parent_ends, parent: int, initializer) -> None:
         finally:
             mine.close()
             os.close(pidfd)
+
+
+def _fork_worker(conn, me: int, initializer):
+    """(pid, the command's pipe end, a pidfd) of a worker forked from the zygote."""
+    from multiprocessing.connection import Pipe
+    mine, theirs = Pipe(duplex=True)
+    # not reaped before its pidfd is open (a reaped pid may be another process's)
+    old = signal.pthread_sigmask(signal.SIG_BLOCK, {signal.SIGCHLD})
+    try:
+        pid = os.fork()
+        if pid == 0:                         # the worker
+            code = 0
+            try:
+                signal.signal(signal.SIGCHLD, signal.SIG_DFL)
+                signal.pthread_sigmask(signal.SIG_SETMASK, old)
+                _worker(theirs, (conn, mine), me, initializer)
+            except BaseException:            # noqa: BLE001 - a worker's end, not the zygote's
+                code = 1
+            finally:
+                for f in (sys.stdout, sys.stderr):   # a task's prints (os._exit does not flush)
+                    try:
+                        f.flush()
+                    except Exception:        # noqa: BLE001 - closed streams
+                        pass
+                os._exit(code)
+        try:
+            pidfd = os.pidfd_open(pid)
+        except OSError:
+            os.kill(pid, signal.SIGKILL)     # not watchable: not left running
+            raise
+    except BaseException:
+        mine.close()
+        raise
+    finally:
+        signal.pthread_sigmask(signal.SIG_SETMASK, old)
+        theirs.close()
+    return pid, mine, pidfd
 
 
 def _reap(signum, frame) -> None:
@@ -219,6 +244,15 @@ def _reap(signum, frame) -> None:
             return
         if pid == 0:
             return
+
+
+def _pidfd_works() -> bool:
+    """os.pidfd_open exists and the kernel (and a seccomp profile) allow it."""
+    try:
+        os.close(os.pidfd_open(os.getpid()))
+    except (AttributeError, OSError):
+        return False
+    return True
 
 
 class _Forked:
@@ -232,12 +266,12 @@ class _Forked:
         self.pid, self.sentinel = pid, pidfd
 
     def is_alive(self) -> bool:
-        import select
-        return not select.select([self.sentinel], [], [], 0)[0]
+        from multiprocessing.connection import wait          # poll(): any fd number, not select's < 1024
+        return not wait([self.sentinel], 0)
 
     def join(self, timeout: float | None = None) -> None:
-        import select
-        select.select([self.sentinel], [], [], timeout)
+        from multiprocessing.connection import wait
+        wait([self.sentinel], timeout)
 
     def terminate(self) -> None:
         self._signal(signal.SIGTERM)
@@ -264,7 +298,7 @@ class LocalPool:
         Worker processes (>= 1), started now.
     start_method : str
         ``multiprocessing``'s start method of the first N (default :data:`START_METHOD`);
-        replacements are spawned.
+        replacements are forked by the zygote after a fork (where pidfds work), else spawned.
     initializer : callable, optional
         Called by every worker (those started now and replacements) before its first task, as
         ``concurrent.futures``' initializer; a module-level function (a spawned worker loads it).
@@ -282,6 +316,7 @@ class LocalPool:
         self._replacements = n * REPLACEMENTS_PER_WORKER
         self._starting = 0                   # replacements being started (the pool is not empty)
         self._zygote = None                  # (process, connection): forks replacements (Linux)
+        self._spawn_replacements = False
         self._lock = threading.Lock()
         self._queue: list = []               # (-priority, order, key, fn, args, future)
         self._order = itertools.count()
@@ -306,7 +341,7 @@ class LocalPool:
                 theirs.close()
                 self._workers[proc.pid] = (proc, mine)
                 self._idle.append(proc.pid)
-            if start_method == "fork" and hasattr(os, "pidfd_open"):
+            if start_method == "fork" and _pidfd_works():
                 mine, theirs = ctx.Pipe(duplex=True)
                 ends = [mine, *(c for _, c in self._workers.values())]
                 zygote = ctx.Process(target=_zygote, args=(theirs, ends, os.getpid(), self._init), daemon=True,
@@ -319,6 +354,8 @@ class LocalPool:
                 finally:
                     theirs.close()
                 self._zygote = (zygote, mine)
+            # no zygote (spawned workers, or no pidfd): replacements are spawned, as such workers
+            self._spawn_replacements = self._zygote is None
             self._wake_r, self._wake_w = multiprocessing.Pipe(duplex=False)
             self._thread = threading.Thread(target=self._dispatch, name="haa_sym-pool", daemon=True)
             self._thread.start()
@@ -377,12 +414,7 @@ class LocalPool:
         except OSError:
             pass
         self._thread.join(STOP_TIMEOUT)
-        with self._lock:
-            self._stop_workers()
-            left = self._abandoned()
-        for fut in left:
-            if not fut.done():
-                fut.set_exception(WorkerLost("the local worker processes were stopped"))
+        self._stop(self._abandoned_now())
         for c in (self._wake_r, self._wake_w):
             c.close()
 
@@ -405,8 +437,11 @@ class LocalPool:
         except BaseException as exc:         # noqa: BLE001 - every waiting future is told, none hangs
             with self._lock:
                 self._broken = exc
-                self._stop_workers()         # before this thread ends (its replacements' parent-death signal)
                 left = self._abandoned()
+                try:
+                    self._stop_workers()     # before this thread ends (its replacements' parent-death signal)
+                except Exception:            # noqa: BLE001 - close() tries again; the futures are told below
+                    pass
             for fut in left:
                 if not fut.done():
                     fut.set_exception(WorkerLost(self._lost_why()))
@@ -415,16 +450,19 @@ class LocalPool:
         from multiprocessing.connection import wait
         while True:
             with self._lock:
-                if self._closed:
-                    # stopped by this thread: Linux's parent-death signal of a spawned
-                    # replacement is tied to the thread that started it, this one (one still
-                    # winding down when it ended was killed: its semaphores leaked)
-                    self._stop_workers()
+                closed = self._closed
+                if closed:
                     left = self._abandoned()
-                    break
-                failed = self._feed()
-                conns = {c: pid for pid, (_, c) in self._workers.items()}
-                sentinels = {p.sentinel: pid for pid, (p, _) in self._workers.items()}
+                else:
+                    failed = self._feed()
+                    conns = {c: pid for pid, (_, c) in self._workers.items()}
+                    sentinels = {p.sentinel: pid for pid, (p, _) in self._workers.items()}
+            if closed:
+                # stopped by this thread: Linux's parent-death signal of a spawned replacement
+                # is tied to the thread that started it, this one (one still winding down when
+                # it ended was killed: its semaphores leaked)
+                self._stop(left)
+                return
             _fail(failed)
             ready = wait([self._wake_r, *conns, *sentinels])
             for r in ready:
@@ -436,7 +474,6 @@ class LocalPool:
             for r in ready:
                 if r in sentinels and sentinels[r] in self._workers:
                     self._died(sentinels[r])
-        _fail([(f, WorkerLost("the local worker processes were stopped")) for f in left])
 
     def _feed(self) -> list:
         """Give queued tasks to idle workers (under the lock); returns the (future, error) pairs
@@ -536,11 +573,15 @@ class LocalPool:
         self._fail_all_if_none_left()
 
     def _replace(self) -> None:
-        """A new worker: the zygote's fork, else spawned (module docstring)."""
+        """A new worker: the zygote's fork where workers are forked, else spawned (module
+        docstring); none if that fails (the others go on, or the pool is left with none)."""
         proc = mine = None
         try:
-            proc, mine = self._from_zygote() if self._zygote is not None else self._spawned()
-        except Exception:                    # noqa: BLE001 - none started (limits, the zygote gone): the others go on
+            if self._spawn_replacements:
+                proc, mine = self._spawned()
+            elif self._zygote is not None:
+                proc, mine = self._from_zygote()
+        except Exception:                    # noqa: BLE001 - none started (limits, the zygote's failure)
             proc = mine = None
         with self._lock:
             self._starting -= 1
@@ -550,22 +591,37 @@ class LocalPool:
                 return
         if proc is not None:                 # closed meanwhile: not left running
             proc.terminate()
-            proc.join(STOP_TIMEOUT)
-        if mine is not None:
-            mine.close()
+            _end([(proc, mine)], ask=False)
 
     def _from_zygote(self):
+        """(process, connection) of a worker forked by the zygote. An answer not in time or out
+        of step ends the zygote (its late answer would be read as the next one's)."""
         from multiprocessing import reduction
         from multiprocessing.connection import Connection
         conn = self._zygote[1]
-        conn.send(True)
-        if not conn.poll(STOP_TIMEOUT):
-            raise TimeoutError("the zygote did not answer")
-        pid = conn.recv()
-        mine = Connection(reduction.recv_handle(conn))
-        return _Forked(pid, reduction.recv_handle(conn)), mine
+        try:
+            conn.send(True)
+            if not conn.poll(STOP_TIMEOUT):
+                raise TimeoutError(f"the zygote did not answer within {STOP_TIMEOUT:g} s")
+            what, value = conn.recv()
+            if what != "forked":
+                raise RuntimeError(f"the zygote could not fork a worker ({value})")
+            fds = [reduction.recv_handle(conn), reduction.recv_handle(conn)]
+        except RuntimeError:
+            raise
+        except BaseException:
+            with self._lock:
+                zygote, self._zygote = self._zygote, None
+            if zygote is not None:
+                zygote[0].kill()
+                _end([zygote], ask=False)
+            raise
+        for fd in fds:                       # not inherited by a later exec of the command's
+            os.set_inheritable(fd, False)
+        return _Forked(value, fds[1]), Connection(fds[0])
 
     def _spawned(self):
+        """(process, connection) of a spawned worker (a new interpreter)."""
         mine, theirs = self._spawn.Pipe(duplex=True)
         proc = self._spawn.Process(target=_worker, args=(theirs, (), os.getpid(), self._init), daemon=True,
                                    name="haa_sym-worker")
@@ -591,7 +647,7 @@ class LocalPool:
         (its workers would get its parent-death signal) (under the lock or before the
         dispatcher runs)."""
         for pid, (proc, conn) in list(self._workers.items()):
-            if pid in self._running:
+            if pid not in self._idle:        # running a task (self._running may be abandoned already)
                 proc.terminate()             # its task abandoned (an error, Ctrl-C): no wait for it
                 continue
             try:
@@ -605,6 +661,19 @@ class LocalPool:
         if self._zygote is not None:
             zygote, self._zygote = self._zygote, None
             _end([zygote], ask=True)
+
+    def _abandoned_now(self) -> list:
+        with self._lock:
+            return self._abandoned()
+
+    def _stop(self, left: list) -> None:
+        """The workers stopped, then ``left``'s futures failed (outside the lock: their
+        callbacks may call this pool), whatever the stop raises."""
+        try:
+            with self._lock:
+                self._stop_workers()
+        finally:
+            _fail([(f, WorkerLost("the local worker processes were stopped")) for f in left])
 
     def _abandoned(self) -> list:
         """The futures of every queued and running task, taken from the pool (under the lock)."""
@@ -632,7 +701,7 @@ def _end(members, ask: bool) -> None:
             proc.join()
         conn.close()
         if isinstance(proc, _Forked):
-            proc.close()
+            proc.close()                     # its pidfd
 
 
 def _fail(pairs) -> None:
