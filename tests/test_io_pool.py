@@ -268,11 +268,16 @@ def test_schedule_on_local_2_finishes_on_the_other_worker_when_one_is_killed(tmp
     out = tmp_path / "s.csv"
     proc = start_schedule_on_local_2(out, tmp_path)
     try:
-        seen, _ = _watch(proc, until=lambda pids, s: len(pids) >= 3)
-        time.sleep(1.0)
-        children = psutil.Process(proc.pid).children()
-        workers = [c for c in children if c.name() == "haa_sym-worker"]
-        assert len(workers) == 2 and {c.name() for c in children} == {"haa_sym-worker", "haa_sym-zygote"}, children
+        seen, _ = _watch(proc, until=lambda pids, s: len(pids) >= 4)
+        # each names itself once it runs (under load, maybe not at once)
+        deadline = time.monotonic() + 20
+        while True:
+            children = psutil.Process(proc.pid).children()
+            workers = [c for c in children if c.name() == "haa_sym-worker"]
+            if len(workers) == 2 and {c.name() for c in children} == {"haa_sym-worker", "haa_sym-zygote"}:
+                break
+            assert time.monotonic() < deadline and proc.poll() is None, children
+            time.sleep(0.05)
         # killed while computing (its CPU time grows), not idle between task lists
         busy = sum(workers[0].cpu_times()[:2])
         deadline = time.monotonic() + 20
@@ -375,10 +380,10 @@ def test_no_worker_is_left_when_a_replacement_cannot_be_started(how, monkeypatch
         pytest.skip("the zygote needs os.pidfd_open (Linux)")
     with LocalPool(1) as pool:
         if how == "zygote":                          # the zygote gone: no fork to ask for
-            zygote = [c for c in psutil.Process().children() if c.name() == "haa_sym-zygote"]
-            assert len(zygote) == 1
-            zygote[0].kill()
-            zygote[0].wait(10)
+            # by its pid: its name is its own to set once it runs, maybe not yet under load
+            zygote = psutil.Process(pool._zygote[0].pid)
+            zygote.kill()
+            zygote.wait(10)
         monkeypatch.setattr(multiprocessing.context.SpawnProcess, "start", refuse)
         (victim,) = _workers(pool)
         futs = [pool.submit(_die_if, "a", victim), pool.submit(pow, 2, 3)]
