@@ -116,27 +116,25 @@ def _die_with_parent(parent: int) -> None:
         os._exit(0)
 
 
-def _worker(conn, parent_ends=(), parent: int | None = None, initializer=None) -> None:
-    """A worker process's loop: ``(key, payload)`` in, ``payload`` the pickled ``(fn, args)``;
-    ``(key, ok, result, start, stop)`` out; until ``None`` or the pipe closes. The payload is
-    unpickled here, apart from the key, so that a task whose function or arguments do not load
-    in the worker (a function defined after the fork) fails as that task's error, not as a dead
-    worker."""
-    import pickle
+def _started(name: str, parent_ends, parent: int | None) -> None:
+    """What a worker and the zygote do first: their name, their signals, the command's pipe ends
+    they hold closed, their parent's death theirs."""
+    _named(name)
     # SIGINT (Ctrl-C reaches the whole process group) is the command's to handle: it stops the
     # workers itself. SIGTERM ends a worker (the command's own handler, inherited by a fork,
     # would raise haa_sym.errors.Terminated mid-task).
-    _named("haa_sym-worker")
     signal.signal(signal.SIGINT, signal.SIG_IGN)
     signal.signal(signal.SIGTERM, signal.SIG_DFL)
-    # a forked worker holds copies of the command's ends of its own pipe and of the workers forked
-    # before it: closed, so that the command's death closes this worker's pipe (EOF) and ends it
+    # a fork holds copies of the command's ends of its own pipe and of the workers forked before
+    # it: closed, so that the command's death closes its pipe (EOF) and ends it
     for c in parent_ends:
         c.close()
     if parent is not None:
         _die_with_parent(parent)
-    if initializer is not None:
-        initializer()
+
+
+def _requests(conn):
+    """The messages on ``conn`` until ``None`` or its end."""
     while True:
         try:
             msg = conn.recv()
@@ -144,7 +142,20 @@ def _worker(conn, parent_ends=(), parent: int | None = None, initializer=None) -
             return
         if msg is None:
             return
-        key, payload = msg
+        yield msg
+
+
+def _worker(conn, parent_ends=(), parent: int | None = None, initializer=None) -> None:
+    """A worker process's loop: ``(key, payload)`` in, ``payload`` the pickled ``(fn, args)``;
+    ``(key, ok, result, start, stop)`` out; until ``None`` or the pipe closes. The payload is
+    unpickled here, apart from the key, so that a task whose function or arguments do not load
+    in the worker (a function defined after the fork) fails as that task's error, not as a dead
+    worker."""
+    import pickle
+    _started("haa_sym-worker", parent_ends, parent)
+    if initializer is not None:
+        initializer()
+    for key, payload in _requests(conn):
         start = time.time()                  # the clock of the task stream (dask's too)
         try:
             fn, args = pickle.loads(payload)
@@ -165,21 +176,10 @@ def _zygote(conn, parent_ends, parent: int, initializer) -> None:
     ``None`` or the pipe closes. Its children are reaped here (SIGCHLD); the command watches each
     through its pidfd, which a reap does not close."""
     from multiprocessing import reduction
-    _named("haa_sym-zygote")
-    signal.signal(signal.SIGINT, signal.SIG_IGN)
-    signal.signal(signal.SIGTERM, signal.SIG_DFL)
-    for c in parent_ends:
-        c.close()
-    _die_with_parent(parent)
+    _started("haa_sym-zygote", parent_ends, parent)
     signal.signal(signal.SIGCHLD, _reap)
     me = os.getpid()
-    while True:
-        try:
-            msg = conn.recv()
-        except (EOFError, OSError):
-            return
-        if msg is None:
-            return
+    for _ in _requests(conn):
         try:
             pid, mine, pidfd = _fork_worker(conn, me, initializer)
         except Exception as exc:             # noqa: BLE001 - this request's failure, told; the zygote goes on
